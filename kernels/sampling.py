@@ -1,0 +1,246 @@
+"""The sampling core: address modes, texel fetch, nearest/bilinear/trilinear filtering, LOD, mips.
+
+Every technique in warptex samples textures through the ``@wp.func`` building blocks in this
+module, so a texture is addressed and filtered the same way everywhere.
+
+Texture storage (see :class:`TextureView`): the texels of all layers and all mip levels live in
+one flat ``wp.array`` of ``vec4`` (unused channels are zero), level by level. Inside level ``k``,
+the layers follow each other, each stored row-major with row 0 at the *top* of the image::
+
+    index(layer, k, row, col) = level_offset[k] + (layer * h_k + row) * w_k + col
+
+so level 0 of every layer is the contiguous prefix of the buffer, shaped ``(layers, H, W)``.
+
+UV convention (OpenGL / trimesh): ``(0, 0)`` is the bottom-left corner of the image as viewed,
+``(1, 1)`` the top-right. Texel ``(row i, col j)`` of a ``w × h`` level has its centre at
+``u = (j + 0.5) / w``, ``v = 1 - (i + 0.5) / h``.
+"""
+
+import warp as wp
+
+# Filter modes (mirrored by ``warptex.Filter``).
+FILTER_NEAREST = wp.constant(0)
+FILTER_BILINEAR = wp.constant(1)
+FILTER_TRILINEAR = wp.constant(2)
+
+# Address modes (mirrored by ``warptex.Address``).
+ADDRESS_WRAP = wp.constant(0)
+ADDRESS_CLAMP = wp.constant(1)
+ADDRESS_MIRROR = wp.constant(2)
+ADDRESS_BORDER = wp.constant(3)
+
+# Where a sampling kernel takes its level of detail from.
+LOD_NONE = wp.constant(0)  # level 0
+LOD_CONSTANT = wp.constant(1)  # one value for every sample
+LOD_PER_SAMPLE = wp.constant(2)  # an array of LODs
+LOD_DERIVATIVES = wp.constant(3)  # from screen-space UV derivatives
+
+
+@wp.struct
+class TextureView:
+    """A texture array with its mip chain, as kernels see it (layout in the module docstring)."""
+
+    texels: wp.array(dtype=wp.vec4)
+    level_offset: wp.array(dtype=wp.int32)
+    level_width: wp.array(dtype=wp.int32)
+    level_height: wp.array(dtype=wp.int32)
+    num_levels: wp.int32
+    num_layers: wp.int32
+
+
+@wp.struct
+class Sampler:
+    """How a texture is filtered and addressed (a sampler object, as in graphics APIs)."""
+
+    filter: wp.int32
+    address: wp.int32
+    border: wp.vec4
+    lod_bias: float
+    min_lod: float
+    max_lod: float
+
+
+@wp.func
+def address_index(i: wp.int32, n: wp.int32, address: wp.int32) -> wp.int32:
+    """Map an integer texel index onto ``[0, n)``; ``-1`` means "outside" for the border mode."""
+    r = i
+    if address == ADDRESS_WRAP:
+        r = i % n
+        if r < 0:
+            r += n
+    elif address == ADDRESS_CLAMP:
+        r = wp.clamp(i, 0, n - 1)
+    elif address == ADDRESS_MIRROR:
+        period = 2 * n
+        r = i % period
+        if r < 0:
+            r += period
+        if r >= n:
+            r = period - 1 - r
+    elif i < 0 or i >= n:
+        r = -1
+    return r
+
+
+@wp.func
+def reduce_coord(u: float, address: wp.int32) -> float:
+    """Bring a texture coordinate into one period of its address mode, exactly.
+
+    ``u - floor(u)`` is exact in floating point, so a UV of 1000.25 addresses the same texels as
+    0.25 does (scaling 1000.25 by the texture size first would lose the fraction). Clamp and border
+    read constant values beyond one texture width, so the coordinate is clamped to ``[-1, 2]``,
+    which also keeps the integer conversion in range.
+    """
+    r = u
+    if address == ADDRESS_WRAP:
+        r = u - wp.floor(u)
+    elif address == ADDRESS_MIRROR:
+        r = u - 2.0 * wp.floor(0.5 * u)
+    else:
+        r = wp.clamp(u, -1.0, 2.0)
+    return r
+
+
+@wp.func
+def fetch(tex: TextureView, layer: wp.int32, level: wp.int32, x: wp.int32, y: wp.int32, smp: Sampler) -> wp.vec4:
+    """One texel of ``level`` at column ``x``, row ``y`` (row 0 on top), after addressing."""
+    w = tex.level_width[level]
+    h = tex.level_height[level]
+    xi = address_index(x, w, smp.address)
+    yi = address_index(y, h, smp.address)
+    value = smp.border
+    if xi >= 0 and yi >= 0:
+        value = tex.texels[tex.level_offset[level] + (layer * h + yi) * w + xi]
+    return value
+
+
+@wp.func
+def sample_nearest(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: Sampler) -> wp.vec4:
+    """Nearest texel of one level; ``uv`` already reduced by :func:`reduce_coord`."""
+    x = wp.floor(uv[0] * float(tex.level_width[level]))
+    y = wp.floor((1.0 - uv[1]) * float(tex.level_height[level]))
+    return fetch(tex, layer, level, int(x), int(y), smp)
+
+
+@wp.func
+def sample_bilinear(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: Sampler) -> wp.vec4:
+    """Bilinear filtering of one level; ``uv`` already reduced by :func:`reduce_coord`."""
+    x = uv[0] * float(tex.level_width[level]) - 0.5
+    y = (1.0 - uv[1]) * float(tex.level_height[level]) - 0.5
+    x0 = wp.floor(x)
+    y0 = wp.floor(y)
+    fx = x - x0
+    fy = y - y0
+    i = int(x0)
+    j = int(y0)
+    top = fetch(tex, layer, level, i, j, smp) * (1.0 - fx) + fetch(tex, layer, level, i + 1, j, smp) * fx
+    bottom = fetch(tex, layer, level, i, j + 1, smp) * (1.0 - fx) + fetch(tex, layer, level, i + 1, j + 1, smp) * fx
+    return top * (1.0 - fy) + bottom * fy
+
+
+@wp.func
+def lod_from_derivatives(tex: TextureView, uv_dx: wp.vec2, uv_dy: wp.vec2) -> float:
+    """Unclamped level of detail ``log2(footprint)`` of a pixel with UV derivatives ``uv_dx``, ``uv_dy``.
+
+    The footprint is the longer of the two screen-space derivative vectors, measured in level-0
+    texels (the isotropic rule of the OpenGL specification). A zero footprint gives a very negative
+    LOD (about -50), never ``-inf``, so its gradient stays finite.
+    """
+    size = wp.vec2(float(tex.level_width[0]), float(tex.level_height[0]))
+    a = wp.cw_mul(uv_dx, size)
+    b = wp.cw_mul(uv_dy, size)
+    rho2 = wp.max(wp.max(wp.dot(a, a), wp.dot(b, b)), 1.0e-30)
+    return 0.5 * wp.log2(rho2)
+
+
+@wp.func
+def sample_lod(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: Sampler) -> wp.vec4:
+    """Sample ``layer`` at ``uv`` with level of detail ``lod``: the building block of every technique.
+
+    The sampler's bias and ``[min_lod, max_lod]`` clamp are applied, then the LOD is clamped to
+    the chain. Nearest and bilinear read the nearest level (``floor(lod + 0.5)``); trilinear blends
+    the two levels around ``lod``. Non-finite ``uv`` or ``lod`` give NaN in every channel.
+    """
+    result = wp.vec4(wp.nan)
+    if wp.isfinite(uv) and wp.isfinite(lod):
+        r = wp.vec2(reduce_coord(uv[0], smp.address), reduce_coord(uv[1], smp.address))
+        top = float(tex.num_levels - 1)
+        l = wp.clamp(wp.clamp(lod + smp.lod_bias, smp.min_lod, smp.max_lod), 0.0, top)
+        if smp.filter == FILTER_TRILINEAR:
+            base = wp.floor(l)
+            f = l - base
+            level = int(base)
+            result = sample_bilinear(tex, layer, level, r, smp)
+            if f > 0.0:
+                finer = result
+                result = finer * (1.0 - f) + sample_bilinear(tex, layer, level + 1, r, smp) * f
+        elif smp.filter == FILTER_BILINEAR:
+            result = sample_bilinear(tex, layer, int(wp.floor(l + 0.5)), r, smp)
+        else:
+            result = sample_nearest(tex, layer, int(wp.floor(l + 0.5)), r, smp)
+    return result
+
+
+@wp.kernel
+def sample_kernel(
+    tex: TextureView,
+    uv: wp.array(dtype=wp.vec2),
+    uv_dx: wp.array(dtype=wp.vec2),
+    uv_dy: wp.array(dtype=wp.vec2),
+    lods: wp.array(dtype=float),
+    layers: wp.array(dtype=wp.int32),
+    smp: Sampler,
+    lod_source: wp.int32,
+    constant_lod: float,
+    constant_layer: wp.int32,
+    out: wp.array2d(dtype=float),
+):
+    """``out[i, c]`` = channel ``c`` of the texture sampled at ``uv[i]``.
+
+    Per-sample layer indices are clamped to the array; optional arrays may be null when unused.
+    """
+    i = wp.tid()
+    layer = constant_layer
+    if layers.shape[0] > 0:
+        layer = wp.clamp(layers[i], 0, tex.num_layers - 1)
+    lod = 0.0
+    if lod_source == LOD_CONSTANT:
+        lod = constant_lod
+    elif lod_source == LOD_PER_SAMPLE:
+        lod = lods[i]
+    elif lod_source == LOD_DERIVATIVES:
+        lod = lod_from_derivatives(tex, uv_dx[i], uv_dy[i])
+    value = sample_lod(tex, layer, uv[i], lod, smp)
+    for c in range(out.shape[1]):
+        out[i, c] = value[c]
+
+
+@wp.kernel
+def downsample_kernel(tex: TextureView, level: wp.int32, texels: wp.array(dtype=wp.vec4)):
+    """Box-filter ``level`` into ``level + 1`` of every layer, for any (non-power-of-two) size.
+
+    Launched over ``(layers, h_{k+1}, w_{k+1})``. Each coarse texel covers an axis-aligned
+    rectangle of ``w_k / w_{k+1}`` by ``h_k / h_{k+1}`` fine texels and is the area-weighted mean
+    of the fine texels it overlaps, so odd sizes lose nothing and a constant stays constant.
+    ``texels`` is ``tex.texels``, passed separately so the tape sees the write; the two levels are
+    disjoint, so the backward pass carries gradients of level ``k + 1`` down to level ``k``.
+    """
+    layer, row, col = wp.tid()
+    w0 = tex.level_width[level]
+    h0 = tex.level_height[level]
+    w1 = tex.level_width[level + 1]
+    h1 = tex.level_height[level + 1]
+    # Cell edges as exact integer ratios, so the last cell ends exactly on the last fine texel.
+    x_lo = float(col * w0) / float(w1)
+    x_hi = float((col + 1) * w0) / float(w1)
+    y_lo = float(row * h0) / float(h1)
+    y_hi = float((row + 1) * h0) / float(h1)
+    src = tex.level_offset[level] + layer * h0 * w0
+    acc = wp.vec4(0.0)
+    for y in range(int(wp.floor(y_lo)), wp.min(int(wp.ceil(y_hi)), h0)):
+        wy = wp.min(y_hi, float(y + 1)) - wp.max(y_lo, float(y))
+        for x in range(int(wp.floor(x_lo)), wp.min(int(wp.ceil(x_hi)), w0)):
+            wx = wp.min(x_hi, float(x + 1)) - wp.max(x_lo, float(x))
+            acc += texels[src + y * w0 + x] * (wx * wy)
+    dst = tex.level_offset[level + 1] + (layer * h1 + row) * w1 + col
+    texels[dst] = acc * (float(w1 * h1) / float(w0 * h0))

@@ -1,0 +1,25 @@
+"""Shared fixtures: Warp set-up, the shared data folder, and finite-difference helpers."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import warp as wp
+
+wp.config.quiet = True
+wp.init()
+
+SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+@pytest.fixture
+def shared_data() -> Path:
+    """``../shared/data`` next to the repository; tests using it skip when it is absent."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"../shared/data not found at {SHARED_DATA}: real-data tests need the shared folder")
+    return SHARED_DATA
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(1234)

@@ -1,0 +1,187 @@
+"""Backward passes of the sampling core against central finite differences.
+
+The loss is ``L = Σ w · sample(...)`` with random weights ``w``, evaluated in float64 from the
+float32 outputs. Texel gradients are checked along random directions over all texels (sampling is
+linear in the texels, so central differences are exact up to rounding). UV, LOD and derivative
+gradients are checked per sample, where the function is smooth: bilinear filtering has kinks on
+texel-centre lines, so samples whose one-sided differences disagree are left out (and at least 90%
+of the samples must remain, so the check cannot pass by leaving everything out).
+"""
+
+import numpy as np
+import pytest
+import warp as wp
+
+import warptex as wt
+
+FILTERS = {"nearest": {"filter": "nearest"}, "bilinear": {"filter": "bilinear"}, "trilinear": {"lod": 1.4}}
+MODES = ("wrap", "clamp", "mirror", "border")
+BORDER = (0.3, 0.6, 0.9, 1.0)
+
+
+def _forward(img, uv, weights, *, mipmaps=True, **kw) -> np.ndarray:
+    """Per-sample loss ``Σ_c w · out`` (float64, shape ``[N]``) for a fresh texture of ``img``."""
+    out = wt.sample(wt.Texture(img, mipmaps=mipmaps), uv, **kw).numpy()
+    return (out.astype(np.float64) * weights).sum(axis=-1)
+
+
+def _backward(img, uv, weights, *, build_on_tape=True, **kw):
+    """Analytic gradients: ``(texture, uv_array, extra_arrays)`` after the backward pass."""
+    tex = wt.Texture(img, requires_grad=True)
+    uv_wp = wp.array(uv, dtype=wp.vec2, requires_grad=True)
+    tape = wp.Tape()
+    with tape:
+        if build_on_tape:
+            tex.update()
+        out = wt.sample(tex, uv_wp, **kw)
+    out.grad.assign(weights.astype(np.float32))
+    tape.backward()
+    return tex, uv_wp
+
+
+def _directional_fd(loss, x, direction, h):
+    return (loss(x + h * direction) - loss(x - h * direction)) / (2 * h)
+
+
+def _check_per_sample(loss_of, x, grad, rel_step, *, min_kept=0.9):
+    """Compare ``grad`` (``[N, D]``) with central differences of the per-sample ``loss_of(x)``."""
+    x = np.asarray(x, np.float32)
+    f0 = loss_of(x)
+    kept_total = 0
+    for axis in range(x.shape[1]):
+        plus, minus = x.copy(), x.copy()
+        plus[:, axis] += rel_step
+        minus[:, axis] -= rel_step
+        # The step actually taken, after float32 rounding of x ± step.
+        up = plus[:, axis].astype(np.float64) - x[:, axis]
+        down = x[:, axis].astype(np.float64) - minus[:, axis]
+        fp, fm = loss_of(plus), loss_of(minus)
+        central = (fp - fm) / (up + down)
+        forward, backward = (fp - f0) / up, (f0 - fm) / down
+        smooth = np.abs(forward - backward) <= 1e-2 * (1 + np.abs(central))
+        np.testing.assert_allclose(grad[smooth, axis], central[smooth], rtol=2e-3, atol=2e-3)
+        kept_total += smooth.mean()
+    assert kept_total / x.shape[1] >= min_kept, "too few smooth samples to check the gradient"
+
+
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("filt", list(FILTERS))
+def test_texel_gradients_match_finite_differences(rng, filt, mode):
+    img = rng.random((12, 10, 3), dtype=np.float32)
+    uv = rng.uniform(-1.5, 2.5, (300, 2)).astype(np.float32)
+    weights = rng.normal(size=(300, 3))
+    kw = {**FILTERS[filt], "address": mode, "border": BORDER}
+    tex, _ = _backward(img, uv, weights, **kw)
+    grad = tex.grad(0).astype(np.float64)
+    assert np.abs(grad).sum() > 0
+    for _ in range(3):
+        direction = rng.normal(size=img.shape)
+        fd = _directional_fd(lambda x: _forward(x.astype(np.float32), uv, weights, **kw).sum(), img, direction, 0.05)
+        np.testing.assert_allclose((grad * direction).sum(), fd, rtol=1e-4, atol=1e-4)
+
+
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("filt", list(FILTERS))
+def test_uv_gradients_match_finite_differences(rng, filt, mode):
+    img = rng.random((16, 12, 4), dtype=np.float32)
+    uv = rng.uniform(-1.5, 2.5, (400, 2)).astype(np.float32)
+    weights = rng.normal(size=(400, 4))
+    kw = {**FILTERS[filt], "address": mode, "border": BORDER}
+    _, uv_wp = _backward(img, uv, weights, **kw)
+    grad = uv_wp.grad.numpy().astype(np.float64)
+    if filt == "nearest":
+        np.testing.assert_array_equal(grad, 0.0)
+    _check_per_sample(lambda x: _forward(img, x, weights, **kw), uv, grad, 2e-3 / 16)
+
+
+def test_lod_gradients_match_finite_differences(rng):
+    img = rng.random((32, 32, 2), dtype=np.float32)
+    uv = rng.uniform(0, 1, (300, 2)).astype(np.float32)
+    lod = rng.uniform(0.1, 4.9, (300, 1)).astype(np.float32)
+    weights = rng.normal(size=(300, 2))
+    tex = wt.Texture(img)
+    lod_wp = wp.array(lod[:, 0], dtype=float, requires_grad=True)
+    tape = wp.Tape()
+    with tape:
+        out = wt.sample(tex, uv, lod=lod_wp)
+    out.grad.assign(weights.astype(np.float32))
+    tape.backward()
+    grad = lod_wp.grad.numpy()[:, None].astype(np.float64)
+    _check_per_sample(lambda x: _forward(img, uv, weights, lod=x[:, 0]), lod, grad, 1e-3)
+
+
+def test_derivative_gradients_match_finite_differences(rng):
+    img = rng.random((64, 64, 1), dtype=np.float32)
+    uv = rng.uniform(0, 1, (300, 2)).astype(np.float32)
+    dx = rng.uniform(0.02, 0.1, (300, 2)).astype(np.float32)
+    dy = rng.uniform(-0.01, 0.01, (300, 2)).astype(np.float32)
+    weights = rng.normal(size=(300, 1))
+    dx_wp = wp.array(dx, dtype=wp.vec2, requires_grad=True)
+    tape = wp.Tape()
+    with tape:
+        out = wt.sample(wt.Texture(img), uv, uv_dx=dx_wp, uv_dy=dy)
+    out.grad.assign(weights.astype(np.float32))
+    tape.backward()
+    grad = dx_wp.grad.numpy().astype(np.float64)
+    assert np.abs(grad).max() > 0
+    _check_per_sample(lambda x: _forward(img, uv, weights, uv_dx=x, uv_dy=dy), dx, grad, 1e-4)
+
+
+def test_coarse_level_gradients_flow_to_level_zero_through_the_chain(rng):
+    img = rng.random((24, 20, 3), dtype=np.float32)
+    uv = rng.uniform(-1, 2, (300, 2)).astype(np.float32)
+    weights = rng.normal(size=(300, 3))
+    kw = {"lod": 2.6}  # levels 2 and 3 only: level 0 is reached only through the box filter
+    tex, _ = _backward(img, uv, weights, build_on_tape=True, **kw)
+    grad = tex.grad(0).astype(np.float64)
+    assert np.abs(grad).sum() > 0
+    for _ in range(3):
+        direction = rng.normal(size=img.shape)
+        fd = _directional_fd(lambda x: _forward(x.astype(np.float32), uv, weights, **kw).sum(), img, direction, 0.05)
+        np.testing.assert_allclose((grad * direction).sum(), fd, rtol=1e-4, atol=1e-4)
+
+
+def test_each_level_receives_its_own_gradient(rng):
+    # Without the chain on the tape, gradients stay on the level that was sampled.
+    img = rng.random((16, 16, 2), dtype=np.float32)
+    uv = rng.uniform(0, 1, (200, 2)).astype(np.float32)
+    weights = rng.normal(size=(200, 2))
+    tex, _ = _backward(img, uv, weights, build_on_tape=False, lod=1.5)
+    assert np.abs(tex.grad(0)).sum() == 0.0
+    for k in (1, 2):
+        grad = tex.grad(k).astype(np.float64)
+        direction = rng.normal(size=grad.shape)
+
+        def loss(values):
+            probe = wt.Texture(img)
+            level = probe.numpy(k)
+            level_vec4 = np.zeros((*level.shape[:2], 4), np.float32)
+            level_vec4[..., :2] = values
+            probe.level(k).assign(level_vec4)
+            return (wt.sample(probe, uv, lod=1.5).numpy().astype(np.float64) * weights).sum()
+
+        fd = _directional_fd(loss, tex.numpy(k).astype(np.float64), direction, 0.05)
+        np.testing.assert_allclose((grad * direction).sum(), fd, rtol=1e-4, atol=1e-4)
+
+
+def test_texture_array_gradients_go_to_the_sampled_layer(rng):
+    layers = rng.random((3, 8, 8, 1), dtype=np.float32)
+    arr = wt.TextureArray(layers, requires_grad=True)
+    uv = rng.uniform(0, 1, (100, 2)).astype(np.float32)
+    tape = wp.Tape()
+    with tape:
+        out = wt.sample(arr, uv, layer=1)
+    out.grad.fill_(1.0)
+    tape.backward()
+    grad = arr.grad(0)
+    assert np.abs(grad[[0, 2]]).sum() == 0.0
+    np.testing.assert_allclose(grad[1].sum(), 100.0, rtol=1e-5)  # bilinear weights sum to 1 per sample
+
+
+def test_non_finite_uvs_give_zero_gradients(rng):
+    img = rng.random((8, 8, 1), dtype=np.float32)
+    uv = np.array([[np.nan, 0.5], [0.25, 0.75]], np.float32)
+    tex, uv_wp = _backward(img, uv, np.ones((2, 1)))
+    assert np.isfinite(tex.grad(0)).all() and np.isfinite(uv_wp.grad.numpy()).all()
+    np.testing.assert_allclose(tex.grad(0).sum(), 1.0, rtol=1e-6)
+    assert (uv_wp.grad.numpy()[0] == 0).all()

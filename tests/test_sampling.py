@@ -1,0 +1,274 @@
+"""Forward sampling: texel-centre exactness, NumPy-reference agreement, LOD rules, bad input."""
+
+import numpy as np
+import pytest
+import warp as wp
+
+import reference as ref
+import warptex as wt
+
+BORDER = (0.25, 0.5, 0.75, 1.0)
+
+
+def _image(rng, h, w, c=4):
+    return rng.random((h, w, c), dtype=np.float32)
+
+
+def _sample(tex, uv, **kw):
+    return wt.sample(tex, uv, **kw).numpy()
+
+
+# -- texel centres ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("mode", ref.MODES)
+@pytest.mark.parametrize("filt", ["nearest", "bilinear"])
+def test_texel_centres_are_exact(rng, mode, filt):
+    # Power-of-two sizes: texel-centre UVs are exact in float32, so the lookup must be bit-exact.
+    img = _image(rng, 8, 16)
+    out = _sample(wt.Texture(img), ref.texel_centres(8, 16), filter=filt, address=mode)
+    np.testing.assert_array_equal(out, img)
+
+
+@pytest.mark.parametrize("filt", ["nearest", "bilinear"])
+def test_texel_centres_non_power_of_two(rng, filt):
+    # (j + 0.5) / 7 is not representable: the lookup is exact up to that rounding.
+    img = _image(rng, 5, 7, 3)
+    out = _sample(wt.Texture(img), ref.texel_centres(5, 7), filter=filt)
+    np.testing.assert_allclose(out, img, atol=1e-6, rtol=0)
+
+
+def test_row_zero_is_the_top_of_the_image():
+    img = np.zeros((4, 4, 1), np.float32)
+    img[0] = 1.0  # top row
+    tex = wt.Texture(img)
+    top, bottom = _sample(tex, [[0.5, 0.99], [0.5, 0.01]], filter="nearest")[:, 0]
+    assert top == 1.0 and bottom == 0.0
+
+
+# -- agreement with the NumPy reference ------------------------------------------------------------
+
+
+def _random_uvs(rng, h, w):
+    """Random UVs near the texture, far outside it (±1000), and exactly on texel borders."""
+    near = rng.uniform(-2.0, 3.0, (400, 2))
+    far = rng.uniform(-1000.0, 1000.0, (400, 2))
+    cols, rows = rng.integers(-2 * w, 3 * w, 200), rng.integers(-2 * h, 3 * h, 200)
+    borders = np.stack([cols / w, 1.0 - rows / h], axis=-1)  # texel corners: bilinear weights 0/1
+    edges = np.array([[0, 0], [1, 1], [0, 1], [1, 0], [-1, 2], [1000, -1000], [-0.0, 0.5]])
+    return np.concatenate([near, far, borders, edges]).astype(np.float32)
+
+
+@pytest.mark.parametrize("mode", ref.MODES)
+@pytest.mark.parametrize("size", [(8, 8), (13, 17), (1, 5)])
+def test_bilinear_matches_reference(rng, mode, size):
+    img = _image(rng, *size)
+    uv = _random_uvs(rng, *size)
+    out = _sample(wt.Texture(img), uv, filter="bilinear", address=mode, border=BORDER)
+    np.testing.assert_allclose(out, ref.bilinear(img, uv, mode, BORDER), atol=1e-5, rtol=0)
+
+
+@pytest.mark.parametrize("mode", ref.MODES)
+def test_nearest_matches_reference(rng, mode):
+    img = _image(rng, 9, 6)
+    # Random UVs only: exactly on a texel border, float32 and float64 may pick different sides.
+    uv = np.concatenate([rng.uniform(-3, 4, (500, 2)), rng.uniform(-1000, 1000, (500, 2))]).astype(np.float32)
+    out = _sample(wt.Texture(img), uv, filter="nearest", address=mode, border=BORDER)
+    expected = ref.nearest(img, uv, mode, BORDER)
+    # Far from the origin, u * w rounds in float32: allow a handful of UVs that sit within
+    # float32 rounding of a texel border to land on the neighbour.
+    x = np.concatenate([np.asarray(uv, np.float64)[:, 0] * 6, (1 - np.asarray(uv, np.float64)[:, 1]) * 9])
+    ambiguous = np.abs(x - np.round(x)).reshape(2, -1).min(axis=0) < 1e-3
+    np.testing.assert_array_equal(out[~ambiguous], expected[~ambiguous])
+    assert ambiguous.mean() < 0.01
+
+
+def test_border_colour_uses_the_texture_channels(rng):
+    tex = wt.Texture(_image(rng, 4, 4, 2))
+    out = _sample(tex, [[-5.0, -5.0]], address="border", border=(0.1, 0.2))
+    np.testing.assert_allclose(out, [[0.1, 0.2]], rtol=0, atol=1e-7)
+
+
+# -- mip chains and trilinear filtering -------------------------------------------------------------
+
+
+@pytest.mark.parametrize("size", [(64, 64), (37, 23), (1, 9), (6, 1)])
+def test_mip_chain_matches_box_filter(rng, size):
+    img = _image(rng, *size, 3)
+    tex = wt.Texture(img)
+    expected = ref.mip_chain(img)
+    assert tex.level_sizes == [level.shape[:2] for level in expected]
+    for k, level in enumerate(expected):
+        np.testing.assert_allclose(tex.numpy(k), level, atol=1e-6, rtol=0)
+
+
+def test_mip_chain_preserves_the_mean_of_even_levels(rng):
+    img = _image(rng, 32, 48, 1)
+    tex = wt.Texture(img)
+    for k in range(tex.num_levels):
+        np.testing.assert_allclose(tex.numpy(k).mean(), img.mean(), rtol=1e-5)
+
+
+@pytest.mark.parametrize("size", [(16, 16), (21, 10)])
+def test_constant_texture_is_constant_at_every_lod(size):
+    colour = np.array([0.2, 0.4, 0.6, 0.8], np.float32)
+    tex = wt.Texture(np.broadcast_to(colour, (*size, 4)))
+    uv = np.random.default_rng(0).uniform(-3, 3, (300, 2)).astype(np.float32)
+    for lod in np.linspace(-1.0, tex.num_levels + 1.0, 17):
+        for mode in ("wrap", "clamp", "mirror"):
+            np.testing.assert_allclose(_sample(tex, uv, lod=float(lod), address=mode), np.broadcast_to(colour, (300, 4)), atol=1e-6)
+
+
+@pytest.mark.parametrize("mode", ["wrap", "clamp", "mirror"])
+def test_level_k_lookup_is_bilinear_on_the_kth_box_level(rng, mode):
+    img = _image(rng, 40, 24)
+    tex = wt.Texture(img)
+    chain = ref.mip_chain(img)
+    uv = rng.uniform(-2, 3, (300, 2)).astype(np.float32)
+    for k in range(tex.num_levels):
+        out = _sample(tex, uv, lod=float(k), filter="trilinear", address=mode)
+        np.testing.assert_allclose(out, ref.bilinear(chain[k], uv, mode), atol=1e-5, rtol=0)
+
+
+def test_trilinear_matches_reference_between_levels(rng):
+    img = _image(rng, 32, 20)
+    tex = wt.Texture(img)
+    uv = rng.uniform(-2, 3, (500, 2)).astype(np.float32)
+    lod = rng.uniform(-1, tex.num_levels + 1, 500).astype(np.float32)
+    out = _sample(tex, uv, lod=lod)
+    np.testing.assert_allclose(out, ref.trilinear(ref.mip_chain(img), uv, lod), atol=1e-5, rtol=0)
+
+
+def test_lod_from_derivatives_is_log2_of_the_footprint(rng):
+    h, w = 64, 32
+    img = _image(rng, h, w)
+    tex = wt.Texture(img)
+    uv = rng.uniform(0, 1, (400, 2)).astype(np.float32)
+    scale = 2.0 ** rng.uniform(-9, 1, (400, 1))
+    dx = (rng.normal(size=(400, 2)) * scale).astype(np.float32)
+    dy = (rng.normal(size=(400, 2)) * scale).astype(np.float32)
+    lod = ref.lod_from_derivatives(dx, dy, h, w)
+    out = _sample(tex, uv, uv_dx=dx, uv_dy=dy)
+    np.testing.assert_allclose(out, ref.trilinear(ref.mip_chain(img), uv, lod), atol=1e-5, rtol=0)
+    # An axis-aligned footprint of exactly 4 texels is LOD 2: level 2 alone.
+    out = _sample(tex, uv, uv_dx=np.tile([[4.0 / w, 0.0]], (400, 1)), uv_dy=np.zeros((400, 2)))
+    np.testing.assert_allclose(out, ref.bilinear(ref.mip_chain(img)[2], uv), atol=1e-5, rtol=0)
+
+
+def test_zero_derivatives_read_level_zero(rng):
+    img = _image(rng, 16, 16)
+    uv = rng.uniform(0, 1, (50, 2)).astype(np.float32)
+    zeros = np.zeros_like(uv)
+    out = _sample(wt.Texture(img), uv, uv_dx=zeros, uv_dy=zeros)
+    np.testing.assert_allclose(out, ref.bilinear(img, uv), atol=1e-6)
+
+
+def test_lod_bias_and_clamp(rng):
+    img = _image(rng, 64, 64)
+    tex = wt.Texture(img)
+    chain = ref.mip_chain(img)
+    uv = rng.uniform(0, 1, (100, 2)).astype(np.float32)
+    biased = _sample(tex, uv, lod=0.25, lod_bias=1.5)
+    np.testing.assert_allclose(biased, ref.trilinear(chain, uv, 1.75), atol=1e-5)
+    clamped = _sample(tex, uv, lod=5.0, max_lod=2.5)
+    np.testing.assert_allclose(clamped, ref.trilinear(chain, uv, 2.5), atol=1e-5)
+    raised = _sample(tex, uv, lod=0.0, min_lod=1.0)
+    np.testing.assert_allclose(raised, ref.bilinear(chain[1], uv), atol=1e-5)
+    past_the_end = _sample(tex, uv, lod=40.0)
+    np.testing.assert_allclose(past_the_end, np.broadcast_to(chain[-1][0, 0], (100, 4)), atol=1e-5)
+
+
+def test_bilinear_with_lod_reads_the_nearest_level(rng):
+    img = _image(rng, 16, 16)
+    chain = ref.mip_chain(img)
+    uv = rng.uniform(0, 1, (100, 2)).astype(np.float32)
+    out = _sample(wt.Texture(img), uv, lod=1.6, filter="bilinear")
+    np.testing.assert_allclose(out, ref.bilinear(chain[2], uv), atol=1e-5)
+
+
+def test_output_keeps_the_uv_shape(rng):
+    tex = wt.Texture(_image(rng, 4, 4, 3))
+    out = wt.sample(tex, rng.random((5, 6, 2)))
+    assert out.shape == (5, 6, 3) and out.dtype == wp.float32
+    assert wt.sample(tex, np.zeros((0, 2))).shape == (0, 3)
+
+
+# -- texture arrays -----------------------------------------------------------------------------------
+
+
+def test_texture_array_layers_sample_like_single_textures(rng):
+    layers = rng.random((3, 12, 10, 2), dtype=np.float32)
+    arr = wt.TextureArray(layers)
+    uv = rng.uniform(-1, 2, (200, 2)).astype(np.float32)
+    for k in range(3):
+        single = _sample(wt.Texture(layers[k]), uv, lod=1.3)
+        np.testing.assert_allclose(_sample(arr, uv, layer=k, lod=1.3), single, atol=1e-6)
+        np.testing.assert_allclose(arr.numpy(1)[k], ref.mip_chain(layers[k])[1], atol=1e-6)
+    per_sample = rng.integers(0, 3, 200)
+    out = _sample(arr, uv, layer=per_sample, filter="nearest")
+    for k in range(3):
+        np.testing.assert_array_equal(out[per_sample == k], _sample(arr, uv[per_sample == k], layer=k, filter="nearest"))
+
+
+def test_per_sample_layers_out_of_range_are_clamped(rng):
+    layers = rng.random((2, 4, 4, 1), dtype=np.float32)
+    arr = wt.TextureArray(layers)
+    uv = ref.texel_centres(4, 4).reshape(-1, 2)
+    out = _sample(arr, uv, layer=np.full(16, 7), filter="nearest")
+    np.testing.assert_array_equal(out, layers[1].reshape(-1, 1))
+
+
+# -- non-finite input -----------------------------------------------------------------------------------
+
+
+def test_non_finite_uvs_give_nan_and_never_crash(rng):
+    tex = wt.Texture(_image(rng, 8, 8), requires_grad=True)
+    uv = np.array([[np.nan, 0.5], [0.5, np.inf], [-np.inf, -np.inf], [0.5, 0.5]], np.float32)
+    for mode in ref.MODES:
+        for kw in ({}, {"lod": 1.0}, {"filter": "nearest"}):
+            out = _sample(tex, uv, address=mode, **kw)
+            assert np.isnan(out[:3]).all() and np.isfinite(out[3]).all()
+
+
+# -- bad input ------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "kwargs, error, match",
+    [
+        ({"uv": np.zeros((4, 3))}, ValueError, r"sample\(\): uv must have shape \(\.\.\., 2\), got \(4, 3\)"),
+        ({"uv": np.zeros(2, dtype=object)}, TypeError, r"sample\(\): uv must hold real numbers"),
+        ({"uv": wp.zeros(4, dtype=wp.vec3)}, TypeError, r"sample\(\): uv must be a wp.array of wp.vec2"),
+        ({"filter": "cubic"}, ValueError, r"sample\(\): filter must be one of .*'cubic'"),
+        ({"address": "repeat"}, ValueError, r"sample\(\): address must be one of .*'repeat'"),
+        ({"filter": "trilinear"}, ValueError, r"sample\(\): filter='trilinear' needs lod="),
+        ({"lod": 1.0, "uv_dx": np.zeros((4, 2)), "uv_dy": np.zeros((4, 2))}, ValueError, "either lod= or uv_dx="),
+        ({"uv_dx": np.zeros((4, 2))}, ValueError, "uv_dx and uv_dy must be given together"),
+        ({"uv_dx": np.zeros((3, 2)), "uv_dy": np.zeros((3, 2))}, ValueError, r"uv_dx must have the shape of uv"),
+        ({"lod": np.zeros(5)}, ValueError, r"sample\(\): lod must have shape \(4,\)"),
+        ({"lod": float("nan")}, ValueError, r"sample\(\): lod must be finite, got nan"),
+        ({"lod_bias": "1"}, TypeError, r"sample\(\): lod_bias must be a number"),
+        ({"min_lod": 3.0, "max_lod": 1.0}, ValueError, r"min_lod \(3.0\) must not exceed max_lod"),
+        ({"border": (1, 2, 3, 4, 5)}, ValueError, r"border must be 1 to 4 finite numbers"),
+        ({"layer": 1}, ValueError, r"sample\(\): layer must be in \[0, 0\], got 1"),
+        ({"layer": np.zeros(4)}, TypeError, r"sample\(\): layer must hold integers"),
+        ({"device": "cuda:7"}, (ValueError, RuntimeError), r"cuda"),
+    ],
+)
+def test_bad_arguments_raise_naming_the_value(kwargs, error, match):
+    tex = wt.Texture(np.ones((4, 4, 3), np.float32))
+    kwargs = {"uv": np.zeros((4, 2), np.float32), **kwargs}
+    uv = kwargs.pop("uv")
+    with pytest.raises(error, match=match):
+        wt.sample(tex, uv, **kwargs)
+
+
+def test_sample_refuses_non_textures():
+    with pytest.raises(TypeError, match=r"sample\(\): texture must be a Texture or TextureArray, got ndarray"):
+        wt.sample(np.ones((4, 4, 3)), np.zeros((1, 2)))
+
+
+def test_texture_array_needs_a_layer():
+    arr = wt.TextureArray(np.ones((2, 4, 4, 1), np.float32))
+    with pytest.raises(ValueError, match=r"sample\(\): layer is required for a TextureArray of 2 layers"):
+        wt.sample(arr, np.zeros((1, 2)))

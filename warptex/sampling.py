@@ -1,0 +1,222 @@
+"""Public texture sampling: :func:`sample` and the filter and address modes."""
+
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+import warp as wp
+
+from warptex._validate import as_enum, as_float, as_float_array, resolve_device
+from warptex.kernels import sampling as ks
+from warptex.texture import Texture, TextureArray
+
+
+class Filter(str, enum.Enum):
+    """Texture filtering.
+
+    - ``NEAREST``: the texel containing the UV, on the mip level nearest the LOD (level 0 without one).
+    - ``BILINEAR``: bilinear interpolation of the four nearest texel centres, on the nearest level.
+    - ``TRILINEAR``: bilinear on the two levels around the LOD, blended linearly; needs a LOD.
+    - ``AUTO``: ``TRILINEAR`` when a LOD or UV derivatives are given, ``BILINEAR`` otherwise.
+    """
+
+    NEAREST = "nearest"
+    BILINEAR = "bilinear"
+    TRILINEAR = "trilinear"
+    AUTO = "auto"
+
+
+class Address(str, enum.Enum):
+    """What texel coordinates outside ``[0, 1]`` read.
+
+    - ``WRAP``: repeat the texture (period 1 in UV).
+    - ``CLAMP``: the nearest edge texel.
+    - ``MIRROR``: repeat with every other copy mirrored (period 2), as OpenGL's ``MIRRORED_REPEAT``.
+    - ``BORDER``: the constant ``border`` colour outside the texture (bilinear blends towards it).
+    """
+
+    WRAP = "wrap"
+    CLAMP = "clamp"
+    MIRROR = "mirror"
+    BORDER = "border"
+
+
+_FILTER_IDS = {Filter.NEAREST: ks.FILTER_NEAREST, Filter.BILINEAR: ks.FILTER_BILINEAR, Filter.TRILINEAR: ks.FILTER_TRILINEAR}
+_ADDRESS_IDS = {
+    Address.WRAP: ks.ADDRESS_WRAP,
+    Address.CLAMP: ks.ADDRESS_CLAMP,
+    Address.MIRROR: ks.ADDRESS_MIRROR,
+    Address.BORDER: ks.ADDRESS_BORDER,
+}
+
+
+def make_sampler(
+    func: str,
+    *,
+    filter: Filter,
+    address: Address | str,
+    border=(0.0, 0.0, 0.0, 0.0),
+    lod_bias: float = 0.0,
+    min_lod: float = 0.0,
+    max_lod: float = float("inf"),
+) -> ks.Sampler:
+    """Validate sampler options and pack them for kernels (``filter`` must already be resolved)."""
+    smp = ks.Sampler()
+    smp.filter = _FILTER_IDS[filter]
+    smp.address = _ADDRESS_IDS[as_enum(func, "address", address, Address)]
+    colour = as_float_array(func, "border", border).reshape(-1)
+    if not 1 <= colour.size <= 4 or not np.isfinite(colour).all():
+        raise ValueError(f"{func}(): border must be 1 to 4 finite numbers, got {border!r}")
+    smp.border = wp.vec4(*np.pad(colour, (0, 4 - colour.size)))
+    smp.lod_bias = as_float(func, "lod_bias", lod_bias)
+    smp.min_lod = as_float(func, "min_lod", min_lod, finite=False)
+    smp.max_lod = as_float(func, "max_lod", max_lod, finite=False)
+    if smp.min_lod > smp.max_lod:
+        raise ValueError(f"{func}(): min_lod ({smp.min_lod}) must not exceed max_lod ({smp.max_lod})")
+    return smp
+
+
+def _vec2_array(func: str, name: str, value, device) -> wp.array:
+    """``value`` as a contiguous ``wp.array`` of ``vec2`` (a view when it already is one)."""
+    if isinstance(value, wp.array):
+        if value.dtype != wp.vec2:
+            raise TypeError(f"{func}(): {name} must be a wp.array of wp.vec2, got dtype {wp.types.type_repr(value.dtype)}")
+        if value.device != device:
+            raise ValueError(f"{func}(): {name} is on {value.device} but the texture is on {device}")
+        if not value.is_contiguous:
+            raise ValueError(f"{func}(): {name} must be contiguous")
+        return value
+    arr = as_float_array(func, name, value)
+    if arr.ndim < 1 or arr.shape[-1] != 2:
+        raise ValueError(f"{func}(): {name} must have shape (..., 2), got {arr.shape}")
+    return wp.array(np.ascontiguousarray(arr), dtype=wp.vec2, device=device)
+
+
+def _per_sample(func: str, name: str, value, shape, dtype, device) -> wp.array:
+    """A per-sample array of ``dtype`` matching the sample ``shape``."""
+    if isinstance(value, wp.array):
+        if value.dtype != dtype or value.shape != shape or value.device != device:
+            raise ValueError(
+                f"{func}(): {name} must be a wp.array of {wp.types.type_repr(dtype)} with shape {shape} "
+                f"on {device}, got {wp.types.type_repr(value.dtype)} {value.shape} on {value.device}"
+            )
+        return value
+    np_dtype = np.float32 if dtype == wp.float32 else np.int32
+    arr = np.asarray(value)
+    if dtype == wp.int32 and not np.issubdtype(arr.dtype, np.integer):
+        raise TypeError(f"{func}(): {name} must hold integers, got dtype {arr.dtype}")
+    if dtype == wp.float32:
+        arr = as_float_array(func, name, arr)
+    if arr.shape != shape:
+        raise ValueError(f"{func}(): {name} must have shape {shape} (one per UV), got {arr.shape}")
+    return wp.array(np.ascontiguousarray(arr, dtype=np_dtype), dtype=dtype, device=device)
+
+
+def sample(
+    texture: TextureArray,
+    uv,
+    *,
+    layer=None,
+    lod=None,
+    uv_dx=None,
+    uv_dy=None,
+    filter: Filter | str = Filter.AUTO,
+    address: Address | str = Address.WRAP,
+    border=(0.0, 0.0, 0.0, 0.0),
+    lod_bias: float = 0.0,
+    min_lod: float = 0.0,
+    max_lod: float = float("inf"),
+    device=None,
+) -> wp.array:
+    """Sample a texture (or a layer of a texture array) at UV coordinates.
+
+    Args:
+        texture: a :class:`Texture` or :class:`TextureArray` with ``C`` channels.
+        uv: texture coordinates, shape ``(..., 2)``: a float NumPy array, or a ``wp.array`` of
+            ``wp.vec2`` of any shape (receives gradients when it has ``requires_grad``). ``(0, 0)``
+            is the image's bottom-left corner; non-finite UVs give NaN in every channel.
+        layer: for a :class:`TextureArray`: an int, or an int array with one index per UV
+            (out-of-range per-UV indices are clamped to the array). Must be ``None`` or 0 for a
+            :class:`Texture`.
+        lod: level of detail: a number, or one float per UV (a ``wp.array`` of float receives
+            gradients). Exclusive with ``uv_dx``/``uv_dy``.
+        uv_dx, uv_dy: screen-space derivatives of ``uv`` along x and y, same shape as ``uv``. The
+            LOD is ``log2(max(|uv_dx * (W, H)|, |uv_dy * (W, H)|))``, the footprint in level-0 texels.
+        filter: a :class:`Filter`; ``"auto"`` picks trilinear when a LOD is given, else bilinear.
+        address: an :class:`Address` mode for both axes.
+        border: the colour read outside the texture in ``"border"`` mode, 1 to 4 numbers.
+        lod_bias: added to every LOD before clamping.
+        min_lod, max_lod: clamp of the biased LOD (then clamped to the chain, ``[0, levels - 1]``).
+        device: Warp device; must be the texture's (``None``: the texture's).
+
+    Returns:
+        ``wp.array`` of float32, shape ``(..., C)`` (``uv``'s sample shape plus the channels),
+        recorded on the active ``wp.Tape``: gradients reach the texels of every sampled level,
+        ``uv``, and a per-UV ``lod`` or ``uv_dx``/``uv_dy`` arrays. Call ``.numpy()`` for NumPy.
+    """
+    func = "sample"
+    if not isinstance(texture, TextureArray):
+        raise TypeError(f"{func}(): texture must be a Texture or TextureArray, got {type(texture).__name__}")
+    device = resolve_device(func, device, texture.device)
+    uv = _vec2_array(func, "uv", uv, device)
+    shape = uv.shape
+    count = uv.size
+
+    filt = as_enum(func, "filter", filter, Filter)
+    has_lod = lod is not None or uv_dx is not None or uv_dy is not None
+    if filt == Filter.AUTO:
+        filt = Filter.TRILINEAR if has_lod else Filter.BILINEAR
+    if filt == Filter.TRILINEAR and not has_lod:
+        raise ValueError(f"{func}(): filter='trilinear' needs lod= or uv_dx=/uv_dy=")
+    smp = make_sampler(func, filter=filt, address=address, border=border, lod_bias=lod_bias, min_lod=min_lod, max_lod=max_lod)
+
+    flat = uv.reshape((count,))
+    lod_source, constant_lod = ks.LOD_NONE, 0.0
+    lods = dx = dy = None
+    if lod is not None and (uv_dx is not None or uv_dy is not None):
+        raise ValueError(f"{func}(): pass either lod= or uv_dx=/uv_dy=, not both")
+    if (uv_dx is None) != (uv_dy is None):
+        raise ValueError(f"{func}(): uv_dx and uv_dy must be given together")
+    if uv_dx is not None:
+        lod_source = ks.LOD_DERIVATIVES
+        dx = _vec2_array(func, "uv_dx", uv_dx, device)
+        dy = _vec2_array(func, "uv_dy", uv_dy, device)
+        for name, d in (("uv_dx", dx), ("uv_dy", dy)):
+            if d.shape != shape:
+                raise ValueError(f"{func}(): {name} must have the shape of uv {shape}, got {d.shape}")
+        dx, dy = dx.reshape((count,)), dy.reshape((count,))
+    elif isinstance(lod, (int, float, np.integer, np.floating)) and not isinstance(lod, bool):
+        lod_source, constant_lod = ks.LOD_CONSTANT, as_float(func, "lod", lod)
+    elif lod is not None:
+        lod_source = ks.LOD_PER_SAMPLE
+        lods = _per_sample(func, "lod", lod, shape, wp.float32, device).reshape((count,))
+
+    constant_layer, layers = _resolve_layer(func, texture, layer, shape, device)
+    if layers is not None:
+        layers = layers.reshape((count,))
+
+    requires_grad = texture.requires_grad or any(a is not None and a.requires_grad for a in (uv, dx, dy, lods))
+    out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=requires_grad)
+    if count:
+        wp.launch(
+            ks.sample_kernel,
+            dim=count,
+            inputs=[texture.view, flat, dx, dy, lods, layers, smp, lod_source, constant_lod, constant_layer],
+            outputs=[out],
+            device=device,
+        )
+    return out.reshape((*shape, texture.channels))
+
+
+def _resolve_layer(func: str, texture: TextureArray, layer, shape, device):
+    """``(constant_layer, per_sample_layers_or_None)`` for ``layer``, validated against ``texture``."""
+    if layer is None:
+        if isinstance(texture, Texture) or texture.num_layers == 1:
+            return 0, None
+        raise ValueError(f"{func}(): layer is required for a TextureArray of {texture.num_layers} layers")
+    if isinstance(layer, (int, np.integer)) and not isinstance(layer, bool):
+        if not 0 <= layer < texture.num_layers:
+            raise ValueError(f"{func}(): layer must be in [0, {texture.num_layers - 1}], got {layer}")
+        return int(layer), None
+    return 0, _per_sample(func, "layer", layer, shape, wp.int32, device)
