@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-wp.config.quiet = True
+wp.config.log_level = wp.LOG_WARNING
 wp.init()
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
