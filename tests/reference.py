@@ -80,7 +80,7 @@ def box_downsample(img) -> np.ndarray:
     img = np.asarray(img, np.float64)
     h, w, _ = img.shape
     ay, ax = _overlap(h, max(1, h // 2)), _overlap(w, max(1, w // 2))
-    return np.einsum("ah,hwc,bw->abc", ay, img, ax)
+    return np.einsum("ah,hwc,bw->abc", ay, img, ax, optimize=True)
 
 
 def mip_chain(img) -> list:

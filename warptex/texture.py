@@ -19,7 +19,12 @@ def mip_sizes(height: int, width: int, max_levels: int | None = None) -> list[tu
     The chain runs down to ``1 × 1`` unless ``max_levels`` cuts it short. Non-power-of-two sizes are
     fine: a ``5 × 3`` texture has levels ``5×3, 2×1, 1×1``.
     """
-    sizes = [(height, width)]
+    for name, value in (("height", height), ("width", width)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise ValueError(f"mip_sizes(): {name} must be a positive int, got {value!r}")
+    if max_levels is not None and (isinstance(max_levels, bool) or not isinstance(max_levels, (int, np.integer)) or max_levels < 1):
+        raise ValueError(f"mip_sizes(): max_levels must be a positive int or None, got {max_levels!r}")
+    sizes = [(int(height), int(width))]
     while sizes[-1] != (1, 1) and (max_levels is None or len(sizes) < max_levels):
         h, w = sizes[-1]
         sizes.append((max(1, h // 2), max(1, w // 2)))
@@ -53,9 +58,11 @@ class TextureArray:
     def __init__(self, layers, *, mipmaps: bool | int = True, requires_grad: bool = False, device=None):
         data = self._layers_to_array(layers)
         num_layers, height, width, channels = data.shape
-        if isinstance(mipmaps, bool):
+        if isinstance(mipmaps, (bool, np.bool_)):
             max_levels = None if mipmaps else 1
-        elif isinstance(mipmaps, (int, np.integer)) and mipmaps >= 1:
+        elif not isinstance(mipmaps, (int, np.integer)):
+            raise TypeError(f"{self._name}(): mipmaps must be a bool or a positive int, got {mipmaps!r}")
+        elif mipmaps >= 1:
             max_levels = int(mipmaps)
         else:
             raise ValueError(f"{self._name}(): mipmaps must be a bool or a positive int, got {mipmaps!r}")
@@ -117,8 +124,12 @@ class TextureArray:
             raise ValueError(f"{cls._name}(): {name} must not be empty, got shape {data.shape}")
         if not 1 <= c <= 4:
             raise ValueError(f"{cls._name}(): {name} must have 1 to 4 channels, got {c} (shape {data.shape})")
-        if not np.isfinite(data).all():
-            raise ValueError(f"{cls._name}(): {name} contains NaN or infinite texels")
+        finite = np.isfinite(data)
+        if not finite.all():
+            where = tuple(int(i) for i in np.argwhere(~finite)[0])
+            raise ValueError(
+                f"{cls._name}(): {name} contains non-finite texels, first {data[where]} at (row, col, channel) {where}"
+            )
         return np.ascontiguousarray(data, dtype=np.float32)
 
     @classmethod
@@ -137,6 +148,9 @@ class TextureArray:
         ``data=True`` keeps PNG/JPG values as they are (normal, splat and height maps) instead of
         decoding sRGB. Files of different sizes or channel counts raise ``ValueError`` naming both.
         """
+        if isinstance(paths, (str, bytes, os.PathLike)):
+            raise TypeError(f"{cls._name}.from_files(): paths must be a sequence of paths, got the single path {paths!r}")
+        paths = list(paths)
         images = [io.read_image(p, data=data, channels=channels) for p in paths]
         if not images:
             raise ValueError(f"{cls._name}.from_files(): needs at least one path")
@@ -200,6 +214,7 @@ class TextureArray:
         Writing to a coarse level directly (rather than through :meth:`update`) is allowed, e.g.
         for hand-made mips; its gradient (``.grad``) is the view of that level's gradient.
         """
+        self._check_level("level", level)
         return self._level_array(self._chain, level)
 
     # -- operations -------------------------------------------------------------------------------
@@ -222,10 +237,12 @@ class TextureArray:
 
     def numpy(self, level: int = 0) -> np.ndarray:
         """Texels of ``level`` as float32 ``[L, h, w, C]``."""
+        self._check_level("numpy", level)
         return self._level_numpy(self._chain, level)
 
     def grad(self, level: int = 0) -> np.ndarray | None:
         """Gradient with respect to the texels of ``level``, float32 ``[L, h, w, C]`` (``None`` without grads)."""
+        self._check_level("grad", level)
         if self._chain.grad is None:
             return None
         return self._level_numpy(self._chain.grad, level)
@@ -235,9 +252,11 @@ class TextureArray:
         if self._chain.grad is not None:
             self._chain.grad.zero_()
 
+    def _check_level(self, method: str, level) -> None:
+        if isinstance(level, bool) or not isinstance(level, (int, np.integer)) or not 0 <= level < self.num_levels:
+            raise ValueError(f"{self._name}.{method}(): level must be an int in [0, {self.num_levels - 1}], got {level!r}")
+
     def _level_array(self, buffer: wp.array, level: int) -> wp.array:
-        if not isinstance(level, (int, np.integer)) or not 0 <= level < self.num_levels:
-            raise ValueError(f"{self._name}: level must be an int in [0, {self.num_levels - 1}], got {level!r}")
         h, w = self._sizes[level]
         start = self._offsets[level]
         return buffer[start : start + self.num_layers * h * w].reshape((self.num_layers, h, w))
