@@ -30,6 +30,7 @@ __all__ = [
     "linear_to_srgb",
     "read_image",
     "read_exr",
+    "exr_channel_names",
     "write_png",
     "write_exr",
 ]
@@ -150,6 +151,21 @@ def read_exr(path, channels: Sequence[str] | None = None) -> tuple[np.ndarray, t
         TypeError: If ``channels`` is not a sequence of str.
     """
     return _read_exr(_checked_input_path(path, "read_exr"), channels, "read_exr")
+
+
+def exr_channel_names(path) -> tuple[str, ...]:
+    """Names of the channels in an EXR file's first part, read from its header only.
+
+    Raises:
+        FileNotFoundError: if the file does not exist.
+        ValueError: if it is not a readable OpenEXR file.
+    """
+    path = _checked_input_path(path, "exr_channel_names")
+    try:
+        with OpenEXR.File(path, header_only=True) as exr:
+            return tuple(channel.name for channel in exr.header()["channels"])
+    except RuntimeError as exc:
+        raise ValueError(f"exr_channel_names(): cannot decode '{path}' as an OpenEXR image: {exc}") from exc
 
 
 def write_png(path, image, *, data: bool = False, bits: int = 8) -> None:

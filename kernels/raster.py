@@ -1,0 +1,159 @@
+"""G-buffer rasterisation: one primary ray per pixel against a ``wp.Mesh`` BVH, with ray differentials.
+
+Pixel ``(row, col)`` shoots a ray through its centre (conventions in :mod:`warptex.camera`). The
+derivatives of position along screen x and y come from ray differentials (Igehy 1999) intersected
+with the hit triangle's plane, so they are exact for planar geometry; UV derivatives follow from
+them through the triangle's position-to-UV map.
+"""
+
+import warp as wp
+
+
+@wp.struct
+class CameraView:
+    """A camera as kernels see it; ``half_x``/``half_y`` are the image-plane half extents."""
+
+    eye: wp.vec3
+    forward: wp.vec3
+    right: wp.vec3
+    up: wp.vec3
+    half_x: float
+    half_y: float
+    width: wp.int32
+    height: wp.int32
+    orthographic: wp.int32
+
+
+@wp.func
+def primary_ray(cam: CameraView, row: wp.int32, col: wp.int32):
+    """Origin and direction (forward component 1) of the ray through a pixel centre, and their
+    derivatives per pixel step along x and y: ``(origin, dir, d_origin_dx, d_origin_dy, d_dir_dx, d_dir_dy)``."""
+    x = 2.0 * (float(col) + 0.5) / float(cam.width) - 1.0
+    y = 1.0 - 2.0 * (float(row) + 0.5) / float(cam.height)
+    offset = cam.right * (x * cam.half_x) + cam.up * (y * cam.half_y)
+    step_x = cam.right * (2.0 * cam.half_x / float(cam.width))
+    step_y = cam.up * (-2.0 * cam.half_y / float(cam.height))
+    zero = wp.vec3(0.0)
+    if cam.orthographic != 0:
+        return cam.eye + offset, cam.forward, step_x, step_y, zero, zero
+    return cam.eye, cam.forward + offset, zero, zero, step_x, step_y
+
+
+@wp.func
+def plane_differential(t: float, d: wp.vec3, n: wp.vec3, d_origin: wp.vec3, d_dir: wp.vec3) -> wp.vec3:
+    """Change of the hit point ``o + t d`` on the plane with normal ``n`` for a ray change ``(d_origin, d_dir)``."""
+    dp = d_origin + d_dir * t
+    return dp - d * (wp.dot(dp, n) / wp.dot(d, n))
+
+
+@wp.kernel
+def raster_kernel(
+    mesh: wp.uint64,
+    points: wp.array(dtype=wp.vec3),
+    indices: wp.array(dtype=wp.int32),
+    face_ids: wp.array(dtype=wp.int32),
+    vertex_normals: wp.array(dtype=wp.vec3),
+    cam: CameraView,
+    position: wp.array2d(dtype=wp.vec3),
+    normal: wp.array2d(dtype=wp.vec3),
+    geometric_normal: wp.array2d(dtype=wp.vec3),
+    depth: wp.array2d(dtype=float),
+    mask: wp.array2d(dtype=float),
+    triangle: wp.array2d(dtype=wp.int32),
+    barycentric: wp.array2d(dtype=wp.vec3),
+    position_dx: wp.array2d(dtype=wp.vec3),
+    position_dy: wp.array2d(dtype=wp.vec3),
+):
+    """Closest hit per pixel; normals face the camera (flipped on back faces, shading normals bent). ``indices`` holds the
+    triangles in the BVH, ``face_ids`` their index in the mesh. Misses keep the outputs'
+    background values (zeros, ``depth = inf``, ``triangle = -1``) written by the caller."""
+    row, col = wp.tid()
+    o, d, do_dx, do_dy, dd_dx, dd_dy = primary_ray(cam, row, col)
+    hit = wp.mesh_query_ray(mesh, o, d, 1.0e30)
+    if hit.result:
+        f = hit.face
+        i = indices[3 * f]
+        j = indices[3 * f + 1]
+        k = indices[3 * f + 2]
+        b = wp.vec3(hit.u, hit.v, 1.0 - hit.u - hit.v)
+        p = o + d * hit.t
+        ng = wp.normalize(wp.cross(points[j] - points[i], points[k] - points[i]))
+        ns = vertex_normals[i] * b[0] + vertex_normals[j] * b[1] + vertex_normals[k] * b[2]
+        if wp.length(ns) > 1.0e-12:
+            ns = wp.normalize(ns)
+        else:
+            ns = ng
+        if wp.dot(ng, d) > 0.0:  # the back of the triangle faces the camera
+            ng = -ng
+            ns = -ns
+        # Interpolated normals can turn away from the viewer near silhouettes; bend them just
+        # enough to face it (cos 0.01 with the view direction), as renderers do.
+        view = -wp.normalize(d)
+        facing = wp.dot(ns, view)
+        if facing < 0.01:
+            ns = wp.normalize(ns + view * (0.01 - facing))
+        position[row, col] = p
+        normal[row, col] = ns
+        geometric_normal[row, col] = ng
+        depth[row, col] = wp.dot(p - cam.eye, cam.forward)
+        mask[row, col] = 1.0
+        triangle[row, col] = face_ids[f]
+        barycentric[row, col] = b
+        position_dx[row, col] = plane_differential(hit.t, d, ng, do_dx, dd_dx)
+        position_dy[row, col] = plane_differential(hit.t, d, ng, do_dy, dd_dy)
+
+
+@wp.func
+def barycentric_change(e1: wp.vec3, e2: wp.vec3, dp: wp.vec3) -> wp.vec2:
+    """Coefficients ``(a, b)`` with ``dp = a e1 + b e2`` for ``dp`` in the triangle's plane."""
+    n = wp.cross(e1, e2)
+    inv = 1.0 / wp.dot(n, n)
+    return wp.vec2(wp.dot(wp.cross(dp, e2), n) * inv, wp.dot(wp.cross(e1, dp), n) * inv)
+
+
+@wp.kernel
+def uv_kernel(
+    points: wp.array(dtype=wp.vec3),
+    indices: wp.array(dtype=wp.int32),
+    uvs: wp.array(dtype=wp.vec2),
+    vertex_tangents: wp.array(dtype=wp.vec4),
+    triangle: wp.array2d(dtype=wp.int32),
+    barycentric: wp.array2d(dtype=wp.vec3),
+    normal: wp.array2d(dtype=wp.vec3),
+    position_dx: wp.array2d(dtype=wp.vec3),
+    position_dy: wp.array2d(dtype=wp.vec3),
+    uv: wp.array2d(dtype=wp.vec2),
+    uv_dx: wp.array2d(dtype=wp.vec2),
+    uv_dy: wp.array2d(dtype=wp.vec2),
+    tangent: wp.array2d(dtype=wp.vec4),
+):
+    """Interpolated UVs, their screen-space derivatives, and the tangent frame of one UV set.
+
+    The tangent is the interpolated vertex tangent made orthogonal to the shading normal, with
+    the bitangent sign in ``w`` (bitangent = ``w * cross(normal, tangent)``).
+    """
+    row, col = wp.tid()
+    f = triangle[row, col]
+    if f >= 0:
+        i = indices[3 * f]
+        j = indices[3 * f + 1]
+        k = indices[3 * f + 2]
+        b = barycentric[row, col]
+        uv[row, col] = uvs[i] * b[0] + uvs[j] * b[1] + uvs[k] * b[2]
+        e1 = points[j] - points[i]
+        e2 = points[k] - points[i]
+        t1 = uvs[j] - uvs[i]
+        t2 = uvs[k] - uvs[i]
+        ax = barycentric_change(e1, e2, position_dx[row, col])
+        ay = barycentric_change(e1, e2, position_dy[row, col])
+        uv_dx[row, col] = t1 * ax[0] + t2 * ax[1]
+        uv_dy[row, col] = t1 * ay[0] + t2 * ay[1]
+        tv = vertex_tangents[i] * b[0] + vertex_tangents[j] * b[1] + vertex_tangents[k] * b[2]
+        n = normal[row, col]
+        t = wp.vec3(tv[0], tv[1], tv[2])
+        t = t - n * wp.dot(n, t)
+        if wp.length(t) > 1.0e-12:
+            sign = 1.0
+            if tv[3] < 0.0:
+                sign = -1.0
+            tangent[row, col] = wp.vec4(wp.normalize(t)[0], wp.normalize(t)[1], wp.normalize(t)[2], sign)

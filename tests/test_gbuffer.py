@@ -1,0 +1,280 @@
+"""G-buffers: rasterised real meshes against brute-force ray casting, derivatives, EXR I/O, bad input."""
+
+import numpy as np
+import OpenEXR
+import pytest
+import trimesh
+
+import warptex as wt
+from warptex import io
+from warptex.camera import look_at, orthographic
+from warptex.gbuffer import GBuffer, load_mesh, rasterize
+from warptex.gbuffer_io import load_gbuffer, save_gbuffer
+
+MESHES = ("bunny.ply", "fandisk.obj", "featuretype.ply", "Duck.glb", "monkey.glb")
+
+
+def _framing_camera(mesh, resolution=(96, 96), direction=(0.3, 0.4, 1.0)):
+    centre, radius = mesh.bounds.mean(axis=0), np.linalg.norm(mesh.extents)
+    return look_at(centre + np.asarray(direction) * radius * 1.2, centre, fov_y=40.0, resolution=resolution)
+
+
+def _brute_force_hits(mesh, origins, directions):
+    """Möller–Trumbore against every triangle: (t, face, barycentric) per ray, t = inf on a miss."""
+    p = np.asarray(mesh.vertices, np.float64)[mesh.faces]
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    ts, faces, barys = [], [], []
+    for o, d in zip(origins, directions):
+        q = np.cross(d, e2)
+        det = (e1 * q).sum(-1)
+        ok = np.abs(det) > 1e-14
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        s = o - p[:, 0]
+        b1 = (s * q).sum(-1) * inv
+        r = np.cross(s, e1)
+        b2 = (d * r).sum(-1) * inv
+        t = (e2 * r).sum(-1) * inv
+        hit = ok & (b1 >= 0) & (b2 >= 0) & (b1 + b2 <= 1) & (t > 0)
+        t = np.where(hit, t, np.inf)
+        f = int(np.argmin(t))
+        ts.append(t[f])
+        faces.append(f if np.isfinite(t[f]) else -1)
+        barys.append((1 - b1[f] - b2[f], b1[f], b2[f]))
+    return np.array(ts), np.array(faces), np.array(barys)
+
+
+@pytest.fixture(params=MESHES)
+def real_mesh(request, shared_data):
+    return request.param, load_mesh(shared_data / "meshes" / request.param)
+
+
+def test_real_meshes_rasterise_like_brute_force_ray_casting(real_mesh, rng):
+    name, mesh = real_mesh
+    camera = _framing_camera(mesh)
+    g = rasterize(mesh, camera).numpy()
+    covered = g["mask"] > 0
+    assert 0.05 < covered.mean() < 0.9, f"{name}: the framing camera should see the mesh"
+
+    # Coverage and depth agree with an independent ray caster on a random pixel subset.
+    origins, directions = camera.rays()
+    pixels = rng.choice(covered.size, 150, replace=False)
+    rows, cols = np.unravel_index(pixels, covered.shape)
+    t, faces, _ = _brute_force_hits(mesh, origins[rows, cols], directions[rows, cols])
+    diag = np.linalg.norm(mesh.extents)
+    # Rays grazing a triangle edge may go either way; allow a couple of such pixels.
+    assert (np.isfinite(t) == covered[rows, cols]).mean() >= 0.98
+    both = np.isfinite(t) & covered[rows, cols]
+    np.testing.assert_allclose(g["depth"][rows, cols][both], t[both], atol=1e-4 * diag)
+    assert (g["triangle"][rows, cols][both] == faces[both]).mean() >= 0.95
+
+    # Every covered position lies on its reported triangle (distance < 1e-4 of the diagonal).
+    tri = np.asarray(mesh.vertices)[mesh.faces[g["triangle"][covered]]]
+    pos = g["position"][covered].astype(np.float64)
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    assert np.abs(((pos - tri[:, 0]) * normal).sum(-1)).max() < 1e-4 * diag
+    assert (g["triangle"][~covered] == -1).all() and np.isinf(g["depth"][~covered]).all()
+
+    # Normals: unit length, facing the camera.
+    view = -directions[covered] / np.linalg.norm(directions[covered], axis=-1, keepdims=True)
+    for key in ("normal", "geometric_normal"):
+        n = g[key][covered]
+        np.testing.assert_allclose(np.linalg.norm(n, axis=-1), 1.0, atol=1e-5)
+        assert ((n * view).sum(-1) > 0.0).all(), f"{name}: {key} faces away from the camera"
+
+
+def test_duck_uvs_sample_its_texture_the_right_way_up(shared_data, rng):
+    mesh = load_mesh(shared_data / "meshes" / "Duck.glb")
+    image = io.srgb_to_linear(np.asarray(mesh.visual.material.baseColorTexture.convert("RGB")) / 255.0)
+    camera = _framing_camera(mesh, (128, 128), direction=(0.6, 0.3, 1.0))
+    g = rasterize(mesh, camera)
+    uv = g.uv()["uv"].numpy()
+    covered = g.mask.numpy() > 0
+
+    # UVs at known pixels equal the barycentric interpolation of the brute-force hit.
+    rows, cols = np.nonzero(covered)
+    pick = rng.choice(len(rows), 60, replace=False)
+    origins, directions = camera.rays()
+    _, faces, bary = _brute_force_hits(mesh, origins[rows[pick], cols[pick]], directions[rows[pick], cols[pick]])
+    agree = faces == g.triangle.numpy()[rows[pick], cols[pick]]
+    assert agree.mean() > 0.9
+    expected = (np.asarray(mesh.visual.uv)[mesh.faces[faces]] * bary[..., None]).sum(1)
+    np.testing.assert_allclose(uv[rows[pick], cols[pick]][agree], expected[agree], atol=1e-4)
+
+    # Sampled colours: the duck is yellow with an orange beak; read upside down, the texture's
+    # white background shows on the body. Near-white pixels measure the orientation.
+    tex = wt.Texture(image)
+
+    def white_fraction(uvs):
+        colour = wt.sample(tex, uvs).numpy()[covered]
+        return (colour.min(axis=-1) > 0.8).mean()
+
+    flipped = uv * [1, -1] + [0, 1]
+    assert white_fraction(uv) < 0.005
+    assert white_fraction(flipped) > 0.03  # the check can tell
+
+
+def test_plane_derivatives_match_the_analytic_values():
+    # A fronto-parallel quad at distance 5 with UV = (x, y) / 4.
+    vertices = np.array([[-20, -20, -5], [20, -20, -5], [20, 20, -5], [-20, 20, -5]], np.float64)
+    mesh = trimesh.Trimesh(vertices, [[0, 1, 2], [0, 2, 3]], process=False)
+    mesh.visual = trimesh.visual.TextureVisuals(uv=vertices[:, :2] / 4.0)
+    h, w = 40, 60
+    camera = look_at((0, 0, 0), (0, 0, -1), fov_y=60.0, resolution=(h, w))
+    g = rasterize(mesh, camera).numpy()
+    assert (g["mask"] == 1).all()
+    step = 2 * np.tan(np.radians(30)) * 5 / h  # world size of a pixel at distance 5
+    np.testing.assert_allclose(g["depth"], 5.0, rtol=1e-6)
+    np.testing.assert_allclose(g["position_dx"], np.broadcast_to([step, 0, 0], (h, w, 3)), atol=1e-6)
+    np.testing.assert_allclose(g["position_dy"], np.broadcast_to([0, -step, 0], (h, w, 3)), atol=1e-6)
+    np.testing.assert_allclose(g["uv0.uv_dx"], np.broadcast_to([step / 4, 0], (h, w, 2)), atol=1e-6)
+    np.testing.assert_allclose(g["uv0.uv_dy"], np.broadcast_to([0, -step / 4], (h, w, 2)), atol=1e-6)
+    np.testing.assert_allclose(g["uv0.tangent"], np.broadcast_to([1, 0, 0, 1], (h, w, 4)), atol=1e-6)
+
+
+def test_ground_plane_derivatives_are_exact_and_lod_grows_with_distance():
+    vertices = np.array([[-100, 0, 10], [100, 0, 10], [100, 0, -200], [-100, 0, -200]], np.float64)
+    mesh = trimesh.Trimesh(vertices, [[0, 1, 2], [0, 2, 3]], process=False)
+    mesh.visual = trimesh.visual.TextureVisuals(uv=vertices[:, [0, 2]] * [1, -1] / 8.0)
+    camera = look_at((0, 2, 0), (0, 1, -6), fov_y=50.0, resolution=(64, 64))
+    g = rasterize(mesh, camera).numpy()
+    covered = g["mask"] > 0
+    # The derivative from ray differentials equals the limit of finite differences of positions
+    # of rays shifted by a tiny fraction of a pixel (computed here in float64).
+    origins, directions = camera.rays()
+    hx, hy = camera.half_extent
+    eps = 1e-3
+    shifted = directions + camera.right * (2 * hx / 64 * eps)
+    t0 = -origins[..., 1] / directions[..., 1]
+    t1 = -origins[..., 1] / shifted[..., 1]
+    fd = (origins + shifted * t1[..., None] - origins - directions * t0[..., None]) / eps
+    np.testing.assert_allclose(g["position_dx"][covered], fd[covered], rtol=1e-3, atol=1e-5)
+    footprint = np.maximum(np.linalg.norm(g["uv0.uv_dx"], axis=-1), np.linalg.norm(g["uv0.uv_dy"], axis=-1))
+    column = np.log2(footprint[:, 32][covered[:, 32]] * 256)
+    depth = g["depth"][:, 32][covered[:, 32]]
+    assert np.all(np.diff(column[np.argsort(depth)]) > 0), "LOD must grow with distance"
+
+
+def test_orthographic_camera_has_constant_derivatives():
+    mesh = trimesh.creation.box((4, 4, 4))
+    camera = orthographic((0, 0, 10), (0, 0, 0), height=8.0, resolution=(32, 32))
+    g = rasterize(mesh, camera).numpy()
+    covered = g["mask"] > 0
+    assert covered.mean() == pytest.approx(0.25, abs=0.02)
+    np.testing.assert_allclose(g["position_dx"][covered], np.broadcast_to([0.25, 0, 0], (covered.sum(), 3)), atol=1e-6)
+    np.testing.assert_allclose(g["depth"][covered], 8.0, rtol=1e-6)
+
+
+def test_gbuffer_exr_round_trip_is_bit_exact(tmp_path, shared_data):
+    g = rasterize(shared_data / "meshes" / "Duck.glb", _framing_camera(load_mesh(shared_data / "meshes" / "Duck.glb")))
+    save_gbuffer(tmp_path / "g.exr", g)
+    loaded = load_gbuffer(tmp_path / "g.exr")
+    a, b = g.numpy(), loaded.numpy()
+    assert sorted(a) == sorted(b)
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+
+
+@pytest.mark.parametrize("prefix", ["", "ViewLayer."])
+def test_blender_named_exr_loads(tmp_path, prefix):
+    g = rasterize(trimesh.creation.icosphere(), look_at((0, 0, 4), (0, 0, 0), resolution=(24, 32))).numpy()
+    channels = {}
+    for i, c in enumerate("XYZ"):
+        channels[f"{prefix}Position.{c}"] = g["position"][..., i]
+        channels[f"{prefix}Normal.{c}"] = g["normal"][..., i]
+    channels[f"{prefix}Depth.Z"] = np.where(g["mask"] > 0, g["depth"], 1e10).astype(np.float32)
+    channels[f"{prefix}UV.U"] = np.full((24, 32), 0.25, np.float32)
+    channels[f"{prefix}UV.V"] = np.full((24, 32), 0.75, np.float32)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    channels = {k: np.ascontiguousarray(v) for k, v in channels.items()}
+    with OpenEXR.File(header, channels) as f:
+        f.write(str(tmp_path / "blender.exr"))
+    loaded = load_gbuffer(tmp_path / "blender.exr")
+    np.testing.assert_array_equal(loaded.position.numpy(), g["position"])
+    np.testing.assert_array_equal(loaded.normal.numpy(), g["normal"])
+    np.testing.assert_array_equal(loaded.mask.numpy(), g["mask"])
+    np.testing.assert_array_equal(loaded.uv()["uv"].numpy()[..., 1], 0.75)
+
+
+def test_exr_without_required_channels_names_them(tmp_path):
+    io.write_exr(tmp_path / "rgb.exr", np.zeros((4, 4, 3), np.float32))
+    with pytest.raises(ValueError, match=r"load_gbuffer\(\): .* has no position channels \(looked for \['P.X'.*'Position.X'.*it has \['B', 'G', 'R'\]"):
+        load_gbuffer(tmp_path / "rgb.exr")
+
+
+def test_exr_with_two_view_layers_needs_a_layer(tmp_path):
+    planes = {f"{layer}.{p}.{c}": np.zeros((2, 2), np.float32) for layer in ("A", "B") for p in ("Position", "Normal") for c in "XYZ"}
+    io.write_exr(tmp_path / "two.exr", planes)
+    with pytest.raises(ValueError, match=r"several view layers \['A', 'B'\]; pass layer="):
+        load_gbuffer(tmp_path / "two.exr")
+    assert load_gbuffer(tmp_path / "two.exr", layer="B").resolution == (2, 2)
+
+
+# -- bad input ------------------------------------------------------------------------------------
+
+
+CAMERA = look_at((0, 0, 5), (0, 0, 0), resolution=(16, 16))
+
+
+@pytest.mark.parametrize(
+    "mesh, error, match",
+    [
+        (trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), int)), ValueError, r"rasterize\(\): the mesh is empty"),
+        (trimesh.Trimesh([[0, 0, 0], [1, np.nan, 0], [0, 1, 0]], [[0, 1, 2]], process=False), ValueError, r"vertex 1 is not finite"),
+        (trimesh.Trimesh([[0, 0, 0], [1, 1, 1], [2, 2, 2]], [[0, 1, 2]], process=False), ValueError, r"all 1 triangles .* degenerate"),
+        (np.zeros((3, 3)), TypeError, r"rasterize\(\): mesh must be a trimesh.Trimesh or a path"),
+    ],
+)
+def test_bad_meshes_raise(mesh, error, match):
+    with pytest.raises(error, match=match):
+        rasterize(mesh, CAMERA)
+
+
+def test_degenerate_triangles_are_skipped_and_ids_stay_those_of_the_mesh():
+    vertices = [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [5, 5, 0]]
+    mesh = trimesh.Trimesh(vertices, [[0, 0, 3], [0, 1, 2]], process=False)  # face 0 has zero area
+    g = rasterize(mesh, CAMERA).numpy()
+    assert set(np.unique(g["triangle"])) == {-1, 1}
+
+
+def test_camera_looking_away_gives_an_empty_gbuffer():
+    g = rasterize(trimesh.creation.box(), look_at((0, 0, 5), (0, 0, 10), resolution=(8, 8)))
+    assert isinstance(g, GBuffer) and g.mask.numpy().sum() == 0 and (g.triangle.numpy() == -1).all()
+
+
+def test_camera_inside_the_mesh_sees_back_faces_facing_it():
+    g = rasterize(trimesh.creation.box((4, 4, 4)), look_at((0, 0, 0), (0, 0, -1), resolution=(8, 8))).numpy()
+    assert (g["mask"] == 1).all()
+    np.testing.assert_allclose(g["geometric_normal"][4, 4], [0, 0, 1], atol=1e-6)
+
+
+def test_unreadable_mesh_files(tmp_path):
+    (tmp_path / "junk.ply").write_text("this is not a mesh")
+    with pytest.raises(ValueError, match=r"load_mesh\(\): .*junk.ply"):
+        load_mesh(tmp_path / "junk.ply")
+    with pytest.raises(FileNotFoundError, match=r"load_mesh\(\): file not found"):
+        load_mesh(tmp_path / "missing.obj")
+
+
+@pytest.mark.parametrize(
+    "call, match",
+    [
+        (lambda: look_at((0, 0, 0), (0, 0, 0)), r"look_at\(\): eye and target must differ"),
+        (lambda: look_at((0, 0, 0), (0, 1, 0)), r"look_at\(\): up \[0.0, 1.0, 0.0\] must not be parallel"),
+        (lambda: look_at((0, 0, 1), (0, 0, 0), resolution=(0, 4)), r"look_at\(\): resolution must be two positive ints"),
+        (lambda: look_at((0, 0, 1), (0, 0, 0), fov_y=180), r"look_at\(\): fov_y must be in \(0, 180\)"),
+        (lambda: look_at((0, np.nan, 1), (0, 0, 0)), r"look_at\(\): eye must be 3 finite numbers"),
+        (lambda: orthographic((0, 0, 1), (0, 0, 0), height=-1), r"orthographic\(\): height must be positive"),
+    ],
+)
+def test_bad_cameras_raise(call, match):
+    with pytest.raises(ValueError, match=match):
+        call()
+
+
+def test_look_at_frame_is_right_handed_and_y_up():
+    cam = look_at((0, 0, 5), (0, 0, 0))
+    np.testing.assert_allclose(cam.forward, [0, 0, -1])
+    np.testing.assert_allclose(cam.right, [1, 0, 0])
+    np.testing.assert_allclose(cam.up, [0, 1, 0])
+    np.testing.assert_allclose(np.cross(cam.right, cam.up), -cam.forward)

@@ -1,0 +1,114 @@
+"""Cameras: pinhole (``look_at``) and orthographic, in a right-handed, +Y-up world.
+
+Camera space follows OpenGL: the camera looks along its ``forward`` axis (camera-space -Z), ``right``
+is +X and ``up`` is +Y. Pixel ``(row i, column j)`` of an ``(H, W)`` image has its centre at
+normalised device coordinates ``x = 2 (j + 0.5) / W - 1`` (left to right) and
+``y = 1 - 2 (i + 0.5) / H`` (top to bottom), so row 0 is the top of the image.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from warptex._validate import as_float
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A camera: position, orthonormal frame, projection and image size.
+
+    Attributes:
+        eye: camera position, world space, ``(3,)`` float64.
+        forward, right, up: orthonormal view frame (``right = forward × up``), ``(3,)`` each.
+        resolution: ``(height, width)`` in pixels.
+        fov_y: vertical field of view in degrees (pinhole); ``None`` for orthographic.
+        ortho_height: world-space height of the view (orthographic); ``None`` for pinhole.
+    """
+
+    eye: np.ndarray
+    forward: np.ndarray
+    right: np.ndarray
+    up: np.ndarray
+    resolution: tuple[int, int]
+    fov_y: float | None = None
+    ortho_height: float | None = None
+
+    @property
+    def orthographic(self) -> bool:
+        return self.ortho_height is not None
+
+    @property
+    def half_extent(self) -> tuple[float, float]:
+        """Half width and half height of the image plane at distance 1 (pinhole) or in world units."""
+        h, w = self.resolution
+        half_h = self.ortho_height / 2 if self.orthographic else math.tan(math.radians(self.fov_y) / 2)
+        return half_h * w / h, half_h
+
+    def rays(self) -> tuple[np.ndarray, np.ndarray]:
+        """Primary rays through every pixel centre: origins and unnormalised directions, ``[H, W, 3]``.
+
+        A pinhole ray's direction is ``forward + x·right·hx + y·up·hy`` (unit length along
+        ``forward``), so the hit distance along it is the view-space depth.
+        """
+        h, w = self.resolution
+        hx, hy = self.half_extent
+        x = (2 * (np.arange(w) + 0.5) / w - 1)[None, :, None]
+        y = (1 - 2 * (np.arange(h) + 0.5) / h)[:, None, None]
+        offset = x * hx * self.right + y * hy * self.up
+        if self.orthographic:
+            return self.eye + offset, np.broadcast_to(self.forward, (h, w, 3)).copy()
+        return np.broadcast_to(self.eye, (h, w, 3)).copy(), self.forward + offset
+
+
+def _frame(func: str, eye, target, up):
+    eye, target, up = (np.asarray(v, np.float64).reshape(-1) for v in (eye, target, up))
+    for name, v in (("eye", eye), ("target", target), ("up", up)):
+        if v.shape != (3,) or not np.isfinite(v).all():
+            raise ValueError(f"{func}(): {name} must be 3 finite numbers, got {v.tolist()}")
+    forward = target - eye
+    if np.linalg.norm(forward) < 1e-12:
+        raise ValueError(f"{func}(): eye and target must differ, both are {eye.tolist()}")
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, up)
+    if np.linalg.norm(right) < 1e-9 * max(np.linalg.norm(up), 1e-300):
+        raise ValueError(f"{func}(): up {up.tolist()} must not be parallel to the view direction {forward.tolist()}")
+    right /= np.linalg.norm(right)
+    return eye, forward, right, np.cross(right, forward)
+
+
+def _resolution(func: str, resolution) -> tuple[int, int]:
+    try:
+        h, w = resolution
+    except (TypeError, ValueError):
+        raise ValueError(f"{func}(): resolution must be (height, width), got {resolution!r}") from None
+    if not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v > 0 for v in (h, w)):
+        raise ValueError(f"{func}(): resolution must be two positive ints (height, width), got {resolution!r}")
+    return int(h), int(w)
+
+
+def look_at(eye, target, up=(0.0, 1.0, 0.0), fov_y: float = 45.0, resolution=(512, 512)) -> Camera:
+    """A pinhole camera at ``eye`` looking at ``target``.
+
+    Args:
+        eye, target: world-space points, 3 numbers each.
+        up: world direction that appears upward in the image (not parallel to the view).
+        fov_y: vertical field of view in degrees, in ``(0, 180)``.
+        resolution: ``(height, width)`` in pixels.
+    """
+    eye, forward, right, cam_up = _frame("look_at", eye, target, up)
+    fov = as_float("look_at", "fov_y", fov_y)
+    if not 0.0 < fov < 180.0:
+        raise ValueError(f"look_at(): fov_y must be in (0, 180) degrees, got {fov}")
+    return Camera(eye, forward, right, cam_up, _resolution("look_at", resolution), fov_y=fov)
+
+
+def orthographic(eye, target, up=(0.0, 1.0, 0.0), height: float = 2.0, resolution=(512, 512)) -> Camera:
+    """An orthographic camera at ``eye`` looking at ``target``, seeing ``height`` world units vertically."""
+    eye, forward, right, cam_up = _frame("orthographic", eye, target, up)
+    extent = as_float("orthographic", "height", height)
+    if extent <= 0:
+        raise ValueError(f"orthographic(): height must be positive, got {extent}")
+    return Camera(eye, forward, right, cam_up, _resolution("orthographic", resolution), ortho_height=extent)

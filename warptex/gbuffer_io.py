@@ -1,0 +1,175 @@
+"""G-buffers as multi-channel OpenEXR files.
+
+Channels written by :func:`save_gbuffer` (all float32, so a round trip is bit-exact):
+
+=====================  =========================================================
+``P.X P.Y P.Z``        position (world space)
+``N.X N.Y N.Z``        shading normal
+``Ng.X Ng.Y Ng.Z``     geometric normal
+``Z``                  depth along the camera's forward axis (``inf`` where empty)
+``mask``               coverage, 1 or 0
+``triangle``           triangle index, -1 where empty (exact below 2**24 faces)
+``dPdx.X`` ... ``.Z``  position derivative per pixel along x; ``dPdy.*`` along y
+``<set>.U <set>.V``    UV set ``<set>`` (``uv0`` first); ``<set>.dUdx``, ``<set>.dVdx``,
+                       ``<set>.dUdy``, ``<set>.dVdy`` its derivatives;
+                       ``<set>.T.X/Y/Z/W`` its tangent
+=====================  =========================================================
+
+:func:`load_gbuffer` also reads Blender's pass names, with or without a view-layer prefix
+(``ViewLayer.Position.X``): ``Position``, ``Normal``, ``UV`` (``.U .V`` or ``.X .Y``) and ``Depth``
+(``Depth.Z`` or ``Z``). Position and normal are required; missing optional channels get the
+documented defaults.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import warp as wp
+
+from warptex import io
+from warptex.gbuffer import FIELDS, UV_FIELDS, GBuffer
+
+_VEC = {wp.vec2: 2, wp.vec3: 3, wp.vec4: 4}
+_NAMES = {
+    "position": ("P.X", "P.Y", "P.Z"),
+    "normal": ("N.X", "N.Y", "N.Z"),
+    "geometric_normal": ("Ng.X", "Ng.Y", "Ng.Z"),
+    "depth": ("Z",),
+    "mask": ("mask",),
+    "triangle": ("triangle",),
+    "position_dx": ("dPdx.X", "dPdx.Y", "dPdx.Z"),
+    "position_dy": ("dPdy.X", "dPdy.Y", "dPdy.Z"),
+}
+_UV_NAMES = {
+    "uv": ("U", "V"),
+    "uv_dx": ("dUdx", "dVdx"),
+    "uv_dy": ("dUdy", "dVdy"),
+    "tangent": ("T.X", "T.Y", "T.Z", "T.W"),
+}
+# Alternatives accepted on load, tried in order after warptex's own names (Blender's passes).
+_ALIASES = {
+    "position": [("Position.X", "Position.Y", "Position.Z")],
+    "normal": [("Normal.X", "Normal.Y", "Normal.Z")],
+    "depth": [("Depth.Z",), ("Depth.V",), ("Depth",)],
+}
+_BLENDER_UV = [("UV.U", "UV.V"), ("UV.X", "UV.Y")]
+_BLENDER_PASSES = {"Position", "Normal", "UV", "Depth", "Combined", "Image", "Alpha", "Vector", "IndexOB", "IndexMA"}
+
+
+def save_gbuffer(path: str | os.PathLike, gbuffer: GBuffer) -> None:
+    """Write ``gbuffer`` to a float32 multi-channel EXR (channel names in the module docstring), atomically."""
+    if not isinstance(gbuffer, GBuffer):
+        raise TypeError(f"save_gbuffer(): gbuffer must be a GBuffer, got {type(gbuffer).__name__}")
+    channels = {}
+
+    def put(names, values):
+        values = np.asarray(values, np.float32).reshape(*gbuffer.resolution, len(names))
+        channels.update({name: values[..., i] for i, name in enumerate(names)})
+
+    for name in FIELDS:
+        put(_NAMES[name], getattr(gbuffer, name).numpy())
+    for set_name, arrays in gbuffer.uv_sets.items():
+        for name, suffixes in _UV_NAMES.items():
+            put([f"{set_name}.{s}" for s in suffixes], arrays[name].numpy())
+    io.write_exr(path, channels)
+
+
+def load_gbuffer(path: str | os.PathLike, *, layer: str | None = None, device=None) -> GBuffer:
+    """Read a G-buffer EXR written by :func:`save_gbuffer`, Blender, or another tool using either naming.
+
+    Args:
+        path: the EXR file.
+        layer: view-layer prefix to read (e.g. ``"ViewLayer"``) when the file holds several;
+            ``None`` accepts channels with or without any single prefix.
+        device: Warp device for the arrays.
+
+    Defaults for missing optional channels: geometric normal = normal; depth = ``inf`` where the
+    mask is 0, else 1; mask = 1 where depth is finite and below 1e9 (Blender's background is
+    1e10), or everywhere without depth; triangle = 0 on covered pixels and -1 elsewhere;
+    derivatives = 0 (so sampling uses mip level 0); tangents = 0.
+
+    Raises:
+        ValueError: the file is not a readable EXR, or lacks position or normal channels (the
+            message names the channels it looked for and lists those present).
+    """
+    func = "load_gbuffer"
+    with_names = _channel_table(func, path, layer)
+    resolution = next(iter(with_names.values())).shape
+
+    def find(candidates):
+        for names in candidates:
+            if all(n in with_names for n in names):
+                return np.stack([with_names[n] for n in names], axis=-1)
+        return None
+
+    data = {}
+    for name in FIELDS:
+        data[name] = find([_NAMES[name], *_ALIASES.get(name, [])])
+    for required in ("position", "normal"):
+        if data[required] is None:
+            wanted = " or ".join(str(list(n)) for n in [_NAMES[required], *_ALIASES[required]])
+            raise ValueError(
+                f"{func}(): '{os.fspath(path)}' has no {required} channels (looked for {wanted}); "
+                f"it has {sorted(with_names)}"
+            )
+    depth = data["depth"][..., 0] if data["depth"] is not None else None
+    if data["mask"] is None:
+        covered = np.isfinite(depth) & (depth < 1e9) if depth is not None else np.ones(resolution, bool)
+        data["mask"] = covered.astype(np.float32)[..., None]
+    covered = data["mask"][..., 0] > 0.5
+    if depth is None:
+        data["depth"] = np.where(covered, 1.0, np.inf).astype(np.float32)[..., None]
+    if data["geometric_normal"] is None:
+        data["geometric_normal"] = data["normal"]
+    if data["triangle"] is None:
+        data["triangle"] = np.where(covered, 0, -1)[..., None]
+    for name in ("position_dx", "position_dy"):
+        if data[name] is None:
+            data[name] = np.zeros((*resolution, 3), np.float32)
+
+    device = wp.get_device(device)
+    arrays = {name: _to_warp(data[name], dtype, device) for name, dtype in FIELDS.items()}
+    uv_sets = {}
+    for set_name in _uv_set_names(with_names):
+        found = {k: find([[f"{set_name}.{s}" for s in suffixes]]) for k, suffixes in _UV_NAMES.items()}
+        if found["uv"] is None:  # uv0 from Blender's UV pass
+            found["uv"] = find(_BLENDER_UV)
+        uv_sets[set_name] = {
+            k: _to_warp(found[k] if found[k] is not None else np.zeros((*resolution, _VEC[t]), np.float32), t, device)
+            for k, t in UV_FIELDS.items()
+        }
+    return GBuffer(**arrays, uv_sets=uv_sets)
+
+
+def _channel_table(func: str, path, layer: str | None) -> dict[str, np.ndarray]:
+    """Every channel of the file as ``[H, W]`` float32, keyed by its name without the view-layer prefix."""
+    planes, names = io.read_exr(path, channels=io.exr_channel_names(path))
+    # Blender names channels "<view layer>.<pass>.<component>".
+    prefixes = {n.rsplit(".", 2)[0] for n in names if n.count(".") >= 2 and n.split(".")[-2] in _BLENDER_PASSES}
+    if layer is None:
+        if len(prefixes) > 1:
+            raise ValueError(f"{func}(): '{os.fspath(path)}' holds several view layers {sorted(prefixes)}; pass layer=")
+        layer = next(iter(prefixes), None)
+    elif layer not in prefixes:
+        raise ValueError(f"{func}(): '{os.fspath(path)}' has no view layer {layer!r}; it has {sorted(prefixes) or 'none'}")
+    strip = f"{layer}." if layer else "\0"
+    return {(n[len(strip) :] if n.startswith(strip) else n): planes[..., i] for i, n in enumerate(names)}
+
+
+def _uv_set_names(table: dict[str, np.ndarray]) -> list[str]:
+    """UV sets present: warptex's ``<set>.U``/``<set>.V`` pairs, and Blender's ``UV`` pass as ``uv0``."""
+    sets = sorted(n[:-2] for n in table if n.endswith(".U") and n[:-2] + ".V" in table and n[:-2] != "UV")
+    if "uv0" not in sets and any(all(n in table for n in names) for names in _BLENDER_UV):
+        sets.insert(0, "uv0")
+    return sets
+
+
+def _to_warp(values: np.ndarray, dtype, device) -> wp.array:
+    values = np.ascontiguousarray(values, np.float32)
+    if dtype == wp.int32:
+        return wp.array(values[..., 0].astype(np.int32), dtype=wp.int32, device=device)
+    if dtype == wp.float32:
+        return wp.array(values[..., 0], dtype=wp.float32, device=device)
+    return wp.array(values, dtype=dtype, device=device)
