@@ -16,11 +16,6 @@ def test_demo_writes_png_and_exr(tmp_path, capsys):
     assert "wrote" in capsys.readouterr().out
 
 
-def test_default_command_is_the_demo(tmp_path):
-    assert main(["--out", str(tmp_path), "--resolution", "24x32"]) == 0
-    assert (tmp_path / "demo.png").is_file()
-
-
 def test_cli_reports_bad_input_without_a_traceback(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path), "--texture", str(tmp_path / "missing.png")]) == 1
     assert "read_image(): file not found" in capsys.readouterr().err

@@ -1,0 +1,72 @@
+"""The main job (``warptex render``): outputs of the default terrain and of user meshes, and errors."""
+
+import numpy as np
+import pytest
+
+from warptex import io
+from warptex.cli import main
+from warptex.gbuffer_io import load_gbuffer
+from warptex.render import lambert, noise_texture, run_render
+from warptex.gbuffer import GBuffer
+
+OUTPUTS = ("render.png", "albedo.png", "normals.png", "render.exr", "gbuffer.exr")
+
+
+def test_default_render_writes_every_output(tmp_path):
+    assert main(["--out", str(tmp_path), "--resolution", "48x64"]) == 0  # render is the default command
+    for name in OUTPUTS:
+        assert (tmp_path / name).stat().st_size > 0, name
+    lit = io.read_image(tmp_path / "render.exr", channels=("R", "G", "B", "A"))
+    g = load_gbuffer(tmp_path / "gbuffer.exr")
+    assert lit.shape == (48, 64, 4) and g.resolution == (48, 64)
+    covered = g.mask.numpy() > 0
+    assert 0.3 < covered.mean() < 1.0, "the default camera frames the terrain"
+    np.testing.assert_array_equal(lit[..., 3], covered.astype(np.float32))
+    assert "uv0" in g.uv_sets and (lit[covered, :3] > 0).all()
+
+
+def test_render_of_a_user_mesh_with_its_embedded_texture(tmp_path, shared_data):
+    paths = run_render(tmp_path, mesh_path=shared_data / "meshes" / "Duck.glb", resolution=(40, 40), progress=False)
+    albedo = io.read_image(paths[1])
+    covered = load_gbuffer(paths[4]).mask.numpy() > 0
+    r, g, b = albedo[covered].mean(axis=0)
+    assert r > 0.4 and g > 0.3 and b < 0.1, "the Duck renders with its own yellow texture"
+
+
+def test_render_of_a_mesh_without_uvs_projects_the_texture(tmp_path, shared_data):
+    paths = run_render(
+        tmp_path,
+        mesh_path=shared_data / "meshes" / "bunny.ply",
+        texture_path=shared_data / "textures" / "brick.png",
+        resolution=(96, 96),
+        tiling=2.0,
+        progress=False,
+    )
+    albedo = io.read_image(paths[1])
+    covered = load_gbuffer(paths[4]).mask.numpy() > 0
+    assert albedo[covered].std() > 0.01, "the texture shows on the mesh"
+
+
+def test_lambert_facing_the_light_is_full_albedo():
+    g = GBuffer.empty((1, 2))
+    g.normal.assign(np.array([[[0, 1, 0], [0, -1, 0]]], np.float32))
+    g.mask.fill_(1.0)
+    lit = lambert(g, np.full((1, 2, 3), 0.5, np.float32), light_dir=(0, 2, 0), ambient=0.2)
+    np.testing.assert_allclose(lit[0], [[0.5] * 3, [0.1] * 3], rtol=1e-6)
+    with pytest.raises(ValueError, match=r"lambert\(\): light_dir must be 3 finite numbers"):
+        lambert(g, np.zeros((1, 2, 3)), light_dir=(0, 0, 0))
+
+
+def test_noise_texture_tiles_seamlessly():
+    tex = noise_texture(64, seed=3)
+    assert tex.shape == (64, 64, 3) and np.isfinite(tex).all()
+    inner = np.abs(np.diff(tex, axis=1)).mean()
+    seam = np.abs(tex[:, 0] - tex[:, -1]).mean()
+    assert seam < 2 * inner, "opposite edges continue each other"
+
+
+def test_render_reports_bad_input(tmp_path, capsys):
+    assert main(["render", "--out", str(tmp_path), "--mesh", str(tmp_path / "missing.obj")]) == 1
+    assert "load_mesh(): file not found" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["render", "--eye", "1,2"])

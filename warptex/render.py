@@ -1,0 +1,161 @@
+"""The main job: rasterise a mesh (the procedural terrain by default), texture it, light it, save it.
+
+Until the technique modules land, the material is one texture: sampled in the mesh's UV0 when it
+has UVs (its own embedded base-colour texture when it carries one), else projected on world XZ;
+trilinear-filtered with the LOD from the G-buffer's derivatives, Lambert-lit.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import trimesh
+import warp as wp
+
+from warptex import io
+from warptex.camera import Camera, look_at
+from warptex.gbuffer import GBuffer, load_mesh, rasterize
+from warptex.gbuffer_io import save_gbuffer
+from warptex.sampling import sample
+from warptex.terrain import terrain
+from warptex.texture import Texture
+
+SKY = np.array([0.45, 0.62, 0.85], np.float32)
+
+
+def noise_texture(size: int = 256, *, seed: int = 0, octaves: int = 6) -> np.ndarray:
+    """A tileable, earthy ground texture ``[size, size, 3]`` (linear RGB): fBm of wrapped value noise."""
+    rng = np.random.default_rng(seed)
+    uv = (np.stack(np.meshgrid(np.arange(size), np.arange(size)[::-1]), axis=-1) + 0.5) / size
+    value = np.zeros((size, size))
+    for octave in range(octaves):
+        cells = 4 * 2**octave
+        grid = Texture(rng.random((cells, cells, 1), dtype=np.float32), mipmaps=False)
+        value += 0.55**octave * sample(grid, uv.astype(np.float32), address="wrap").numpy()[..., 0]
+    value = (value - value.min()) / (value.max() - value.min())
+    dark, mid, light = np.array([0.09, 0.07, 0.04]), np.array([0.16, 0.2, 0.07]), np.array([0.32, 0.29, 0.2])
+    t = value[..., None]
+    return np.where(t < 0.5, dark + (mid - dark) * (2 * t), mid + (light - mid) * (2 * t - 1)).astype(np.float32)
+
+
+def lambert(gbuffer: GBuffer, albedo: np.ndarray, *, light_dir=(0.4, 0.8, 0.3), ambient: float = 0.2) -> np.ndarray:
+    """Lambert shading ``albedo · (ambient + (1 - ambient) · max(0, n·l))`` over the G-buffer's
+    shading normals; uncovered pixels get the sky colour. ``[H, W, 3]`` linear in, ``[H, W, 3]`` out."""
+    light = np.asarray(light_dir, np.float64)
+    if light.shape != (3,) or not np.isfinite(light).all() or np.linalg.norm(light) == 0:
+        raise ValueError(f"lambert(): light_dir must be 3 finite numbers, not all zero, got {light_dir!r}")
+    light /= np.linalg.norm(light)
+    n_dot_l = np.clip(gbuffer.normal.numpy() @ light, 0.0, None)[..., None]
+    lit = albedo[..., :3] * (ambient + (1.0 - ambient) * n_dot_l)
+    return np.where(gbuffer.mask.numpy()[..., None] > 0, lit, SKY).astype(np.float32)
+
+
+def default_camera(mesh: trimesh.Trimesh, resolution, fov_y: float = 45.0) -> Camera:
+    """A three-quarter view from above, far enough that the mesh's bounding sphere fits the view."""
+    centre, radius = mesh.bounds.mean(axis=0), np.linalg.norm(mesh.extents) / 2
+    direction = np.array([-0.55, 0.6, 0.75])
+    half_fov = np.radians(fov_y) / 2 * min(1.0, resolution[1] / resolution[0])
+    distance = 1.05 * radius / np.sin(half_fov)
+    return look_at(centre + direction / np.linalg.norm(direction) * distance, centre, fov_y=fov_y, resolution=resolution)
+
+
+def terrain_camera(resolution, fov_y: float = 45.0) -> Camera:
+    """The default scene's camera: over the near corner of the default terrain, looking across it."""
+    return look_at((-24.0, 24.0, 32.0), (2.0, 2.0, -6.0), fov_y=fov_y, resolution=resolution)
+
+
+def _material_uvs(mesh: trimesh.Trimesh, gbuffer: GBuffer, tiling: float):
+    """``(uv, uv_dx, uv_dy)`` for the material: UV0 × tiling, or world XZ × tiling without UVs."""
+    if "uv0" in gbuffer.uv_sets:
+        arrays = gbuffer.uv_sets["uv0"]
+        return tuple(arrays[k].numpy() * tiling for k in ("uv", "uv_dx", "uv_dy"))
+    scale = tiling / max(float(np.max(mesh.extents)), 1e-12)
+    return tuple(getattr(gbuffer, k).numpy()[..., [0, 2]] * [scale, -scale] for k in ("position", "position_dx", "position_dy"))
+
+
+def _embedded_texture(mesh: trimesh.Trimesh) -> np.ndarray | None:
+    image = getattr(getattr(mesh.visual, "material", None), "baseColorTexture", None)
+    if image is None:
+        return None
+    return io.srgb_to_linear(np.asarray(image.convert("RGB"), np.float32) / 255.0)
+
+
+def run_render(
+    out_dir: str | os.PathLike = "out",
+    *,
+    mesh_path=None,
+    texture_path=None,
+    resolution=(512, 512),
+    eye=None,
+    target=None,
+    fov_y: float = 45.0,
+    tiling: float | None = None,
+    seed: int = 0,
+    progress: bool | None = None,
+    device=None,
+) -> list[Path]:
+    """Render a mesh and write ``render.png``, ``albedo.png``, ``normals.png``, ``render.exr`` and ``gbuffer.exr``.
+
+    Args:
+        out_dir: output folder (created if missing).
+        mesh_path: a mesh file; ``None`` renders the procedural terrain (:func:`warptex.terrain.terrain`).
+        texture_path: the texture; default: the mesh's embedded texture, else a procedural ground texture.
+        resolution: ``(height, width)``.
+        eye, target: camera position and look-at point (default: a three-quarter view framing the mesh).
+        fov_y: vertical field of view, degrees.
+        tiling: texture repeats across UV0 (or across the mesh's largest extent without UVs);
+            default 1 with an embedded texture, else 8.
+        seed: terrain and procedural texture seed.
+        progress: show a progress bar (``None``: only on a terminal).
+        device: Warp device.
+
+    Returns:
+        The paths written.
+    """
+    from tqdm import tqdm  # a progress bar over the stages: the first run compiles kernels for seconds
+
+    stages = tqdm(total=5, desc="render", unit="stage", disable=False if progress else None if progress is None else True)
+    stages.set_postfix_str("mesh")
+    mesh = terrain(seed=seed) if mesh_path is None else load_mesh(mesh_path)
+    framing = terrain_camera(resolution, fov_y) if mesh_path is None else default_camera(mesh, resolution, fov_y)
+    if eye is None and target is None:
+        camera = framing
+    else:
+        eye = framing.eye if eye is None else eye
+        target = mesh.bounds.mean(axis=0) if target is None else target
+        camera = look_at(eye, target, fov_y=fov_y, resolution=resolution)
+    stages.update()
+
+    stages.set_postfix_str("rasterise")
+    g = rasterize(mesh, camera, device=device)
+    stages.update()
+
+    stages.set_postfix_str("texture")
+    embedded = _embedded_texture(mesh) if texture_path is None else None
+    image = io.read_image(texture_path) if texture_path is not None else embedded if embedded is not None else noise_texture(seed=seed)
+    tiling = (1.0 if embedded is not None else 8.0) if tiling is None else float(tiling)
+    uv, uv_dx, uv_dy = (np.ascontiguousarray(a, np.float32) for a in _material_uvs(mesh, g, tiling))
+    albedo = sample(Texture(image, device=device), uv, uv_dx=uv_dx, uv_dy=uv_dy, device=device).numpy()
+    albedo = albedo[..., :3] if albedo.shape[-1] >= 3 else np.repeat(albedo[..., :1], 3, axis=-1)
+    covered = g.mask.numpy()[..., None] > 0
+    albedo = np.where(covered, albedo, SKY)
+    stages.update()
+
+    stages.set_postfix_str("shade")
+    lit = lambert(g, albedo)
+    stages.update()
+
+    stages.set_postfix_str("write")
+    out = Path(out_dir)
+    paths = [out / "render.png", out / "albedo.png", out / "normals.png", out / "render.exr", out / "gbuffer.exr"]
+    io.write_png(paths[0], lit)
+    io.write_png(paths[1], albedo)
+    io.write_png(paths[2], np.where(covered, g.normal.numpy() * 0.5 + 0.5, 0.0), data=True)
+    io.write_exr(paths[3], np.concatenate([lit, covered.astype(np.float32)], axis=-1))
+    save_gbuffer(paths[4], g)
+    stages.update()
+    stages.close()
+    wp.synchronize_device(g.device)
+    return paths
