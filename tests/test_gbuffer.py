@@ -278,3 +278,14 @@ def test_look_at_frame_is_right_handed_and_y_up():
     np.testing.assert_allclose(cam.right, [1, 0, 0])
     np.testing.assert_allclose(cam.up, [0, 1, 0])
     np.testing.assert_allclose(np.cross(cam.right, cam.up), -cam.forward)
+
+
+def test_gltf_scenes_are_flattened_with_their_node_transforms(tmp_path):
+    box = trimesh.creation.box((1, 1, 1))
+    scene = trimesh.Scene()
+    scene.add_geometry(box, node_name="a", transform=trimesh.transformations.translation_matrix((10, 0, 0)))
+    scene.add_geometry(box, node_name="b", transform=trimesh.transformations.translation_matrix((-10, 0, 0)))
+    scene.export(tmp_path / "scene.glb")
+    mesh = load_mesh(tmp_path / "scene.glb")
+    assert len(mesh.faces) == 24
+    np.testing.assert_allclose(mesh.bounds, [[-10.5, -0.5, -0.5], [10.5, 0.5, 0.5]], atol=1e-6)
