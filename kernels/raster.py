@@ -156,4 +156,5 @@ def uv_kernel(
             sign = 1.0
             if tv[3] < 0.0:
                 sign = -1.0
-            tangent[row, col] = wp.vec4(wp.normalize(t)[0], wp.normalize(t)[1], wp.normalize(t)[2], sign)
+            t = wp.normalize(t)
+            tangent[row, col] = wp.vec4(t[0], t[1], t[2], sign)

@@ -43,6 +43,15 @@ def _directional_fd(loss, x, direction, h):
     return (loss(x + h * direction) - loss(x - h * direction)) / (2 * h)
 
 
+def _check_texel_gradient(rng, grad, img, uv, weights, **kw):
+    """``grad`` (level 0) against central differences along three random directions over all texels."""
+    assert np.abs(grad).sum() > 0
+    for _ in range(3):
+        direction = rng.normal(size=img.shape)
+        fd = _directional_fd(lambda x: _forward(x.astype(np.float32), uv, weights, **kw).sum(), img, direction, 0.05)
+        np.testing.assert_allclose((grad.astype(np.float64) * direction).sum(), fd, rtol=1e-4, atol=1e-4)
+
+
 def _check_per_sample(loss_of, x, grad, rel_step, *, min_kept=0.9):
     """Compare ``grad`` (``[N, D]``) with central differences of the per-sample ``loss_of(x)``."""
     x = np.asarray(x, np.float32)
@@ -72,12 +81,7 @@ def test_texel_gradients_match_finite_differences(rng, filt, mode):
     weights = rng.normal(size=(300, 3))
     kw = {**FILTERS[filt], "address": mode, "border": BORDER}
     tex, _ = _backward(img, uv, weights, **kw)
-    grad = tex.grad(0).astype(np.float64)
-    assert np.abs(grad).sum() > 0
-    for _ in range(3):
-        direction = rng.normal(size=img.shape)
-        fd = _directional_fd(lambda x: _forward(x.astype(np.float32), uv, weights, **kw).sum(), img, direction, 0.05)
-        np.testing.assert_allclose((grad * direction).sum(), fd, rtol=1e-4, atol=1e-4)
+    _check_texel_gradient(rng, tex.grad(0), img, uv, weights, **kw)
 
 
 @pytest.mark.parametrize("mode", MODES)
@@ -133,12 +137,7 @@ def test_coarse_level_gradients_flow_to_level_zero_through_the_chain(rng):
     weights = rng.normal(size=(300, 3))
     kw = {"lod": 2.6}  # levels 2 and 3 only: level 0 is reached only through the box filter
     tex, _ = _backward(img, uv, weights, build_on_tape=True, **kw)
-    grad = tex.grad(0).astype(np.float64)
-    assert np.abs(grad).sum() > 0
-    for _ in range(3):
-        direction = rng.normal(size=img.shape)
-        fd = _directional_fd(lambda x: _forward(x.astype(np.float32), uv, weights, **kw).sum(), img, direction, 0.05)
-        np.testing.assert_allclose((grad * direction).sum(), fd, rtol=1e-4, atol=1e-4)
+    _check_texel_gradient(rng, tex.grad(0), img, uv, weights, **kw)
 
 
 def test_each_level_receives_its_own_gradient(rng):
