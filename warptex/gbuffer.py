@@ -163,14 +163,16 @@ def _checked_mesh(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         raise ValueError(f"rasterize(): vertex {bad} is not finite: {vertices[bad].tolist()}")
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise ValueError(f"rasterize(): face indices must be in [0, {len(vertices) - 1}], got [{faces.min()}, {faces.max()}]")
-    return vertices, faces, _vertex_normals(mesh, vertices, faces)
+    return vertices, faces, vertex_normals(mesh)
 
 
-def _vertex_normals(mesh: trimesh.Trimesh, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """The mesh's own vertex normals when it carries them, else smooth area-weighted ones.
+def vertex_normals(mesh: trimesh.Trimesh) -> np.ndarray:
+    """Unit vertex normals ``[V, 3]``: the mesh's own when it carries them, else smooth area-weighted ones.
 
     (Computed here rather than by trimesh, whose fallback without SciPy logs a traceback.)
     """
+    vertices = np.asarray(mesh.vertices, np.float64)
+    faces = np.asarray(mesh.faces, np.int64)
     cache = getattr(getattr(mesh, "_cache", None), "cache", {})
     if "vertex_normals" in cache and np.shape(cache["vertex_normals"]) == vertices.shape:
         normals = np.asarray(cache["vertex_normals"], np.float64)

@@ -32,6 +32,7 @@ import numpy as np
 import trimesh
 
 from warptex._validate import as_float
+from warptex.gbuffer import vertex_normals
 
 __all__ = ["terrain", "terrain_slope_height"]
 
@@ -326,5 +327,5 @@ def terrain_slope_height(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]
     if len(mesh.vertices) == 0:
         raise ValueError("terrain_slope_height(): mesh has no vertices")
     height01 = _normalise(np.asarray(mesh.vertices[:, 1], dtype=np.float64))
-    slope = np.degrees(np.arccos(np.clip(np.asarray(mesh.vertex_normals[:, 1], dtype=np.float64), -1.0, 1.0)))
+    slope = np.degrees(np.arccos(np.clip(vertex_normals(mesh)[:, 1], -1.0, 1.0)))
     return height01, slope
