@@ -53,9 +53,9 @@ class _Noise:
     def __init__(self, seed: int):
         rng = np.random.default_rng([seed, 0])
         perm = rng.permutation(_TABLE)
-        self.perm = np.concatenate([perm, perm]).astype(np.int64)
+        self.perm = np.concatenate([perm, perm]).astype(np.intp)
         angles = rng.uniform(0.0, 2.0 * math.pi, _TABLE)
-        self.grad = np.stack([np.cos(angles), np.sin(angles)], axis=-1)
+        self.grad_x, self.grad_z = np.cos(angles), np.sin(angles)
         self.seed = seed
 
     def frame(self, layer: int, octave: int) -> tuple[float, float, float, float]:
@@ -71,20 +71,18 @@ class _Noise:
         z0 = np.floor(z)
         fx = x - x0
         fz = z - z0
-        ix = x0.astype(np.int64) & (_TABLE - 1)
-        iz = z0.astype(np.int64) & (_TABLE - 1)
-        p = self.perm
-        row0 = p[ix]
-        row1 = p[ix + 1]
-
-        def corner(row, dz_index, dx, dz):
-            g = self.grad[p[row + iz + dz_index]]
-            return g[..., 0] * dx + g[..., 1] * dz
-
-        n00 = corner(row0, 0, fx, fz)
-        n10 = corner(row1, 0, fx - 1.0, fz)
-        n01 = corner(row0, 1, fx, fz - 1.0)
-        n11 = corner(row1, 1, fx - 1.0, fz - 1.0)
+        ix = x0.astype(np.intp) & (_TABLE - 1)
+        iz = z0.astype(np.intp) & (_TABLE - 1)
+        p, gx, gz = self.perm, self.grad_x, self.grad_z
+        h0 = p[ix] + iz  # row hashes of the lattice columns ix and ix + 1
+        h1 = p[ix + 1] + iz
+        k00, k01, k10, k11 = p[h0], p[h0 + 1], p[h1], p[h1 + 1]
+        fx1 = fx - 1.0
+        fz1 = fz - 1.0
+        n00 = gx[k00] * fx + gz[k00] * fz
+        n10 = gx[k10] * fx1 + gz[k10] * fz
+        n01 = gx[k01] * fx + gz[k01] * fz1
+        n11 = gx[k11] * fx1 + gz[k11] * fz1
         sx = fx * fx * fx * (fx * (fx * 6.0 - 15.0) + 10.0)
         sz = fz * fz * fz * (fz * (fz * 6.0 - 15.0) + 10.0)
         a = n00 + sx * (n10 - n00)
@@ -151,26 +149,54 @@ def _heights01(x, z, *, seed, octaves, lacunarity, gain, ridge, cliffs, feature_
     wz = _fbm(noise, px, pz, 3, 2.0, 0.5, layer=2)
     px, pz = px + 0.35 * wx, pz + 0.35 * wz
 
-    hills = 0.5 + 0.5 * _fbm(noise, px, pz, octaves, lacunarity, gain, layer=3)
-    crests = _ridged(noise, 0.6 * px, 0.6 * pz, octaves, lacunarity, gain, layer=4)
-    base = _normalise((1.0 - ridge) * hills + ridge * crests)
+    # Large-scale relief decides where the mountains stand; rolling hills everywhere, ridged
+    # crests (sharp, branching ridge lines) rising with the relief.
+    relief = 0.5 + 0.5 * _fbm(noise, 0.7 * px, 0.7 * pz, 3, 2.0, 0.5, layer=3)
+    hills = 0.5 + 0.5 * _fbm(noise, px, pz, octaves, lacunarity, 0.8 * gain, layer=4)
+    crests = _ridged(noise, px, pz, octaves, lacunarity, gain, layer=5)
+    uplift = _smoothstep(0.35, 0.75, relief)
+    mountains = (1.0 - ridge) * hills + ridge * crests
+    base = _normalise(0.6 * relief + 0.25 * hills + 0.9 * uplift * mountains)
     # Broad valley floors, sharper peaks.
-    base = base ** 1.4
+    base = base ** 1.6
 
     if cliffs > 0.0:
-        # A smooth staircase f -> f^p / (f^p + (1-f)^p) per step: flat benches, risers p times
-        # steeper than the slope underneath. Terrace lines are shifted by low-frequency noise, and a
-        # mask fades the terraces out over part of the map (and over the lowest ground).
-        p = 1.0 + 6.0 * cliffs
-        shift = 0.5 * _fbm(noise, 0.7 * px, 0.7 * pz, 2, 2.0, 0.5, layer=5)
+        # A smooth staircase f -> f^p / (f^p + (1-f)^p) per step: nearly flat benches, risers p
+        # times steeper than the slope underneath. Terrace lines are shifted by low-frequency noise,
+        # and a mask fades the terraces out over part of the map and over the lowest ground.
+        p = 1.0 + 4.0 * cliffs
+        shift = 0.5 * _fbm(noise, 0.7 * px, 0.7 * pz, 2, 2.0, 0.5, layer=6)
         t = base * terraces + shift
         f = t - np.floor(t)
         fp = f ** p
         step = fp / (fp + (1.0 - f) ** p)
-        mask = _smoothstep(-0.25, 0.2, _fbm(noise, 0.45 * px, 0.45 * pz, 2, 2.0, 0.5, layer=6))
-        mask *= _smoothstep(0.05, 0.25, base)
-        base = base + mask * (step - f) / terraces
+        mask = _smoothstep(-0.1, 0.25, _fbm(noise, 0.45 * px, 0.45 * pz, 2, 2.0, 0.5, layer=7))
+        mask *= _smoothstep(0.1, 0.3, base)
+        base = base + 0.85 * mask * (step - f) / terraces
     return _normalise(base)
+
+
+def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Smooth vertex normals, ``[V, 3]`` unit vectors: face normals weighted by the corner angles.
+
+    The same weighting as ``trimesh``'s own ``vertex_normals``, but vectorised with ``bincount``:
+    trimesh's fallback without SciPy loops in Python and takes seconds on a 513 × 513 grid.
+    """
+    tri = vertices[faces]  # [F, 3 corners, 3]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    unit = cross / np.linalg.norm(cross, axis=-1, keepdims=True)
+    e_next = np.roll(tri, -1, axis=1) - tri  # corner k -> k+1
+    e_prev = np.roll(tri, 1, axis=1) - tri  # corner k -> k-1
+    cos = np.einsum("fkc,fkc->fk", e_next, e_prev) / (
+        np.linalg.norm(e_next, axis=-1) * np.linalg.norm(e_prev, axis=-1)
+    )
+    angles = np.arccos(np.clip(cos, -1.0, 1.0))  # [F, 3]
+    flat = faces.ravel()
+    summed = np.stack(
+        [np.bincount(flat, weights=(angles * unit[:, k : k + 1]).ravel(), minlength=len(vertices)) for k in range(3)],
+        axis=-1,
+    )
+    return summed / np.linalg.norm(summed, axis=-1, keepdims=True)
 
 
 # -- validation ---------------------------------------------------------------------------------------
@@ -194,17 +220,13 @@ def _pair(name: str, value) -> tuple:
 
 
 def _positive(name: str, value) -> float:
-    f = as_float("terrain", name, value)
-    if f <= 0.0:
-        raise ValueError(f"terrain(): {name} must be positive, got {f}")
-    return f
+    return _bounded(name, value, lambda f: f > 0.0, "positive")
 
 
-def _in_range(name: str, value, low: float, high: float | None, *, open_low: bool = False) -> float:
+def _bounded(name: str, value, ok, bound: str) -> float:
+    """``value`` as a finite float satisfying ``ok``; otherwise a ValueError quoting ``bound``."""
     f = as_float("terrain", name, value)
-    if (f <= low if open_low else f < low) or (high is not None and f > high):
-        lo = "(" if open_low else "["
-        bound = f"at least {low}" if high is None and not open_low else f"in {lo}{low}, {high if high is not None else 'inf'}]"
+    if not ok(f):
         raise ValueError(f"terrain(): {name} must be {bound}, got {f}")
     return f
 
@@ -243,8 +265,9 @@ def terrain(
         lacunarity: frequency ratio between octaves, ``>= 1``.
         gain: amplitude ratio between octaves, in ``(0, 1]``; higher is rougher.
         ridge: blend weight of ridged noise (sharp crests) against smooth fBm hills, in ``[0, 1]``.
-        cliffs: terrace sharpness, ``>= 0``: 0 disables terracing; at 1 a terrace riser is 7× steeper
-            than the ground beneath it, so cliff faces pass 60° at the defaults; larger is sharper.
+        cliffs: terrace sharpness, ``>= 0``: 0 disables terracing; at 1 a terrace riser is about
+            4× steeper than the ground beneath it (cliff faces well past 60° at the defaults) while
+            the benches between risers flatten out; larger is sharper.
         terraces: number of terrace steps over the height range, ``>= 1``.
         feature_size: wavelength of the coarsest octave in world units; finite, positive.
 
@@ -260,12 +283,12 @@ def terrain(
     size_x, size_z = (_positive(f"size[{i}]", v) for i, v in enumerate(_pair("size", size)))
     rows, cols = (_int(f"resolution[{i}]", v, 2) for i, v in enumerate(_pair("resolution", resolution)))
     seed = _int("seed", seed, 0)
-    height = _in_range("height", height, 0.0, None)
+    height = _bounded("height", height, lambda f: f >= 0.0, ">= 0")
     octaves = _int("octaves", octaves, 1, _MAX_OCTAVES)
-    lacunarity = _in_range("lacunarity", lacunarity, 1.0, None)
-    gain = _in_range("gain", gain, 0.0, 1.0, open_low=True)
-    ridge = _in_range("ridge", ridge, 0.0, 1.0)
-    cliffs = _in_range("cliffs", cliffs, 0.0, None)
+    lacunarity = _bounded("lacunarity", lacunarity, lambda f: f >= 1.0, ">= 1")
+    gain = _bounded("gain", gain, lambda f: 0.0 < f <= 1.0, "in (0, 1]")
+    ridge = _bounded("ridge", ridge, lambda f: 0.0 <= f <= 1.0, "in [0, 1]")
+    cliffs = _bounded("cliffs", cliffs, lambda f: f >= 0.0, ">= 0")
     terraces = _int("terraces", terraces, 1)
     feature_size = _positive("feature_size", feature_size)
 
@@ -289,7 +312,11 @@ def terrain(
     faces = np.stack([np.stack([a, c, b], -1), np.stack([b, c, d], -1)], axis=1).reshape(-1, 3)
 
     mesh = trimesh.Trimesh(
-        vertices=vertices, faces=faces, visual=trimesh.visual.TextureVisuals(uv=uv), process=False
+        vertices=vertices,
+        faces=faces,
+        vertex_normals=_vertex_normals(vertices, faces),
+        visual=trimesh.visual.TextureVisuals(uv=uv),
+        process=False,
     )
     mesh.metadata["terrain"] = {
         "size": (size_x, size_z),
