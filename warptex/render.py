@@ -63,7 +63,7 @@ def default_camera(mesh: trimesh.Trimesh, resolution, fov_y: float = 45.0) -> Ca
 
 def terrain_camera(resolution, fov_y: float = 45.0) -> Camera:
     """The default scene's camera: over the near corner of the default terrain, looking across it."""
-    return look_at((-24.0, 24.0, 32.0), (2.0, 2.0, -6.0), fov_y=fov_y, resolution=resolution)
+    return look_at((-30.0, 34.0, 40.0), (2.0, 2.0, -4.0), fov_y=fov_y, resolution=resolution)
 
 
 def _material_uvs(mesh: trimesh.Trimesh, gbuffer: GBuffer, tiling: float):
