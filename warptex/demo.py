@@ -16,6 +16,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from warptex import io
+from warptex.render import to_rgb
 from warptex.sampling import sample
 from warptex.texture import Texture
 
@@ -73,11 +74,6 @@ def _label(image: np.ndarray, text: str) -> np.ndarray:
     return np.asarray(pil)
 
 
-def _rgb(colour: np.ndarray) -> np.ndarray:
-    """Linear RGB for display: gray (1-2 channels) is replicated, alpha dropped."""
-    return colour[..., :3] if colour.shape[-1] >= 3 else np.repeat(colour[..., :1], 3, axis=-1)
-
-
 def _to_rgb8(linear_rgb: np.ndarray) -> np.ndarray:
     return np.round(io.linear_to_srgb(linear_rgb) * 255).astype(np.uint8)
 
@@ -106,7 +102,7 @@ def run_demo(out_dir: str | os.PathLike = "out", *, texture_path=None, resolutio
         ("bilinear, level 0", {"filter": "bilinear"}),
         ("trilinear, LOD from derivatives", {"uv_dx": uv_dx, "uv_dy": uv_dy}),
     ):
-        colour = _rgb(sample(tex, uv, device=device, **kw).numpy())
+        colour = to_rgb(sample(tex, uv, device=device, **kw).numpy())
         renders[name] = np.where(mask[..., None], colour, SKY)
     panels = [_label(_to_rgb8(colour), name) for name, colour in renders.items()]
 
@@ -115,7 +111,7 @@ def run_demo(out_dir: str | os.PathLike = "out", *, texture_path=None, resolutio
     quad_uv = np.stack(np.meshgrid(cells, cells[::-1]), axis=-1).astype(np.float32)
     modes = []
     for mode in ("wrap", "clamp", "mirror", "border"):
-        colour = _rgb(sample(tex, quad_uv, address=mode, border=(0.1, 0.1, 0.1, 1.0), device=device).numpy())
+        colour = to_rgb(sample(tex, quad_uv, address=mode, border=(0.1, 0.1, 0.1, 1.0), device=device).numpy())
         modes.append(_label(_to_rgb8(colour), mode))
     elapsed = time.perf_counter() - start
 

@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
-import warp as wp
 
 from warptex import io
 from warptex.camera import Camera, look_at
@@ -38,6 +37,11 @@ def noise_texture(size: int = 256, *, seed: int = 0, octaves: int = 6) -> np.nda
     dark, mid, light = np.array([0.09, 0.07, 0.04]), np.array([0.16, 0.2, 0.07]), np.array([0.32, 0.29, 0.2])
     t = value[..., None]
     return np.where(t < 0.5, dark + (mid - dark) * (2 * t), mid + (light - mid) * (2 * t - 1)).astype(np.float32)
+
+
+def to_rgb(colour: np.ndarray) -> np.ndarray:
+    """``[..., C]`` colour as ``[..., 3]`` RGB for display: gray (1-2 channels) is replicated, alpha dropped."""
+    return colour[..., :3] if colour.shape[-1] >= 3 else np.repeat(colour[..., :1], 3, axis=-1)
 
 
 def lambert(gbuffer: GBuffer, albedo: np.ndarray, *, light_dir=(0.4, 0.8, 0.3), ambient: float = 0.2) -> np.ndarray:
@@ -137,8 +141,7 @@ def run_render(
     image = io.read_image(texture_path) if texture_path is not None else embedded if embedded is not None else noise_texture(seed=seed)
     tiling = (1.0 if embedded is not None else 8.0) if tiling is None else float(tiling)
     uv, uv_dx, uv_dy = (np.ascontiguousarray(a, np.float32) for a in _material_uvs(mesh, g, tiling))
-    albedo = sample(Texture(image, device=device), uv, uv_dx=uv_dx, uv_dy=uv_dy, device=device).numpy()
-    albedo = albedo[..., :3] if albedo.shape[-1] >= 3 else np.repeat(albedo[..., :1], 3, axis=-1)
+    albedo = to_rgb(sample(Texture(image, device=device), uv, uv_dx=uv_dx, uv_dy=uv_dy, device=device).numpy())
     covered = g.mask.numpy()[..., None] > 0
     albedo = np.where(covered, albedo, SKY)
     stages.update()
@@ -157,5 +160,4 @@ def run_render(
     save_gbuffer(paths[4], g)
     stages.update()
     stages.close()
-    wp.synchronize_device(g.device)
     return paths
