@@ -3,7 +3,8 @@
 The public API: textures (:class:`Texture`, :class:`TextureArray`), :func:`sample` with its
 :class:`Filter` and :class:`Address` modes, image I/O in :mod:`warptex.io`, cameras
 (:func:`look_at`, :func:`orthographic`), G-buffers (:func:`rasterize`, :func:`save_gbuffer`,
-:func:`load_gbuffer`) and the procedural :func:`terrain`.
+:func:`load_gbuffer`), the procedural :func:`terrain`, the techniques (:func:`triplanar`,
+:func:`biplanar`, :func:`triplanar_normal`) and the Lambert preview :func:`lambert`.
 """
 
 from warptex import io
@@ -12,16 +13,22 @@ from warptex.gbuffer import GBuffer, load_mesh, rasterize
 from warptex.gbuffer_io import load_gbuffer, save_gbuffer
 from warptex.sampling import Address, Filter, sample
 from warptex.terrain import terrain
+from warptex.shade import lambert
 from warptex.texture import Texture, TextureArray, mip_sizes
+from warptex.triplanar import Blend, Space, biplanar, triplanar, triplanar_normal
 
 __all__ = [
     "Address",
+    "Blend",
     "Camera",
     "Filter",
     "GBuffer",
     "Texture",
+    "Space",
     "TextureArray",
+    "biplanar",
     "io",
+    "lambert",
     "load_gbuffer",
     "load_mesh",
     "look_at",
@@ -31,5 +38,7 @@ __all__ = [
     "sample",
     "save_gbuffer",
     "terrain",
+    "triplanar",
+    "triplanar_normal",
 ]
 __version__ = "0.1.0"

@@ -13,10 +13,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from PIL import Image, ImageDraw
 
 from warptex import io
-from warptex.render import to_rgb
+from warptex.shade import labelled, to_rgb
 from warptex.sampling import sample
 from warptex.texture import Texture
 
@@ -65,19 +64,6 @@ def ground_plane(resolution: tuple[int, int], *, height=1.0, pitch_deg=12.0, fov
     return uv.astype(np.float32), uv_dx.astype(np.float32), uv_dy.astype(np.float32), mask
 
 
-def _label(image: np.ndarray, text: str) -> np.ndarray:
-    """``image`` (sRGB-encoded uint8 RGB) with ``text`` in its top-left corner."""
-    pil = Image.fromarray(image)
-    draw = ImageDraw.Draw(pil)
-    draw.rectangle((0, 0, 8 + 7 * len(text), 18), fill=(0, 0, 0))
-    draw.text((4, 3), text, fill=(255, 255, 255))
-    return np.asarray(pil)
-
-
-def _to_rgb8(linear_rgb: np.ndarray) -> np.ndarray:
-    return np.round(io.linear_to_srgb(linear_rgb) * 255).astype(np.uint8)
-
-
 def run_demo(out_dir: str | os.PathLike = "out", *, texture_path=None, resolution=(360, 480), device=None) -> list[Path]:
     """Render the demo and write ``demo.png`` (sRGB preview) and ``demo_trilinear.exr`` (linear).
 
@@ -104,7 +90,7 @@ def run_demo(out_dir: str | os.PathLike = "out", *, texture_path=None, resolutio
     ):
         colour = to_rgb(sample(tex, uv, device=device, **kw).numpy())
         renders[name] = np.where(mask[..., None], colour, SKY)
-    panels = [_label(_to_rgb8(colour), name) for name, colour in renders.items()]
+    panels = [labelled(colour, name) for name, colour in renders.items()]
 
     quad = 3 * w // 4  # four address-mode panels span the three ground-plane panels
     cells = np.linspace(-1.0, 2.0, quad, endpoint=False) + 1.5 / quad
@@ -112,7 +98,7 @@ def run_demo(out_dir: str | os.PathLike = "out", *, texture_path=None, resolutio
     modes = []
     for mode in ("wrap", "clamp", "mirror", "border"):
         colour = to_rgb(sample(tex, quad_uv, address=mode, border=(0.1, 0.1, 0.1, 1.0), device=device).numpy())
-        modes.append(_label(_to_rgb8(colour), mode))
+        modes.append(labelled(colour, mode))
     elapsed = time.perf_counter() - start
 
     top = np.concatenate(panels, axis=1)

@@ -1,8 +1,9 @@
 """The main job: rasterise a mesh (the procedural terrain by default), texture it, light it, save it.
 
-Until the technique modules land, the material is one texture: sampled in the mesh's UV0 when it
-has UVs (its own embedded base-colour texture when it carries one), else projected on world XZ;
-trilinear-filtered with the LOD from the G-buffer's derivatives, Lambert-lit.
+The material is one texture: sampled in the mesh's UV0 when it has UVs (its own embedded
+base-colour texture when it carries one), else triplanar-mapped (:mod:`warptex.triplanar`);
+trilinear-filtered with the LOD from the G-buffer's derivatives, Lambert-lit. (The default
+terrain's splat-layer material arrives with the layer and stochastic techniques.)
 """
 
 from __future__ import annotations
@@ -18,10 +19,10 @@ from warptex.camera import Camera, look_at
 from warptex.gbuffer import GBuffer, load_mesh, rasterize
 from warptex.gbuffer_io import save_gbuffer
 from warptex.sampling import sample
+from warptex.shade import SKY, lambert, to_rgb
 from warptex.terrain import terrain
 from warptex.texture import Texture
-
-SKY = np.array([0.45, 0.62, 0.85], np.float32)
+from warptex.triplanar import triplanar
 
 
 def noise_texture(size: int = 256, *, seed: int = 0, octaves: int = 6) -> np.ndarray:
@@ -39,23 +40,6 @@ def noise_texture(size: int = 256, *, seed: int = 0, octaves: int = 6) -> np.nda
     return np.where(t < 0.5, dark + (mid - dark) * (2 * t), mid + (light - mid) * (2 * t - 1)).astype(np.float32)
 
 
-def to_rgb(colour: np.ndarray) -> np.ndarray:
-    """``[..., C]`` colour as ``[..., 3]`` RGB for display: gray (1-2 channels) is replicated, alpha dropped."""
-    return colour[..., :3] if colour.shape[-1] >= 3 else np.repeat(colour[..., :1], 3, axis=-1)
-
-
-def lambert(gbuffer: GBuffer, albedo: np.ndarray, *, light_dir=(0.4, 0.8, 0.3), ambient: float = 0.2) -> np.ndarray:
-    """Lambert shading ``albedo · (ambient + (1 - ambient) · max(0, n·l))`` over the G-buffer's
-    shading normals; uncovered pixels get the sky colour. ``[H, W, 3]`` linear in, ``[H, W, 3]`` out."""
-    light = np.asarray(light_dir, np.float64)
-    if light.shape != (3,) or not np.isfinite(light).all() or np.linalg.norm(light) == 0:
-        raise ValueError(f"lambert(): light_dir must be 3 finite numbers, not all zero, got {light_dir!r}")
-    light /= np.linalg.norm(light)
-    n_dot_l = np.clip(gbuffer.normal.numpy() @ light, 0.0, None)[..., None]
-    lit = albedo[..., :3] * (ambient + (1.0 - ambient) * n_dot_l)
-    return np.where(gbuffer.mask.numpy()[..., None] > 0, lit, SKY).astype(np.float32)
-
-
 def default_camera(mesh: trimesh.Trimesh, resolution, fov_y: float = 45.0) -> Camera:
     """A three-quarter view from above, far enough that the mesh's bounding sphere fits the view."""
     centre, radius = mesh.bounds.mean(axis=0), np.linalg.norm(mesh.extents) / 2
@@ -70,13 +54,14 @@ def terrain_camera(resolution, fov_y: float = 45.0) -> Camera:
     return look_at((-30.0, 34.0, 40.0), (2.0, 2.0, -4.0), fov_y=fov_y, resolution=resolution)
 
 
-def _material_uvs(mesh: trimesh.Trimesh, gbuffer: GBuffer, tiling: float):
-    """``(uv, uv_dx, uv_dy)`` for the material: UV0 × tiling, or world XZ × tiling without UVs."""
+def _albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, texture: Texture, tiling: float, device) -> np.ndarray:
+    """The material colour: UV0 × tiling when the mesh has UVs, else triplanar with ``tiling``
+    repeats across the mesh's largest extent."""
     if "uv0" in gbuffer.uv_sets:
-        arrays = gbuffer.uv_sets["uv0"]
-        return tuple(arrays[k].numpy() * tiling for k in ("uv", "uv_dx", "uv_dy"))
+        uv, uv_dx, uv_dy = (np.ascontiguousarray(gbuffer.uv_sets["uv0"][k].numpy() * tiling, np.float32) for k in ("uv", "uv_dx", "uv_dy"))
+        return to_rgb(sample(texture, uv, uv_dx=uv_dx, uv_dy=uv_dy, device=device))
     scale = tiling / max(float(np.max(mesh.extents)), 1e-12)
-    return tuple(getattr(gbuffer, k).numpy()[..., [0, 2]] * [scale, -scale] for k in ("position", "position_dx", "position_dy"))
+    return to_rgb(triplanar(gbuffer, texture, tiling=scale, device=device))
 
 
 def _embedded_texture(mesh: trimesh.Trimesh) -> np.ndarray | None:
@@ -109,7 +94,7 @@ def run_render(
         resolution: ``(height, width)``.
         eye, target: camera position and look-at point (default: a three-quarter view framing the mesh).
         fov_y: vertical field of view, degrees.
-        tiling: texture repeats across UV0 (or across the mesh's largest extent without UVs);
+        tiling: texture repeats across UV0 (or, triplanar, across the mesh's largest extent without UVs);
             default 1 with an embedded texture, else 8.
         seed: terrain and procedural texture seed.
         progress: show a progress bar (``None``: only on a terminal).
@@ -140,8 +125,7 @@ def run_render(
     embedded = _embedded_texture(mesh) if texture_path is None else None
     image = io.read_image(texture_path) if texture_path is not None else embedded if embedded is not None else noise_texture(seed=seed)
     tiling = (1.0 if embedded is not None else 8.0) if tiling is None else float(tiling)
-    uv, uv_dx, uv_dy = (np.ascontiguousarray(a, np.float32) for a in _material_uvs(mesh, g, tiling))
-    albedo = to_rgb(sample(Texture(image, device=device), uv, uv_dx=uv_dx, uv_dy=uv_dy, device=device).numpy())
+    albedo = _albedo(mesh, g, Texture(image, device=device), tiling, device)
     covered = g.mask.numpy()[..., None] > 0
     albedo = np.where(covered, albedo, SKY)
     stages.update()

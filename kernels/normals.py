@@ -1,0 +1,83 @@
+"""Tangent-space normal maps: decoding, and blending with a surface normal (whiteout, UDN, RNM).
+
+The blends work in a frame whose ``z`` axis is the surface's main direction: the tangent-space
+normal ``t`` (x along ``u``, y along ``v``, z out of the surface) and the base normal ``b`` are
+both expressed there. ``b.z`` may be negative (a surface facing down its axis); every blend keeps
+the result on ``b``'s side. References: Barré-Brisebois and Hill, "Blending in Detail" (2012);
+Golus, "Normal Mapping for a Triplanar Shader" (2017).
+"""
+
+import warp as wp
+
+BLEND_WHITEOUT = wp.constant(0)
+BLEND_UDN = wp.constant(1)
+BLEND_RNM = wp.constant(2)
+
+
+@wp.func
+def decode_normal(texel: wp.vec4, channels: wp.int32, strength: float, flip_green: wp.int32) -> wp.vec3:
+    """Tangent-space normal of a normal-map texel stored as ``[0, 1]`` data (flat = ``(0.5, 0.5, 1)``).
+
+    Two-channel maps (BC5-style) rebuild ``z = sqrt(1 - x² - y²)``. ``flip_green`` negates ``y``
+    for DirectX-style maps. ``strength`` scales ``x, y`` (0 gives the flat normal, 1 the map as
+    authored); the result is normalised (zero if the texel decodes to zero).
+    """
+    x = texel[0] * 2.0 - 1.0
+    y = texel[1] * 2.0 - 1.0
+    if flip_green != 0:
+        y = -y
+    z = 0.0
+    if channels >= 3:
+        z = texel[2] * 2.0 - 1.0
+    else:
+        r = 1.0 - x * x - y * y
+        if r > 0.0:
+            z = wp.sqrt(r)
+    t = wp.vec3(x * strength, y * strength, z)
+    result = wp.vec3(0.0)
+    if wp.length(t) > 0.0:
+        result = wp.normalize(t)
+    return result
+
+
+@wp.func
+def sign_or_one(x: float) -> float:
+    """``sign(x)`` with ``sign(0) = +1``."""
+    s = 1.0
+    if x < 0.0:
+        s = -1.0
+    return s
+
+
+@wp.func
+def blend_projected(t: wp.vec3, b: wp.vec3, blend: wp.int32) -> wp.vec3:
+    """Blend tangent-space normal ``t`` onto base normal ``b`` (same frame); not normalised.
+
+    - whiteout: ``(t.xy + b.xy, t.z · b.z)``
+    - UDN: ``(t.xy + b.xy, b.z)``
+    - RNM: reoriented normal mapping with ``n1 = (b.xy, |b.z| + 1)``, ``n2 = (-t.xy, t.z)``,
+      ``r = n1 · dot(n1, n2) / n1.z - n2``, and ``r.z`` given ``b.z``'s sign.
+
+    A flat ``t = (0, 0, 1)`` returns ``b`` exactly for all three.
+    """
+    r = wp.vec3(t[0] + b[0], t[1] + b[1], t[2] * b[2])
+    if blend == BLEND_UDN:
+        r = wp.vec3(t[0] + b[0], t[1] + b[1], b[2])
+    elif blend == BLEND_RNM:
+        n1 = wp.vec3(b[0], b[1], wp.abs(b[2]) + 1.0)
+        n2 = wp.vec3(-t[0], -t[1], t[2])
+        r = n1 * (wp.dot(n1, n2) / n1[2]) - n2
+        r = wp.vec3(r[0], r[1], r[2] * sign_or_one(b[2]))
+    return r
+
+
+@wp.func
+def to_world(r: wp.vec3, axis: wp.int32) -> wp.vec3:
+    """From projection ``axis``' frame (plane coordinates, then the axis) back to world axes:
+    ``r.zyx`` for X, ``r.xzy`` for Y, ``r`` for Z."""
+    w = r
+    if axis == 0:
+        w = wp.vec3(r[2], r[1], r[0])
+    elif axis == 1:
+        w = wp.vec3(r[0], r[2], r[1])
+    return w

@@ -1,0 +1,290 @@
+"""Triplanar and biplanar mapping, and triplanar normal mapping, per pixel over a G-buffer.
+
+A surface point ``p`` with normal ``n`` is textured by projecting it onto the three axis planes
+(``p.zy`` for the X plane, ``p.xz`` for Y, ``p.xy`` for Z), sampling each projection, and blending
+the samples with weights that favour the plane the surface faces. Biplanar mapping (Quilez) uses
+only the major and median axes: it is triplanar with a weight function that is exactly zero on the
+minor axis, and the kernels skip zero-weight taps, so it reads at most two projections.
+
+**Handedness of the mirror fix.** A plane projection seen from its back side reads mirrored, so the
+``u`` axis of each plane is flipped by the sign of the normal. Golus' signs (``uvX.x *= sign(n.x)``,
+``uvY.x *= sign(n.y)``, ``uvZ.x *= -sign(n.z)``, DESIGN.md §3) are written for Unity's left-handed
+world; in warptex's right-handed world they mirror *every* face. warptex therefore uses their
+negation, ``-sign(n.x)``, ``-sign(n.y)``, ``+sign(n.z)`` (with ``sign(0) = +1``): seen from outside,
+every face then reads the right way round and ``(dp/du, dp/dv, n)`` is a right-handed frame, which
+is what tangent-space normal maps assume. (The two conventions differ by one global mirror of ``u``.)
+
+**Level of detail.** Each projection has its own footprint: its UV derivatives are the plane
+components of the G-buffer's ``position_dx``/``position_dy`` times its tiling, so a wall and the
+ground beside it pick their own mip levels.
+"""
+
+import warp as wp
+
+from .normals import blend_projected, decode_normal, sign_or_one, to_world
+from .sampling import Sampler, TextureView, lod_from_derivatives, sample_lod
+
+# How the three projections are weighted.
+WEIGHTS_TRIPLANAR = wp.constant(0)  # pow(|n|, sharpness), normalised
+WEIGHTS_BIPLANAR = wp.constant(1)  # Quilez: major and median axes, remapped, normalised
+
+# Quilez' biplanar remap: 1/sqrt(3), the smallest possible major component of a unit normal.
+BIPLANAR_EDGE = wp.constant(0.5773)
+# Weights are normalised by max(sum, WEIGHT_EPS); only a zero or non-finite normal gets near it.
+WEIGHT_EPS = wp.constant(1.0e-20)
+
+
+@wp.struct
+class Projection:
+    """Where the three plane projections read, shared by every triplanar kernel.
+
+    ``tiling`` holds 1 value (all planes) or 3 (X, Y, Z planes); ``offsets`` is ``(3, 2)``, a UV
+    offset per plane; ``sharpness`` holds 1 value. They are arrays so that a ``wp.Tape`` can carry
+    gradients into them. ``world_to_object`` / ``normal_to_object`` take the G-buffer's world-space
+    position and normal into the space that is projected (identity for world space).
+    """
+
+    tiling: wp.array(dtype=float)
+    offsets: wp.array2d(dtype=float)
+    sharpness: wp.array(dtype=float)
+    world_to_object: wp.mat44
+    normal_to_object: wp.mat33
+    normal_to_world: wp.mat33
+    mirror_fix: wp.int32
+    weights: wp.int32
+
+
+@wp.func
+def plane_coords(v: wp.vec3, axis: wp.int32) -> wp.vec2:
+    """The plane components of ``v`` for projection ``axis``: ``v.zy``, ``v.xz`` or ``v.xy``."""
+    c = wp.vec2(v[0], v[1])
+    if axis == 0:
+        c = wp.vec2(v[2], v[1])
+    elif axis == 1:
+        c = wp.vec2(v[0], v[2])
+    return c
+
+
+@wp.func
+def u_sign(n: wp.vec3, axis: wp.int32, mirror_fix: wp.int32) -> float:
+    """Direction of the plane's ``u`` along its first world axis: the (right-handed) mirror fix."""
+    s = 1.0
+    if mirror_fix != 0:
+        if axis == 2:
+            s = sign_or_one(n[2])
+        else:
+            s = -sign_or_one(n[axis])
+    return s
+
+
+@wp.func
+def projection_tiling(proj: Projection, axis: wp.int32) -> float:
+    return proj.tiling[wp.min(axis, proj.tiling.shape[0] - 1)]
+
+
+@wp.func
+def projection_uv(proj: Projection, axis: wp.int32, p: wp.vec3, n: wp.vec3) -> wp.vec2:
+    """UV of projection ``axis``: plane coordinates × tiling, ``u`` mirror-fixed, plus the offset."""
+    c = plane_coords(p, axis) * projection_tiling(proj, axis)
+    return wp.vec2(c[0] * u_sign(n, axis, proj.mirror_fix) + proj.offsets[axis, 0], c[1] + proj.offsets[axis, 1])
+
+
+@wp.func
+def projection_lod(tex: TextureView, proj: Projection, axis: wp.int32, dpdx: wp.vec3, dpdy: wp.vec3) -> float:
+    """Level of detail of projection ``axis`` from its own footprint (signs do not matter)."""
+    t = projection_tiling(proj, axis)
+    return lod_from_derivatives(tex, plane_coords(dpdx, axis) * t, plane_coords(dpdy, axis) * t)
+
+
+@wp.func
+def power_weight(r: float, exponent: float) -> float:
+    """``r^exponent`` for ``r`` in ``[0, 1]``, with ``0^0 = 1`` and no ``log 0`` in the gradient."""
+    w = 0.0
+    if exponent == 0.0:
+        w = 1.0
+    elif r > 0.0:
+        w = wp.exp(exponent * wp.log(r))
+    return w
+
+
+@wp.func
+def triplanar_weights(n: wp.vec3, sharpness: float) -> wp.vec3:
+    """``pow(|n|, sharpness)`` normalised to sum 1; zero for a zero or non-finite normal.
+
+    ``|n|`` is first divided by its largest component, which leaves the normalised weights
+    unchanged but keeps ``pow`` from underflowing at high sharpness.
+    """
+    a = wp.vec3(wp.abs(n[0]), wp.abs(n[1]), wp.abs(n[2]))
+    m = wp.max(a)
+    w = wp.vec3(0.0)
+    if wp.isfinite(n) and m > 0.0:
+        w = wp.vec3(power_weight(a[0] / m, sharpness), power_weight(a[1] / m, sharpness), power_weight(a[2] / m, sharpness))
+        w = w / wp.max(w[0] + w[1] + w[2], WEIGHT_EPS)
+    return w
+
+
+@wp.func
+def biplanar_remap(a: float, exponent: float) -> float:
+    return power_weight(wp.clamp((a - BIPLANAR_EDGE) / (1.0 - BIPLANAR_EDGE), 0.0, 1.0), exponent)
+
+
+@wp.func
+def biplanar_weights(n: wp.vec3, sharpness: float) -> wp.vec3:
+    """Quilez' biplanar weights: major and median axes get ``clamp((|n| - 0.5773) / (1 - 0.5773), 0, 1)^(k/8)``,
+    the minor axis 0, normalised to sum 1. Zero for a zero or non-finite normal.
+
+    The normal is normalised first (the remap assumes unit length). The minor axis is the smallest
+    component (the highest index among ties). Swapping tied major and median axes changes nothing;
+    a median tied with the minor is at most 1/sqrt(3), where the remap is below 1.2e-4 (zero
+    except near the exact diagonal), so the weights are continuous up to that.
+    """
+    w = wp.vec3(0.0)
+    length = wp.length(n)
+    if wp.isfinite(n) and length > 0.0:
+        a = wp.vec3(wp.abs(n[0]), wp.abs(n[1]), wp.abs(n[2])) / length
+        e = sharpness / 8.0
+        if a[2] <= a[0] and a[2] <= a[1]:
+            w = wp.vec3(biplanar_remap(a[0], e), biplanar_remap(a[1], e), 0.0)
+        elif a[1] <= a[0]:
+            w = wp.vec3(biplanar_remap(a[0], e), 0.0, biplanar_remap(a[2], e))
+        else:
+            w = wp.vec3(0.0, biplanar_remap(a[1], e), biplanar_remap(a[2], e))
+        w = w / wp.max(w[0] + w[1] + w[2], WEIGHT_EPS)
+    return w
+
+
+@wp.func
+def projection_weights(proj: Projection, n: wp.vec3) -> wp.vec3:
+    w = wp.vec3(0.0)
+    if proj.weights == WEIGHTS_BIPLANAR:
+        w = biplanar_weights(n, proj.sharpness[0])
+    else:
+        w = triplanar_weights(n, proj.sharpness[0])
+    return w
+
+
+@wp.func
+def object_space(proj: Projection, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3):
+    """Position, normal and position derivatives in the projected space."""
+    m = proj.world_to_object
+    return (
+        wp.transform_point(m, p),
+        proj.normal_to_object * n,
+        wp.transform_vector(m, dpdx),
+        wp.transform_vector(m, dpdy),
+    )
+
+
+@wp.func
+def sample_one(tex: TextureView, layer: wp.int32, axis: wp.int32, proj: Projection, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, smp: Sampler) -> wp.vec4:
+    """Projection ``axis`` of ``tex``, trilinear with the projection's own LOD."""
+    lod = projection_lod(tex, proj, axis, dpdx, dpdy)
+    return sample_lod(tex, layer, projection_uv(proj, axis, p, n), lod, smp)
+
+
+@wp.func
+def sample_projection(
+    tex_x: TextureView,
+    tex_y: TextureView,
+    tex_z: TextureView,
+    layer: wp.int32,
+    axis: wp.int32,
+    proj: Projection,
+    p: wp.vec3,
+    n: wp.vec3,
+    dpdx: wp.vec3,
+    dpdy: wp.vec3,
+    smp: Sampler,
+) -> wp.vec4:
+    """Projection ``axis``, read from that axis' texture (X: ``tex_x``, Y: ``tex_y``, Z: ``tex_z``)."""
+    value = wp.vec4(0.0)
+    if axis == 0:
+        value = sample_one(tex_x, layer, axis, proj, p, n, dpdx, dpdy, smp)
+    elif axis == 1:
+        value = sample_one(tex_y, layer, axis, proj, p, n, dpdx, dpdy, smp)
+    else:
+        value = sample_one(tex_z, layer, axis, proj, p, n, dpdx, dpdy, smp)
+    return value
+
+
+@wp.kernel
+def triplanar_kernel(
+    tex_x: TextureView,
+    tex_y: TextureView,
+    tex_z: TextureView,
+    layer: wp.int32,
+    position: wp.array(dtype=wp.vec3),
+    position_dx: wp.array(dtype=wp.vec3),
+    position_dy: wp.array(dtype=wp.vec3),
+    normal: wp.array(dtype=wp.vec3),
+    mask: wp.array(dtype=float),
+    proj: Projection,
+    smp: Sampler,
+    out: wp.array2d(dtype=float),
+):
+    """``out[i, c]``: the triplanar (or biplanar) blend of the three (two) plane projections.
+
+    Uncovered pixels (``mask == 0``) and zero or non-finite normals give 0. Zero-weight
+    projections are not sampled.
+    """
+    i = wp.tid()
+    colour = wp.vec4(0.0)
+    if mask[i] != 0.0:
+        p, n, dpdx, dpdy = object_space(proj, position[i], normal[i], position_dx[i], position_dy[i])
+        w = projection_weights(proj, n)
+        for axis in range(3):
+            if w[axis] > 0.0:
+                colour += w[axis] * sample_projection(tex_x, tex_y, tex_z, layer, axis, proj, p, n, dpdx, dpdy, smp)
+    for c in range(out.shape[1]):
+        out[i, c] = colour[c]
+
+
+@wp.kernel
+def triplanar_normal_kernel(
+    tex_x: TextureView,
+    tex_y: TextureView,
+    tex_z: TextureView,
+    layer: wp.int32,
+    position: wp.array(dtype=wp.vec3),
+    position_dx: wp.array(dtype=wp.vec3),
+    position_dy: wp.array(dtype=wp.vec3),
+    normal: wp.array(dtype=wp.vec3),
+    mask: wp.array(dtype=float),
+    proj: Projection,
+    smp: Sampler,
+    channels: wp.int32,
+    strength: float,
+    flip_green: wp.int32,
+    blend: wp.int32,
+    out: wp.array2d(dtype=float),
+):
+    """``out[i, :]``: the unit world-space normal after triplanar normal mapping.
+
+    Each projection's tangent-space normal is decoded, turned into the projection's world-aligned
+    frame (its ``x`` follows the mirror-fixed ``u``), blended with the surface normal there
+    (whiteout, UDN or RNM), swizzled back to world axes, and the weighted sum is normalised.
+    Uncovered pixels, zero or non-finite normals give ``(0, 0, 0)``; if the blend cancels out, the
+    surface normal is returned.
+    """
+    i = wp.tid()
+    result = wp.vec3(0.0)
+    if mask[i] != 0.0:
+        p, n, dpdx, dpdy = object_space(proj, position[i], normal[i], position_dx[i], position_dy[i])
+        w = projection_weights(proj, n)
+        total = wp.vec3(0.0)
+        for axis in range(3):
+            if w[axis] > 0.0:
+                texel = sample_projection(tex_x, tex_y, tex_z, layer, axis, proj, p, n, dpdx, dpdy, smp)
+                t = decode_normal(texel, channels, strength, flip_green)
+                t = wp.vec3(t[0] * u_sign(n, axis, proj.mirror_fix), t[1], t[2])
+                base = plane_coords(n, axis)
+                blended = blend_projected(t, wp.vec3(base[0], base[1], n[axis]), blend)
+                total += w[axis] * to_world(blended, axis)
+        world = proj.normal_to_world * total
+        surface = proj.normal_to_world * n
+        if wp.length(world) > 1.0e-12 and wp.isfinite(world):
+            result = wp.normalize(world)
+        elif wp.length(surface) > 0.0 and wp.isfinite(surface):
+            result = wp.normalize(surface)
+    for c in range(3):
+        out[i, c] = result[c]

@@ -1,0 +1,375 @@
+"""Triplanar and biplanar mapping and triplanar normal mapping over a G-buffer.
+
+Surfaces without usable UVs are textured by projecting the world (or object) position onto the
+three axis planes, ``p.zy`` (X plane), ``p.xz`` (Y plane) and ``p.xy`` (Z plane), and blending the
+projections by the surface normal. Formulas and conventions: :mod:`warptex.kernels.triplanar`.
+
+Differentiable parameters (``tiling``, ``sharpness``, ``offsets``) may be given as float32
+``wp.array``\\ s with ``requires_grad=True``; a ``wp.Tape`` then carries gradients into them, as it
+does into the textures' texels.
+"""
+
+from __future__ import annotations
+
+import enum
+from typing import Sequence
+
+import numpy as np
+import warp as wp
+
+from warptex._validate import as_enum, as_float, as_float_array
+from warptex.gbuffer import GBuffer
+from warptex.kernels import normals as kn
+from warptex.kernels import triplanar as kt
+from warptex.sampling import Address, Filter, make_sampler
+from warptex.texture import Texture, TextureArray
+
+
+class Space(str, enum.Enum):
+    """Which coordinates are projected.
+
+    - ``WORLD``: the G-buffer's world-space positions and normals.
+    - ``OBJECT``: object space, given the object's ``object_to_world`` 4×4 matrix: the texture
+      then moves with the object.
+    """
+
+    WORLD = "world"
+    OBJECT = "object"
+
+
+class Blend(str, enum.Enum):
+    """How a projected tangent-space normal is combined with the surface normal.
+
+    - ``WHITEOUT``: ``(t.xy + n.xy, t.z · n.z)``, keeps detail on curved surfaces (the default).
+    - ``UDN``: ``(t.xy + n.xy, n.z)``, cheaper, flattens strong detail slightly.
+    - ``RNM``: reoriented normal mapping, rotates the map onto the surface normal exactly.
+    """
+
+    WHITEOUT = "whiteout"
+    UDN = "udn"
+    RNM = "rnm"
+
+
+_BLEND_IDS = {Blend.WHITEOUT: kn.BLEND_WHITEOUT, Blend.UDN: kn.BLEND_UDN, Blend.RNM: kn.BLEND_RNM}
+
+
+def triplanar(
+    gbuffer: GBuffer,
+    texture: TextureArray | None = None,
+    *,
+    tiling=1.0,
+    sharpness=4.0,
+    offsets=None,
+    mirror_fix: bool = True,
+    textures_per_axis: Sequence[TextureArray | None] | None = None,
+    layer: int = 0,
+    space: Space | str = Space.WORLD,
+    object_to_world=None,
+    filter: Filter | str = Filter.AUTO,
+    address: Address | str = Address.WRAP,
+    lod_bias: float = 0.0,
+    min_lod: float = 0.0,
+    max_lod: float = float("inf"),
+    device=None,
+) -> wp.array:
+    """Triplanar mapping: three plane projections blended by ``pow(|n|, sharpness)``.
+
+    Per pixel, projection ``a`` (X, Y, Z) reads its texture at
+    ``uv_a = plane_a(p) · tiling_a`` with ``u`` flipped on back-facing sides (``mirror_fix``) plus
+    ``offsets[a]``, at the LOD of its own footprint (the plane components of the G-buffer's
+    position derivatives × tiling), and the results are blended with
+    ``w = pow(|n|, sharpness) / sum``.
+
+    Args:
+        gbuffer: the :class:`~warptex.gbuffer.GBuffer` (``position``, ``normal``, their derivatives
+            and ``mask`` are read), ``(H, W)``.
+        texture: a :class:`Texture` or :class:`TextureArray` with ``C`` channels, used for every
+            projection that ``textures_per_axis`` does not override.
+        tiling: texture repeats per unit of length: a number, 3 numbers (X, Y, Z projections), or
+            a float32 ``wp.array`` of shape ``(1,)`` or ``(3,)`` (receives gradients). Non-zero.
+        sharpness: blend exponent ``k >= 0`` (0: equal weights; large: the dominant axis only), a
+            number or a float32 ``wp.array`` of shape ``(1,)`` (receives gradients).
+        offsets: UV offsets per projection, ``(3, 2)`` (e.g. ``[[0, .33], [0, 0], [.33, 0]]`` to
+            decorrelate the planes), or a float32 ``wp.array`` of that shape (receives gradients).
+        mirror_fix: flip ``u`` on faces that look down the negative (X, Y) or positive (Z) axis,
+            so that every face reads the right way round in warptex's right-handed world.
+        textures_per_axis: ``(x, y, z)``: textures for the X (side), Y (top) and Z (front)
+            projections; ``None`` entries fall back to ``texture``. All need ``C`` channels and
+            ``layer``; sizes may differ.
+        layer: the layer to read from texture arrays.
+        space: :class:`Space`: ``"world"`` or ``"object"`` (needs ``object_to_world``).
+        object_to_world: ``(4, 4)`` affine matrix of the object, for ``space="object"``.
+        filter, address, lod_bias, min_lod, max_lod: as for :func:`warptex.sample`; ``"auto"``
+            is trilinear.
+        device: Warp device; must be the G-buffer's and the textures'.
+
+    Returns:
+        ``wp.array`` of float32, shape ``(H, W, C)``: 0 where the mask is 0 or the normal is zero
+        or non-finite. Recorded on the active ``wp.Tape``: gradients reach the texels,
+        ``tiling``, ``sharpness`` and ``offsets`` when those are arrays that require them.
+    """
+    return _colour("triplanar", kt.WEIGHTS_TRIPLANAR, **locals())
+
+
+def biplanar(
+    gbuffer: GBuffer,
+    texture: TextureArray | None = None,
+    *,
+    tiling=1.0,
+    sharpness=8.0,
+    offsets=None,
+    mirror_fix: bool = True,
+    textures_per_axis: Sequence[TextureArray | None] | None = None,
+    layer: int = 0,
+    space: Space | str = Space.WORLD,
+    object_to_world=None,
+    filter: Filter | str = Filter.AUTO,
+    address: Address | str = Address.WRAP,
+    lod_bias: float = 0.0,
+    min_lod: float = 0.0,
+    max_lod: float = float("inf"),
+    device=None,
+) -> wp.array:
+    """Biplanar mapping (Quilez): only the major and median projections, at most two taps.
+
+    The weights are ``clamp((|n_a| - 0.5773) / (1 - 0.5773), 0, 1) ^ (sharpness / 8)`` for the
+    major and median axes of the normal, 0 for the minor axis, normalised. Everything else (UVs,
+    mirror fix, offsets, LOD, textures per axis, gradients) is as in :func:`triplanar`; the
+    default ``sharpness=8`` is Quilez' (exponent 1).
+    """
+    return _colour("biplanar", kt.WEIGHTS_BIPLANAR, **locals())
+
+
+def triplanar_normal(
+    gbuffer: GBuffer,
+    normal_map: TextureArray | None = None,
+    *,
+    tiling=1.0,
+    sharpness=4.0,
+    offsets=None,
+    mirror_fix: bool = True,
+    textures_per_axis: Sequence[TextureArray | None] | None = None,
+    layer: int = 0,
+    blend: Blend | str = Blend.WHITEOUT,
+    strength: float = 1.0,
+    flip_green: bool = False,
+    biplanar: bool = False,
+    space: Space | str = Space.WORLD,
+    object_to_world=None,
+    filter: Filter | str = Filter.AUTO,
+    address: Address | str = Address.WRAP,
+    lod_bias: float = 0.0,
+    min_lod: float = 0.0,
+    max_lod: float = float("inf"),
+    device=None,
+) -> wp.array:
+    """Triplanar normal mapping (Golus): unit world-space normals perturbed by a tangent-space map.
+
+    Each projection reads the normal map where :func:`triplanar` would read colour, decodes it
+    (``[0, 1]`` data; flat is ``(0.5, 0.5, 1)``; two-channel maps rebuild ``z``), scales its
+    ``x, y`` by ``strength``, flips ``x`` with the mirror fix, blends it with the surface normal
+    in that projection's frame (:class:`Blend`), swizzles it back to world axes (``.zyx``,
+    ``.xzy``, ``.xyz``), and the weighted sum is normalised. A flat map returns the surface normal
+    exactly. Each tangent frame ``(dp/du, dp/dv, n)`` is right-handed, as OpenGL-style (green up)
+    maps expect.
+
+    Args:
+        normal_map: a texture of 2 to 4 channels holding a tangent-space normal map as data (load
+            it with ``Texture.from_file(path, data=True)``, not sRGB-decoded).
+        blend: :class:`Blend`: ``"whiteout"``, ``"udn"`` or ``"rnm"``.
+        strength: ``>= 0``; scales the map's slopes (0: flat, 1: as authored).
+        flip_green: for DirectX-style (green down) maps.
+        biplanar: weight the projections as :func:`biplanar` does (pass ``sharpness=8`` for
+            Quilez' default).
+        Other arguments: as for :func:`triplanar`.
+
+    Returns:
+        ``wp.array`` of float32, shape ``(H, W, 3)``: unit normals, ``(0, 0, 0)`` where the mask
+        is 0 or the surface normal is zero or non-finite. Differentiable like :func:`triplanar`.
+    """
+    func = "triplanar_normal"
+    opts = dict(locals())
+    blend_id = _BLEND_IDS[as_enum(func, "blend", opts.pop("blend"), Blend)]
+    strength = as_float(func, "strength", opts.pop("strength"))
+    if strength < 0:
+        raise ValueError(f"{func}(): strength must be >= 0, got {strength}")
+    flip_green = bool(opts.pop("flip_green"))
+    weights = kt.WEIGHTS_BIPLANAR if opts.pop("biplanar") else kt.WEIGHTS_TRIPLANAR
+    opts.pop("func")
+    setup = _setup(func, weights, texture=opts.pop("normal_map"), **opts)
+    if setup.channels < 2:
+        raise ValueError(f"{func}(): a normal map needs 2 to 4 channels, got {setup.channels}")
+    return setup.launch(kt.triplanar_normal_kernel, 3, [setup.channels, strength, int(flip_green), blend_id])
+
+
+# -- internals --------------------------------------------------------------------------------------
+
+
+def _colour(func: str, weights: int, **opts) -> wp.array:
+    setup = _setup(func, weights, **opts)
+    return setup.launch(kt.triplanar_kernel, setup.channels, [])
+
+
+class _Setup:
+    """Validated launch inputs shared by the three public functions."""
+
+    def __init__(self, func, gbuffer, textures, layer, proj, smp, device, params):
+        self.func, self.gbuffer, self.textures, self.layer = func, gbuffer, textures, layer
+        self.proj, self.smp, self.device, self.params = proj, smp, device, params
+        self.channels = textures[0].channels
+
+    def launch(self, kernel, channels: int, extra: list) -> wp.array:
+        g = self.gbuffer
+        h, w = g.resolution
+        count = h * w
+        requires_grad = any(t.requires_grad for t in self.textures) or any(p.requires_grad for p in self.params)
+        out = wp.zeros((count, channels), dtype=float, device=self.device, requires_grad=requires_grad)
+        flat = [a.reshape((count,)) for a in (g.position, g.position_dx, g.position_dy, g.normal, g.mask)]
+        if count:
+            wp.launch(
+                kernel,
+                dim=count,
+                inputs=[*(t.view for t in self.textures), self.layer, *flat, self.proj, self.smp, *extra],
+                outputs=[out],
+                device=self.device,
+            )
+        return out.reshape((h, w, channels))
+
+
+def _setup(
+    func,
+    weights,
+    *,
+    gbuffer,
+    texture,
+    tiling,
+    sharpness,
+    offsets,
+    mirror_fix,
+    textures_per_axis,
+    layer,
+    space,
+    object_to_world,
+    filter,
+    address,
+    lod_bias,
+    min_lod,
+    max_lod,
+    device,
+) -> _Setup:
+    if not isinstance(gbuffer, GBuffer):
+        raise TypeError(f"{func}(): gbuffer must be a warptex GBuffer, got {type(gbuffer).__name__}")
+    device = wp.get_device(device) if device is not None else gbuffer.device
+    if gbuffer.device != device:
+        raise ValueError(f"{func}(): the G-buffer is on {gbuffer.device} but device is {device}")
+    _check_gbuffer(func, gbuffer)
+    textures = _textures(func, texture, textures_per_axis, layer, device)
+
+    proj = kt.Projection()
+    proj.tiling = _param(func, "tiling", tiling, ((1,), (3,)), device, nonzero=True)
+    proj.sharpness = _param(func, "sharpness", sharpness, ((1,),), device, nonnegative=True)
+    proj.offsets = _param(func, "offsets", np.zeros((3, 2)) if offsets is None else offsets, ((3, 2),), device)
+    proj.mirror_fix = int(bool(mirror_fix))
+    proj.weights = weights
+    to_object, normal_to_object, normal_to_world = _space_matrices(func, space, object_to_world)
+    proj.world_to_object = wp.mat44(*to_object.reshape(-1))
+    proj.normal_to_object = wp.mat33(*normal_to_object.reshape(-1))
+    proj.normal_to_world = wp.mat33(*normal_to_world.reshape(-1))
+
+    filt = as_enum(func, "filter", filter, Filter)
+    smp = make_sampler(
+        func,
+        filter=Filter.TRILINEAR if filt == Filter.AUTO else filt,
+        address=address,
+        lod_bias=lod_bias,
+        min_lod=min_lod,
+        max_lod=max_lod,
+    )
+    params = [proj.tiling, proj.sharpness, proj.offsets]
+    return _Setup(func, gbuffer, textures, layer, proj, smp, device, params)
+
+
+def _check_gbuffer(func: str, g: GBuffer) -> None:
+    shape = g.resolution
+    for name, dtype in (("position", wp.vec3), ("position_dx", wp.vec3), ("position_dy", wp.vec3), ("normal", wp.vec3), ("mask", wp.float32)):
+        arr = getattr(g, name)
+        if not isinstance(arr, wp.array) or arr.dtype != dtype or arr.shape != shape or not arr.is_contiguous:
+            got = f"{wp.types.type_repr(arr.dtype)} {arr.shape}" if isinstance(arr, wp.array) else type(arr).__name__
+            raise ValueError(f"{func}(): gbuffer.{name} must be a contiguous wp.array of {wp.types.type_repr(dtype)} with shape {shape}, got {got}")
+        if arr.device != g.device:
+            raise ValueError(f"{func}(): gbuffer.{name} is on {arr.device}, the rest of the G-buffer on {g.device}")
+
+
+def _textures(func, texture, per_axis, layer, device) -> list[TextureArray]:
+    if per_axis is None:
+        per_axis = (None, None, None)
+    elif isinstance(per_axis, (str, bytes)) or not isinstance(per_axis, Sequence) or len(per_axis) != 3:
+        raise ValueError(f"{func}(): textures_per_axis must be a sequence of 3 textures (X, Y, Z projections) or None, got {per_axis!r}")
+    chosen = [texture if t is None else t for t in per_axis]
+    for axis, t in zip("XYZ", chosen):
+        if t is None:
+            raise ValueError(f"{func}(): no texture for the {axis} projection: pass texture= or all three textures_per_axis")
+        if not isinstance(t, TextureArray):
+            raise TypeError(f"{func}(): the {axis} projection's texture must be a Texture or TextureArray, got {type(t).__name__}")
+        if t.device != device:
+            raise ValueError(f"{func}(): the {axis} projection's texture is on {t.device} but the G-buffer on {device}")
+        if t.channels != chosen[0].channels:
+            raise ValueError(f"{func}(): all projections need the same channel count; X has {chosen[0].channels}, {axis} has {t.channels}")
+        if isinstance(layer, bool) or not isinstance(layer, (int, np.integer)) or not 0 <= layer < t.num_layers:
+            raise ValueError(f"{func}(): layer must be an int in [0, {t.num_layers - 1}] for the {axis} projection's texture, got {layer!r}")
+    return chosen
+
+
+def _param(func, name, value, shapes, device, *, nonzero=False, nonnegative=False) -> wp.array:
+    """A float32 parameter array of one of ``shapes``: the caller's ``wp.array`` (gradients flow
+    into it) or a new array from numbers."""
+    if isinstance(value, wp.array):
+        if value.dtype != wp.float32 or value.shape not in shapes:
+            want = " or ".join(str(s) for s in shapes)
+            raise ValueError(f"{func}(): {name} as a wp.array must be float32 with shape {want}, got {wp.types.type_repr(value.dtype)} {value.shape}")
+        if value.device != device:
+            raise ValueError(f"{func}(): {name} is on {value.device} but the G-buffer on {device}")
+        if not value.is_contiguous:
+            raise ValueError(f"{func}(): {name} must be contiguous")
+        arr, values = value, value.numpy()
+    else:
+        if isinstance(value, bool):
+            raise TypeError(f"{func}(): {name} must be numbers, got {value!r}")
+        values = as_float_array(func, name, value)
+        if values.ndim == 0:
+            values = values.reshape(1)
+        if values.shape not in shapes:
+            want = " or ".join(str(s) for s in shapes)
+            raise ValueError(f"{func}(): {name} must have shape {want}, got {values.shape}")
+        arr = None
+    if not np.isfinite(values).all():
+        raise ValueError(f"{func}(): {name} must be finite, got {values.tolist()}")
+    if nonzero and (values == 0).any():
+        raise ValueError(f"{func}(): {name} must be non-zero, got {values.tolist()}")
+    if nonnegative and (values < 0).any():
+        raise ValueError(f"{func}(): {name} must be >= 0, got {values.tolist()}")
+    if arr is None:
+        arr = wp.array(np.ascontiguousarray(values, np.float32), dtype=float, device=device)
+    return arr
+
+
+def _space_matrices(func, space, object_to_world):
+    """``(world_to_object 4×4, normal world→object 3×3, normal object→world 3×3)``."""
+    space = as_enum(func, "space", space, Space)
+    if space == Space.WORLD:
+        if object_to_world is not None:
+            raise ValueError(f"{func}(): object_to_world is only used with space='object'")
+        eye = np.eye(4)
+        return eye, eye[:3, :3], eye[:3, :3]
+    if object_to_world is None:
+        raise ValueError(f"{func}(): space='object' needs object_to_world, the object's 4x4 matrix")
+    m = np.asarray(as_float_array(func, "object_to_world", object_to_world), np.float64)
+    if m.shape != (4, 4) or not np.isfinite(m).all():
+        raise ValueError(f"{func}(): object_to_world must be a finite 4x4 matrix, got shape {m.shape}")
+    if not np.allclose(m[3], [0, 0, 0, 1]):
+        raise ValueError(f"{func}(): object_to_world must be affine (last row 0, 0, 0, 1), got {m[3].tolist()}")
+    linear = m[:3, :3]
+    if abs(np.linalg.det(linear)) < 1e-12:
+        raise ValueError(f"{func}(): object_to_world is singular")
+    # Normals transform by the inverse transpose of the position transform.
+    return np.linalg.inv(m), linear.T, np.linalg.inv(linear).T
