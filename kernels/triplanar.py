@@ -83,17 +83,26 @@ def projection_tiling(proj: Projection, axis: wp.int32) -> float:
 
 
 @wp.func
-def projection_uv(proj: Projection, axis: wp.int32, p: wp.vec3, n: wp.vec3) -> wp.vec2:
-    """UV of projection ``axis``: plane coordinates × tiling, ``u`` mirror-fixed, plus the offset."""
-    c = plane_coords(p, axis) * projection_tiling(proj, axis)
+def plane_uv(proj: Projection, axis: wp.int32, p: wp.vec3, n: wp.vec3, tiling: float) -> wp.vec2:
+    """UV of projection ``axis`` at ``tiling``: plane coordinates × tiling, ``u`` mirror-fixed, plus the offset."""
+    c = plane_coords(p, axis) * tiling
     return wp.vec2(c[0] * u_sign(n, axis, proj.mirror_fix) + proj.offsets[axis, 0], c[1] + proj.offsets[axis, 1])
 
 
 @wp.func
+def plane_lod(tex: TextureView, axis: wp.int32, dpdx: wp.vec3, dpdy: wp.vec3, tiling: float) -> float:
+    """Level of detail of projection ``axis`` at ``tiling``, from its own footprint (signs do not matter)."""
+    return lod_from_derivatives(tex, plane_coords(dpdx, axis) * tiling, plane_coords(dpdy, axis) * tiling)
+
+
+@wp.func
+def projection_uv(proj: Projection, axis: wp.int32, p: wp.vec3, n: wp.vec3) -> wp.vec2:
+    return plane_uv(proj, axis, p, n, projection_tiling(proj, axis))
+
+
+@wp.func
 def projection_lod(tex: TextureView, proj: Projection, axis: wp.int32, dpdx: wp.vec3, dpdy: wp.vec3) -> float:
-    """Level of detail of projection ``axis`` from its own footprint (signs do not matter)."""
-    t = projection_tiling(proj, axis)
-    return lod_from_derivatives(tex, plane_coords(dpdx, axis) * t, plane_coords(dpdy, axis) * t)
+    return plane_lod(tex, axis, dpdx, dpdy, projection_tiling(proj, axis))
 
 
 @wp.func
@@ -173,6 +182,28 @@ def object_space(proj: Projection, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: 
         wp.transform_vector(m, dpdx),
         wp.transform_vector(m, dpdy),
     )
+
+
+@wp.func
+def triplanar_sample(
+    tex: TextureView,
+    layer: wp.int32,
+    proj: Projection,
+    w: wp.vec3,
+    p: wp.vec3,
+    n: wp.vec3,
+    dpdx: wp.vec3,
+    dpdy: wp.vec3,
+    tiling: float,
+    smp: Sampler,
+) -> wp.vec4:
+    """One texture layer read through all three projections at ``tiling``, blended by ``w``
+    (zero-weight projections are not sampled): the building block of triplanar splat layers."""
+    value = wp.vec4(0.0)
+    for axis in range(3):
+        if w[axis] > 0.0:
+            value += w[axis] * sample_lod(tex, layer, plane_uv(proj, axis, p, n, tiling), plane_lod(tex, axis, dpdx, dpdy, tiling), smp)
+    return value
 
 
 @wp.func

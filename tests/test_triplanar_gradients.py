@@ -3,9 +3,8 @@
 The loss is ``L = Σ r · out`` over a 64×64 orthographic sphere G-buffer with random weights ``r``,
 accumulated in float64 from the float32 outputs. Texel gradients are checked along random
 directions (the colour techniques are linear in the texels, so central differences are exact up to
-rounding). A parameter (tiling, sharpness, offset) is shared by every pixel, and bilinear filtering
-has slope jumps on texel lines: pixels whose one-sided differences disagree get ``r = 0`` before
-the analytic and numerical derivatives are compared (at least 90% of the pixels must remain).
+rounding); the parameters shared by every pixel (tiling, sharpness, offsets) with
+:func:`fd.check_parameter_gradient`, which leaves out the pixels whose step crosses a slope jump.
 """
 
 import numpy as np
@@ -14,6 +13,7 @@ import trimesh
 import warp as wp
 
 import warptex as wt
+from fd import check_parameter_gradient
 from warptex.triplanar import biplanar, triplanar, triplanar_normal
 
 TECHNIQUES = {
@@ -79,36 +79,25 @@ def _gradients(g, technique, img, r, **params):
 PARAMS = {"tiling": np.array([1.3, 0.9, 1.7]), "sharpness": np.array([3.0]), "offsets": np.array([[0.1, 0.33], [0.25, -0.4], [0.67, 0.05]])}
 
 
-def _kink_free(g, technique, img, r, name, index, step):
-    """``r`` with the pixels zeroed where the output is not smooth in parameter ``name[index]``,
-    and the central difference of the loss with those weights."""
-    outs = []
-    for delta in (-step, 0.0, step):
-        value = PARAMS[name].copy()
-        value[index] += delta
-        outs.append(TECHNIQUES[technique](g, wt.Texture(img), **{**PARAMS, name: value}).numpy().astype(np.float64))
-    minus, centre, plus = outs
-    backward, forward = (centre - minus) / step, (plus - centre) / step
-    central = (plus - minus) / (2 * step)
-    smooth = (np.abs(forward - backward) <= 1e-2 * (1 + np.abs(central))).all(axis=-1)
-    assert smooth.mean() >= 0.9, f"{name}{list(index)}: too few smooth pixels ({smooth.mean():.2f})"
-    kept = r * smooth[..., None]
-    return kept, float((central * kept).sum())
-
-
 @pytest.mark.parametrize("technique", list(TECHNIQUES))
 def test_parameter_gradients_match_finite_differences(sphere, technique):
     """d loss / d (tiling, sharpness, offsets), every component, against central differences."""
     img = _texture_for(technique, 32, 24, seed=1)
     r = _weights(sphere, 3)
-    _, grads = _gradients(sphere, technique, img, r, **PARAMS)
     steps = {"tiling": 1e-3, "sharpness": 1e-2, "offsets": 1e-3}
     for name, value in PARAMS.items():
+        _, grads = _gradients(sphere, technique, img, r, **PARAMS)
         assert np.abs(grads[name]).max() > 0, f"{name}: zero gradient"
-        for index in np.ndindex(value.shape):
-            kept, fd = _kink_free(sphere, technique, img, r, name, index, steps[name])
-            _, analytic = _gradients(sphere, technique, img, kept, **PARAMS)
-            np.testing.assert_allclose(analytic[name][index], fd, rtol=2e-2, atol=2e-2, err_msg=f"{technique}: d/d {name}{list(index)}")
+        check_parameter_gradient(
+            lambda v: TECHNIQUES[technique](sphere, wt.Texture(img), **{**PARAMS, name: v}).numpy(),
+            lambda v, kept: _gradients(sphere, technique, img, kept, **{**PARAMS, name: v})[1][name],
+            value,
+            r,
+            steps[name],
+            rtol=2e-2,
+            atol=2e-2,
+            label=f"{technique}: {name}",
+        )
 
 
 @pytest.mark.parametrize("technique", list(TECHNIQUES))

@@ -4,13 +4,14 @@ The public API: textures (:class:`Texture`, :class:`TextureArray`), :func:`sampl
 :class:`Filter` and :class:`Address` modes, image I/O in :mod:`warptex.io`, cameras
 (:func:`look_at`, :func:`orthographic`), G-buffers (:func:`rasterize`, :func:`save_gbuffer`,
 :func:`load_gbuffer`), the procedural :func:`terrain`, the techniques (:func:`triplanar`,
-:func:`biplanar`, :func:`triplanar_normal`) and the Lambert preview :func:`lambert`.
+:func:`biplanar`, :func:`triplanar_normal`, :func:`splat`) and the Lambert preview :func:`lambert`.
 """
 
 from warptex import io
 from warptex.camera import Camera, look_at, orthographic
 from warptex.gbuffer import GBuffer, load_mesh, rasterize
 from warptex.gbuffer_io import load_gbuffer, save_gbuffer
+from warptex.layers import splat
 from warptex.sampling import Address, Filter, sample
 from warptex.terrain import terrain
 from warptex.shade import lambert
@@ -37,6 +38,7 @@ __all__ = [
     "rasterize",
     "sample",
     "save_gbuffer",
+    "splat",
     "terrain",
     "triplanar",
     "triplanar_normal",

@@ -52,3 +52,36 @@ def resolve_device(func: str, device, default) -> wp.context.Device:
     if device != default:
         raise ValueError(f"{func}(): device {device} differs from the texture's device {default}")
     return device
+
+
+def param_array(func, name, value, shapes, device, *, nonzero=False, nonnegative=False) -> wp.array:
+    """A float32 parameter array of one of ``shapes``: the caller's ``wp.array`` (gradients flow
+    into it) or a new array from numbers."""
+    if isinstance(value, wp.array):
+        if value.dtype != wp.float32 or value.shape not in shapes:
+            want = " or ".join(str(s) for s in shapes)
+            raise ValueError(f"{func}(): {name} as a wp.array must be float32 with shape {want}, got {wp.types.type_repr(value.dtype)} {value.shape}")
+        if value.device != device:
+            raise ValueError(f"{func}(): {name} is on {value.device} but the G-buffer on {device}")
+        if not value.is_contiguous:
+            raise ValueError(f"{func}(): {name} must be contiguous")
+        arr, values = value, value.numpy()
+    else:
+        if isinstance(value, bool):
+            raise TypeError(f"{func}(): {name} must be numbers, got {value!r}")
+        values = as_float_array(func, name, value)
+        if values.ndim == 0:
+            values = values.reshape(1)
+        if values.shape not in shapes:
+            want = " or ".join(str(s) for s in shapes)
+            raise ValueError(f"{func}(): {name} must have shape {want}, got {values.shape}")
+        arr = None
+    if not np.isfinite(values).all():
+        raise ValueError(f"{func}(): {name} must be finite, got {values.tolist()}")
+    if nonzero and (values == 0).any():
+        raise ValueError(f"{func}(): {name} must be non-zero, got {values.tolist()}")
+    if nonnegative and (values < 0).any():
+        raise ValueError(f"{func}(): {name} must be >= 0, got {values.tolist()}")
+    if arr is None:
+        arr = wp.array(np.ascontiguousarray(values, np.float32), dtype=float, device=device)
+    return arr

@@ -75,6 +75,25 @@ class GBuffer:
             raise ValueError(f"GBuffer.uv(): no UV set named {name!r}; the G-buffer has {have}")
         return self.uv_sets[name]
 
+    def require(self, func: str, *names: str) -> None:
+        """Check that the named fields are contiguous ``(H, W)`` arrays of their dtype on the
+        G-buffer's device (``"uv0.uv"`` names a UV-set field), raising an error that names ``func``."""
+        shape, device = self.resolution, self.device
+        for name in names:
+            if "." in name:
+                set_name, key = name.split(".", 1)
+                if set_name not in self.uv_sets:
+                    have = ", ".join(self.uv_sets) or "none"
+                    raise ValueError(f"{func}(): the G-buffer has no UV set {set_name!r} (it has {have})")
+                arr, dtype = self.uv_sets[set_name].get(key), UV_FIELDS[key]
+            else:
+                arr, dtype = getattr(self, name), FIELDS[name]
+            if not isinstance(arr, wp.array) or arr.dtype != dtype or arr.shape != shape or not arr.is_contiguous:
+                got = f"{wp.types.type_repr(arr.dtype)} {arr.shape}" if isinstance(arr, wp.array) else type(arr).__name__
+                raise ValueError(f"{func}(): gbuffer.{name} must be a contiguous wp.array of {wp.types.type_repr(dtype)} with shape {shape}, got {got}")
+            if arr.device != device:
+                raise ValueError(f"{func}(): gbuffer.{name} is on {arr.device}, the rest of the G-buffer on {device}")
+
     def numpy(self) -> dict[str, np.ndarray]:
         """Every array as NumPy, UV fields named ``"<set>.<field>"`` (e.g. ``"uv0.uv_dx"``)."""
         out = {name: getattr(self, name).numpy() for name in FIELDS}

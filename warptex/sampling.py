@@ -77,6 +77,14 @@ def make_sampler(
     return smp
 
 
+def surface_sampler(func: str, *, filter, address, lod_bias=0.0, min_lod=0.0, max_lod=float("inf")) -> ks.Sampler:
+    """The sampler of a technique that reads textures over a G-buffer (which always has
+    derivatives, so ``"auto"`` is trilinear)."""
+    filt = as_enum(func, "filter", filter, Filter)
+    filt = Filter.TRILINEAR if filt == Filter.AUTO else filt
+    return make_sampler(func, filter=filt, address=address, lod_bias=lod_bias, min_lod=min_lod, max_lod=max_lod)
+
+
 def _vec2_array(func: str, name: str, value, device) -> wp.array:
     """``value`` as a contiguous ``wp.array`` of ``vec2`` (a view when it already is one)."""
     if isinstance(value, wp.array):

@@ -17,11 +17,11 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
-from warptex._validate import as_enum, as_float, as_float_array
+from warptex._validate import as_enum, as_float, as_float_array, param_array
 from warptex.gbuffer import GBuffer
 from warptex.kernels import normals as kn
 from warptex.kernels import triplanar as kt
-from warptex.sampling import Address, Filter, make_sampler
+from warptex.sampling import Address, Filter, surface_sampler
 from warptex.texture import Texture, TextureArray
 
 
@@ -262,42 +262,29 @@ def _setup(
     device = wp.get_device(device) if device is not None else gbuffer.device
     if gbuffer.device != device:
         raise ValueError(f"{func}(): the G-buffer is on {gbuffer.device} but device is {device}")
-    _check_gbuffer(func, gbuffer)
+    gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask")
     textures = _textures(func, texture, textures_per_axis, layer, device)
 
+    proj = make_projection(func, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=weights, space=space, object_to_world=object_to_world, device=device)
+
+    smp = surface_sampler(func, filter=filter, address=address, lod_bias=lod_bias, min_lod=min_lod, max_lod=max_lod)
+    params = [proj.tiling, proj.sharpness, proj.offsets]
+    return _Setup(func, gbuffer, textures, layer, proj, smp, device, params)
+
+
+def make_projection(func, *, tiling, sharpness, offsets, mirror_fix, weights, space=Space.WORLD, object_to_world=None, device=None) -> kt.Projection:
+    """Validate the projection options of a triplanar technique and pack them for the kernels."""
     proj = kt.Projection()
-    proj.tiling = _param(func, "tiling", tiling, ((1,), (3,)), device, nonzero=True)
-    proj.sharpness = _param(func, "sharpness", sharpness, ((1,),), device, nonnegative=True)
-    proj.offsets = _param(func, "offsets", np.zeros((3, 2)) if offsets is None else offsets, ((3, 2),), device)
+    proj.tiling = param_array(func, "tiling", tiling, ((1,), (3,)), device, nonzero=True)
+    proj.sharpness = param_array(func, "sharpness", sharpness, ((1,),), device, nonnegative=True)
+    proj.offsets = param_array(func, "offsets", np.zeros((3, 2)) if offsets is None else offsets, ((3, 2),), device)
     proj.mirror_fix = int(bool(mirror_fix))
     proj.weights = weights
     to_object, normal_to_object, normal_to_world = _space_matrices(func, space, object_to_world)
     proj.world_to_object = wp.mat44(*to_object.reshape(-1))
     proj.normal_to_object = wp.mat33(*normal_to_object.reshape(-1))
     proj.normal_to_world = wp.mat33(*normal_to_world.reshape(-1))
-
-    filt = as_enum(func, "filter", filter, Filter)
-    smp = make_sampler(
-        func,
-        filter=Filter.TRILINEAR if filt == Filter.AUTO else filt,
-        address=address,
-        lod_bias=lod_bias,
-        min_lod=min_lod,
-        max_lod=max_lod,
-    )
-    params = [proj.tiling, proj.sharpness, proj.offsets]
-    return _Setup(func, gbuffer, textures, layer, proj, smp, device, params)
-
-
-def _check_gbuffer(func: str, g: GBuffer) -> None:
-    shape = g.resolution
-    for name, dtype in (("position", wp.vec3), ("position_dx", wp.vec3), ("position_dy", wp.vec3), ("normal", wp.vec3), ("mask", wp.float32)):
-        arr = getattr(g, name)
-        if not isinstance(arr, wp.array) or arr.dtype != dtype or arr.shape != shape or not arr.is_contiguous:
-            got = f"{wp.types.type_repr(arr.dtype)} {arr.shape}" if isinstance(arr, wp.array) else type(arr).__name__
-            raise ValueError(f"{func}(): gbuffer.{name} must be a contiguous wp.array of {wp.types.type_repr(dtype)} with shape {shape}, got {got}")
-        if arr.device != g.device:
-            raise ValueError(f"{func}(): gbuffer.{name} is on {arr.device}, the rest of the G-buffer on {g.device}")
+    return proj
 
 
 def _textures(func, texture, per_axis, layer, device) -> list[TextureArray]:
@@ -318,39 +305,6 @@ def _textures(func, texture, per_axis, layer, device) -> list[TextureArray]:
         if isinstance(layer, bool) or not isinstance(layer, (int, np.integer)) or not 0 <= layer < t.num_layers:
             raise ValueError(f"{func}(): layer must be an int in [0, {t.num_layers - 1}] for the {axis} projection's texture, got {layer!r}")
     return chosen
-
-
-def _param(func, name, value, shapes, device, *, nonzero=False, nonnegative=False) -> wp.array:
-    """A float32 parameter array of one of ``shapes``: the caller's ``wp.array`` (gradients flow
-    into it) or a new array from numbers."""
-    if isinstance(value, wp.array):
-        if value.dtype != wp.float32 or value.shape not in shapes:
-            want = " or ".join(str(s) for s in shapes)
-            raise ValueError(f"{func}(): {name} as a wp.array must be float32 with shape {want}, got {wp.types.type_repr(value.dtype)} {value.shape}")
-        if value.device != device:
-            raise ValueError(f"{func}(): {name} is on {value.device} but the G-buffer on {device}")
-        if not value.is_contiguous:
-            raise ValueError(f"{func}(): {name} must be contiguous")
-        arr, values = value, value.numpy()
-    else:
-        if isinstance(value, bool):
-            raise TypeError(f"{func}(): {name} must be numbers, got {value!r}")
-        values = as_float_array(func, name, value)
-        if values.ndim == 0:
-            values = values.reshape(1)
-        if values.shape not in shapes:
-            want = " or ".join(str(s) for s in shapes)
-            raise ValueError(f"{func}(): {name} must have shape {want}, got {values.shape}")
-        arr = None
-    if not np.isfinite(values).all():
-        raise ValueError(f"{func}(): {name} must be finite, got {values.tolist()}")
-    if nonzero and (values == 0).any():
-        raise ValueError(f"{func}(): {name} must be non-zero, got {values.tolist()}")
-    if nonnegative and (values < 0).any():
-        raise ValueError(f"{func}(): {name} must be >= 0, got {values.tolist()}")
-    if arr is None:
-        arr = wp.array(np.ascontiguousarray(values, np.float32), dtype=float, device=device)
-    return arr
 
 
 def _space_matrices(func, space, object_to_world):

@@ -1,0 +1,192 @@
+"""Terrain texturing: texture-array layers blended by splat maps, with height-based blending.
+
+Formulas: :mod:`warptex.kernels.layers`. The atlas + index-map variant is in :mod:`warptex.atlas`.
+"""
+
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+import warp as wp
+
+from warptex._validate import as_enum, param_array
+from warptex.gbuffer import GBuffer
+from warptex.kernels import layers as kl
+from warptex.kernels import triplanar as kt
+from warptex.sampling import Address, Filter, make_sampler, surface_sampler
+from warptex.texture import TextureArray
+from warptex.triplanar import make_projection
+
+
+class Projection(str, enum.Enum):
+    """Where the layers are read.
+
+    - ``UV``: the G-buffer's UV set (``uv_set``) × the layer's tiling.
+    - ``WORLD_XZ``: world ``(-x, z)`` × tiling: the triplanar top projection (reads unmirrored
+      from above), for ground without UVs.
+    - ``TRIPLANAR``: every layer mapped triplanar (``sharpness``, ``offsets``, ``mirror_fix`` as in
+      :func:`warptex.triplanar`), for cliffs.
+    """
+
+    UV = "uv"
+    WORLD_XZ = "world_xz"
+    TRIPLANAR = "triplanar"
+
+
+_PROJECTION_IDS = {Projection.UV: kl.PROJECT_UV, Projection.WORLD_XZ: kl.PROJECT_WORLD_XZ, Projection.TRIPLANAR: kl.PROJECT_TRIPLANAR}
+
+
+def as_splat_maps(func: str, splat_maps, device) -> TextureArray:
+    """``splat_maps`` as a :class:`TextureArray` (NumPy ``[H, W, C]`` or ``[M, H, W, C]`` arrays are
+    wrapped without mips); weights are data, never sRGB-decoded."""
+    if isinstance(splat_maps, TextureArray):
+        if splat_maps.device != device:
+            raise ValueError(f"{func}(): splat_maps are on {splat_maps.device} but the G-buffer on {device}")
+        return splat_maps
+    if isinstance(splat_maps, wp.array):
+        raise TypeError(f"{func}(): pass splat maps as a TextureArray (or NumPy), not a bare wp.array")
+    data = np.asarray(splat_maps)
+    if data.ndim == 3:
+        data = data[None]
+    if data.ndim != 4:
+        raise ValueError(f"{func}(): splat_maps must be a TextureArray or an array [H, W, C] / [M, H, W, C], got shape {data.shape}")
+    return TextureArray(data, mipmaps=False, device=device)
+
+
+def check_layer_count(func: str, num_layers: int, maps: TextureArray) -> None:
+    """``M`` maps of ``C`` channels hold weights for ``(M - 1)·C < L <= M·C`` layers."""
+    m, c = maps.num_layers, maps.channels
+    if not (m - 1) * c < num_layers <= m * c:
+        need = -(-num_layers // c)
+        raise ValueError(
+            f"{func}(): {m} splat map(s) of {c} channel(s) hold weights for {(m - 1) * c + 1} to {m * c} layers, "
+            f"but there are {num_layers} layers (use {need} map(s) of {c} channels)"
+        )
+
+
+def splat(
+    gbuffer: GBuffer,
+    layers: TextureArray,
+    splat_maps,
+    *,
+    tiling=1.0,
+    projection: Projection | str = Projection.UV,
+    normalize: bool = True,
+    height_blend=None,
+    heights: TextureArray | None = None,
+    height_channel: int = 3,
+    uv_set: str = "uv0",
+    sharpness=4.0,
+    offsets=None,
+    mirror_fix: bool = True,
+    filter: Filter | str = Filter.AUTO,
+    address: Address | str = Address.WRAP,
+    lod_bias: float = 0.0,
+    min_lod: float = 0.0,
+    max_lod: float = float("inf"),
+    device=None,
+) -> wp.array:
+    """Blend the ``L`` layers of a texture array by splat-map weights, per pixel of a G-buffer.
+
+    Splat map ``m``'s channel ``c`` is the weight of layer ``m·C + c``; the maps are read in
+    ``uv_set`` with bilinear filtering on level 0, clamped at the edges (a texel centre returns its
+    texel exactly). Negative weights are clamped to 0; with ``normalize`` the weights are divided by
+    their sum, and a pixel whose weights are all zero gets 0. Each layer with weight is sampled at
+    its own tiling (trilinear, LOD from the G-buffer's derivatives) in ``projection``.
+
+    Args:
+        gbuffer: the G-buffer, ``(H, W)``; reads ``uv_set``, ``position``, ``normal``, their
+            derivatives and ``mask``.
+        layers: a :class:`TextureArray` of ``L`` layers (one size, ``C_out`` channels).
+        splat_maps: a :class:`TextureArray` (or NumPy ``[H, W, C]`` / ``[M, H, W, C]``) of
+            ``M = ceil(L / C)`` maps; spare channels of the last map are ignored.
+        tiling: layer repeats per UV unit (or per world unit): a number, ``L`` numbers, or a float32
+            ``wp.array`` of shape ``(1,)`` or ``(L,)`` (receives gradients). Non-zero.
+        projection: :class:`Projection`: ``"uv"``, ``"world_xz"`` or ``"triplanar"``.
+        normalize: divide the weights by their sum.
+        height_blend: ``None`` for a plain blend, or the transition ``t > 0`` of height-based
+            blending (a number or a float32 ``wp.array`` of shape ``(1,)``, receives gradients):
+            ``h = height·w; m = max h; w' = max(0, h + t - m)·w / sum``.
+        heights: ``L`` one-channel height layers (any size), read like the colour layers; default:
+            channel ``height_channel`` of ``layers``.
+        height_channel: the channel of ``layers`` holding height when ``heights`` is ``None``.
+        uv_set: the G-buffer UV set holding the splat-map UVs (and the layer UVs for ``"uv"``).
+        sharpness, offsets, mirror_fix: the triplanar options, for ``projection="triplanar"``.
+        filter, address, lod_bias, min_lod, max_lod: how the layers are sampled, as for
+            :func:`warptex.sample` (``"auto"`` is trilinear).
+        device: Warp device; must be the G-buffer's and the textures'.
+
+    Returns:
+        ``wp.array`` of float32, shape ``(H, W, C_out)``; 0 where the mask is 0. Recorded on the
+        active ``wp.Tape``: gradients reach the splat-map texels (every channel), the layer texels,
+        ``heights``, and ``tiling`` / ``height_blend`` when given as arrays that require them.
+    """
+    func = "splat"
+    if not isinstance(gbuffer, GBuffer):
+        raise TypeError(f"{func}(): gbuffer must be a warptex GBuffer, got {type(gbuffer).__name__}")
+    device = wp.get_device(device) if device is not None else gbuffer.device
+    if gbuffer.device != device:
+        raise ValueError(f"{func}(): the G-buffer is on {gbuffer.device} but device is {device}")
+    if not isinstance(layers, TextureArray):
+        raise TypeError(f"{func}(): layers must be a TextureArray, got {type(layers).__name__}")
+    if layers.device != device:
+        raise ValueError(f"{func}(): layers are on {layers.device} but the G-buffer on {device}")
+    maps = as_splat_maps(func, splat_maps, device)
+    num_layers = layers.num_layers
+    check_layer_count(func, num_layers, maps)
+    gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask", f"{uv_set}.uv", f"{uv_set}.uv_dx", f"{uv_set}.uv_dy")
+
+    params = kl.SplatParams()
+    params.tiling = param_array(func, "tiling", tiling, ((1,), (num_layers,)), device, nonzero=True)
+    params.projection = _PROJECTION_IDS[as_enum(func, "projection", projection, Projection)]
+    params.normalize = int(bool(normalize))
+    params.height_channel = 0
+    height_tex = layers
+    if height_blend is None:
+        if heights is not None:
+            raise ValueError(f"{func}(): heights are only used with height_blend=<transition>")
+        params.height_mode = kl.HEIGHT_NONE
+        params.transition = wp.zeros(1, dtype=float, device=device)
+    else:
+        params.transition = param_array(func, "height_blend", height_blend, ((1,),), device)
+        if float(params.transition.numpy()[0]) <= 0:
+            raise ValueError(f"{func}(): height_blend (the transition) must be > 0, got {params.transition.numpy()[0]}")
+        if heights is None:
+            if isinstance(height_channel, bool) or not isinstance(height_channel, (int, np.integer)) or not 0 <= height_channel < layers.channels:
+                raise ValueError(
+                    f"{func}(): height_channel must be a channel of the layers (0 to {layers.channels - 1}), got {height_channel!r}; "
+                    "pass heights= for layers without a height channel"
+                )
+            params.height_mode, params.height_channel = kl.HEIGHT_CHANNEL, int(height_channel)
+        else:
+            if not isinstance(heights, TextureArray):
+                raise TypeError(f"{func}(): heights must be a TextureArray, got {type(heights).__name__}")
+            if heights.num_layers != num_layers or heights.channels != 1 or heights.device != device:
+                raise ValueError(
+                    f"{func}(): heights must have {num_layers} one-channel layers on {device}, "
+                    f"got {heights.num_layers} layer(s) of {heights.channels} channel(s) on {heights.device}"
+                )
+            params.height_mode, height_tex = kl.HEIGHT_ARRAY, heights
+
+    proj = make_projection(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kt.WEIGHTS_TRIPLANAR, device=device)
+    smp = surface_sampler(func, filter=filter, address=address, lod_bias=lod_bias, min_lod=min_lod, max_lod=max_lod)
+    map_smp = make_sampler(func, filter=Filter.BILINEAR, address=Address.CLAMP, max_lod=0.0)
+
+    h, w = gbuffer.resolution
+    count = h * w
+    textures = (layers, height_tex, maps)
+    arrays = (params.tiling, params.transition, proj.sharpness, proj.offsets)
+    requires_grad = any(t.requires_grad for t in textures) or any(a.requires_grad for a in arrays)
+    out = wp.zeros((count, layers.channels), dtype=float, device=device, requires_grad=requires_grad)
+    uvs = gbuffer.uv_sets[uv_set]
+    flat = [a.reshape((count,)) for a in (uvs["uv"], uvs["uv_dx"], uvs["uv_dy"], gbuffer.position, gbuffer.position_dx, gbuffer.position_dy, gbuffer.normal, gbuffer.mask)]
+    if count:
+        wp.launch(
+            kl.splat_kernel(num_layers, maps.channels),
+            dim=count,
+            inputs=[layers.view, height_tex.view, maps.view, *flat, params, proj, smp, map_smp],
+            outputs=[out],
+            device=device,
+        )
+    return out.reshape((h, w, layers.channels))
