@@ -6,7 +6,8 @@ import pytest
 from warptex import io
 from warptex.cli import main
 from warptex.gbuffer_io import load_gbuffer
-from warptex.render import noise_texture, run_render
+from warptex.render import run_render
+from warptex.terrain_material import noise_texture
 from warptex.shade import lambert
 from warptex.gbuffer import GBuffer
 

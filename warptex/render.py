@@ -1,9 +1,10 @@
 """The main job: rasterise a mesh (the procedural terrain by default), texture it, light it, save it.
 
-The material is one texture: sampled in the mesh's UV0 when it has UVs (its own embedded
-base-colour texture when it carries one), else triplanar-mapped (:mod:`warptex.triplanar`);
-trilinear-filtered with the LOD from the G-buffer's derivatives, Lambert-lit. (The default
-terrain's splat-layer material arrives with the layer and stochastic techniques.)
+The default terrain is textured with four splat-blended layers (grass, gravel, rock, snow; see
+:mod:`warptex.terrain_material`), each mapped triplanar, height-blended. Other meshes get one
+texture: in their UV0 when they have UVs (their own embedded base-colour texture when they carry
+one), else triplanar. Everything is trilinear-filtered with the LOD from the G-buffer's
+derivatives and Lambert-lit.
 """
 
 from __future__ import annotations
@@ -21,23 +22,13 @@ from warptex.gbuffer_io import save_gbuffer
 from warptex.sampling import sample
 from warptex.shade import SKY, lambert, to_rgb
 from warptex.terrain import terrain
-from warptex.texture import Texture
+from warptex.texture import Texture, TextureArray
+from warptex.layers import splat
+from warptex.terrain_material import noise_texture, terrain_layers, terrain_splat_maps
 from warptex.triplanar import triplanar
 
 
-def noise_texture(size: int = 256, *, seed: int = 0, octaves: int = 6) -> np.ndarray:
-    """A tileable, earthy ground texture ``[size, size, 3]`` (linear RGB): fBm of wrapped value noise."""
-    rng = np.random.default_rng(seed)
-    uv = (np.stack(np.meshgrid(np.arange(size), np.arange(size)[::-1]), axis=-1) + 0.5) / size
-    value = np.zeros((size, size))
-    for octave in range(octaves):
-        cells = 4 * 2**octave
-        grid = Texture(rng.random((cells, cells, 1), dtype=np.float32), mipmaps=False)
-        value += 0.55**octave * sample(grid, uv.astype(np.float32), address="wrap").numpy()[..., 0]
-    value = (value - value.min()) / (value.max() - value.min())
-    dark, mid, light = np.array([0.09, 0.07, 0.04]), np.array([0.16, 0.2, 0.07]), np.array([0.32, 0.29, 0.2])
-    t = value[..., None]
-    return np.where(t < 0.5, dark + (mid - dark) * (2 * t), mid + (light - mid) * (2 * t - 1)).astype(np.float32)
+TERRAIN_GRID = (129, 129)  # the default terrain's vertex grid, one splat texel per vertex
 
 
 def default_camera(mesh: trimesh.Trimesh, resolution, fov_y: float = 45.0) -> Camera:
@@ -62,6 +53,15 @@ def _albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, texture: Texture, tiling: f
         return to_rgb(sample(texture, uv, uv_dx=uv_dx, uv_dy=uv_dy, device=device))
     scale = tiling / max(float(np.max(mesh.extents)), 1e-12)
     return to_rgb(triplanar(gbuffer, texture, tiling=scale, device=device))
+
+
+def _terrain_albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, tiling: float | None, seed: int, device) -> np.ndarray:
+    """The default terrain's splat material: layers repeat ``tiling`` times per world unit (default 1/6)."""
+    maps = terrain_splat_maps(mesh, TERRAIN_GRID)
+    layers = terrain_layers(seed=seed, device=device)
+    tiling = 1.0 / 6.0 if tiling is None else float(tiling)
+    colour = splat(gbuffer, layers, TextureArray(maps[None], mipmaps=False, device=device), tiling=tiling, projection="triplanar", height_blend=0.2, device=device)
+    return to_rgb(colour)
 
 
 def _embedded_texture(mesh: trimesh.Trimesh) -> np.ndarray | None:
@@ -95,7 +95,8 @@ def run_render(
         eye, target: camera position and look-at point (default: a three-quarter view framing the mesh).
         fov_y: vertical field of view, degrees.
         tiling: texture repeats across UV0 (or, triplanar, across the mesh's largest extent without UVs);
-            default 1 with an embedded texture, else 8.
+            default 1 with an embedded texture, else 8. For the default terrain: layer repeats per
+            world unit (default 1/6).
         seed: terrain and procedural texture seed.
         progress: show a progress bar (``None``: only on a terminal).
         device: Warp device.
@@ -107,7 +108,7 @@ def run_render(
 
     stages = tqdm(total=5, desc="render", unit="stage", disable=False if progress else None if progress is None else True)
     stages.set_postfix_str("mesh")
-    mesh = terrain(seed=seed) if mesh_path is None else load_mesh(mesh_path)
+    mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
     framing = terrain_camera(resolution, fov_y) if mesh_path is None else default_camera(mesh, resolution, fov_y)
     if eye is None and target is None:
         camera = framing
@@ -122,10 +123,13 @@ def run_render(
     stages.update()
 
     stages.set_postfix_str("texture")
-    embedded = _embedded_texture(mesh) if texture_path is None else None
-    image = io.read_image(texture_path) if texture_path is not None else embedded if embedded is not None else noise_texture(seed=seed)
-    tiling = (1.0 if embedded is not None else 8.0) if tiling is None else float(tiling)
-    albedo = _albedo(mesh, g, Texture(image, device=device), tiling, device)
+    if mesh_path is None and texture_path is None:
+        albedo = _terrain_albedo(mesh, g, tiling, seed, device)
+    else:
+        embedded = _embedded_texture(mesh) if texture_path is None else None
+        image = io.read_image(texture_path) if texture_path is not None else embedded if embedded is not None else noise_texture(seed=seed)
+        tiling = (1.0 if embedded is not None else 8.0) if tiling is None else float(tiling)
+        albedo = _albedo(mesh, g, Texture(image, device=device), tiling, device)
     covered = g.mask.numpy()[..., None] > 0
     albedo = np.where(covered, albedo, SKY)
     stages.update()
