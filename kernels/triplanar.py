@@ -302,6 +302,8 @@ def triplanar_normal_kernel(
     if mask[i] != 0.0:
         p, n, dpdx, dpdy = object_space(proj, position[i], normal[i], position_dx[i], position_dy[i])
         w = projection_weights(proj, n)
+        if wp.length(n) > 0.0:
+            n = wp.normalize(n)  # the blends assume a unit base normal (object space may scale it)
         total = wp.vec3(0.0)
         for axis in range(3):
             if w[axis] > 0.0:

@@ -189,3 +189,21 @@ def test_bad_input_raises_clear_errors(terrain_gbuffer, rng):
         splat(g, layers, maps, uv_set="uv7")
     with pytest.raises(TypeError, match=r"splat\(\): layers must be a TextureArray"):
         splat(g, np.zeros((4, 8, 8, 3)), maps)
+
+
+def test_terrain_splat_maps_follow_height_and_slope():
+    """The default terrain's rules: weights sum to 1, rock owns the cliffs, snow the high flats."""
+    from warptex.terrain import terrain_slope_height
+    from warptex.terrain_material import terrain_splat_maps
+
+    mesh = wt.terrain(resolution=(65, 65))
+    maps = terrain_splat_maps(mesh, (65, 65))
+    assert maps.shape == (65, 65, 4)
+    np.testing.assert_allclose(maps.sum(axis=-1), 1.0, atol=1e-6)
+    assert maps.min() >= 0.0
+    height, slope = (a.reshape(65, 65) for a in terrain_slope_height(mesh))
+    assert (maps[slope > 45][:, 2] > 0.99).all()  # rock on steep faces
+    high_flat = (height > 0.85) & (slope < 20)
+    assert high_flat.any() and (maps[high_flat][:, 3] > 0.99).all()  # snow on high, gentle ground
+    with pytest.raises(ValueError, match=r"terrain_splat_maps\(\): the mesh has 4225 vertices, not a 64x64 grid"):
+        terrain_splat_maps(mesh, (64, 64))
