@@ -1,0 +1,145 @@
+"""The atlas + index-map variant of splat-map terrain texturing (seed 004).
+
+Instead of ``L`` layer textures and ``ceil(L / 4)`` splat maps, the layers are packed into one
+*atlas* texture, and per splat texel an *index map* names the ``k`` layers that matter there while
+a *weight map* holds their weights (both exported offline from the splat maps). A pixel then reads
+``k`` atlas tiles however many layers there are.
+
+Atlas layout (:class:`AtlasLayout`): layer ``l`` sits in grid cell ``(row, col) = (l // columns,
+l % columns)``, rows counted from the top of the atlas image. A cell is ``tile_height + 2·gutter``
+by ``tile_width + 2·gutter`` texels: the layer in the middle, surrounded by ``gutter`` texels of
+its own *wrapped* content, so filtering across a tile edge reads the layer's wrapped neighbours and
+never the next tile. Level-0 atlas texel ``(row·(th + 2g) + y, col·(tw + 2g) + x)`` holds layer
+texel ``((y - g) mod th, (x - g) mod tw)`` for ``0 <= y < th + 2g``, ``0 <= x < tw + 2g``.
+
+Sampling a layer at UV ``uv``: ``f = frac(uv)`` (exact, see ``reduce_coord``), then the atlas
+texel coordinates ``x = col·(tw + 2g) + g + f.x·tw``, ``y = row·(th + 2g) + g + (1 - f.y)·th``
+(row 0 on top, as for every texture), i.e. atlas UV ``(x / W_atlas, 1 - y / H_atlas)``. The UV
+derivatives are scaled by the same chain rule, so the LOD is the pixel footprint in *tile* texels,
+exactly the LOD the layer would get as a texture of its own.
+
+Why the LOD must be clamped: when ``th``, ``tw`` and ``g`` are divisible by ``2^ℓ``, atlas level
+``ℓ`` (box-filtered, sizes halved) is the grid of every layer's own level ``ℓ`` with a gutter of
+``g / 2^ℓ`` texels, still of wrapped content. Bilinear filtering inside a tile reads at most one
+texel beyond the tile, so it is exact while ``g / 2^ℓ >= 1``. Past that level a coarse texel
+averages texels of two tiles (and tile edges stop falling on texel edges), and colour bleeds
+across tiles: the grey seams of seed 004. The safe levels are ``ℓ <= v2(g), v2(th), v2(tw)``
+(``v2`` = the number of times 2 divides the int), so ``ℓ_max <= log2(g)``; the sampler clamps the
+LOD (after bias, before trilinear blending) to that ``ℓ_max``, which the Python side computes.
+"""
+
+import warp as wp
+
+from .sampling import ADDRESS_WRAP, Sampler, TextureView, fetch, lod_from_derivatives, reduce_coord, sample_lod
+
+MAX_ENTRIES = wp.constant(4)  # the most index-map entries (k) per texel: an RGBA index map
+ATLAS_EPS = wp.constant(1.0e-20)
+
+
+@wp.struct
+class AtlasLayout:
+    """Where the tiles lie in the atlas (all in level-0 texels)."""
+
+    tile_width: wp.int32
+    tile_height: wp.int32
+    gutter: wp.int32
+    columns: wp.int32
+    num_tiles: wp.int32
+
+
+@wp.kernel
+def pack_kernel(layers: TextureView, layout: AtlasLayout, wrap: Sampler, atlas: wp.array2d(dtype=wp.vec4)):
+    """Write every layer's cell (tile + wrapped gutter) into level 0 of the atlas.
+
+    Launched over ``(L, th + 2g, tw + 2g)``; ``wrap`` is a wrap-addressing sampler, so ``fetch``
+    wraps the gutter indices. Recorded on a tape, the backward pass adds every atlas texel's
+    gradient (gutter copies included) to the layer texel it was copied from.
+    """
+    layer, y, x = wp.tid()
+    g = layout.gutter
+    row = layer // layout.columns
+    col = layer % layout.columns
+    ay = row * (layout.tile_height + 2 * g) + y
+    ax = col * (layout.tile_width + 2 * g) + x
+    atlas[ay, ax] = fetch(layers, layer, 0, x - g, y - g, wrap)
+
+
+@wp.func
+def tile_uv(atlas: TextureView, layout: AtlasLayout, layer: wp.int32, uv: wp.vec2) -> wp.vec2:
+    """The atlas UV of layer ``layer`` at layer UV ``uv``, wrapped into the tile (module docstring)."""
+    fx = reduce_coord(uv[0], ADDRESS_WRAP)
+    fy = reduce_coord(uv[1], ADDRESS_WRAP)
+    g = layout.gutter
+    row = layer // layout.columns
+    col = layer % layout.columns
+    x = float(col * (layout.tile_width + 2 * g) + g) + fx * float(layout.tile_width)
+    y = float(row * (layout.tile_height + 2 * g) + g) + (1.0 - fy) * float(layout.tile_height)
+    return wp.vec2(x / float(atlas.level_width[0]), 1.0 - y / float(atlas.level_height[0]))
+
+
+@wp.func
+def sample_tile(
+    atlas: TextureView, layout: AtlasLayout, layer: wp.int32, uv: wp.vec2, uv_dx: wp.vec2, uv_dy: wp.vec2, smp: Sampler
+) -> wp.vec4:
+    """Layer ``layer`` sampled from the atlas at layer UV ``uv`` with layer-UV derivatives.
+
+    The LOD is measured in tile texels; ``smp.max_lod`` must already hold the safe clamp.
+    """
+    scale = wp.vec2(
+        float(layout.tile_width) / float(atlas.level_width[0]), float(layout.tile_height) / float(atlas.level_height[0])
+    )
+    lod = lod_from_derivatives(atlas, wp.cw_mul(uv_dx, scale), wp.cw_mul(uv_dy, scale))
+    return sample_lod(atlas, 0, tile_uv(atlas, layout, layer, uv), lod, smp)
+
+
+@wp.func
+def map_texel(n: wp.int32, u: float) -> wp.int32:
+    """The texel (of ``n``) containing coordinate ``u`` (``u·n``), clamped to ``[0, n)``."""
+    return wp.clamp(int(wp.floor(wp.clamp(u, -1.0, 2.0) * float(n))), 0, n - 1)
+
+
+@wp.kernel
+def splat_atlas_kernel(
+    atlas: TextureView,
+    layout: AtlasLayout,
+    indices: wp.array3d(dtype=wp.int32),
+    weights: wp.array3d(dtype=float),
+    tiling: wp.array(dtype=float),
+    uv0: wp.array(dtype=wp.vec2),
+    uv0_dx: wp.array(dtype=wp.vec2),
+    uv0_dy: wp.array(dtype=wp.vec2),
+    mask: wp.array(dtype=float),
+    smp: Sampler,
+    normalize: wp.int32,
+    out: wp.array2d(dtype=float),
+):
+    """``out[i]`` = ``Σ_j w_j · layer_{idx_j}(uv0[i] · tiling)`` over the ``k`` index-map entries.
+
+    The index and weight maps (``[h, w, k]``) are read with nearest filtering, clamped, in UV0: the
+    texel containing ``uv0``. Every entry is sampled, zero weights included, so weight gradients
+    are exact. With ``normalize`` the weights are clamped to ``>= 0`` and divided by their sum.
+    """
+    i = wp.tid()
+    colour = wp.vec4(0.0)
+    if mask[i] != 0.0:
+        uv = uv0[i]
+        if wp.isfinite(uv):
+            row = map_texel(indices.shape[0], 1.0 - uv[1])
+            col = map_texel(indices.shape[1], uv[0])
+            k = indices.shape[2]
+            total = float(0.0)
+            for j in range(MAX_ENTRIES):
+                if j < k:
+                    total += wp.max(weights[row, col, j], 0.0)
+            for j in range(MAX_ENTRIES):
+                if j < k:
+                    w = weights[row, col, j]
+                    if normalize != 0:
+                        w = wp.max(w, 0.0) / wp.max(total, ATLAS_EPS)
+                    layer = wp.clamp(indices[row, col, j], 0, layout.num_tiles - 1)
+                    t = tiling[wp.min(layer, tiling.shape[0] - 1)]
+                    colour += w * sample_tile(atlas, layout, layer, uv * t, uv0_dx[i] * t, uv0_dy[i] * t, smp)
+        else:
+            colour = wp.vec4(wp.nan)
+    for c in range(out.shape[1]):
+        out[i, c] = colour[c]
