@@ -4,17 +4,20 @@ The public API: textures (:class:`Texture`, :class:`TextureArray`), :func:`sampl
 :class:`Filter` and :class:`Address` modes, image I/O in :mod:`warptex.io`, cameras
 (:func:`look_at`, :func:`orthographic`), G-buffers (:func:`rasterize`, :func:`save_gbuffer`,
 :func:`load_gbuffer`), the procedural :func:`terrain`, the techniques (:func:`triplanar`,
-:func:`biplanar`, :func:`triplanar_normal`, :func:`splat`) and the Lambert preview :func:`lambert`.
+:func:`biplanar`, :func:`triplanar_normal`, :func:`splat`, the atlas variant
+:func:`splat_atlas`, and :func:`stochastic` anti-tiling sampling) and the Lambert preview :func:`lambert`.
 """
 
 from warptex import io
 from warptex.camera import Camera, look_at, orthographic
 from warptex.gbuffer import GBuffer, load_mesh, rasterize
 from warptex.gbuffer_io import load_gbuffer, save_gbuffer
+from warptex.atlas import export_index_maps, pack_atlas, splat_atlas
 from warptex.layers import splat
 from warptex.sampling import Address, Filter, sample
 from warptex.terrain import terrain
 from warptex.shade import lambert
+from warptex.stochastic import Method, prepare_histogram, stochastic
 from warptex.texture import Texture, TextureArray, mip_sizes
 from warptex.triplanar import Blend, Space, biplanar, triplanar, triplanar_normal
 
@@ -24,10 +27,12 @@ __all__ = [
     "Camera",
     "Filter",
     "GBuffer",
+    "Method",
     "Texture",
     "Space",
     "TextureArray",
     "biplanar",
+    "export_index_maps",
     "io",
     "lambert",
     "load_gbuffer",
@@ -35,10 +40,14 @@ __all__ = [
     "look_at",
     "mip_sizes",
     "orthographic",
+    "pack_atlas",
+    "prepare_histogram",
     "rasterize",
     "sample",
     "save_gbuffer",
     "splat",
+    "splat_atlas",
+    "stochastic",
     "terrain",
     "triplanar",
     "triplanar_normal",

@@ -1,0 +1,364 @@
+"""Stochastic texture sampling that breaks visible tiling: hash4, cheap2 and hex.
+
+One building block, :func:`sample_stochastic`, samples a texture layer at ``uv`` with one level
+of detail ``lod`` for every tap; callers compute that LOD from the *unperturbed* UV derivatives,
+so all taps read the same mip levels and no mip seam appears at cell borders. ``params.method``
+picks the technique at run time:
+
+* ``METHOD_NONE``: plain :func:`~warptex.kernels.sampling.sample_lod`.
+* ``METHOD_HASH4`` (seed 000; Quilez, "texture repetition", technique 1): every integer cell
+  ``(i, j)`` gets a hashed offset ``o`` and, with ``mirror``, per-axis signs ``s``; the four cells
+  around ``uv`` are sampled at ``s * uv + o`` and blended bilinearly with weights
+  ``b = smoothstep(blend_lo, blend_hi, frac(uv))``: ``lerp(lerp(a, b, bx), lerp(c, d, bx), by)``.
+* ``METHOD_CHEAP2`` (Quilez technique 3): a smooth value noise ``k`` of ``uv * noise_frequency``
+  picks ``l = k * noise_levels``; the two taps use the hashed offsets of indices ``floor(l)`` and
+  ``floor(l) + 1`` and blend with ``smoothstep(blend_lo, blend_hi, frac(l))``.
+* ``METHOD_HEX`` (Heitz & Neyret 2018; Mikkelsen 2022): ``uv * HEX_SCALE`` on a skewed
+  equilateral triangle grid; the three vertices of the enclosing triangle each give an offset
+  (and, with ``rotation > 0``, a rotation about the vertex centre); barycentric weights are raised
+  to ``contrast`` and normalised. Without a histogram the taps are blended linearly; with one the
+  texture holds Gaussianised values ``G`` and the blend is variance preserving,
+  ``G = Σ wᵢ (Gᵢ - μ) / sqrt(Σ wᵢ²) + μ``, mapped back per channel by the inverse LUT of the mip
+  level read (prefiltered LUTs, see ``warptex.histogram.prepare_histogram``; trilinear filtering
+  blends the LUTs of its two levels) and the inverse decorrelation when ``decorrelate`` is set.
+
+Offsets, signs and angles come from :func:`~warptex.kernels.hashing.hash4_unit` with the streams
+below, so results are deterministic per seed on every device. Tap coordinates are formed from
+``uv - 2 floor(uv / 2)`` (exact), which keeps precision for large UVs and is valid for the
+periodic address modes (wrap, period 1; mirror, period 2), the only ones stochastic sampling takes.
+"""
+
+import warp as wp
+
+from . import hashing, sampling
+from .sampling import Sampler, TextureView
+
+METHOD_NONE = wp.constant(0)
+METHOD_HASH4 = wp.constant(1)
+METHOD_CHEAP2 = wp.constant(2)
+METHOD_HEX = wp.constant(3)
+
+# Hash streams (the fourth lane of pcg4d), one per use.
+STREAM_HASH4_CELL = wp.constant(0)
+STREAM_CHEAP2_OFFSET = wp.constant(1)
+STREAM_CHEAP2_NOISE = wp.constant(2)
+STREAM_HEX_VERTEX = wp.constant(3)
+
+# Triangle grid: p = uv * HEX_SCALE (Heitz & Neyret's 2 sqrt(3): triangle sides of 1/(2 sqrt 3) in
+# UV); skewed coordinates s = (p.x - p.y / sqrt 3, 2 p.y / sqrt 3); vertex (i, j) sits at
+# p = (i + j / 2, j sqrt(3) / 2).
+HEX_SCALE = wp.constant(3.4641016151377544)
+INV_SQRT3 = wp.constant(0.5773502691896258)
+HALF_SQRT3 = wp.constant(0.8660254037844386)
+PI = wp.constant(3.141592653589793)
+
+
+@wp.struct
+class StochasticParams:
+    """Options of :func:`sample_stochastic` (built by ``warptex.stochastic.stochastic_params``).
+
+    ``lut`` is ``[layers, lut_levels, channels, lut_size]`` flattened: entry ``i`` of channel ``c`` at
+    mip level ``k`` is the value whose Gaussianised value, read at level ``k``, is
+    ``lut_lo + (i + 0.5) / lut_size * (lut_hi - lut_lo)``. ``basis`` and ``centre`` (per layer) undo
+    the decorrelation: ``rgb = basis * y + centre``. Unused arrays are empty.
+    """
+
+    method: wp.int32
+    seed: wp.uint32
+    blend_lo: float  # hash4 / cheap2 blend window of smoothstep
+    blend_hi: float
+    mirror: wp.int32  # hash4 / cheap2: random per-axis mirroring of each tap
+    noise_frequency: float  # cheap2: value-noise lattice cells per UV unit
+    noise_levels: float  # cheap2: distinct offsets swept by the noise, k * noise_levels
+    contrast: float  # hex: barycentric weight exponent (>= 1)
+    rotation: float  # hex: random rotation strength in [0, 1] (0: none)
+    histogram: wp.int32  # hex: 1 when the texture is Gaussianised and lut is set
+    mean: float  # hex: mean of the Gaussianised values
+    lut: wp.array(dtype=float)
+    lut_size: wp.int32
+    lut_levels: wp.int32
+    lut_lo: float
+    lut_hi: float
+    channels: wp.int32
+    decorrelate: wp.int32
+    basis: wp.array(dtype=wp.mat33)
+    centre: wp.array(dtype=wp.vec3)
+
+
+@wp.func
+def periodic_base(uv: wp.vec2) -> wp.vec2:
+    """``uv - 2 floor(uv / 2)``: the same texels as ``uv`` under wrap and mirror, exactly, in [0, 2)."""
+    return uv - 2.0 * wp.vec2(wp.floor(0.5 * uv[0]), wp.floor(0.5 * uv[1]))
+
+
+@wp.func
+def offset_tap(base: wp.vec2, h: wp.vec4, mirror: wp.int32) -> wp.vec2:
+    """``s * base + (h.x, h.y)``, with ``s`` = -1 on an axis where ``mirror`` is set and ``h.z``/``h.w`` < 0.5."""
+    s = wp.vec2(1.0, 1.0)
+    if mirror != 0:
+        if h[2] < 0.5:
+            s[0] = -1.0
+        if h[3] < 0.5:
+            s[1] = -1.0
+    return wp.cw_mul(s, base) + wp.vec2(h[0], h[1])
+
+
+@wp.func
+def sample_hash4(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: Sampler, params: StochasticParams) -> wp.vec4:
+    """Four cells around ``uv``, each with its hashed offset (and mirror), smoothstep-blended."""
+    cell = wp.vec2(wp.floor(uv[0]), wp.floor(uv[1]))
+    f = uv - cell
+    base = periodic_base(uv)
+    bx = wp.smoothstep(params.blend_lo, params.blend_hi, f[0])
+    by = wp.smoothstep(params.blend_lo, params.blend_hi, f[1])
+    ix = int(cell[0])
+    iy = int(cell[1])
+    result = wp.vec4(0.0)
+    for k in range(4):
+        dx = k % 2
+        dy = k // 2
+        wx = 1.0 - bx
+        if dx == 1:
+            wx = bx
+        wy = 1.0 - by
+        if dy == 1:
+            wy = by
+        w = wx * wy
+        if w > 0.0:  # half of every axis has a single tap: skip the rest
+            h = hashing.hash4_unit(ix + dx, iy + dy, params.seed, STREAM_HASH4_CELL)
+            result += w * sampling.sample_lod(tex, layer, offset_tap(base, h, params.mirror), lod, smp)
+    return result
+
+
+@wp.func
+def value_noise(p: wp.vec2, seed: wp.uint32) -> float:
+    """Smooth value noise in [0, 1): hashed lattice values, bilinear with smoothstep (C1) weights."""
+    cell = wp.vec2(wp.floor(p[0]), wp.floor(p[1]))
+    f = p - cell
+    ix = int(cell[0])
+    iy = int(cell[1])
+    a = hashing.hash4_unit(ix, iy, seed, STREAM_CHEAP2_NOISE)[0]
+    b = hashing.hash4_unit(ix + 1, iy, seed, STREAM_CHEAP2_NOISE)[0]
+    c = hashing.hash4_unit(ix, iy + 1, seed, STREAM_CHEAP2_NOISE)[0]
+    d = hashing.hash4_unit(ix + 1, iy + 1, seed, STREAM_CHEAP2_NOISE)[0]
+    sx = wp.smoothstep(0.0, 1.0, f[0])
+    sy = wp.smoothstep(0.0, 1.0, f[1])
+    return wp.lerp(wp.lerp(a, b, sx), wp.lerp(c, d, sx), sy)
+
+
+@wp.func
+def sample_cheap2(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: Sampler, params: StochasticParams) -> wp.vec4:
+    """Two taps whose offsets are picked by low-frequency noise, blended by the noise's fraction."""
+    l = value_noise(uv * params.noise_frequency, params.seed) * params.noise_levels
+    index = wp.floor(l)
+    t = wp.smoothstep(params.blend_lo, params.blend_hi, l - index)
+    base = periodic_base(uv)
+    ia = int(index)
+    result = wp.vec4(0.0)
+    if t < 1.0:
+        ha = hashing.hash4_unit(ia, 0, params.seed, STREAM_CHEAP2_OFFSET)
+        result += (1.0 - t) * sampling.sample_lod(tex, layer, offset_tap(base, ha, params.mirror), lod, smp)
+    if t > 0.0:
+        hb = hashing.hash4_unit(ia + 1, 0, params.seed, STREAM_CHEAP2_OFFSET)
+        result += t * sampling.sample_lod(tex, layer, offset_tap(base, hb, params.mirror), lod, smp)
+    return result
+
+
+@wp.func
+def hex_grid(uv: wp.vec2):
+    """Enclosing triangle of ``uv * HEX_SCALE``: barycentric weights and the vertices' lattice ids.
+
+    Returns ``(w, v0, v1, v2)``: ``w`` a ``vec3`` summing to 1, ``vk`` the ``vec2i`` of the vertex
+    weighted by ``w[k]``. Lower triangle ``f.x + f.y < 1``: vertices ``b, b+(1,0), b+(0,1)`` with
+    ``(1-f.x-f.y, f.x, f.y)``; upper: ``b+(1,1), b+(1,0), b+(0,1)`` with ``(f.x+f.y-1, 1-f.y, 1-f.x)``.
+    """
+    # In float64: for large UVs the skewed coordinates are large but their fractions must be exact.
+    px = wp.float64(uv[0]) * wp.float64(HEX_SCALE)
+    py = wp.float64(uv[1]) * wp.float64(HEX_SCALE)
+    sx = px - py * wp.float64(INV_SQRT3)
+    sy = wp.float64(2.0) * wp.float64(INV_SQRT3) * py
+    bx = wp.floor(sx)
+    by = wp.floor(sy)
+    f = wp.vec2(float(sx - bx), float(sy - by))
+    i = int(bx)
+    j = int(by)
+    w = wp.vec3(1.0 - f[0] - f[1], f[0], f[1])
+    v0 = wp.vec2i(i, j)
+    if f[0] + f[1] >= 1.0:
+        w = wp.vec3(f[0] + f[1] - 1.0, 1.0 - f[1], 1.0 - f[0])
+        v0 = wp.vec2i(i + 1, j + 1)
+    return w, v0, wp.vec2i(i + 1, j), wp.vec2i(i, j + 1)
+
+
+@wp.func
+def hex_centre(v: wp.vec2i) -> wp.vec2:
+    """UV of triangle-grid vertex ``v``."""
+    return wp.vec2(float(v[0]) + 0.5 * float(v[1]), HALF_SQRT3 * float(v[1])) / HEX_SCALE
+
+
+@wp.func
+def hex_centre64(v: wp.vec2i) -> wp.vec2d:
+    """:func:`hex_centre` in float64."""
+    scale = wp.float64(HEX_SCALE)
+    return wp.vec2d((wp.float64(v[0]) + wp.float64(0.5) * wp.float64(v[1])) / scale, wp.float64(HALF_SQRT3) * wp.float64(v[1]) / scale)
+
+
+@wp.func
+def hex_tap(uv: wp.vec2, base: wp.vec2, v: wp.vec2i, params: StochasticParams) -> wp.vec2:
+    """Tap UV of vertex ``v``: ``R(θ) (uv - c) + c + o`` (reduced by :func:`periodic_base`).
+
+    ``o = (h.x, h.y)``, ``θ = (2 h.z - 1) π rotation`` from ``hash4_unit(v, seed, STREAM_HEX_VERTEX)``,
+    ``c`` the vertex centre (:func:`hex_centre`).
+    """
+    h = hashing.hash4_unit(v[0], v[1], params.seed, STREAM_HEX_VERTEX)
+    tap = base + wp.vec2(h[0], h[1])
+    if params.rotation != 0.0:
+        # uv - centre in float64: both are large for large UVs, their difference is not.
+        c = hex_centre64(v)
+        d = wp.vec2(float(wp.float64(uv[0]) - c[0]), float(wp.float64(uv[1]) - c[1]))
+        theta = (2.0 * h[2] - 1.0) * PI * params.rotation
+        cs = wp.cos(theta)
+        sn = wp.sin(theta)
+        tap += wp.vec2(cs * d[0] - sn * d[1], sn * d[0] + cs * d[1]) - d
+    return tap
+
+
+@wp.func
+def hex_weights(w: wp.vec3, contrast: float) -> wp.vec3:
+    """Barycentric weights raised to ``contrast`` and normalised to sum 1."""
+    p = wp.vec3(0.0)
+    for k in range(3):
+        if w[k] > 0.0:  # pow's adjoint takes log(w): keep exact zeros out of it
+            p[k] = wp.pow(w[k], contrast)
+    return p / (p[0] + p[1] + p[2])
+
+
+@wp.func
+def inverse_lut(params: StochasticParams, layer: wp.int32, level: wp.int32, c: wp.int32, g: float) -> float:
+    """Linear interpolation of channel ``c``'s inverse LUT of mip ``level`` at ``g`` (ends clamped)."""
+    n = params.lut_size
+    x = wp.clamp((g - params.lut_lo) / (params.lut_hi - params.lut_lo) * float(n) - 0.5, 0.0, float(n - 1))
+    i0 = wp.min(int(wp.floor(x)), n - 2)
+    t = x - float(i0)
+    k = wp.min(level, params.lut_levels - 1)
+    start = ((layer * params.lut_levels + k) * params.channels + c) * n + i0
+    return params.lut[start] * (1.0 - t) + params.lut[start + 1] * t
+
+
+@wp.func
+def lut_level(tex: TextureView, lod: float, smp: Sampler) -> wp.vec2:
+    """``(level, fraction)`` of the mip levels ``sample_lod`` reads at ``lod`` (same bias and clamps)."""
+    l = wp.clamp(wp.clamp(lod + smp.lod_bias, smp.min_lod, smp.max_lod), 0.0, float(tex.num_levels - 1))
+    result = wp.vec2(wp.floor(l + 0.5), 0.0)
+    if smp.filter == sampling.FILTER_TRILINEAR:
+        result = wp.vec2(wp.floor(l), l - wp.floor(l))
+    return result
+
+
+@wp.func
+def sample_hex(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: Sampler, params: StochasticParams) -> wp.vec4:
+    """Three taps on the triangle grid; linear or variance-preserving (histogram) blend."""
+    bary, v0, v1, v2 = hex_grid(uv)
+    w = hex_weights(bary, params.contrast)
+    base = periodic_base(uv)
+    acc = wp.vec4(0.0)
+    for k in range(3):
+        v = v0
+        if k == 1:
+            v = v1
+        elif k == 2:
+            v = v2
+        if w[k] > 0.0:
+            value = sampling.sample_lod(tex, layer, hex_tap(uv, base, v, params), lod, smp)
+            if params.histogram != 0:
+                value = value - wp.vec4(params.mean)
+            acc += w[k] * value
+    result = acc
+    if params.histogram != 0:
+        g = acc / wp.sqrt(wp.dot(w, w)) + wp.vec4(params.mean)
+        result = wp.vec4(0.0)
+        lf = lut_level(tex, lod, smp)
+        level = int(lf[0])
+        for c in range(4):
+            if c < params.channels:
+                channel = inverse_lut(params, layer, level, c, g[c])
+                if lf[1] > 0.0:
+                    channel = channel * (1.0 - lf[1]) + inverse_lut(params, layer, level + 1, c, g[c]) * lf[1]
+                result[c] = channel
+        if params.decorrelate != 0:
+            rgb = params.basis[layer] * wp.vec3(result[0], result[1], result[2]) + params.centre[layer]
+            result = wp.vec4(rgb[0], rgb[1], rgb[2], result[3])
+    return result
+
+
+@wp.func
+def sample_stochastic(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: Sampler, params: StochasticParams) -> wp.vec4:
+    """Sample ``layer`` at ``uv`` with the technique ``params.method``, every tap at ``lod``.
+
+    ``lod`` is taken as is (then biased and clamped by ``smp`` as in ``sample_lod``); compute it from
+    the unperturbed UV derivatives. Non-finite ``uv`` or ``lod`` give NaN in every channel.
+    """
+    result = wp.vec4(wp.nan)
+    if wp.isfinite(uv) and wp.isfinite(lod):
+        if params.method == METHOD_HASH4:
+            result = sample_hash4(tex, layer, uv, lod, smp, params)
+        elif params.method == METHOD_CHEAP2:
+            result = sample_cheap2(tex, layer, uv, lod, smp, params)
+        elif params.method == METHOD_HEX:
+            result = sample_hex(tex, layer, uv, lod, smp, params)
+        else:
+            result = sampling.sample_lod(tex, layer, uv, lod, smp)
+    return result
+
+
+@wp.kernel
+def stochastic_kernel(
+    tex: TextureView,
+    uv: wp.array(dtype=wp.vec2),
+    uv_dx: wp.array(dtype=wp.vec2),
+    uv_dy: wp.array(dtype=wp.vec2),
+    lods: wp.array(dtype=float),
+    layers: wp.array(dtype=wp.int32),
+    smp: Sampler,
+    params: StochasticParams,
+    lod_source: wp.int32,
+    constant_lod: float,
+    constant_layer: wp.int32,
+    out: wp.array2d(dtype=float),
+):
+    """``out[i, c]`` = channel ``c`` of :func:`sample_stochastic` at ``uv[i]`` (arguments as ``sample_kernel``)."""
+    i = wp.tid()
+    layer = constant_layer
+    if layers.shape[0] > 0:
+        layer = wp.clamp(layers[i], 0, tex.num_layers - 1)
+    lod = 0.0
+    if lod_source == sampling.LOD_CONSTANT:
+        lod = constant_lod
+    elif lod_source == sampling.LOD_PER_SAMPLE:
+        lod = lods[i]
+    elif lod_source == sampling.LOD_DERIVATIVES:
+        lod = sampling.lod_from_derivatives(tex, uv_dx[i], uv_dy[i])
+    value = sample_stochastic(tex, layer, uv[i], lod, smp, params)
+    for c in range(out.shape[1]):
+        out[i, c] = value[c]
+
+
+@wp.kernel
+def hex_taps_kernel(
+    uv: wp.array(dtype=wp.vec2),
+    params: StochasticParams,
+    weights: wp.array(dtype=wp.vec3),
+    vertices: wp.array2d(dtype=wp.vec2i),
+    taps: wp.array2d(dtype=wp.vec2),
+):
+    """The hex technique's taps at ``uv[i]``: normalised weights, vertex ids and tap UVs (3 each)."""
+    i = wp.tid()
+    bary, v0, v1, v2 = hex_grid(uv[i])
+    weights[i] = hex_weights(bary, params.contrast)
+    base = periodic_base(uv[i])
+    vertices[i, 0] = v0
+    vertices[i, 1] = v1
+    vertices[i, 2] = v2
+    taps[i, 0] = hex_tap(uv[i], base, v0, params)
+    taps[i, 1] = hex_tap(uv[i], base, v1, params)
+    taps[i, 2] = hex_tap(uv[i], base, v2, params)
