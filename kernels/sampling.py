@@ -181,6 +181,33 @@ def sample_lod(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: 
     return result
 
 
+@wp.func
+def sample_layer_and_lod(
+    tex: TextureView,
+    i: wp.int32,
+    uv_dx: wp.array(dtype=wp.vec2),
+    uv_dy: wp.array(dtype=wp.vec2),
+    lods: wp.array(dtype=float),
+    layers: wp.array(dtype=wp.int32),
+    lod_source: wp.int32,
+    constant_lod: float,
+    constant_layer: wp.int32,
+):
+    """Sample ``i``'s layer (per-sample indices clamped to the array) and LOD, by ``lod_source``:
+    the argument conventions of :func:`sample_kernel`, shared by every per-UV sampling kernel."""
+    layer = constant_layer
+    if layers.shape[0] > 0:
+        layer = wp.clamp(layers[i], 0, tex.num_layers - 1)
+    lod = 0.0
+    if lod_source == LOD_CONSTANT:
+        lod = constant_lod
+    elif lod_source == LOD_PER_SAMPLE:
+        lod = lods[i]
+    elif lod_source == LOD_DERIVATIVES:
+        lod = lod_from_derivatives(tex, uv_dx[i], uv_dy[i])
+    return layer, lod
+
+
 @wp.kernel
 def sample_kernel(
     tex: TextureView,
@@ -200,16 +227,7 @@ def sample_kernel(
     Per-sample layer indices are clamped to the array; optional arrays may be null when unused.
     """
     i = wp.tid()
-    layer = constant_layer
-    if layers.shape[0] > 0:
-        layer = wp.clamp(layers[i], 0, tex.num_layers - 1)
-    lod = 0.0
-    if lod_source == LOD_CONSTANT:
-        lod = constant_lod
-    elif lod_source == LOD_PER_SAMPLE:
-        lod = lods[i]
-    elif lod_source == LOD_DERIVATIVES:
-        lod = lod_from_derivatives(tex, uv_dx[i], uv_dy[i])
+    layer, lod = sample_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
     value = sample_lod(tex, layer, uv[i], lod, smp)
     for c in range(out.shape[1]):
         out[i, c] = value[c]

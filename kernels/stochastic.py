@@ -328,16 +328,7 @@ def stochastic_kernel(
 ):
     """``out[i, c]`` = channel ``c`` of :func:`sample_stochastic` at ``uv[i]`` (arguments as ``sample_kernel``)."""
     i = wp.tid()
-    layer = constant_layer
-    if layers.shape[0] > 0:
-        layer = wp.clamp(layers[i], 0, tex.num_layers - 1)
-    lod = 0.0
-    if lod_source == sampling.LOD_CONSTANT:
-        lod = constant_lod
-    elif lod_source == sampling.LOD_PER_SAMPLE:
-        lod = lods[i]
-    elif lod_source == sampling.LOD_DERIVATIVES:
-        lod = sampling.lod_from_derivatives(tex, uv_dx[i], uv_dy[i])
+    layer, lod = sampling.sample_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
     value = sample_stochastic(tex, layer, uv[i], lod, smp, params)
     for c in range(out.shape[1]):
         out[i, c] = value[c]

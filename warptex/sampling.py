@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+import math
 
 import numpy as np
 import warp as wp
@@ -171,34 +172,11 @@ def sample(
     shape = uv.shape
     count = uv.size
 
-    filt = as_enum(func, "filter", filter, Filter)
-    has_lod = lod is not None or uv_dx is not None or uv_dy is not None
-    if filt == Filter.AUTO:
-        filt = Filter.TRILINEAR if has_lod else Filter.BILINEAR
-    if filt == Filter.TRILINEAR and not has_lod:
-        raise ValueError(f"{func}(): filter='trilinear' needs lod= or uv_dx=/uv_dy=")
+    filt = resolve_filter(func, filter, has_lod=lod is not None or uv_dx is not None or uv_dy is not None)
     smp = make_sampler(func, filter=filt, address=address, border=border, lod_bias=lod_bias, min_lod=min_lod, max_lod=max_lod)
 
     flat = uv.reshape((count,))
-    lod_source, constant_lod = ks.LOD_NONE, 0.0
-    lods = dx = dy = None
-    if lod is not None and (uv_dx is not None or uv_dy is not None):
-        raise ValueError(f"{func}(): pass either lod= or uv_dx=/uv_dy=, not both")
-    if (uv_dx is None) != (uv_dy is None):
-        raise ValueError(f"{func}(): uv_dx and uv_dy must be given together")
-    if uv_dx is not None:
-        lod_source = ks.LOD_DERIVATIVES
-        dx = _vec2_array(func, "uv_dx", uv_dx, device)
-        dy = _vec2_array(func, "uv_dy", uv_dy, device)
-        for name, d in (("uv_dx", dx), ("uv_dy", dy)):
-            if d.shape != shape:
-                raise ValueError(f"{func}(): {name} must have the shape of uv {shape}, got {d.shape}")
-        dx, dy = dx.reshape((count,)), dy.reshape((count,))
-    elif isinstance(lod, (int, float, np.integer, np.floating)) and not isinstance(lod, bool):
-        lod_source, constant_lod = ks.LOD_CONSTANT, as_float(func, "lod", lod)
-    elif lod is not None:
-        lod_source = ks.LOD_PER_SAMPLE
-        lods = _per_sample(func, "lod", lod, shape, wp.float32, device).reshape((count,))
+    lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
 
     constant_layer, layers = _resolve_layer(func, texture, layer, shape, device)
     if layers is not None:
@@ -215,6 +193,38 @@ def sample(
             device=device,
         )
     return out.reshape((*shape, texture.channels))
+
+
+def resolve_filter(func: str, filter, *, has_lod: bool) -> Filter:
+    """``filter`` resolved for a lookup with or without a LOD source (``"auto"``: trilinear with one)."""
+    filt = as_enum(func, "filter", filter, Filter)
+    if filt == Filter.AUTO:
+        filt = Filter.TRILINEAR if has_lod else Filter.BILINEAR
+    if filt == Filter.TRILINEAR and not has_lod:
+        raise ValueError(f"{func}(): filter='trilinear' needs lod= or uv_dx=/uv_dy=")
+    return filt
+
+
+def lod_inputs(func: str, lod, uv_dx, uv_dy, shape, device):
+    """``(lod_source, constant_lod, lods, uv_dx, uv_dy)`` for a kernel, flattened, validated."""
+    count = math.prod(shape)
+    if lod is not None and (uv_dx is not None or uv_dy is not None):
+        raise ValueError(f"{func}(): pass either lod= or uv_dx=/uv_dy=, not both")
+    if (uv_dx is None) != (uv_dy is None):
+        raise ValueError(f"{func}(): uv_dx and uv_dy must be given together")
+    if uv_dx is not None:
+        dx = _vec2_array(func, "uv_dx", uv_dx, device)
+        dy = _vec2_array(func, "uv_dy", uv_dy, device)
+        for name, d in (("uv_dx", dx), ("uv_dy", dy)):
+            if d.shape != shape:
+                raise ValueError(f"{func}(): {name} must have the shape of uv {shape}, got {d.shape}")
+        return ks.LOD_DERIVATIVES, 0.0, None, dx.reshape((count,)), dy.reshape((count,))
+    if isinstance(lod, (int, float, np.integer, np.floating)) and not isinstance(lod, bool):
+        return ks.LOD_CONSTANT, as_float(func, "lod", lod), None, None, None
+    if lod is not None:
+        lods = _per_sample(func, "lod", lod, shape, wp.float32, device).reshape((count,))
+        return ks.LOD_PER_SAMPLE, 0.0, lods, None, None
+    return ks.LOD_NONE, 0.0, None, None, None
 
 
 def _resolve_layer(func: str, texture: TextureArray, layer, shape, device):

@@ -9,16 +9,14 @@ other techniques (triplanar, splat layers) can sample each projection or layer s
 from __future__ import annotations
 
 import enum
-import math
 
 import numpy as np
 import warp as wp
 
 from warptex._validate import as_enum, as_float, as_float_array, resolve_device
 from warptex.histogram import GAUSSIAN_MEAN, LUT_RANGE, Histogram, prepare_histogram
-from warptex.kernels import sampling as ks
 from warptex.kernels import stochastic as kst
-from warptex.sampling import Address, Filter, _per_sample, _resolve_layer, _vec2_array, make_sampler
+from warptex.sampling import Address, Filter, _resolve_layer, _vec2_array, lod_inputs, make_sampler, resolve_filter
 from warptex.texture import Texture, TextureArray
 
 __all__ = ["Histogram", "Method", "hex_taps", "prepare_histogram", "stochastic", "stochastic_params"]
@@ -209,15 +207,10 @@ def stochastic(
     addr = as_enum(func, "address", address, Address)
     if addr not in (Address.WRAP, Address.MIRROR):
         raise ValueError(f"{func}(): address must be 'wrap' or 'mirror' (a periodic texture), got {addr.value!r}")
-    filt = as_enum(func, "filter", filter, Filter)
-    has_lod = lod is not None or uv_dx is not None or uv_dy is not None
-    if filt == Filter.AUTO:
-        filt = Filter.TRILINEAR if has_lod else Filter.BILINEAR
-    if filt == Filter.TRILINEAR and not has_lod:
-        raise ValueError(f"{func}(): filter='trilinear' needs lod= or uv_dx=/uv_dy=")
+    filt = resolve_filter(func, filter, has_lod=lod is not None or uv_dx is not None or uv_dy is not None)
     smp = make_sampler(func, filter=filt, address=addr, lod_bias=lod_bias, min_lod=min_lod, max_lod=max_lod)
 
-    lod_source, constant_lod, lods, dx, dy = _lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
+    lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
     constant_layer, layers = _resolve_layer(func, texture, layer, shape, device)
     if layers is not None:
         layers = layers.reshape((count,))
@@ -233,28 +226,6 @@ def stochastic(
             device=device,
         )
     return out.reshape((*shape, texture.channels))
-
-
-def _lod_inputs(func: str, lod, uv_dx, uv_dy, shape, device):
-    """``(lod_source, constant_lod, lods, uv_dx, uv_dy)`` for a kernel, flattened, validated."""
-    count = math.prod(shape)
-    if lod is not None and (uv_dx is not None or uv_dy is not None):
-        raise ValueError(f"{func}(): pass either lod= or uv_dx=/uv_dy=, not both")
-    if (uv_dx is None) != (uv_dy is None):
-        raise ValueError(f"{func}(): uv_dx and uv_dy must be given together")
-    if uv_dx is not None:
-        dx = _vec2_array(func, "uv_dx", uv_dx, device)
-        dy = _vec2_array(func, "uv_dy", uv_dy, device)
-        for name, d in (("uv_dx", dx), ("uv_dy", dy)):
-            if d.shape != shape:
-                raise ValueError(f"{func}(): {name} must have the shape of uv {shape}, got {d.shape}")
-        return ks.LOD_DERIVATIVES, 0.0, None, dx.reshape((count,)), dy.reshape((count,))
-    if isinstance(lod, (int, float, np.integer, np.floating)) and not isinstance(lod, bool):
-        return ks.LOD_CONSTANT, as_float(func, "lod", lod), None, None, None
-    if lod is not None:
-        lods = _per_sample(func, "lod", lod, shape, wp.float32, device).reshape((count,))
-        return ks.LOD_PER_SAMPLE, 0.0, lods, None, None
-    return ks.LOD_NONE, 0.0, None, None, None
 
 
 def hex_taps(uv, *, seed: int = 0, contrast: float = 1.0, rotation: float = 0.0, device=None):
