@@ -23,7 +23,7 @@ import numpy as np
 import warp as wp
 
 from warptex._validate import as_float, as_float_array, param_array
-from warptex.gbuffer import GBuffer
+from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import atlas as ka
 from warptex.layers import check_layer_count
 from warptex.sampling import Filter, make_sampler, surface_sampler
@@ -321,11 +321,7 @@ def splat_atlas(
         ``weights``, ``tiling`` and the G-buffer's UVs and derivatives.
     """
     func = "splat_atlas"
-    if not isinstance(gbuffer, GBuffer):
-        raise TypeError(f"{func}(): gbuffer must be a warptex GBuffer, got {type(gbuffer).__name__}")
-    device = wp.get_device(device) if device is not None else gbuffer.device
-    if gbuffer.device != device:
-        raise ValueError(f"{func}(): the G-buffer is on {gbuffer.device} but device is {device}")
+    device = gbuffer_device(func, gbuffer, device)
     if not isinstance(atlas, Atlas):
         raise TypeError(f"{func}(): atlas must be an Atlas (from pack_atlas), got {type(atlas).__name__}")
     if atlas.device != device:

@@ -112,6 +112,17 @@ class GBuffer:
         return cls(**arrays, uv_sets=sets, camera=camera)
 
 
+def gbuffer_device(func: str, gbuffer, device) -> wp.context.Device:
+    """The device a technique launches on over ``gbuffer``: ``device`` if given (it must be the
+    G-buffer's), else the G-buffer's; a ``TypeError`` if ``gbuffer`` is not a :class:`GBuffer`."""
+    if not isinstance(gbuffer, GBuffer):
+        raise TypeError(f"{func}(): gbuffer must be a warptex GBuffer, got {type(gbuffer).__name__}")
+    device = wp.get_device(device) if device is not None else gbuffer.device
+    if gbuffer.device != device:
+        raise ValueError(f"{func}(): the G-buffer is on {gbuffer.device} but device is {device}")
+    return device
+
+
 def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
     """Load a mesh file (OBJ, PLY, STL, GLB/GLTF, ...) as one ``trimesh.Trimesh``.
 

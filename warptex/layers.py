@@ -11,7 +11,7 @@ import numpy as np
 import warp as wp
 
 from warptex._validate import as_enum, param_array
-from warptex.gbuffer import GBuffer
+from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import layers as kl
 from warptex.kernels import triplanar as kt
 from warptex.sampling import Address, Filter, make_sampler, surface_sampler
@@ -123,11 +123,7 @@ def splat(
         ``heights``, and ``tiling`` / ``height_blend`` when given as arrays that require them.
     """
     func = "splat"
-    if not isinstance(gbuffer, GBuffer):
-        raise TypeError(f"{func}(): gbuffer must be a warptex GBuffer, got {type(gbuffer).__name__}")
-    device = wp.get_device(device) if device is not None else gbuffer.device
-    if gbuffer.device != device:
-        raise ValueError(f"{func}(): the G-buffer is on {gbuffer.device} but device is {device}")
+    device = gbuffer_device(func, gbuffer, device)
     if not isinstance(layers, TextureArray):
         raise TypeError(f"{func}(): layers must be a TextureArray, got {type(layers).__name__}")
     if layers.device != device:

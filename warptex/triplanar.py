@@ -18,7 +18,7 @@ import numpy as np
 import warp as wp
 
 from warptex._validate import as_enum, as_float, as_float_array, param_array
-from warptex.gbuffer import GBuffer
+from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import normals as kn
 from warptex.kernels import triplanar as kt
 from warptex.sampling import Address, Filter, surface_sampler
@@ -257,11 +257,7 @@ def _setup(
     max_lod,
     device,
 ) -> _Setup:
-    if not isinstance(gbuffer, GBuffer):
-        raise TypeError(f"{func}(): gbuffer must be a warptex GBuffer, got {type(gbuffer).__name__}")
-    device = wp.get_device(device) if device is not None else gbuffer.device
-    if gbuffer.device != device:
-        raise ValueError(f"{func}(): the G-buffer is on {gbuffer.device} but device is {device}")
+    device = gbuffer_device(func, gbuffer, device)
     gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask")
     textures = _textures(func, texture, textures_per_axis, layer, device)
 
