@@ -25,6 +25,7 @@ import functools
 import warp as wp
 
 from .sampling import Sampler, TextureView, lod_from_derivatives, sample_lod
+from .stochastic import StochasticParams, sample_stochastic
 from .triplanar import Projection, plane_lod, plane_uv, triplanar_sample, triplanar_weights
 
 PROJECT_UV = wp.constant(0)  # UV0 × tiling
@@ -71,17 +72,19 @@ def sample_layer(
     dpdx: wp.vec3,
     dpdy: wp.vec3,
     smp: Sampler,
+    stoch: StochasticParams,
 ) -> wp.vec4:
-    """Layer ``layer`` of ``tex`` with that layer's tiling, in the splat's projection."""
+    """Layer ``layer`` of ``tex`` with that layer's tiling, in the splat's projection, sampled as
+    ``stoch`` says (plain for ``METHOD_NONE``)."""
     t = layer_tiling(params, layer)
     value = wp.vec4(0.0)
     if params.projection == PROJECT_UV:
-        value = sample_lod(tex, layer, uv0 * t, lod_from_derivatives(tex, uv0_dx * t, uv0_dy * t), smp)
+        value = sample_stochastic(tex, layer, uv0 * t, lod_from_derivatives(tex, uv0_dx * t, uv0_dy * t), smp, stoch)
     elif params.projection == PROJECT_WORLD_XZ:
         up = wp.vec3(0.0, 1.0, 0.0)
-        value = sample_lod(tex, layer, plane_uv(proj, 1, p, up, t), plane_lod(tex, 1, dpdx, dpdy, t), smp)
+        value = sample_stochastic(tex, layer, plane_uv(proj, 1, p, up, t), plane_lod(tex, 1, dpdx, dpdy, t), smp, stoch)
     else:
-        value = triplanar_sample(tex, layer, proj, tri_w, p, n, dpdx, dpdy, t, smp)
+        value = triplanar_sample(tex, layer, proj, tri_w, p, n, dpdx, dpdy, t, smp, stoch)
     return value
 
 
@@ -110,6 +113,8 @@ def splat_kernel(num_layers: int, map_channels: int):
         proj: Projection,
         smp: Sampler,
         map_smp: Sampler,
+        stoch: StochasticParams,
+        height_stoch: StochasticParams,
         out: wp.array2d(dtype=float),
     ):
         i = wp.tid()
@@ -137,12 +142,12 @@ def splat_kernel(num_layers: int, map_channels: int):
             h = weights_t()
             for j in range(wp.static(num_layers)):
                 if w[j] > 0.0:
-                    value = sample_layer(layers, j, params, proj, uv, uv0_dx[i], uv0_dy[i], p, n, tri_w, position_dx[i], position_dy[i], smp)
+                    value = sample_layer(layers, j, params, proj, uv, uv0_dx[i], uv0_dy[i], p, n, tri_w, position_dx[i], position_dy[i], smp, stoch)
                     c[j] = value
                     if params.height_mode == HEIGHT_CHANNEL:
                         h[j] = value[params.height_channel] * w[j]
                     elif params.height_mode == HEIGHT_ARRAY:
-                        height = sample_layer(heights, j, params, proj, uv, uv0_dx[i], uv0_dy[i], p, n, tri_w, position_dx[i], position_dy[i], smp)
+                        height = sample_layer(heights, j, params, proj, uv, uv0_dx[i], uv0_dy[i], p, n, tri_w, position_dx[i], position_dy[i], smp, height_stoch)
                         h[j] = height[0] * w[j]
 
             if params.height_mode != HEIGHT_NONE:

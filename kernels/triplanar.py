@@ -22,7 +22,8 @@ ground beside it pick their own mip levels.
 import warp as wp
 
 from .normals import blend_projected, decode_normal, sign_or_one, to_world
-from .sampling import Sampler, TextureView, lod_from_derivatives, sample_lod
+from .sampling import Sampler, TextureView, lod_from_derivatives
+from .stochastic import StochasticParams, sample_stochastic
 
 # How the three projections are weighted.
 WEIGHTS_TRIPLANAR = wp.constant(0)  # pow(|n|, sharpness), normalised
@@ -196,21 +197,26 @@ def triplanar_sample(
     dpdy: wp.vec3,
     tiling: float,
     smp: Sampler,
+    stoch: StochasticParams,
 ) -> wp.vec4:
     """One texture layer read through all three projections at ``tiling``, blended by ``w``
-    (zero-weight projections are not sampled): the building block of triplanar splat layers."""
+    (zero-weight projections are not sampled; each is sampled as ``stoch`` says): the building
+    block of triplanar splat layers."""
     value = wp.vec4(0.0)
     for axis in range(3):
         if w[axis] > 0.0:
-            value += w[axis] * sample_lod(tex, layer, plane_uv(proj, axis, p, n, tiling), plane_lod(tex, axis, dpdx, dpdy, tiling), smp)
+            value += w[axis] * sample_stochastic(tex, layer, plane_uv(proj, axis, p, n, tiling), plane_lod(tex, axis, dpdx, dpdy, tiling), smp, stoch)
     return value
 
 
 @wp.func
-def sample_one(tex: TextureView, layer: wp.int32, axis: wp.int32, proj: Projection, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, smp: Sampler) -> wp.vec4:
-    """Projection ``axis`` of ``tex``, trilinear with the projection's own LOD."""
+def sample_one(
+    tex: TextureView, layer: wp.int32, axis: wp.int32, proj: Projection, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, smp: Sampler, stoch: StochasticParams
+) -> wp.vec4:
+    """Projection ``axis`` of ``tex`` at the projection's own LOD, sampled as ``stoch`` says
+    (plain trilinear for ``METHOD_NONE``; the stochastic taps all use the unperturbed LOD)."""
     lod = projection_lod(tex, proj, axis, dpdx, dpdy)
-    return sample_lod(tex, layer, projection_uv(proj, axis, p, n), lod, smp)
+    return sample_stochastic(tex, layer, projection_uv(proj, axis, p, n), lod, smp, stoch)
 
 
 @wp.func
@@ -226,15 +232,16 @@ def sample_projection(
     dpdx: wp.vec3,
     dpdy: wp.vec3,
     smp: Sampler,
+    stoch: StochasticParams,
 ) -> wp.vec4:
     """Projection ``axis``, read from that axis' texture (X: ``tex_x``, Y: ``tex_y``, Z: ``tex_z``)."""
     value = wp.vec4(0.0)
     if axis == 0:
-        value = sample_one(tex_x, layer, axis, proj, p, n, dpdx, dpdy, smp)
+        value = sample_one(tex_x, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
     elif axis == 1:
-        value = sample_one(tex_y, layer, axis, proj, p, n, dpdx, dpdy, smp)
+        value = sample_one(tex_y, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
     else:
-        value = sample_one(tex_z, layer, axis, proj, p, n, dpdx, dpdy, smp)
+        value = sample_one(tex_z, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
     return value
 
 
@@ -251,6 +258,7 @@ def triplanar_kernel(
     mask: wp.array(dtype=float),
     proj: Projection,
     smp: Sampler,
+    stoch: StochasticParams,
     out: wp.array2d(dtype=float),
 ):
     """``out[i, c]``: the triplanar (or biplanar) blend of the three (two) plane projections.
@@ -265,7 +273,7 @@ def triplanar_kernel(
         w = projection_weights(proj, n)
         for axis in range(3):
             if w[axis] > 0.0:
-                colour += w[axis] * sample_projection(tex_x, tex_y, tex_z, layer, axis, proj, p, n, dpdx, dpdy, smp)
+                colour += w[axis] * sample_projection(tex_x, tex_y, tex_z, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
     for c in range(out.shape[1]):
         out[i, c] = colour[c]
 
@@ -283,6 +291,7 @@ def triplanar_normal_kernel(
     mask: wp.array(dtype=float),
     proj: Projection,
     smp: Sampler,
+    stoch: StochasticParams,
     channels: wp.int32,
     strength: float,
     flip_green: wp.int32,
@@ -307,7 +316,7 @@ def triplanar_normal_kernel(
         total = wp.vec3(0.0)
         for axis in range(3):
             if w[axis] > 0.0:
-                texel = sample_projection(tex_x, tex_y, tex_z, layer, axis, proj, p, n, dpdx, dpdy, smp)
+                texel = sample_projection(tex_x, tex_y, tex_z, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
                 t = decode_normal(texel, channels, strength, flip_green)
                 t = wp.vec3(t[0] * u_sign(n, axis, proj.mirror_fix), t[1], t[2])
                 base = plane_coords(n, axis)

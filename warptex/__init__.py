@@ -17,7 +17,7 @@ from warptex.layers import splat
 from warptex.sampling import Address, Filter, sample
 from warptex.terrain import terrain
 from warptex.shade import lambert
-from warptex.stochastic import Method, prepare_histogram, stochastic
+from warptex.stochastic import Method, Stochastic, prepare_histogram, stochastic
 from warptex.texture import Texture, TextureArray, mip_sizes
 from warptex.triplanar import Blend, Space, biplanar, triplanar, triplanar_normal
 
@@ -47,6 +47,7 @@ __all__ = [
     "save_gbuffer",
     "splat",
     "splat_atlas",
+    "Stochastic",
     "stochastic",
     "terrain",
     "triplanar",

@@ -5,6 +5,7 @@ Formulas: :mod:`warptex.kernels.layers`. The atlas + index-map variant is in :mo
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 
 import numpy as np
@@ -15,6 +16,7 @@ from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import layers as kl
 from warptex.kernels import triplanar as kt
 from warptex.sampling import Address, Filter, make_sampler, surface_sampler
+from warptex.stochastic import Stochastic, as_stochastic, resolve_stochastic
 from warptex.texture import TextureArray
 from warptex.triplanar import make_projection
 
@@ -80,6 +82,7 @@ def splat(
     sharpness=4.0,
     offsets=None,
     mirror_fix: bool = True,
+    stochastic: Stochastic | str | None = None,
     filter: Filter | str = Filter.AUTO,
     address: Address | str = Address.WRAP,
     lod_bias: float = 0.0,
@@ -113,6 +116,10 @@ def splat(
         height_channel: the channel of ``layers`` holding height when ``heights`` is ``None``.
         uv_set: the G-buffer UV set holding the splat-map UVs (and the layer UVs for ``"uv"``).
         sharpness, offsets, mirror_fix: the triplanar options, for ``projection="triplanar"``.
+        stochastic: ``None`` (plain tiling), or anti-tiling for every layer: a
+            :class:`~warptex.Stochastic` (or a method name), see :func:`warptex.stochastic`. A
+            histogram must be built from ``layers``; ``heights`` are read with the same taps,
+            blended linearly.
         filter, address, lod_bias, min_lod, max_lod: how the layers are sampled, as for
             :func:`warptex.sample` (``"auto"`` is trilinear).
         device: Warp device; must be the G-buffer's and the textures'.
@@ -165,13 +172,20 @@ def splat(
                 )
             params.height_mode, height_tex = kl.HEIGHT_ARRAY, heights
 
+    option = as_stochastic(func, stochastic)
+    stoch, layers_read = resolve_stochastic(func, option, layers, address)
+    if height_tex is layers:
+        height_tex, height_stoch = layers_read, stoch  # heights from a channel of the same (decoded) sample
+    else:  # a separate height array: the same taps, without the layers' histogram
+        height_stoch, _ = resolve_stochastic(func, dataclasses.replace(option, histogram=None), height_tex, address)
+
     proj = make_projection(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kt.WEIGHTS_TRIPLANAR, device=device)
     smp = surface_sampler(func, filter=filter, address=address, lod_bias=lod_bias, min_lod=min_lod, max_lod=max_lod)
     map_smp = make_sampler(func, filter=Filter.BILINEAR, address=Address.CLAMP, max_lod=0.0)
 
     h, w = gbuffer.resolution
     count = h * w
-    textures = (layers, height_tex, maps)
+    textures = (layers_read, height_tex, maps)
     arrays = (params.tiling, params.transition, proj.sharpness, proj.offsets)
     requires_grad = any(t.requires_grad for t in textures) or any(a.requires_grad for a in arrays)
     out = wp.zeros((count, layers.channels), dtype=float, device=device, requires_grad=requires_grad)
@@ -181,7 +195,7 @@ def splat(
         wp.launch(
             kl.splat_kernel(num_layers, maps.channels),
             dim=count,
-            inputs=[layers.view, height_tex.view, maps.view, *flat, params, proj, smp, map_smp],
+            inputs=[layers_read.view, height_tex.view, maps.view, *flat, params, proj, smp, map_smp, stoch, height_stoch],
             outputs=[out],
             device=device,
         )

@@ -8,6 +8,7 @@ other techniques (triplanar, splat layers) can sample each projection or layer s
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 
 import numpy as np
@@ -19,7 +20,7 @@ from warptex.kernels import stochastic as kst
 from warptex.sampling import Address, Filter, _resolve_layer, _vec2_array, lod_inputs, make_sampler, resolve_filter
 from warptex.texture import Texture, TextureArray
 
-__all__ = ["Histogram", "Method", "hex_taps", "prepare_histogram", "stochastic", "stochastic_params"]
+__all__ = ["Histogram", "Method", "Stochastic", "hex_taps", "prepare_histogram", "as_stochastic", "resolve_stochastic", "stochastic", "stochastic_params"]
 
 
 class Method(str, enum.Enum):
@@ -44,6 +45,58 @@ class Method(str, enum.Enum):
 
 _METHOD_IDS = {Method.NONE: kst.METHOD_NONE, Method.HASH4: kst.METHOD_HASH4, Method.CHEAP2: kst.METHOD_CHEAP2, Method.HEX: kst.METHOD_HEX}
 _DEFAULT_BLEND = {Method.HASH4: (0.25, 0.75), Method.CHEAP2: (0.2, 0.8)}
+
+
+@dataclasses.dataclass(frozen=True)
+class Stochastic:
+    """Stochastic sampling inside another technique: pass as ``stochastic=`` to
+    :func:`~warptex.triplanar`, :func:`~warptex.biplanar`, :func:`~warptex.triplanar_normal` or
+    :func:`~warptex.splat` (a bare method name, e.g. ``stochastic="hex"``, takes every default).
+
+    Every projection (triplanar) or layer (splat) is then sampled with the technique, each with the
+    LOD of its own unperturbed footprint. The fields mean what :func:`stochastic`'s arguments of the
+    same names mean; ``histogram`` must be built from the texture (or layer array) being sampled,
+    and gradients then reach ``histogram.texture``.
+    """
+
+    method: Method | str = Method.HASH4
+    seed: int = 0
+    blend: tuple[float, float] | None = None
+    mirror: bool = False
+    contrast: float = 1.0
+    rotation: float = 0.0
+    noise_frequency: float = 0.5
+    noise_levels: float = 8.0
+    histogram: Histogram | None = None
+
+
+
+def as_stochastic(func: str, option) -> Stochastic:
+    """``stochastic=`` of a technique (``None``, a :class:`Method` name, or :class:`Stochastic`) as
+    :class:`Stochastic` (``None`` is method ``"none"``). Errors name ``func``."""
+    if option is None:
+        return Stochastic(method=Method.NONE)
+    if isinstance(option, (str, Method)):
+        return Stochastic(method=option)
+    if not isinstance(option, Stochastic):
+        raise TypeError(f"{func}(): stochastic must be None, a method name or a warptex.Stochastic, got {type(option).__name__}")
+    return option
+
+
+def resolve_stochastic(func: str, option, texture: TextureArray, address, *, histogram_allowed: bool = True) -> tuple[kst.StochasticParams, TextureArray]:
+    """``stochastic=`` of a technique (see :func:`as_stochastic`) as ``(params, sampled)`` for its
+    kernels (see :func:`stochastic_params`). ``address`` must be periodic for any method but
+    ``"none"``. Errors name ``func``."""
+    option = as_stochastic(func, option)
+    if option.histogram is not None and not histogram_allowed:
+        raise ValueError(f"{func}(): a stochastic histogram needs one texture for every projection (textures_per_axis differ)")
+    fields = {f.name: getattr(option, f.name) for f in dataclasses.fields(option)}  # shallow: the histogram is shared
+    params, sampled = stochastic_params(func, texture, **fields)
+    addr = as_enum(func, "address", address, Address)
+    if params.method != kst.METHOD_NONE and addr not in (Address.WRAP, Address.MIRROR):
+        raise ValueError(f"{func}(): stochastic sampling needs address 'wrap' or 'mirror' (a periodic texture), got {addr.value!r}")
+    return params, sampled
+
 
 def stochastic_params(
     func: str,

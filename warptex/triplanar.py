@@ -22,6 +22,7 @@ from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import normals as kn
 from warptex.kernels import triplanar as kt
 from warptex.sampling import Address, Filter, surface_sampler
+from warptex.stochastic import Stochastic, resolve_stochastic
 from warptex.texture import Texture, TextureArray
 
 
@@ -65,6 +66,7 @@ def triplanar(
     layer: int = 0,
     space: Space | str = Space.WORLD,
     object_to_world=None,
+    stochastic: Stochastic | str | None = None,
     filter: Filter | str = Filter.AUTO,
     address: Address | str = Address.WRAP,
     lod_bias: float = 0.0,
@@ -99,6 +101,11 @@ def triplanar(
         layer: the layer to read from texture arrays.
         space: :class:`Space`: ``"world"`` or ``"object"`` (needs ``object_to_world``).
         object_to_world: ``(4, 4)`` affine matrix of the object, for ``space="object"``.
+        stochastic: ``None`` (plain tiling), or anti-tiling for every projection: a
+            :class:`~warptex.Stochastic` (or a method name, ``"hash4"``, ``"cheap2"``, ``"hex"``),
+            see :func:`warptex.stochastic`. Each projection's taps share its unperturbed LOD.
+            Needs ``address`` ``"wrap"`` or ``"mirror"``; a histogram needs one texture for all
+            projections.
         filter, address, lod_bias, min_lod, max_lod: as for :func:`warptex.sample`; ``"auto"``
             is trilinear.
         device: Warp device; must be the G-buffer's and the textures'.
@@ -123,6 +130,7 @@ def biplanar(
     layer: int = 0,
     space: Space | str = Space.WORLD,
     object_to_world=None,
+    stochastic: Stochastic | str | None = None,
     filter: Filter | str = Filter.AUTO,
     address: Address | str = Address.WRAP,
     lod_bias: float = 0.0,
@@ -134,7 +142,7 @@ def biplanar(
 
     The weights are ``clamp((|n_a| - 0.5773) / (1 - 0.5773), 0, 1) ^ (sharpness / 8)`` for the
     major and median axes of the normal, 0 for the minor axis, normalised. Everything else (UVs,
-    mirror fix, offsets, LOD, textures per axis, gradients) is as in :func:`triplanar`; the
+    mirror fix, offsets, LOD, textures per axis, stochastic sampling, gradients) is as in :func:`triplanar`; the
     default ``sharpness=8`` is Quilez' (exponent 1).
     """
     return _colour("biplanar", kt.WEIGHTS_BIPLANAR, **locals())
@@ -156,6 +164,7 @@ def triplanar_normal(
     biplanar: bool = False,
     space: Space | str = Space.WORLD,
     object_to_world=None,
+    stochastic: Stochastic | str | None = None,
     filter: Filter | str = Filter.AUTO,
     address: Address | str = Address.WRAP,
     lod_bias: float = 0.0,
@@ -181,6 +190,8 @@ def triplanar_normal(
         flip_green: for DirectX-style (green down) maps.
         biplanar: weight the projections as :func:`biplanar` does (pass ``sharpness=8`` for
             Quilez' default).
+        stochastic: as for :func:`triplanar`, without ``mirror`` or ``rotation`` (they would turn
+            the map's slopes without turning its tangent frame).
         Other arguments: as for :func:`triplanar`.
 
     Returns:
@@ -196,6 +207,9 @@ def triplanar_normal(
     flip_green = bool(opts.pop("flip_green"))
     weights = kt.WEIGHTS_BIPLANAR if opts.pop("biplanar") else kt.WEIGHTS_TRIPLANAR
     opts.pop("func")
+    option = opts["stochastic"]
+    if isinstance(option, Stochastic) and (option.mirror or option.rotation):
+        raise ValueError(f"{func}(): stochastic mirror and rotation would turn a normal map's slopes without its tangent frame; use neither")
     setup = _setup(func, weights, texture=opts.pop("normal_map"), **opts)
     if setup.channels < 2:
         raise ValueError(f"{func}(): a normal map needs 2 to 4 channels, got {setup.channels}")
@@ -213,9 +227,9 @@ def _colour(func: str, weights: int, **opts) -> wp.array:
 class _Setup:
     """Validated launch inputs shared by the three public functions."""
 
-    def __init__(self, func, gbuffer, textures, layer, proj, smp, device, params):
+    def __init__(self, func, gbuffer, textures, layer, proj, smp, stoch, device, params):
         self.func, self.gbuffer, self.textures, self.layer = func, gbuffer, textures, layer
-        self.proj, self.smp, self.device, self.params = proj, smp, device, params
+        self.proj, self.smp, self.stoch, self.device, self.params = proj, smp, stoch, device, params
         self.channels = textures[0].channels
 
     def launch(self, kernel, channels: int, extra: list) -> wp.array:
@@ -229,7 +243,7 @@ class _Setup:
             wp.launch(
                 kernel,
                 dim=count,
-                inputs=[*(t.view for t in self.textures), self.layer, *flat, self.proj, self.smp, *extra],
+                inputs=[*(t.view for t in self.textures), self.layer, *flat, self.proj, self.smp, self.stoch, *extra],
                 outputs=[out],
                 device=self.device,
             )
@@ -250,6 +264,7 @@ def _setup(
     layer,
     space,
     object_to_world,
+    stochastic,
     filter,
     address,
     lod_bias,
@@ -264,8 +279,12 @@ def _setup(
     proj = make_projection(func, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=weights, space=space, object_to_world=object_to_world, device=device)
 
     smp = surface_sampler(func, filter=filter, address=address, lod_bias=lod_bias, min_lod=min_lod, max_lod=max_lod)
+    one_texture = all(t is textures[0] for t in textures)
+    stoch, sampled = resolve_stochastic(func, stochastic, textures[0], address, histogram_allowed=one_texture)
+    if sampled is not textures[0]:  # a histogram: every projection reads its Gaussianised texture
+        textures = [sampled] * 3
     params = [proj.tiling, proj.sharpness, proj.offsets]
-    return _Setup(func, gbuffer, textures, layer, proj, smp, device, params)
+    return _Setup(func, gbuffer, textures, layer, proj, smp, stoch, device, params)
 
 
 def make_projection(func, *, tiling, sharpness, offsets, mirror_fix, weights, space=Space.WORLD, object_to_world=None, device=None) -> kt.Projection:
