@@ -62,19 +62,34 @@ class Sampler:
 
 @wp.func
 def address_index(i: wp.int32, n: wp.int32, address: wp.int32) -> wp.int32:
-    """Map an integer texel index onto ``[0, n)``; ``-1`` means "outside" for the border mode."""
+    """Map an integer texel index onto ``[0, n)``; ``-1`` means "outside" for the border mode.
+
+    Filtering reads indices within one texel of a reduced coordinate (``[-1, n]`` for wrap,
+    ``[-1, 2n]`` for mirror), so wrap and mirror first try a compare and an add; the integer
+    remainder, which costs more than the rest of a bilinear tap, runs only for other indices.
+    """
     r = i
     if address == ADDRESS_WRAP:
-        r = i % n
         if r < 0:
             r += n
+        elif r >= n:
+            r -= n
+        if r < 0 or r >= n:
+            r = i % n
+            if r < 0:
+                r += n
     elif address == ADDRESS_CLAMP:
         r = wp.clamp(i, 0, n - 1)
     elif address == ADDRESS_MIRROR:
         period = 2 * n
-        r = i % period
         if r < 0:
             r += period
+        elif r >= period:
+            r -= period
+        if r < 0 or r >= period:
+            r = i % period
+            if r < 0:
+                r += period
         if r >= n:
             r = period - 1 - r
     elif i < 0 or i >= n:
@@ -102,16 +117,22 @@ def reduce_coord(u: float, address: wp.int32) -> float:
 
 
 @wp.func
+def texel(tex: TextureView, start: wp.int32, w: wp.int32, xi: wp.int32, yi: wp.int32, smp: Sampler) -> wp.vec4:
+    """The texel at addressed column ``xi``, row ``yi`` of the ``w``-wide image starting at
+    ``start``, or the border colour where either index is ``-1``."""
+    value = smp.border
+    if xi >= 0 and yi >= 0:
+        value = tex.texels[start + yi * w + xi]
+    return value
+
+
+@wp.func
 def fetch(tex: TextureView, layer: wp.int32, level: wp.int32, x: wp.int32, y: wp.int32, smp: Sampler) -> wp.vec4:
     """One texel of ``level`` at column ``x``, row ``y`` (row 0 on top), after addressing."""
     w = tex.level_width[level]
     h = tex.level_height[level]
-    xi = address_index(x, w, smp.address)
-    yi = address_index(y, h, smp.address)
-    value = smp.border
-    if xi >= 0 and yi >= 0:
-        value = tex.texels[tex.level_offset[level] + (layer * h + yi) * w + xi]
-    return value
+    start = tex.level_offset[level] + layer * h * w
+    return texel(tex, start, w, address_index(x, w, smp.address), address_index(y, h, smp.address), smp)
 
 
 @wp.func
@@ -125,16 +146,22 @@ def sample_nearest(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.ve
 @wp.func
 def sample_bilinear(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: Sampler) -> wp.vec4:
     """Bilinear filtering of one level; ``uv`` already reduced by :func:`reduce_coord`."""
-    x = uv[0] * float(tex.level_width[level]) - 0.5
-    y = (1.0 - uv[1]) * float(tex.level_height[level]) - 0.5
+    w = tex.level_width[level]
+    h = tex.level_height[level]
+    x = uv[0] * float(w) - 0.5
+    y = (1.0 - uv[1]) * float(h) - 0.5
     x0 = wp.floor(x)
     y0 = wp.floor(y)
     fx = x - x0
     fy = y - y0
-    i = int(x0)
-    j = int(y0)
-    top = fetch(tex, layer, level, i, j, smp) * (1.0 - fx) + fetch(tex, layer, level, i + 1, j, smp) * fx
-    bottom = fetch(tex, layer, level, i, j + 1, smp) * (1.0 - fx) + fetch(tex, layer, level, i + 1, j + 1, smp) * fx
+    # The two columns and two rows are addressed once each, not once per texel.
+    start = tex.level_offset[level] + layer * h * w
+    i0 = address_index(int(x0), w, smp.address)
+    i1 = address_index(int(x0) + 1, w, smp.address)
+    j0 = address_index(int(y0), h, smp.address)
+    j1 = address_index(int(y0) + 1, h, smp.address)
+    top = texel(tex, start, w, i0, j0, smp) * (1.0 - fx) + texel(tex, start, w, i1, j0, smp) * fx
+    bottom = texel(tex, start, w, i0, j1, smp) * (1.0 - fx) + texel(tex, start, w, i1, j1, smp) * fx
     return top * (1.0 - fy) + bottom * fy
 
 
