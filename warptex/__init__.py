@@ -5,10 +5,12 @@ The public API: textures (:class:`Texture`, :class:`TextureArray`), :func:`sampl
 (:func:`look_at`, :func:`orthographic`), G-buffers (:func:`rasterize`, :func:`save_gbuffer`,
 :func:`load_gbuffer`), the procedural :func:`terrain`, the techniques (:func:`triplanar`,
 :func:`biplanar`, :func:`triplanar_normal`, :func:`splat`, the atlas variant
-:func:`splat_atlas`, and :func:`stochastic` anti-tiling sampling) and the Lambert preview :func:`lambert`.
+:func:`splat_atlas`, and :func:`stochastic` anti-tiling sampling), the Lambert preview :func:`lambert`,
+and :func:`set_num_threads` for the CPU threads a launch is split over.
 """
 
 from warptex import io
+from warptex._launch import get_num_threads, set_num_threads
 from warptex.camera import Camera, look_at, orthographic
 from warptex.gbuffer import GBuffer, load_mesh, rasterize
 from warptex.gbuffer_io import load_gbuffer, save_gbuffer
@@ -33,6 +35,7 @@ __all__ = [
     "TextureArray",
     "biplanar",
     "export_index_maps",
+    "get_num_threads",
     "io",
     "lambert",
     "load_gbuffer",
@@ -45,6 +48,7 @@ __all__ = [
     "rasterize",
     "sample",
     "save_gbuffer",
+    "set_num_threads",
     "splat",
     "splat_atlas",
     "Stochastic",

@@ -22,6 +22,7 @@ import types
 import numpy as np
 import warp as wp
 
+from warptex._launch import launch, per_pixel
 from warptex._validate import as_float, as_float_array, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import atlas as ka
@@ -354,12 +355,11 @@ def splat_atlas(
     out = wp.zeros((count, atlas.channels), dtype=float, device=device, requires_grad=requires_grad)
     uvs = gbuffer.uv_sets[uv_set]
     flat = [a.reshape((count,)) for a in (uvs["uv"], uvs["uv_dx"], uvs["uv_dy"], gbuffer.mask)]
-    if count:
-        wp.launch(
-            ka.splat_atlas_kernel,
-            dim=count,
-            inputs=[atlas.texture.view, atlas.layout, idx, wts, tiling, *flat, smp, int(bool(normalize))],
-            outputs=[out],
-            device=device,
-        )
+    launch(
+        ka.splat_atlas_kernel,
+        count,
+        inputs=[atlas.texture.view, atlas.layout, idx, wts, tiling, *per_pixel(*flat), smp, int(bool(normalize))],
+        outputs=[out],
+        device=device,
+    )
     return out.reshape((h, w, atlas.channels))

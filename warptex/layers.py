@@ -11,6 +11,7 @@ import enum
 import numpy as np
 import warp as wp
 
+from warptex._launch import launch, per_pixel
 from warptex._validate import as_enum, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import layers as kl
@@ -191,12 +192,11 @@ def splat(
     out = wp.zeros((count, layers.channels), dtype=float, device=device, requires_grad=requires_grad)
     uvs = gbuffer.uv_sets[uv_set]
     flat = [a.reshape((count,)) for a in (uvs["uv"], uvs["uv_dx"], uvs["uv_dy"], gbuffer.position, gbuffer.position_dx, gbuffer.position_dy, gbuffer.normal, gbuffer.mask)]
-    if count:
-        wp.launch(
-            kl.splat_kernel(num_layers, maps.channels),
-            dim=count,
-            inputs=[layers_read.view, height_tex.view, maps.view, *flat, params, proj, smp, map_smp, stoch, height_stoch],
-            outputs=[out],
-            device=device,
-        )
+    launch(
+        kl.splat_kernel(num_layers, maps.channels),
+        count,
+        inputs=[layers_read.view, height_tex.view, maps.view, *per_pixel(*flat), params, proj, smp, map_smp, stoch, height_stoch],
+        outputs=[out],
+        device=device,
+    )
     return out.reshape((h, w, layers.channels))

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import warp as wp
 
+from warptex._launch import launch, per_pixel
 from warptex._validate import as_enum, as_float, as_float_array, resolve_device
 from warptex.kernels import sampling as ks
 from warptex.texture import Texture, TextureArray
@@ -184,14 +185,13 @@ def sample(
 
     requires_grad = texture.requires_grad or any(a is not None and a.requires_grad for a in (uv, dx, dy, lods))
     out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=requires_grad)
-    if count:
-        wp.launch(
-            ks.sample_kernel,
-            dim=count,
-            inputs=[texture.view, flat, dx, dy, lods, layers, smp, lod_source, constant_lod, constant_layer],
-            outputs=[out],
-            device=device,
-        )
+    launch(
+        ks.sample_kernel,
+        count,
+        inputs=[texture.view, *per_pixel(flat, dx, dy, lods, layers), smp, lod_source, constant_lod, constant_layer],
+        outputs=[out],
+        device=device,
+    )
     return out.reshape((*shape, texture.channels))
 
 

@@ -14,6 +14,7 @@ import enum
 import numpy as np
 import warp as wp
 
+from warptex._launch import launch, per_pixel
 from warptex._validate import as_enum, as_float, as_float_array, resolve_device
 from warptex.histogram import GAUSSIAN_MEAN, LUT_RANGE, Histogram, prepare_histogram
 from warptex.kernels import stochastic as kst
@@ -270,14 +271,13 @@ def stochastic(
 
     requires_grad = sampled.requires_grad or any(a is not None and a.requires_grad for a in (uv, dx, dy, lods))
     out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=requires_grad)
-    if count:
-        wp.launch(
-            kst.stochastic_kernel,
-            dim=count,
-            inputs=[sampled.view, uv.reshape((count,)), dx, dy, lods, layers, smp, params, lod_source, constant_lod, constant_layer],
-            outputs=[out],
-            device=device,
-        )
+    launch(
+        kst.stochastic_kernel,
+        count,
+        inputs=[sampled.view, *per_pixel(uv.reshape((count,)), dx, dy, lods, layers), smp, params, lod_source, constant_lod, constant_layer],
+        outputs=[out],
+        device=device,
+    )
     return out.reshape((*shape, texture.channels))
 
 

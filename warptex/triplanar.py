@@ -17,6 +17,7 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
+from warptex._launch import launch, per_pixel
 from warptex._validate import as_enum, as_float, as_float_array, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import normals as kn
@@ -239,14 +240,13 @@ class _Setup:
         requires_grad = any(t.requires_grad for t in self.textures) or any(p.requires_grad for p in self.params)
         out = wp.zeros((count, channels), dtype=float, device=self.device, requires_grad=requires_grad)
         flat = [a.reshape((count,)) for a in (g.position, g.position_dx, g.position_dy, g.normal, g.mask)]
-        if count:
-            wp.launch(
-                kernel,
-                dim=count,
-                inputs=[*(t.view for t in self.textures), self.layer, *flat, self.proj, self.smp, self.stoch, *extra],
-                outputs=[out],
-                device=self.device,
-            )
+        launch(
+            kernel,
+            count,
+            inputs=[*(t.view for t in self.textures), self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch, *extra],
+            outputs=[out],
+            device=self.device,
+        )
         return out.reshape((h, w, channels))
 
 
