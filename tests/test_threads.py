@@ -69,11 +69,11 @@ def test_threaded_launch_gives_the_same_gradients(threads):
             out = wt.triplanar(g, tex, tiling=tiling)
         out.grad.assign(weights)
         tape.backward()
-        if n == 4:
-            assert len([launch for launch in tape.launches if getattr(launch[0], "key", "").startswith("triplanar_kernel")]) == 4
+        split = [launch for launch in tape.launches if callable(launch)]
+        assert len(split) == (1 if n == 4 else 0)  # one recorded step runs the 4 chunks' adjoints
         grads.append((tex.grad(), tiling.grad.numpy()))
     np.testing.assert_allclose(grads[1][0], grads[0][0], rtol=1e-5, atol=1e-6)
-    np.testing.assert_allclose(grads[1][1], grads[0][1], rtol=1e-5)
+    np.testing.assert_allclose(grads[1][1], grads[0][1], rtol=1e-4)  # a float32 sum of 65 536 terms, in another order
     assert np.abs(grads[0][0]).sum() > 0 and grads[0][1][0] != 0
 
 
@@ -114,3 +114,55 @@ def test_thread_count_from_the_environment(monkeypatch):
         wt.get_num_threads()
     monkeypatch.delenv("WARPTEX_NUM_THREADS")
     assert wt.get_num_threads() == _launch.cpu_count()
+
+
+def test_threaded_backward_gives_per_pixel_and_struct_gradients(threads):
+    """Per-pixel gradients (UVs, LODs) are disjoint slices: bit-identical. Splat-map texels and
+    tiling (arrays inside structs) are summed from private copies: equal to rounding."""
+    g = _sphere()
+    uv_np, lod_np = _uv(), np.random.default_rng(4).uniform(0, 5, 70000).astype(np.float32)
+    layers_np = np.random.default_rng(5).random((4, 16, 16, 4)).astype(np.float32)
+    maps_np = np.random.default_rng(6).random((8, 8, 4)).astype(np.float32)
+    results = []
+    for n in (1, 4):
+        threads(n)
+        tex = _texture(requires_grad=True)
+        uv = wp.array(uv_np, dtype=wp.vec2, requires_grad=True)
+        lod = wp.array(lod_np, dtype=float, requires_grad=True)
+        maps = wt.TextureArray(maps_np[None], mipmaps=False, requires_grad=True)
+        tiling = wp.array([2.0, 1.5, 3.0, 0.5], dtype=float, requires_grad=True)
+        tape = wp.Tape()
+        with tape:
+            a = wt.sample(tex, uv, lod=lod)
+            b = wt.splat(g, wt.TextureArray(layers_np), maps, tiling=tiling)
+        a.grad.fill_(1.0)
+        b.grad.fill_(1.0)
+        tape.backward()
+        results.append([uv.grad.numpy(), lod.grad.numpy(), tex.grad(), maps.grad(), tiling.grad.numpy()])
+    single, split = results
+    np.testing.assert_array_equal(split[0], single[0])
+    np.testing.assert_array_equal(split[1], single[1])
+    for got, want in zip(split[2:], single[2:]):
+        scale = np.abs(want).max()
+        assert scale > 0
+        np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-6 * scale)  # sums of cancelling terms, in another order
+
+
+def test_a_second_backward_matches_a_single_launch(threads):
+    """The private accumulators are emptied after each backward pass, so repeating
+    ``tape.backward()`` and ``tape.zero()`` behave as they do for one Warp launch."""
+    g = _sphere()
+    results = []
+    for n in (1, 4):
+        threads(n)
+        tex = _texture(requires_grad=True)
+        tape = wp.Tape()
+        with tape:
+            out = wt.triplanar(g, tex, tiling=3.0)
+        out.grad.fill_(1.0)
+        tape.backward()
+        tape.backward()
+        results.append(tex.grad().copy())
+        tape.zero()
+        assert not np.any(tex.grad())
+    np.testing.assert_allclose(results[1], results[0], rtol=1e-5, atol=1e-6 * np.abs(results[0]).max())

@@ -6,10 +6,13 @@ contiguous chunks and launches them from a small thread pool at once, one chunk 
 on views (slices) of the per-pixel arrays. Every pixel is computed by the same code from the same
 inputs, so the result is bit-identical to a single launch.
 
-Under a ``wp.Tape`` the chunks are recorded as separate launches; ``tape.backward()`` replays their
-adjoints one after another on the calling thread (Warp's CPU atomics are not thread-safe, so
-backward passes must not run concurrently). Gradients into shared arrays (texels, tiling) are
-then summed in a different order than for one launch: equal to float rounding.
+Under a ``wp.Tape`` the split launch is recorded as one backward step that runs the chunks'
+adjoint launches concurrently too. Warp's CPU atomics are plain read-modify-writes, so two
+adjoints must never accumulate into one array: every chunk but the first gets private, zeroed
+gradient arrays for the arrays it shares with the others (texels, tiling, ...; per-pixel arrays
+are disjoint slices already), and those are added into the real gradients once all chunks are
+done. Gradients are therefore summed in a different order than for one launch: equal to float
+rounding.
 
 CUDA launches are never split: one launch fills the device.
 """
@@ -21,6 +24,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, NamedTuple
 
+import numpy as np
 import warp as wp
 
 # Below this many pixels per thread, handing work to a thread costs more than it saves.
@@ -121,16 +125,75 @@ def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: 
     if chunks == 1:
         wp.launch(kernel, dim=count, inputs=[_chunk(a, 0, count, count) for a in inputs], outputs=outputs, device=device)
         return
-    bounds = [count * k // chunks for k in range(chunks + 1)]
     for out in outputs:
         if out.shape[0] != count:
             raise RuntimeError(f"warptex internal error: an output has {out.shape[0]} rows for {count} pixels")
+    bounds = [count * k // chunks for k in range(chunks + 1)]
+    tape = _active_tape()
+    track = tape is not None and any(o.requires_grad for o in outputs)
+    private: list[tuple[wp.array, wp.array]] = []  # (real gradient, a chunk's private one)
+    parts = []
+    for k, (lo, hi) in enumerate(zip(bounds, bounds[1:])):
+        ins = [_chunk(a, lo, hi, count) if isinstance(a, PerPixel) or not (track and k) else _with_private_grads(a, private) for a in inputs]
+        parts.append((ins, [o[lo:hi] for o in outputs], hi - lo))
 
-    def run(k: int) -> None:
-        lo, hi = bounds[k], bounds[k + 1]
-        wp.launch(kernel, dim=hi - lo, inputs=[_chunk(a, lo, hi, count) for a in inputs], outputs=[o[lo:hi] for o in outputs], device=device)
+    def forward(part) -> None:
+        ins, outs, dim = part
+        wp.launch(kernel, dim=dim, inputs=ins, outputs=outs, device=device, record_tape=False)
 
-    futures = [_executor(chunks - 1).submit(run, k) for k in range(1, chunks)]
-    run(0)
+    _run_all(forward, parts)
+    if track:
+        originals = [a.array if isinstance(a, PerPixel) else a for a in inputs]
+        tape.record_func(lambda: _backward(tape, kernel, device, parts, originals, private), arrays=[o for o in outputs if o.requires_grad])
+
+
+def _run_all(work, parts) -> None:
+    """``work(part)`` for every part, the first on the calling thread, the others in the pool."""
+    futures = [_executor(len(parts) - 1).submit(work, p) for p in parts[1:]]
+    work(parts[0])
     for f in futures:
         f.result()  # re-raises a worker's exception here
+
+
+def _active_tape():
+    return wp._src.context.runtime.tape
+
+
+def _with_private_grads(a, private: list):
+    """``a`` with every array that has a gradient (also inside structs) replaced by a view of the
+    same data whose gradient is a fresh zeroed array, recorded in ``private``.
+
+    Adjoint kernels accumulate into the ``grad`` of the *forward* arrays of struct fields (Warp
+    ignores the adjoint struct there), so private accumulators must sit in the forward arguments.
+    """
+    if wp._src.types.is_array(a):
+        if not a.grad:
+            return a
+        mine = wp.zeros_like(a.grad)
+        private.append((a.grad, mine))
+        return wp.array(ptr=a.ptr, dtype=a.dtype, shape=a.shape, strides=a.strides, device=a.device, grad=mine)
+    if wp._src.types.is_struct(a):
+        copy = a._cls()
+        for name, _ in a._cls.ctype._fields_:
+            if not name.startswith("_"):
+                setattr(copy, name, _with_private_grads(getattr(a, name), private))
+        return copy
+    return a
+
+
+def _backward(tape, kernel, device, parts, originals, private) -> None:
+    """The adjoints of a split launch, run concurrently; the private gradients of chunks 1... are
+    then added into the real ones and zeroed (so a second ``tape.backward()`` adds them again)."""
+    for a in originals:  # registers the real gradients with the tape (for tape.zero()), as a recorded launch does
+        tape.get_adjoint(a)
+    adjoints = [[tape.get_adjoint(a) for a in ins] for ins, _, _ in parts]
+
+    def backward(k: int) -> None:
+        ins, outs, dim = parts[k]
+        wp.launch(kernel, dim=dim, inputs=ins, outputs=outs, adj_inputs=adjoints[k], adj_outputs=[o.grad for o in outs], device=device, adjoint=True)
+
+    _run_all(backward, list(range(len(parts))))
+    for grad, mine in private:
+        target = grad.numpy()  # CPU arrays: views of the same memory
+        target += mine.numpy()
+        mine.zero_()
