@@ -30,7 +30,7 @@ LOD (after bias, before trilinear blending) to that ``ℓ_max``, which the Pytho
 
 import warp as wp
 
-from .sampling import ADDRESS_WRAP, Sampler, TextureView, fetch, lod_from_derivatives, reduce_coord, sample_lod
+from .sampling import ADDRESS_WRAP, Sampler, TextureView, fetch, lod_from_derivatives, reduce_coord, sample_lod, write_channels
 
 MAX_ENTRIES = wp.constant(4)  # the most index-map entries (k) per texel: an RGBA index map
 ATLAS_EPS = wp.constant(1.0e-20)
@@ -141,5 +141,4 @@ def splat_atlas_kernel(
                     colour += w * sample_tile(atlas, layout, layer, uv * t, uv0_dx[i] * t, uv0_dy[i] * t, smp)
         else:
             colour = wp.vec4(wp.nan)
-    for c in range(out.shape[1]):
-        out[i, c] = colour[c]
+    write_channels(out, i, colour)

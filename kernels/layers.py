@@ -24,7 +24,7 @@ import functools
 
 import warp as wp
 
-from .sampling import Sampler, TextureView, lod_from_derivatives, sample_lod
+from .sampling import Sampler, TextureView, lod_from_derivatives, sample_lod, write_channels
 from .stochastic import StochasticParams, sample_stochastic
 from .triplanar import Projection, plane_lod, plane_uv, triplanar_sample, triplanar_weights
 
@@ -164,7 +164,6 @@ def splat_kernel(num_layers: int, map_channels: int):
 
             for j in range(wp.static(num_layers)):
                 colour += w[j] * c[j]
-        for k in range(out.shape[1]):
-            out[i, k] = colour[k]
+        write_channels(out, i, colour)
 
     return kernel

@@ -299,7 +299,7 @@ def sample_stochastic(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float
     the unperturbed UV derivatives. Non-finite ``uv`` or ``lod`` give NaN in every channel.
     """
     result = wp.vec4(wp.nan)
-    if wp.isfinite(uv) and wp.isfinite(lod):
+    if sampling.finite_uv_lod(uv, lod):
         if params.method == METHOD_HASH4:
             result = sample_hash4(tex, layer, uv, lod, smp, params)
         elif params.method == METHOD_CHEAP2:
@@ -329,9 +329,7 @@ def stochastic_kernel(
     """``out[i, c]`` = channel ``c`` of :func:`sample_stochastic` at ``uv[i]`` (arguments as ``sample_kernel``)."""
     i = wp.tid()
     layer, lod = sampling.sample_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
-    value = sample_stochastic(tex, layer, uv[i], lod, smp, params)
-    for c in range(out.shape[1]):
-        out[i, c] = value[c]
+    sampling.write_channels(out, i, sample_stochastic(tex, layer, uv[i], lod, smp, params))
 
 
 @wp.kernel

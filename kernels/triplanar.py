@@ -22,7 +22,7 @@ ground beside it pick their own mip levels.
 import warp as wp
 
 from .normals import blend_projected, decode_normal, sign_or_one, to_world
-from .sampling import Sampler, TextureView, lod_from_derivatives
+from .sampling import Sampler, TextureView, lod_from_derivatives, write_channels
 from .stochastic import StochasticParams, sample_stochastic
 
 # How the three projections are weighted.
@@ -274,8 +274,7 @@ def triplanar_kernel(
         for axis in range(3):
             if w[axis] > 0.0:
                 colour += w[axis] * sample_projection(tex_x, tex_y, tex_z, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
-    for c in range(out.shape[1]):
-        out[i, c] = colour[c]
+    write_channels(out, i, colour)
 
 
 @wp.kernel
