@@ -1,0 +1,176 @@
+"""The benchmark peers (benchmarks/peers) compute what warptex computes, on small data.
+
+NumPy peers agree with warptex to 1e-5; the PyTorch (grid_sample) and Dr.Jit (Texture2f) peers to
+1e-4 forward, and their texture gradients of ``sum(output)`` to 1e-4 relative to the largest
+gradient, level by level (warptex: ``wp.Tape``, ``out.grad`` = 1, ``tex.grad(k)``). The torch and
+drjit parts skip when those packages are not installed.
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+import warp as wp
+
+import warptex as wt
+from warptex.render import terrain_camera
+
+BENCHMARKS = str(Path(__file__).resolve().parents[1] / "benchmarks")
+if BENCHMARKS not in sys.path:
+    sys.path.insert(0, BENCHMARKS)
+
+import peers  # noqa: E402  (benchmarks/peers, found through the path above)
+from peers import common  # noqa: E402
+
+TECHNIQUES = peers.TECHNIQUES
+FORWARD_ATOL = {"numpy": 1e-5, "torch": 1e-4, "drjit": 1e-4}
+GRAD_RTOL = 1e-4
+
+
+# -- data: small textures, the sphere and terrain G-buffers used elsewhere in the tests ---------------
+
+
+def _image(seed, h, w, c=4):
+    return np.random.default_rng(seed).random((h, w, c)).astype(np.float32)
+
+
+def _normal_map(seed, h, w):
+    """A tileable normal map with moderate slopes (3×3 box blur of noise)."""
+    raw = np.random.default_rng(seed).random((h, w, 3))
+    blur = sum(np.roll(np.roll(raw, i, 0), j, 1) for i in (-1, 0, 1) for j in (-1, 0, 1)) / 9
+    return np.concatenate([blur[..., :2], 0.8 + 0.2 * raw[..., 2:]], axis=-1).astype(np.float32)
+
+
+@functools.lru_cache(maxsize=None)
+def _sphere():
+    """The orthographic unit sphere at 64 × 64 (as in test_triplanar), positions × 4 as coordinates."""
+    camera = wt.orthographic((0, 0, 5), (0, 0, 0), height=2.2, resolution=(64, 64))
+    return wt.rasterize(trimesh.creation.icosphere(subdivisions=4), camera)
+
+
+@functools.lru_cache(maxsize=None)
+def _terrain():
+    """The default terrain (coarse mesh) at 48 × 64 (as in test_layers), for the UV0 splat."""
+    return wt.rasterize(wt.terrain(resolution=(65, 65)), terrain_camera((48, 64)))
+
+
+def _source(technique):
+    """The images a technique reads (level 0 each) and its options."""
+    if technique in ("splat4", "splat8"):
+        count = common.SPLAT_LAYERS[technique]
+        layers = np.stack([_image(10 + j, 24, 20) for j in range(count)])
+        maps = np.stack([_image(30 + m, 9, 7) for m in range(count // 4)])
+        return {"layers": layers, "maps": maps}, {"tiling": np.linspace(2.0, 9.0, count).astype(np.float32)}
+    if technique == "triplanar_normal":
+        return {"texture": _normal_map(3, 16, 20)}, {"tiling": 4.0, "strength": 0.8}
+    if technique in ("triplanar", "biplanar"):
+        return {"texture": _image(2, 32, 24)}, {"tiling": 4.0}
+    if technique in ("hash4", "cheap2"):
+        return {"texture": _image(4, 16, 12)}, {"seed": 7, "mirror": True}
+    return {"texture": _image(5, 20, 24)}, {"seed": 3} if technique == "hex" else {}
+
+
+def _uv(technique, count=3000):
+    rng = np.random.default_rng(11)
+    uv = rng.uniform(-3, 5, (count, 2)).astype(np.float32)
+    lod = rng.uniform(-0.5, 5.5, count).astype(np.float32)
+    return uv, (None if technique == "bilinear" else lod)
+
+
+def _textures(images, requires_grad=False):
+    out = {}
+    for name, img in images.items():
+        if name == "layers":
+            out[name] = wt.TextureArray(img, requires_grad=requires_grad)
+        elif name == "maps":
+            out[name] = wt.TextureArray(img, mipmaps=False, requires_grad=requires_grad)
+        else:
+            out[name] = wt.Texture(img, requires_grad=requires_grad)
+    return out
+
+
+@functools.lru_cache(maxsize=None)
+def case(technique):
+    """``(data, warptex output (N, C), warptex gradients {name: [per level]})`` of a technique."""
+    images, opts = _source(technique)
+    texs = _textures(images, requires_grad=True)
+    if technique in common.GBUFFER_TECHNIQUES:
+        g = _terrain() if technique in common.SPLAT_LAYERS else _sphere()
+        data = common.gbuffer_data(g, texture=texs.get("texture"), layers=texs.get("layers"), maps=texs.get("maps"), **opts)
+        call = dict(gbuffer=g, **texs)
+    else:
+        uv, lod = _uv(technique)
+        data = common.sample_data(texs["texture"], uv, lod=lod, **opts)
+        call = dict(texture=texs["texture"])
+    tape = wp.Tape()
+    with tape:
+        out = common.warptex_forward(technique, data, **call)
+    out.grad.fill_(1.0)
+    tape.backward()
+    grads = {name: [t.grad(k) for k in range(t.num_levels)] for name, t in texs.items()}
+    return data, out.numpy().reshape(-1, out.shape[-1]), grads
+
+
+# -- checks ---------------------------------------------------------------------------------------------
+
+
+def _load(backend):
+    if backend != "numpy":
+        pytest.importorskip(backend)
+    try:
+        return peers.load(backend)
+    except peers.PeerUnavailable as err:
+        pytest.skip(f"{backend} peers unavailable: {err}")
+
+
+def _check_forward(backend, technique):
+    peer = _load(backend)[technique]
+    data, want, _ = case(technique)
+    got = peer.output(peer.forward(peer.prepare(data)))
+    assert got.shape == want.shape
+    assert np.abs(want).max() > 0.1  # the data exercise the technique
+    np.testing.assert_allclose(got, want, atol=FORWARD_ATOL[backend], rtol=0)
+    return peer, data
+
+
+def _check_gradients(backend, technique):
+    peer = _load(backend)[technique]
+    data, want_out, want = case(technique)
+    out, grads = peer.forward_backward(peer.prepare(data))
+    np.testing.assert_allclose(peer.output(out), want_out, atol=FORWARD_ATOL[backend], rtol=0)
+    got = peer.grads(grads)
+    assert set(got) == set(want)
+    for name in want:
+        assert 1 <= len(got[name]) <= len(want[name])
+        for extra in want[name][len(got[name]) :]:  # levels a peer does not hold are never read
+            assert not extra.any()
+        scale = max(np.abs(g).max() for g in want[name])
+        assert scale > 0
+        for k, (a, b) in enumerate(zip(got[name], want[name])):
+            np.testing.assert_allclose(a, b, atol=GRAD_RTOL * scale, rtol=0, err_msg=f"{technique}: {name} level {k}")
+
+
+@pytest.mark.parametrize("technique", TECHNIQUES)
+def test_numpy_peer_matches_warptex(technique):
+    _check_forward("numpy", technique)
+
+
+@pytest.mark.parametrize("backend", ["torch", "drjit"])
+@pytest.mark.parametrize("technique", TECHNIQUES)
+def test_autodiff_peer_matches_warptex(backend, technique):
+    _check_forward(backend, technique)
+    _check_gradients(backend, technique)
+
+
+def test_every_backend_lists_every_technique_or_says_why_not():
+    for backend in peers.BACKENDS:
+        reason = peers.unavailable(backend)
+        if reason is None:
+            assert set(peers.load(backend)) == set(TECHNIQUES)
+        else:
+            assert reason.startswith(backend)  # e.g. "torch is not installed (...)"
