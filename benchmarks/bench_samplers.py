@@ -1,0 +1,333 @@
+"""Samples per second of every warptex technique, against the peers a user would pick instead.
+
+For each technique the script times warptex forward and forward+backward (gradients of the sum
+of the output to every texel of every mip level), on one CPU thread and on all of them, then the
+peers in the same process on the same data (``benchmarks/peers``: vectorised NumPy, PyTorch built
+on ``grid_sample``, Dr.Jit's ``Texture2f`` on its LLVM backend; each skipped with its reason when
+not installed), and checks that every peer computes what warptex computes (max abs difference).
+
+Scenes: the orthographic unit sphere (positions × 4 as triplanar coordinates; sample techniques
+read the Z projection's UV and derivatives), the default terrain from its default camera, and
+random UVs. Figures: Msamples/s = shaded (covered) pixels or UVs per second; nominal taps/s =
+Msamples/s × the texel reads a sample makes at most (trilinear reads 8; zero-weight projections,
+layers and stochastic taps are skipped, so real reads are fewer). Every time is the minimum of
+``--repeats`` timed runs after a warm-up run.
+
+    python benchmarks/bench_samplers.py                      # full run, writes bench_out/
+    python benchmarks/bench_samplers.py --quick --json r.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import trimesh
+import warp as wp
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import peers  # noqa: E402  (benchmarks/peers, next to this file)
+from peers import common  # noqa: E402
+
+import warptex as wt  # noqa: E402
+from warptex.plot import line_chart  # noqa: E402
+from warptex.render import TERRAIN_GRID, terrain_camera  # noqa: E402
+from warptex.terrain_material import noise_texture, terrain_splat_maps  # noqa: E402
+
+TECHNIQUES = peers.TECHNIQUES
+SAMPLE_TECHNIQUES = ("bilinear", "trilinear", "hash4", "cheap2", "hex")
+# Texel reads per sample at most (trilinear: 8 per read). Splat: one bilinear map read per 4 layers.
+NOMINAL_TAPS = {"bilinear": 4, "trilinear": 8, "hash4": 32, "cheap2": 16, "hex": 24, "triplanar": 24, "biplanar": 16, "triplanar_normal": 24, "splat4": 4 + 4 * 8, "splat8": 8 + 8 * 8}
+SPHERE_TILING = 4.0
+
+
+# -- scenes -------------------------------------------------------------------------------------------
+
+
+def texture(size: int, channels: int = 4, seed: int = 0) -> wt.Texture:
+    """A seeded ``size²`` noise texture (RGBA: three noise channels and a fourth for height)."""
+    rgb = noise_texture(size, seed=seed)
+    extra = noise_texture(size, seed=seed + 1)[..., :1]
+    return wt.Texture(np.concatenate([rgb, extra], -1)[..., :channels])
+
+
+def sphere(resolution: int) -> wt.GBuffer:
+    mesh = trimesh.creation.icosphere(subdivisions=6)
+    mesh.visual = trimesh.visual.TextureVisuals(uv=mesh.vertices[:, :2] * 0.5 + 0.5)
+    return wt.rasterize(mesh, wt.orthographic((0, 0, 3), (0, 0, 0), height=2.0, resolution=(resolution, resolution)))
+
+
+def terrain(resolution: int) -> wt.GBuffer:
+    mesh = wt.terrain(resolution=TERRAIN_GRID, seed=0)
+    return wt.rasterize(mesh, terrain_camera((resolution, resolution))), mesh
+
+
+def scene_data(technique: str, scene: str, size: dict, tex: wt.Texture, cache: dict) -> tuple[dict, dict]:
+    """``(data, warptex objects)`` of ``technique`` on ``scene`` (see :mod:`peers.common`)."""
+    if scene == "random":
+        rng = np.random.default_rng(7)
+        n = size["random"]
+        uv = rng.uniform(0, 8, (n, 2)).astype(np.float32)
+        lod = None if technique == "bilinear" else rng.uniform(0, 4, n).astype(np.float32)
+        return common.sample_data(tex, uv, lod=lod), {"texture": tex}
+    if scene not in cache:
+        cache[scene] = sphere(size["sphere"]) if scene == "sphere" else terrain(size["terrain"])[0]
+    g = cache[scene]
+    scale = SPHERE_TILING if scene == "sphere" else 1.0 / 6.0
+    if technique in SAMPLE_TECHNIQUES:  # the Z projection's UVs over the covered pixels
+        arrays = g.numpy()
+        covered = arrays["mask"].reshape(-1) > 0
+        uv, dx, dy = (arrays[k].reshape(-1, 3)[covered][:, :2] * scale for k in ("position", "position_dx", "position_dy"))
+        kw = {} if technique == "bilinear" else {"uv_dx": dx, "uv_dy": dy}
+        return common.sample_data(tex, uv, **kw), {"texture": tex}
+    if technique in common.SPLAT_LAYERS:
+        count = common.SPLAT_LAYERS[technique]
+        key = ("layers", count)
+        if key not in cache:
+            levels = np.stack([texture(tex.width, seed=10 + j).numpy() for j in range(count)])
+            cache[key] = wt.TextureArray(levels)
+        rng = np.random.default_rng(count)
+        maps = wt.TextureArray(rng.random((count // 4, 64, 64, 4)).astype(np.float32), mipmaps=False)
+        if scene == "terrain" and count == 4:
+            maps = wt.TextureArray(terrain_splat_maps(terrain_mesh(cache), TERRAIN_GRID)[None], mipmaps=False)
+        tiling = (np.arange(count, dtype=np.float32) % 4 + 2.0) * (8.0 if scene == "sphere" else 4.0)
+        data = common.gbuffer_data(g, layers=cache[key], maps=maps, tiling=tiling)
+        return data, {"gbuffer": g, "layers": cache[key], "maps": maps}
+    data = common.gbuffer_data(g, texture=tex, tiling=scale)
+    return data, {"gbuffer": g, "texture": tex}
+
+
+def terrain_mesh(cache: dict):
+    if "terrain_mesh" not in cache:
+        cache["terrain_mesh"] = wt.terrain(resolution=TERRAIN_GRID, seed=0)
+    return cache["terrain_mesh"]
+
+
+def samples(data: dict) -> int:
+    return int((data["mask"] > 0).sum()) if "mask" in data else len(data["uv"])
+
+
+# -- timing -------------------------------------------------------------------------------------------
+
+
+def best_time(run, repeats: int) -> float:
+    """Seconds of the fastest of ``repeats`` runs after one warm-up run (compiles, allocates)."""
+    run()
+    best = float("inf")
+    for _ in range(repeats):
+        t = time.perf_counter()
+        run()
+        wp.synchronize()
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def warptex_runs(technique: str, data: dict, objs: dict):
+    """``(forward, forward_backward)`` callables of warptex for ``technique``."""
+
+    def forward():
+        return common.warptex_forward(technique, data, **objs)
+
+    # The same texels with gradient buffers; every level is a leaf (the chain is not rebuilt on the tape).
+    grad_objs = {k: with_grad(v) if k in ("texture", "layers", "maps") else v for k, v in objs.items()}
+
+    def forward_backward():
+        for key in ("texture", "layers", "maps"):
+            if key in grad_objs:
+                grad_objs[key].zero_grad()
+        tape = wp.Tape()
+        with tape:
+            out = common.warptex_forward(technique, data, **grad_objs)
+        out.grad.fill_(1.0)
+        tape.backward()
+        return out
+
+    return forward, forward_backward
+
+
+def with_grad(t):
+    """A copy of texture ``t`` (same texels, same mip chain) that receives gradients."""
+    level0 = t.numpy(0)
+    return type(t)(level0, mipmaps=t.num_levels > 1, requires_grad=True)
+
+
+def measure_technique(technique: str, scene: str, args, tex, cache, backends: dict, report) -> list[dict]:
+    """Time warptex and the peers on one technique and scene; print and return the records."""
+    data, objs = scene_data(technique, scene, args.sizes, tex, cache)
+    n = samples(data)
+    records = []
+
+    def record(impl, pass_, threads, seconds, **extra):
+        rec = {"technique": technique, "scene": scene, "impl": impl, "pass": pass_, "threads": threads, "seconds": seconds, "samples": n,
+               "msamples_per_s": n / seconds / 1e6, "nominal_taps_per_s": n * NOMINAL_TAPS[technique] / seconds, **extra}  # fmt: skip
+        records.append(rec)
+        return rec
+
+    forward, forward_backward = warptex_runs(technique, data, objs)
+    reference = {}
+    for threads in sorted({1, args.threads}):
+        wt.set_num_threads(threads)
+        out = forward().numpy()
+        reference[threads] = out.reshape(-1, out.shape[-1])
+        record("warptex", "forward", threads, best_time(forward, args.repeats))
+        record("warptex", "forward+backward", threads, best_time(forward_backward, args.repeats))
+    wt.set_num_threads(args.threads)
+    single_vs_all = float(np.nanmax(np.abs(reference[args.threads] - reference[1]))) if reference[1].size else 0.0
+
+    expected = reference[args.threads]
+    if "mask" in data:
+        expected = expected[data["mask"] > 0] if expected.shape[0] == data["mask"].shape[0] else expected
+    for backend, table in backends.items():
+        peer = table.get(technique)
+        if peer is None:
+            continue
+        peers.set_threads(backend, args.threads)
+        state = peer.prepare(data)
+        try:
+            out = np.asarray(peer.output(peer.forward(state)), np.float32)
+            got = out[data["mask"] > 0] if "mask" in data and out.shape[0] == data["mask"].shape[0] else out
+            diff = float(np.nanmax(np.abs(got - expected))) if got.size else 0.0
+            record(backend, "forward", args.threads, best_time(lambda: peer.forward(state), args.repeats), max_abs_diff=diff, note=peer.note)
+            if peer.forward_backward is not None:
+                record(backend, "forward+backward", args.threads, best_time(lambda: peer.forward_backward(state), args.repeats), note=peer.note)
+        except MemoryError as err:  # a peer that cannot hold the scene is reported, not fatal
+            report(f"  {backend}: skipped ({err})")
+    report(format_rows(records, single_vs_all))
+    for rec in records:
+        rec["threaded_max_abs_diff"] = single_vs_all
+    return records
+
+
+def format_rows(records: list[dict], threaded_diff: float) -> str:
+    """One block per technique: each implementation's figures and its time ratio to warptex."""
+    first = records[0]
+    base = {(r["pass"], r["threads"]): r["seconds"] for r in records if r["impl"] == "warptex"}
+    lines = [f"{first['technique']} on {first['scene']} ({first['samples']:,} samples; threaded vs 1 thread max diff {threaded_diff:.1e})"]
+    for r in records:
+        ratio = r["seconds"] / base[(r["pass"], r["threads"])]
+        diff = f"  diff {r['max_abs_diff']:.1e}" if "max_abs_diff" in r else ""
+        lines.append(
+            f"  {r['impl']:8s} {r['pass']:16s} {r['threads']:2d} thr  {r['seconds'] * 1e3:9.2f} ms  {r['msamples_per_s']:8.2f} Ms/s  "
+            f"{r['nominal_taps_per_s'] / 1e9:6.2f} Gtap/s  {'x' + format(ratio, '.2f') + ' warptex time' if r['impl'] != 'warptex' else ''}{diff}"
+        )
+    return "\n".join(lines)
+
+
+# -- scaling ------------------------------------------------------------------------------------------
+
+
+def scaling(args, backends: dict, report) -> dict:
+    """Triplanar forward (all threads) against pixel count and texture size; peers where available."""
+    out = {"pixels": {}, "texture": {}}
+    tex = texture(1024 if not args.quick else 256)
+    for res in args.scaling_pixels:
+        g = sphere(res)
+        data = common.gbuffer_data(g, texture=tex, tiling=SPHERE_TILING)
+        row = {"warptex": best_time(lambda: wt.triplanar(g, tex, tiling=SPHERE_TILING), args.repeats)}
+        for backend, table in backends.items():
+            peer = table.get("triplanar")
+            if peer is not None:
+                state = peer.prepare(data)
+                row[backend] = best_time(lambda: peer.forward(state), args.repeats)
+        out["pixels"][res] = row
+        report(f"  pixels {res}²: " + "  ".join(f"{k} {v * 1e3:.1f} ms" for k, v in row.items()))
+    g = sphere(args.scaling_pixels[len(args.scaling_pixels) // 2])
+    for size in args.scaling_textures:
+        t = texture(size)
+        out["texture"][size] = {"warptex": best_time(lambda: wt.triplanar(g, t, tiling=SPHERE_TILING), args.repeats)}
+        report(f"  texture {size}²: warptex {out['texture'][size]['warptex'] * 1e3:.1f} ms")
+    return out
+
+
+def plot_scaling(path: Path, result: dict, threads: int) -> None:
+    pixels = result["pixels"]
+    impls = sorted({k for row in pixels.values() for k in row}, key=lambda k: (k != "warptex", k))
+    series = {k: ([r * r for r in pixels], [pixels[r].get(k) for r in pixels]) for k in impls}
+    tex = result["texture"]
+    line_chart(
+        path,
+        [
+            {"series": {k: (x, [None if v is None else v * 1e3 for v in y]) for k, (x, y) in series.items()}, "xlabel": "pixels", "ylabel": "ms",
+             "title": f"triplanar forward vs pixel count ({threads} threads)", "logx": True, "logy": True},
+            {"series": {"warptex": ([s * s for s in tex], [tex[s]["warptex"] * 1e3 for s in tex])}, "xlabel": "texels (level 0)", "ylabel": "ms",
+             "title": "triplanar forward vs texture size", "logx": True, "logy": True},
+        ],
+    )  # fmt: skip
+
+
+# -- main ---------------------------------------------------------------------------------------------
+
+
+def run(args) -> dict:
+    wp.config.quiet = True
+    wp.init()
+    lines = []
+
+    def report(text):
+        print(text, flush=True)
+        lines.append(text)
+
+    backends, skipped = {}, {}
+    for backend in args.peers:
+        why = peers.unavailable(backend)
+        if why is None:
+            backends[backend] = peers.load(backend)
+        else:
+            skipped[backend] = why
+            report(f"peer {backend}: skipped ({why})")
+    tex = texture(args.texture_size)
+    cache, records = {}, []
+    for technique in args.techniques:
+        scenes = ("sphere", "random") if technique in SAMPLE_TECHNIQUES else ("sphere", "terrain")
+        for scene in scenes:
+            records += measure_technique(technique, scene, args, tex, cache, backends, report)
+    result = {"machine": {"platform": platform.platform(), "cpus": wt.get_num_threads(), "python": platform.python_version(), "warp": wp.config.version},
+              "settings": {k: v for k, v in vars(args).items() if k not in ("json", "out")}, "skipped_peers": skipped, "records": records}  # fmt: skip
+    if not args.no_scaling:
+        report("scaling (triplanar forward):")
+        result["scaling"] = scaling(args, backends, report)
+        plot_scaling(args.out / "scaling.png", result["scaling"], args.threads)
+        report(f"plot: {args.out / 'scaling.png'}")
+    return result
+
+
+def parse(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--quick", action="store_true", help="small scenes and one repeat (CI)")
+    p.add_argument("--json", type=Path, help="write the results here")
+    p.add_argument("--out", type=Path, default=Path("bench_out"), help="folder for the scaling plot")
+    p.add_argument("--threads", type=int, default=None, help="threads for the all-core figures (default: every core)")
+    p.add_argument("--repeats", type=int, default=None, help="timed runs per figure (default 5, quick 1)")
+    p.add_argument("--techniques", nargs="+", default=list(TECHNIQUES), choices=TECHNIQUES)
+    p.add_argument("--peers", nargs="*", default=list(peers.BACKENDS), choices=peers.BACKENDS)
+    p.add_argument("--no-scaling", action="store_true", help="skip the pixel-count and texture-size sweeps")
+    args = p.parse_args(argv)
+    args.threads = args.threads or wt.get_num_threads()
+    args.repeats = args.repeats or (1 if args.quick else 5)
+    args.sizes = {"sphere": 256, "terrain": 128, "random": 1 << 16} if args.quick else {"sphere": 1024, "terrain": 512, "random": 1 << 20}
+    args.texture_size = 256 if args.quick else 1024
+    args.scaling_pixels = [64, 128] if args.quick else [256, 512, 1024, 2048]
+    args.scaling_textures = [128, 256] if args.quick else [256, 512, 1024, 2048, 4096]
+    return args
+
+
+def main(argv=None) -> int:
+    args = parse(argv)
+    result = run(args)
+    if args.json:
+        from warptex.io import _atomic_output
+
+        with _atomic_output(str(args.json)) as tmp:
+            Path(tmp).write_text(json.dumps(result, indent=1, default=str))
+        print(f"json: {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
