@@ -2,33 +2,36 @@
 
 Warp runs a CPU launch on the calling thread, one kernel instance after another, and releases
 the GIL while it runs. :func:`launch` therefore cuts the range of a per-pixel kernel into
-contiguous chunks and launches them from a small thread pool at once, one chunk per thread, each
-on views (slices) of the per-pixel arrays. Every pixel is computed by the same code from the same
-inputs, so the result is bit-identical to a single launch.
+contiguous chunks (a few per thread, so that a thread whose pixels are cheap takes more of them)
+and launches them from a small thread pool, each on views (slices) of the per-pixel arrays.
+Every pixel is computed by the same code from the same inputs, so the result is bit-identical to
+a single launch.
 
 Under a ``wp.Tape`` the split launch is recorded as one backward step that runs the chunks'
-adjoint launches concurrently too. Warp's CPU atomics are plain read-modify-writes, so two
-adjoints must never accumulate into one array: every chunk but the first gets private, zeroed
-gradient arrays for the arrays it shares with the others (texels, tiling, ...; per-pixel arrays
-are disjoint slices already), and those are added into the real gradients once all chunks are
-done. Gradients are therefore summed in a different order than for one launch: equal to float
-rounding.
+adjoint launches on the threads too. Warp's CPU atomics are plain read-modify-writes, so two
+adjoints must never accumulate into one array at once: every thread but the first gets private,
+zeroed gradient arrays for the arrays that chunks share (texels, tiling, ...; per-pixel arrays are
+disjoint slices already), added into the real gradients once all chunks are done. Gradients are
+therefore summed in a different order than for one launch: equal to float rounding.
 
 CUDA launches are never split: one launch fills the device.
 """
 
 from __future__ import annotations
 
+import itertools
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, NamedTuple
 
-import numpy as np
 import warp as wp
 
 # Below this many pixels per thread, handing work to a thread costs more than it saves.
 MIN_PIXELS_PER_THREAD = 16384
+# Chunks per thread (when the pixels allow): costs vary across an image (sky, terrain), so
+# threads take chunks from a queue rather than one fixed share each.
+CHUNKS_PER_THREAD = 4
 
 _lock = threading.Lock()
 _pool: ThreadPoolExecutor | None = None
@@ -121,38 +124,58 @@ def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: 
         return
     device = wp.get_device(device)
     threads = 1 if device.is_cuda else get_num_threads() if threads is None else threads
-    chunks = max(1, min(threads, count // MIN_PIXELS_PER_THREAD))
-    if chunks == 1:
+    workers = max(1, min(threads, count // MIN_PIXELS_PER_THREAD))
+    if workers == 1:
         wp.launch(kernel, dim=count, inputs=[_chunk(a, 0, count, count) for a in inputs], outputs=outputs, device=device)
         return
     for out in outputs:
         if out.shape[0] != count:
             raise RuntimeError(f"warptex internal error: an output has {out.shape[0]} rows for {count} pixels")
-    bounds = [count * k // chunks for k in range(chunks + 1)]
-    tape = _active_tape()
-    track = tape is not None and any(o.requires_grad for o in outputs)
-    private: list[tuple[wp.array, wp.array]] = []  # (real gradient, a chunk's private one)
-    parts = []
-    for k, (lo, hi) in enumerate(zip(bounds, bounds[1:])):
-        ins = [_chunk(a, lo, hi, count) if isinstance(a, PerPixel) or not (track and k) else _with_private_grads(a, private) for a in inputs]
-        parts.append((ins, [o[lo:hi] for o in outputs], hi - lo))
+    split = _Split(kernel, device, count, inputs, outputs, workers)
 
-    def forward(part) -> None:
-        ins, outs, dim = part
+    def forward(worker: int, k: int) -> None:
+        ins, outs, dim = split.arguments(inputs, k)
         wp.launch(kernel, dim=dim, inputs=ins, outputs=outs, device=device, record_tape=False)
 
-    _run_all(forward, parts)
-    if track:
-        originals = [a.array if isinstance(a, PerPixel) else a for a in inputs]
-        tape.record_func(lambda: _backward(tape, kernel, device, parts, originals, private), arrays=[o for o in outputs if o.requires_grad])
+    split.run(forward)
+    tape = _active_tape()
+    if tape is not None and any(o.requires_grad for o in outputs):
+        tape.record_func(lambda: _backward(tape, split), arrays=[o for o in outputs if o.requires_grad])
 
 
-def _run_all(work, parts) -> None:
-    """``work(part)`` for every part, the first on the calling thread, the others in the pool."""
-    futures = [_executor(len(parts) - 1).submit(work, p) for p in parts[1:]]
-    work(parts[0])
-    for f in futures:
-        f.result()  # re-raises a worker's exception here
+class _Split:
+    """A launch cut into contiguous chunks, more chunks than workers (a worker whose chunks are
+    cheap, e.g. sky pixels, takes more of them), run by ``workers`` threads taking the next chunk."""
+
+    def __init__(self, kernel, device, count: int, inputs: list, outputs: list, workers: int):
+        self.kernel, self.device, self.count, self.inputs, self.outputs, self.workers = kernel, device, count, inputs, outputs, workers
+        chunks = max(workers, min(count // MIN_PIXELS_PER_THREAD, workers * CHUNKS_PER_THREAD))
+        self.bounds = [count * k // chunks for k in range(chunks + 1)]
+
+    @property
+    def chunks(self) -> int:
+        return len(self.bounds) - 1
+
+    def arguments(self, inputs: list, k: int):
+        """``(inputs, outputs, dim)`` of chunk ``k``: per-pixel arrays sliced, the rest from ``inputs``."""
+        lo, hi = self.bounds[k], self.bounds[k + 1]
+        ins = [_chunk(a, lo, hi, self.count) for a in inputs]
+        return ins, [o[lo:hi] for o in self.outputs], hi - lo
+
+    def run(self, work) -> None:
+        """``work(worker, chunk)`` for every chunk; worker 0 is the calling thread."""
+        counter = itertools.count()
+
+        def loop(worker: int) -> None:
+            while (k := next(counter)) < self.chunks:  # itertools.count is thread-safe in CPython
+                work(worker, k)
+
+        futures = [_executor(self.workers - 1).submit(loop, w) for w in range(1, self.workers)]
+        try:
+            loop(0)
+        finally:
+            for f in futures:
+                f.result()  # waits for every worker; re-raises a worker's exception here
 
 
 def _active_tape():
@@ -181,19 +204,43 @@ def _with_private_grads(a, private: list):
     return a
 
 
-def _backward(tape, kernel, device, parts, originals, private) -> None:
-    """The adjoints of a split launch, run concurrently; the private gradients of chunks 1... are
-    then added into the real ones and zeroed (so a second ``tape.backward()`` adds them again)."""
-    for a in originals:  # registers the real gradients with the tape (for tape.zero()), as a recorded launch does
-        tape.get_adjoint(a)
-    adjoints = [[tape.get_adjoint(a) for a in ins] for ins, _, _ in parts]
+def _backward(tape, split: _Split) -> None:
+    """The adjoints of a split launch, run by the same workers: worker 0 accumulates into the real
+    gradients, the others into private copies of the shared ones, added in at the end."""
+    for a in split.inputs:  # registers the real gradients with the tape (for tape.zero()), as a recorded launch does
+        tape.get_adjoint(a.array if isinstance(a, PerPixel) else a)
+    private: list[tuple[wp.array, wp.array]] = []  # (real gradient, a worker's private one)
+    shared = [split.inputs] + [[a if isinstance(a, PerPixel) else _with_private_grads(a, private) for a in split.inputs] for _ in range(1, split.workers)]
 
-    def backward(k: int) -> None:
-        ins, outs, dim = parts[k]
-        wp.launch(kernel, dim=dim, inputs=ins, outputs=outs, adj_inputs=adjoints[k], adj_outputs=[o.grad for o in outs], device=device, adjoint=True)
+    def backward(worker: int, k: int) -> None:
+        ins, outs, dim = split.arguments(shared[worker], k)
+        adj_ins = [_adjoint(a) for a in ins]
+        wp.launch(split.kernel, dim=dim, inputs=ins, outputs=outs, adj_inputs=adj_ins, adj_outputs=[o.grad for o in outs], device=split.device, adjoint=True)
 
-    _run_all(backward, list(range(len(parts))))
+    split.run(backward)
     for grad, mine in private:
         target = grad.numpy()  # CPU arrays: views of the same memory
         target += mine.numpy()
-        mine.zero_()
+
+
+def _adjoint(a):
+    """The adjoint argument of kernel argument ``a``, as ``wp.Tape.get_adjoint`` makes it (without
+    registering it with a tape)."""
+    if wp._src.types.is_array(a):
+        return a.grad if a.grad else None
+    if wp._src.types.is_struct(a):
+        adj = a._cls()
+        for name, _ in a._cls.ctype._fields_:
+            if name.startswith("_"):
+                continue
+            kind = a._cls.vars[name].type
+            if wp._src.types.matches_array_class(kind, wp.array) or isinstance(kind, wp._src.codegen.Struct):
+                setattr(adj, name, _adjoint(getattr(a, name)))
+            elif wp._src.types.is_native_type(kind):
+                setattr(adj, name, kind())
+            else:
+                setattr(adj, name, getattr(a, name))
+        return adj
+    if wp._src.types.is_native_type(type(a)):
+        return type(a)()
+    return None
