@@ -131,6 +131,12 @@ def best_time(run, repeats: int) -> float:
 def warptex_runs(technique: str, data: dict, objs: dict):
     """``(forward, forward_backward)`` callables of warptex for ``technique``."""
 
+    # Inputs as Warp arrays up front, as the peers convert theirs in prepare(), untimed.
+    data = dict(data)
+    for key, dtype in (("uv", wp.vec2), ("uv_dx", wp.vec2), ("uv_dy", wp.vec2), ("lod", float)):
+        if key in data and technique in SAMPLE_TECHNIQUES:
+            data[key] = wp.array(data[key], dtype=dtype)
+
     def forward():
         return common.warptex_forward(technique, data, **objs)
 
