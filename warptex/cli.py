@@ -1,4 +1,4 @@
-"""Command line: ``warptex [render|demo] [options]`` (also ``python -m warptex``); ``render`` is the default."""
+"""Command line: ``warptex [render|demo|fit] [options]`` (also ``python -m warptex``); ``render`` is the default."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import argparse
 import sys
 
 
-COMMANDS = ("render", "demo")
+COMMANDS = ("render", "demo", "fit")
 
 
 def _resolution(text: str) -> tuple[int, int]:
@@ -56,7 +56,95 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--texture", default=None, help="image file to use (default: a procedural checkerboard)")
     demo.add_argument("--resolution", type=_resolution, default=(360, 480), help="panel size HxW (default: 360x480)")
     demo.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0 (default: Warp's default)")
+    fit = commands.add_parser(
+        "fit",
+        help="fit splat maps and tiling to images (the default terrain, or your targets)",
+        description="Recover splat maps and tiling from images by gradient descent. Without --target: the "
+        "default terrain rendered with true splat maps and tiling is the target, the fit starts from uniform "
+        "weights and a tiling 20%% off. Writes target.png, initial.png, fitted.png, comparison.png, "
+        "splat_true.png, splat_fitted.png, splat_maps.png, splat_fitted.exr, curve.png and summary.json.",
+    )
+    add_fit_arguments(fit)
     return parser
+
+
+def _height_blend(text: str) -> float | None:
+    if text.lower() in ("none", "0", "0.0", "off"):
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"height blend must be a number > 0 or 'none', got {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"height blend must be a number > 0 or 'none', got {text!r}")
+    return value
+
+
+def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``warptex fit`` and ``examples/fit_splat.py`` (see :func:`fit_arguments`)."""
+    parser.add_argument("--out", default="out/fit", help="output folder (default: %(default)s)")
+    parser.add_argument("--iters", type=int, default=240, help="Adam iterations, coarse to fine (default: %(default)s)")
+    parser.add_argument("--resolution", type=_resolution, default=(192, 256), help="synthetic view size HxW (default: 192x256)")
+    parser.add_argument("--views", type=int, default=2, choices=(1, 2, 3), help="synthetic views: 1 three-quarter, 2 + top-down, 3 + opposite corner (default: 2)")
+    parser.add_argument("--seed", type=int, default=0, help="terrain and layer seed (default: 0)")
+    parser.add_argument("--tiling-error", type=float, default=0.2, help="synthetic start: tiling x (1 + this) (default: 0.2)")
+    parser.add_argument("--entropy", type=float, default=1e-4, help="weight-entropy prior, 0 for none (default: 1e-4)")
+    parser.add_argument("--loss", choices=("l2", "l1"), default="l2", help="image loss in linear space (default: l2)")
+    parser.add_argument("--target", action="append", default=None, help="your target image (repeat for several views; needs --gbuffer each)")
+    parser.add_argument("--gbuffer", action="append", default=None, help="the target's G-buffer EXR (warptex render's gbuffer.exr, or Blender passes)")
+    parser.add_argument("--layers", nargs="+", default=None, help="layer images, RGBA with height in alpha (default: the terrain's four)")
+    parser.add_argument("--initial-maps", nargs="+", default=None, help="splat-map images to start from (default: uniform weights)")
+    parser.add_argument("--map-size", type=_resolution, default=(129, 129), help="fitted splat-map size HxW (default: 129x129)")
+    parser.add_argument("--map-channels", type=int, default=4, help="channels per splat map (default: 4)")
+    parser.add_argument("--maps", type=int, default=None, help="number of splat maps (default: enough for the layers)")
+    parser.add_argument("--tiling", type=float, default=None, help="initial tiling of your targets (default: 1/6)")
+    parser.add_argument("--no-fit-tiling", dest="fit_tiling", action="store_false", help="keep the tiling fixed")
+    parser.add_argument("--projection", choices=("uv", "world_xz", "triplanar"), default="triplanar", help="layer projection (default: triplanar)")
+    parser.add_argument("--height-blend", type=_height_blend, default=0.2, help="height-blend transition, or none (default: 0.2)")
+    parser.add_argument("--sharpness", type=float, default=4.0, help="triplanar sharpness (default: 4)")
+    parser.add_argument("--report-every", type=int, default=20, help="print iter, loss, psnr every N iterations (default: 20)")
+    parser.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0 (default: Warp's default)")
+
+
+def fit_arguments(args: argparse.Namespace) -> dict:
+    """The keyword arguments of :func:`warptex.fit_demo.run_fit` from parsed :func:`add_fit_arguments` options."""
+    if (args.target is None) != (args.gbuffer is None):
+        raise ValueError("fit: --target and --gbuffer go together (one G-buffer per target image)")
+    return {
+        "iters": args.iters,
+        "resolution": args.resolution,
+        "views": args.views,
+        "seed": args.seed,
+        "tiling_error": args.tiling_error,
+        "entropy": args.entropy,
+        "loss": args.loss,
+        "targets": args.target,
+        "gbuffers": args.gbuffer,
+        "layers": args.layers,
+        "initial_maps": args.initial_maps,
+        "map_size": args.map_size,
+        "map_channels": args.map_channels,
+        "num_maps": args.maps,
+        "tiling": args.tiling,
+        "fit_tiling": args.fit_tiling,
+        "projection": args.projection,
+        "height_blend": args.height_blend,
+        "sharpness": args.sharpness,
+        "report_every": args.report_every,
+        "device": args.device,
+    }
+
+
+def fit_report(summary: dict) -> str:
+    """The result lines printed after a fit."""
+    lines = [f"fit: {summary['iterations']} iterations in {summary['fit_seconds']:.1f} s; PSNR {summary['initial_psnr_db']:.2f} -> {summary['final_psnr_db']:.2f} dB"]
+    tiling = ", ".join(f"{t:.6f}" for t in summary["fitted_tiling"])
+    if summary["mode"] == "synthetic":
+        lines.append(f"fit: tiling {tiling} (true {summary['true_tiling']:.6f}, error {summary['tiling_error_percent']:.3f}%)")
+        lines.append(f"fit: splat weights MAE {summary['splat_mae_covered']:.4f} on {summary['covered_texels']} covered texels (uniform start: {summary['splat_mae_uniform_start']:.4f})")
+    else:
+        lines.append(f"fit: tiling {tiling}")
+    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -72,7 +160,13 @@ def main(argv: list[str] | None = None) -> int:
     from warptex.render import run_render
 
     try:
-        if args.command == "demo":
+        if args.command == "fit":
+            from warptex.fit_demo import run_fit
+
+            summary = run_fit(args.out, **fit_arguments(args))
+            print(fit_report(summary))
+            paths = summary["files"]
+        elif args.command == "demo":
             paths = run_demo(args.out, texture_path=args.texture, resolution=args.resolution, device=args.device)
         else:
             paths = run_render(

@@ -24,7 +24,8 @@ def line_chart(
         path: the PNG file; its folder is created if missing.
         panels: one dict per chart: ``series`` (``{label: (x, y)}``, sequences of numbers; ``None``
             y values are gaps), ``xlabel``, ``ylabel`` and optional ``title``, ``logx``, ``logy``
-            (bools, base 2 for x and 10 for y) and ``note`` (small text under the axes).
+            (bools, base 2 for x and 10 for y), ``marks`` (``[(x, label)]``, dashed vertical lines)
+            and ``note`` (small text under the axes).
         title: a title over all panels.
         dpi: resolution.
     """
@@ -45,6 +46,11 @@ def line_chart(
     for ax, panel in zip(axes[0], panels):
         for label, (x, y) in panel["series"].items():
             ax.plot(list(x), [float("nan") if v is None else v for v in y], marker="o", markersize=3, linewidth=1.5, label=label)
+        placed: dict = {}
+        for x, label in panel.get("marks", ()):
+            ax.axvline(x, color="0.5", linestyle="--", linewidth=0.8)
+            row = placed[x] = placed.get(x, -1) + 1  # marks at one x stack downwards
+            ax.annotate(label, (x, 1.0), xycoords=("data", "axes fraction"), xytext=(2, -10 - 9 * row), textcoords="offset points", fontsize=7, color="0.3")
         if panel.get("logx"):
             ax.set_xscale("log", base=2)
         if panel.get("logy"):

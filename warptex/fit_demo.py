@@ -1,0 +1,259 @@
+"""``warptex fit`` and ``examples/fit_splat.py``: recover splat maps and tiling from images.
+
+Default (synthetic) run: the default terrain seen from several cameras; the target is rendered
+with the true splat maps (:func:`warptex.terrain_material.terrain_splat_maps`: height and slope
+rules) and the true tiling (1/6) with the real layer textures; the fit starts from uniform weights
+and a tiling 20% off, and its result is compared with the truth.
+
+With ``targets`` and ``gbuffers`` (and optionally ``layers``), it fits splat maps to your images:
+one G-buffer EXR per target image (:func:`warptex.load_gbuffer`), the same splat options as the
+default scene unless you change them.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import warp as wp
+
+from warptex import io
+from warptex.camera import look_at, orthographic
+from warptex.fit import SplatParameters, psnr, splat_coverage
+from warptex.fit_loop import FitView, check_inputs, default_stages, fit_splat, render_views
+from warptex.fit_report import heat_image, legend, weights_image, write_curve, write_json
+from warptex.gbuffer import rasterize
+from warptex.gbuffer_io import load_gbuffer
+from warptex.layers import check_layer_count, splat
+from warptex.render import TERRAIN_GRID, terrain_camera
+from warptex.shade import side_by_side
+from warptex.terrain import terrain
+from warptex.terrain_material import LAYER_NAMES, terrain_layers, terrain_splat_maps
+from warptex.texture import TextureArray
+
+TRUE_TILING = 1.0 / 6.0  # the default scene's layer repeats per world unit
+#: A texel counts as covered when the views' bilinear lookups give it at least this much weight
+#: in all (about one pixel's worth): such a texel's weights change the images.
+COVERED = 1.0
+
+
+def terrain_cameras(resolution, count: int = 2):
+    """``count`` (1–3) cameras on the default terrain: the default three-quarter view; a view
+    straight down (orthographic, the whole terrain); the opposite corner looking back."""
+    cams = [
+        terrain_camera(resolution),
+        orthographic((0.0, 60.0, 0.0), (0.0, 0.0, 0.0), up=(0.0, 0.0, -1.0), height=66.0 * max(1.0, resolution[0] / resolution[1]), resolution=resolution),
+        look_at((30.0, 34.0, -40.0), (-2.0, 2.0, 4.0), resolution=resolution),
+    ]
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or not 1 <= count <= len(cams):
+        raise ValueError(f"terrain_cameras(): count must be 1 to {len(cams)}, got {count!r}")
+    return cams[:count]
+
+
+def _panels(images, prefix: str) -> np.ndarray:
+    return side_by_side({f"{prefix} view {k}": img[..., :3] for k, img in enumerate(images)})
+
+
+def run_fit(
+    out_dir: str | os.PathLike = "out/fit",
+    *,
+    iters: int = 240,
+    resolution=(192, 256),
+    views: int = 2,
+    seed: int = 0,
+    tiling_error: float = 0.2,
+    entropy: float = 1e-4,
+    loss: str = "l2",
+    targets=None,
+    gbuffers=None,
+    layers=None,
+    initial_maps=None,
+    map_size=TERRAIN_GRID,
+    map_channels: int = 4,
+    num_maps: int | None = None,
+    tiling: float | None = None,
+    fit_tiling: bool = True,
+    projection: str = "triplanar",
+    height_blend: float | None = 0.2,
+    sharpness: float = 4.0,
+    report_every: int = 20,
+    progress: bool | None = None,
+    device=None,
+) -> dict:
+    """Fit splat maps (and tiling) to images and write the results into ``out_dir``.
+
+    Args:
+        out_dir: output folder (created if missing).
+        iters: Adam iterations of the default coarse-to-fine schedule
+            (:func:`warptex.fit_loop.default_stages`); 240 takes about 100 s on 2 CPU cores.
+        resolution: ``(height, width)`` of each synthetic view (192×256).
+        views: synthetic views, 1–3 (:func:`terrain_cameras`); 2 = three-quarter + top-down.
+        seed: terrain and layer seed of the synthetic scene.
+        tiling_error: the synthetic fit starts at ``(1 + tiling_error) ×`` the true tiling (0.2).
+        entropy: strength of the weight-entropy prior (:func:`warptex.fit.weight_entropy`),
+            1e-4: the images leave weights that the height blend hides undetermined; the prior
+            takes the least mixed ones. 0 turns it off.
+        loss: ``"l2"`` or ``"l1"``.
+        targets, gbuffers: your images and their G-buffer EXRs (paths, one G-buffer per target)
+            instead of the synthetic scene. Images are linear (PNG/JPG decoded from sRGB); RGB is
+            fitted.
+        layers: layer image paths (RGBA: colour + height in alpha for height blending); default
+            the default scene's four layers.
+        initial_maps: splat-map image paths to start from (data, not sRGB; their size sets the
+            map size); default uniform weights of ``map_size``.
+        map_size: ``(height, width)`` of the fitted splat maps (default 129×129, the default
+            terrain's one texel per vertex).
+        map_channels, num_maps: channels per splat map and map count (default ``ceil(L/4)`` RGBA).
+        tiling: initial tiling (your images; default 1/6, the default scene's).
+        fit_tiling: fit the tiling too (scan + Adam) or keep it.
+        projection, height_blend, sharpness: the :func:`warptex.splat` options of the targets
+            (default: the default scene's: triplanar, 0.2, 4); ``height_blend=None`` for a plain blend.
+        report_every: print ``iter, loss, psnr, tiling`` every this many iterations (0: never).
+        progress: tqdm progress bar (``None``: only on a terminal).
+        device: Warp device.
+
+    Returns:
+        The summary written to ``summary.json`` (with ``"files"``: the paths written).
+
+    Raises:
+        ValueError: bad input, before any iteration: a target and its G-buffer of different
+            sizes, NaNs in a target, splat maps that cannot hold the layers...
+    """
+    func = "run_fit"
+    start = time.perf_counter()
+    device = wp.get_device(device)
+    out = Path(out_dir)
+    user = targets is not None or gbuffers is not None
+    options = {"projection": projection, "height_blend": height_blend, "sharpness": sharpness}
+
+    # -- the scene: G-buffers, targets, layers, truth ------------------------------------------------
+    if user:
+        targets = [targets] if isinstance(targets, (str, os.PathLike)) else list(targets or [])
+        gbuffers = [gbuffers] if isinstance(gbuffers, (str, os.PathLike)) else list(gbuffers or [])
+        if not targets or len(targets) != len(gbuffers):
+            raise ValueError(f"{func}(): give one G-buffer per target image, got {len(targets)} target(s) and {len(gbuffers)} G-buffer(s)")
+        gbufs = [load_gbuffer(p, device=device) for p in gbuffers]
+        images = [io.read_image(p) for p in targets]
+        images = [img[..., :3] if img.shape[-1] >= 3 else img[..., :1] for img in images]
+        true_maps = true_tiling = None
+        tiling0 = TRUE_TILING if tiling is None else float(tiling)
+    else:
+        mesh = terrain(resolution=TERRAIN_GRID, seed=seed)
+        gbufs = [rasterize(mesh, cam, device=device) for cam in terrain_cameras(resolution, views)]
+        true_maps = terrain_splat_maps(mesh, TERRAIN_GRID)
+        true_tiling = TRUE_TILING
+        if not -1.0 < float(tiling_error) < 10.0:
+            raise ValueError(f"{func}(): tiling_error must be in (-1, 10), got {tiling_error!r}")
+        tiling0 = true_tiling * (1.0 + float(tiling_error))
+    if layers is None:
+        layer_tex, names = terrain_layers(seed=seed, device=device), list(LAYER_NAMES)
+    else:
+        layer_tex = TextureArray.from_files(list(layers), device=device)
+        names = [Path(p).stem for p in layers]
+    if height_blend is not None and layer_tex.channels < 4:
+        raise ValueError(f"{func}(): height blending reads the height from the layers' alpha, but they have {layer_tex.channels} channels; pass RGBA layers or height_blend=None")
+    if not user:
+        truth = TextureArray(true_maps[None], mipmaps=False, device=device)
+        images = [splat(g, layer_tex, truth, tiling=true_tiling, device=device, **options).numpy()[..., :3] for g in gbufs]
+
+    # -- parameters ------------------------------------------------------------------------------------
+    if initial_maps is not None:
+        maps = np.stack([io.read_image(p, data=True) for p in initial_maps])
+        check_layer_count(func, layer_tex.num_layers, TextureArray(maps, mipmaps=False, device=device))
+        weights = maps.transpose(1, 2, 0, 3).reshape(*maps.shape[1:3], -1)[..., : layer_tex.num_layers]
+        weights = np.maximum(weights, 0.0) + 1e-6  # no all-zero texel
+        params = SplatParameters(layer_tex.num_layers, maps.shape[1:3], channels=maps.shape[-1], num_maps=maps.shape[0], weights=weights, tiling=tiling0, device=device)
+    else:
+        params = SplatParameters(layer_tex.num_layers, map_size, channels=map_channels, num_maps=num_maps, tiling=tiling0, device=device)
+    fit_views = [FitView(g, img) for g, img in zip(gbufs, images)]
+    stages = default_stages(iters, fit_tiling=fit_tiling)
+
+    # -- fit ----------------------------------------------------------------------------------------------
+    check_inputs(fit_views, layer_tex, params, device=device)  # fit_splat's checks, before anything renders
+    initial = render_views(fit_views, layer_tex, params, splat_options=options)
+    result = fit_splat(fit_views, layer_tex, params, stages=stages, loss=loss, entropy=entropy, splat_options=options, progress=progress, report_every=report_every, device=device)
+    fitted = render_views(fit_views, layer_tex, params, splat_options=options)
+    weights = params.weights()
+
+    # -- measurements ------------------------------------------------------------------------------------
+    fitted_tiling = params.tiling_values().tolist()
+    summary = {
+        "mode": "user" if user else "synthetic",
+        "iterations": result.iterations,
+        "initial_psnr_db": psnr(result.initial_mse),
+        "final_psnr_db": result.final_psnr,
+        "final_mse": result.final_mse,
+        "psnr_space": "linear RGB in [0, 1], covered pixels of all views",
+        "initial_tiling": tiling0,
+        "fitted_tiling": fitted_tiling,
+        "tiling_scans": [{"stage": s["stage"], "chosen": s["chosen"]} for s in result.scans],
+        "entropy_prior": entropy,
+        "loss": loss,
+        "views": len(fit_views),
+        "resolutions": [list(g.resolution) for g in gbufs],
+        "map_size": list(params.size),
+        "splat_options": options,
+        "fit_seconds": result.seconds,
+    }
+    coverage = splat_coverage([g.uv_sets["uv0"]["uv"].numpy()[g.mask.numpy() > 0] for g in gbufs if "uv0" in g.uv_sets], params.size)
+    if not user:
+        err = np.abs(weights - true_maps)
+        covered = coverage >= COVERED
+        summary.update(
+            {
+                "true_tiling": true_tiling,
+                "tiling_error_percent": 100.0 * abs(fitted_tiling[0] / true_tiling - 1.0),
+                "covered_definition": f"texels whose summed bilinear lookup weight over all covered pixels of all views is >= {COVERED} (about one pixel's worth)",
+                "covered_texels": int(covered.sum()),
+                "covered_fraction": float(covered.mean()),
+                "splat_mae_covered": float(err[covered].mean()),
+                "splat_mae_by_coverage": {f">={t:g}": float(err[coverage >= t].mean()) for t in (1e-6, 0.25, 1.0, 4.0) if (coverage >= t).any()},
+                "splat_mae_all_texels": float(err.mean()),
+                "splat_mae_uniform_start": float(np.abs(1.0 / layer_tex.num_layers - true_maps)[covered].mean()),
+            }
+        )
+
+    # -- files ---------------------------------------------------------------------------------------------
+    files = []
+
+    def png(name, image, data=False):
+        path = out / name
+        io.write_png(path, image, data=data)
+        files.append(str(path))
+
+    sky = lambda img, g: np.where(g.mask.numpy()[..., None] > 0, img[..., :3], 0.0)  # noqa: E731
+    png("target.png", _panels([sky(i, g) for i, g in zip(images, gbufs)], "target"), data=True)
+    png("initial.png", _panels([sky(i, g) for i, g in zip(initial, gbufs)], "initial"), data=True)
+    png("fitted.png", _panels([sky(i, g) for i, g in zip(fitted, gbufs)], "fitted"), data=True)
+    rows = {}
+    for k, (t, i, f, g) in enumerate(zip(images, initial, fitted, gbufs)):
+        covered_px = g.mask.numpy() > 0
+        t, i, f = sky(t, g), sky(i, g), sky(f, g)
+        rows[f"view {k}: target"] = t
+        rows[f"view {k}: initial, {psnr(float(np.mean((i - t)[covered_px] ** 2))):.1f} dB"] = i
+        rows[f"view {k}: fitted, {psnr(float(np.mean((f - t)[covered_px] ** 2))):.1f} dB"] = f
+        rows[f"view {k}: |fitted - target| x 8"] = np.clip(8 * np.abs(f - t), 0, 1)
+    png("comparison.png", side_by_side(rows, columns=4), data=True)
+    png("splat_fitted.png", weights_image(weights))
+    for m, data in enumerate(params.maps.numpy()):  # the fitted maps as data, e.g. for initial_maps
+        path = out / ("splat_fitted.exr" if params.maps.num_layers == 1 else f"splat_fitted_{m}.exr")
+        io.write_exr(path, data)
+        files.append(str(path))
+    panels = {f"fitted ({legend(names)})": weights_image(weights), "coverage (white: >= 4 px)": heat_image(coverage, vmax=4.0)}
+    if not user:
+        png("splat_true.png", weights_image(true_maps))
+        panels = {"true": weights_image(true_maps), **panels, f"|fitted - true| (white: 0.5), MAE {summary['splat_mae_covered']:.3f}": heat_image(err.mean(axis=-1), vmax=0.5)}
+    png("splat_maps.png", side_by_side(panels, columns=2), data=True)
+    marks, at = [], 0
+    for stage in stages:
+        name = "tiling scan" if stage.scan is not None else f"sigma {stage.sigma:g}" + (f", stride {stage.stride}" if stage.stride > 1 else "")
+        marks.append((at, name))
+        at += stage.iters
+    write_curve(out / "curve.png", result.history, stages=marks)
+    files.append(str(out / "curve.png"))
+    summary["seconds_total"] = time.perf_counter() - start
+    summary["files"] = files + [str(out / "summary.json")]
+    write_json(out / "summary.json", summary)
+    return summary

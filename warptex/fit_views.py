@@ -1,0 +1,197 @@
+"""Views to fit: a G-buffer and its target image, checked, subsampled and blurred, and the
+objective that renders them all (:class:`Objective`), for :func:`warptex.fit_loop.fit_splat`.
+
+Subsampled stages read every ``stride``-th pixel of the G-buffer and of the target (the
+derivatives, hence the texture LOD, are the full-resolution ones), so a subsampled render of the
+true parameters is exactly the subsampled target. Blurred stages blur the masked render and the
+masked target with the same Gaussian, and weight each pixel by the blurred mask.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+
+from warptex.fit import Loss, SplatParameters, blur, image_loss, weight_entropy
+from warptex.gbuffer import FIELDS, GBuffer, gbuffer_device
+from warptex.kernels import fit as kf
+from warptex.layers import check_layer_count, splat
+from warptex.texture import TextureArray
+
+__all__ = ["FitView", "Objective", "check_inputs", "prepare_views", "subsample_gbuffer"]
+
+
+@dataclass
+class FitView:
+    """One camera view to fit: a G-buffer and the target image it should render to.
+
+    Attributes:
+        gbuffer: the view's :class:`GBuffer` ``(H, W)``.
+        target: ``[H, W, C]`` linear colour (finite where the mask is non-zero); compared with the
+            first ``C`` channels of the render.
+        mask: ``[H, W]`` per-pixel loss weights (>= 0); default the G-buffer's coverage mask.
+            Pixels the G-buffer does not cover are never fitted.
+    """
+
+    gbuffer: GBuffer
+    target: np.ndarray
+    mask: np.ndarray | None = None
+
+
+def subsample_gbuffer(gbuffer: GBuffer, stride: int) -> GBuffer:
+    """Every ``stride``-th pixel of ``gbuffer`` (rows and columns from 0), derivatives unchanged."""
+    if stride == 1:
+        return gbuffer
+
+    def sub(a: wp.array) -> wp.array:
+        return wp.array(np.ascontiguousarray(a.numpy()[::stride, ::stride]), dtype=a.dtype, device=a.device)
+
+    arrays = {name: sub(getattr(gbuffer, name)) for name in FIELDS}
+    sets = {s: {k: sub(v) for k, v in arrays_.items()} for s, arrays_ in gbuffer.uv_sets.items()}
+    return GBuffer(**arrays, uv_sets=sets, camera=None)
+
+
+@dataclass
+class _Prepared:
+    """A validated view on the device, with its subsampled versions and its blurred targets."""
+
+    gbuffer: GBuffer
+    mask: wp.array  # [H, W]
+    target: wp.array  # [H, W, C], 0 where the mask is 0
+    _strided: dict = field(default_factory=dict)
+    _levels: dict = field(default_factory=dict)
+
+    def at(self, stride: int) -> "_Prepared":
+        if stride == 1:
+            return self
+        if stride not in self._strided:
+            sub = lambda a: wp.array(np.ascontiguousarray(a.numpy()[::stride, ::stride]), dtype=float, device=a.device)  # noqa: E731
+            self._strided[stride] = _Prepared(subsample_gbuffer(self.gbuffer, stride), sub(self.mask), sub(self.target))
+        return self._strided[stride]
+
+    def level(self, sigma: float) -> tuple[wp.array, wp.array]:
+        """The target and the loss weights at blur ``sigma``: sharp, the target and the mask;
+        blurred, ``blur(target · mask)`` (to compare with ``blur(render · mask)``) and ``blur(mask)``."""
+        if sigma not in self._levels:
+            if sigma == 0:
+                self._levels[sigma] = (self.target, self.mask)
+            else:
+                mask = self.mask.numpy()
+                masked = wp.array(self.target.numpy() * mask[..., None], dtype=float, device=self.mask.device)
+                weight = blur(mask[..., None], sigma, device=self.mask.device)
+                self._levels[sigma] = (blur(masked, sigma), weight.reshape(mask.shape))
+        return self._levels[sigma]
+
+
+def check_inputs(views, layers: TextureArray, params: SplatParameters, *, device=None) -> None:
+    """The input checks :func:`fit_splat` runs before its first iteration (call it to fail before
+    other work): target and G-buffer sizes, non-finite targets, layer counts, devices."""
+    first = views if isinstance(views, FitView) else next(iter(views), None)
+    device = gbuffer_device("fit_splat", first.gbuffer, device) if isinstance(first, FitView) else wp.get_device(device)
+    prepare_views("fit_splat", views, layers, params, device)
+
+
+def prepare_views(func: str, views, layers: TextureArray, params: SplatParameters, device) -> list[_Prepared]:
+    """Every input check, before anything runs (sizes, finiteness, layer counts, devices); the
+    views on the device, targets zeroed where the mask is 0."""
+    if not isinstance(layers, TextureArray):
+        raise TypeError(f"{func}(): layers must be a TextureArray, got {type(layers).__name__}")
+    if not isinstance(params, SplatParameters):
+        raise TypeError(f"{func}(): params must be SplatParameters, got {type(params).__name__}")
+    check_layer_count(func, layers.num_layers, params.maps)
+    if params.num_layers != layers.num_layers:
+        raise ValueError(f"{func}(): params hold weights for {params.num_layers} layers but there are {layers.num_layers} layers")
+    if layers.device != device or params.device != device:
+        raise ValueError(f"{func}(): layers ({layers.device}) and params ({params.device}) must be on {device}")
+    views = [views] if isinstance(views, FitView) else list(views)
+    if not views:
+        raise ValueError(f"{func}(): needs at least one view")
+    prepared = []
+    for k, view in enumerate(views):
+        if not isinstance(view, FitView):
+            raise TypeError(f"{func}(): view {k} must be a FitView, got {type(view).__name__}")
+        gbuffer_device(func, view.gbuffer, device)
+        hw = view.gbuffer.resolution
+        target = np.asarray(view.target, np.float32)
+        if target.ndim == 2:
+            target = target[..., None]
+        if target.ndim != 3 or target.shape[:2] != hw:
+            raise ValueError(f"{func}(): view {k}: the target is {target.shape[:2]} (H, W) but its G-buffer is {hw}; they must match")
+        if not 1 <= target.shape[2] <= layers.channels:
+            raise ValueError(f"{func}(): view {k}: the target has {target.shape[2]} channels but the layers only {layers.channels}")
+        if k and target.shape[2] != prepared[0].target.shape[2]:
+            raise ValueError(f"{func}(): view {k}: the target has {target.shape[2]} channels, view 0's {prepared[0].target.shape[2]}")
+        mask = view.gbuffer.mask.numpy() if view.mask is None else np.asarray(view.mask, np.float32)
+        if mask.shape != hw:
+            raise ValueError(f"{func}(): view {k}: mask must have shape {hw}, got {mask.shape}")
+        if not np.isfinite(mask).all() or (mask < 0).any():
+            raise ValueError(f"{func}(): view {k}: mask must be finite and >= 0")
+        mask = mask * (view.gbuffer.mask.numpy() > 0)  # pixels without a surface cannot be fitted
+        bad = ~np.isfinite(target) & (mask[..., None] > 0)
+        if bad.any():
+            where = tuple(int(i) for i in np.argwhere(bad)[0])
+            raise ValueError(
+                f"{func}(): view {k}: the target has {int(bad.sum())} non-finite value(s) on covered pixels, "
+                f"first {target[where]} at (row, col, channel) {where}"
+            )
+        if mask.sum() <= 0:
+            raise ValueError(f"{func}(): view {k}: no covered pixel to fit (the mask is all 0)")
+        target = np.where(mask[..., None] > 0, target, 0.0).astype(np.float32)
+        prepared.append(_Prepared(view.gbuffer, wp.array(mask, dtype=float, device=device), wp.array(target, dtype=float, device=device)))
+    return prepared
+
+
+class Objective:
+    """Render every view, mask, blur, and sum the per-view losses (and the entropy prior) into one
+    float64 scalar; ``objective(sigma, stride)`` returns it with the sharp renders."""
+
+    def __init__(self, views: list[_Prepared], layers: TextureArray, params: SplatParameters, options: dict, loss: Loss, entropy: float, device):
+        self.views, self.layers, self.params, self.options = views, layers, params, options
+        self.loss, self.entropy, self.device = loss, entropy, device
+        self.channels = views[0].target.shape[2]
+        self._scales = {}
+
+    def _scale(self, sigma: float, stride: int) -> float:
+        """One normalisation for all views, ``1 / (C · Σ weight)``: views count by their pixels."""
+        key = (sigma, stride)
+        if key not in self._scales:
+            total = sum(float(v.at(stride).level(sigma)[1].numpy().astype(np.float64).sum()) for v in self.views)
+            self._scales[key] = 1.0 / (total * self.channels)
+        return self._scales[key]
+
+    def render(self, view: _Prepared) -> wp.array:
+        kw = dict(self.options)
+        kw["tiling"] = self.params.tiling
+        if self.params.sharpness is not None:
+            kw["sharpness"] = self.params.sharpness
+        return splat(view.gbuffer, self.layers, self.params.maps, device=self.device, **kw)
+
+    def __call__(self, sigma: float, stride: int = 1) -> tuple[wp.array, list[wp.array]]:
+        """The loss (float64 ``(1,)``, ``requires_grad``) and the sharp renders of every view."""
+        total = wp.zeros(1, dtype=wp.float64, device=self.device, requires_grad=True)
+        renders = []
+        for full in self.views:
+            view = full.at(stride)
+            render = self.render(view)
+            renders.append(render)
+            target, weight = view.level(sigma)
+            if sigma > 0:  # the render is 0 off the G-buffer; the user's mask may hide more
+                masked = wp.zeros((*render.shape[:2], self.channels), dtype=float, device=self.device, requires_grad=render.requires_grad)
+                wp.launch(kf.mask_kernel, dim=masked.shape, inputs=[render, view.mask], outputs=[masked], device=self.device)
+                render = blur(masked, sigma)
+            image_loss(render, target, weight=weight, loss=self.loss, scale=self._scale(sigma, stride), out=total, device=self.device)
+        if self.entropy > 0:
+            weight_entropy(self.params, self.entropy, out=total)
+        return total, renders
+
+    def sharp_mse(self, renders: list[wp.array], stride: int = 1) -> float:
+        """The mean squared error of sharp renders (from :meth:`__call__`) over all views."""
+        mse = wp.zeros(1, dtype=wp.float64, device=self.device)
+        for full, render in zip(self.views, renders):
+            view = full.at(stride)
+            image_loss(render, view.target, weight=view.mask, loss=Loss.L2, scale=self._scale(0.0, stride), out=mse, device=self.device)
+        return float(mse.numpy()[0])
+
+
