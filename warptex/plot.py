@@ -24,7 +24,7 @@ def line_chart(
         path: the PNG file; its folder is created if missing.
         panels: one dict per chart: ``series`` (``{label: (x, y)}``, sequences of numbers; ``None``
             y values are gaps), ``xlabel``, ``ylabel`` and optional ``title``, ``logx``, ``logy``
-            (bools, base 2 for x and 10 for y), ``marks`` (``[(x, label)]``, dashed vertical lines)
+            (bools, base 2 for x and 10 for y; a linear y axis starts at 0), ``marks`` (``[(x, label)]``, dashed vertical lines)
             and ``note`` (small text under the axes).
         title: a title over all panels.
         dpi: resolution.
@@ -55,6 +55,8 @@ def line_chart(
             ax.set_xscale("log", base=2)
         if panel.get("logy"):
             ax.set_yscale("log")
+        else:
+            ax.set_ylim(bottom=min(0.0, ax.get_ylim()[0]))  # a linear axis starts at 0: small changes look small
         ax.set_xlabel(panel.get("xlabel", ""))
         ax.set_ylabel(panel.get("ylabel", ""))
         if panel.get("title"):

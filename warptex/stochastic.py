@@ -71,7 +71,6 @@ class Stochastic:
     histogram: Histogram | None = None
 
 
-
 def as_stochastic(func: str, option) -> Stochastic:
     """``stochastic=`` of a technique (``None``, a :class:`Method` name, or :class:`Stochastic`) as
     :class:`Stochastic` (``None`` is method ``"none"``). Errors name ``func``."""
