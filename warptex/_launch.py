@@ -27,6 +27,9 @@ from typing import Any, NamedTuple
 
 import warp as wp
 
+# Warp's tape, type and codegen internals: warp._src in current releases, top-level modules before.
+_internal = getattr(wp, "_src", wp)
+
 # Below this many pixels per thread, handing work to a thread costs more than it saves.
 MIN_PIXELS_PER_THREAD = 16384
 # Chunks per thread (when the pixels allow): costs vary across an image (sky, terrain), so
@@ -179,7 +182,7 @@ class _Split:
 
 
 def _active_tape():
-    return wp._src.context.runtime.tape
+    return _internal.context.runtime.tape
 
 
 def _with_private_grads(a, private: list):
@@ -189,13 +192,13 @@ def _with_private_grads(a, private: list):
     Adjoint kernels accumulate into the ``grad`` of the *forward* arrays of struct fields (Warp
     ignores the adjoint struct there), so private accumulators must sit in the forward arguments.
     """
-    if wp._src.types.is_array(a):
+    if _internal.types.is_array(a):
         if not a.grad:
             return a
         mine = wp.zeros_like(a.grad)
         private.append((a.grad, mine))
         return wp.array(ptr=a.ptr, dtype=a.dtype, shape=a.shape, strides=a.strides, device=a.device, grad=mine)
-    if wp._src.types.is_struct(a):
+    if _internal.types.is_struct(a):
         copy = a._cls()
         for name, _ in a._cls.ctype._fields_:
             if not name.startswith("_"):
@@ -226,21 +229,21 @@ def _backward(tape, split: _Split) -> None:
 def _adjoint(a):
     """The adjoint argument of kernel argument ``a``, as ``wp.Tape.get_adjoint`` makes it (without
     registering it with a tape)."""
-    if wp._src.types.is_array(a):
+    if _internal.types.is_array(a):
         return a.grad if a.grad else None
-    if wp._src.types.is_struct(a):
+    if _internal.types.is_struct(a):
         adj = a._cls()
         for name, _ in a._cls.ctype._fields_:
             if name.startswith("_"):
                 continue
             kind = a._cls.vars[name].type
-            if wp._src.types.matches_array_class(kind, wp.array) or isinstance(kind, wp._src.codegen.Struct):
+            if _internal.types.matches_array_class(kind, wp.array) or isinstance(kind, _internal.codegen.Struct):
                 setattr(adj, name, _adjoint(getattr(a, name)))
-            elif wp._src.types.is_native_type(kind):
+            elif _internal.types.is_native_type(kind):
                 setattr(adj, name, kind())
             else:
                 setattr(adj, name, getattr(a, name))
         return adj
-    if wp._src.types.is_native_type(type(a)):
+    if _internal.types.is_native_type(type(a)):
         return type(a)()
     return None
