@@ -161,30 +161,18 @@ def softplus_kernel(x: wp.array(dtype=float), out: wp.array(dtype=float)):
 
 
 @wp.kernel
-def blur_rows_kernel(src: wp.array3d(dtype=float), taps: wp.array(dtype=float), dst: wp.array3d(dtype=float)):
-    """Filter along each row (x): ``dst[i, j, c] = Σ_k taps[k] · src[i, j + k - r, c]``, zero outside."""
+def blur_kernel(src: wp.array3d(dtype=float), taps: wp.array(dtype=float), step_i: wp.int32, step_j: wp.int32, dst: wp.array3d(dtype=float)):
+    """One pass of a separable filter along ``(step_i, step_j)``, ``(0, 1)`` for rows (x) or
+    ``(1, 0)`` for columns (y): ``dst[i, j, c] = Σ_k taps[k] · src[i + (k - r)·step_i, j + (k - r)·step_j, c]``,
+    zero outside the image."""
     i, j, c = wp.tid()
     radius = (taps.shape[0] - 1) // 2
-    width = src.shape[1]
     acc = float(0.0)
     for k in range(taps.shape[0]):
-        jj = j + k - radius
-        if jj >= 0 and jj < width:
-            acc += taps[k] * src[i, jj, c]
-    dst[i, j, c] = acc
-
-
-@wp.kernel
-def blur_cols_kernel(src: wp.array3d(dtype=float), taps: wp.array(dtype=float), dst: wp.array3d(dtype=float)):
-    """Filter along each column (y), as :data:`blur_rows_kernel`."""
-    i, j, c = wp.tid()
-    radius = (taps.shape[0] - 1) // 2
-    height = src.shape[0]
-    acc = float(0.0)
-    for k in range(taps.shape[0]):
-        ii = i + k - radius
-        if ii >= 0 and ii < height:
-            acc += taps[k] * src[ii, j, c]
+        ii = i + (k - radius) * step_i
+        jj = j + (k - radius) * step_j
+        if ii >= 0 and ii < src.shape[0] and jj >= 0 and jj < src.shape[1]:
+            acc += taps[k] * src[ii, jj, c]
     dst[i, j, c] = acc
 
 

@@ -106,8 +106,8 @@ def blur(image, sigma: float, *, channels: int | None = None, device=None) -> wp
     taps_wp = wp.array(taps, dtype=float, device=device)
     rows = wp.zeros((h, w, channels), dtype=float, device=device, requires_grad=src.requires_grad)
     out = wp.zeros((h, w, channels), dtype=float, device=device, requires_grad=src.requires_grad)
-    wp.launch(kf.blur_rows_kernel, dim=(h, w, channels), inputs=[src, taps_wp], outputs=[rows], device=device)
-    wp.launch(kf.blur_cols_kernel, dim=(h, w, channels), inputs=[rows, taps_wp], outputs=[out], device=device)
+    wp.launch(kf.blur_kernel, dim=(h, w, channels), inputs=[src, taps_wp, 0, 1], outputs=[rows], device=device)
+    wp.launch(kf.blur_kernel, dim=(h, w, channels), inputs=[rows, taps_wp, 1, 0], outputs=[out], device=device)
     return out
 
 
