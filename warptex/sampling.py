@@ -180,8 +180,6 @@ def sample(
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
 
     constant_layer, layers = _resolve_layer(func, texture, layer, shape, device)
-    if layers is not None:
-        layers = layers.reshape((count,))
 
     requires_grad = texture.requires_grad or any(a is not None and a.requires_grad for a in (uv, dx, dy, lods))
     out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=requires_grad)
@@ -228,7 +226,8 @@ def lod_inputs(func: str, lod, uv_dx, uv_dy, shape, device):
 
 
 def _resolve_layer(func: str, texture: TextureArray, layer, shape, device):
-    """``(constant_layer, per_sample_layers_or_None)`` for ``layer``, validated against ``texture``."""
+    """``(constant_layer, per_sample_layers_or_None)`` for ``layer``, validated against ``texture``;
+    per-sample layers come flattened to one entry per UV, as the kernels read them."""
     if layer is None:
         if isinstance(texture, Texture) or texture.num_layers == 1:
             return 0, None
@@ -237,4 +236,4 @@ def _resolve_layer(func: str, texture: TextureArray, layer, shape, device):
         if not 0 <= layer < texture.num_layers:
             raise ValueError(f"{func}(): layer must be in [0, {texture.num_layers - 1}], got {layer}")
         return int(layer), None
-    return 0, _per_sample(func, "layer", layer, shape, wp.int32, device)
+    return 0, _per_sample(func, "layer", layer, shape, wp.int32, device).reshape((math.prod(shape),))

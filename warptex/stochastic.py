@@ -265,8 +265,6 @@ def stochastic(
 
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
     constant_layer, layers = _resolve_layer(func, texture, layer, shape, device)
-    if layers is not None:
-        layers = layers.reshape((count,))
 
     requires_grad = sampled.requires_grad or any(a is not None and a.requires_grad for a in (uv, dx, dy, lods))
     out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=requires_grad)
