@@ -63,9 +63,11 @@ def sphere(resolution: int) -> wt.GBuffer:
     return wt.rasterize(mesh, wt.orthographic((0, 0, 3), (0, 0, 0), height=2.0, resolution=(resolution, resolution)))
 
 
-def terrain(resolution: int) -> wt.GBuffer:
-    mesh = wt.terrain(resolution=TERRAIN_GRID, seed=0)
-    return wt.rasterize(mesh, terrain_camera((resolution, resolution))), mesh
+def terrain_mesh(cache: dict):
+    """The default terrain mesh, built once per run."""
+    if "terrain_mesh" not in cache:
+        cache["terrain_mesh"] = wt.terrain(resolution=TERRAIN_GRID, seed=0)
+    return cache["terrain_mesh"]
 
 
 def scene_data(technique: str, scene: str, size: dict, tex: wt.Texture, cache: dict) -> tuple[dict, dict]:
@@ -77,7 +79,7 @@ def scene_data(technique: str, scene: str, size: dict, tex: wt.Texture, cache: d
         lod = None if technique == "bilinear" else rng.uniform(0, 4, n).astype(np.float32)
         return common.sample_data(tex, uv, lod=lod), {"texture": tex}
     if scene not in cache:
-        cache[scene] = sphere(size["sphere"]) if scene == "sphere" else terrain(size["terrain"])[0]
+        cache[scene] = sphere(size["sphere"]) if scene == "sphere" else wt.rasterize(terrain_mesh(cache), terrain_camera((size["terrain"],) * 2))
     g = cache[scene]
     scale = SPHERE_TILING if scene == "sphere" else 1.0 / 6.0
     if technique in SAMPLE_TECHNIQUES:  # the Z projection's UVs over the covered pixels
@@ -92,21 +94,15 @@ def scene_data(technique: str, scene: str, size: dict, tex: wt.Texture, cache: d
         if key not in cache:
             levels = np.stack([texture(tex.width, seed=10 + j).numpy() for j in range(count)])
             cache[key] = wt.TextureArray(levels)
-        rng = np.random.default_rng(count)
-        maps = wt.TextureArray(rng.random((count // 4, 64, 64, 4)).astype(np.float32), mipmaps=False)
-        if scene == "terrain" and count == 4:
+        if scene == "terrain" and count == 4:  # the terrain's own height/slope splat map
             maps = wt.TextureArray(terrain_splat_maps(terrain_mesh(cache), TERRAIN_GRID)[None], mipmaps=False)
+        else:
+            maps = wt.TextureArray(np.random.default_rng(count).random((count // 4, 64, 64, 4)).astype(np.float32), mipmaps=False)
         tiling = (np.arange(count, dtype=np.float32) % 4 + 2.0) * (8.0 if scene == "sphere" else 4.0)
         data = common.gbuffer_data(g, layers=cache[key], maps=maps, tiling=tiling)
         return data, {"gbuffer": g, "layers": cache[key], "maps": maps}
     data = common.gbuffer_data(g, texture=tex, tiling=scale)
     return data, {"gbuffer": g, "texture": tex}
-
-
-def terrain_mesh(cache: dict):
-    if "terrain_mesh" not in cache:
-        cache["terrain_mesh"] = wt.terrain(resolution=TERRAIN_GRID, seed=0)
-    return cache["terrain_mesh"]
 
 
 def samples(data: dict) -> int:

@@ -43,6 +43,17 @@ def lod_kind(data: dict) -> str:
     return "none"
 
 
+def sample_lod(state: dict, from_derivatives):
+    """The per-sample LOD of a sample technique's prepared ``state`` (its ``lod_kind``): the given
+    LODs, ``from_derivatives(state["uv_dx"], state["uv_dy"])``, or ``None`` (bilinear on level 0)."""
+    kind = state["lod_kind"]
+    if kind == "lod":
+        return state["lod"]
+    if kind == "derivatives":
+        return from_derivatives(state["uv_dx"], state["uv_dy"])
+    return None
+
+
 # -- builders (warptex objects -> peer data) ---------------------------------------------------------
 
 

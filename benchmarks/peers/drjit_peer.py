@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import Peer
-from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options
+from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options, sample_lod
 
 MIN_LLVM = 17  # 15.0.6 and 16.0.6 fail as described below; 19.1.7 works
 
@@ -158,12 +158,7 @@ def _prepare(technique):
 
 
 def _sample_lod(state, size):
-    kind = state["lod_kind"]
-    if kind == "lod":
-        return state["lod"]
-    if kind == "derivatives":
-        return lod_from_derivatives(size, state["uv_dx"], state["uv_dy"])
-    return None
+    return sample_lod(state, lambda dx, dy: lod_from_derivatives(size, dx, dy))
 
 
 def _sign(x):

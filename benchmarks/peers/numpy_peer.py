@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import Peer
-from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options
+from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options, sample_lod
 
 UNAVAILABLE = None
 F32 = np.float32
@@ -89,12 +89,7 @@ def sample(chain: Chain, u, v, lod, layer=0):
 
 def _sample_lod(state):
     """The per-sample LOD of a sample technique (None: bilinear on level 0)."""
-    kind = state["lod_kind"]
-    if kind == "lod":
-        return state["lod"]
-    if kind == "derivatives":
-        return lod_from_derivatives(state["chain"], state["uv_dx"], state["uv_dy"])
-    return None
+    return sample_lod(state, lambda dx, dy: lod_from_derivatives(state["chain"], dx, dy))
 
 
 # -- bilinear, trilinear -------------------------------------------------------------------------------
