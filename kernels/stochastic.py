@@ -246,16 +246,6 @@ def inverse_lut(params: StochasticParams, layer: wp.int32, level: wp.int32, c: w
 
 
 @wp.func
-def lut_level(tex: TextureView, lod: float, smp: Sampler) -> wp.vec2:
-    """``(level, fraction)`` of the mip levels ``sample_lod`` reads at ``lod`` (same bias and clamps)."""
-    l = wp.clamp(wp.clamp(lod + smp.lod_bias, smp.min_lod, smp.max_lod), 0.0, float(tex.num_levels - 1))
-    result = wp.vec2(wp.floor(l + 0.5), 0.0)
-    if smp.filter == sampling.FILTER_TRILINEAR:
-        result = wp.vec2(wp.floor(l), l - wp.floor(l))
-    return result
-
-
-@wp.func
 def sample_hex(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: Sampler, params: StochasticParams) -> wp.vec4:
     """Three taps on the triangle grid; linear or variance-preserving (histogram) blend."""
     bary, v0, v1, v2 = hex_grid(uv)
@@ -277,7 +267,7 @@ def sample_hex(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: 
     if params.histogram != 0:
         g = acc / wp.sqrt(wp.dot(w, w)) + wp.vec4(params.mean)
         result = wp.vec4(0.0)
-        lf = lut_level(tex, lod, smp)
+        lf = sampling.mip_levels(tex, lod, smp)
         level = int(lf[0])
         for c in range(4):
             if c < params.channels:

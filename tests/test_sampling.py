@@ -185,6 +185,23 @@ def test_bilinear_with_lod_reads_the_nearest_level(rng):
     out = _sample(wt.Texture(img), uv, lod=1.6, filter="bilinear")
     np.testing.assert_allclose(out, ref.bilinear(chain[2], uv), atol=1e-5)
 
+@pytest.mark.parametrize("filt", ["nearest", "bilinear", "trilinear"])
+def test_one_lod_for_all_reads_as_per_sample_lods(rng, filt):
+    # A number as lod= has its levels resolved on the host (sample_level_kernel); an array of the
+    # same value goes through the per-sample kernel. Both must read the same levels, bit for bit,
+    # through the bias and clamps, at rounding boundaries (x.5) and past both ends of the chain.
+    tex = wt.Texture(_image(rng, 24, 40), requires_grad=True)
+    uv = np.concatenate([rng.uniform(-2, 3, (200, 2)), [[np.nan, 0.5]]]).astype(np.float32)
+    cases = [(lod, {}) for lod in (-3.0, 0.0, 0.49999997, 0.5, 1.25, 2.5, 3.999, 40.0)]
+    cases += [(0.25, {"lod_bias": 1.5}), (5.0, {"max_lod": 2.5}), (0.0, {"min_lod": 1.0}), (1.1, {"lod_bias": -0.6, "min_lod": -1.0, "max_lod": 4.0})]
+    for lod, kw in cases:
+        one = _sample(tex, uv, lod=lod, filter=filt, **kw)
+        each = _sample(tex, uv, lod=np.full(len(uv), lod, np.float32), filter=filt, **kw)
+        np.testing.assert_array_equal(one, each, err_msg=f"lod={lod} {kw}")
+    no_lod = _sample(tex, uv, filter="bilinear" if filt == "trilinear" else filt)
+    np.testing.assert_array_equal(no_lod, _sample(tex, uv, lod=np.zeros(len(uv), np.float32), filter="bilinear" if filt == "trilinear" else filt))
+
+
 
 def test_output_keeps_the_uv_shape(rng):
     tex = wt.Texture(_image(rng, 4, 4, 3))

@@ -183,14 +183,27 @@ def sample(
 
     requires_grad = texture.requires_grad or any(a is not None and a.requires_grad for a in (uv, dx, dy, lods))
     out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=requires_grad)
-    launch(
-        ks.sample_kernel,
-        count,
-        inputs=[texture.view, *per_pixel(flat, dx, dy, lods, layers), smp, lod_source, constant_lod, constant_layer],
-        outputs=[out],
-        device=device,
-    )
+    if lod_source in (ks.LOD_NONE, ks.LOD_CONSTANT):  # one LOD for all: its levels resolved here
+        level, fraction = mip_levels(constant_lod, smp, texture.num_levels)
+        inputs = [texture.view, *per_pixel(flat, layers), smp, level, fraction, constant_layer]
+        launch(ks.sample_level_kernel, count, inputs=inputs, outputs=[out], device=device)
+    else:
+        inputs = [texture.view, *per_pixel(flat, dx, dy, lods, layers), smp, lod_source, constant_lod, constant_layer]
+        launch(ks.sample_kernel, count, inputs=inputs, outputs=[out], device=device)
     return out.reshape((*shape, texture.channels))
+
+
+def mip_levels(lod: float, smp: ks.Sampler, num_levels: int) -> tuple[int, float]:
+    """``(level, fraction)`` that ``lod`` reads through ``smp``: the kernels' ``mip_levels`` in the
+    same float32 arithmetic, so a uniform LOD reads bit-identically on the host's word."""
+    f32 = np.float32
+    l = f32(lod) + f32(smp.lod_bias)
+    l = min(max(f32(smp.min_lod), l), f32(smp.max_lod))  # wp.clamp(x, a, b) = fmin(fmax(a, x), b)
+    l = min(max(f32(0.0), l), f32(num_levels - 1))
+    if smp.filter == ks.FILTER_TRILINEAR:
+        base = np.floor(l)
+        return int(base), float(f32(l - base))
+    return int(np.floor(l + f32(0.5))), 0.0
 
 
 def resolve_filter(func: str, filter, *, has_lod: bool) -> Filter:
