@@ -264,6 +264,15 @@ def sample_lod(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: 
 
 
 @wp.func
+def sample_layer(tex: TextureView, i: wp.int32, layers: wp.array(dtype=wp.int32), constant_layer: wp.int32) -> wp.int32:
+    """Sample ``i``'s layer: ``layers[i]`` clamped to the array when per-sample layers are given."""
+    layer = constant_layer
+    if layers.shape[0] > 0:
+        layer = wp.clamp(layers[i], 0, tex.num_layers - 1)
+    return layer
+
+
+@wp.func
 def sample_layer_and_lod(
     tex: TextureView,
     i: wp.int32,
@@ -277,9 +286,7 @@ def sample_layer_and_lod(
 ):
     """Sample ``i``'s layer (per-sample indices clamped to the array) and LOD, by ``lod_source``:
     the argument conventions of :func:`sample_kernel`, shared by every per-UV sampling kernel."""
-    layer = constant_layer
-    if layers.shape[0] > 0:
-        layer = wp.clamp(layers[i], 0, tex.num_layers - 1)
+    layer = sample_layer(tex, i, layers, constant_layer)
     lod = 0.0
     if lod_source == LOD_CONSTANT:
         lod = constant_lod
@@ -328,9 +335,7 @@ def sample_level_kernel(
     and ``fraction`` (as :func:`mip_levels` does): the level's size and offset are then the same
     for every sample, which measured 40% faster than deriving them per sample."""
     i = wp.tid()
-    layer = constant_layer
-    if layers.shape[0] > 0:
-        layer = wp.clamp(layers[i], 0, tex.num_layers - 1)
+    layer = sample_layer(tex, i, layers, constant_layer)
     result = wp.vec4(wp.nan)
     if finite_uv_lod(uv[i], 0.0):
         result = sample_levels(tex, layer, uv[i], level, fraction, smp)
