@@ -195,7 +195,7 @@ def sample(
 
 def mip_levels(lod: float, smp: ks.Sampler, num_levels: int) -> tuple[int, float]:
     """``(level, fraction)`` that ``lod`` reads through ``smp``: the kernels' ``mip_levels`` in the
-    same float32 arithmetic, so a uniform LOD reads bit-identically on the host's word."""
+    same float32 arithmetic, so a uniform LOD reads exactly the levels the per-sample kernel would."""
     f32 = np.float32
     l = f32(lod) + f32(smp.lod_bias)
     l = min(max(f32(smp.min_lod), l), f32(smp.max_lod))  # wp.clamp(x, a, b) = fmin(fmax(a, x), b)
