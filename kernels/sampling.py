@@ -174,33 +174,48 @@ def fetch(tex: TextureView, layer: wp.int32, level: wp.int32, x: wp.int32, y: wp
 
 
 @wp.func
-def sample_nearest(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: Sampler) -> wp.vec4:
-    """Nearest texel of one level; ``uv`` already reduced by :func:`reduce_coord`."""
+def nearest_tap(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: Sampler):
+    """``(start, w, x, y)``: the texel that nearest filtering of one level reads, addressed
+    (``-1``: border); ``uv`` already reduced by :func:`reduce_coord`."""
     w = tex.level_width[level]
     h = tex.level_height[level]
     x = int(wp.floor(uv[0] * float(w)))
     y = int(wp.floor((1.0 - uv[1]) * float(h)))
     start = tex.level_offset[level] + layer * h * w
-    return texel(tex, start, w, address_near(x, w, smp.address), address_near(y, h, smp.address), smp)
+    return start, w, address_near(x, w, smp.address), address_near(y, h, smp.address)
 
 
 @wp.func
-def sample_bilinear(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: Sampler) -> wp.vec4:
-    """Bilinear filtering of one level; ``uv`` already reduced by :func:`reduce_coord`."""
+def sample_nearest(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: Sampler) -> wp.vec4:
+    """Nearest texel of one level; ``uv`` already reduced by :func:`reduce_coord`."""
+    start, w, x, y = nearest_tap(tex, layer, level, uv, smp)
+    return texel(tex, start, w, x, y, smp)
+
+
+@wp.func
+def bilinear_taps(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: Sampler):
+    """``(start, w, i0, i1, j0, j1, fx, fy)``: the two columns ``i`` and two rows ``j`` that bilinear
+    filtering of one level reads, addressed (``-1``: border), and the fractions that weight them;
+    ``uv`` already reduced by :func:`reduce_coord`. The columns and rows are addressed once each,
+    not once per texel."""
     w = tex.level_width[level]
     h = tex.level_height[level]
     x = uv[0] * float(w) - 0.5
     y = (1.0 - uv[1]) * float(h) - 0.5
     x0 = wp.floor(x)
     y0 = wp.floor(y)
-    fx = x - x0
-    fy = y - y0
-    # The two columns and two rows are addressed once each, not once per texel.
     start = tex.level_offset[level] + layer * h * w
     i0 = address_near(int(x0), w, smp.address)
     i1 = address_near(int(x0) + 1, w, smp.address)
     j0 = address_near(int(y0), h, smp.address)
     j1 = address_near(int(y0) + 1, h, smp.address)
+    return start, w, i0, i1, j0, j1, x - x0, y - y0
+
+
+@wp.func
+def sample_bilinear(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: Sampler) -> wp.vec4:
+    """Bilinear filtering of one level; ``uv`` already reduced by :func:`reduce_coord`."""
+    start, w, i0, i1, j0, j1, fx, fy = bilinear_taps(tex, layer, level, uv, smp)
     top = texel(tex, start, w, i0, j0, smp) * (1.0 - fx) + texel(tex, start, w, i1, j0, smp) * fx
     bottom = texel(tex, start, w, i0, j1, smp) * (1.0 - fx) + texel(tex, start, w, i1, j1, smp) * fx
     return top * (1.0 - fy) + bottom * fy
@@ -261,6 +276,75 @@ def sample_lod(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: 
         lf = mip_levels(tex, lod, smp)
         result = sample_levels(tex, layer, uv, int(lf[0]), lf[1], smp)
     return result
+
+
+# -- texel gradients ---------------------------------------------------------------------------------
+#
+# Sampling is linear in the texels: the gradient of a sample with respect to the texel array is the
+# output gradient times each tap's filter weight, added into the texels the forward pass read. The
+# ``splat_*`` functions mirror the ``sample_*`` ones (the same taps, from the same ``*_taps``
+# functions) and add instead of read. The texel-gradient kernels built on them replace Warp's
+# generated adjoint where only texels need gradients: that adjoint replays every function's forward
+# pass inside its reverse pass and measured 4.7× slower on triplanar.
+
+
+@wp.func
+def splat_texel(grad: wp.array(dtype=wp.vec4), start: wp.int32, w: wp.int32, xi: wp.int32, yi: wp.int32, g: wp.vec4):
+    """Add ``g`` to the gradient of the texel :func:`texel` reads (nothing for the border colour)."""
+    if xi >= 0 and yi >= 0:
+        wp.atomic_add(grad, start + yi * w + xi, g)
+
+
+@wp.func
+def splat_bilinear(grad: wp.array(dtype=wp.vec4), start: wp.int32, w: wp.int32, i0: wp.int32, i1: wp.int32, j0: wp.int32, j1: wp.int32, fx: float, fy: float, g: wp.vec4):
+    """Add ``g`` times each bilinear weight into the four texels of :func:`bilinear_taps`."""
+    top = g * (1.0 - fy)
+    bottom = g * fy
+    splat_texel(grad, start, w, i0, j0, top * (1.0 - fx))
+    splat_texel(grad, start, w, i1, j0, top * fx)
+    splat_texel(grad, start, w, i0, j1, bottom * (1.0 - fx))
+    splat_texel(grad, start, w, i1, j1, bottom * fx)
+
+
+@wp.func
+def splat_levels(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, level: wp.int32, fraction: float, smp: Sampler, g: wp.vec4):
+    """Add the gradient ``g`` of :func:`sample_levels` (same arguments) into the texels it reads."""
+    r = wp.vec2(reduce_coord(uv[0], smp.address), reduce_coord(uv[1], smp.address))
+    if smp.filter == FILTER_NEAREST:
+        start, w, x, y = nearest_tap(tex, layer, level, r, smp)
+        splat_texel(grad, start, w, x, y, g)
+    else:
+        finer = g
+        if fraction > 0.0:
+            finer = g * (1.0 - fraction)
+            start, w, i0, i1, j0, j1, fx, fy = bilinear_taps(tex, layer, level + 1, r, smp)
+            splat_bilinear(grad, start, w, i0, i1, j0, j1, fx, fy, g * fraction)
+        start, w, i0, i1, j0, j1, fx, fy = bilinear_taps(tex, layer, level, r, smp)
+        splat_bilinear(grad, start, w, i0, i1, j0, j1, fx, fy, finer)
+
+
+@wp.func
+def splat_lod(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, lod: float, smp: Sampler, g: wp.vec4):
+    """Add the gradient ``g`` of :func:`sample_lod` (same arguments) into the texels it reads;
+    non-finite ``uv`` or ``lod`` read nothing and add nothing."""
+    if finite_uv_lod(uv, lod):
+        lf = mip_levels(tex, lod, smp)
+        splat_levels(tex, grad, layer, uv, int(lf[0]), lf[1], smp, g)
+
+
+@wp.func
+def read_channels(a: wp.array2d(dtype=float), i: wp.int32) -> wp.vec4:
+    """Row ``i`` of a ``(n, 1..4)`` float array as a ``vec4`` (missing channels 0): the reverse of
+    :func:`write_channels`, for output gradients."""
+    channels = a.shape[1]
+    value = wp.vec4(a[i, 0], 0.0, 0.0, 0.0)
+    if channels > 1:
+        value[1] = a[i, 1]
+    if channels > 2:
+        value[2] = a[i, 2]
+    if channels > 3:
+        value[3] = a[i, 3]
+    return value
 
 
 @wp.func
@@ -340,6 +424,29 @@ def sample_level_kernel(
     if finite_uv_lod(uv[i], 0.0):
         result = sample_levels(tex, layer, uv[i], level, fraction, smp)
     write_channels(out, i, result)
+
+
+@wp.kernel(enable_backward=False)
+def sample_texel_grad_kernel(
+    tex: TextureView,
+    grad: wp.array(dtype=wp.vec4),
+    uv: wp.array(dtype=wp.vec2),
+    uv_dx: wp.array(dtype=wp.vec2),
+    uv_dy: wp.array(dtype=wp.vec2),
+    lods: wp.array(dtype=float),
+    layers: wp.array(dtype=wp.int32),
+    smp: Sampler,
+    lod_source: wp.int32,
+    constant_lod: float,
+    constant_layer: wp.int32,
+    adj_out: wp.array2d(dtype=float),
+):
+    """Add the gradient of :func:`sample_kernel` (same arguments) with respect to the texels into
+    ``grad``, given its output's gradient ``adj_out``. (A uniform LOD passed as ``LOD_CONSTANT``
+    reads the levels :func:`sample_level_kernel` reads, to the bit.)"""
+    i = wp.tid()
+    layer, lod = sample_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
+    splat_lod(tex, grad, layer, uv[i], lod, smp, read_channels(adj_out, i))
 
 
 @wp.kernel

@@ -25,10 +25,12 @@ def _forward(img, uv, weights, *, mipmaps=True, **kw) -> np.ndarray:
     return (out.astype(np.float64) * weights).sum(axis=-1)
 
 
-def _backward(img, uv, weights, *, build_on_tape=True, **kw):
-    """Analytic gradients: ``(texture, uv_array, extra_arrays)`` after the backward pass."""
+def _backward(img, uv, weights, *, build_on_tape=True, uv_grad=True, **kw):
+    """Analytic gradients: ``(texture, uv_array)`` after the backward pass. With ``uv_grad=False``
+    only the texels need gradients, which the hand-written texel gradient computes; with UV
+    gradients, Warp's generated adjoint computes them all."""
     tex = wt.Texture(img, requires_grad=True)
-    uv_wp = wp.array(uv, dtype=wp.vec2, requires_grad=True)
+    uv_wp = wp.array(uv, dtype=wp.vec2, requires_grad=uv_grad)
     tape = wp.Tape()
     with tape:
         if build_on_tape:
@@ -73,14 +75,18 @@ def _check_per_sample(loss_of, x, grad, rel_step, *, min_kept=0.9):
     assert kept_total / x.shape[1] >= min_kept, "too few smooth samples to check the gradient"
 
 
+BACKWARDS = {"generated": True, "hand-written": False}  # backward pass -> whether the UVs need gradients
+
+
+@pytest.mark.parametrize("backward", BACKWARDS)
 @pytest.mark.parametrize("mode", MODES)
 @pytest.mark.parametrize("filt", list(FILTERS))
-def test_texel_gradients_match_finite_differences(rng, filt, mode):
+def test_texel_gradients_match_finite_differences(rng, filt, mode, backward):
     img = rng.random((12, 10, 3), dtype=np.float32)
     uv = rng.uniform(-1.5, 2.5, (300, 2)).astype(np.float32)
     weights = rng.normal(size=(300, 3))
     kw = {**FILTERS[filt], "address": mode, "border": BORDER}
-    tex, _ = _backward(img, uv, weights, **kw)
+    tex, _ = _backward(img, uv, weights, uv_grad=BACKWARDS[backward], **kw)
     _check_texel_gradient(rng, tex.grad(0), img, uv, weights, **kw)
 
 
@@ -131,12 +137,13 @@ def test_derivative_gradients_match_finite_differences(rng):
     _check_per_sample(lambda x: _forward(img, uv, weights, uv_dx=x, uv_dy=dy), dx, grad, 1e-4)
 
 
-def test_coarse_level_gradients_flow_to_level_zero_through_the_chain(rng):
+@pytest.mark.parametrize("backward", BACKWARDS)
+def test_coarse_level_gradients_flow_to_level_zero_through_the_chain(rng, backward):
     img = rng.random((24, 20, 3), dtype=np.float32)
     uv = rng.uniform(-1, 2, (300, 2)).astype(np.float32)
     weights = rng.normal(size=(300, 3))
     kw = {"lod": 2.6}  # levels 2 and 3 only: level 0 is reached only through the box filter
-    tex, _ = _backward(img, uv, weights, build_on_tape=True, **kw)
+    tex, _ = _backward(img, uv, weights, build_on_tape=True, uv_grad=BACKWARDS[backward], **kw)
     _check_texel_gradient(rng, tex.grad(0), img, uv, weights, **kw)
 
 
@@ -177,10 +184,61 @@ def test_texture_array_gradients_go_to_the_sampled_layer(rng):
     np.testing.assert_allclose(grad[1].sum(), 100.0, rtol=1e-5)  # bilinear weights sum to 1 per sample
 
 
-def test_non_finite_uvs_give_zero_gradients(rng):
+@pytest.mark.parametrize("backward", BACKWARDS)
+def test_non_finite_uvs_give_zero_gradients(rng, backward):
     img = rng.random((8, 8, 1), dtype=np.float32)
-    uv = np.array([[np.nan, 0.5], [0.25, 0.75]], np.float32)
-    tex, uv_wp = _backward(img, uv, np.ones((2, 1)))
-    assert np.isfinite(tex.grad(0)).all() and np.isfinite(uv_wp.grad.numpy()).all()
+    uv = np.array([[np.nan, 0.5], [0.25, 0.75], [np.inf, 0.1]], np.float32)
+    tex, uv_wp = _backward(img, uv, np.ones((3, 1)), uv_grad=BACKWARDS[backward])
+    assert np.isfinite(tex.grad(0)).all()
     np.testing.assert_allclose(tex.grad(0).sum(), 1.0, rtol=1e-6)
-    assert (uv_wp.grad.numpy()[0] == 0).all()
+    if uv_wp.requires_grad:
+        assert np.isfinite(uv_wp.grad.numpy()).all()
+        assert (uv_wp.grad.numpy()[[0, 2]] == 0).all()
+
+
+LOOKUPS = {  # sample() keywords, each a way of choosing the levels
+    "nearest": {"filter": "nearest", "address": "border", "border": BORDER},
+    "bilinear lod 2.6": {"filter": "bilinear", "lod": 2.6, "address": "clamp"},
+    "trilinear lod 1.4": {"lod": 1.4, "address": "mirror"},
+    "trilinear per-sample lods": {"lod": "array"},
+    "trilinear derivatives": {"uv_dx": "array", "uv_dy": "array"},
+    "per-sample layers": {"layer": "array", "lod": 0.5},
+}
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("lookup", LOOKUPS)
+def test_hand_written_texel_gradients_equal_the_generated_adjoint(rng, monkeypatch, lookup, threads):
+    """Only texels need gradients: the hand-written texel gradient runs (and only then), and gives
+    what the generated adjoint gives when the UVs need gradients too, over every level read, on one
+    thread and split over two (70 000 samples: more than one chunk)."""
+    from warptex import sampling
+
+    n = 70000
+    layers = rng.random((3, 37, 29, 3), dtype=np.float32)
+    uv = rng.uniform(-1.5, 2.5, (n, 2)).astype(np.float32)
+    weights = rng.normal(size=(n, 3)).astype(np.float32)
+    arrays = {"lod": rng.uniform(-0.5, 6.0, n).astype(np.float32), "uv_dx": rng.uniform(-0.2, 0.2, (n, 2)).astype(np.float32),
+              "uv_dy": rng.uniform(-0.05, 0.05, (n, 2)).astype(np.float32), "layer": rng.integers(-1, 4, n)}  # fmt: skip
+    kw = {k: arrays[k] if v == "array" else v for k, v in LOOKUPS[lookup].items()}
+    kw.setdefault("layer", 1)
+    scattered = []
+    monkeypatch.setattr(sampling, "scatter", lambda *a, **k: (scattered.append(a[0]), wt._launch.scatter(*a, **k)))
+    wt.set_num_threads(threads)
+    try:
+        grads = {}
+        for uv_grad in (False, True):
+            tex = wt.TextureArray(layers, requires_grad=True)
+            tape = wp.Tape()
+            with tape:
+                out = wt.sample(tex, wp.array(uv, dtype=wp.vec2, requires_grad=uv_grad), **kw)
+            out.grad.assign(weights)
+            tape.backward()
+            grads[uv_grad] = np.concatenate([tex.grad(k).reshape(-1) for k in range(tex.num_levels)])
+            assert len(scattered) == 1  # the first run only
+            tape.zero()
+            assert not tex.grad(0).any(), "tape.zero() must reset the texel gradients"
+    finally:
+        wt.set_num_threads(None)
+    assert np.abs(grads[True]).max() > 1
+    np.testing.assert_allclose(grads[False], grads[True], rtol=1e-5, atol=2e-5 * np.abs(grads[True]).max())

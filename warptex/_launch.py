@@ -19,6 +19,7 @@ CUDA launches are never split: one launch fills the device.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import os
 import threading
@@ -111,7 +112,7 @@ def _chunk(value: Any, start: int, stop: int, count: int):
     return value
 
 
-def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: int | None = None) -> None:
+def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: int | None = None, backward=None) -> None:
     """Launch a per-pixel ``kernel`` over ``count`` pixels, split over CPU threads.
 
     Args:
@@ -122,14 +123,22 @@ def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: 
         outputs: the kernel's outputs, all per-pixel arrays (first axis ``count``).
         device: the Warp device.
         threads: threads to use (default :func:`get_num_threads`); CUDA always uses one launch.
+        backward: ``None`` to record the kernel's generated adjoint on an active ``wp.Tape``, or
+            ``backward(tape)``, recorded in its place: a hand-written gradient (see :func:`scatter`)
+            that reads the outputs' ``.grad`` when the tape runs backwards.
     """
     if count <= 0:
         return
     device = wp.get_device(device)
     threads = 1 if device.is_cuda else get_num_threads() if threads is None else threads
     workers = max(1, min(threads, count // MIN_PIXELS_PER_THREAD))
+    tape = _active_tape()
+    if backward is not None:
+        if tape is not None and any(o.requires_grad for o in outputs):
+            tape.record_func(functools.partial(backward, tape), arrays=[o for o in outputs if o.requires_grad])
+        tape = None  # the generated adjoint is not recorded
     if workers == 1:
-        wp.launch(kernel, dim=count, inputs=[_chunk(a, 0, count, count) for a in inputs], outputs=outputs, device=device)
+        wp.launch(kernel, dim=count, inputs=[_chunk(a, 0, count, count) for a in inputs], outputs=outputs, device=device, record_tape=tape is not None)
         return
     for out in outputs:
         if out.shape[0] != count:
@@ -141,9 +150,43 @@ def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: 
         wp.launch(kernel, dim=dim, inputs=ins, outputs=outs, device=device, record_tape=False)
 
     split.run(forward)
-    tape = _active_tape()
     if tape is not None and any(o.requires_grad for o in outputs):
         tape.record_func(lambda: _backward(tape, split), arrays=[o for o in outputs if o.requires_grad])
+
+
+def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads: int | None = None) -> None:
+    """Launch a per-pixel ``kernel`` that *adds* into ``targets``, arrays shared by every pixel
+    (texel gradients), split over CPU threads as :func:`launch` splits a launch.
+
+    Warp's CPU atomics are plain read-modify-writes, so every worker but the first adds into
+    private zeroed copies of ``targets``, summed into them once all chunks are done (equal to a
+    single launch up to float rounding). Not recorded on a tape: this is what a backward step runs.
+
+    Args:
+        kernel: a Warp kernel; ``targets`` appear among its ``inputs`` (by identity).
+        count, inputs, device, threads: as for :func:`launch` (no outputs).
+        targets: the arrays the kernel adds into.
+    """
+    if count <= 0:
+        return
+    device = wp.get_device(device)
+    threads = 1 if device.is_cuda else get_num_threads() if threads is None else threads
+    workers = max(1, min(threads, count // MIN_PIXELS_PER_THREAD))
+    split = _Split(kernel, device, count, inputs, [], workers)
+    unique = list({id(t): t for t in targets}.values())  # one texture may feed several arguments
+    private: list[tuple[wp.array, wp.array]] = []
+    shared = [inputs]
+    for _ in range(1, workers):
+        copies = {id(t): wp.zeros_like(t) for t in unique}
+        private += [(t, copies[id(t)]) for t in unique]
+        shared.append([copies.get(id(a), a) for a in inputs])
+
+    def run(worker: int, k: int) -> None:
+        ins, _, dim = split.arguments(shared[worker], k)
+        wp.launch(kernel, dim=dim, inputs=ins, device=device, record_tape=False)
+
+    split.run(run)
+    _add_private(private)
 
 
 class _Split:
@@ -221,8 +264,13 @@ def _backward(tape, split: _Split) -> None:
         wp.launch(split.kernel, dim=dim, inputs=ins, outputs=outs, adj_inputs=adj_ins, adj_outputs=[o.grad for o in outs], device=split.device, adjoint=True)
 
     split.run(backward)
-    for grad, mine in private:
-        target = grad.numpy()  # CPU arrays: views of the same memory
+    _add_private(private)
+
+
+def _add_private(private: list[tuple[wp.array, wp.array]]) -> None:
+    """``real += mine`` for every ``(real, mine)`` pair of gradient arrays (CPU: NumPy views)."""
+    for real, mine in private:
+        target = real.numpy()  # CPU arrays: views of the same memory
         target += mine.numpy()
 
 

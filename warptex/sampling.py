@@ -8,7 +8,7 @@ import math
 import numpy as np
 import warp as wp
 
-from warptex._launch import launch, per_pixel
+from warptex._launch import launch, per_pixel, scatter
 from warptex._validate import as_enum, as_float, as_float_array, resolve_device
 from warptex.kernels import sampling as ks
 from warptex.texture import Texture, TextureArray
@@ -181,15 +181,21 @@ def sample(
 
     constant_layer, layers = _resolve_layer(func, texture, layer, shape, device)
 
-    requires_grad = texture.requires_grad or any(a is not None and a.requires_grad for a in (uv, dx, dy, lods))
-    out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=requires_grad)
+    other_grads = any(a is not None and a.requires_grad for a in (uv, dx, dy, lods))
+    out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=texture.requires_grad or other_grads)
+    args = [*per_pixel(flat, dx, dy, lods, layers), smp, lod_source, constant_lod, constant_layer]
+
+    def texel_gradients(tape):  # sampling is linear in the texels: their gradient, hand-written
+        grad = tape.get_adjoint(texture.view.texels)  # registered for tape.zero()
+        scatter(ks.sample_texel_grad_kernel, count, inputs=[texture.view, grad, *args, *per_pixel(out.grad)], targets=[grad], device=device)
+
+    backward = texel_gradients if texture.requires_grad and not other_grads else None
     if lod_source in (ks.LOD_NONE, ks.LOD_CONSTANT):  # one LOD for all: its levels resolved here
         level, fraction = mip_levels(constant_lod, smp, texture.num_levels)
         inputs = [texture.view, *per_pixel(flat, layers), smp, level, fraction, constant_layer]
-        launch(ks.sample_level_kernel, count, inputs=inputs, outputs=[out], device=device)
+        launch(ks.sample_level_kernel, count, inputs=inputs, outputs=[out], device=device, backward=backward)
     else:
-        inputs = [texture.view, *per_pixel(flat, dx, dy, lods, layers), smp, lod_source, constant_lod, constant_layer]
-        launch(ks.sample_kernel, count, inputs=inputs, outputs=[out], device=device)
+        launch(ks.sample_kernel, count, inputs=[texture.view, *args], outputs=[out], device=device, backward=backward)
     return out.reshape((*shape, texture.channels))
 
 
