@@ -22,7 +22,7 @@ ground beside it pick their own mip levels.
 import warp as wp
 
 from .normals import blend_projected, decode_normal, sign_or_one, to_world
-from .sampling import Sampler, TextureView, lod_from_derivatives, write_channels
+from .sampling import Sampler, TextureView, lod_from_derivatives, read_channels, splat_lod, write_channels
 from .stochastic import StochasticParams, sample_stochastic
 
 # How the three projections are weighted.
@@ -275,6 +275,53 @@ def triplanar_kernel(
             if w[axis] > 0.0:
                 colour += w[axis] * sample_projection(tex_x, tex_y, tex_z, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
     write_channels(out, i, colour)
+
+
+@wp.func
+def splat_one(
+    tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, axis: wp.int32, proj: Projection, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, smp: Sampler, g: wp.vec4
+):
+    """Add the gradient ``g`` of projection ``axis`` (plain sampling, as :func:`sample_one` reads
+    it) into ``grad``, the texels' gradient; nothing when ``grad`` is empty (not needed)."""
+    if grad.shape[0] > 0:
+        splat_lod(tex, grad, layer, projection_uv(proj, axis, p, n), projection_lod(tex, proj, axis, dpdx, dpdy), smp, g)
+
+
+@wp.kernel(enable_backward=False)
+def triplanar_texel_grad_kernel(
+    tex_x: TextureView,
+    tex_y: TextureView,
+    tex_z: TextureView,
+    grad_x: wp.array(dtype=wp.vec4),
+    grad_y: wp.array(dtype=wp.vec4),
+    grad_z: wp.array(dtype=wp.vec4),
+    layer: wp.int32,
+    position: wp.array(dtype=wp.vec3),
+    position_dx: wp.array(dtype=wp.vec3),
+    position_dy: wp.array(dtype=wp.vec3),
+    normal: wp.array(dtype=wp.vec3),
+    mask: wp.array(dtype=float),
+    proj: Projection,
+    smp: Sampler,
+    adj_out: wp.array2d(dtype=float),
+):
+    """Add the gradient of :func:`triplanar_kernel` with plain sampling (``METHOD_NONE``) with
+    respect to the texels of ``tex_x``/``tex_y``/``tex_z`` into ``grad_x``/``grad_y``/``grad_z``
+    (empty: not needed), given the output's gradient ``adj_out``: each projection's weight times
+    ``adj_out[i]``, splatted into the texels it read."""
+    i = wp.tid()
+    if mask[i] != 0.0:
+        p, n, dpdx, dpdy = object_space(proj, position[i], normal[i], position_dx[i], position_dy[i])
+        w = projection_weights(proj, n)
+        g = read_channels(adj_out, i)
+        for axis in range(3):
+            if w[axis] > 0.0:
+                if axis == 0:
+                    splat_one(tex_x, grad_x, layer, axis, proj, p, n, dpdx, dpdy, smp, w[axis] * g)
+                elif axis == 1:
+                    splat_one(tex_y, grad_y, layer, axis, proj, p, n, dpdx, dpdy, smp, w[axis] * g)
+                else:
+                    splat_one(tex_z, grad_z, layer, axis, proj, p, n, dpdx, dpdy, smp, w[axis] * g)
 
 
 @wp.kernel

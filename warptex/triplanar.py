@@ -17,10 +17,11 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
-from warptex._launch import launch, per_pixel
+from warptex._launch import launch, per_pixel, scatter
 from warptex._validate import as_enum, as_float, as_float_array, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import normals as kn
+from warptex.kernels import stochastic as kst
 from warptex.kernels import triplanar as kt
 from warptex.sampling import Address, Filter, surface_sampler
 from warptex.stochastic import Stochastic, resolve_stochastic
@@ -222,7 +223,7 @@ def triplanar_normal(
 
 def _colour(func: str, weights: int, **opts) -> wp.array:
     setup = _setup(func, weights, **opts)
-    return setup.launch(kt.triplanar_kernel, setup.channels, [])
+    return setup.launch(kt.triplanar_kernel, setup.channels, [], texel_grad_kernel=kt.triplanar_texel_grad_kernel)
 
 
 class _Setup:
@@ -233,20 +234,27 @@ class _Setup:
         self.proj, self.smp, self.stoch, self.device, self.params = proj, smp, stoch, device, params
         self.channels = textures[0].channels
 
-    def launch(self, kernel, channels: int, extra: list) -> wp.array:
+    def launch(self, kernel, channels: int, extra: list, texel_grad_kernel=None) -> wp.array:
+        """Launch ``kernel``; ``texel_grad_kernel``, when given, is its hand-written texel gradient
+        for plain sampling, used in place of the generated adjoint when only texels need gradients."""
         g = self.gbuffer
         h, w = g.resolution
         count = h * w
-        requires_grad = any(t.requires_grad for t in self.textures) or any(p.requires_grad for p in self.params)
-        out = wp.zeros((count, channels), dtype=float, device=self.device, requires_grad=requires_grad)
         flat = [a.reshape((count,)) for a in (g.position, g.position_dx, g.position_dy, g.normal, g.mask)]
-        launch(
-            kernel,
-            count,
-            inputs=[*(t.view for t in self.textures), self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch, *extra],
-            outputs=[out],
-            device=self.device,
-        )
+        texel_grads = any(t.requires_grad for t in self.textures)
+        other_grads = any(p.requires_grad for p in self.params) or any(a.requires_grad for a in flat)
+        out = wp.zeros((count, channels), dtype=float, device=self.device, requires_grad=texel_grads or other_grads)
+        views = [t.view for t in self.textures]
+
+        def texel_gradients(tape):
+            grads = [tape.get_adjoint(t.view.texels) if t.requires_grad else None for t in self.textures]
+            inputs = [*views, *grads, self.layer, *per_pixel(*flat), self.proj, self.smp, *per_pixel(out.grad)]
+            scatter(texel_grad_kernel, count, inputs=inputs, targets=[a for a in grads if a is not None], device=self.device)
+
+        plain = self.stoch.method == kst.METHOD_NONE
+        backward = texel_gradients if texel_grad_kernel is not None and plain and texel_grads and not other_grads else None
+        inputs = [*views, self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch, *extra]
+        launch(kernel, count, inputs=inputs, outputs=[out], device=self.device, backward=backward)
         return out.reshape((h, w, channels))
 
 
