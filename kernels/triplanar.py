@@ -22,8 +22,8 @@ ground beside it pick their own mip levels.
 import warp as wp
 
 from .normals import blend_projected, decode_normal, sign_or_one, to_world
-from .sampling import Sampler, TextureView, lod_from_derivatives, read_channels, splat_lod, write_channels
-from .stochastic import StochasticParams, sample_stochastic
+from .sampling import Sampler, TextureView, lod_from_derivatives, read_channels, write_channels
+from .stochastic import StochasticParams, sample_stochastic, splat_stochastic
 
 # How the three projections are weighted.
 WEIGHTS_TRIPLANAR = wp.constant(0)  # pow(|n|, sharpness), normalised
@@ -279,12 +279,23 @@ def triplanar_kernel(
 
 @wp.func
 def splat_one(
-    tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, axis: wp.int32, proj: Projection, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, smp: Sampler, g: wp.vec4
+    tex: TextureView,
+    grad: wp.array(dtype=wp.vec4),
+    layer: wp.int32,
+    axis: wp.int32,
+    proj: Projection,
+    p: wp.vec3,
+    n: wp.vec3,
+    dpdx: wp.vec3,
+    dpdy: wp.vec3,
+    smp: Sampler,
+    stoch: StochasticParams,
+    g: wp.vec4,
 ):
-    """Add the gradient ``g`` of projection ``axis`` (plain sampling, as :func:`sample_one` reads
-    it) into ``grad``, the texels' gradient; nothing when ``grad`` is empty (not needed)."""
+    """Add the gradient ``g`` of projection ``axis`` (as :func:`sample_one` reads it; linear
+    blends only) into ``grad``, the texels' gradient; nothing when ``grad`` is empty (not needed)."""
     if grad.shape[0] > 0:
-        splat_lod(tex, grad, layer, projection_uv(proj, axis, p, n), projection_lod(tex, proj, axis, dpdx, dpdy), smp, g)
+        splat_stochastic(tex, grad, layer, projection_uv(proj, axis, p, n), projection_lod(tex, proj, axis, dpdx, dpdy), smp, stoch, g)
 
 
 @wp.kernel(enable_backward=False)
@@ -303,12 +314,13 @@ def triplanar_texel_grad_kernel(
     mask: wp.array(dtype=float),
     proj: Projection,
     smp: Sampler,
+    stoch: StochasticParams,
     adj_out: wp.array2d(dtype=float),
 ):
-    """Add the gradient of :func:`triplanar_kernel` with plain sampling (``METHOD_NONE``) with
-    respect to the texels of ``tex_x``/``tex_y``/``tex_z`` into ``grad_x``/``grad_y``/``grad_z``
-    (empty: not needed), given the output's gradient ``adj_out``: each projection's weight times
-    ``adj_out[i]``, splatted into the texels it read."""
+    """Add the gradient of :func:`triplanar_kernel` (linear blends: plain sampling, or stochastic
+    without a histogram) with respect to the texels of ``tex_x``/``tex_y``/``tex_z`` into
+    ``grad_x``/``grad_y``/``grad_z`` (empty: not needed), given the output's gradient ``adj_out``:
+    each projection's weight times ``adj_out[i]``, splatted into the texels it read."""
     i = wp.tid()
     if mask[i] != 0.0:
         p, n, dpdx, dpdy = object_space(proj, position[i], normal[i], position_dx[i], position_dy[i])
@@ -317,11 +329,11 @@ def triplanar_texel_grad_kernel(
         for axis in range(3):
             if w[axis] > 0.0:
                 if axis == 0:
-                    splat_one(tex_x, grad_x, layer, axis, proj, p, n, dpdx, dpdy, smp, w[axis] * g)
+                    splat_one(tex_x, grad_x, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, w[axis] * g)
                 elif axis == 1:
-                    splat_one(tex_y, grad_y, layer, axis, proj, p, n, dpdx, dpdy, smp, w[axis] * g)
+                    splat_one(tex_y, grad_y, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, w[axis] * g)
                 else:
-                    splat_one(tex_z, grad_z, layer, axis, proj, p, n, dpdx, dpdy, smp, w[axis] * g)
+                    splat_one(tex_z, grad_z, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, w[axis] * g)
 
 
 @wp.kernel

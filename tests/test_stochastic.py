@@ -6,6 +6,7 @@ Measured figures (autocorrelation peaks at the tile period, histogram moments) a
 """
 
 import dataclasses
+import importlib
 
 import numpy as np
 import pytest
@@ -319,8 +320,10 @@ GRAD_CASES = {
 }
 
 
+@pytest.mark.parametrize("backward", ["hand-written", "generated"])
 @pytest.mark.parametrize("case", list(GRAD_CASES))
-def test_texel_gradients_match_finite_differences(rng, case):
+def test_texel_gradients_match_finite_differences(rng, case, backward):
+    """Only the texels need gradients: the hand-written texel gradient; the UVs too: the generated adjoint."""
     img = rng.random((16, 16, 3), dtype=np.float32)
     uv = rng.uniform(-4, 4, (400, 2)).astype(np.float32)
     weights = rng.normal(size=(400, 3))
@@ -329,7 +332,7 @@ def test_texel_gradients_match_finite_differences(rng, case):
     tape = wp.Tape()
     with tape:
         tex.update()
-        out = stochastic(tex, uv, **kw)
+        out = stochastic(tex, wp.array(uv, dtype=wp.vec2, requires_grad=backward == "generated"), **kw)
     out.grad.assign(weights.astype(np.float32))
     tape.backward()
     grad = tex.grad(0).astype(np.float64)
@@ -339,6 +342,46 @@ def test_texel_gradients_match_finite_differences(rng, case):
         direction = rng.normal(size=img.shape)
         fd = (loss(img + 0.05 * direction) - loss(img - 0.05 * direction)) / 0.1
         np.testing.assert_allclose((grad * direction).sum(), fd, rtol=1e-4, atol=1e-4)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("case", [*GRAD_CASES, "hex derivatives", "hex histogram"])
+def test_hand_written_texel_gradients_equal_the_generated_adjoint(rng, monkeypatch, case, threads):
+    """The hand-written texel gradient (only texels need gradients) gives what the generated adjoint
+    gives when the UVs need gradients too, over every level, on one thread and split over two
+    (70 000 samples). The histogram blend, not linear in the texels, always takes the generated adjoint."""
+    module = importlib.import_module("warptex.stochastic")
+    n = 70000
+    img = rng.random((37, 29, 3), dtype=np.float32)
+    uv = rng.uniform(-6, 6, (n, 2)).astype(np.float32)
+    weights = rng.normal(size=(n, 3)).astype(np.float32)
+    kw = dict(GRAD_CASES.get(case, {"method": "hex", "rotation": 0.3}))
+    if case == "hex derivatives":
+        kw.update(uv_dx=rng.uniform(-0.2, 0.2, (n, 2)).astype(np.float32), uv_dy=rng.uniform(-0.05, 0.05, (n, 2)).astype(np.float32))
+    scattered = []
+    monkeypatch.setattr(module, "scatter", lambda *a, **k: (scattered.append(a[0]), wt._launch.scatter(*a, **k)))
+    wt.set_num_threads(threads)
+    try:
+        grads = {}
+        for uv_grad in (False, True):
+            tex = wt.Texture(img, requires_grad=True)
+            sampled = tex
+            if case == "hex histogram":
+                kw["histogram"] = prepare_histogram(tex, requires_grad=True)
+                sampled = kw["histogram"].texture
+            tape = wp.Tape()
+            with tape:
+                out = stochastic(tex, wp.array(uv, dtype=wp.vec2, requires_grad=uv_grad), **kw)
+            out.grad.assign(weights)
+            tape.backward()
+            grads[uv_grad] = np.concatenate([sampled.grad(k).reshape(-1) for k in range(sampled.num_levels)])
+            tape.zero()
+            assert not sampled.grad(0).any(), "tape.zero() must reset the texel gradients"
+    finally:
+        wt.set_num_threads(None)
+    assert len(scattered) == (0 if case == "hex histogram" else 1)
+    assert np.abs(grads[True]).max() > 1
+    np.testing.assert_allclose(grads[False], grads[True], rtol=1e-5, atol=2e-5 * np.abs(grads[True]).max())
 
 
 def _check_against_reference_differences(ref_loss, x, grad, *, step=1e-6, tol=1e-3, min_kept=0.9):

@@ -174,12 +174,16 @@ def test_hand_written_texel_gradients_match_finite_differences(sphere, technique
         np.testing.assert_allclose((grad * direction).sum(), fd, rtol=1e-3, atol=2e-3)
 
 
+CASES = ["triplanar", "biplanar nearest mirror", "per-axis textures, one fixed", "stochastic hash4 mirrored", "stochastic hex rotated", "stochastic hex histogram"]
+
+
 @pytest.mark.parametrize("threads", [1, 2])
-@pytest.mark.parametrize("case", ["triplanar", "biplanar nearest mirror", "per-axis textures, one fixed", "stochastic"])
+@pytest.mark.parametrize("case", CASES)
 def test_hand_written_texel_gradients_equal_the_generated_adjoint(monkeypatch, case, threads):
     """The hand-written texel gradient (only texels need gradients) against the generated adjoint
     (a tiling array needs gradients too), over every level of every texture, on a 256² sphere
-    (65 536 pixels: split over two threads). Stochastic sampling always takes the generated adjoint."""
+    (65 536 pixels: split over two threads). The histogram blend, not linear in the texels,
+    always takes the generated adjoint."""
     module = importlib.import_module("warptex.triplanar")  # the package's `triplanar` is the function
 
     camera = wt.orthographic((3.0, 2.0, 4.0), (0.0, 0.0, 0.0), height=2.2, resolution=(256, 256))
@@ -199,9 +203,15 @@ def test_hand_written_texel_gradients_equal_the_generated_adjoint(monkeypatch, c
             else:
                 textures = [wt.Texture(images[0], requires_grad=True)]
                 kw = {"texture": textures[0], **({"filter": "nearest", "address": "mirror"} if "nearest" in case else {})}
+            if case == "stochastic hash4 mirrored":
+                kw["stochastic"] = wt.Stochastic("hash4", mirror=True)
+            elif case == "stochastic hex rotated":
+                kw["stochastic"] = wt.Stochastic("hex", rotation=0.5, contrast=2.0)
+            elif case == "stochastic hex histogram":
+                histogram = wt.prepare_histogram(textures[0], requires_grad=True)
+                kw["stochastic"] = wt.Stochastic("hex", histogram=histogram)
+                textures = [histogram.texture]
             technique = biplanar if case.startswith("biplanar") else triplanar
-            if case == "stochastic":
-                kw["stochastic"] = "hash4"
             tape = wp.Tape()
             with tape:
                 out = technique(g, tiling=wp.array([2.5], dtype=float, requires_grad=tiling_grad), **kw)
@@ -212,6 +222,6 @@ def test_hand_written_texel_gradients_equal_the_generated_adjoint(monkeypatch, c
             assert not any(t.grad(0).any() for t in textures if t.requires_grad), "tape.zero() must reset the texel gradients"
     finally:
         wt.set_num_threads(None)
-    assert len(scattered) == (0 if case == "stochastic" else 1)
+    assert len(scattered) == (0 if case.endswith("histogram") else 1)
     assert np.abs(grads[True]).max() > 1
     np.testing.assert_allclose(grads[False], grads[True], rtol=1e-5, atol=2e-5 * np.abs(grads[True]).max())

@@ -14,7 +14,7 @@ import enum
 import numpy as np
 import warp as wp
 
-from warptex._launch import launch, per_pixel
+from warptex._launch import launch, per_pixel, scatter
 from warptex._validate import as_enum, as_float, as_float_array, resolve_device
 from warptex.histogram import GAUSSIAN_MEAN, LUT_RANGE, Histogram, prepare_histogram
 from warptex.kernels import stochastic as kst
@@ -266,15 +266,17 @@ def stochastic(
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
     constant_layer, layers = _resolve_layer(func, texture, layer, shape, device)
 
-    requires_grad = sampled.requires_grad or any(a is not None and a.requires_grad for a in (uv, dx, dy, lods))
-    out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=requires_grad)
-    launch(
-        kst.stochastic_kernel,
-        count,
-        inputs=[sampled.view, *per_pixel(uv.reshape((count,)), dx, dy, lods, layers), smp, params, lod_source, constant_lod, constant_layer],
-        outputs=[out],
-        device=device,
-    )
+    other_grads = any(a is not None and a.requires_grad for a in (uv, dx, dy, lods))
+    out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=sampled.requires_grad or other_grads)
+    args = [*per_pixel(uv.reshape((count,)), dx, dy, lods, layers), smp, params, lod_source, constant_lod, constant_layer]
+
+    def texel_gradients(tape):  # a linear blend of taps: the texels' gradient, hand-written
+        grad = tape.get_adjoint(sampled.view.texels)  # registered for tape.zero()
+        scatter(kst.stochastic_texel_grad_kernel, count, inputs=[sampled.view, grad, *args, *per_pixel(out.grad)], targets=[grad], device=device)
+
+    linear = params.histogram == 0
+    backward = texel_gradients if sampled.requires_grad and linear and not other_grads else None
+    launch(kst.stochastic_kernel, count, inputs=[sampled.view, *args], outputs=[out], device=device, backward=backward)
     return out.reshape((*shape, texture.channels))
 
 

@@ -21,7 +21,6 @@ from warptex._launch import launch, per_pixel, scatter
 from warptex._validate import as_enum, as_float, as_float_array, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import normals as kn
-from warptex.kernels import stochastic as kst
 from warptex.kernels import triplanar as kt
 from warptex.sampling import Address, Filter, surface_sampler
 from warptex.stochastic import Stochastic, resolve_stochastic
@@ -236,7 +235,7 @@ class _Setup:
 
     def launch(self, kernel, channels: int, extra: list, texel_grad_kernel=None) -> wp.array:
         """Launch ``kernel``; ``texel_grad_kernel``, when given, is its hand-written texel gradient
-        for plain sampling, used in place of the generated adjoint when only texels need gradients."""
+        for linear blends, used in place of the generated adjoint when only texels need gradients."""
         g = self.gbuffer
         h, w = g.resolution
         count = h * w
@@ -248,11 +247,11 @@ class _Setup:
 
         def texel_gradients(tape):
             grads = [tape.get_adjoint(t.view.texels) if t.requires_grad else None for t in self.textures]
-            inputs = [*views, *grads, self.layer, *per_pixel(*flat), self.proj, self.smp, *per_pixel(out.grad)]
+            inputs = [*views, *grads, self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch, *per_pixel(out.grad)]
             scatter(texel_grad_kernel, count, inputs=inputs, targets=[a for a in grads if a is not None], device=self.device)
 
-        plain = self.stoch.method == kst.METHOD_NONE
-        backward = texel_gradients if texel_grad_kernel is not None and plain and texel_grads and not other_grads else None
+        linear = self.stoch.histogram == 0  # the histogram blend is not linear in the texels
+        backward = texel_gradients if texel_grad_kernel is not None and linear and texel_grads and not other_grads else None
         inputs = [*views, self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch, *extra]
         launch(kernel, count, inputs=inputs, outputs=[out], device=self.device, backward=backward)
         return out.reshape((h, w, channels))
