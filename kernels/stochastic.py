@@ -277,6 +277,19 @@ def stochastic_taps(uv: wp.vec2, params: StochasticParams):
 
 
 @wp.func
+def pick_tap(k: wp.int32, t0: wp.vec2, t1: wp.vec2, t2: wp.vec2, t3: wp.vec2) -> wp.vec2:
+    """Tap ``k`` of :func:`stochastic_taps` (``k`` is a constant in unrolled loops: no branch is left)."""
+    tap = t0
+    if k == 1:
+        tap = t1
+    elif k == 2:
+        tap = t2
+    elif k == 3:
+        tap = t3
+    return tap
+
+
+@wp.func
 def histogram_blend(tex: TextureView, layer: wp.int32, acc: wp.vec4, w: wp.vec4, lod: float, smp: Sampler, params: StochasticParams) -> wp.vec4:
     """The hex histogram blend of ``acc = Σ w_k (tap_k - mean)`` (Gaussianised taps): rescaled to
     the taps' variance, mapped through the inverse LUT of the levels ``lod`` reads, decorrelation
@@ -315,14 +328,7 @@ def sample_stochastic(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float
         result = wp.vec4(0.0)
         for k in range(4):
             if w[k] > 0.0:
-                tap = t0
-                if k == 1:
-                    tap = t1
-                elif k == 2:
-                    tap = t2
-                elif k == 3:
-                    tap = t3
-                result += w[k] * (sampling.sample_lod(tex, layer, tap, lod, smp) - mean)
+                result += w[k] * (sampling.sample_lod(tex, layer, pick_tap(k, t0, t1, t2, t3), lod, smp) - mean)
         if params.histogram != 0:
             result = histogram_blend(tex, layer, result, w, lod, smp, params)
     return result
@@ -339,14 +345,7 @@ def splat_stochastic(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.
         t0, t1, t2, t3, w = stochastic_taps(uv, params)
         for k in range(4):
             if w[k] > 0.0:
-                tap = t0
-                if k == 1:
-                    tap = t1
-                elif k == 2:
-                    tap = t2
-                elif k == 3:
-                    tap = t3
-                sampling.splat_lod(tex, grad, layer, tap, lod, smp, w[k] * g)
+                sampling.splat_lod(tex, grad, layer, pick_tap(k, t0, t1, t2, t3), lod, smp, w[k] * g)
 
 
 @wp.kernel

@@ -13,6 +13,7 @@ import pytest
 import warp as wp
 
 import warptex as wt
+from backward_paths import assert_same_gradients, texel_gradients_both_ways
 
 FILTERS = {"nearest": {"filter": "nearest"}, "bilinear": {"filter": "bilinear"}, "trilinear": {"lod": 1.4}}
 MODES = ("wrap", "clamp", "mirror", "border")
@@ -212,33 +213,17 @@ def test_hand_written_texel_gradients_equal_the_generated_adjoint(rng, monkeypat
     """Only texels need gradients: the hand-written texel gradient runs (and only then), and gives
     what the generated adjoint gives when the UVs need gradients too, over every level read, on one
     thread and split over two (70 000 samples: more than one chunk)."""
-    from warptex import sampling
-
     n = 70000
     layers = rng.random((3, 37, 29, 3), dtype=np.float32)
     uv = rng.uniform(-1.5, 2.5, (n, 2)).astype(np.float32)
-    weights = rng.normal(size=(n, 3)).astype(np.float32)
     arrays = {"lod": rng.uniform(-0.5, 6.0, n).astype(np.float32), "uv_dx": rng.uniform(-0.2, 0.2, (n, 2)).astype(np.float32),
               "uv_dy": rng.uniform(-0.05, 0.05, (n, 2)).astype(np.float32), "layer": rng.integers(-1, 4, n)}  # fmt: skip
-    kw = {k: arrays[k] if v == "array" else v for k, v in LOOKUPS[lookup].items()}
-    kw.setdefault("layer", 1)
-    scattered = []
-    monkeypatch.setattr(sampling, "scatter", lambda *a, **k: (scattered.append(a[0]), wt._launch.scatter(*a, **k)))
-    wt.set_num_threads(threads)
-    try:
-        grads = {}
-        for uv_grad in (False, True):
-            tex = wt.TextureArray(layers, requires_grad=True)
-            tape = wp.Tape()
-            with tape:
-                out = wt.sample(tex, wp.array(uv, dtype=wp.vec2, requires_grad=uv_grad), **kw)
-            out.grad.assign(weights)
-            tape.backward()
-            grads[uv_grad] = np.concatenate([tex.grad(k).reshape(-1) for k in range(tex.num_levels)])
-            assert len(scattered) == 1  # the first run only
-            tape.zero()
-            assert not tex.grad(0).any(), "tape.zero() must reset the texel gradients"
-    finally:
-        wt.set_num_threads(None)
-    assert np.abs(grads[True]).max() > 1
-    np.testing.assert_allclose(grads[False], grads[True], rtol=1e-5, atol=2e-5 * np.abs(grads[True]).max())
+    kw = {"layer": 1, **{k: arrays[k] if v == "array" else v for k, v in LOOKUPS[lookup].items()}}
+
+    def forward(uv_grad):
+        tex = wt.TextureArray(layers, requires_grad=True)
+        return wt.sample(tex, wp.array(uv, dtype=wp.vec2, requires_grad=uv_grad), **kw), [tex]
+
+    hand, generated, scatters = texel_gradients_both_ways(monkeypatch, "warptex.sampling", threads, forward, rng.normal(size=(n, 3)).astype(np.float32))
+    assert scatters == 1
+    assert_same_gradients(hand, generated)

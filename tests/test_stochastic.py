@@ -6,7 +6,6 @@ Measured figures (autocorrelation peaks at the tile period, histogram moments) a
 """
 
 import dataclasses
-import importlib
 
 import numpy as np
 import pytest
@@ -15,6 +14,7 @@ import warp as wp
 import reference as ref
 import reference_stochastic as rs
 import warptex as wt
+from backward_paths import assert_same_gradients, texel_gradients_both_ways
 from warptex.stochastic import Method, hex_taps, prepare_histogram, stochastic, stochastic_params
 
 TEXTURES = ("brick", "grass", "gravel")
@@ -350,38 +350,22 @@ def test_hand_written_texel_gradients_equal_the_generated_adjoint(rng, monkeypat
     """The hand-written texel gradient (only texels need gradients) gives what the generated adjoint
     gives when the UVs need gradients too, over every level, on one thread and split over two
     (70 000 samples). The histogram blend, not linear in the texels, always takes the generated adjoint."""
-    module = importlib.import_module("warptex.stochastic")
     n = 70000
     img = rng.random((37, 29, 3), dtype=np.float32)
     uv = rng.uniform(-6, 6, (n, 2)).astype(np.float32)
-    weights = rng.normal(size=(n, 3)).astype(np.float32)
     kw = dict(GRAD_CASES.get(case, {"method": "hex", "rotation": 0.3}))
     if case == "hex derivatives":
         kw.update(uv_dx=rng.uniform(-0.2, 0.2, (n, 2)).astype(np.float32), uv_dy=rng.uniform(-0.05, 0.05, (n, 2)).astype(np.float32))
-    scattered = []
-    monkeypatch.setattr(module, "scatter", lambda *a, **k: (scattered.append(a[0]), wt._launch.scatter(*a, **k)))
-    wt.set_num_threads(threads)
-    try:
-        grads = {}
-        for uv_grad in (False, True):
-            tex = wt.Texture(img, requires_grad=True)
-            sampled = tex
-            if case == "hex histogram":
-                kw["histogram"] = prepare_histogram(tex, requires_grad=True)
-                sampled = kw["histogram"].texture
-            tape = wp.Tape()
-            with tape:
-                out = stochastic(tex, wp.array(uv, dtype=wp.vec2, requires_grad=uv_grad), **kw)
-            out.grad.assign(weights)
-            tape.backward()
-            grads[uv_grad] = np.concatenate([sampled.grad(k).reshape(-1) for k in range(sampled.num_levels)])
-            tape.zero()
-            assert not sampled.grad(0).any(), "tape.zero() must reset the texel gradients"
-    finally:
-        wt.set_num_threads(None)
-    assert len(scattered) == (0 if case == "hex histogram" else 1)
-    assert np.abs(grads[True]).max() > 1
-    np.testing.assert_allclose(grads[False], grads[True], rtol=1e-5, atol=2e-5 * np.abs(grads[True]).max())
+
+    def forward(uv_grad):
+        tex = wt.Texture(img, requires_grad=True)
+        histogram = prepare_histogram(tex, requires_grad=True) if case == "hex histogram" else None
+        out = stochastic(tex, wp.array(uv, dtype=wp.vec2, requires_grad=uv_grad), histogram=histogram, **kw)
+        return out, [tex if histogram is None else histogram.texture]
+
+    hand, generated, scatters = texel_gradients_both_ways(monkeypatch, "warptex.stochastic", threads, forward, rng.normal(size=(n, 3)).astype(np.float32))
+    assert scatters == (0 if case == "hex histogram" else 1)
+    assert_same_gradients(hand, generated)
 
 
 def _check_against_reference_differences(ref_loss, x, grad, *, step=1e-6, tol=1e-3, min_kept=0.9):
