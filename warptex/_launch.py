@@ -130,8 +130,7 @@ def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: 
     if count <= 0:
         return
     device = wp.get_device(device)
-    threads = 1 if device.is_cuda else get_num_threads() if threads is None else threads
-    workers = max(1, min(threads, count // MIN_PIXELS_PER_THREAD))
+    workers = _workers(device, count, threads)
     tape = _active_tape()
     if backward is not None:
         if tape is not None and any(o.requires_grad for o in outputs):
@@ -170,8 +169,10 @@ def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads:
     if count <= 0:
         return
     device = wp.get_device(device)
-    threads = 1 if device.is_cuda else get_num_threads() if threads is None else threads
-    workers = max(1, min(threads, count // MIN_PIXELS_PER_THREAD))
+    workers = _workers(device, count, threads)
+    if workers == 1:
+        wp.launch(kernel, dim=count, inputs=[_chunk(a, 0, count, count) for a in inputs], device=device, record_tape=False)
+        return
     split = _Split(kernel, device, count, inputs, [], workers)
     unique = list({id(t): t for t in targets}.values())  # one texture may feed several arguments
     private: list[tuple[wp.array, wp.array]] = []
@@ -187,6 +188,12 @@ def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads:
 
     split.run(run)
     _add_private(private)
+
+
+def _workers(device, count: int, threads: int | None) -> int:
+    """Threads a launch of ``count`` pixels is split over: 1 on CUDA and for small launches."""
+    threads = 1 if device.is_cuda else get_num_threads() if threads is None else threads
+    return max(1, min(threads, count // MIN_PIXELS_PER_THREAD))
 
 
 class _Split:
