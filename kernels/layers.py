@@ -15,17 +15,31 @@ where ``height_j`` is read at layer ``j``'s UV from a channel of the layer itsel
 separate height array. Small ``t`` gives sharp, height-driven borders; large ``t`` tends to the
 plain blend.
 
-The kernels are made per layer count and splat channel count (:func:`splat_kernel`), so every
+The kernels are made per layer count and splat channel count (:func:`splat_kernels`), so every
 per-layer loop is unrolled at compile time and the local weight, height and colour storage has
 exactly the size it needs.
+
+**Hand-written gradient.** Warp's generated adjoint replays each sampling function's forward pass
+inside its reverse pass (about 7× the forward here). Where only texels and the transition need
+gradients (no tiling, sharpness, offsets or G-buffer gradients) and every blend of taps is linear
+(no histogram), :func:`splat_kernels`' second kernel computes them directly: per pixel it replays
+the forward once, takes the blend's derivatives by hand, and adds each layer's colour gradient into
+the texels the layer read (:func:`add_layer_gradient`), each weight's into the splat-map texels::
+
+    colour = Σ w''_j c_j                          ∂/∂c_j = w''_j · g,   ∂/∂w''_j = g · c_j
+    w''_j = v_j / max(Σ v, ε),  v_j = wh_j w'_j     (height blending, from h_j = height_j · w'_j)
+    w'_j = w_j / max(Σ w, ε)                        (normalize),  w_j = max(splat_j, 0)
+
+Where Warp's ``max`` has ties its adjoint takes the second operand; the hand-written one does the
+same (the running height maximum credits the last layer at the maximum).
 """
 
 import functools
 
 import warp as wp
 
-from .sampling import Sampler, TextureView, lod_from_derivatives, sample_lod, write_channels
-from .stochastic import StochasticParams, sample_stochastic
+from .sampling import Sampler, TextureView, lod_from_derivatives, read_channels, sample_lod, splat_lod, write_channels
+from .stochastic import StochasticParams, sample_stochastic, splat_stochastic
 from .triplanar import Projection, plane_lod, plane_uv, triplanar_sample, triplanar_weights
 
 PROJECT_UV = wp.constant(0)  # UV0 × tiling
@@ -88,15 +102,53 @@ def sample_layer(
     return value
 
 
+@wp.func
+def add_layer_gradient(
+    tex: TextureView,
+    grad: wp.array(dtype=wp.vec4),
+    layer: wp.int32,
+    params: SplatParams,
+    proj: Projection,
+    uv0: wp.vec2,
+    uv0_dx: wp.vec2,
+    uv0_dy: wp.vec2,
+    p: wp.vec3,
+    n: wp.vec3,
+    tri_w: wp.vec3,
+    dpdx: wp.vec3,
+    dpdy: wp.vec3,
+    smp: Sampler,
+    stoch: StochasticParams,
+    g: wp.vec4,
+):
+    """Add the gradient ``g`` of :func:`sample_layer` (same arguments; linear blends only) into
+    ``grad``, the texels' gradient; nothing when ``grad`` is empty (not needed)."""
+    if grad.shape[0] > 0:
+        t = layer_tiling(params, layer)
+        if params.projection == PROJECT_UV:
+            splat_stochastic(tex, grad, layer, uv0 * t, lod_from_derivatives(tex, uv0_dx * t, uv0_dy * t), smp, stoch, g)
+        elif params.projection == PROJECT_WORLD_XZ:
+            up = wp.vec3(0.0, 1.0, 0.0)
+            splat_stochastic(tex, grad, layer, plane_uv(proj, 1, p, up, t), plane_lod(tex, 1, dpdx, dpdy, t), smp, stoch, g)
+        else:
+            for axis in range(3):
+                if tri_w[axis] > 0.0:
+                    splat_stochastic(tex, grad, layer, plane_uv(proj, axis, p, n, t), plane_lod(tex, axis, dpdx, dpdy, t), smp, stoch, tri_w[axis] * g)
+
+
 @functools.cache
-def splat_kernel(num_layers: int, map_channels: int):
-    """The splat kernel for ``num_layers`` layers whose weights come ``map_channels`` per map."""
+def splat_kernels(num_layers: int, map_channels: int):
+    """``(forward, texel_grad)``: the splat kernel for ``num_layers`` layers whose weights come
+    ``map_channels`` per map, and its hand-written gradient (module docstring), compiled together
+    as one Warp module."""
     weights_t = wp.types.vector(length=num_layers, dtype=float)
     colours_t = wp.types.matrix(shape=(num_layers, 4), dtype=float)
+    module = f"warptex_splat_{num_layers}x{map_channels}"
+    wp.set_module_options({"max_unroll": max(16, num_layers)}, module=module)
 
     # Per-layer loops unroll. Components are only ever written once into fresh vectors (Warp's
     # in-place component writes have exact adjoints then, but not when they overwrite a value).
-    @wp.kernel(module="unique", module_options={"max_unroll": max(16, num_layers)})
+    @wp.kernel(module=module)
     def kernel(
         layers: TextureView,
         heights: TextureView,
@@ -166,4 +218,144 @@ def splat_kernel(num_layers: int, map_channels: int):
                 colour += w[j] * c[j]
         write_channels(out, i, colour)
 
-    return kernel
+    @wp.kernel(enable_backward=False, module=module)
+    def texel_grad(
+        layers: TextureView,
+        heights: TextureView,
+        maps: TextureView,
+        grad_layers: wp.array(dtype=wp.vec4),
+        grad_heights: wp.array(dtype=wp.vec4),
+        grad_maps: wp.array(dtype=wp.vec4),
+        grad_transition: wp.array(dtype=float),
+        uv0: wp.array(dtype=wp.vec2),
+        uv0_dx: wp.array(dtype=wp.vec2),
+        uv0_dy: wp.array(dtype=wp.vec2),
+        position: wp.array(dtype=wp.vec3),
+        position_dx: wp.array(dtype=wp.vec3),
+        position_dy: wp.array(dtype=wp.vec3),
+        normal: wp.array(dtype=wp.vec3),
+        mask: wp.array(dtype=float),
+        params: SplatParams,
+        proj: Projection,
+        smp: Sampler,
+        map_smp: Sampler,
+        stoch: StochasticParams,
+        height_stoch: StochasticParams,
+        adj_out: wp.array2d(dtype=float),
+    ):
+        """Add the gradient of ``kernel`` (linear blends of taps) with respect to the layers',
+        heights' and splat maps' texels and the transition into ``grad_*`` (empty: not needed),
+        given the output's gradient ``adj_out``: the forward replayed, then its blend reversed."""
+        i = wp.tid()
+        if mask[i] != 0.0:
+            uv = uv0[i]
+            p = position[i]
+            n = normal[i]
+            tri_w = wp.vec3(0.0)
+            if params.projection == PROJECT_TRIPLANAR:
+                tri_w = triplanar_weights(n, proj.sharpness[0])
+
+            # Forward: raw splat values r, clamped w0, normalised w1, colours c, raw heights hv.
+            r = weights_t()
+            texel = wp.vec4(0.0)
+            for j in range(wp.static(num_layers)):
+                if j % wp.static(map_channels) == 0:
+                    texel = sample_lod(maps, j // wp.static(map_channels), uv, 0.0, map_smp)
+                r[j] = texel[j % wp.static(map_channels)]
+            w0 = weights_t()
+            for j in range(wp.static(num_layers)):
+                w0[j] = wp.max(r[j], 0.0)
+            total = wp.dot(w0, weights_t(1.0))
+            w1 = w0
+            if params.normalize != 0:
+                w1 = w0 / wp.max(total, SPLAT_EPS)
+            c = colours_t()
+            hv = weights_t()
+            for j in range(wp.static(num_layers)):
+                if w1[j] > 0.0:
+                    value = sample_layer(layers, j, params, proj, uv, uv0_dx[i], uv0_dy[i], p, n, tri_w, position_dx[i], position_dy[i], smp, stoch)
+                    c[j] = value
+                    if params.height_mode == HEIGHT_CHANNEL:
+                        hv[j] = value[params.height_channel]
+                    elif params.height_mode == HEIGHT_ARRAY:
+                        hv[j] = sample_layer(heights, j, params, proj, uv, uv0_dx[i], uv0_dy[i], p, n, tri_w, position_dx[i], position_dy[i], smp, height_stoch)[0]
+            g = read_channels(adj_out, i)
+
+            # Backward through the blend: gw1 is the gradient of w1, gc of the colours, ghv of the heights.
+            gw1 = weights_t()
+            gc = colours_t()
+            ghv = weights_t()
+            if params.height_mode == HEIGHT_NONE:
+                for j in range(wp.static(num_layers)):
+                    gc[j] = w1[j] * g
+                    gw1[j] = wp.dot(g, c[j])
+            else:
+                h = wp.cw_mul(hv, w1)
+                top = -1.0e30
+                arg = -1
+                for j in range(wp.static(num_layers)):
+                    if w1[j] > 0.0 and h[j] >= top:  # ties: the later layer, as Warp's max adjoint
+                        top = h[j]
+                        arg = j
+                t = params.transition[0]
+                wh = weights_t()
+                for j in range(wp.static(num_layers)):
+                    wh[j] = wp.max(h[j] + t - top, 0.0)
+                v = wp.cw_mul(wh, w1)
+                v_total = wp.dot(v, weights_t(1.0))
+                d = wp.max(v_total, SPLAT_EPS)
+                gv = weights_t()
+                for j in range(wp.static(num_layers)):
+                    gc[j] = (v[j] / d) * g
+                    gv[j] = wp.dot(g, c[j]) / d
+                if v_total > SPLAT_EPS:
+                    gv -= weights_t(wp.dot(gv, v) / d)
+                g_top = 0.0
+                g_t = 0.0
+                gh = weights_t()
+                for j in range(wp.static(num_layers)):
+                    gw1[j] = gv[j] * wh[j]
+                    if h[j] + t - top > 0.0:
+                        ge = gv[j] * w1[j]
+                        gh[j] = ge
+                        g_t += ge
+                        g_top -= ge
+                if arg >= 0:
+                    gh[arg] = gh[arg] + g_top
+                for j in range(wp.static(num_layers)):
+                    gw1[j] = gw1[j] + gh[j] * hv[j]
+                    ghv[j] = gh[j] * w1[j]
+                if params.height_mode == HEIGHT_CHANNEL:
+                    for j in range(wp.static(num_layers)):
+                        gc[j, params.height_channel] = gc[j, params.height_channel] + ghv[j]
+                if grad_transition.shape[0] > 0:
+                    wp.atomic_add(grad_transition, 0, g_t)
+
+            # Through the normalisation and the clamp: gr, the gradient of the raw splat values.
+            gw0 = gw1
+            if params.normalize != 0:
+                s = wp.max(total, SPLAT_EPS)
+                gw0 = gw1 / s
+                if total > SPLAT_EPS:
+                    gw0 -= weights_t(wp.dot(gw1, w0) / (s * s))
+            gr = weights_t()
+            for j in range(wp.static(num_layers)):
+                if r[j] > 0.0:
+                    gr[j] = gw0[j]
+
+            # Into the texels: each map's channels, each layer's colour, each separate height.
+            if grad_maps.shape[0] > 0:
+                gm = wp.vec4(0.0)
+                for j in range(wp.static(num_layers)):
+                    gm[j % wp.static(map_channels)] = gr[j]
+                    if j % wp.static(map_channels) == wp.static(map_channels - 1) or j == wp.static(num_layers - 1):
+                        splat_lod(maps, grad_maps, j // wp.static(map_channels), uv, 0.0, map_smp, gm)
+                        gm = wp.vec4(0.0)
+            for j in range(wp.static(num_layers)):
+                if w1[j] > 0.0:
+                    add_layer_gradient(layers, grad_layers, j, params, proj, uv, uv0_dx[i], uv0_dy[i], p, n, tri_w, position_dx[i], position_dy[i], smp, stoch, gc[j])
+                    if params.height_mode == HEIGHT_ARRAY:
+                        gh4 = wp.vec4(ghv[j], 0.0, 0.0, 0.0)
+                        add_layer_gradient(heights, grad_heights, j, params, proj, uv, uv0_dx[i], uv0_dy[i], p, n, tri_w, position_dx[i], position_dy[i], smp, height_stoch, gh4)
+
+    return kernel, texel_grad

@@ -1,8 +1,9 @@
 """The hand-written texel gradient against Warp's generated adjoint, on the same inputs.
 
-When only texels need gradients, ``sample``, ``stochastic``, ``triplanar`` and ``biplanar`` record
-a hand-written texel gradient (a ``scatter`` launch); when another input needs gradients too, the
-generated adjoint computes them all. Both must give the same texel gradients.
+When only texels need gradients, ``sample``, ``stochastic``, ``triplanar``, ``biplanar`` and
+``splat`` record a hand-written texel gradient (a ``scatter`` launch; ``splat``'s also gives the
+height-blend transition's); when another input needs gradients too, the generated adjoint computes
+them all. Both must give the same gradients.
 """
 
 import importlib
@@ -19,8 +20,9 @@ def texel_gradients_both_ways(monkeypatch, module: str, threads: int, forward, w
     then with another input needing them too, and how many hand-written gradients ``module``
     launched over both runs.
 
-    ``forward(other_grads) -> (out, textures)`` runs the technique (on a tape) with fresh textures.
-    Each tape is zeroed afterwards, which must reset the texel gradients.
+    ``forward(other_grads) -> (out, textures)`` runs the technique (on a tape) with fresh textures
+    (or parameter arrays: their gradients are compared too). Each tape is zeroed afterwards, which
+    must reset the gradients.
     """
     scatters = []
     monkeypatch.setattr(importlib.import_module(module), "scatter", lambda *a, **k: (scatters.append(a[0]), wt._launch.scatter(*a, **k)))
@@ -34,12 +36,19 @@ def texel_gradients_both_ways(monkeypatch, module: str, threads: int, forward, w
             out.grad.assign(weights.reshape(out.shape))
             tape.backward()
             textures = [t for t in textures if t.requires_grad]
-            grads.append(np.concatenate([t.grad(k).reshape(-1) for t in textures for k in range(t.num_levels)]))
+            grads.append(np.concatenate([g.reshape(-1) for t in textures for g in _gradients(t)]))
             tape.zero()
-            assert not any(t.grad(0).any() for t in textures), "tape.zero() must reset the texel gradients"
+            assert not any(g.any() for t in textures for g in _gradients(t)), "tape.zero() must reset the gradients"
     finally:
         wt.set_num_threads(None)
     return grads[0], grads[1], len(scatters)
+
+
+def _gradients(t) -> list[np.ndarray]:
+    """Every level's gradient of a texture, or a parameter array's gradient."""
+    if isinstance(t, wp.array):
+        return [t.grad.numpy()]
+    return [t.grad(k) for k in range(t.num_levels)]
 
 
 def assert_same_gradients(hand_written: np.ndarray, generated: np.ndarray) -> None:

@@ -5,6 +5,7 @@ import pytest
 import warp as wp
 
 import warptex as wt
+from backward_paths import assert_same_gradients, texel_gradients_both_ways
 from fd import check_parameter_gradient
 from reference_layers import splat_reference
 from warptex.layers import splat
@@ -161,6 +162,57 @@ def test_tiling_and_transition_gradients_match_finite_differences(terrain_gbuffe
 
     for name, step in (("tiling", 1e-3), ("height_blend", 1e-3)):
         check_parameter_gradient(render(name), gradient(name), base[name], r, step, rtol=1e-2, atol=1e-2, label=name)
+
+
+BACKWARD_CASES = {
+    "uv, 4 layers": dict(layers=4, projection="uv"),
+    "world_xz, 8 layers, height channel, not normalised": dict(layers=8, projection="world_xz", height="channel", normalize=False),
+    "triplanar, 8 layers, height array, nearest mirror": dict(layers=8, projection="triplanar", height="array", filter="nearest", address="mirror"),
+    "uv, 4 layers, hash4, height channel": dict(layers=4, projection="uv", height="channel", stochastic=wt.Stochastic("hash4", mirror=True)),
+    "triplanar, 4 layers, hex rotated, height array": dict(layers=4, projection="triplanar", height="array", stochastic=wt.Stochastic("hex", rotation=0.5, contrast=2.0)),
+    "uv, 4 layers, hex histogram": dict(layers=4, projection="uv", height="channel", histogram=True),
+}
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("case", list(BACKWARD_CASES))
+def test_hand_written_gradients_equal_the_generated_adjoint(monkeypatch, case, threads):
+    """The hand-written gradient (only texels and the transition need gradients) against the
+    generated adjoint (a tiling array needs gradients too): layers (every level), separate heights,
+    splat maps (negative values included, which the clamp cuts) and the transition, on the terrain
+    at 192² (36 864 pixels: split over two threads). The histogram blend, not linear in the texels,
+    always takes the generated adjoint."""
+    c = dict(BACKWARD_CASES[case])
+    g = wt.rasterize(wt.terrain(resolution=(65, 65)), terrain_camera((192, 192)))
+    rng = np.random.default_rng(11)
+    count = c.pop("layers")
+    layer_data = rng.random((count, 24, 20, 4)).astype(np.float32)
+    map_data = rng.random((count // 4, 9, 7, 4)).astype(np.float32) - 0.2
+    height_data = rng.random((count, 16, 16, 1)).astype(np.float32)
+    tiling = (rng.uniform(0.05, 0.3, count) if c["projection"] != "uv" else rng.uniform(2, 9, count)).astype(np.float32)
+    height, histogram = c.pop("height", None), c.pop("histogram", False)
+
+    def forward(tiling_grad):
+        layers = wt.TextureArray(layer_data, requires_grad=True)
+        maps = wt.TextureArray(map_data, mipmaps=False, requires_grad=True)
+        kw, textures = dict(c), [layers, maps]
+        if height is not None:
+            kw["height_blend"] = wp.array([0.15], dtype=float, requires_grad=True)
+            textures.append(kw["height_blend"])
+        if height == "array":
+            kw["heights"] = wt.TextureArray(height_data, requires_grad=True)
+            textures.append(kw["heights"])
+        if histogram:
+            hist = wt.prepare_histogram(layers, requires_grad=True)
+            kw["stochastic"] = wt.Stochastic("hex", histogram=hist)
+            textures[0] = hist.texture
+        out = splat(g, layers, maps, tiling=wp.array(tiling, dtype=float, requires_grad=tiling_grad), **kw)
+        return out, textures
+
+    weights = rng.normal(size=(192, 192, 4)).astype(np.float32)
+    hand, generated, scatters = texel_gradients_both_ways(monkeypatch, "warptex.layers", threads, forward, weights)
+    assert scatters == (0 if histogram else 1)
+    assert_same_gradients(hand, generated)
 
 
 def test_bad_input_raises_clear_errors(terrain_gbuffer, rng):
