@@ -45,7 +45,7 @@ def fit_splat_example(
 
     Args:
         out_dir: output folder (created if missing).
-        iters: Adam iterations of the coarse-to-fine schedule (240: about 70 s on 2 CPU cores).
+        iters: Adam iterations of the coarse-to-fine schedule (240: about 25 s on 2 CPU cores).
         resolution: ``(height, width)`` of each view (192×256).
         views: 1 (three-quarter view), 2 (+ top-down, the default) or 3 (+ the opposite corner).
         seed: terrain and layer seed.

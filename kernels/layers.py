@@ -20,11 +20,13 @@ per-layer loop is unrolled at compile time and the local weight, height and colo
 exactly the size it needs.
 
 **Hand-written gradient.** Warp's generated adjoint replays each sampling function's forward pass
-inside its reverse pass (about 7× the forward here). Where only texels and the transition need
-gradients (no tiling, sharpness, offsets or G-buffer gradients) and every blend of taps is linear
-(no histogram), :func:`splat_kernels`' second kernel computes them directly: per pixel it replays
-the forward once, takes the blend's derivatives by hand, and adds each layer's colour gradient into
-the texels the layer read (:func:`add_layer_gradient`), each weight's into the splat-map texels::
+inside its reverse pass (about 5× the forward here). Where only texels, the transition and, with
+plain sampling, the tiling need gradients (no sharpness, offsets or G-buffer gradients) and every
+blend of taps is linear (no histogram), :func:`splat_kernels`' second kernel computes them
+directly: per pixel it replays the forward once, takes the blend's derivatives by hand, and adds
+each layer's colour gradient into the texels the layer read (:func:`add_layer_gradient`), each
+weight's into the splat-map texels, and each layer's colour gradient times the sample's derivative
+along its tiling (:func:`sample_layer_slope`) into the tiling::
 
     colour = Σ w''_j c_j                          ∂/∂c_j = w''_j · g,   ∂/∂w''_j = g · c_j
     w''_j = v_j / max(Σ v, ε),  v_j = wh_j w'_j     (height blending, from h_j = height_j · w'_j)
@@ -38,9 +40,9 @@ import functools
 
 import warp as wp
 
-from .sampling import Sampler, TextureView, lod_from_derivatives, read_channels, sample_lod, splat_lod, write_channels
+from .sampling import Sampler, TextureView, lod_from_derivatives, lod_scale_slope, read_channels, sample_lod, sample_lod_derivatives, splat_lod, write_channels
 from .stochastic import StochasticParams, sample_stochastic, splat_stochastic
-from .triplanar import Projection, plane_lod, plane_uv, triplanar_sample, triplanar_weights
+from .triplanar import Projection, plane_lod, plane_sample_slope, plane_uv, triplanar_sample, triplanar_weights
 
 PROJECT_UV = wp.constant(0)  # UV0 × tiling
 PROJECT_WORLD_XZ = wp.constant(1)  # the triplanar top projection, (-x, z) × tiling
@@ -100,6 +102,41 @@ def sample_layer(
     else:
         value = triplanar_sample(tex, layer, proj, tri_w, p, n, dpdx, dpdy, t, smp, stoch)
     return value
+
+
+@wp.func
+def sample_layer_slope(
+    tex: TextureView,
+    layer: wp.int32,
+    params: SplatParams,
+    proj: Projection,
+    uv0: wp.vec2,
+    uv0_dx: wp.vec2,
+    uv0_dy: wp.vec2,
+    p: wp.vec3,
+    n: wp.vec3,
+    tri_w: wp.vec3,
+    dpdx: wp.vec3,
+    dpdy: wp.vec3,
+    smp: Sampler,
+):
+    """``(value, d value / d tiling)`` of :func:`sample_layer` with plain sampling (no stochastic
+    method), as Warp's adjoint takes the derivative."""
+    t = layer_tiling(params, layer)
+    value = wp.vec4(0.0)
+    slope = wp.vec4(0.0)
+    if params.projection == PROJECT_UV:
+        value, d_u, d_v, d_lod = sample_lod_derivatives(tex, layer, uv0 * t, lod_from_derivatives(tex, uv0_dx * t, uv0_dy * t), smp)
+        slope = d_u * uv0[0] + d_v * uv0[1] + d_lod * lod_scale_slope(tex, uv0_dx, uv0_dy, t)
+    elif params.projection == PROJECT_WORLD_XZ:
+        value, slope = plane_sample_slope(tex, layer, proj, 1, p, wp.vec3(0.0, 1.0, 0.0), dpdx, dpdy, t, smp)
+    else:
+        for axis in range(3):
+            if tri_w[axis] > 0.0:
+                v, s = plane_sample_slope(tex, layer, proj, axis, p, n, dpdx, dpdy, t, smp)
+                value += tri_w[axis] * v
+                slope += tri_w[axis] * s
+    return value, slope
 
 
 @wp.func
@@ -227,6 +264,7 @@ def splat_kernels(num_layers: int, map_channels: int):
         grad_heights: wp.array(dtype=wp.vec4),
         grad_maps: wp.array(dtype=wp.vec4),
         grad_transition: wp.array(dtype=float),
+        grad_tiling: wp.array(dtype=float),
         uv0: wp.array(dtype=wp.vec2),
         uv0_dx: wp.array(dtype=wp.vec2),
         uv0_dy: wp.array(dtype=wp.vec2),
@@ -244,8 +282,9 @@ def splat_kernels(num_layers: int, map_channels: int):
         adj_out: wp.array2d(dtype=float),
     ):
         """Add the gradient of ``kernel`` (linear blends of taps) with respect to the layers',
-        heights' and splat maps' texels and the transition into ``grad_*`` (empty: not needed),
-        given the output's gradient ``adj_out``: the forward replayed, then its blend reversed."""
+        heights' and splat maps' texels, the transition and (plain sampling only) the tiling into
+        ``grad_*`` (empty: not needed), given the output's gradient ``adj_out``: the forward
+        replayed, then its blend reversed."""
         i = wp.tid()
         if mask[i] != 0.0:
             uv = uv0[i]
@@ -255,7 +294,8 @@ def splat_kernels(num_layers: int, map_channels: int):
             if params.projection == PROJECT_TRIPLANAR:
                 tri_w = triplanar_weights(n, proj.sharpness[0])
 
-            # Forward: raw splat values r, clamped w0, normalised w1, colours c, raw heights hv.
+            # Forward: raw splat values r, clamped w0, normalised w1, colours c, raw heights hv
+            # (and, for the tiling, their derivatives dc, dhv).
             r = weights_t()
             texel = wp.vec4(0.0)
             for j in range(wp.static(num_layers)):
@@ -271,14 +311,26 @@ def splat_kernels(num_layers: int, map_channels: int):
                 w1 = w0 / wp.max(total, SPLAT_EPS)
             c = colours_t()
             hv = weights_t()
+            dc = colours_t()
+            dhv = weights_t()
+            tiling_grads = grad_tiling.shape[0] > 0
             for j in range(wp.static(num_layers)):
                 if w1[j] > 0.0:
-                    value = sample_layer(layers, j, params, proj, uv, uv0_dx[i], uv0_dy[i], p, n, tri_w, position_dx[i], position_dy[i], smp, stoch)
-                    c[j] = value
+                    if tiling_grads:
+                        value, slope = sample_layer_slope(layers, j, params, proj, uv, uv0_dx[i], uv0_dy[i], p, n, tri_w, position_dx[i], position_dy[i], smp)
+                        c[j] = value
+                        dc[j] = slope
+                    else:
+                        c[j] = sample_layer(layers, j, params, proj, uv, uv0_dx[i], uv0_dy[i], p, n, tri_w, position_dx[i], position_dy[i], smp, stoch)
                     if params.height_mode == HEIGHT_CHANNEL:
-                        hv[j] = value[params.height_channel]
+                        hv[j] = c[j, params.height_channel]
                     elif params.height_mode == HEIGHT_ARRAY:
-                        hv[j] = sample_layer(heights, j, params, proj, uv, uv0_dx[i], uv0_dy[i], p, n, tri_w, position_dx[i], position_dy[i], smp, height_stoch)[0]
+                        if tiling_grads:
+                            height, height_slope = sample_layer_slope(heights, j, params, proj, uv, uv0_dx[i], uv0_dy[i], p, n, tri_w, position_dx[i], position_dy[i], smp)
+                            hv[j] = height[0]
+                            dhv[j] = height_slope[0]
+                        else:
+                            hv[j] = sample_layer(heights, j, params, proj, uv, uv0_dx[i], uv0_dy[i], p, n, tri_w, position_dx[i], position_dy[i], smp, height_stoch)[0]
             g = read_channels(adj_out, i)
 
             # Backward through the blend: gw1 is the gradient of w1, gc of the colours, ghv of the heights.
@@ -343,7 +395,12 @@ def splat_kernels(num_layers: int, map_channels: int):
                 if r[j] > 0.0:
                     gr[j] = gw0[j]
 
-            # Into the texels: each map's channels, each layer's colour, each separate height.
+            # Into the tiling (each layer's entry), then the texels: each map's channels, each
+            # layer's colour, each separate height.
+            if tiling_grads:
+                for j in range(wp.static(num_layers)):
+                    if w1[j] > 0.0:
+                        wp.atomic_add(grad_tiling, wp.min(j, grad_tiling.shape[0] - 1), wp.dot(gc[j], dc[j]) + ghv[j] * dhv[j])
             if grad_maps.shape[0] > 0:
                 gm = wp.vec4(0.0)
                 for j in range(wp.static(num_layers)):

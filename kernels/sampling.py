@@ -332,6 +332,70 @@ def splat_lod(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, 
         splat_levels(tex, grad, layer, uv, int(lf[0]), lf[1], smp, g)
 
 
+# -- UV and LOD derivatives ---------------------------------------------------------------------------
+#
+# ``sample_lod`` and its derivatives with respect to ``uv`` and ``lod``, in one pass and as Warp's
+# adjoint takes them (zero for nearest filtering, across a clamp or a floor), for hand-written
+# gradients of parameters that move the UVs (tiling).
+
+
+@wp.func
+def bilinear_derivatives(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: Sampler):
+    """``(value, d/du, d/dv)`` of :func:`sample_bilinear` (same arguments; ``uv`` reduced)."""
+    start, w, i0, i1, j0, j1, fx, fy = bilinear_taps(tex, layer, level, uv, smp)
+    t00 = texel(tex, start, w, i0, j0, smp)
+    t10 = texel(tex, start, w, i1, j0, smp)
+    t01 = texel(tex, start, w, i0, j1, smp)
+    t11 = texel(tex, start, w, i1, j1, smp)
+    top = t00 * (1.0 - fx) + t10 * fx
+    bottom = t01 * (1.0 - fx) + t11 * fx
+    d_fx = (t10 - t00) * (1.0 - fy) + (t11 - t01) * fy
+    return top * (1.0 - fy) + bottom * fy, d_fx * float(w), (bottom - top) * -float(tex.level_height[level])
+
+
+@wp.func
+def sample_lod_derivatives(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: Sampler):
+    """``(value, d/du, d/dv, d/dlod)`` of :func:`sample_lod` (same arguments; the value is the same
+    bits). Non-finite ``uv`` or ``lod`` give a NaN value and zero derivatives. ``reduce_coord`` has
+    slope 1 where it does not clamp; where clamp and border clamp ``u``, all four taps read the
+    same edge texel or the border colour, so the derivative is zero there by itself."""
+    value = wp.vec4(wp.nan)
+    d_u = wp.vec4(0.0)
+    d_v = wp.vec4(0.0)
+    d_lod = wp.vec4(0.0)
+    if finite_uv_lod(uv, lod):
+        lf = mip_levels(tex, lod, smp)
+        level = int(lf[0])
+        fraction = lf[1]
+        r = wp.vec2(reduce_coord(uv[0], smp.address), reduce_coord(uv[1], smp.address))
+        if smp.filter == FILTER_NEAREST:
+            value = sample_nearest(tex, layer, level, r, smp)
+        else:
+            value, d_u, d_v = bilinear_derivatives(tex, layer, level, r, smp)
+            if fraction > 0.0:  # trilinear between two levels (mip_levels' clamp to the chain is inactive then)
+                coarse, c_u, c_v = bilinear_derivatives(tex, layer, level + 1, r, smp)
+                biased = lod + smp.lod_bias
+                if biased >= smp.min_lod and biased < smp.max_lod:
+                    d_lod = coarse - value
+                value = value * (1.0 - fraction) + coarse * fraction
+                d_u = d_u * (1.0 - fraction) + c_u * fraction
+                d_v = d_v * (1.0 - fraction) + c_v * fraction
+    return value, d_u, d_v, d_lod
+
+
+@wp.func
+def lod_scale_slope(tex: TextureView, uv_dx: wp.vec2, uv_dy: wp.vec2, scale: float) -> float:
+    """``d/ds lod_from_derivatives(tex, uv_dx · s, uv_dy · s)`` at ``s = scale``: ``1 / (s ln 2)``,
+    or 0 where the footprint is below the floor that keeps the LOD finite."""
+    size = wp.vec2(float(tex.level_width[0]), float(tex.level_height[0]))
+    a = wp.cw_mul(uv_dx * scale, size)
+    b = wp.cw_mul(uv_dy * scale, size)
+    slope = 0.0
+    if wp.max(wp.dot(a, a), wp.dot(b, b)) > 1.0e-30:
+        slope = 1.0 / (scale * 0.6931471805599453)
+    return slope
+
+
 @wp.func
 def read_channels(a: wp.array2d(dtype=float), i: wp.int32) -> wp.vec4:
     """Row ``i`` of a ``(n, 1..4)`` float array as a ``vec4`` (missing channels 0): the reverse of

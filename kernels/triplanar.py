@@ -22,7 +22,7 @@ ground beside it pick their own mip levels.
 import warp as wp
 
 from .normals import blend_projected, decode_normal, sign_or_one, to_world
-from .sampling import Sampler, TextureView, lod_from_derivatives, read_channels, write_channels
+from .sampling import Sampler, TextureView, lod_from_derivatives, lod_scale_slope, read_channels, sample_lod_derivatives, write_channels
 from .stochastic import StochasticParams, sample_stochastic, splat_stochastic
 
 # How the three projections are weighted.
@@ -94,6 +94,16 @@ def plane_uv(proj: Projection, axis: wp.int32, p: wp.vec3, n: wp.vec3, tiling: f
 def plane_lod(tex: TextureView, axis: wp.int32, dpdx: wp.vec3, dpdy: wp.vec3, tiling: float) -> float:
     """Level of detail of projection ``axis`` at ``tiling``, from its own footprint (signs do not matter)."""
     return lod_from_derivatives(tex, plane_coords(dpdx, axis) * tiling, plane_coords(dpdy, axis) * tiling)
+
+
+@wp.func
+def plane_sample_slope(tex: TextureView, layer: wp.int32, proj: Projection, axis: wp.int32, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, tiling: float, smp: Sampler):
+    """``(value, d value / d tiling)`` of plain sampling of projection ``axis`` at ``tiling``: the
+    UV moves by the (mirror-fixed) plane coordinates, the LOD by ``1 / (tiling ln 2)``."""
+    value, d_u, d_v, d_lod = sample_lod_derivatives(tex, layer, plane_uv(proj, axis, p, n, tiling), plane_lod(tex, axis, dpdx, dpdy, tiling), smp)
+    c = plane_coords(p, axis)
+    lod_slope = lod_scale_slope(tex, plane_coords(dpdx, axis), plane_coords(dpdy, axis), tiling)
+    return value, d_u * (c[0] * u_sign(n, axis, proj.mirror_fix)) + d_v * c[1] + d_lod * lod_slope
 
 
 @wp.func

@@ -15,8 +15,8 @@ import warptex as wt
 
 
 def texel_gradients_both_ways(monkeypatch, module: str, threads: int, forward, weights: np.ndarray):
-    """``(hand_written, generated, scatters)``: the texel gradients (every level of every texture
-    that has them, concatenated) of ``Σ weights · out``, first with only texels needing gradients,
+    """``(hand_written, generated, scatters)``: the gradients of ``Σ weights · out``, one
+    ``(is_parameter, flat array)`` per texture (every level) or parameter array that has them, first with only texels needing gradients,
     then with another input needing them too, and how many hand-written gradients ``module``
     launched over both runs.
 
@@ -36,7 +36,7 @@ def texel_gradients_both_ways(monkeypatch, module: str, threads: int, forward, w
             out.grad.assign(weights.reshape(out.shape))
             tape.backward()
             textures = [t for t in textures if t.requires_grad]
-            grads.append(np.concatenate([g.reshape(-1) for t in textures for g in _gradients(t)]))
+            grads.append([(isinstance(t, wp.array), np.concatenate([g.reshape(-1) for g in _gradients(t)])) for t in textures])
             tape.zero()
             assert not any(g.any() for t in textures for g in _gradients(t)), "tape.zero() must reset the gradients"
     finally:
@@ -51,8 +51,12 @@ def _gradients(t) -> list[np.ndarray]:
     return [t.grad(k) for k in range(t.num_levels)]
 
 
-def assert_same_gradients(hand_written: np.ndarray, generated: np.ndarray) -> None:
-    """Equal to float rounding (sums in another order), and not trivially zero."""
-    scale = np.abs(generated).max()
-    assert scale > 1
-    np.testing.assert_allclose(hand_written, generated, rtol=1e-5, atol=2e-5 * scale)
+def assert_same_gradients(hand_written: list, generated: list) -> None:
+    """Equal to float rounding (sums in another order), each input against its own scale, and not
+    trivially zero. A parameter's gradient sums a term per pixel in float32, with cancellation:
+    the two ways then differ by about 1e-4 of it (as one way does between 1 and 2 threads)."""
+    assert len(hand_written) == len(generated)
+    assert max(np.abs(g).max() for _, g in generated) > 1
+    for k, ((parameter, hand), (_, gen)) in enumerate(zip(hand_written, generated)):
+        rtol = 1e-3 if parameter else 1e-5
+        np.testing.assert_allclose(hand, gen, rtol=rtol, atol=2 * rtol * np.abs(gen).max(), err_msg=f"input {k}")

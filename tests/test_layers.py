@@ -165,9 +165,10 @@ def test_tiling_and_transition_gradients_match_finite_differences(terrain_gbuffe
 
 
 BACKWARD_CASES = {
-    "uv, 4 layers": dict(layers=4, projection="uv"),
-    "world_xz, 8 layers, height channel, not normalised": dict(layers=8, projection="world_xz", height="channel", normalize=False),
-    "triplanar, 8 layers, height array, nearest mirror": dict(layers=8, projection="triplanar", height="array", filter="nearest", address="mirror"),
+    "uv, 4 layers, mirror": dict(layers=4, projection="uv", address="mirror"),
+    "world_xz, 8 layers, height channel, not normalised, bilinear": dict(layers=8, projection="world_xz", height="channel", normalize=False, filter="bilinear"),
+    "triplanar, 8 layers, height array, clamp, biased": dict(layers=8, projection="triplanar", height="array", address="clamp", lod_bias=0.3, min_lod=0.5),
+    "uv, 4 layers, nearest, height channel": dict(layers=4, projection="uv", height="channel", filter="nearest"),
     "uv, 4 layers, hash4, height channel": dict(layers=4, projection="uv", height="channel", stochastic=wt.Stochastic("hash4", mirror=True)),
     "triplanar, 4 layers, hex rotated, height array": dict(layers=4, projection="triplanar", height="array", stochastic=wt.Stochastic("hex", rotation=0.5, contrast=2.0)),
     "uv, 4 layers, hex histogram": dict(layers=4, projection="uv", height="channel", histogram=True),
@@ -177,11 +178,12 @@ BACKWARD_CASES = {
 @pytest.mark.parametrize("threads", [1, 2])
 @pytest.mark.parametrize("case", list(BACKWARD_CASES))
 def test_hand_written_gradients_equal_the_generated_adjoint(monkeypatch, case, threads):
-    """The hand-written gradient (only texels and the transition need gradients) against the
-    generated adjoint (a tiling array needs gradients too): layers (every level), separate heights,
-    splat maps (negative values included, which the clamp cuts) and the transition, on the terrain
-    at 192² (36 864 pixels: split over two threads). The histogram blend, not linear in the texels,
-    always takes the generated adjoint."""
+    """The hand-written gradient (texels, transition and, for plain sampling, tiling) against the
+    generated adjoint (a sharpness array needs gradients too): layers (every level), separate
+    heights, splat maps (negative values included, which the clamp cuts), the transition and the
+    tiling, on the terrain at 192² (36 864 pixels: split over two threads). The histogram blend,
+    not linear in the texels, always takes the generated adjoint; with a stochastic method the
+    tiling is left out (its gradient needs the generated adjoint)."""
     c = dict(BACKWARD_CASES[case])
     g = wt.rasterize(wt.terrain(resolution=(65, 65)), terrain_camera((192, 192)))
     rng = np.random.default_rng(11)
@@ -191,11 +193,13 @@ def test_hand_written_gradients_equal_the_generated_adjoint(monkeypatch, case, t
     height_data = rng.random((count, 16, 16, 1)).astype(np.float32)
     tiling = (rng.uniform(0.05, 0.3, count) if c["projection"] != "uv" else rng.uniform(2, 9, count)).astype(np.float32)
     height, histogram = c.pop("height", None), c.pop("histogram", False)
+    plain = "stochastic" not in c and not histogram
 
-    def forward(tiling_grad):
+    def forward(other_grads):
         layers = wt.TextureArray(layer_data, requires_grad=True)
         maps = wt.TextureArray(map_data, mipmaps=False, requires_grad=True)
-        kw, textures = dict(c), [layers, maps]
+        kw = {**c, "tiling": wp.array(tiling, dtype=float, requires_grad=plain), "sharpness": wp.array([4.0], dtype=float, requires_grad=other_grads)}
+        textures = [layers, maps] + ([kw["tiling"]] if plain else [])
         if height is not None:
             kw["height_blend"] = wp.array([0.15], dtype=float, requires_grad=True)
             textures.append(kw["height_blend"])
@@ -206,8 +210,7 @@ def test_hand_written_gradients_equal_the_generated_adjoint(monkeypatch, case, t
             hist = wt.prepare_histogram(layers, requires_grad=True)
             kw["stochastic"] = wt.Stochastic("hex", histogram=hist)
             textures[0] = hist.texture
-        out = splat(g, layers, maps, tiling=wp.array(tiling, dtype=float, requires_grad=tiling_grad), **kw)
-        return out, textures
+        return splat(g, layers, maps, **kw), textures
 
     weights = rng.normal(size=(192, 192, 4)).astype(np.float32)
     hand, generated, scatters = texel_gradients_both_ways(monkeypatch, "warptex.layers", threads, forward, weights)

@@ -87,7 +87,7 @@ def run_fit(
     Args:
         out_dir: output folder (created if missing).
         iters: Adam iterations of the default coarse-to-fine schedule
-            (:func:`warptex.fit_loop.default_stages`); 240 takes about 100 s on 2 CPU cores.
+            (:func:`warptex.fit_loop.default_stages`); 240 takes about 25 s on 2 CPU cores.
         resolution: ``(height, width)`` of each synthetic view (192×256).
         views: synthetic views, 1–3 (:func:`terrain_cameras`); 2 = three-quarter + top-down.
         seed: terrain and layer seed of the synthetic scene.

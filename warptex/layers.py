@@ -15,6 +15,7 @@ from warptex._launch import launch, per_pixel, scatter
 from warptex._validate import as_enum, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import layers as kl
+from warptex.kernels import stochastic as kst
 from warptex.kernels import triplanar as kt
 from warptex.sampling import Address, Filter, make_sampler, surface_sampler
 from warptex.stochastic import Stochastic, as_stochastic, resolve_stochastic
@@ -188,19 +189,20 @@ def splat(
     count = h * w
     uvs = gbuffer.uv_sets[uv_set]
     flat = [a.reshape((count,)) for a in (uvs["uv"], uvs["uv_dx"], uvs["uv_dy"], gbuffer.position, gbuffer.position_dx, gbuffer.position_dy, gbuffer.normal, gbuffer.mask)]
-    # Gradients the hand-written backward gives (texels, transition), and those only Warp's generated adjoint gives.
+    # Gradients the hand-written backward gives (texels, transition; tiling for plain sampling), and those only Warp's generated adjoint gives.
     read = {"layers": layers_read, "heights": height_tex if params.height_mode == kl.HEIGHT_ARRAY else None, "maps": maps}
-    texel_grads = any(t is not None and t.requires_grad for t in read.values()) or params.transition.requires_grad
-    other_grads = any(a.requires_grad for a in (params.tiling, proj.sharpness, proj.offsets, *flat))
+    tiling_by_hand = params.tiling.requires_grad and stoch.method == kst.METHOD_NONE
+    texel_grads = any(t is not None and t.requires_grad for t in read.values()) or params.transition.requires_grad or tiling_by_hand
+    other_grads = any(a.requires_grad for a in (proj.sharpness, proj.offsets, *flat)) or (params.tiling.requires_grad and not tiling_by_hand)
     out = wp.zeros((count, layers.channels), dtype=float, device=device, requires_grad=texel_grads or other_grads)
     kernel, texel_grad_kernel = kl.splat_kernels(num_layers, maps.channels)
     args = [*per_pixel(*flat), params, proj, smp, map_smp, stoch, height_stoch]
 
-    def texel_gradients(tape):  # linear blends of taps: texel and transition gradients, hand-written
+    def texel_gradients(tape):  # linear blends of taps: texel, transition and tiling gradients, hand-written
         grads = [tape.get_adjoint(t.view.texels) if t is not None and t.requires_grad else None for t in read.values()]
-        transition = tape.get_adjoint(params.transition) if params.transition.requires_grad else None
-        inputs = [layers_read.view, height_tex.view, maps.view, *grads, transition, *args, *per_pixel(out.grad)]
-        scatter(texel_grad_kernel, count, inputs=inputs, targets=[a for a in (*grads, transition) if a is not None], device=device)
+        scalars = [tape.get_adjoint(a) if a.requires_grad else None for a in (params.transition, params.tiling)]
+        inputs = [layers_read.view, height_tex.view, maps.view, *grads, *scalars, *args, *per_pixel(out.grad)]
+        scatter(texel_grad_kernel, count, inputs=inputs, targets=[a for a in (*grads, *scalars) if a is not None], device=device)
 
     linear = stoch.histogram == 0 and height_stoch.histogram == 0  # the histogram blend is not linear in the texels
     backward = texel_gradients if linear and texel_grads and not other_grads else None
