@@ -346,6 +346,39 @@ def triplanar_texel_grad_kernel(
                     splat_one(tex_z, grad_z, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, w[axis] * g)
 
 
+@wp.func
+def projected_normal(texel: wp.vec4, axis: wp.int32, n: wp.vec3, proj: Projection, channels: wp.int32, strength: float, flip_green: wp.int32, blend: wp.int32) -> wp.vec3:
+    """Projection ``axis``' normal in world-aligned axes (unweighted): ``texel`` decoded, its ``x``
+    mirror-fixed, blended with the unit surface normal ``n`` in the projection's frame, swizzled back."""
+    t = decode_normal(texel, channels, strength, flip_green)
+    t = wp.vec3(t[0] * u_sign(n, axis, proj.mirror_fix), t[1], t[2])
+    base = plane_coords(n, axis)
+    return to_world(blend_projected(t, wp.vec3(base[0], base[1], n[axis]), blend), axis)
+
+
+@wp.func
+def unit_normal(total: wp.vec3, n: wp.vec3, proj: Projection) -> wp.vec3:
+    """The blended normal ``total`` in world space, normalised; the surface normal ``n`` where the
+    blend cancels out; ``(0, 0, 0)`` where both are zero or non-finite."""
+    world = proj.normal_to_world * total
+    surface = proj.normal_to_world * n
+    result = wp.vec3(0.0)
+    if wp.length(world) > 1.0e-12 and wp.isfinite(world):
+        result = wp.normalize(world)
+    elif wp.length(surface) > 0.0 and wp.isfinite(surface):
+        result = wp.normalize(surface)
+    return result
+
+
+@wp.func
+def unit_base_normal(n: wp.vec3) -> wp.vec3:
+    """``n`` normalised when it has a length: the blends assume a unit base normal (object space may scale it)."""
+    result = n
+    if wp.length(n) > 0.0:
+        result = wp.normalize(n)
+    return result
+
+
 @wp.kernel
 def triplanar_normal_kernel(
     tex_x: TextureView,
@@ -379,22 +412,117 @@ def triplanar_normal_kernel(
     if mask[i] != 0.0:
         p, n, dpdx, dpdy = object_space(proj, position[i], normal[i], position_dx[i], position_dy[i])
         w = projection_weights(proj, n)
-        if wp.length(n) > 0.0:
-            n = wp.normalize(n)  # the blends assume a unit base normal (object space may scale it)
+        n = unit_base_normal(n)
         total = wp.vec3(0.0)
         for axis in range(3):
             if w[axis] > 0.0:
                 texel = sample_projection(tex_x, tex_y, tex_z, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
-                t = decode_normal(texel, channels, strength, flip_green)
-                t = wp.vec3(t[0] * u_sign(n, axis, proj.mirror_fix), t[1], t[2])
-                base = plane_coords(n, axis)
-                blended = blend_projected(t, wp.vec3(base[0], base[1], n[axis]), blend)
-                total += w[axis] * to_world(blended, axis)
-        world = proj.normal_to_world * total
-        surface = proj.normal_to_world * n
-        if wp.length(world) > 1.0e-12 and wp.isfinite(world):
-            result = wp.normalize(world)
-        elif wp.length(surface) > 0.0 and wp.isfinite(surface):
-            result = wp.normalize(surface)
+                total += w[axis] * projected_normal(texel, axis, n, proj, channels, strength, flip_green, blend)
+        result = unit_normal(total, n, proj)
     for c in range(3):
         out[i, c] = result[c]
+
+
+# -- triplanar normal mapping under a tape, texels only needing gradients ---------------------------
+#
+# Normal mapping is not linear in the texels (decode, blend, normalise), so its gradient is taken in
+# two steps: the projections' samples are stored per pixel (projection_samples_kernel), the normal
+# is computed from them by a kernel whose generated adjoint is cheap (no sampling in it), and the
+# samples' gradient is added into the texels they read by hand (projection_texel_grad_kernel).
+
+
+@wp.kernel(enable_backward=False)
+def projection_samples_kernel(
+    tex_x: TextureView,
+    tex_y: TextureView,
+    tex_z: TextureView,
+    layer: wp.int32,
+    position: wp.array(dtype=wp.vec3),
+    position_dx: wp.array(dtype=wp.vec3),
+    position_dy: wp.array(dtype=wp.vec3),
+    normal: wp.array(dtype=wp.vec3),
+    mask: wp.array(dtype=float),
+    proj: Projection,
+    smp: Sampler,
+    stoch: StochasticParams,
+    samples: wp.array2d(dtype=wp.vec4),
+    weights: wp.array(dtype=wp.vec3),
+):
+    """``samples[i, axis]``: what :func:`triplanar_normal_kernel` reads from projection ``axis``
+    (0 where its weight is 0 or the pixel is not covered); ``weights[i]``: the projections' weights."""
+    i = wp.tid()
+    if mask[i] != 0.0:
+        p, n, dpdx, dpdy = object_space(proj, position[i], normal[i], position_dx[i], position_dy[i])
+        w = projection_weights(proj, n)
+        weights[i] = w
+        n = unit_base_normal(n)
+        for axis in range(3):
+            if w[axis] > 0.0:
+                samples[i, axis] = sample_projection(tex_x, tex_y, tex_z, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
+
+
+@wp.kernel
+def triplanar_normal_from_samples_kernel(
+    samples: wp.array2d(dtype=wp.vec4),
+    weights: wp.array(dtype=wp.vec3),
+    normal: wp.array(dtype=wp.vec3),
+    mask: wp.array(dtype=float),
+    proj: Projection,
+    channels: wp.int32,
+    strength: float,
+    flip_green: wp.int32,
+    blend: wp.int32,
+    out: wp.array2d(dtype=float),
+):
+    """:func:`triplanar_normal_kernel` with each projection's sample and weight read from
+    ``samples`` and ``weights`` (no gradient reaches the weights: this runs only where the
+    sharpness and the G-buffer need none)."""
+    i = wp.tid()
+    result = wp.vec3(0.0)
+    if mask[i] != 0.0:
+        w = weights[i]
+        n = unit_base_normal(proj.normal_to_object * normal[i])
+        total = wp.vec3(0.0)
+        for axis in range(3):
+            if w[axis] > 0.0:
+                total += w[axis] * projected_normal(samples[i, axis], axis, n, proj, channels, strength, flip_green, blend)
+        result = unit_normal(total, n, proj)
+    for c in range(3):
+        out[i, c] = result[c]
+
+
+@wp.kernel(enable_backward=False)
+def projection_texel_grad_kernel(
+    tex_x: TextureView,
+    tex_y: TextureView,
+    tex_z: TextureView,
+    grad_x: wp.array(dtype=wp.vec4),
+    grad_y: wp.array(dtype=wp.vec4),
+    grad_z: wp.array(dtype=wp.vec4),
+    layer: wp.int32,
+    position: wp.array(dtype=wp.vec3),
+    position_dx: wp.array(dtype=wp.vec3),
+    position_dy: wp.array(dtype=wp.vec3),
+    normal: wp.array(dtype=wp.vec3),
+    mask: wp.array(dtype=float),
+    proj: Projection,
+    smp: Sampler,
+    stoch: StochasticParams,
+    adj_samples: wp.array2d(dtype=wp.vec4),
+):
+    """Add the gradient ``adj_samples`` of :func:`projection_samples_kernel`'s samples (linear
+    blends of taps) into the texels they read, as :func:`triplanar_texel_grad_kernel` does."""
+    i = wp.tid()
+    if mask[i] != 0.0:
+        p, n, dpdx, dpdy = object_space(proj, position[i], normal[i], position_dx[i], position_dy[i])
+        w = projection_weights(proj, n)
+        n = unit_base_normal(n)
+        for axis in range(3):
+            if w[axis] > 0.0:
+                g = adj_samples[i, axis]
+                if axis == 0:
+                    splat_one(tex_x, grad_x, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, g)
+                elif axis == 1:
+                    splat_one(tex_y, grad_y, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, g)
+                else:
+                    splat_one(tex_z, grad_z, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, g)

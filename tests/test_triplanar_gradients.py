@@ -7,6 +7,8 @@ rounding); the parameters shared by every pixel (tiling, sharpness, offsets) wit
 :func:`fd.check_parameter_gradient`, which leaves out the pixels whose step crosses a slope jump.
 """
 
+import functools
+
 import numpy as np
 import pytest
 import trimesh
@@ -149,12 +151,14 @@ def test_gradients_reach_each_per_axis_texture(sphere):
     np.testing.assert_allclose(total, sum(single.grad(k).sum() for k in range(single.num_levels)), rtol=1e-4)
 
 
-@pytest.mark.parametrize("technique", ["triplanar", "biplanar"])
+@pytest.mark.parametrize("technique", list(TECHNIQUES))
 def test_hand_written_texel_gradients_match_finite_differences(sphere, technique):
     """With only the texels needing gradients (numbers for tiling, sharpness, offsets), the
-    hand-written texel gradient runs in place of the generated adjoint: checked the same way."""
+    hand-written texel gradient runs in place of the generated adjoint of the sampling kernel
+    (normal mapping: the generated adjoint of the normal from stored samples, then the samples'
+    texel gradient by hand): checked the same way."""
     rng = np.random.default_rng(8)
-    img = smooth_texture(16, 20, seed=6)
+    img = _texture_for(technique, 16, 20, seed=6)
     r = _weights(sphere, 3)
     params = {"tiling": [1.3, 0.9, 1.7], "sharpness": 3.0, "offsets": PARAMS["offsets"]}
     tex = wt.Texture(img, requires_grad=True)
@@ -164,16 +168,30 @@ def test_hand_written_texel_gradients_match_finite_differences(sphere, technique
         out = TECHNIQUES[technique](sphere, tex, **params)
     out.grad.assign(r)
     tape.backward()
-    assert not any(isinstance(launch, tuple) and launch[0].key.startswith("triplanar") for launch in tape.launches), "the generated adjoint was recorded"
+    recorded = [launch[0].key for launch in tape.launches if isinstance(launch, tuple)]
+    assert not {"triplanar_kernel", "triplanar_normal_kernel"} & set(recorded), "the sampling kernel's generated adjoint was recorded"
     grad = tex.grad(0).astype(np.float64)
     assert np.abs(grad).sum() > 0
+    step = 2e-3 if technique.startswith("normal") else 0.05  # colour is linear in the texels
     for _ in range(3):
         direction = rng.normal(size=img.shape).astype(np.float32)
-        fd = (_loss(sphere, technique, img + 0.05 * direction, r, **params) - _loss(sphere, technique, img - 0.05 * direction, r, **params)) / 0.1
+        fd = (_loss(sphere, technique, img + step * direction, r, **params) - _loss(sphere, technique, img - step * direction, r, **params)) / (2 * step)
         np.testing.assert_allclose((grad * direction).sum(), fd, rtol=1e-3, atol=2e-3)
 
 
-CASES = ["triplanar", "biplanar nearest mirror", "per-axis textures, one fixed", "stochastic hash4 mirrored", "stochastic hex rotated", "stochastic hex histogram"]
+CASES = [
+    "triplanar",
+    "biplanar nearest mirror",
+    "per-axis textures, one fixed",
+    "stochastic hash4 mirrored",
+    "stochastic hex rotated",
+    "stochastic hex histogram",
+    "normal whiteout",
+    "normal rnm, per-axis textures, one fixed",
+    "normal udn biplanar nearest mirror",
+    "normal hash4",
+    "normal hex histogram",
+]
 
 
 @pytest.mark.parametrize("threads", [1, 2])
@@ -186,14 +204,18 @@ def test_hand_written_texel_gradients_equal_the_generated_adjoint(monkeypatch, c
     camera = wt.orthographic((3.0, 2.0, 4.0), (0.0, 0.0, 0.0), height=2.2, resolution=(256, 256))
     g = wt.rasterize(trimesh.creation.icosphere(subdivisions=4), camera)
     rng = np.random.default_rng(9)
+    normal = case.startswith("normal")
     images = [rng.random((37, 29, 3)).astype(np.float32) for _ in range(3)]
+    if normal:  # tangent-space normals: slopes within ±0.3, z near 1
+        images = [np.concatenate([0.2 + 0.6 * im[..., :2], 0.9 + 0.1 * im[..., 2:]], -1) for im in images]
     stochastic = {
         "stochastic hash4 mirrored": wt.Stochastic("hash4", mirror=True),
         "stochastic hex rotated": wt.Stochastic("hex", rotation=0.5, contrast=2.0),
+        "normal hash4": wt.Stochastic("hash4"),
     }
 
     def forward(tiling_grad):
-        if case.startswith("per-axis"):
+        if "per-axis" in case:
             textures = [wt.Texture(images[0], requires_grad=True), wt.Texture(images[1]), wt.Texture(images[2], requires_grad=True)]
             kw = {"textures_per_axis": textures}
         else:
@@ -201,11 +223,16 @@ def test_hand_written_texel_gradients_equal_the_generated_adjoint(monkeypatch, c
             kw = {"texture": textures[0], **({"filter": "nearest", "address": "mirror"} if "nearest" in case else {})}
         if case in stochastic:
             kw["stochastic"] = stochastic[case]
-        elif case == "stochastic hex histogram":
+        elif case.endswith("hex histogram"):
             histogram = wt.prepare_histogram(textures[0], requires_grad=True)
             kw["stochastic"] = wt.Stochastic("hex", histogram=histogram)
             textures = [histogram.texture]
-        technique = biplanar if case.startswith("biplanar") else triplanar
+        if normal:
+            kw["normal_map"] = kw.pop("texture", None)
+            blend = next((b for b in ("rnm", "udn") if b in case), "whiteout")
+            technique = functools.partial(triplanar_normal, blend=blend, biplanar="biplanar" in case, strength=0.8)
+        else:
+            technique = biplanar if case.startswith("biplanar") else triplanar
         return technique(g, tiling=wp.array([2.5], dtype=float, requires_grad=tiling_grad), **kw), textures
 
     weights = rng.normal(size=(256, 256, 3)).astype(np.float32)

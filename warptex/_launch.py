@@ -131,7 +131,7 @@ def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: 
         return
     device = wp.get_device(device)
     workers = _workers(device, count, threads)
-    tape = _active_tape()
+    tape = active_tape()
     if backward is not None:
         if tape is not None and any(o.requires_grad for o in outputs):
             tape.record_func(functools.partial(backward, tape), arrays=[o for o in outputs if o.requires_grad])
@@ -231,7 +231,8 @@ class _Split:
                 f.result()  # waits for every worker; re-raises a worker's exception here
 
 
-def _active_tape():
+def active_tape():
+    """The ``wp.Tape`` being recorded, or ``None``."""
     return _internal.context.runtime.tape
 
 

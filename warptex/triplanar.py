@@ -17,7 +17,7 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
-from warptex._launch import launch, per_pixel, scatter
+from warptex._launch import active_tape, launch, per_pixel, scatter
 from warptex._validate import as_enum, as_float, as_float_array, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import normals as kn
@@ -214,7 +214,7 @@ def triplanar_normal(
     setup = _setup(func, weights, texture=opts.pop("normal_map"), **opts)
     if setup.channels < 2:
         raise ValueError(f"{func}(): a normal map needs 2 to 4 channels, got {setup.channels}")
-    return setup.launch(kt.triplanar_normal_kernel, 3, [setup.channels, strength, int(flip_green), blend_id])
+    return setup.launch_normal([setup.channels, strength, int(flip_green), blend_id])
 
 
 # -- internals --------------------------------------------------------------------------------------
@@ -255,6 +255,34 @@ class _Setup:
         inputs = [*views, self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch, *extra]
         launch(kernel, count, inputs=inputs, outputs=[out], device=self.device, backward=backward)
         return out.reshape((h, w, channels))
+
+    def launch_normal(self, extra: list) -> wp.array:
+        """Launch triplanar normal mapping. Where only texels need gradients (and the taps blend
+        linearly), in two steps: the projections' samples, stored per pixel with a hand-written
+        texel gradient, then the normal from them (its generated adjoint has no sampling to replay)."""
+        g = self.gbuffer
+        h, w = g.resolution
+        count = h * w
+        flat = [a.reshape((count,)) for a in (g.position, g.position_dx, g.position_dy, g.normal, g.mask)]
+        texel_grads = any(t.requires_grad for t in self.textures)
+        other_grads = any(p.requires_grad for p in self.params) or any(a.requires_grad for a in flat)
+        if not (active_tape() is not None and texel_grads and not other_grads and self.stoch.histogram == 0):
+            return self.launch(kt.triplanar_normal_kernel, 3, extra)
+        views = [t.view for t in self.textures]
+        samples = wp.zeros((count, 3), dtype=wp.vec4, device=self.device, requires_grad=True)
+
+        def texel_gradients(tape):
+            grads = [tape.get_adjoint(t.view.texels) if t.requires_grad else None for t in self.textures]
+            inputs = [*views, *grads, self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch, *per_pixel(samples.grad)]
+            scatter(kt.projection_texel_grad_kernel, count, inputs=inputs, targets=[a for a in grads if a is not None], device=self.device)
+
+        inputs = [*views, self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch]
+        weights = wp.zeros(count, dtype=wp.vec3, device=self.device)
+        launch(kt.projection_samples_kernel, count, inputs=inputs, outputs=[samples, weights], device=self.device, backward=texel_gradients)
+        out = wp.zeros((count, 3), dtype=float, device=self.device, requires_grad=True)
+        inputs = [*per_pixel(samples, weights, g.normal.reshape((count,)), g.mask.reshape((count,))), self.proj, *extra]
+        launch(kt.triplanar_normal_from_samples_kernel, count, inputs=inputs, outputs=[out], device=self.device)
+        return out.reshape((h, w, 3))
 
 
 def _setup(
