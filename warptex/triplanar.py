@@ -233,56 +233,56 @@ class _Setup:
         self.proj, self.smp, self.stoch, self.device, self.params = proj, smp, stoch, device, params
         self.channels = textures[0].channels
 
-    def launch(self, kernel, channels: int, extra: list, texel_grad_kernel=None) -> wp.array:
-        """Launch ``kernel``; ``texel_grad_kernel``, when given, is its hand-written texel gradient
-        for linear blends, used in place of the generated adjoint when only texels need gradients."""
+    def _pixels(self):
+        """``(count, per-pixel G-buffer arrays, texel_grads, other_grads)``: whether the textures, and
+        whether the parameters or G-buffer arrays, need gradients."""
         g = self.gbuffer
-        h, w = g.resolution
-        count = h * w
+        count = g.resolution[0] * g.resolution[1]
         flat = [a.reshape((count,)) for a in (g.position, g.position_dx, g.position_dy, g.normal, g.mask)]
         texel_grads = any(t.requires_grad for t in self.textures)
         other_grads = any(p.requires_grad for p in self.params) or any(a.requires_grad for a in flat)
-        out = wp.zeros((count, channels), dtype=float, device=self.device, requires_grad=texel_grads or other_grads)
+        return count, flat, texel_grads, other_grads
+
+    def _texel_gradients(self, kernel, count: int, flat: list, adjoint: wp.array):
+        """``backward(tape)``: ``kernel`` adds the per-pixel gradient ``adjoint.grad`` into the
+        textures' texel gradients, by hand (``*_texel_grad_kernel``)."""
         views = [t.view for t in self.textures]
 
-        def texel_gradients(tape):
+        def backward(tape):
             grads = [tape.get_adjoint(t.view.texels) if t.requires_grad else None for t in self.textures]
-            inputs = [*views, *grads, self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch, *per_pixel(out.grad)]
-            scatter(texel_grad_kernel, count, inputs=inputs, targets=[a for a in grads if a is not None], device=self.device)
+            inputs = [*views, *grads, self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch, *per_pixel(adjoint.grad)]
+            scatter(kernel, count, inputs=inputs, targets=[a for a in grads if a is not None], device=self.device)
 
+        return backward
+
+    def launch(self, kernel, channels: int, extra: list, texel_grad_kernel=None) -> wp.array:
+        """Launch ``kernel``; ``texel_grad_kernel``, when given, is its hand-written texel gradient
+        for linear blends, used in place of the generated adjoint when only texels need gradients."""
+        count, flat, texel_grads, other_grads = self._pixels()
+        out = wp.zeros((count, channels), dtype=float, device=self.device, requires_grad=texel_grads or other_grads)
         linear = self.stoch.histogram == 0  # the histogram blend is not linear in the texels
-        backward = texel_gradients if texel_grad_kernel is not None and linear and texel_grads and not other_grads else None
-        inputs = [*views, self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch, *extra]
+        by_hand = texel_grad_kernel is not None and linear and texel_grads and not other_grads
+        backward = self._texel_gradients(texel_grad_kernel, count, flat, out) if by_hand else None
+        inputs = [*[t.view for t in self.textures], self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch, *extra]
         launch(kernel, count, inputs=inputs, outputs=[out], device=self.device, backward=backward)
-        return out.reshape((h, w, channels))
+        return out.reshape((*self.gbuffer.resolution, channels))
 
     def launch_normal(self, extra: list) -> wp.array:
         """Launch triplanar normal mapping. Where only texels need gradients (and the taps blend
         linearly), in two steps: the projections' samples, stored per pixel with a hand-written
         texel gradient, then the normal from them (its generated adjoint has no sampling to replay)."""
-        g = self.gbuffer
-        h, w = g.resolution
-        count = h * w
-        flat = [a.reshape((count,)) for a in (g.position, g.position_dx, g.position_dy, g.normal, g.mask)]
-        texel_grads = any(t.requires_grad for t in self.textures)
-        other_grads = any(p.requires_grad for p in self.params) or any(a.requires_grad for a in flat)
+        count, flat, texel_grads, other_grads = self._pixels()
         if not (active_tape() is not None and texel_grads and not other_grads and self.stoch.histogram == 0):
             return self.launch(kt.triplanar_normal_kernel, 3, extra)
-        views = [t.view for t in self.textures]
         samples = wp.zeros((count, 3), dtype=wp.vec4, device=self.device, requires_grad=True)
-
-        def texel_gradients(tape):
-            grads = [tape.get_adjoint(t.view.texels) if t.requires_grad else None for t in self.textures]
-            inputs = [*views, *grads, self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch, *per_pixel(samples.grad)]
-            scatter(kt.projection_texel_grad_kernel, count, inputs=inputs, targets=[a for a in grads if a is not None], device=self.device)
-
-        inputs = [*views, self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch]
         weights = wp.zeros(count, dtype=wp.vec3, device=self.device)
-        launch(kt.projection_samples_kernel, count, inputs=inputs, outputs=[samples, weights], device=self.device, backward=texel_gradients)
+        inputs = [*[t.view for t in self.textures], self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch]
+        backward = self._texel_gradients(kt.projection_texel_grad_kernel, count, flat, samples)
+        launch(kt.projection_samples_kernel, count, inputs=inputs, outputs=[samples, weights], device=self.device, backward=backward)
         out = wp.zeros((count, 3), dtype=float, device=self.device, requires_grad=True)
-        inputs = [*per_pixel(samples, weights, g.normal.reshape((count,)), g.mask.reshape((count,))), self.proj, *extra]
-        launch(kt.triplanar_normal_from_samples_kernel, count, inputs=inputs, outputs=[out], device=self.device)
-        return out.reshape((h, w, 3))
+        normal, mask = flat[3], flat[4]
+        launch(kt.triplanar_normal_from_samples_kernel, count, inputs=[*per_pixel(samples, weights, normal, mask), self.proj, *extra], outputs=[out], device=self.device)
+        return out.reshape((*self.gbuffer.resolution, 3))
 
 
 def _setup(
