@@ -308,6 +308,34 @@ def splat_one(
         splat_stochastic(tex, grad, layer, projection_uv(proj, axis, p, n), projection_lod(tex, proj, axis, dpdx, dpdy), smp, stoch, g)
 
 
+@wp.func
+def splat_projection(
+    tex_x: TextureView,
+    tex_y: TextureView,
+    tex_z: TextureView,
+    grad_x: wp.array(dtype=wp.vec4),
+    grad_y: wp.array(dtype=wp.vec4),
+    grad_z: wp.array(dtype=wp.vec4),
+    layer: wp.int32,
+    axis: wp.int32,
+    proj: Projection,
+    p: wp.vec3,
+    n: wp.vec3,
+    dpdx: wp.vec3,
+    dpdy: wp.vec3,
+    smp: Sampler,
+    stoch: StochasticParams,
+    g: wp.vec4,
+):
+    """Add the gradient ``g`` of :func:`sample_projection` into that axis' texel gradient."""
+    if axis == 0:
+        splat_one(tex_x, grad_x, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, g)
+    elif axis == 1:
+        splat_one(tex_y, grad_y, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, g)
+    else:
+        splat_one(tex_z, grad_z, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, g)
+
+
 @wp.kernel(enable_backward=False)
 def triplanar_texel_grad_kernel(
     tex_x: TextureView,
@@ -338,12 +366,7 @@ def triplanar_texel_grad_kernel(
         g = read_channels(adj_out, i)
         for axis in range(3):
             if w[axis] > 0.0:
-                if axis == 0:
-                    splat_one(tex_x, grad_x, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, w[axis] * g)
-                elif axis == 1:
-                    splat_one(tex_y, grad_y, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, w[axis] * g)
-                else:
-                    splat_one(tex_z, grad_z, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, w[axis] * g)
+                splat_projection(tex_x, tex_y, tex_z, grad_x, grad_y, grad_z, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, w[axis] * g)
 
 
 @wp.func
@@ -519,10 +542,4 @@ def projection_texel_grad_kernel(
         n = unit_base_normal(n)
         for axis in range(3):
             if w[axis] > 0.0:
-                g = adj_samples[i, axis]
-                if axis == 0:
-                    splat_one(tex_x, grad_x, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, g)
-                elif axis == 1:
-                    splat_one(tex_y, grad_y, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, g)
-                else:
-                    splat_one(tex_z, grad_z, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, g)
+                splat_projection(tex_x, tex_y, tex_z, grad_x, grad_y, grad_z, layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, adj_samples[i, axis])
