@@ -183,6 +183,18 @@ def splat_kernels(num_layers: int, map_channels: int):
     module = f"warptex_splat_{num_layers}x{map_channels}"
     wp.set_module_options({"max_unroll": max(16, num_layers)}, module=module)
 
+    @wp.func(module=module)
+    def splat_values(maps: TextureView, uv: wp.vec2, map_smp: Sampler):
+        """Each layer's raw splat-map value at ``uv``: one bilinear read per map, channel ``j % C``
+        of map ``j // C`` for layer ``j``."""
+        r = weights_t()
+        texel = wp.vec4(0.0)
+        for j in range(wp.static(num_layers)):
+            if j % wp.static(map_channels) == 0:
+                texel = sample_lod(maps, j // wp.static(map_channels), uv, 0.0, map_smp)
+            r[j] = texel[j % wp.static(map_channels)]
+        return r
+
     # Per-layer loops unroll. Components are only ever written once into fresh vectors (Warp's
     # in-place component writes have exact adjoints then, but not when they overwrite a value).
     @wp.kernel(module=module)
@@ -216,13 +228,11 @@ def splat_kernels(num_layers: int, map_channels: int):
             if params.projection == PROJECT_TRIPLANAR:
                 tri_w = triplanar_weights(n, proj.sharpness[0])
 
-            # Weights from the splat maps, one bilinear read per map.
+            # Weights from the splat maps, clamped at 0.
+            r = splat_values(maps, uv, map_smp)
             w = weights_t()
-            texel = wp.vec4(0.0)
             for j in range(wp.static(num_layers)):
-                if j % wp.static(map_channels) == 0:
-                    texel = sample_lod(maps, j // wp.static(map_channels), uv, 0.0, map_smp)
-                w[j] = wp.max(texel[j % wp.static(map_channels)], 0.0)
+                w[j] = wp.max(r[j], 0.0)
             if params.normalize != 0:
                 w = w / wp.max(wp.dot(w, weights_t(1.0)), SPLAT_EPS)
 
@@ -296,12 +306,7 @@ def splat_kernels(num_layers: int, map_channels: int):
 
             # Forward: raw splat values r, clamped w0, normalised w1, colours c, raw heights hv
             # (and, for the tiling, their derivatives dc, dhv).
-            r = weights_t()
-            texel = wp.vec4(0.0)
-            for j in range(wp.static(num_layers)):
-                if j % wp.static(map_channels) == 0:
-                    texel = sample_lod(maps, j // wp.static(map_channels), uv, 0.0, map_smp)
-                r[j] = texel[j % wp.static(map_channels)]
+            r = splat_values(maps, uv, map_smp)
             w0 = weights_t()
             for j in range(wp.static(num_layers)):
                 w0[j] = wp.max(r[j], 0.0)
