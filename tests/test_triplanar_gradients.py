@@ -7,6 +7,7 @@ rounding); the parameters shared by every pixel (tiling, sharpness, offsets) wit
 :func:`fd.check_parameter_gradient`, which leaves out the pixels whose step crosses a slope jump.
 """
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -118,6 +119,50 @@ def test_texel_gradients_match_finite_differences(sphere, technique):
         fm = _loss(sphere, technique, img - step * direction, r, **PARAMS)
         fd = (fp - fm) / (2 * step)
         np.testing.assert_allclose((grad.astype(np.float64) * direction).sum(), fd, rtol=1e-3, atol=2e-3)
+
+
+@pytest.mark.parametrize(("technique", "sharpness"), [("triplanar", 3.0), ("triplanar", 2.5), ("biplanar", 8.0), ("normal_whiteout", 4.0)])
+def test_surface_normal_gradients_match_finite_differences(sphere, technique, sharpness):
+    """d loss / d (G-buffer normal) along random directions, through the blend weights (integer
+    sharpness takes the multiplication path of ``power_weight``, with its hand-written adjoint).
+    Pixels where the weights have a corner are left out: a normal component near 0 (the mirror fix
+    flips) or near biplanar's edge 1/sqrt(3) (its remap clamps)."""
+    rng = np.random.default_rng(5)
+    img = _texture_for(technique, 32, 24, seed=6)
+    r = _weights(sphere, 3)
+    normals = sphere.normal.numpy()
+    a = np.abs(normals) / np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-12)
+    smooth = ((a > 0.05) & (np.abs(a - 0.5773) > 0.01)).all(-1, keepdims=True)
+
+    def loss(n):
+        g = dataclasses.replace(sphere, normal=wp.array(n, dtype=wp.vec3))
+        return float((TECHNIQUES[technique](g, wt.Texture(img), sharpness=sharpness).numpy().astype(np.float64) * r).sum())
+
+    normal = wp.array(normals, dtype=wp.vec3, requires_grad=True)
+    tape = wp.Tape()
+    with tape:
+        out = TECHNIQUES[technique](dataclasses.replace(sphere, normal=normal), wt.Texture(img), sharpness=sharpness)
+    out.grad.assign(r.reshape(out.shape))
+    tape.backward()
+    grad = normal.grad.numpy().astype(np.float64)
+    assert np.abs(grad).max() > 0
+    step = 1e-3
+    for _ in range(2):
+        direction = (rng.normal(size=normals.shape) * smooth).astype(np.float32)
+        fd = (loss(normals + step * direction) - loss(normals - step * direction)) / (2 * step)
+        np.testing.assert_allclose((grad * direction).sum(), fd, rtol=1e-2, atol=1e-2)
+
+
+def test_sharpness_gradient_at_zero_is_the_one_sided_slope(sphere):
+    """At sharpness 0 every weight is ``r^0 = 1``, but the slope ``ln r`` is not 0: a sharpness
+    fitted from 0 can move. Checked against a forward difference (sharpness cannot go below 0)."""
+    img = smooth_texture(32, 24, seed=8)
+    r = _weights(sphere, 3)
+    _, grads = _gradients(sphere, "triplanar", img, r, sharpness=[0.0])
+    step = 1e-3
+    fd = (_loss(sphere, "triplanar", img, r, sharpness=step) - _loss(sphere, "triplanar", img, r, sharpness=0.0)) / step
+    assert abs(fd) > 1e-2
+    np.testing.assert_allclose(grads["sharpness"][0], fd, rtol=1e-2)
 
 
 def test_scalar_tiling_gradient_is_the_sum_over_projections(sphere):
