@@ -165,6 +165,20 @@ def test_sharpness_gradient_at_zero_is_the_one_sided_slope(sphere):
     np.testing.assert_allclose(grads["sharpness"][0], fd, rtol=1e-2)
 
 
+@pytest.mark.parametrize("technique", list(TECHNIQUES))
+def test_every_kernel_variant_computes_the_same_forward(sphere, technique):
+    """Without a tape (the forward-only plain-sampling kernels), on a tape where only texels need
+    gradients (the same, or the two-step normal mapping) and where a parameter does too (the
+    general kernels, with the generated adjoint): the same output, to the bit."""
+    img = _texture_for(technique, 32, 24, seed=10)
+    plain = TECHNIQUES[technique](sphere, wt.Texture(img), **PARAMS).numpy()
+    for tiling_grad in (False, True):
+        params = {**PARAMS, "tiling": wp.array(PARAMS["tiling"].astype(np.float32), dtype=float, requires_grad=tiling_grad)}
+        with wp.Tape():
+            out = TECHNIQUES[technique](sphere, wt.Texture(img, requires_grad=True), **params).numpy()
+        np.testing.assert_array_equal(out, plain)
+
+
 def test_scalar_tiling_gradient_is_the_sum_over_projections(sphere):
     """A tiling array of shape (1,) receives the sum of the three per-projection gradients."""
     img = smooth_texture(32, 24, seed=4)

@@ -22,6 +22,7 @@ from warptex._validate import as_enum, as_float, as_float_array, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import normals as kn
 from warptex.kernels import triplanar as kt
+from warptex.kernels.stochastic import METHOD_NONE
 from warptex.sampling import Address, Filter, surface_sampler
 from warptex.stochastic import Stochastic, resolve_stochastic
 from warptex.texture import Texture, TextureArray
@@ -222,7 +223,8 @@ def triplanar_normal(
 
 def _colour(func: str, weights: int, **opts) -> wp.array:
     setup = _setup(func, weights, **opts)
-    return setup.launch(kt.triplanar_kernel, setup.channels, [], texel_grad_kernel=kt.triplanar_texel_grad_kernel)
+    texel_grad_kernel = setup.variant(kt.triplanar_texel_grad_kernel, kt.triplanar_texel_grad_plain_kernel)
+    return setup.launch(kt.triplanar_kernel, kt.triplanar_plain_kernel, setup.channels, [], texel_grad_kernel=texel_grad_kernel)
 
 
 class _Setup:
@@ -232,6 +234,11 @@ class _Setup:
         self.func, self.gbuffer, self.textures, self.layer = func, gbuffer, textures, layer
         self.proj, self.smp, self.stoch, self.device, self.params = proj, smp, stoch, device, params
         self.channels = textures[0].channels
+
+    def variant(self, general, plain):
+        """``plain``, the variant of kernel ``general`` without the stochastic code (forward only),
+        when sampling is plain; else ``general``."""
+        return plain if self.stoch.method == METHOD_NONE else general
 
     def _pixels(self):
         """``(count, per-pixel G-buffer arrays, texel_grads, other_grads)``: whether the textures, and
@@ -255,14 +262,18 @@ class _Setup:
 
         return backward
 
-    def launch(self, kernel, channels: int, extra: list, texel_grad_kernel=None) -> wp.array:
-        """Launch ``kernel``; ``texel_grad_kernel``, when given, is its hand-written texel gradient
-        for linear blends, used in place of the generated adjoint when only texels need gradients."""
+    def launch(self, kernel, plain_kernel, channels: int, extra: list, texel_grad_kernel=None) -> wp.array:
+        """Launch ``kernel``, or its forward-only variant for plain sampling ``plain_kernel`` where
+        no generated adjoint is recorded; ``texel_grad_kernel``, when given, is its hand-written
+        texel gradient for linear blends, used in place of the generated adjoint when only texels
+        need gradients."""
         count, flat, texel_grads, other_grads = self._pixels()
         out = wp.zeros((count, channels), dtype=float, device=self.device, requires_grad=texel_grads or other_grads)
         linear = self.stoch.histogram == 0  # the histogram blend is not linear in the texels
         by_hand = texel_grad_kernel is not None and linear and texel_grads and not other_grads
         backward = self._texel_gradients(texel_grad_kernel, count, flat, out) if by_hand else None
+        if by_hand or active_tape() is None:  # no generated adjoint needed
+            kernel = self.variant(kernel, plain_kernel)
         inputs = [*[t.view for t in self.textures], self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch, *extra]
         launch(kernel, count, inputs=inputs, outputs=[out], device=self.device, backward=backward)
         return out.reshape((*self.gbuffer.resolution, channels))
@@ -273,12 +284,12 @@ class _Setup:
         texel gradient, then the normal from them (its generated adjoint has no sampling to replay)."""
         count, flat, texel_grads, other_grads = self._pixels()
         if not (active_tape() is not None and texel_grads and not other_grads and self.stoch.histogram == 0):
-            return self.launch(kt.triplanar_normal_kernel, 3, extra)
+            return self.launch(kt.triplanar_normal_kernel, kt.triplanar_normal_plain_kernel, 3, extra)
         samples = wp.zeros((count, 3), dtype=wp.vec4, device=self.device, requires_grad=True)
         weights = wp.zeros(count, dtype=wp.vec3, device=self.device)
         inputs = [*[t.view for t in self.textures], self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch]
-        backward = self._texel_gradients(kt.projection_texel_grad_kernel, count, flat, samples)
-        launch(kt.projection_samples_kernel, count, inputs=inputs, outputs=[samples, weights], device=self.device, backward=backward)
+        backward = self._texel_gradients(self.variant(kt.projection_texel_grad_kernel, kt.projection_texel_grad_plain_kernel), count, flat, samples)
+        launch(self.variant(kt.projection_samples_kernel, kt.projection_samples_plain_kernel), count, inputs=inputs, outputs=[samples, weights], device=self.device, backward=backward)
         out = wp.zeros((count, 3), dtype=float, device=self.device, requires_grad=True)
         normal, mask = flat[3], flat[4]
         launch(kt.triplanar_normal_from_samples_kernel, count, inputs=[*per_pixel(samples, weights, normal, mask), self.proj, *extra], outputs=[out], device=self.device)
@@ -334,6 +345,7 @@ def make_projection(func, *, tiling, sharpness, offsets, mirror_fix, weights, sp
     proj.world_to_object = wp.mat44(*to_object.reshape(-1))
     proj.normal_to_object = wp.mat33(*normal_to_object.reshape(-1))
     proj.normal_to_world = wp.mat33(*normal_to_world.reshape(-1))
+    proj.object_space = int(as_enum(func, "space", space, Space) == Space.OBJECT)
     return proj
 
 
