@@ -126,8 +126,8 @@ def power_weight(r: float, exponent: float) -> float:
     """``r^exponent`` for ``r`` in ``[0, 1]``, with ``0^0 = 1`` and no ``log 0`` in the gradient.
 
     Integer exponents from 1 to 31 (the usual sharpness values) are raised by multiplying ``r``'s
-    squares, which is at least as accurate as ``exp(exponent · log r)`` and measured a sixth of a
-    triplanar sample's time less; others take ``exp`` and ``log``. The gradient
+    squares, which is at least as accurate as ``exp(exponent · log r)`` and made the triplanar
+    forward 5% faster; others take ``exp`` and ``log``. The gradient
     (:func:`adj_power_weight`) is the same on both paths.
     """
     w = 0.0

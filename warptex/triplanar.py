@@ -236,8 +236,8 @@ class _Setup:
         self.channels = textures[0].channels
 
     def variant(self, general, plain):
-        """``plain``, the variant of kernel ``general`` without the stochastic code (forward only),
-        when sampling is plain; else ``general``."""
+        """``plain`` (kernel ``general`` built without the stochastic code) when sampling is plain,
+        else ``general``."""
         return plain if self.stoch.method == METHOD_NONE else general
 
     def _pixels(self):
