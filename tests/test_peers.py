@@ -167,6 +167,23 @@ def test_autodiff_peer_matches_warptex(backend, technique):
     _check_gradients(backend, technique)
 
 
+@pytest.mark.parametrize("technique", TECHNIQUES)
+def test_torch_peer_split_over_threads_computes_the_same(technique, monkeypatch):
+    """The torch peer splits a ``grid_sample`` read into one batch per thread (ATen runs a batch on
+    one thread); with 3 threads and tiny batches every read is split and padded, and the results
+    and gradients still match warptex."""
+    torch = pytest.importorskip("torch")
+    torch_peer = pytest.importorskip("peers.torch_peer")
+    monkeypatch.setattr(torch_peer, "SPLIT_POINTS", 5)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(3)
+    try:
+        _check_forward("torch", technique)
+        _check_gradients("torch", technique)
+    finally:
+        torch.set_num_threads(threads)
+
+
 def test_every_backend_lists_every_technique_or_says_why_not():
     for backend in peers.BACKENDS:
         reason = peers.unavailable(backend)
