@@ -2,6 +2,8 @@
 rounding), validation."""
 
 import functools
+import gc
+import weakref
 
 import numpy as np
 import pytest
@@ -166,3 +168,41 @@ def test_a_second_backward_matches_a_single_launch(threads):
         tape.zero()
         assert not np.any(tex.grad())
     np.testing.assert_allclose(results[1], results[0], rtol=1e-5, atol=1e-6 * np.abs(results[0]).max())
+
+
+def test_private_accumulators_are_kept_with_their_gradient(threads):
+    """A threaded backward pass reuses the last one's private accumulators, zeroed (fresh ones cost
+    page faults), through the hand-written scatter and the generated adjoint alike, and lets them
+    go with the gradient they serve."""
+    g = _sphere()
+    threads(1)
+    want = []
+    for sharpness_grad in (False, True):  # hand-written texel gradient, then Warp's generated adjoint
+        tex = _texture(requires_grad=True)
+        tape = wp.Tape()
+        with tape:
+            out = wt.triplanar(g, tex, tiling=3.0, sharpness=wp.array([4.0], dtype=float, requires_grad=sharpness_grad))
+        out.grad.fill_(1.0)
+        tape.backward()
+        want.append(tex.grad().copy())
+
+    threads(4)
+    tex = _texture(requires_grad=True)
+    real = tex.view.texels.grad
+    kept = []
+    for k, sharpness_grad in enumerate((False, False, True, True)):
+        tape = wp.Tape()
+        with tape:
+            out = wt.triplanar(g, tex, tiling=3.0, sharpness=wp.array([4.0], dtype=float, requires_grad=sharpness_grad))
+        out.grad.fill_(1.0)
+        tape.backward()
+        np.testing.assert_allclose(tex.grad(), want[k // 2], rtol=1e-5, atol=1e-6 * np.abs(want[k // 2]).max())
+        kept.append(dict(_launch._private_arrays[real]))
+        tex.zero_grad()
+    assert set(kept[0]) == {1, 2, 3}  # one per worker but the first
+    assert all(kept[k][w] is kept[0][w] for k in range(4) for w in (1, 2, 3))
+
+    gone = weakref.ref(kept[0][1])
+    del tex, real, kept, tape, out
+    gc.collect()
+    assert gone() is None
