@@ -310,7 +310,7 @@ def _make(technique, body):
     def grads(g):
         return {n: [t.detach().numpy().transpose(0, 2, 3, 1)[0 if n == "texture" else slice(None)].copy() for t in v] for n, v in g.items()}
 
-    note = "F.grid_sample, one call per mip level read (samples grouped by level), wrap by circular padding"
+    note = "F.grid_sample, one call per mip level read (samples grouped by level, split into one batch per thread), wrap by circular padding"
     return Peer("torch", technique, _prepare(technique), forward, forward_backward, lambda r: r.detach().numpy().astype(np.float32), grads, note)
 
 
