@@ -68,7 +68,7 @@ def grid_sample_points(image, grid):
     ATen's CPU ``grid_sample`` (forward and backward) runs its batches in parallel and each batch
     on one thread, so a single batch of points uses one core whatever ``torch.set_num_threads``
     says. The points are split into one batch per thread over the same image (an ``expand``, no
-    copy), as a user who wants all cores would write it: that measured 1.5–1.9× faster on two
+    copy), as a user who wants all cores would write it: that measured 1.5–2× faster on two
     threads than one batch, forward and backward.
     """
     n = grid.shape[0]
