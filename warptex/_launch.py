@@ -248,7 +248,7 @@ def _private_zeros(real: wp.array, worker: int) -> wp.array:
     kept from the last backward pass when there is one, else a new one (kept while ``real`` lives)."""
     copies = _private_arrays.setdefault(real, {})
     mine = copies.get(worker)
-    if mine is None or mine.shape != real.shape or mine.dtype != real.dtype:
+    if mine is None:  # keyed by the array itself, whose shape and dtype never change
         mine = copies[worker] = wp.zeros_like(real)
     else:
         mine.zero_()
