@@ -30,7 +30,10 @@ LOD (after bias, before trilinear blending) to that ``ℓ_max``, which the Pytho
 
 import warp as wp
 
-from .sampling import ADDRESS_WRAP, Sampler, TextureView, fetch, lod_from_derivatives, reduce_coord, sample_lod, write_channels
+from . import ADJOINT_MODULE, specialised
+from .sampling import ADDRESS_WRAP, SamplerArgs, TextureView, fetch, lod_from_derivatives, reduce_coord, sample_lod, sample_lod_call, write_channels
+
+MODULE = "warptex.atlas"
 
 MAX_ENTRIES = wp.constant(4)  # the most index-map entries (k) per texel: an RGBA index map
 ATLAS_EPS = wp.constant(1.0e-20)
@@ -47,8 +50,8 @@ class AtlasLayout:
     num_tiles: wp.int32
 
 
-@wp.kernel
-def pack_kernel(layers: TextureView, layout: AtlasLayout, wrap: Sampler, atlas: wp.array2d(dtype=wp.vec4)):
+@wp.kernel(module=MODULE)
+def pack_kernel(layers: TextureView, layout: AtlasLayout, wrap: SamplerArgs, atlas: wp.array2d(dtype=wp.vec4)):
     """Write every layer's cell (tile + wrapped gutter) into level 0 of the atlas.
 
     Launched over ``(L, th + 2g, tw + 2g)``; ``wrap`` is a wrap-addressing sampler, so ``fetch``
@@ -77,19 +80,25 @@ def tile_uv(atlas: TextureView, layout: AtlasLayout, layer: wp.int32, uv: wp.vec
     return wp.vec2(x / float(atlas.level_width[0]), 1.0 - y / float(atlas.level_height[0]))
 
 
-@wp.func
-def sample_tile(
-    atlas: TextureView, layout: AtlasLayout, layer: wp.int32, uv: wp.vec2, uv_dx: wp.vec2, uv_dy: wp.vec2, smp: Sampler
-) -> wp.vec4:
-    """Layer ``layer`` sampled from the atlas at layer UV ``uv`` with layer-UV derivatives.
+def _sample_tile(sample, name: str):
+    def sample_tile(
+        atlas: TextureView, layout: AtlasLayout, layer: wp.int32, uv: wp.vec2, uv_dx: wp.vec2, uv_dy: wp.vec2, smp: SamplerArgs
+    ) -> wp.vec4:
+        """Layer ``layer`` sampled from the atlas at layer UV ``uv`` with layer-UV derivatives.
 
-    The LOD is measured in tile texels; ``smp.max_lod`` must already hold the safe clamp.
-    """
-    scale = wp.vec2(
-        float(layout.tile_width) / float(atlas.level_width[0]), float(layout.tile_height) / float(atlas.level_height[0])
-    )
-    lod = lod_from_derivatives(atlas, wp.cw_mul(uv_dx, scale), wp.cw_mul(uv_dy, scale))
-    return sample_lod(atlas, 0, tile_uv(atlas, layout, layer, uv), lod, smp)
+        The LOD is measured in tile texels; ``smp.max_lod`` must already hold the safe clamp.
+        """
+        scale = wp.vec2(
+            float(layout.tile_width) / float(atlas.level_width[0]), float(layout.tile_height) / float(atlas.level_height[0])
+        )
+        lod = lod_from_derivatives(atlas, wp.cw_mul(uv_dx, scale), wp.cw_mul(uv_dy, scale))
+        return sample(atlas, 0, tile_uv(atlas, layout, layer, uv), lod, smp)
+
+    return wp.func(specialised(sample_tile, name))
+
+
+sample_tile = _sample_tile(sample_lod, "sample_tile")
+sample_tile_call = _sample_tile(sample_lod_call, "sample_tile_call")  # for the generated adjoint
 
 
 @wp.func
@@ -98,47 +107,54 @@ def map_texel(n: wp.int32, u: float) -> wp.int32:
     return wp.clamp(int(wp.floor(wp.clamp(u, -1.0, 2.0) * float(n))), 0, n - 1)
 
 
-@wp.kernel
-def splat_atlas_kernel(
-    atlas: TextureView,
-    layout: AtlasLayout,
-    indices: wp.array3d(dtype=wp.int32),
-    weights: wp.array3d(dtype=float),
-    tiling: wp.array(dtype=float),
-    uv0: wp.array(dtype=wp.vec2),
-    uv0_dx: wp.array(dtype=wp.vec2),
-    uv0_dy: wp.array(dtype=wp.vec2),
-    mask: wp.array(dtype=float),
-    smp: Sampler,
-    normalize: wp.int32,
-    out: wp.array2d(dtype=float),
-):
-    """``out[i]`` = ``Σ_j w_j · layer_{idx_j}(uv0[i] · tiling)`` over the ``k`` index-map entries.
+def _splat_atlas_kernel(module: str, enable_backward: bool, sample_tile):
+    @wp.kernel(enable_backward=enable_backward, module=module)
+    def splat_atlas_kernel(
+        atlas: TextureView,
+        layout: AtlasLayout,
+        indices: wp.array3d(dtype=wp.int32),
+        weights: wp.array3d(dtype=float),
+        tiling: wp.array(dtype=float),
+        uv0: wp.array(dtype=wp.vec2),
+        uv0_dx: wp.array(dtype=wp.vec2),
+        uv0_dy: wp.array(dtype=wp.vec2),
+        mask: wp.array(dtype=float),
+        smp: SamplerArgs,
+        normalize: wp.int32,
+        out: wp.array2d(dtype=float),
+    ):
+        """``out[i]`` = ``Σ_j w_j · layer_{idx_j}(uv0[i] · tiling)`` over the ``k`` index-map entries.
 
-    The index and weight maps (``[h, w, k]``) are read with nearest filtering, clamped, in UV0: the
-    texel containing ``uv0``. Every entry is sampled, zero weights included, so weight gradients
-    are exact. With ``normalize`` the weights are clamped to ``>= 0`` and divided by their sum.
-    """
-    i = wp.tid()
-    colour = wp.vec4(0.0)
-    if mask[i] != 0.0:
-        uv = uv0[i]
-        if wp.isfinite(uv):
-            row = map_texel(indices.shape[0], 1.0 - uv[1])
-            col = map_texel(indices.shape[1], uv[0])
-            k = indices.shape[2]
-            total = float(0.0)
-            for j in range(MAX_ENTRIES):
-                if j < k:
-                    total += wp.max(weights[row, col, j], 0.0)
-            for j in range(MAX_ENTRIES):
-                if j < k:
-                    w = weights[row, col, j]
-                    if normalize != 0:
-                        w = wp.max(w, 0.0) / wp.max(total, ATLAS_EPS)
-                    layer = wp.clamp(indices[row, col, j], 0, layout.num_tiles - 1)
-                    t = tiling[wp.min(layer, tiling.shape[0] - 1)]
-                    colour += w * sample_tile(atlas, layout, layer, uv * t, uv0_dx[i] * t, uv0_dy[i] * t, smp)
-        else:
-            colour = wp.vec4(wp.nan)
-    write_channels(out, i, colour)
+        The index and weight maps (``[h, w, k]``) are read with nearest filtering, clamped, in UV0: the
+        texel containing ``uv0``. Every entry is sampled, zero weights included, so weight gradients
+        are exact. With ``normalize`` the weights are clamped to ``>= 0`` and divided by their sum.
+        """
+        i = wp.tid()
+        colour = wp.vec4(0.0)
+        if mask[i] != 0.0:
+            uv = uv0[i]
+            if wp.isfinite(uv):
+                row = map_texel(indices.shape[0], 1.0 - uv[1])
+                col = map_texel(indices.shape[1], uv[0])
+                k = indices.shape[2]
+                total = float(0.0)
+                for j in range(MAX_ENTRIES):
+                    if j < k:
+                        total += wp.max(weights[row, col, j], 0.0)
+                for j in range(MAX_ENTRIES):
+                    if j < k:
+                        w = weights[row, col, j]
+                        if normalize != 0:
+                            w = wp.max(w, 0.0) / wp.max(total, ATLAS_EPS)
+                        layer = wp.clamp(indices[row, col, j], 0, layout.num_tiles - 1)
+                        t = tiling[wp.min(layer, tiling.shape[0] - 1)]
+                        colour += w * sample_tile(atlas, layout, layer, uv * t, uv0_dx[i] * t, uv0_dy[i] * t, smp)
+            else:
+                colour = wp.vec4(wp.nan)
+        write_channels(out, i, colour)
+
+    return splat_atlas_kernel
+
+
+splat_atlas_kernel = _splat_atlas_kernel(MODULE, False, sample_tile)
+splat_atlas_adjoint_kernel = _splat_atlas_kernel(ADJOINT_MODULE, True, sample_tile_call)

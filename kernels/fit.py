@@ -30,12 +30,14 @@ float64::
 
 import warp as wp
 
+MODULE = "warptex.fit"
+
 LOSS_L2 = wp.constant(0)
 LOSS_L1 = wp.constant(1)
 L1_DELTA2 = wp.constant(1.0e-12)
 
 
-@wp.kernel
+@wp.kernel(module=MODULE)
 def logit_max_kernel(logits: wp.array(dtype=float), num_layers: wp.int32, top: wp.array(dtype=float)):
     """``top[t] = max_l logits[l, t]``: the softmax shift of flat texel ``t``.
 
@@ -60,7 +62,7 @@ def softmax_weight(logits: wp.array(dtype=float), layer: wp.int32, num_layers: w
     return w
 
 
-@wp.kernel
+@wp.kernel(module=MODULE)
 def softmax_total_kernel(logits: wp.array(dtype=float), top: wp.array(dtype=float), num_layers: wp.int32, total: wp.array(dtype=float)):
     """``total[t] = Σ_l exp(logits[l, t] - top[t])``, the softmax denominator of flat texel ``t``.
 
@@ -75,7 +77,7 @@ def softmax_total_kernel(logits: wp.array(dtype=float), top: wp.array(dtype=floa
     total[t] = acc
 
 
-@wp.kernel
+@wp.kernel(module=MODULE)
 def softmax_kernel(
     logits: wp.array(dtype=float),
     top: wp.array(dtype=float),
@@ -119,7 +121,7 @@ def entropy_term(w: float, valid: bool) -> float:
     return e
 
 
-@wp.kernel
+@wp.kernel(module=MODULE)
 def entropy_kernel(maps: wp.array3d(dtype=wp.vec4), num_layers: wp.int32, channels: wp.int32, scale: float, loss: wp.array(dtype=wp.float64)):
     """Adds ``scale · Σ_c -w_c log w_c`` of splat-map texel ``maps[m, i, j]`` to ``loss[0]``: the
     entropy of the weights, summed over the maps, i.e. per texel over the layers."""
@@ -133,14 +135,14 @@ def entropy_kernel(maps: wp.array3d(dtype=wp.vec4), num_layers: wp.int32, channe
     wp.atomic_add(loss, 0, wp.float64(e * scale))
 
 
-@wp.kernel
+@wp.kernel(module=MODULE)
 def exp_kernel(x: wp.array(dtype=float), out: wp.array(dtype=float)):
     """``out = exp(x)``: log-scale parameters (tiling)."""
     i = wp.tid()
     out[i] = wp.exp(x[i])
 
 
-@wp.kernel
+@wp.kernel(module=MODULE)
 def softplus_kernel(x: wp.array(dtype=float), out: wp.array(dtype=float)):
     """``out = log(1 + exp(x)) = max(x, 0) + log1p(exp(-|x|))``: no overflow for large ``x``, no
     underflow to 0 for very negative ``x``."""
@@ -160,7 +162,7 @@ def softplus_kernel(x: wp.array(dtype=float), out: wp.array(dtype=float)):
         out[i] = tail
 
 
-@wp.kernel
+@wp.kernel(module=MODULE)
 def blur_kernel(src: wp.array3d(dtype=float), taps: wp.array(dtype=float), step_i: wp.int32, step_j: wp.int32, dst: wp.array3d(dtype=float)):
     """One pass of a separable filter along ``(step_i, step_j)``, ``(0, 1)`` for rows (x) or
     ``(1, 0)`` for columns (y): ``dst[i, j, c] = Σ_k taps[k] · src[i + (k - r)·step_i, j + (k - r)·step_j, c]``,
@@ -176,14 +178,14 @@ def blur_kernel(src: wp.array3d(dtype=float), taps: wp.array(dtype=float), step_
     dst[i, j, c] = acc
 
 
-@wp.kernel
+@wp.kernel(module=MODULE)
 def mask_kernel(src: wp.array3d(dtype=float), mask: wp.array2d(dtype=float), dst: wp.array3d(dtype=float)):
     """``dst = src · mask`` per pixel."""
     i, j, c = wp.tid()
     dst[i, j, c] = src[i, j, c] * mask[i, j]
 
 
-@wp.kernel
+@wp.kernel(module=MODULE)
 def image_loss_kernel(
     render: wp.array3d(dtype=float),
     target: wp.array3d(dtype=float),

@@ -8,6 +8,8 @@ them through the triangle's position-to-UV map.
 
 import warp as wp
 
+MODULE = "warptex.raster"
+
 
 @wp.struct
 class CameraView:
@@ -46,7 +48,7 @@ def plane_differential(t: float, d: wp.vec3, n: wp.vec3, d_origin: wp.vec3, d_di
     return dp - d * (wp.dot(dp, n) / wp.dot(d, n))
 
 
-@wp.kernel
+@wp.kernel(enable_backward=False, module=MODULE)
 def raster_kernel(
     mesh: wp.uint64,
     points: wp.array(dtype=wp.vec3),
@@ -111,7 +113,7 @@ def barycentric_change(e1: wp.vec3, e2: wp.vec3, dp: wp.vec3) -> wp.vec2:
     return wp.vec2(wp.dot(wp.cross(dp, e2), n) * inv, wp.dot(wp.cross(e1, dp), n) * inv)
 
 
-@wp.kernel
+@wp.kernel(enable_backward=False, module=MODULE)
 def uv_kernel(
     points: wp.array(dtype=wp.vec3),
     indices: wp.array(dtype=wp.int32),

@@ -18,6 +18,8 @@ UV convention (OpenGL / trimesh): ``(0, 0)`` is the bottom-left corner of the im
 
 import warp as wp
 
+from . import ADJOINT_MODULE, out_of_line
+
 # Filter modes (mirrored by ``warptex.Filter``).
 FILTER_NEAREST = wp.constant(0)
 FILTER_BILINEAR = wp.constant(1)
@@ -53,8 +55,8 @@ class TextureView:
 
 
 @wp.struct
-class Sampler:
-    """How a texture is filtered and addressed (a sampler object, as in graphics APIs)."""
+class SamplerArgs:
+    """How a texture is filtered and addressed, as kernels see it (packed from ``warptex.Sampler``)."""
 
     filter: wp.int32
     address: wp.int32
@@ -155,7 +157,7 @@ def write_channels(out: wp.array2d(dtype=float), i: wp.int32, value: wp.vec4):
 
 
 @wp.func
-def texel(tex: TextureView, start: wp.int32, w: wp.int32, xi: wp.int32, yi: wp.int32, smp: Sampler) -> wp.vec4:
+def texel(tex: TextureView, start: wp.int32, w: wp.int32, xi: wp.int32, yi: wp.int32, smp: SamplerArgs) -> wp.vec4:
     """The texel at addressed column ``xi``, row ``yi`` of the ``w``-wide image starting at
     ``start``, or the border colour where either index is ``-1``."""
     value = smp.border
@@ -165,7 +167,7 @@ def texel(tex: TextureView, start: wp.int32, w: wp.int32, xi: wp.int32, yi: wp.i
 
 
 @wp.func
-def fetch(tex: TextureView, layer: wp.int32, level: wp.int32, x: wp.int32, y: wp.int32, smp: Sampler) -> wp.vec4:
+def fetch(tex: TextureView, layer: wp.int32, level: wp.int32, x: wp.int32, y: wp.int32, smp: SamplerArgs) -> wp.vec4:
     """One texel of ``level`` at column ``x``, row ``y`` (row 0 on top), after addressing."""
     w = tex.level_width[level]
     h = tex.level_height[level]
@@ -174,7 +176,7 @@ def fetch(tex: TextureView, layer: wp.int32, level: wp.int32, x: wp.int32, y: wp
 
 
 @wp.func
-def nearest_tap(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: Sampler):
+def nearest_tap(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: SamplerArgs):
     """``(start, w, x, y)``: the texel that nearest filtering of one level reads, addressed
     (``-1``: border); ``uv`` already reduced by :func:`reduce_coord`."""
     w = tex.level_width[level]
@@ -186,14 +188,14 @@ def nearest_tap(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2,
 
 
 @wp.func
-def sample_nearest(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: Sampler) -> wp.vec4:
+def sample_nearest(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: SamplerArgs) -> wp.vec4:
     """Nearest texel of one level; ``uv`` already reduced by :func:`reduce_coord`."""
     start, w, x, y = nearest_tap(tex, layer, level, uv, smp)
     return texel(tex, start, w, x, y, smp)
 
 
 @wp.func
-def bilinear_taps(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: Sampler):
+def bilinear_taps(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: SamplerArgs):
     """``(start, w, i0, i1, j0, j1, fx, fy)``: the two columns ``i`` and two rows ``j`` that bilinear
     filtering of one level reads, addressed (``-1``: border), and the fractions that weight them;
     ``uv`` already reduced by :func:`reduce_coord`. The columns and rows are addressed once each,
@@ -213,7 +215,7 @@ def bilinear_taps(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec
 
 
 @wp.func
-def sample_bilinear(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: Sampler) -> wp.vec4:
+def sample_bilinear(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: SamplerArgs) -> wp.vec4:
     """Bilinear filtering of one level; ``uv`` already reduced by :func:`reduce_coord`."""
     start, w, i0, i1, j0, j1, fx, fy = bilinear_taps(tex, layer, level, uv, smp)
     top = texel(tex, start, w, i0, j0, smp) * (1.0 - fx) + texel(tex, start, w, i1, j0, smp) * fx
@@ -237,7 +239,7 @@ def lod_from_derivatives(tex: TextureView, uv_dx: wp.vec2, uv_dy: wp.vec2) -> fl
 
 
 @wp.func
-def mip_levels(tex: TextureView, lod: float, smp: Sampler) -> wp.vec2:
+def mip_levels(tex: TextureView, lod: float, smp: SamplerArgs) -> wp.vec2:
     """``(level, fraction)`` that ``lod`` reads: the sampler's bias and ``[min_lod, max_lod]`` clamp,
     then the chain's. Nearest and bilinear read level ``floor(lod + 0.5)`` (fraction 0); trilinear
     blends ``floor(lod)`` and the next level by the fraction."""
@@ -249,7 +251,7 @@ def mip_levels(tex: TextureView, lod: float, smp: Sampler) -> wp.vec2:
 
 
 @wp.func
-def sample_levels(tex: TextureView, layer: wp.int32, uv: wp.vec2, level: wp.int32, fraction: float, smp: Sampler) -> wp.vec4:
+def sample_levels(tex: TextureView, layer: wp.int32, uv: wp.vec2, level: wp.int32, fraction: float, smp: SamplerArgs) -> wp.vec4:
     """Filter finite ``uv`` on ``level``, blended with ``level + 1`` by ``fraction`` when it is
     positive (``fraction`` is 0 for nearest and bilinear; see :func:`mip_levels`)."""
     r = wp.vec2(reduce_coord(uv[0], smp.address), reduce_coord(uv[1], smp.address))
@@ -265,7 +267,7 @@ def sample_levels(tex: TextureView, layer: wp.int32, uv: wp.vec2, level: wp.int3
 
 
 @wp.func
-def sample_lod(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: Sampler) -> wp.vec4:
+def sample_lod(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: SamplerArgs) -> wp.vec4:
     """Sample ``layer`` at ``uv`` with level of detail ``lod``: the building block of every technique.
 
     The levels read are those of :func:`mip_levels`. Non-finite ``uv`` or ``lod`` give NaN in
@@ -278,58 +280,65 @@ def sample_lod(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: 
     return result
 
 
+@out_of_line
+def sample_lod_call(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: SamplerArgs) -> wp.vec4:
+    """:func:`sample_lod`, out of line: for the kernels with Warp's generated adjoint, which call
+    it from several places; a Warp module then compiles one copy of it and of its adjoint."""
+    return sample_lod(tex, layer, uv, lod, smp)
+
+
 # -- texel gradients ---------------------------------------------------------------------------------
 #
 # Sampling is linear in the texels: the gradient of a sample with respect to the texel array is the
 # output gradient times each tap's filter weight, added into the texels the forward pass read. The
-# ``splat_*`` functions mirror the ``sample_*`` ones (the same taps, from the same ``*_taps``
+# ``scatter_*`` functions mirror the ``sample_*`` ones (the same taps, from the same ``*_taps``
 # functions) and add instead of read. The texel-gradient kernels built on them replace Warp's
 # generated adjoint where only texels need gradients: that adjoint replays every function's forward
 # pass inside its reverse pass and measured 4.7× slower on triplanar.
 
 
 @wp.func
-def splat_texel(grad: wp.array(dtype=wp.vec4), start: wp.int32, w: wp.int32, xi: wp.int32, yi: wp.int32, g: wp.vec4):
+def scatter_texel(grad: wp.array(dtype=wp.vec4), start: wp.int32, w: wp.int32, xi: wp.int32, yi: wp.int32, g: wp.vec4):
     """Add ``g`` to the gradient of the texel :func:`texel` reads (nothing for the border colour)."""
     if xi >= 0 and yi >= 0:
         wp.atomic_add(grad, start + yi * w + xi, g)
 
 
 @wp.func
-def splat_bilinear(grad: wp.array(dtype=wp.vec4), start: wp.int32, w: wp.int32, i0: wp.int32, i1: wp.int32, j0: wp.int32, j1: wp.int32, fx: float, fy: float, g: wp.vec4):
+def scatter_bilinear(grad: wp.array(dtype=wp.vec4), start: wp.int32, w: wp.int32, i0: wp.int32, i1: wp.int32, j0: wp.int32, j1: wp.int32, fx: float, fy: float, g: wp.vec4):
     """Add ``g`` times each bilinear weight into the four texels of :func:`bilinear_taps`."""
     top = g * (1.0 - fy)
     bottom = g * fy
-    splat_texel(grad, start, w, i0, j0, top * (1.0 - fx))
-    splat_texel(grad, start, w, i1, j0, top * fx)
-    splat_texel(grad, start, w, i0, j1, bottom * (1.0 - fx))
-    splat_texel(grad, start, w, i1, j1, bottom * fx)
+    scatter_texel(grad, start, w, i0, j0, top * (1.0 - fx))
+    scatter_texel(grad, start, w, i1, j0, top * fx)
+    scatter_texel(grad, start, w, i0, j1, bottom * (1.0 - fx))
+    scatter_texel(grad, start, w, i1, j1, bottom * fx)
 
 
 @wp.func
-def splat_levels(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, level: wp.int32, fraction: float, smp: Sampler, g: wp.vec4):
+def scatter_levels(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, level: wp.int32, fraction: float, smp: SamplerArgs, g: wp.vec4):
     """Add the gradient ``g`` of :func:`sample_levels` (same arguments) into the texels it reads."""
     r = wp.vec2(reduce_coord(uv[0], smp.address), reduce_coord(uv[1], smp.address))
     if smp.filter == FILTER_NEAREST:
         start, w, x, y = nearest_tap(tex, layer, level, r, smp)
-        splat_texel(grad, start, w, x, y, g)
+        scatter_texel(grad, start, w, x, y, g)
     else:
         finer = g
         if fraction > 0.0:
             finer = g * (1.0 - fraction)
             start, w, i0, i1, j0, j1, fx, fy = bilinear_taps(tex, layer, level + 1, r, smp)
-            splat_bilinear(grad, start, w, i0, i1, j0, j1, fx, fy, g * fraction)
+            scatter_bilinear(grad, start, w, i0, i1, j0, j1, fx, fy, g * fraction)
         start, w, i0, i1, j0, j1, fx, fy = bilinear_taps(tex, layer, level, r, smp)
-        splat_bilinear(grad, start, w, i0, i1, j0, j1, fx, fy, finer)
+        scatter_bilinear(grad, start, w, i0, i1, j0, j1, fx, fy, finer)
 
 
 @wp.func
-def splat_lod(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, lod: float, smp: Sampler, g: wp.vec4):
+def scatter_lod(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, lod: float, smp: SamplerArgs, g: wp.vec4):
     """Add the gradient ``g`` of :func:`sample_lod` (same arguments) into the texels it reads;
     non-finite ``uv`` or ``lod`` read nothing and add nothing."""
     if finite_uv_lod(uv, lod):
         lf = mip_levels(tex, lod, smp)
-        splat_levels(tex, grad, layer, uv, int(lf[0]), lf[1], smp, g)
+        scatter_levels(tex, grad, layer, uv, int(lf[0]), lf[1], smp, g)
 
 
 # -- UV and LOD derivatives ---------------------------------------------------------------------------
@@ -340,7 +349,7 @@ def splat_lod(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, 
 
 
 @wp.func
-def bilinear_derivatives(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: Sampler):
+def bilinear_derivatives(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.vec2, smp: SamplerArgs):
     """``(value, d/du, d/dv)`` of :func:`sample_bilinear` (same arguments; ``uv`` reduced)."""
     start, w, i0, i1, j0, j1, fx, fy = bilinear_taps(tex, layer, level, uv, smp)
     t00 = texel(tex, start, w, i0, j0, smp)
@@ -354,7 +363,7 @@ def bilinear_derivatives(tex: TextureView, layer: wp.int32, level: wp.int32, uv:
 
 
 @wp.func
-def sample_lod_derivatives(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: Sampler):
+def sample_lod_derivatives(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: SamplerArgs):
     """``(value, d/du, d/dv, d/dlod)`` of :func:`sample_lod` (same arguments; the value is the same
     bits). Non-finite ``uv`` or ``lod`` give a NaN value and zero derivatives. ``reduce_coord`` has
     slope 1 where it does not clamp; where clamp and border clamp ``u``, all four taps read the
@@ -412,7 +421,7 @@ def read_channels(a: wp.array2d(dtype=float), i: wp.int32) -> wp.vec4:
 
 
 @wp.func
-def sample_layer(tex: TextureView, i: wp.int32, layers: wp.array(dtype=wp.int32), constant_layer: wp.int32) -> wp.int32:
+def resolve_layer(tex: TextureView, i: wp.int32, layers: wp.array(dtype=wp.int32), constant_layer: wp.int32) -> wp.int32:
     """Sample ``i``'s layer: ``layers[i]`` clamped to the array when per-sample layers are given."""
     layer = constant_layer
     if layers.shape[0] > 0:
@@ -421,7 +430,7 @@ def sample_layer(tex: TextureView, i: wp.int32, layers: wp.array(dtype=wp.int32)
 
 
 @wp.func
-def sample_layer_and_lod(
+def resolve_layer_and_lod(
     tex: TextureView,
     i: wp.int32,
     uv_dx: wp.array(dtype=wp.vec2),
@@ -434,7 +443,7 @@ def sample_layer_and_lod(
 ):
     """Sample ``i``'s layer (per-sample indices clamped to the array) and LOD, by ``lod_source``:
     the argument conventions of :func:`sample_kernel`, shared by every per-UV sampling kernel."""
-    layer = sample_layer(tex, i, layers, constant_layer)
+    layer = resolve_layer(tex, i, layers, constant_layer)
     lod = 0.0
     if lod_source == LOD_CONSTANT:
         lod = constant_lod
@@ -445,75 +454,118 @@ def sample_layer_and_lod(
     return layer, lod
 
 
-@wp.kernel
-def sample_kernel(
+# -- kernels --------------------------------------------------------------------------------------------
+#
+# A per-sample operation has three kernels (``warptex._op.Kernels``): the forward pass without Warp's
+# generated adjoint; its hand-written texel gradient, whose arguments are the forward's inputs, then
+# the gradient arrays it adds into, then the outputs' gradients; and the forward again with the
+# generated adjoint, in a Warp module of its own, compiled only when that adjoint is recorded (when
+# UVs, LODs or derivatives need gradients).
+
+MODULE = "warptex.sample"
+GRAD_MODULE = MODULE + ".grad"
+MIPS_MODULE = "warptex.mips"
+
+
+def _sample_kernel(module: str, enable_backward: bool, sample):
+    @wp.kernel(enable_backward=enable_backward, module=module)
+    def sample_kernel(
+        tex: TextureView,
+        uv: wp.array(dtype=wp.vec2),
+        uv_dx: wp.array(dtype=wp.vec2),
+        uv_dy: wp.array(dtype=wp.vec2),
+        lods: wp.array(dtype=float),
+        layers: wp.array(dtype=wp.int32),
+        smp: SamplerArgs,
+        lod_source: wp.int32,
+        constant_lod: float,
+        constant_layer: wp.int32,
+        out: wp.array2d(dtype=float),
+    ):
+        """``out[i, c]`` = channel ``c`` of the texture sampled at ``uv[i]``.
+
+        Per-sample layer indices are clamped to the array; optional arrays may be null when unused.
+        """
+        i = wp.tid()
+        layer, lod = resolve_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
+        write_channels(out, i, sample(tex, layer, uv[i], lod, smp))
+
+    return sample_kernel
+
+
+def _sample_level_kernel(module: str, enable_backward: bool):
+    @wp.kernel(enable_backward=enable_backward, module=module)
+    def sample_level_kernel(
+        tex: TextureView,
+        uv: wp.array(dtype=wp.vec2),
+        layers: wp.array(dtype=wp.int32),
+        smp: SamplerArgs,
+        level: wp.int32,
+        fraction: float,
+        constant_layer: wp.int32,
+        out: wp.array2d(dtype=float),
+    ):
+        """:func:`sample_kernel` for one LOD shared by every sample, resolved on the host to ``level``
+        and ``fraction`` (as :func:`mip_levels` does): the level's size and offset are then the same
+        for every sample, which measured a third faster than deriving them per sample."""
+        i = wp.tid()
+        layer = resolve_layer(tex, i, layers, constant_layer)
+        result = wp.vec4(wp.nan)
+        if finite_uv_lod(uv[i], 0.0):
+            result = sample_levels(tex, layer, uv[i], level, fraction, smp)
+        write_channels(out, i, result)
+
+    return sample_level_kernel
+
+
+sample_kernel = _sample_kernel(MODULE, False, sample_lod)
+sample_level_kernel = _sample_level_kernel(MODULE, enable_backward=False)
+sample_adjoint_kernel = _sample_kernel(ADJOINT_MODULE, True, sample_lod_call)
+sample_level_adjoint_kernel = _sample_level_kernel(ADJOINT_MODULE, enable_backward=True)
+
+
+@wp.kernel(enable_backward=False, module=GRAD_MODULE)
+def sample_texel_grad_kernel(
     tex: TextureView,
     uv: wp.array(dtype=wp.vec2),
     uv_dx: wp.array(dtype=wp.vec2),
     uv_dy: wp.array(dtype=wp.vec2),
     lods: wp.array(dtype=float),
     layers: wp.array(dtype=wp.int32),
-    smp: Sampler,
+    smp: SamplerArgs,
     lod_source: wp.int32,
     constant_lod: float,
     constant_layer: wp.int32,
-    out: wp.array2d(dtype=float),
+    grad: wp.array(dtype=wp.vec4),
+    adj_out: wp.array2d(dtype=float),
 ):
-    """``out[i, c]`` = channel ``c`` of the texture sampled at ``uv[i]``.
-
-    Per-sample layer indices are clamped to the array; optional arrays may be null when unused.
-    """
+    """Add the gradient of :func:`sample_kernel` (same inputs) with respect to the texels into
+    ``grad``, given its output's gradient ``adj_out``."""
     i = wp.tid()
-    layer, lod = sample_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
-    write_channels(out, i, sample_lod(tex, layer, uv[i], lod, smp))
+    layer, lod = resolve_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
+    scatter_lod(tex, grad, layer, uv[i], lod, smp, read_channels(adj_out, i))
 
 
-@wp.kernel
-def sample_level_kernel(
+@wp.kernel(enable_backward=False, module=GRAD_MODULE)
+def sample_level_texel_grad_kernel(
     tex: TextureView,
     uv: wp.array(dtype=wp.vec2),
     layers: wp.array(dtype=wp.int32),
-    smp: Sampler,
+    smp: SamplerArgs,
     level: wp.int32,
     fraction: float,
     constant_layer: wp.int32,
-    out: wp.array2d(dtype=float),
-):
-    """:func:`sample_kernel` for one LOD shared by every sample, resolved on the host to ``level``
-    and ``fraction`` (as :func:`mip_levels` does): the level's size and offset are then the same
-    for every sample, which measured a third faster than deriving them per sample."""
-    i = wp.tid()
-    layer = sample_layer(tex, i, layers, constant_layer)
-    result = wp.vec4(wp.nan)
-    if finite_uv_lod(uv[i], 0.0):
-        result = sample_levels(tex, layer, uv[i], level, fraction, smp)
-    write_channels(out, i, result)
-
-
-@wp.kernel(enable_backward=False)
-def sample_texel_grad_kernel(
-    tex: TextureView,
     grad: wp.array(dtype=wp.vec4),
-    uv: wp.array(dtype=wp.vec2),
-    uv_dx: wp.array(dtype=wp.vec2),
-    uv_dy: wp.array(dtype=wp.vec2),
-    lods: wp.array(dtype=float),
-    layers: wp.array(dtype=wp.int32),
-    smp: Sampler,
-    lod_source: wp.int32,
-    constant_lod: float,
-    constant_layer: wp.int32,
     adj_out: wp.array2d(dtype=float),
 ):
-    """Add the gradient of :func:`sample_kernel` (same arguments) with respect to the texels into
-    ``grad``, given its output's gradient ``adj_out``. (A uniform LOD passed as ``LOD_CONSTANT``
-    reads the levels :func:`sample_level_kernel` reads, to the bit.)"""
+    """Add the gradient of :func:`sample_level_kernel` (same inputs) with respect to the texels into
+    ``grad``, given its output's gradient ``adj_out``."""
     i = wp.tid()
-    layer, lod = sample_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
-    splat_lod(tex, grad, layer, uv[i], lod, smp, read_channels(adj_out, i))
+    if finite_uv_lod(uv[i], 0.0):
+        scatter_levels(tex, grad, resolve_layer(tex, i, layers, constant_layer), uv[i], level, fraction, smp, read_channels(adj_out, i))
 
 
-@wp.kernel
+@wp.kernel(module=MIPS_MODULE)
 def downsample_kernel(tex: TextureView, level: wp.int32, texels: wp.array(dtype=wp.vec4)):
     """Box-filter ``level`` into ``level + 1`` of every layer, for any (non-power-of-two) size.
 

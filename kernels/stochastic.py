@@ -30,8 +30,8 @@ periodic address modes (wrap, period 1; mirror, period 2), the only ones stochas
 
 import warp as wp
 
-from . import hashing, sampling
-from .sampling import Sampler, TextureView
+from . import ADJOINT_MODULE, hashing, out_of_line, sampling, specialised
+from .sampling import SamplerArgs, TextureView
 
 METHOD_NONE = wp.constant(0)
 METHOD_HASH4 = wp.constant(1)
@@ -54,7 +54,7 @@ PI = wp.constant(3.141592653589793)
 
 
 @wp.struct
-class StochasticParams:
+class StochasticArgs:
     """Options of :func:`sample_stochastic` (built by ``warptex.stochastic.stochastic_params``).
 
     ``lut`` is ``[layers, lut_levels, channels, lut_size]`` flattened: entry ``i`` of channel ``c`` at
@@ -104,7 +104,7 @@ def offset_tap(base: wp.vec2, h: wp.vec4, mirror: wp.int32) -> wp.vec2:
 
 
 @wp.func
-def hash4_taps(uv: wp.vec2, params: StochasticParams):
+def hash4_taps(uv: wp.vec2, params: StochasticArgs):
     """``(t0, t1, t2, t3, w)``: the four cells around ``uv``, each with its hashed offset (and
     mirror), and their smoothstep blend weights (a zero-weight tap is not hashed: half of every
     axis has a single tap)."""
@@ -148,7 +148,7 @@ def value_noise(p: wp.vec2, seed: wp.uint32) -> float:
 
 
 @wp.func
-def cheap2_taps(uv: wp.vec2, params: StochasticParams):
+def cheap2_taps(uv: wp.vec2, params: StochasticArgs):
     """``(t0, t1, w)``: two taps whose offsets are picked by low-frequency noise, and their blend
     weights ``(1 - t, t)`` from the noise's fraction (a zero-weight tap is not hashed)."""
     l = value_noise(uv * params.noise_frequency, params.seed) * params.noise_levels
@@ -192,24 +192,18 @@ def hex_grid(uv: wp.vec2):
 
 
 @wp.func
-def hex_centre(v: wp.vec2i) -> wp.vec2:
-    """UV of triangle-grid vertex ``v``."""
-    return wp.vec2(float(v[0]) + 0.5 * float(v[1]), HALF_SQRT3 * float(v[1])) / HEX_SCALE
-
-
-@wp.func
 def hex_centre64(v: wp.vec2i) -> wp.vec2d:
-    """:func:`hex_centre` in float64."""
+    """UV of triangle-grid vertex ``v``, ``(i + j / 2, j sqrt(3) / 2) / HEX_SCALE``, in float64."""
     scale = wp.float64(HEX_SCALE)
     return wp.vec2d((wp.float64(v[0]) + wp.float64(0.5) * wp.float64(v[1])) / scale, wp.float64(HALF_SQRT3) * wp.float64(v[1]) / scale)
 
 
 @wp.func
-def hex_tap(uv: wp.vec2, base: wp.vec2, v: wp.vec2i, params: StochasticParams) -> wp.vec2:
+def hex_tap(uv: wp.vec2, base: wp.vec2, v: wp.vec2i, params: StochasticArgs) -> wp.vec2:
     """Tap UV of vertex ``v``: ``R(θ) (uv - c) + c + o`` (reduced by :func:`periodic_base`).
 
     ``o = (h.x, h.y)``, ``θ = (2 h.z - 1) π rotation`` from ``hash4_unit(v, seed, STREAM_HEX_VERTEX)``,
-    ``c`` the vertex centre (:func:`hex_centre`).
+    ``c`` the vertex centre (:func:`hex_centre64`).
     """
     h = hashing.hash4_unit(v[0], v[1], params.seed, STREAM_HEX_VERTEX)
     tap = base + wp.vec2(h[0], h[1])
@@ -235,7 +229,7 @@ def hex_weights(w: wp.vec3, contrast: float) -> wp.vec3:
 
 
 @wp.func
-def inverse_lut(params: StochasticParams, layer: wp.int32, level: wp.int32, c: wp.int32, g: float) -> float:
+def inverse_lut(params: StochasticArgs, layer: wp.int32, level: wp.int32, c: wp.int32, g: float) -> float:
     """Linear interpolation of channel ``c``'s inverse LUT of mip ``level`` at ``g`` (ends clamped)."""
     n = params.lut_size
     x = wp.clamp((g - params.lut_lo) / (params.lut_hi - params.lut_lo) * float(n) - 0.5, 0.0, float(n - 1))
@@ -247,7 +241,7 @@ def inverse_lut(params: StochasticParams, layer: wp.int32, level: wp.int32, c: w
 
 
 @wp.func
-def hex_taps(uv: wp.vec2, params: StochasticParams):
+def hex_taps(uv: wp.vec2, params: StochasticArgs):
     """``(t0, t1, t2, w)``: the taps of the three vertices of the triangle around ``uv`` and their
     normalised weights."""
     bary, v0, v1, v2 = hex_grid(uv)
@@ -256,7 +250,7 @@ def hex_taps(uv: wp.vec2, params: StochasticParams):
 
 
 @wp.func
-def stochastic_taps(uv: wp.vec2, params: StochasticParams):
+def stochastic_taps(uv: wp.vec2, params: StochasticArgs):
     """``(t0, t1, t2, t3, w)``: the tap UVs of ``params.method`` (not ``METHOD_NONE``) at finite
     ``uv`` and their blend weights; unused taps have weight 0. hash4 uses four taps, cheap2 two,
     hex three (weights before the histogram blend)."""
@@ -290,7 +284,7 @@ def pick_tap(k: wp.int32, t0: wp.vec2, t1: wp.vec2, t2: wp.vec2, t3: wp.vec2) ->
 
 
 @wp.func
-def histogram_blend(tex: TextureView, layer: wp.int32, acc: wp.vec4, w: wp.vec4, lod: float, smp: Sampler, params: StochasticParams) -> wp.vec4:
+def histogram_blend(tex: TextureView, layer: wp.int32, acc: wp.vec4, w: wp.vec4, lod: float, smp: SamplerArgs, params: StochasticArgs) -> wp.vec4:
     """The hex histogram blend of ``acc = Σ w_k (tap_k - mean)`` (Gaussianised taps): rescaled to
     the taps' variance, mapped through the inverse LUT of the levels ``lod`` reads, decorrelation
     undone."""
@@ -310,92 +304,138 @@ def histogram_blend(tex: TextureView, layer: wp.int32, acc: wp.vec4, w: wp.vec4,
     return result
 
 
+def _sample_stochastic(sample, taps, blend_histogram, name: str, decorate=wp.func):
+    def sample_stochastic(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: SamplerArgs, params: StochasticArgs) -> wp.vec4:
+        """Sample ``layer`` at ``uv`` with the technique ``params.method``, every tap at ``lod``.
+
+        ``lod`` is taken as is (then biased and clamped by ``smp`` as in ``sample_lod``); compute it
+        from the unperturbed UV derivatives. Non-finite ``uv`` or ``lod`` give NaN in every channel.
+        """
+        result = wp.vec4(wp.nan)
+        if params.method == METHOD_NONE:  # tested first: plain sampling measured 5% slower after the others' tests
+            result = sample(tex, layer, uv, lod, smp)
+        elif sampling.finite_uv_lod(uv, lod):
+            t0, t1, t2, t3, w = taps(uv, params)
+            mean = wp.vec4(0.0)
+            if params.histogram != 0:
+                mean = wp.vec4(params.mean)
+            result = wp.vec4(0.0)
+            for k in range(4):
+                if w[k] > 0.0:
+                    result += w[k] * (sample(tex, layer, pick_tap(k, t0, t1, t2, t3), lod, smp) - mean)
+            if params.histogram != 0:
+                result = blend_histogram(tex, layer, result, w, lod, smp, params)
+        return result
+
+    return decorate(specialised(sample_stochastic, name))
+
+
+@out_of_line
+def stochastic_taps_call(uv: wp.vec2, params: StochasticArgs):
+    """:func:`stochastic_taps`, out of line (for :func:`sample_stochastic_call`)."""
+    return stochastic_taps(uv, params)
+
+
+@out_of_line
+def histogram_blend_call(tex: TextureView, layer: wp.int32, acc: wp.vec4, w: wp.vec4, lod: float, smp: SamplerArgs, params: StochasticArgs) -> wp.vec4:
+    """:func:`histogram_blend`, out of line (for :func:`sample_stochastic_call`)."""
+    return histogram_blend(tex, layer, acc, w, lod, smp, params)
+
+
+sample_stochastic = _sample_stochastic(sampling.sample_lod, stochastic_taps, histogram_blend, "sample_stochastic")
+# For the generated-adjoint kernels: out of line, and built on out-of-line pieces, so that a Warp
+# module holding several such kernels compiles each piece and its adjoint once.
+sample_stochastic_call = _sample_stochastic(sampling.sample_lod_call, stochastic_taps_call, histogram_blend_call, "sample_stochastic_call", out_of_line)
+
+
 @wp.func
-def sample_stochastic(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: Sampler, params: StochasticParams) -> wp.vec4:
-    """Sample ``layer`` at ``uv`` with the technique ``params.method``, every tap at ``lod``.
-
-    ``lod`` is taken as is (then biased and clamped by ``smp`` as in ``sample_lod``); compute it from
-    the unperturbed UV derivatives. Non-finite ``uv`` or ``lod`` give NaN in every channel.
-    """
-    result = wp.vec4(wp.nan)
-    if params.method == METHOD_NONE:  # tested first: plain sampling measured 5% slower after the others' tests
-        result = sampling.sample_lod(tex, layer, uv, lod, smp)
-    elif sampling.finite_uv_lod(uv, lod):
-        t0, t1, t2, t3, w = stochastic_taps(uv, params)
-        mean = wp.vec4(0.0)
-        if params.histogram != 0:
-            mean = wp.vec4(params.mean)
-        result = wp.vec4(0.0)
-        for k in range(4):
-            if w[k] > 0.0:
-                result += w[k] * (sampling.sample_lod(tex, layer, pick_tap(k, t0, t1, t2, t3), lod, smp) - mean)
-        if params.histogram != 0:
-            result = histogram_blend(tex, layer, result, w, lod, smp, params)
-    return result
-
-
-@wp.func
-def splat_stochastic(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, lod: float, smp: Sampler, params: StochasticParams, g: wp.vec4):
+def scatter_stochastic(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, lod: float, smp: SamplerArgs, params: StochasticArgs, g: wp.vec4):
     """Add the gradient ``g`` of :func:`sample_stochastic` (same arguments) into the texels it
     reads: each tap's weight times ``g``. Linear blends only (no histogram, which is not linear
     in the texels)."""
     if params.method == METHOD_NONE:
-        sampling.splat_lod(tex, grad, layer, uv, lod, smp, g)
+        sampling.scatter_lod(tex, grad, layer, uv, lod, smp, g)
     elif sampling.finite_uv_lod(uv, lod):
         t0, t1, t2, t3, w = stochastic_taps(uv, params)
         for k in range(4):
             if w[k] > 0.0:
-                sampling.splat_lod(tex, grad, layer, pick_tap(k, t0, t1, t2, t3), lod, smp, w[k] * g)
+                sampling.scatter_lod(tex, grad, layer, pick_tap(k, t0, t1, t2, t3), lod, smp, w[k] * g)
 
 
-@wp.kernel
-def stochastic_kernel(
-    tex: TextureView,
-    uv: wp.array(dtype=wp.vec2),
-    uv_dx: wp.array(dtype=wp.vec2),
-    uv_dy: wp.array(dtype=wp.vec2),
-    lods: wp.array(dtype=float),
-    layers: wp.array(dtype=wp.int32),
-    smp: Sampler,
-    params: StochasticParams,
-    lod_source: wp.int32,
-    constant_lod: float,
-    constant_layer: wp.int32,
-    out: wp.array2d(dtype=float),
-):
-    """``out[i, c]`` = channel ``c`` of :func:`sample_stochastic` at ``uv[i]`` (arguments as ``sample_kernel``)."""
-    i = wp.tid()
-    layer, lod = sampling.sample_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
-    sampling.write_channels(out, i, sample_stochastic(tex, layer, uv[i], lod, smp, params))
+@wp.func
+def sample_plain(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: SamplerArgs, params: StochasticArgs) -> wp.vec4:
+    """:func:`sample_stochastic` for ``METHOD_NONE`` without the stochastic code (``params`` is not
+    read), for the plain variants of kernels that take either."""
+    return sampling.sample_lod(tex, layer, uv, lod, smp)
 
 
-@wp.kernel(enable_backward=False)
+@wp.func
+def scatter_plain(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, lod: float, smp: SamplerArgs, params: StochasticArgs, g: wp.vec4):
+    """:func:`scatter_stochastic` for ``METHOD_NONE`` without the stochastic code."""
+    sampling.scatter_lod(tex, grad, layer, uv, lod, smp, g)
+
+
+# -- kernels (the three roles of ``warptex._op.Kernels``; see ``warptex.kernels.sampling``) ------------
+
+MODULE = "warptex.stochastic"
+GRAD_MODULE = MODULE + ".grad"
+
+
+def _stochastic_kernel(module: str, enable_backward: bool, sample):
+    @wp.kernel(enable_backward=enable_backward, module=module)
+    def stochastic_kernel(
+        tex: TextureView,
+        uv: wp.array(dtype=wp.vec2),
+        uv_dx: wp.array(dtype=wp.vec2),
+        uv_dy: wp.array(dtype=wp.vec2),
+        lods: wp.array(dtype=float),
+        layers: wp.array(dtype=wp.int32),
+        smp: SamplerArgs,
+        params: StochasticArgs,
+        lod_source: wp.int32,
+        constant_lod: float,
+        constant_layer: wp.int32,
+        out: wp.array2d(dtype=float),
+    ):
+        """``out[i, c]`` = channel ``c`` of :func:`sample_stochastic` at ``uv[i]`` (arguments as ``sample_kernel``)."""
+        i = wp.tid()
+        layer, lod = sampling.resolve_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
+        sampling.write_channels(out, i, sample(tex, layer, uv[i], lod, smp, params))
+
+    return stochastic_kernel
+
+
+stochastic_kernel = _stochastic_kernel(MODULE, False, sample_stochastic)
+stochastic_adjoint_kernel = _stochastic_kernel(ADJOINT_MODULE, True, sample_stochastic_call)
+
+
+@wp.kernel(enable_backward=False, module=GRAD_MODULE)
 def stochastic_texel_grad_kernel(
     tex: TextureView,
-    grad: wp.array(dtype=wp.vec4),
     uv: wp.array(dtype=wp.vec2),
     uv_dx: wp.array(dtype=wp.vec2),
     uv_dy: wp.array(dtype=wp.vec2),
     lods: wp.array(dtype=float),
     layers: wp.array(dtype=wp.int32),
-    smp: Sampler,
-    params: StochasticParams,
+    smp: SamplerArgs,
+    params: StochasticArgs,
     lod_source: wp.int32,
     constant_lod: float,
     constant_layer: wp.int32,
+    grad: wp.array(dtype=wp.vec4),
     adj_out: wp.array2d(dtype=float),
 ):
-    """Add the gradient of :func:`stochastic_kernel` (same arguments; linear blends only) with
-    respect to the texels into ``grad``, given its output's gradient ``adj_out``."""
+    """Add the gradient of :func:`stochastic_kernel` (same inputs; linear blends only) with respect
+    to the texels into ``grad``, given its output's gradient ``adj_out``."""
     i = wp.tid()
-    layer, lod = sampling.sample_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
-    splat_stochastic(tex, grad, layer, uv[i], lod, smp, params, sampling.read_channels(adj_out, i))
+    layer, lod = sampling.resolve_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
+    scatter_stochastic(tex, grad, layer, uv[i], lod, smp, params, sampling.read_channels(adj_out, i))
 
 
-@wp.kernel
+@wp.kernel(enable_backward=False, module=MODULE)
 def hex_taps_kernel(
     uv: wp.array(dtype=wp.vec2),
-    params: StochasticParams,
+    params: StochasticArgs,
     weights: wp.array(dtype=wp.vec3),
     vertices: wp.array2d(dtype=wp.vec2i),
     taps: wp.array2d(dtype=wp.vec2),

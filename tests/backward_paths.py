@@ -2,36 +2,38 @@
 
 When only texels need gradients, ``sample``, ``stochastic``, ``triplanar``, ``biplanar`` and
 ``splat`` record a hand-written texel gradient (a ``scatter`` launch; ``splat``'s also gives the
-height-blend transition's); when another input needs gradients too, the generated adjoint computes
-them all. Both must give the same gradients.
+height-blend transition's); when another input needs gradients too, or when the tests force it, the
+generated adjoint computes them all. All must give the same gradients.
 """
-
-import importlib
 
 import numpy as np
 import warp as wp
 
 import warptex as wt
+from warptex import _op
 
 
-def texel_gradients_both_ways(monkeypatch, module: str, threads: int, forward, weights: np.ndarray):
-    """``(hand_written, generated, scatters)``: the gradients of ``Σ weights · out``, one
-    ``(is_parameter, flat array)`` per texture (every level) or parameter array that has them, first with only texels needing gradients,
-    then with another input needing them too, and how many hand-written gradients ``module``
-    launched over both runs.
+def texel_gradients_both_ways(monkeypatch, threads: int, forward, weights: np.ndarray):
+    """``(hand_written, forced, generated, scatters)``: the gradients of ``Σ weights · out``, one
+    ``(is_parameter, flat array)`` per texture (every level) or parameter array that has them: with
+    only texels needing gradients (the hand-written path), the same with the generated adjoint
+    forced (``warptex._op.force_generated_adjoint``), and with another input needing gradients too
+    (the generated adjoint, which then also differentiates that input, not compared); and how many
+    hand-written texel-gradient kernels were launched over the three runs (the blend of stored
+    samples that ``splat``'s generated-adjoint path launches by hand is not counted).
 
     ``forward(other_grads) -> (out, textures)`` runs the technique (on a tape) with fresh textures
     (or parameter arrays: their gradients are compared too). Each tape is zeroed afterwards, which
     must reset the gradients.
     """
     scatters = []
-    monkeypatch.setattr(importlib.import_module(module), "scatter", lambda *a, **k: (scatters.append(a[0]), wt._launch.scatter(*a, **k)))
+    monkeypatch.setattr(_op, "scatter", lambda *a, **k: (scatters.append(a[0].key), wt._launch.scatter(*a, **k)))
     wt.set_num_threads(threads)
     try:
         grads = []
-        for other_grads in (False, True):
+        for other_grads, forced in ((False, False), (False, True), (True, False)):
             tape = wp.Tape()
-            with tape:
+            with tape, _op.force_generated_adjoint(forced):
                 out, textures = forward(other_grads)
             out.grad.assign(weights.reshape(out.shape))
             tape.backward()
@@ -41,7 +43,7 @@ def texel_gradients_both_ways(monkeypatch, module: str, threads: int, forward, w
             assert not any(g.any() for t in textures for g in _gradients(t)), "tape.zero() must reset the gradients"
     finally:
         wt.set_num_threads(None)
-    return grads[0], grads[1], len(scatters)
+    return grads[0], grads[1], grads[2], sum("texel_grad" in key for key in scatters)
 
 
 def _gradients(t) -> list[np.ndarray]:

@@ -33,8 +33,7 @@ from typing import Any, NamedTuple
 
 import warp as wp
 
-# Warp's tape, type and codegen internals: warp._src in current releases, top-level modules before.
-_internal = getattr(wp, "_src", wp)
+from warptex._warp import active_tape, struct_fields, struct_like
 
 # Below this many pixels per thread, handing work to a thread costs more than it saves.
 MIN_PIXELS_PER_THREAD = 16384
@@ -48,6 +47,33 @@ _pool_size = 0
 _num_threads: int | None = None
 # Each real gradient array's private accumulators, by worker (see the module docstring).
 _private_arrays: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def preload(kernels, device=None) -> None:
+    """Compile (or load from Warp's kernel cache) the Warp modules of ``kernels`` for ``device``,
+    side by side on every core.
+
+    Warp compiles a module the first time one of its kernels runs, one module after another. A job
+    that knows which kernels it will run calls this first, so that a cold start compiles them in
+    parallel (each compile is single-threaded, on the CPU and with NVRTC alike).
+    """
+    modules = list({id(k.module): k.module for k in kernels}.values())
+    if modules:
+        wp.force_load(device=wp.get_device(device), modules=modules, max_workers=min(len(modules), cpu_count()))
+
+
+def precompile(device=None, *, layer_counts=(4,)) -> None:
+    """Compile every warptex kernel for ``device`` now, side by side on every core, into Warp's
+    kernel cache (the first run of each kernel then starts at once).
+
+    Args:
+        device: Warp device (``None``: Warp's default).
+        layer_counts: the layer counts whose splat kernels to compile (they come in sizes of 8,
+            16, 32... layers).
+    """
+    from warptex.kernels import all_kernels
+
+    preload(all_kernels(layer_counts), device)
 
 
 class PerPixel(NamedTuple):
@@ -119,6 +145,10 @@ def _chunk(value: Any, start: int, stop: int, count: int):
     return value
 
 
+GENERATED = "generated"
+"""``backward=GENERATED``: record the kernel's generated adjoint (see :func:`launch`)."""
+
+
 def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: int | None = None, backward=None) -> None:
     """Launch a per-pixel ``kernel`` over ``count`` pixels, split over CPU threads.
 
@@ -130,21 +160,22 @@ def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: 
         outputs: the kernel's outputs, all per-pixel arrays (first axis ``count``).
         device: the Warp device.
         threads: threads to use (default :func:`get_num_threads`); CUDA always uses one launch.
-        backward: ``None`` to record the kernel's generated adjoint on an active ``wp.Tape``, or
-            ``backward(tape)``, recorded in its place: a hand-written gradient (see :func:`scatter`)
-            that reads the outputs' ``.grad`` when the tape runs backwards.
+        backward: what an active ``wp.Tape`` records for the backward pass (when an output requires
+            gradients): ``None``, nothing; :data:`GENERATED`, the kernel's generated adjoint (the
+            kernel must have one); or ``backward(tape)``, a hand-written gradient (see
+            :func:`scatter`) that reads the outputs' ``.grad`` when the tape runs backwards.
     """
     if count <= 0:
         return
     device = wp.get_device(device)
     workers = _workers(device, count, threads)
     tape = active_tape()
-    if backward is not None:
-        if tape is not None and any(o.requires_grad for o in outputs):
-            tape.record_func(functools.partial(backward, tape), arrays=[o for o in outputs if o.requires_grad])
-        tape = None  # the generated adjoint is not recorded
+    recorded = [o for o in outputs if o.requires_grad] if tape is not None and backward is not None else []
+    if recorded and backward is not GENERATED:
+        tape.record_func(functools.partial(backward, tape), arrays=recorded)
+    generated = bool(recorded) and backward is GENERATED
     if workers == 1:
-        wp.launch(kernel, dim=count, inputs=[_chunk(a, 0, count, count) for a in inputs], outputs=outputs, device=device, record_tape=tape is not None)
+        wp.launch(kernel, dim=count, inputs=[_chunk(a, 0, count, count) for a in inputs], outputs=outputs, device=device, record_tape=generated)
         return
     for out in outputs:
         if out.shape[0] != count:
@@ -156,8 +187,8 @@ def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: 
         wp.launch(kernel, dim=dim, inputs=ins, outputs=outs, device=device, record_tape=False)
 
     split.run(forward)
-    if tape is not None and any(o.requires_grad for o in outputs):
-        tape.record_func(lambda: _backward(tape, split), arrays=[o for o in outputs if o.requires_grad])
+    if generated:
+        tape.record_func(lambda: _backward(tape, split), arrays=recorded)
 
 
 def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads: int | None = None) -> None:
@@ -238,11 +269,6 @@ class _Split:
                 f.result()  # waits for every worker; re-raises a worker's exception here
 
 
-def active_tape():
-    """The ``wp.Tape`` being recorded, or ``None``."""
-    return _internal.context.runtime.tape
-
-
 def _private_zeros(real: wp.array, worker: int) -> wp.array:
     """Worker ``worker``'s private accumulator for the gradient array ``real``, zeroed: the one
     kept from the last backward pass when there is one, else a new one (kept while ``real`` lives)."""
@@ -262,17 +288,16 @@ def _with_private_grads(a, private: list, worker: int):
     Adjoint kernels accumulate into the ``grad`` of the *forward* arrays of struct fields (Warp
     ignores the adjoint struct there), so private accumulators must sit in the forward arguments.
     """
-    if _internal.types.is_array(a):
+    if wp.types.is_array(a):
         if not a.grad:
             return a
         mine = _private_zeros(a.grad, worker)
         private.append((a.grad, mine))
         return wp.array(ptr=a.ptr, dtype=a.dtype, shape=a.shape, strides=a.strides, device=a.device, grad=mine)
-    if _internal.types.is_struct(a):
-        copy = a._cls()
-        for name, _ in a._cls.ctype._fields_:
-            if not name.startswith("_"):
-                setattr(copy, name, _with_private_grads(getattr(a, name), private, worker))
+    if wp.types.is_struct(a):
+        copy = struct_like(a)
+        for name, value in struct_fields(a).items():
+            setattr(copy, name, _with_private_grads(value, private, worker))
         return copy
     return a
 
@@ -287,7 +312,7 @@ def _backward(tape, split: _Split) -> None:
 
     def backward(worker: int, k: int) -> None:
         ins, outs, dim = split.arguments(shared[worker], k)
-        adj_ins = [_adjoint(a) for a in ins]
+        adj_ins = [tape.get_adjoint(a) for a in ins]
         wp.launch(split.kernel, dim=dim, inputs=ins, outputs=outs, adj_inputs=adj_ins, adj_outputs=[o.grad for o in outs], device=split.device, adjoint=True)
 
     split.run(backward)
@@ -300,26 +325,3 @@ def _add_private(private: list[tuple[wp.array, wp.array]]) -> None:
     for real, mine in {id(mine): (real, mine) for real, mine in private}.values():
         target = real.numpy()  # CPU arrays: views of the same memory
         target += mine.numpy()
-
-
-def _adjoint(a):
-    """The adjoint argument of kernel argument ``a``, as ``wp.Tape.get_adjoint`` makes it (without
-    registering it with a tape)."""
-    if _internal.types.is_array(a):
-        return a.grad if a.grad else None
-    if _internal.types.is_struct(a):
-        adj = a._cls()
-        for name, _ in a._cls.ctype._fields_:
-            if name.startswith("_"):
-                continue
-            kind = a._cls.vars[name].type
-            if _internal.types.matches_array_class(kind, wp.array) or isinstance(kind, _internal.codegen.Struct):
-                setattr(adj, name, _adjoint(getattr(a, name)))
-            elif _internal.types.is_native_type(kind):
-                setattr(adj, name, kind())
-            else:
-                setattr(adj, name, getattr(a, name))
-        return adj
-    if _internal.types.is_native_type(type(a)):
-        return type(a)()
-    return None

@@ -22,7 +22,8 @@ import types
 import numpy as np
 import warp as wp
 
-from warptex._launch import launch, per_pixel
+from warptex._launch import per_pixel
+from warptex._op import Kernels, needs_grad, run
 from warptex._validate import as_float, as_float_array, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import atlas as ka
@@ -91,6 +92,9 @@ def export_index_maps(splat_maps, k: int = 2, *, num_layers: int | None = None, 
 def _two_adic(n: int) -> int:
     """How many times 2 divides ``n > 0``."""
     return (n & -n).bit_length() - 1
+
+
+_KERNELS = Kernels(ka.splat_atlas_kernel, None, ka.splat_atlas_adjoint_kernel)
 
 
 class _AtlasTexture(Texture):
@@ -351,15 +355,10 @@ def splat_atlas(
 
     h, w = gbuffer.resolution
     count = h * w
-    requires_grad = atlas.texture.requires_grad or wts.requires_grad or tiling.requires_grad
-    out = wp.zeros((count, atlas.channels), dtype=float, device=device, requires_grad=requires_grad)
     uvs = gbuffer.uv_sets[uv_set]
     flat = [a.reshape((count,)) for a in (uvs["uv"], uvs["uv_dx"], uvs["uv_dy"], gbuffer.mask)]
-    launch(
-        ka.splat_atlas_kernel,
-        count,
-        inputs=[atlas.texture.view, atlas.layout, idx, wts, tiling, *per_pixel(*flat), smp, int(bool(normalize))],
-        outputs=[out],
-        device=device,
-    )
+    others = [atlas.texture.view.texels, wts, tiling, *flat]  # all differentiated by the generated adjoint
+    out = wp.zeros((count, atlas.channels), dtype=float, device=device, requires_grad=needs_grad(*others))
+    inputs = [atlas.texture.view, atlas.layout, idx, wts, tiling, *per_pixel(*flat), smp, int(bool(normalize))]
+    run(_KERNELS, count, inputs=inputs, outputs=[out], device=device, others=others)
     return out.reshape((h, w, atlas.channels))

@@ -273,6 +273,7 @@ def rasterize(mesh, camera: Camera, *, device=None) -> GBuffer:
         ],
         outputs=[g.position, g.normal, g.geometric_normal, g.depth, g.mask, g.triangle, barycentric, g.position_dx, g.position_dy],
         device=device,
+        record_tape=False,
     )
     for name, uv in uv_sets.items():
         out = g.uv_sets[name]
@@ -293,5 +294,6 @@ def rasterize(mesh, camera: Camera, *, device=None) -> GBuffer:
             ],
             outputs=[out["uv"], out["uv_dx"], out["uv_dy"], out["tangent"]],
             device=device,
+            record_tape=False,
         )
     return g

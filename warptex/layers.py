@@ -11,12 +11,14 @@ import enum
 import numpy as np
 import warp as wp
 
-from warptex._launch import launch, per_pixel, scatter
+from warptex._launch import per_pixel
+from warptex._op import Kernels, hand_written, needs_grad, run, run_by_hand
+from warptex._warp import active_tape
 from warptex._validate import as_enum, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import layers as kl
 from warptex.kernels import stochastic as kst
-from warptex.kernels import triplanar as kt
+from warptex.kernels import projection as kp
 from warptex.sampling import Address, Filter, make_sampler, surface_sampler
 from warptex.stochastic import Stochastic, as_stochastic, resolve_stochastic
 from warptex.texture import TextureArray
@@ -142,7 +144,8 @@ def splat(
     check_layer_count(func, num_layers, maps)
     gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask", f"{uv_set}.uv", f"{uv_set}.uv_dx", f"{uv_set}.uv_dy")
 
-    params = kl.SplatParams()
+    params = kl.SplatArgs()
+    params.num_layers, params.map_channels = num_layers, maps.channels
     params.tiling = param_array(func, "tiling", tiling, ((1,), (num_layers,)), device, nonzero=True)
     params.projection = _PROJECTION_IDS[as_enum(func, "projection", projection, Projection)]
     params.normalize = int(bool(normalize))
@@ -181,7 +184,7 @@ def splat(
     else:  # a separate height array: the same taps, without the layers' histogram
         height_stoch, _ = resolve_stochastic(func, dataclasses.replace(option, histogram=None), height_tex, address)
 
-    proj = make_projection(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kt.WEIGHTS_TRIPLANAR, device=device)
+    proj = make_projection(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kp.WEIGHTS_TRIPLANAR, device=device)
     smp = surface_sampler(func, filter=filter, address=address, lod_bias=lod_bias, min_lod=min_lod, max_lod=max_lod)
     map_smp = make_sampler(func, filter=Filter.BILINEAR, address=Address.CLAMP, max_lod=0.0)
 
@@ -189,22 +192,36 @@ def splat(
     count = h * w
     uvs = gbuffer.uv_sets[uv_set]
     flat = [a.reshape((count,)) for a in (uvs["uv"], uvs["uv_dx"], uvs["uv_dy"], gbuffer.position, gbuffer.position_dx, gbuffer.position_dy, gbuffer.normal, gbuffer.mask)]
-    # Gradients the hand-written backward gives (texels, transition; tiling for plain sampling), and those only Warp's generated adjoint gives.
-    read = {"layers": layers_read, "heights": height_tex if params.height_mode == kl.HEIGHT_ARRAY else None, "maps": maps}
-    tiling_by_hand = params.tiling.requires_grad and stoch.method == kst.METHOD_NONE
-    texel_grads = any(t is not None and t.requires_grad for t in read.values()) or params.transition.requires_grad or tiling_by_hand
-    other_grads = any(a.requires_grad for a in (proj.sharpness, proj.offsets, *flat)) or (params.tiling.requires_grad and not tiling_by_hand)
-    out = wp.zeros((count, layers.channels), dtype=float, device=device, requires_grad=texel_grads or other_grads)
-    kernel, texel_grad_kernel = kl.splat_kernels(num_layers, maps.channels)
-    args = [*per_pixel(*flat), params, proj, smp, map_smp, stoch, height_stoch]
-
-    def texel_gradients(tape):  # linear blends of taps: texel, transition and tiling gradients, hand-written
-        grads = [tape.get_adjoint(t.view.texels) if t is not None and t.requires_grad else None for t in read.values()]
-        scalars = [tape.get_adjoint(a) if a.requires_grad else None for a in (params.transition, params.tiling)]
-        inputs = [layers_read.view, height_tex.view, maps.view, *grads, *scalars, *args, *per_pixel(out.grad)]
-        scatter(texel_grad_kernel, count, inputs=inputs, targets=[a for a in (*grads, *scalars) if a is not None], device=device)
-
+    heights_read = height_tex if params.height_mode == kl.HEIGHT_ARRAY else None
+    plain = stoch.method == kst.METHOD_NONE
+    # What the hand-written gradient differentiates (the texel-gradient kernels' gradient arguments),
+    # and what only Warp's generated adjoint does (the tiling too, with a stochastic method).
+    by_hand = [layers_read.view.texels, heights_read.view.texels if heights_read else None, maps.view.texels, params.transition, params.tiling if plain else None]
+    others = [proj.sharpness, proj.offsets, *flat] + ([] if plain else [params.tiling])
     linear = stoch.histogram == 0 and height_stoch.histogram == 0  # the histogram blend is not linear in the texels
-    backward = texel_gradients if linear and texel_grads and not other_grads else None
-    launch(kernel, count, inputs=[layers_read.view, height_tex.view, maps.view, *args], outputs=[out], device=device, backward=backward)
+    out = wp.zeros((count, layers.channels), dtype=float, device=device, requires_grad=needs_grad(*by_hand, *others))
+    kernels = kl.splat_kernels(kl.capacity(num_layers))
+    inputs = [layers_read.view, height_tex.view, maps.view, *per_pixel(*flat), params, proj, smp, map_smp, stoch, height_stoch]
+    if active_tape() is not None and out.requires_grad and not hand_written(others, linear):
+        sampled_grads = needs_grad(by_hand[0], by_hand[1], params.tiling, *others)  # what the stored samples differentiate into
+        _splat_generated(kernels, count, inputs, out, flat, maps, params, map_smp, heights_read is not None, sampled_grads, device)
+    elif plain:
+        run(Kernels(kernels["forward"], kernels["texel_grad"]), count, inputs=inputs, outputs=[out], device=device, by_hand=by_hand)
+    else:
+        run(Kernels(kernels["stochastic_forward"], kernels["stochastic_texel_grad"]), count, inputs=inputs, outputs=[out], device=device, by_hand=by_hand)
     return out.reshape((h, w, layers.channels))
+
+
+def _splat_generated(kernels: dict, count: int, inputs: list, out: wp.array, flat: list, maps: TextureArray, params, map_smp, height_array: bool, sampled_grads: bool, device) -> None:
+    """:func:`splat` where Warp's generated adjoint is needed, in two steps: every weighted layer's
+    sample stored per pixel (generated adjoint), then their blend (hand-written gradient, to the
+    samples, the splat maps, the transition and the UVs through the maps' reads)."""
+    num_layers = params.num_layers
+    samples = wp.zeros((count, num_layers), dtype=wp.vec4, device=device, requires_grad=sampled_grads)
+    height_samples = wp.zeros((count, num_layers if height_array else 1), dtype=float, device=device, requires_grad=sampled_grads and height_array)  # read with separate heights only
+    adjoint = kl.splat_samples_adjoint_kernel
+    run(Kernels(adjoint, None, adjoint), count, inputs=inputs, outputs=[samples, height_samples], device=device)
+    uv0, mask = flat[0], flat[7]
+    blend_inputs = [maps.view, *per_pixel(uv0, mask), params, map_smp, *per_pixel(samples, height_samples)]
+    by_hand = [maps.view.texels, params.transition, *per_pixel(uv0, samples, height_samples)]
+    run_by_hand(Kernels(kernels["blend"], kernels["blend_grad"]), count, inputs=blend_inputs, outputs=[out], device=device, by_hand=by_hand)

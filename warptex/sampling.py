@@ -8,7 +8,8 @@ import math
 import numpy as np
 import warp as wp
 
-from warptex._launch import launch, per_pixel, scatter
+from warptex._launch import per_pixel
+from warptex._op import Kernels, needs_grad, run
 from warptex._validate import as_enum, as_float, as_float_array, resolve_device
 from warptex.kernels import sampling as ks
 from warptex.texture import Texture, TextureArray
@@ -44,6 +45,9 @@ class Address(str, enum.Enum):
     BORDER = "border"
 
 
+_KERNELS = Kernels(ks.sample_kernel, ks.sample_texel_grad_kernel, ks.sample_adjoint_kernel)
+_LEVEL_KERNELS = Kernels(ks.sample_level_kernel, ks.sample_level_texel_grad_kernel, ks.sample_level_adjoint_kernel)
+
 _FILTER_IDS = {Filter.NEAREST: ks.FILTER_NEAREST, Filter.BILINEAR: ks.FILTER_BILINEAR, Filter.TRILINEAR: ks.FILTER_TRILINEAR}
 _ADDRESS_IDS = {
     Address.WRAP: ks.ADDRESS_WRAP,
@@ -62,9 +66,9 @@ def make_sampler(
     lod_bias: float = 0.0,
     min_lod: float = 0.0,
     max_lod: float = float("inf"),
-) -> ks.Sampler:
+) -> ks.SamplerArgs:
     """Validate sampler options and pack them for kernels (``filter`` must already be resolved)."""
-    smp = ks.Sampler()
+    smp = ks.SamplerArgs()
     smp.filter = _FILTER_IDS[filter]
     smp.address = _ADDRESS_IDS[as_enum(func, "address", address, Address)]
     colour = as_float_array(func, "border", border).reshape(-1)
@@ -79,7 +83,7 @@ def make_sampler(
     return smp
 
 
-def surface_sampler(func: str, *, filter, address, lod_bias=0.0, min_lod=0.0, max_lod=float("inf")) -> ks.Sampler:
+def surface_sampler(func: str, *, filter, address, lod_bias=0.0, min_lod=0.0, max_lod=float("inf")) -> ks.SamplerArgs:
     """The sampler of a technique that reads textures over a G-buffer (which always has
     derivatives, so ``"auto"`` is trilinear)."""
     filt = as_enum(func, "filter", filter, Filter)
@@ -181,25 +185,20 @@ def sample(
 
     constant_layer, layers = _resolve_layer(func, texture, layer, shape, device)
 
-    other_grads = any(a is not None and a.requires_grad for a in (uv, dx, dy, lods))
-    out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=texture.requires_grad or other_grads)
-    args = [*per_pixel(flat, dx, dy, lods, layers), smp, lod_source, constant_lod, constant_layer]
-
-    def texel_gradients(tape):  # sampling is linear in the texels: their gradient, hand-written
-        grad = tape.get_adjoint(texture.view.texels)  # registered for tape.zero()
-        scatter(ks.sample_texel_grad_kernel, count, inputs=[texture.view, grad, *args, *per_pixel(out.grad)], targets=[grad], device=device)
-
-    backward = texel_gradients if texture.requires_grad and not other_grads else None
+    others = [uv, dx, dy, lods]
+    out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=texture.requires_grad or needs_grad(*others))
     if lod_source in (ks.LOD_NONE, ks.LOD_CONSTANT):  # one LOD for all: its levels resolved here
         level, fraction = mip_levels(constant_lod, smp, texture.num_levels)
         inputs = [texture.view, *per_pixel(flat, layers), smp, level, fraction, constant_layer]
-        launch(ks.sample_level_kernel, count, inputs=inputs, outputs=[out], device=device, backward=backward)
+        kernels = _LEVEL_KERNELS
     else:
-        launch(ks.sample_kernel, count, inputs=[texture.view, *args], outputs=[out], device=device, backward=backward)
+        inputs = [texture.view, *per_pixel(flat, dx, dy, lods, layers), smp, lod_source, constant_lod, constant_layer]
+        kernels = _KERNELS
+    run(kernels, count, inputs=inputs, outputs=[out], device=device, by_hand=[texture.view.texels], others=others)
     return out.reshape((*shape, texture.channels))
 
 
-def mip_levels(lod: float, smp: ks.Sampler, num_levels: int) -> tuple[int, float]:
+def mip_levels(lod: float, smp: ks.SamplerArgs, num_levels: int) -> tuple[int, float]:
     """``(level, fraction)`` that ``lod`` reads through ``smp``: the kernels' ``mip_levels`` in the
     same float32 arithmetic, so a uniform LOD reads exactly the levels the per-sample kernel would."""
     f32 = np.float32

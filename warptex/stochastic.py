@@ -14,7 +14,8 @@ import enum
 import numpy as np
 import warp as wp
 
-from warptex._launch import launch, per_pixel, scatter
+from warptex._launch import per_pixel
+from warptex._op import Kernels, needs_grad, run
 from warptex._validate import as_enum, as_float, as_float_array, resolve_device
 from warptex.histogram import GAUSSIAN_MEAN, LUT_RANGE, Histogram, prepare_histogram
 from warptex.kernels import stochastic as kst
@@ -45,6 +46,7 @@ class Method(str, enum.Enum):
 
 
 _METHOD_IDS = {Method.NONE: kst.METHOD_NONE, Method.HASH4: kst.METHOD_HASH4, Method.CHEAP2: kst.METHOD_CHEAP2, Method.HEX: kst.METHOD_HEX}
+_KERNELS = Kernels(kst.stochastic_kernel, kst.stochastic_texel_grad_kernel, kst.stochastic_adjoint_kernel)
 _DEFAULT_BLEND = {Method.HASH4: (0.25, 0.75), Method.CHEAP2: (0.2, 0.8)}
 
 
@@ -83,7 +85,7 @@ def as_stochastic(func: str, option) -> Stochastic:
     return option
 
 
-def resolve_stochastic(func: str, option, texture: TextureArray, address, *, histogram_allowed: bool = True) -> tuple[kst.StochasticParams, TextureArray]:
+def resolve_stochastic(func: str, option, texture: TextureArray, address, *, histogram_allowed: bool = True) -> tuple[kst.StochasticArgs, TextureArray]:
     """``stochastic=`` of a technique (see :func:`as_stochastic`) as ``(params, sampled)`` for its
     kernels (see :func:`stochastic_params`). ``address`` must be periodic for any method but
     ``"none"``. Errors name ``func``."""
@@ -111,10 +113,10 @@ def stochastic_params(
     noise_frequency: float = 0.5,
     noise_levels: float = 8.0,
     histogram: Histogram | None = None,
-) -> tuple[kst.StochasticParams, TextureArray]:
+) -> tuple[kst.StochasticArgs, TextureArray]:
     """Validate stochastic options (see :func:`stochastic`) and pack them for kernels.
 
-    Returns ``(params, sampled)``: the :class:`~warptex.kernels.stochastic.StochasticParams` and the
+    Returns ``(params, sampled)``: the :class:`~warptex.kernels.stochastic.StochasticArgs` and the
     texture the kernel must sample, ``histogram.texture`` when a histogram is given, else ``texture``.
     Errors name ``func``.
     """
@@ -141,7 +143,7 @@ def stochastic_params(
     if freq <= 0.0 or levels <= 0.0:
         raise ValueError(f"{func}(): noise_frequency and noise_levels must be positive, got {freq} and {levels}")
 
-    params = kst.StochasticParams()
+    params = kst.StochasticArgs()
     params.method = _METHOD_IDS[m]
     params.seed = wp.uint32(int(seed))
     params.blend_lo, params.blend_hi = float(window[0]), float(window[1])
@@ -266,17 +268,10 @@ def stochastic(
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
     constant_layer, layers = _resolve_layer(func, texture, layer, shape, device)
 
-    other_grads = any(a is not None and a.requires_grad for a in (uv, dx, dy, lods))
-    out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=sampled.requires_grad or other_grads)
-    args = [*per_pixel(uv.reshape((count,)), dx, dy, lods, layers), smp, params, lod_source, constant_lod, constant_layer]
-
-    def texel_gradients(tape):  # a linear blend of taps: the texels' gradient, hand-written
-        grad = tape.get_adjoint(sampled.view.texels)  # registered for tape.zero()
-        scatter(kst.stochastic_texel_grad_kernel, count, inputs=[sampled.view, grad, *args, *per_pixel(out.grad)], targets=[grad], device=device)
-
-    linear = params.histogram == 0
-    backward = texel_gradients if sampled.requires_grad and linear and not other_grads else None
-    launch(kst.stochastic_kernel, count, inputs=[sampled.view, *args], outputs=[out], device=device, backward=backward)
+    others = [uv, dx, dy, lods]
+    out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=sampled.requires_grad or needs_grad(*others))
+    inputs = [sampled.view, *per_pixel(uv.reshape((count,)), dx, dy, lods, layers), smp, params, lod_source, constant_lod, constant_layer]
+    run(_KERNELS, count, inputs=inputs, outputs=[out], device=device, by_hand=[sampled.view.texels], others=others, linear=params.histogram == 0)
     return out.reshape((*shape, texture.channels))
 
 
@@ -303,6 +298,6 @@ def hex_taps(uv, *, seed: int = 0, contrast: float = 1.0, rotation: float = 0.0,
     vertices = wp.zeros((n, 3), dtype=wp.vec2i, device=device)
     taps = wp.zeros((n, 3), dtype=wp.vec2, device=device)
     if n:
-        wp.launch(kst.hex_taps_kernel, dim=n, inputs=[uv.reshape((n,)), params], outputs=[weights, vertices, taps], device=device)
+        wp.launch(kst.hex_taps_kernel, dim=n, inputs=[uv.reshape((n,)), params], outputs=[weights, vertices, taps], device=device, record_tape=False)
     shape = uv.shape
     return weights.numpy().reshape(*shape, 3), vertices.numpy().reshape(*shape, 3, 2), taps.numpy().reshape(*shape, 3, 2)

@@ -17,10 +17,13 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
-from warptex._launch import active_tape, launch, per_pixel, scatter
+from warptex._launch import per_pixel
+from warptex._op import Kernels, hand_written, needs_grad, run
+from warptex._warp import active_tape
 from warptex._validate import as_enum, as_float, as_float_array, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import normals as kn
+from warptex.kernels import projection as kp
 from warptex.kernels import triplanar as kt
 from warptex.kernels.stochastic import METHOD_NONE
 from warptex.sampling import Address, Filter, surface_sampler
@@ -117,7 +120,7 @@ def triplanar(
         or non-finite. Recorded on the active ``wp.Tape``: gradients reach the texels,
         ``tiling``, ``sharpness`` and ``offsets`` when those are arrays that require them.
     """
-    return _colour("triplanar", kt.WEIGHTS_TRIPLANAR, **locals())
+    return _colour("triplanar", kp.WEIGHTS_TRIPLANAR, **locals())
 
 
 def biplanar(
@@ -147,7 +150,7 @@ def biplanar(
     mirror fix, offsets, LOD, textures per axis, stochastic sampling, gradients) is as in :func:`triplanar`; the
     default ``sharpness=8`` is Quilez' (exponent 1).
     """
-    return _colour("biplanar", kt.WEIGHTS_BIPLANAR, **locals())
+    return _colour("biplanar", kp.WEIGHTS_BIPLANAR, **locals())
 
 
 def triplanar_normal(
@@ -207,7 +210,7 @@ def triplanar_normal(
     if strength < 0:
         raise ValueError(f"{func}(): strength must be >= 0, got {strength}")
     flip_green = bool(opts.pop("flip_green"))
-    weights = kt.WEIGHTS_BIPLANAR if opts.pop("biplanar") else kt.WEIGHTS_TRIPLANAR
+    weights = kp.WEIGHTS_BIPLANAR if opts.pop("biplanar") else kp.WEIGHTS_TRIPLANAR
     opts.pop("func")
     option = opts["stochastic"]
     if isinstance(option, Stochastic) and (option.mirror or option.rotation):
@@ -221,78 +224,59 @@ def triplanar_normal(
 # -- internals --------------------------------------------------------------------------------------
 
 
+_COLOUR = Kernels(kt.triplanar_kernel, kt.triplanar_texel_grad_kernel, kt.triplanar_adjoint_kernel)
+_COLOUR_STOCHASTIC = Kernels(kt.triplanar_stochastic_kernel, kt.triplanar_stochastic_texel_grad_kernel, kt.triplanar_adjoint_kernel)
+_NORMAL = Kernels(kt.triplanar_normal_kernel, None, kt.triplanar_normal_adjoint_kernel)
+_NORMAL_STOCHASTIC = Kernels(kt.triplanar_normal_stochastic_kernel, None, kt.triplanar_normal_adjoint_kernel)
+_SAMPLES = Kernels(kt.projection_samples_kernel, kt.projection_texel_grad_kernel)
+_SAMPLES_STOCHASTIC = Kernels(kt.projection_samples_stochastic_kernel, kt.projection_stochastic_texel_grad_kernel)
+_NORMAL_FROM_SAMPLES = Kernels(kt.triplanar_normal_from_samples_kernel, None, kt.triplanar_normal_from_samples_kernel)
+
+
 def _colour(func: str, weights: int, **opts) -> wp.array:
     setup = _setup(func, weights, **opts)
-    texel_grad_kernel = setup.variant(kt.triplanar_texel_grad_kernel, kt.triplanar_texel_grad_plain_kernel)
-    return setup.launch(kt.triplanar_kernel, kt.triplanar_plain_kernel, setup.channels, [], texel_grad_kernel=texel_grad_kernel)
+    return setup.launch(setup.variant(_COLOUR, _COLOUR_STOCHASTIC), setup.channels, [])
 
 
 class _Setup:
     """Validated launch inputs shared by the three public functions."""
 
-    def __init__(self, func, gbuffer, textures, layer, proj, smp, stoch, device, params):
+    def __init__(self, func, gbuffer, textures, layer, proj, smp, stoch, device):
         self.func, self.gbuffer, self.textures, self.layer = func, gbuffer, textures, layer
-        self.proj, self.smp, self.stoch, self.device, self.params = proj, smp, stoch, device, params
+        self.proj, self.smp, self.stoch, self.device = proj, smp, stoch, device
         self.channels = textures[0].channels
+        g = gbuffer
+        self.count = g.resolution[0] * g.resolution[1]
+        self.pixels = [a.reshape((self.count,)) for a in (g.position, g.position_dx, g.position_dy, g.normal, g.mask)]
+        self.texels = [t.view.texels for t in textures]  # what the hand-written gradients differentiate
+        self.others = [proj.tiling, proj.sharpness, proj.offsets, *self.pixels]  # what only the generated adjoint does
+        self.linear = stoch.histogram == 0  # the histogram blend is not linear in the texels
 
-    def variant(self, general, plain):
-        """``plain`` (kernel ``general`` built without the stochastic code) when sampling is plain,
-        else ``general``."""
-        return plain if self.stoch.method == METHOD_NONE else general
+    def variant(self, plain: Kernels, stochastic: Kernels) -> Kernels:
+        """``plain`` (built without the stochastic code) when sampling is plain, else ``stochastic``."""
+        return plain if self.stoch.method == METHOD_NONE else stochastic
 
-    def _pixels(self):
-        """``(count, per-pixel G-buffer arrays, texel_grads, other_grads)``: whether the textures, and
-        whether the parameters or G-buffer arrays, need gradients."""
-        g = self.gbuffer
-        count = g.resolution[0] * g.resolution[1]
-        flat = [a.reshape((count,)) for a in (g.position, g.position_dx, g.position_dy, g.normal, g.mask)]
-        texel_grads = any(t.requires_grad for t in self.textures)
-        other_grads = any(p.requires_grad for p in self.params) or any(a.requires_grad for a in flat)
-        return count, flat, texel_grads, other_grads
+    def inputs(self) -> list:
+        return [*[t.view for t in self.textures], self.layer, *per_pixel(*self.pixels), self.proj, self.smp, self.stoch]
 
-    def _texel_gradients(self, kernel, count: int, flat: list, adjoint: wp.array):
-        """``backward(tape)``: ``kernel`` adds the per-pixel gradient ``adjoint.grad`` into the
-        textures' texel gradients, by hand (``*_texel_grad_kernel``)."""
-        views = [t.view for t in self.textures]
-
-        def backward(tape):
-            grads = [tape.get_adjoint(t.view.texels) if t.requires_grad else None for t in self.textures]
-            inputs = [*views, *grads, self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch, *per_pixel(adjoint.grad)]
-            scatter(kernel, count, inputs=inputs, targets=[a for a in grads if a is not None], device=self.device)
-
-        return backward
-
-    def launch(self, kernel, plain_kernel, channels: int, extra: list, texel_grad_kernel=None) -> wp.array:
-        """Launch ``kernel``, or its forward-only variant for plain sampling ``plain_kernel`` where
-        no generated adjoint is recorded; ``texel_grad_kernel``, when given, is its hand-written
-        texel gradient for linear blends, used in place of the generated adjoint when only texels
-        need gradients."""
-        count, flat, texel_grads, other_grads = self._pixels()
-        out = wp.zeros((count, channels), dtype=float, device=self.device, requires_grad=texel_grads or other_grads)
-        linear = self.stoch.histogram == 0  # the histogram blend is not linear in the texels
-        by_hand = texel_grad_kernel is not None and linear and texel_grads and not other_grads
-        backward = self._texel_gradients(texel_grad_kernel, count, flat, out) if by_hand else None
-        if by_hand or active_tape() is None:  # no generated adjoint needed
-            kernel = self.variant(kernel, plain_kernel)
-        inputs = [*[t.view for t in self.textures], self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch, *extra]
-        launch(kernel, count, inputs=inputs, outputs=[out], device=self.device, backward=backward)
+    def launch(self, kernels: Kernels, channels: int, extra: list) -> wp.array:
+        """Run ``kernels`` (colour or normal mapping) into a new ``(H, W, channels)`` array."""
+        out = wp.zeros((self.count, channels), dtype=float, device=self.device, requires_grad=needs_grad(*self.texels, *self.others))
+        run(kernels, self.count, inputs=[*self.inputs(), *extra], outputs=[out], device=self.device, by_hand=self.texels, others=self.others, linear=self.linear)
         return out.reshape((*self.gbuffer.resolution, channels))
 
     def launch_normal(self, extra: list) -> wp.array:
-        """Launch triplanar normal mapping. Where only texels need gradients (and the taps blend
+        """Run triplanar normal mapping. Where only texels need gradients (and the taps blend
         linearly), in two steps: the projections' samples, stored per pixel with a hand-written
         texel gradient, then the normal from them (its generated adjoint has no sampling to replay)."""
-        count, flat, texel_grads, other_grads = self._pixels()
-        if not (active_tape() is not None and texel_grads and not other_grads and self.stoch.histogram == 0):
-            return self.launch(kt.triplanar_normal_kernel, kt.triplanar_normal_plain_kernel, 3, extra)
-        samples = wp.zeros((count, 3), dtype=wp.vec4, device=self.device, requires_grad=True)
-        weights = wp.zeros(count, dtype=wp.vec3, device=self.device)
-        inputs = [*[t.view for t in self.textures], self.layer, *per_pixel(*flat), self.proj, self.smp, self.stoch]
-        backward = self._texel_gradients(self.variant(kt.projection_texel_grad_kernel, kt.projection_texel_grad_plain_kernel), count, flat, samples)
-        launch(self.variant(kt.projection_samples_kernel, kt.projection_samples_plain_kernel), count, inputs=inputs, outputs=[samples, weights], device=self.device, backward=backward)
-        out = wp.zeros((count, 3), dtype=float, device=self.device, requires_grad=True)
-        normal, mask = flat[3], flat[4]
-        launch(kt.triplanar_normal_from_samples_kernel, count, inputs=[*per_pixel(samples, weights, normal, mask), self.proj, *extra], outputs=[out], device=self.device)
+        if active_tape() is None or not needs_grad(*self.texels) or not hand_written(self.others, self.linear):
+            return self.launch(self.variant(_NORMAL, _NORMAL_STOCHASTIC), 3, extra)
+        samples = wp.zeros((self.count, 3), dtype=wp.vec4, device=self.device, requires_grad=True)
+        weights = wp.zeros(self.count, dtype=wp.vec3, device=self.device)
+        run(self.variant(_SAMPLES, _SAMPLES_STOCHASTIC), self.count, inputs=self.inputs(), outputs=[samples, weights], device=self.device, by_hand=self.texels)
+        out = wp.zeros((self.count, 3), dtype=float, device=self.device, requires_grad=True)
+        normal, mask = self.pixels[3], self.pixels[4]
+        run(_NORMAL_FROM_SAMPLES, self.count, inputs=[*per_pixel(samples, weights, normal, mask), self.proj, *extra], outputs=[out], device=self.device)
         return out.reshape((*self.gbuffer.resolution, 3))
 
 
@@ -329,13 +313,12 @@ def _setup(
     stoch, sampled = resolve_stochastic(func, stochastic, textures[0], address, histogram_allowed=one_texture)
     if sampled is not textures[0]:  # a histogram: every projection reads its Gaussianised texture
         textures = [sampled] * 3
-    params = [proj.tiling, proj.sharpness, proj.offsets]
-    return _Setup(func, gbuffer, textures, layer, proj, smp, stoch, device, params)
+    return _Setup(func, gbuffer, textures, layer, proj, smp, stoch, device)
 
 
-def make_projection(func, *, tiling, sharpness, offsets, mirror_fix, weights, space=Space.WORLD, object_to_world=None, device=None) -> kt.Projection:
+def make_projection(func, *, tiling, sharpness, offsets, mirror_fix, weights, space=Space.WORLD, object_to_world=None, device=None) -> kp.ProjectionArgs:
     """Validate the projection options of a triplanar technique and pack them for the kernels."""
-    proj = kt.Projection()
+    proj = kp.ProjectionArgs()
     proj.tiling = param_array(func, "tiling", tiling, ((1,), (3,)), device, nonzero=True)
     proj.sharpness = param_array(func, "sharpness", sharpness, ((1,),), device, nonnegative=True)
     proj.offsets = param_array(func, "offsets", np.zeros((3, 2)) if offsets is None else offsets, ((3, 2),), device)

@@ -1,0 +1,257 @@
+"""Plane projections: the building blocks of triplanar and biplanar mapping, shared by the
+triplanar kernels and by splat layers mapped triplanar.
+
+A surface point ``p`` with normal ``n`` is projected onto the three axis planes (``p.zy`` for the
+X plane, ``p.xz`` for Y, ``p.xy`` for Z); each projection is sampled and the samples are blended
+with weights that favour the plane the surface faces: ``w = |n|^k / Σ |n|^k`` (triplanar), or
+Quilez' biplanar weights, exactly zero on the minor axis.
+
+**Handedness of the mirror fix.** A plane projection seen from its back side reads mirrored, so the
+``u`` axis of each plane is flipped by the sign of the normal. Golus ("Normal Mapping for a
+Triplanar Shader", 2017) writes ``uvX.x *= sign(n.x)``, ``uvY.x *= sign(n.y)``,
+``uvZ.x *= -sign(n.z)`` for Unity's left-handed world; in warptex's right-handed world those mirror
+*every* face. warptex therefore uses their negation, ``-sign(n.x)``, ``-sign(n.y)``, ``+sign(n.z)``
+(with ``sign(0) = +1``): seen from outside, every face then reads the right way round and
+``(dp/du, dp/dv, n)`` is a right-handed frame, which is what tangent-space normal maps assume.
+(The two conventions differ by one global mirror of ``u``.)
+
+**Level of detail.** Each projection has its own footprint: its UV derivatives are the plane
+components of the G-buffer's ``position_dx``/``position_dy`` times its tiling, so a wall and the
+ground beside it pick their own mip levels.
+"""
+
+import warp as wp
+
+from . import out_of_line
+from .normals import sign_or_one
+from .sampling import SamplerArgs, TextureView, lod_from_derivatives, lod_scale_slope, sample_lod_derivatives
+from .stochastic import StochasticArgs, sample_stochastic_call
+
+# How the three projections are weighted.
+WEIGHTS_TRIPLANAR = wp.constant(0)  # pow(|n|, sharpness), normalised
+WEIGHTS_BIPLANAR = wp.constant(1)  # Quilez: major and median axes, remapped, normalised
+
+# Quilez' biplanar remap: 1/sqrt(3), the smallest possible major component of a unit normal.
+BIPLANAR_EDGE = wp.constant(0.5773)
+# Weights are normalised by max(sum, WEIGHT_EPS); only a zero or non-finite normal gets near it.
+WEIGHT_EPS = wp.constant(1.0e-20)
+
+
+@wp.struct
+class ProjectionArgs:
+    """Where the three plane projections read, as kernels see it (packed by ``warptex._pack``).
+
+    ``tiling`` holds 1 value (all planes) or 3 (X, Y, Z planes); ``offsets`` is ``(3, 2)``, a UV
+    offset per plane; ``sharpness`` holds 1 value. They are arrays so that a ``wp.Tape`` can carry
+    gradients into them. ``world_to_object`` / ``normal_to_object`` take the G-buffer's world-space
+    position and normal into the space that is projected when ``object_space`` is set.
+    """
+
+    tiling: wp.array(dtype=float)
+    offsets: wp.array2d(dtype=float)
+    sharpness: wp.array(dtype=float)
+    world_to_object: wp.mat44
+    normal_to_object: wp.mat33
+    normal_to_world: wp.mat33
+    object_space: wp.int32  # 0: world space, the matrices are identities and are skipped
+    mirror_fix: wp.int32
+    weights: wp.int32
+
+
+@wp.func
+def plane_coords(v: wp.vec3, axis: wp.int32) -> wp.vec2:
+    """The plane components of ``v`` for projection ``axis``: ``v.zy``, ``v.xz`` or ``v.xy``."""
+    c = wp.vec2(v[0], v[1])
+    if axis == 0:
+        c = wp.vec2(v[2], v[1])
+    elif axis == 1:
+        c = wp.vec2(v[0], v[2])
+    return c
+
+
+@wp.func
+def u_sign(n: wp.vec3, axis: wp.int32, mirror_fix: wp.int32) -> float:
+    """Direction of the plane's ``u`` along its first world axis: the (right-handed) mirror fix."""
+    s = 1.0
+    if mirror_fix != 0:
+        if axis == 2:
+            s = sign_or_one(n[2])
+        else:
+            s = -sign_or_one(n[axis])
+    return s
+
+
+@wp.func
+def projection_tiling(proj: ProjectionArgs, axis: wp.int32) -> float:
+    return proj.tiling[wp.min(axis, proj.tiling.shape[0] - 1)]
+
+
+@wp.func
+def plane_uv(proj: ProjectionArgs, axis: wp.int32, p: wp.vec3, n: wp.vec3, tiling: float) -> wp.vec2:
+    """UV of projection ``axis`` at ``tiling``: plane coordinates × tiling, ``u`` mirror-fixed, plus the offset."""
+    c = plane_coords(p, axis) * tiling
+    return wp.vec2(c[0] * u_sign(n, axis, proj.mirror_fix) + proj.offsets[axis, 0], c[1] + proj.offsets[axis, 1])
+
+
+@wp.func
+def plane_lod(tex: TextureView, axis: wp.int32, dpdx: wp.vec3, dpdy: wp.vec3, tiling: float) -> float:
+    """Level of detail of projection ``axis`` at ``tiling``, from its own footprint (signs do not matter)."""
+    return lod_from_derivatives(tex, plane_coords(dpdx, axis) * tiling, plane_coords(dpdy, axis) * tiling)
+
+
+@wp.func
+def plane_sample_slope(tex: TextureView, layer: wp.int32, proj: ProjectionArgs, axis: wp.int32, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, tiling: float, smp: SamplerArgs):
+    """``(value, d value / d tiling)`` of plain sampling of projection ``axis`` at ``tiling``: the
+    UV moves by the (mirror-fixed) plane coordinates, the LOD by ``1 / (tiling ln 2)``."""
+    value, d_u, d_v, d_lod = sample_lod_derivatives(tex, layer, plane_uv(proj, axis, p, n, tiling), plane_lod(tex, axis, dpdx, dpdy, tiling), smp)
+    c = plane_coords(p, axis)
+    lod_slope = lod_scale_slope(tex, plane_coords(dpdx, axis), plane_coords(dpdy, axis), tiling)
+    return value, d_u * (c[0] * u_sign(n, axis, proj.mirror_fix)) + d_v * c[1] + d_lod * lod_slope
+
+
+@wp.func
+def projection_uv(proj: ProjectionArgs, axis: wp.int32, p: wp.vec3, n: wp.vec3) -> wp.vec2:
+    return plane_uv(proj, axis, p, n, projection_tiling(proj, axis))
+
+
+@wp.func
+def projection_lod(tex: TextureView, proj: ProjectionArgs, axis: wp.int32, dpdx: wp.vec3, dpdy: wp.vec3) -> float:
+    return plane_lod(tex, axis, dpdx, dpdy, projection_tiling(proj, axis))
+
+
+# Integer exponents below this are raised by multiplication (power_weight).
+MAX_INT_EXPONENT = wp.constant(32)
+
+
+@wp.func
+def power_weight(r: float, exponent: float) -> float:
+    """``r^exponent`` for ``r`` in ``[0, 1]``, with ``0^0 = 1`` and no ``log 0`` in the gradient.
+
+    Integer exponents from 1 to 31 (the usual sharpness values) are raised by multiplying ``r``'s
+    squares, which is at least as accurate as ``exp(exponent · log r)`` and made the triplanar
+    forward 5% faster; others take ``exp`` and ``log``. The gradient
+    (:func:`adj_power_weight`) is the same on both paths.
+    """
+    w = 0.0
+    if exponent == 0.0:
+        w = 1.0
+    elif r > 0.0:
+        k = int(exponent)
+        if float(k) == exponent and k > 0 and k < MAX_INT_EXPONENT:
+            r2 = r * r
+            r4 = r2 * r2
+            r8 = r4 * r4
+            w = wp.where((k & 1) != 0, r, 1.0) * wp.where((k & 2) != 0, r2, 1.0) * wp.where((k & 4) != 0, r4, 1.0)
+            w = w * wp.where((k & 8) != 0, r8, 1.0) * wp.where((k & 16) != 0, r8 * r8, 1.0)
+        else:
+            w = wp.exp(exponent * wp.log(r))
+    return w
+
+
+@wp.func_grad(power_weight)
+def adj_power_weight(r: float, exponent: float, adj_w: float):
+    """``d r^e / d r = e r^e / r`` and ``d r^e / d e = r^e ln r`` for ``r > 0`` (the exponent's
+    slope at ``e = 0`` included, so a sharpness fitted from 0 can move); nothing at ``r = 0``."""
+    if r > 0.0:
+        w = power_weight(r, exponent)
+        wp.adjoint[r] += adj_w * exponent * w / r
+        wp.adjoint[exponent] += adj_w * w * wp.log(r)
+
+
+@wp.func
+def triplanar_weights(n: wp.vec3, sharpness: float) -> wp.vec3:
+    """``pow(|n|, sharpness)`` normalised to sum 1; zero for a zero or non-finite normal.
+
+    ``|n|`` is first divided by its largest component, which leaves the normalised weights
+    unchanged but keeps ``pow`` from underflowing at high sharpness.
+    """
+    a = wp.vec3(wp.abs(n[0]), wp.abs(n[1]), wp.abs(n[2]))
+    m = wp.max(a)
+    w = wp.vec3(0.0)
+    if wp.isfinite(n) and m > 0.0:
+        w = wp.vec3(power_weight(a[0] / m, sharpness), power_weight(a[1] / m, sharpness), power_weight(a[2] / m, sharpness))
+        w = w / wp.max(w[0] + w[1] + w[2], WEIGHT_EPS)
+    return w
+
+
+@wp.func
+def biplanar_remap(a: float, exponent: float) -> float:
+    return power_weight(wp.clamp((a - BIPLANAR_EDGE) / (1.0 - BIPLANAR_EDGE), 0.0, 1.0), exponent)
+
+
+@wp.func
+def biplanar_weights(n: wp.vec3, sharpness: float) -> wp.vec3:
+    """Quilez' biplanar weights: major and median axes get ``clamp((|n| - 0.5773) / (1 - 0.5773), 0, 1)^(k/8)``,
+    the minor axis 0, normalised to sum 1. Zero for a zero or non-finite normal.
+
+    The normal is normalised first (the remap assumes unit length). The minor axis is the smallest
+    component (the highest index among ties). Swapping tied major and median axes changes nothing;
+    a median tied with the minor is at most 1/sqrt(3), where the remap is below 1.2e-4 (zero
+    except near the exact diagonal), so the weights are continuous up to that.
+    """
+    w = wp.vec3(0.0)
+    length = wp.length(n)
+    if wp.isfinite(n) and length > 0.0:
+        a = wp.vec3(wp.abs(n[0]), wp.abs(n[1]), wp.abs(n[2])) / length
+        e = sharpness / 8.0
+        if a[2] <= a[0] and a[2] <= a[1]:
+            w = wp.vec3(biplanar_remap(a[0], e), biplanar_remap(a[1], e), 0.0)
+        elif a[1] <= a[0]:
+            w = wp.vec3(biplanar_remap(a[0], e), 0.0, biplanar_remap(a[2], e))
+        else:
+            w = wp.vec3(0.0, biplanar_remap(a[1], e), biplanar_remap(a[2], e))
+        w = w / wp.max(w[0] + w[1] + w[2], WEIGHT_EPS)
+    return w
+
+
+@wp.func
+def projection_weights(proj: ProjectionArgs, n: wp.vec3) -> wp.vec3:
+    w = wp.vec3(0.0)
+    if proj.weights == WEIGHTS_BIPLANAR:
+        w = biplanar_weights(n, proj.sharpness[0])
+    else:
+        w = triplanar_weights(n, proj.sharpness[0])
+    return w
+
+
+@wp.func
+def object_space(proj: ProjectionArgs, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3):
+    """Position, normal and position derivatives in the projected space (skipping the identity
+    transforms of world space measured 4% of a triplanar sample's time)."""
+    if proj.object_space == 0:
+        return p, n, dpdx, dpdy
+    m = proj.world_to_object
+    return (
+        wp.transform_point(m, p),
+        proj.normal_to_object * n,
+        wp.transform_vector(m, dpdx),
+        wp.transform_vector(m, dpdy),
+    )
+
+
+# -- out of line, for the generated-adjoint kernels ---------------------------------------------------
+
+
+@out_of_line
+def surface_frame(proj: ProjectionArgs, position: wp.vec3, normal: wp.vec3, position_dx: wp.vec3, position_dy: wp.vec3):
+    """``(p, n, dpdx, dpdy, w)``: :func:`object_space` and the projections' weights, out of line."""
+    p, n, dpdx, dpdy = object_space(proj, position, normal, position_dx, position_dy)
+    return p, n, dpdx, dpdy, projection_weights(proj, n)
+
+
+@out_of_line
+def projection_sample(
+    tex: TextureView,
+    layer: wp.int32,
+    proj: ProjectionArgs,
+    axis: wp.int32,
+    p: wp.vec3,
+    n: wp.vec3,
+    dpdx: wp.vec3,
+    dpdy: wp.vec3,
+    tiling: float,
+    smp: SamplerArgs,
+    stoch: StochasticArgs,
+) -> wp.vec4:
+    """Projection ``axis`` of ``tex`` at ``tiling``, at its own LOD, sampled as ``stoch`` says, out of line."""
+    return sample_stochastic_call(tex, layer, plane_uv(proj, axis, p, n, tiling), plane_lod(tex, axis, dpdx, dpdy, tiling), smp, stoch)

@@ -1,0 +1,62 @@
+"""The adapter to Warp's internals (``warptex/_warp.py``) against the installed Warp release.
+
+warptex reaches into Warp in these few places only; if a Warp release changes them, these tests
+say so before the threaded backward passes or the tape records go wrong.
+"""
+
+import numpy as np
+import warp as wp
+
+import warptex as wt
+from warptex import _op, _warp
+from warptex.kernels import projection as kp
+from warptex.kernels import sampling as ks
+
+
+def test_active_tape_is_the_tape_being_recorded():
+    assert _warp.active_tape() is None
+    for _ in range(2):
+        tape = wp.Tape()
+        with tape:
+            assert _warp.active_tape() is tape
+        assert _warp.active_tape() is None
+
+
+def test_struct_fields_and_a_new_struct_of_the_same_kind():
+    smp = ks.SamplerArgs()
+    smp.filter, smp.address, smp.lod_bias = 2, 1, 0.5
+    fields = _warp.struct_fields(smp)
+    assert list(fields) == ["filter", "address", "border", "lod_bias", "min_lod", "max_lod"]
+    assert fields["filter"] == 2 and fields["lod_bias"] == 0.5
+    copy = _warp.struct_like(smp)
+    assert type(copy) is type(smp) and copy.filter == 0
+    for name, value in fields.items():
+        setattr(copy, name, value)
+    assert _warp.struct_fields(copy)["address"] == 1
+
+    proj = kp.ProjectionArgs()
+    proj.tiling = wp.array([2.0], dtype=float, requires_grad=True)
+    assert _warp.struct_fields(proj)["tiling"] is proj.tiling  # arrays come back as they were set
+
+
+def test_threaded_generated_adjoint_accumulates_struct_array_gradients(rng):
+    """The private accumulators that a split backward pass puts into struct fields (through the
+    adapter) reach the real gradient: a generated adjoint over two threads equals one thread."""
+    img = rng.random((16, 16, 2), dtype=np.float32)
+    uv = rng.uniform(-2, 2, (70000, 2)).astype(np.float32)
+    weights = rng.normal(size=(70000, 2)).astype(np.float32)
+    grads = []
+    for threads in (1, 2):
+        wt.set_num_threads(threads)
+        try:
+            tex = wt.Texture(img, requires_grad=True)
+            tape = wp.Tape()
+            with tape, _op.force_generated_adjoint():
+                out = wt.sample(tex, uv, lod=0.6)
+            out.grad.assign(weights)
+            tape.backward()
+            grads.append(np.concatenate([tex.grad(k).ravel() for k in range(tex.num_levels)]))
+        finally:
+            wt.set_num_threads(None)
+    assert np.abs(grads[0]).max() > 1
+    np.testing.assert_allclose(grads[1], grads[0], rtol=1e-5, atol=1e-5 * np.abs(grads[0]).max())
