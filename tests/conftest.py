@@ -12,6 +12,15 @@ wp.init()
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
+@pytest.fixture(scope="session", autouse=True)
+def compiled_kernels():
+    """Every warptex kernel compiled (or loaded from Warp's kernel cache) before the first test,
+    side by side on every core: with a cold cache, tests would compile them one after another."""
+    import warptex
+
+    warptex.precompile("cpu", layer_counts=(4, 8))
+
+
 @pytest.fixture
 def shared_data() -> Path:
     """``../shared/data`` next to the repository; tests using it skip when it is absent."""

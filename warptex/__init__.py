@@ -13,7 +13,7 @@ with :class:`FitView` targets and :class:`Stage` schedules; losses, blur and met
 """
 
 from warptex import io
-from warptex._launch import get_num_threads, set_num_threads
+from warptex._launch import get_num_threads, precompile, set_num_threads
 from warptex.camera import Camera, look_at, orthographic
 from warptex.gbuffer import GBuffer, load_mesh, rasterize
 from warptex.gbuffer_io import load_gbuffer, save_gbuffer
@@ -54,6 +54,7 @@ __all__ = [
     "mip_sizes",
     "orthographic",
     "pack_atlas",
+    "precompile",
     "prepare_histogram",
     "rasterize",
     "sample",

@@ -16,6 +16,11 @@ import numpy as np
 import trimesh
 
 from warptex import io
+from warptex._launch import preload
+from warptex.kernels import layers as kl
+from warptex.kernels import raster as kr
+from warptex.kernels import sampling as ks
+from warptex.kernels import triplanar as kt
 from warptex.camera import Camera, look_at
 from warptex.gbuffer import GBuffer, load_mesh, rasterize
 from warptex.gbuffer_io import save_gbuffer
@@ -24,7 +29,7 @@ from warptex.shade import SKY, lambert, to_rgb
 from warptex.terrain import terrain
 from warptex.texture import Texture, TextureArray
 from warptex.layers import splat
-from warptex.terrain_material import noise_texture, terrain_layers, terrain_splat_maps
+from warptex.terrain_material import LAYER_NAMES, noise_texture, terrain_layers, terrain_splat_maps
 from warptex.triplanar import triplanar
 
 
@@ -71,6 +76,14 @@ def _embedded_texture(mesh: trimesh.Trimesh) -> np.ndarray | None:
     return io.srgb_to_linear(np.asarray(image.convert("RGB"), np.float32) / 255.0)
 
 
+def _kernels(terrain_material: bool) -> list:
+    """The kernels a render runs: rasterisation, mip chains, and the splat or sampling ones."""
+    used = [kr.raster_kernel, ks.downsample_kernel]
+    if terrain_material:
+        return used + [kl.splat_kernels(kl.capacity(len(LAYER_NAMES)))["forward"]]
+    return used + [ks.sample_kernel, kt.triplanar_kernel]
+
+
 def run_render(
     out_dir: str | os.PathLike = "out",
     *,
@@ -107,6 +120,8 @@ def run_render(
     from tqdm import tqdm  # a progress bar over the stages: the first run compiles kernels for seconds
 
     stages = tqdm(total=5, desc="render", unit="stage", disable=False if progress else None if progress is None else True)
+    stages.set_postfix_str("kernels")
+    preload(_kernels(mesh_path is None and texture_path is None), device)  # a cold start compiles them side by side
     stages.set_postfix_str("mesh")
     mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
     framing = terrain_camera(resolution, fov_y) if mesh_path is None else default_camera(mesh, resolution, fov_y)
