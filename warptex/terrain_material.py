@@ -14,7 +14,6 @@ import numpy as np
 import trimesh
 
 from warptex import io
-from warptex.sampling import sample
 from warptex.terrain import terrain_slope_height
 from warptex.texture import Texture, TextureArray
 
@@ -27,16 +26,26 @@ SHARED_TEXTURES = Path(__file__).resolve().parents[2] / "shared" / "data" / "tex
 def noise_texture(size: int = 256, *, seed: int = 0, octaves: int = 6) -> np.ndarray:
     """A tileable, earthy ground texture ``[size, size, 3]`` (linear RGB): fBm of wrapped value noise."""
     rng = np.random.default_rng(seed)
-    uv = (np.stack(np.meshgrid(np.arange(size), np.arange(size)[::-1]), axis=-1) + 0.5) / size
     value = np.zeros((size, size))
     for octave in range(octaves):
         cells = 4 * 2**octave
-        grid = Texture(rng.random((cells, cells, 1), dtype=np.float32), mipmaps=False)
-        value += 0.55**octave * sample(grid, uv.astype(np.float32), address="wrap").numpy()[..., 0]
+        value += 0.55**octave * _wrapped_bilinear(rng.random((cells, cells), dtype=np.float32), size)
     value = (value - value.min()) / (value.max() - value.min())
     dark, mid, light = np.array([0.09, 0.07, 0.04]), np.array([0.16, 0.2, 0.07]), np.array([0.32, 0.29, 0.2])
     t = value[..., None]
     return np.where(t < 0.5, dark + (mid - dark) * (2 * t), mid + (light - mid) * (2 * t - 1)).astype(np.float32)
+
+
+def _wrapped_bilinear(grid: np.ndarray, size: int) -> np.ndarray:
+    """``grid`` ``[n, n]`` magnified to ``[size, size]``: bilinear between texel centres, wrapping
+    at the edges (texture-sampling conventions), so the result tiles."""
+    n = grid.shape[0]
+    x = (np.arange(size) + 0.5) * (n / size) - 0.5
+    i0 = np.floor(x).astype(int)
+    f = (x - i0).astype(np.float32)
+    i0, i1 = i0 % n, (i0 + 1) % n
+    rows = grid[i0] * (1 - f)[:, None] + grid[i1] * f[:, None]
+    return rows[:, i0] * (1 - f)[None, :] + rows[:, i1] * f[None, :]
 
 
 def _smoothstep(e0: float, e1: float, x: np.ndarray) -> np.ndarray:
