@@ -15,6 +15,10 @@ layers and stochastic taps are skipped, so real reads are fewer). Every time is 
 
     python benchmarks/bench_samplers.py                      # full run, writes bench_out/
     python benchmarks/bench_samplers.py --quick --json r.json
+    python benchmarks/bench_samplers.py --device cuda:0      # on a GPU: torch and Dr.Jit on CUDA too
+
+On a CUDA device, warptex runs one launch per call (no CPU threads), the peers are torch on the same
+device and Dr.Jit's CUDA backend (NumPy is skipped), and every timed call ends by waiting for the GPU.
 """
 
 from __future__ import annotations
@@ -50,17 +54,17 @@ SPHERE_TILING = 4.0
 # -- scenes -------------------------------------------------------------------------------------------
 
 
-def texture(size: int, channels: int = 4, seed: int = 0) -> wt.Texture:
+def texture(size: int, channels: int = 4, seed: int = 0, device=None) -> wt.Texture:
     """A seeded ``size²`` noise texture (RGBA: three noise channels and a fourth for height)."""
     rgb = noise_texture(size, seed=seed)
     extra = noise_texture(size, seed=seed + 1)[..., :1]
-    return wt.Texture(np.concatenate([rgb, extra], -1)[..., :channels])
+    return wt.Texture(np.concatenate([rgb, extra], -1)[..., :channels], device=device)
 
 
-def sphere(resolution: int) -> wt.GBuffer:
+def sphere(resolution: int, device=None) -> wt.GBuffer:
     mesh = trimesh.creation.icosphere(subdivisions=6)
     mesh.visual = trimesh.visual.TextureVisuals(uv=mesh.vertices[:, :2] * 0.5 + 0.5)
-    return wt.rasterize(mesh, wt.orthographic((0, 0, 3), (0, 0, 0), height=2.0, resolution=(resolution, resolution)))
+    return wt.rasterize(mesh, wt.orthographic((0, 0, 3), (0, 0, 0), height=2.0, resolution=(resolution, resolution)), device=device)
 
 
 def terrain_mesh(cache: dict):
@@ -70,7 +74,7 @@ def terrain_mesh(cache: dict):
     return cache["terrain_mesh"]
 
 
-def scene_data(technique: str, scene: str, size: dict, tex: wt.Texture, cache: dict) -> tuple[dict, dict]:
+def scene_data(technique: str, scene: str, size: dict, tex: wt.Texture, cache: dict, device=None) -> tuple[dict, dict]:
     """``(data, warptex objects)`` of ``technique`` on ``scene`` (see :mod:`peers.common`)."""
     if scene == "random":
         rng = np.random.default_rng(7)
@@ -79,7 +83,7 @@ def scene_data(technique: str, scene: str, size: dict, tex: wt.Texture, cache: d
         lod = None if technique == "bilinear" else rng.uniform(0, 4, n).astype(np.float32)
         return common.sample_data(tex, uv, lod=lod), {"texture": tex}
     if scene not in cache:
-        cache[scene] = sphere(size["sphere"]) if scene == "sphere" else wt.rasterize(terrain_mesh(cache), terrain_camera((size["terrain"],) * 2))
+        cache[scene] = sphere(size["sphere"], device) if scene == "sphere" else wt.rasterize(terrain_mesh(cache), terrain_camera((size["terrain"],) * 2), device=device)
     g = cache[scene]
     scale = SPHERE_TILING if scene == "sphere" else 1.0 / 6.0
     if technique in SAMPLE_TECHNIQUES:  # the Z projection's UVs over the covered pixels
@@ -93,11 +97,11 @@ def scene_data(technique: str, scene: str, size: dict, tex: wt.Texture, cache: d
         key = ("layers", count)
         if key not in cache:
             levels = np.stack([texture(tex.width, seed=10 + j).numpy() for j in range(count)])
-            cache[key] = wt.TextureArray(levels)
+            cache[key] = wt.TextureArray(levels, device=device)
         if scene == "terrain" and count == 4:  # the terrain's own height/slope splat map
-            maps = wt.TextureArray(terrain_splat_maps(terrain_mesh(cache), TERRAIN_GRID)[None], mipmaps=False)
+            maps = wt.TextureArray(terrain_splat_maps(terrain_mesh(cache), TERRAIN_GRID)[None], mipmaps=False, device=device)
         else:
-            maps = wt.TextureArray(np.random.default_rng(count).random((count // 4, 64, 64, 4)).astype(np.float32), mipmaps=False)
+            maps = wt.TextureArray(np.random.default_rng(count).random((count // 4, 64, 64, 4)).astype(np.float32), mipmaps=False, device=device)
         tiling = (np.arange(count, dtype=np.float32) % 4 + 2.0) * (8.0 if scene == "sphere" else 4.0)
         data = common.gbuffer_data(g, layers=cache[key], maps=maps, tiling=tiling)
         return data, {"gbuffer": g, "layers": cache[key], "maps": maps}
@@ -112,29 +116,31 @@ def samples(data: dict) -> int:
 # -- timing -------------------------------------------------------------------------------------------
 
 
-def best_time(run, repeats: int) -> float:
-    """Seconds of the fastest of ``repeats`` runs after one warm-up run (compiles, allocates)."""
+def best_time(run, repeats: int, sync=wp.synchronize) -> float:
+    """Seconds of the fastest of ``repeats`` runs after one warm-up run (compiles, allocates); each
+    run ends with ``sync()``, which waits for work queued on a GPU."""
     run()
+    sync()
     best = float("inf")
     for _ in range(repeats):
         t = time.perf_counter()
         run()
-        wp.synchronize()
+        sync()
         best = min(best, time.perf_counter() - t)
     return best
 
 
-def warptex_runs(technique: str, data: dict, objs: dict):
+def warptex_runs(technique: str, data: dict, objs: dict, device=None):
     """``(forward, forward_backward)`` callables of warptex for ``technique``."""
 
     # Inputs as Warp arrays up front, as the peers convert theirs in prepare(), untimed.
     data = dict(data)
     for key, dtype in (("uv", wp.vec2), ("uv_dx", wp.vec2), ("uv_dy", wp.vec2), ("lod", float)):
         if key in data and technique in SAMPLE_TECHNIQUES:
-            data[key] = wp.array(data[key], dtype=dtype)
+            data[key] = wp.array(data[key], dtype=dtype, device=device)
 
     def forward():
-        return common.warptex_forward(technique, data, **objs)
+        return common.warptex_forward(technique, data, device=device, **objs)
 
     # The same texels with gradient buffers; every level is a leaf (the chain is not rebuilt on the tape).
     grad_objs = {k: with_grad(v) if k in ("texture", "layers", "maps") else v for k, v in objs.items()}
@@ -145,7 +151,7 @@ def warptex_runs(technique: str, data: dict, objs: dict):
                 grad_objs[key].zero_grad()
         tape = wp.Tape()
         with tape:
-            out = common.warptex_forward(technique, data, **grad_objs)
+            out = common.warptex_forward(technique, data, device=device, **grad_objs)
         out.grad.fill_(1.0)
         tape.backward()
         return out
@@ -156,48 +162,53 @@ def warptex_runs(technique: str, data: dict, objs: dict):
 def with_grad(t):
     """A copy of texture ``t`` (same texels, same mip chain) that receives gradients."""
     level0 = t.numpy(0)
-    return type(t)(level0, mipmaps=t.num_levels > 1, requires_grad=True)
+    return type(t)(level0, mipmaps=t.num_levels > 1, requires_grad=True, device=t.device)
 
 
 def measure_technique(technique: str, scene: str, args, tex, cache, backends: dict, report) -> list[dict]:
     """Time warptex and the peers on one technique and scene; print and return the records."""
-    data, objs = scene_data(technique, scene, args.sizes, tex, cache)
+    data, objs = scene_data(technique, scene, args.sizes, tex, cache, args.device)
     n = samples(data)
     records = []
+    cuda = wp.get_device(args.device).is_cuda
 
     def record(impl, pass_, threads, seconds, **extra):
-        rec = {"technique": technique, "scene": scene, "impl": impl, "pass": pass_, "threads": threads, "seconds": seconds, "samples": n,
+        rec = {"technique": technique, "scene": scene, "impl": impl, "pass": pass_, "device": args.device, "threads": threads, "seconds": seconds, "samples": n,
                "msamples_per_s": n / seconds / 1e6, "nominal_taps_per_s": n * NOMINAL_TAPS[technique] / seconds, **extra}  # fmt: skip
         records.append(rec)
         return rec
 
-    forward, forward_backward = warptex_runs(technique, data, objs)
+    forward, forward_backward = warptex_runs(technique, data, objs, args.device)
     reference = {}
-    for threads in sorted({1, args.threads}):
+    thread_counts = [None] if cuda else sorted({1, args.threads})  # a CUDA launch fills the device
+    for threads in thread_counts:
         wt.set_num_threads(threads)
         out = forward().numpy()
         reference[threads] = out.reshape(-1, out.shape[-1])
         record("warptex", "forward", threads, best_time(forward, args.repeats))
         record("warptex", "forward+backward", threads, best_time(forward_backward, args.repeats))
-    wt.set_num_threads(args.threads)
-    single_vs_all = float(np.nanmax(np.abs(reference[args.threads] - reference[1]))) if reference[1].size else 0.0
+    wt.set_num_threads(None if cuda else args.threads)
+    peer_threads = thread_counts[-1]
+    single_vs_all = float(np.nanmax(np.abs(reference[peer_threads] - reference[thread_counts[0]]))) if reference[peer_threads].size else 0.0
 
-    expected = reference[args.threads]
+    expected = reference[peer_threads]
     if "mask" in data:
         expected = expected[data["mask"] > 0] if expected.shape[0] == data["mask"].shape[0] else expected
     for backend, table in backends.items():
         peer = table.get(technique)
         if peer is None:
             continue
-        peers.set_threads(backend, args.threads)
+        if not cuda:
+            peers.set_threads(backend, args.threads)
+        sync = lambda: peers.synchronize(backend)  # noqa: E731
         state = peer.prepare(data)
         try:
             out = np.asarray(peer.output(peer.forward(state)), np.float32)
             got = out[data["mask"] > 0] if "mask" in data and out.shape[0] == data["mask"].shape[0] else out
             diff = float(np.nanmax(np.abs(got - expected))) if got.size else 0.0
-            record(backend, "forward", args.threads, best_time(lambda: peer.forward(state), args.repeats), max_abs_diff=diff, note=peer.note)
+            record(backend, "forward", peer_threads, best_time(lambda: peer.forward(state), args.repeats, sync), max_abs_diff=diff, note=peer.note)
             if peer.forward_backward is not None:
-                record(backend, "forward+backward", args.threads, best_time(lambda: peer.forward_backward(state), args.repeats), note=peer.note)
+                record(backend, "forward+backward", peer_threads, best_time(lambda: peer.forward_backward(state), args.repeats, sync), note=peer.note)
         except MemoryError as err:  # a peer that cannot hold the scene is reported, not fatal
             report(f"  {backend}: skipped ({err})")
     report(format_rows(records, single_vs_all))
@@ -210,12 +221,14 @@ def format_rows(records: list[dict], threaded_diff: float) -> str:
     """One block per technique: each implementation's figures and its time ratio to warptex."""
     first = records[0]
     base = {(r["pass"], r["threads"]): r["seconds"] for r in records if r["impl"] == "warptex"}
-    lines = [f"{first['technique']} on {first['scene']} ({first['samples']:,} samples; threaded vs 1 thread max diff {threaded_diff:.1e})"]
+    threaded = "" if first["threads"] is None else f"; threaded vs 1 thread max diff {threaded_diff:.1e}"
+    lines = [f"{first['technique']} on {first['scene']} ({first['samples']:,} samples on {first['device']}{threaded})"]
     for r in records:
         ratio = r["seconds"] / base[(r["pass"], r["threads"])]
         diff = f"  diff {r['max_abs_diff']:.1e}" if "max_abs_diff" in r else ""
+        where = "  GPU " if r["threads"] is None else f"{r['threads']:2d} thr"
         lines.append(
-            f"  {r['impl']:8s} {r['pass']:16s} {r['threads']:2d} thr  {r['seconds'] * 1e3:9.2f} ms  {r['msamples_per_s']:8.2f} Ms/s  "
+            f"  {r['impl']:8s} {r['pass']:16s} {where}  {r['seconds'] * 1e3:9.2f} ms  {r['msamples_per_s']:8.2f} Ms/s  "
             f"{r['nominal_taps_per_s'] / 1e9:6.2f} Gtap/s  {'x' + format(ratio, '.2f') + ' warptex time' if r['impl'] != 'warptex' else ''}{diff}"
         )
     return "\n".join(lines)
@@ -227,21 +240,21 @@ def format_rows(records: list[dict], threaded_diff: float) -> str:
 def scaling(args, backends: dict, report) -> dict:
     """Triplanar forward (all threads) against pixel count and texture size; peers where available."""
     out = {"pixels": {}, "texture": {}}
-    tex = texture(1024 if not args.quick else 256)
+    tex = texture(1024 if not args.quick else 256, device=args.device)
     for res in args.scaling_pixels:
-        g = sphere(res)
+        g = sphere(res, args.device)
         data = common.gbuffer_data(g, texture=tex, tiling=SPHERE_TILING)
         row = {"warptex": best_time(lambda: wt.triplanar(g, tex, tiling=SPHERE_TILING), args.repeats)}
         for backend, table in backends.items():
             peer = table.get("triplanar")
             if peer is not None:
                 state = peer.prepare(data)
-                row[backend] = best_time(lambda: peer.forward(state), args.repeats)
+                row[backend] = best_time(lambda: peer.forward(state), args.repeats, lambda: peers.synchronize(backend))
         out["pixels"][res] = row
         report(f"  pixels {res}²: " + "  ".join(f"{k} {v * 1e3:.1f} ms" for k, v in row.items()))
-    g = sphere(args.scaling_pixels[len(args.scaling_pixels) // 2])
+    g = sphere(args.scaling_pixels[len(args.scaling_pixels) // 2], args.device)
     for size in args.scaling_textures:
-        t = texture(size)
+        t = texture(size, device=args.device)
         out["texture"][size] = {"warptex": best_time(lambda: wt.triplanar(g, t, tiling=SPHERE_TILING), args.repeats)}
         report(f"  texture {size}²: warptex {out['texture'][size]['warptex'] * 1e3:.1f} ms")
     return out
@@ -256,7 +269,7 @@ def plot_scaling(path: Path, result: dict, threads: int) -> None:
         path,
         [
             {"series": {k: (x, [None if v is None else v * 1e3 for v in y]) for k, (x, y) in series.items()}, "xlabel": "pixels", "ylabel": "ms",
-             "title": f"triplanar forward vs pixel count ({threads} threads)", "logx": True, "logy": True},
+             "title": f"triplanar forward vs pixel count ({threads if isinstance(threads, str) else f'{threads} threads'})", "logx": True, "logy": True},
             {"series": {"warptex": ([s * s for s in tex], [tex[s]["warptex"] * 1e3 for s in tex])}, "xlabel": "texels (level 0)", "ylabel": "ms",
              "title": "triplanar forward vs texture size", "logx": True,
              "note": "flat: trilinear reads the mip levels that match the pixel footprint, whatever the size"},
@@ -278,24 +291,24 @@ def run(args) -> dict:
 
     backends, skipped = {}, {}
     for backend in args.peers:
-        why = peers.unavailable(backend)
-        if why is None:
+        try:
+            peers.set_device(backend, args.device)
             backends[backend] = peers.load(backend)
-        else:
-            skipped[backend] = why
+        except peers.PeerUnavailable as why:
+            skipped[backend] = str(why)
             report(f"peer {backend}: skipped ({why})")
-    tex = texture(args.texture_size)
+    tex = texture(args.texture_size, device=args.device)
     cache, records = {}, []
     for technique in args.techniques:
         scenes = ("sphere", "random") if technique in SAMPLE_TECHNIQUES else ("sphere", "terrain")
         for scene in scenes:
             records += measure_technique(technique, scene, args, tex, cache, backends, report)
-    result = {"machine": {"platform": platform.platform(), "cpus": wt.get_num_threads(), "python": platform.python_version(), "warp": wp.config.version},
+    result = {"machine": {"platform": platform.platform(), "cpus": wt.get_num_threads(), "device": wp.get_device(args.device).name, "python": platform.python_version(), "warp": wp.config.version},
               "settings": {k: v for k, v in vars(args).items() if k not in ("json", "out")}, "skipped_peers": skipped, "records": records}  # fmt: skip
     if not args.no_scaling:
         report("scaling (triplanar forward):")
         result["scaling"] = scaling(args, backends, report)
-        plot_scaling(args.out / "scaling.png", result["scaling"], args.threads)
+        plot_scaling(args.out / "scaling.png", result["scaling"], args.threads if not wp.get_device(args.device).is_cuda else args.device)
         report(f"plot: {args.out / 'scaling.png'}")
     return result
 
@@ -305,12 +318,19 @@ def parse(argv=None):
     p.add_argument("--quick", action="store_true", help="small scenes and one repeat (CI)")
     p.add_argument("--json", type=Path, help="write the results here")
     p.add_argument("--out", type=Path, default=Path("bench_out"), help="folder for the scaling plot")
+    p.add_argument("--device", default="cpu", help="Warp device: cpu or cuda:N (default: cpu)")
     p.add_argument("--threads", type=int, default=None, help="threads for the all-core figures (default: every core)")
     p.add_argument("--repeats", type=int, default=None, help="timed runs per figure (default 5, quick 1)")
     p.add_argument("--techniques", nargs="+", default=list(TECHNIQUES), choices=TECHNIQUES)
     p.add_argument("--peers", nargs="*", default=list(peers.BACKENDS), choices=peers.BACKENDS)
     p.add_argument("--no-scaling", action="store_true", help="skip the pixel-count and texture-size sweeps")
     args = p.parse_args(argv)
+    wp.config.quiet = True
+    wp.init()
+    try:
+        wp.get_device(args.device)
+    except (RuntimeError, ValueError) as err:
+        p.error(f"--device {args.device!r}: {err}")
     args.threads = args.threads or wt.get_num_threads()
     args.repeats = args.repeats or (1 if args.quick else 5)
     args.sizes = {"sphere": 256, "terrain": 128, "random": 1 << 16} if args.quick else {"sphere": 1024, "terrain": 512, "random": 1 << 20}

@@ -104,6 +104,22 @@ def unavailable(backend: str) -> str | None:
     return None
 
 
+def set_device(backend: str, device: str) -> None:
+    """Run ``backend``'s peers on ``device`` (``"cpu"`` or ``"cuda:N"``): torch on that device, Dr.Jit
+    on its LLVM or CUDA backend; ``PeerUnavailable`` (with the reason) where the backend cannot."""
+    if backend not in _MODULES:
+        raise ValueError(f"peers.set_device(): backend must be one of {BACKENDS}, got {backend!r}")
+    module = importlib.import_module(f"{__name__}.{_MODULES[backend]}")
+    if not module.IMPORTED:
+        raise PeerUnavailable(module.UNAVAILABLE)
+    module.set_device(str(device))
+
+
+def synchronize(backend: str) -> None:
+    """Wait for ``backend``'s queued GPU work (timed calls end with it)."""
+    _module(backend).synchronize()
+
+
 def set_threads(backend: str, count: int) -> None:
     """Use ``count`` CPU threads in ``backend`` (``torch.set_num_threads``, ``dr.set_thread_count``;
     NumPy's element-wise work is single-threaded, so this is a no-op there)."""

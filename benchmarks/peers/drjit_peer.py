@@ -20,11 +20,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import Peer
+from . import Peer, PeerUnavailable
 from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options, sample_lod
 
 MIN_LLVM = 17  # 15.0.6 and 16.0.6 fail as described below; 19.1.7 works
 
+IMPORTED = False
 try:
     import drjit as dr
     from drjit.llvm.ad import Array2f, Float, TensorXf, Texture2f, UInt32
@@ -35,16 +36,50 @@ except Exception as err:  # noqa: BLE001 (the LLVM backend failed to start)
     dr = None
     UNAVAILABLE = f"drjit's LLVM backend is unavailable ({type(err).__name__}: {err}); install libLLVM (apt-get install llvm) or set DRJIT_LIBLLVM_PATH"
 else:
+    IMPORTED = True
     UNAVAILABLE = None
+
+
+def _llvm_problem() -> str | None:
+    """Why Dr.Jit's LLVM (CPU) backend cannot run here, or ``None``."""
     if not dr.has_backend(dr.JitBackend.LLVM):
-        UNAVAILABLE = "drjit's LLVM backend is unavailable (libLLVM not found): apt-get install libllvm19, or set DRJIT_LIBLLVM_PATH"
-    elif dr.detail.llvm_version()[0] < MIN_LLVM:
+        return "drjit's LLVM backend is unavailable (libLLVM not found): apt-get install libllvm19, or set DRJIT_LIBLLVM_PATH"
+    if dr.detail.llvm_version()[0] < MIN_LLVM:
         # LLVM 15 and 16 abort the process ("LLVM ERROR: Cannot select: fminimum") on Dr.Jit's
         # float min/max on x86, so an older libLLVM must not be used at all.
-        UNAVAILABLE = (
+        return (
             f"drjit loaded libLLVM {'.'.join(map(str, dr.detail.llvm_version()))}, whose x86 backend aborts on Dr.Jit's "
             f"float min/max; needs LLVM >= {MIN_LLVM}: apt-get install libllvm19 (Dr.Jit picks the newest), or set DRJIT_LIBLLVM_PATH"
         )
+    return None
+
+
+if IMPORTED:
+    UNAVAILABLE = _llvm_problem()
+
+
+def set_device(device: str) -> None:
+    """The LLVM backend on the CPU, the CUDA backend on a GPU (the types of both modules rebound)."""
+    global Array2f, Float, TensorXf, Texture2f, UInt32, UNAVAILABLE
+    from . import drjit_stochastic
+
+    if device == "cpu":
+        UNAVAILABLE = _llvm_problem()
+        if UNAVAILABLE:
+            raise PeerUnavailable(UNAVAILABLE)
+        import drjit.llvm.ad as backend
+    else:
+        if not dr.has_backend(dr.JitBackend.CUDA):
+            raise PeerUnavailable("drjit's CUDA backend is unavailable (no CUDA driver or GPU)")
+        import drjit.cuda.ad as backend
+        UNAVAILABLE = None
+    Array2f, Float, TensorXf, Texture2f, UInt32 = backend.Array2f, backend.Float, backend.TensorXf, backend.Texture2f, backend.UInt32
+    drjit_stochastic.Float, drjit_stochastic.Float64, drjit_stochastic.Int32, drjit_stochastic.UInt32 = backend.Float, backend.Float64, backend.Int32, backend.UInt32
+
+
+def synchronize() -> None:
+    dr.sync_thread()
+
 
 PLANES = ((2, 1), (0, 2), (0, 1))
 TO_WORLD = ((2, 1, 0), (0, 2, 1), (0, 1, 2))

@@ -10,13 +10,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import Peer
+from . import Peer, PeerUnavailable
 from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options, sample_lod
 
-UNAVAILABLE = None
+IMPORTED, UNAVAILABLE = True, None
 F32 = np.float32
 PLANES = ((2, 1), (0, 2), (0, 1))  # X plane: p.zy, Y plane: p.xz, Z plane: p.xy
 BIPLANAR_EDGE = F32(0.5773)
+
+
+def set_device(device: str) -> None:
+    if device != "cpu":
+        raise PeerUnavailable("NumPy runs on the CPU only")
+
+
+def synchronize() -> None:
+    pass
 
 
 def set_threads(count: int) -> None:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import Peer
+from . import Peer, PeerUnavailable
 from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options, sample_lod
 
 try:
@@ -28,17 +28,43 @@ try:
     import torch.nn.functional as F
 except ImportError as err:  # the peers are optional
     torch = F = None
-    UNAVAILABLE = f"torch is not installed ({err})"
+    IMPORTED, UNAVAILABLE = False, f"torch is not installed ({err})"
 else:
-    UNAVAILABLE = None
+    IMPORTED, UNAVAILABLE = True, None
 
 PLANES = ((2, 1), (0, 2), (0, 1))
 TO_WORLD = ((2, 1, 0), (0, 2, 1), (0, 1, 2))
 MASK32 = 0xFFFFFFFF
 
 
+DEVICE = "cpu"  # where the tensors live (set_device)
+
+
+def set_device(device: str) -> None:
+    """Put every tensor on ``device``: the inputs explicitly, the rest through torch's default device."""
+    global DEVICE
+    if device != "cpu" and not torch.cuda.is_available():
+        raise PeerUnavailable(f"this torch build has no CUDA (torch {torch.__version__})")
+    DEVICE = device
+    torch.set_default_device(device)
+
+
+def synchronize() -> None:
+    if DEVICE != "cpu":
+        torch.cuda.synchronize()
+
+
 def set_threads(count: int) -> None:
     torch.set_num_threads(count)
+
+
+def _tensor(a: np.ndarray):
+    """A float32 NumPy array as a tensor on :data:`DEVICE`."""
+    return torch.from_numpy(np.ascontiguousarray(a, np.float32)).to(DEVICE)
+
+
+def _numpy(t) -> np.ndarray:
+    return t.detach().cpu().numpy()
 
 
 # -- textures and the sampling core ---------------------------------------------------------------
@@ -50,7 +76,7 @@ def _leaves(levels):
     for a in levels:
         a = np.asarray(a, np.float32)
         a = a[None] if a.ndim == 3 else a
-        out.append(torch.from_numpy(np.ascontiguousarray(a.transpose(0, 3, 1, 2))))
+        out.append(_tensor(a.transpose(0, 3, 1, 2)))
     return out
 
 
@@ -123,7 +149,7 @@ def lod_from_derivatives(size, dx, dy):
 
 
 def _tensors(data, keys):
-    return {k: torch.from_numpy(np.ascontiguousarray(data[k], np.float32)) for k in keys if k in data}
+    return {k: _tensor(data[k]) for k in keys if k in data}
 
 
 # -- peers ----------------------------------------------------------------------------------------------
@@ -308,10 +334,10 @@ def _make(technique, body):
         return out, {n: [torch.zeros_like(t) if t.grad is None else t.grad for t in v] for n, v in leaves.items()}
 
     def grads(g):
-        return {n: [t.detach().numpy().transpose(0, 2, 3, 1)[0 if n == "texture" else slice(None)].copy() for t in v] for n, v in g.items()}
+        return {n: [_numpy(t).transpose(0, 2, 3, 1)[0 if n == "texture" else slice(None)].copy() for t in v] for n, v in g.items()}
 
     note = "F.grid_sample, one call per mip level read (samples grouped by level, split into one batch per thread), wrap by circular padding"
-    return Peer("torch", technique, _prepare(technique), forward, forward_backward, lambda r: r.detach().numpy().astype(np.float32), grads, note)
+    return Peer("torch", technique, _prepare(technique), forward, forward_backward, lambda r: _numpy(r).astype(np.float32), grads, note)
 
 
 def peers() -> dict[str, Peer]:
