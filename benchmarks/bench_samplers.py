@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import platform
 import sys
 import time
@@ -40,9 +39,10 @@ import peers  # noqa: E402  (benchmarks/peers, next to this file)
 from peers import common  # noqa: E402
 
 import warptex as wt  # noqa: E402
-from warptex.plot import line_chart  # noqa: E402
-from warptex.render import TERRAIN_GRID, terrain_camera  # noqa: E402
-from warptex.terrain_material import noise_texture, terrain_splat_maps  # noqa: E402
+from warptex.apps.plot import line_chart  # noqa: E402
+from warptex.apps.render import TERRAIN_GRID, terrain_camera  # noqa: E402
+from warptex.apps.terrain import terrain  # noqa: E402
+from warptex.apps.terrain_material import noise_texture, terrain_splat_maps  # noqa: E402
 
 TECHNIQUES = peers.TECHNIQUES
 SAMPLE_TECHNIQUES = ("bilinear", "trilinear", "hash4", "cheap2", "hex")
@@ -70,7 +70,7 @@ def sphere(resolution: int, device=None) -> wt.GBuffer:
 def terrain_mesh(cache: dict):
     """The default terrain mesh, built once per run."""
     if "terrain_mesh" not in cache:
-        cache["terrain_mesh"] = wt.terrain(resolution=TERRAIN_GRID, seed=0)
+        cache["terrain_mesh"] = terrain(resolution=TERRAIN_GRID, seed=0)
     return cache["terrain_mesh"]
 
 

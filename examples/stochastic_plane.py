@@ -24,8 +24,7 @@ import warp as wp
 
 import warptex as wt
 from warptex import io
-from warptex.shade import lambert, side_by_side
-from warptex.stochastic import prepare_histogram, stochastic
+from warptex.apps.shade import lambert, side_by_side
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 
@@ -68,22 +67,22 @@ def render_plane(
     camera = wt.look_at((0.0, eye_height, 0.0), (0.0, 0.0, -3.5 * eye_height), fov_y=60.0, resolution=resolution)
     g = wt.rasterize(ground_quad(200.0), camera, device=device)
     tex = wt.Texture.from_file(texture_path, device=device)
-    hist = prepare_histogram(tex)
+    hist = wt.prepare_histogram(tex)
 
     # UV = world (x, -z) × tiling: "up" in the texture points away from the camera.
     axes, signs = [0, 2], np.array([1.0, -1.0], np.float32) * tiling
     uv, uv_dx, uv_dy = (getattr(g, k).numpy()[..., axes] * signs for k in ("position", "position_dx", "position_dy"))
     covered = g.mask.numpy() > 0
     options = {
-        "plain tiling": {"method": "none"},
-        "hash4 (4 taps, per-cell offsets)": {"method": "hash4"},
-        "cheap2 (2 taps, noise-driven)": {"method": "cheap2"},
-        f"hex (3 taps, histogram-preserving, contrast {contrast:g})": {"method": "hex", "histogram": hist, "contrast": contrast},
+        "plain tiling": wt.Stochastic("none", seed=seed),
+        "hash4 (4 taps, per-cell offsets)": wt.Stochastic("hash4", seed=seed),
+        "cheap2 (2 taps, noise-driven)": wt.Stochastic("cheap2", seed=seed),
+        f"hex (3 taps, histogram-preserving, contrast {contrast:g})": wt.Stochastic("hex", seed=seed, histogram=hist, contrast=contrast),
     }
     start = time.perf_counter()
     panels = {}
-    for name, kw in options.items():
-        colour = stochastic(tex, uv, uv_dx=uv_dx, uv_dy=uv_dy, seed=seed, device=device, **kw).numpy()
+    for name, option in options.items():
+        colour = wt.stochastic(tex, uv, option, uv_dx=uv_dx, uv_dy=uv_dy, device=device).numpy()
         panels[name] = lambert(g, np.where(covered[..., None], colour, 0.0), light_dir=(0.3, 1.0, 0.2), ambient=0.35)
     elapsed = time.perf_counter() - start
 

@@ -25,8 +25,8 @@ import warp as wp
 
 import warptex as wt
 from warptex import io
-from warptex.render import default_camera
-from warptex.shade import height_to_normal_map, lambert, side_by_side, to_rgb
+from warptex.apps.render import default_camera
+from warptex.apps.shade import height_to_normal_map, lambert, side_by_side, to_rgb
 from warptex.triplanar import biplanar, triplanar, triplanar_normal
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"

@@ -1,4 +1,4 @@
-"""The atlas + index-map variant of splat-map terrain texturing (seed 004).
+"""The atlas + index-map variant of splat-map terrain texturing.
 
 Instead of ``L`` layer textures and ``ceil(L / 4)`` splat maps, the layers are packed into one
 *atlas* texture, and per splat texel an *index map* names the ``k`` layers that matter there while
@@ -23,7 +23,7 @@ Why the LOD must be clamped: when ``th``, ``tw`` and ``g`` are divisible by ``2^
 ``g / 2^ℓ`` texels, still of wrapped content. Bilinear filtering inside a tile reads at most one
 texel beyond the tile, so it is exact while ``g / 2^ℓ >= 1``. Past that level a coarse texel
 averages texels of two tiles (and tile edges stop falling on texel edges), and colour bleeds
-across tiles: the grey seams of seed 004. The safe levels are ``ℓ <= v2(g), v2(th), v2(tw)``
+across tiles: the grey seams of naively mipmapped atlases. The safe levels are ``ℓ <= v2(g), v2(th), v2(tw)``
 (``v2`` = the number of times 2 divides the int), so ``ℓ_max <= log2(g)``; the sampler clamps the
 LOD (after bias, before trilinear blending) to that ``ℓ_max``, which the Python side computes.
 """

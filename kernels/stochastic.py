@@ -6,7 +6,7 @@ so all taps read the same mip levels and no mip seam appears at cell borders. ``
 picks the technique at run time:
 
 * ``METHOD_NONE``: plain :func:`~warptex.kernels.sampling.sample_lod`.
-* ``METHOD_HASH4`` (seed 000; Quilez, "texture repetition", technique 1): every integer cell
+* ``METHOD_HASH4`` (Quilez, "texture repetition", technique 1): every integer cell
   ``(i, j)`` gets a hashed offset ``o`` and, with ``mirror``, per-axis signs ``s``; the four cells
   around ``uv`` are sampled at ``s * uv + o`` and blended bilinearly with weights
   ``b = smoothstep(blend_lo, blend_hi, frac(uv))``: ``lerp(lerp(a, b, bx), lerp(c, d, bx), by)``.
@@ -55,7 +55,7 @@ PI = wp.constant(3.141592653589793)
 
 @wp.struct
 class StochasticArgs:
-    """Options of :func:`sample_stochastic` (built by ``warptex.stochastic.stochastic_params``).
+    """Options of :func:`sample_stochastic` (packed by ``warptex._pack.stochastic_args``).
 
     ``lut`` is ``[layers, lut_levels, channels, lut_size]`` flattened: entry ``i`` of channel ``c`` at
     mip level ``k`` is the value whose Gaussianised value, read at level ``k``, is

@@ -32,3 +32,18 @@ def shared_data() -> Path:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(1234)
+
+
+SAMPLER_FIELDS = ("filter", "address", "border", "lod_bias", "min_lod", "max_lod")
+
+
+def with_sampler(kw: dict) -> dict:
+    """Keyword arguments with the ``warptex.Sampler`` fields among them gathered into ``sampler=``
+    (tests list sampler options beside a technique's own, as tables of cases)."""
+    kw = dict(kw)
+    fields = {k: kw.pop(k) for k in SAMPLER_FIELDS if k in kw}
+    if fields:
+        import warptex
+
+        kw["sampler"] = warptex.Sampler(**fields)
+    return kw

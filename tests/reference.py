@@ -1,6 +1,6 @@
 """Small NumPy references of the sampling formulas, written independently of the kernels.
 
-They follow DESIGN.md and the OpenGL specification in float64 and in a different form from the
+They follow the formulas in the docstrings and the OpenGL specification in float64 and in a different form from the
 Warp code (coordinate folding instead of index addressing, overlap matrices instead of loops), so
 agreement means the formula is right, not merely that it was written twice the same way.
 """

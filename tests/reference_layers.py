@@ -1,4 +1,4 @@
-"""A NumPy reference of splat-map layer blending (DESIGN.md §3, Unity TerrainLit), in float64.
+"""A NumPy reference of splat-map layer blending (as Unity's TerrainLit blends), in float64.
 
 Written as whole-image array operations (every layer sampled everywhere, weights as ``[N, L]``
 matrices), unlike the per-pixel kernel that skips zero-weight layers.

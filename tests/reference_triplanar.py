@@ -1,6 +1,6 @@
 """NumPy reference of triplanar / biplanar mapping and triplanar normal mapping, in float64.
 
-Written from the formulas (issue 4, DESIGN.md §3 with warptex's right-handed mirror signs), not
+Written from the formulas (Golus 2017, with warptex's right-handed mirror signs), not
 from the kernels, and in a different form: every pixel at once, the three projections stacked on a
 leading axis, masks and index arrays instead of per-pixel branches and swizzle cases. Sampling uses
 :mod:`reference` (box mip chain, bilinear, trilinear).

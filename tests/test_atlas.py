@@ -1,4 +1,4 @@
-"""Atlas + index-map splatting (seed 004): export, packing, agreement with ``splat``, no bleeding,
+"""Atlas + index-map splatting: export, packing, agreement with ``splat``, no bleeding,
 gradients, bad input.
 
 G-buffers here are built by hand (``GBuffer.empty`` + ``assign``): the splat path reads weights
@@ -87,7 +87,7 @@ def test_pack_places_tiles_with_wrapped_gutters_for_odd_npot_layers(rng):
     # Atlas.uv sends every layer texel centre to that texel of the atlas.
     centres = texel_centres(6, 10).reshape(-1, 2) + rng.integers(-3, 4, (60, 2))  # any period
     for j in range(5):
-        got = wt.sample(atlas.texture, atlas.uv(j, centres).astype(np.float32), filter="nearest").numpy()
+        got = wt.sample(atlas.texture, atlas.uv(j, centres).astype(np.float32), sampler=wt.Sampler(filter="nearest")).numpy()
         np.testing.assert_array_equal(got, layers[j].reshape(-1, 3))
 
     one_column = pack_atlas(layers, gutter=1, columns=1)
@@ -132,10 +132,10 @@ def test_all_layers_reproduce_the_splat_path(rng, mips):
     tiling = np.float32([1.7, 2.3, 3.1, 0.9])
     atlas = pack_atlas(layers, gutter=4)
     assert atlas.max_lod == 2
-    kw = {"filter": "bilinear", "max_lod": 0.0} if mips == "off" else {"filter": "trilinear", "max_lod": float(atlas.max_lod)}
+    sampler = wt.Sampler(filter="bilinear", max_lod=0.0) if mips == "off" else wt.Sampler(filter="trilinear", max_lod=float(atlas.max_lod))
     idx, w = export_index_maps(maps, 4)
-    got = splat_atlas(g, atlas, idx, w, tiling=tiling, **kw).numpy()
-    want = splat(g, wt.TextureArray(layers), maps, tiling=tiling, projection="uv", **kw).numpy()
+    got = splat_atlas(g, atlas, idx, w, tiling=tiling, sampler=sampler).numpy()
+    want = splat(g, wt.TextureArray(layers), maps, tiling=tiling, projection="uv", sampler=sampler).numpy()
     np.testing.assert_allclose(got, want, atol=1e-5)
     assert np.abs(want).max() > 0.1
 
@@ -173,7 +173,7 @@ def test_tile_borders_never_bleed_at_coarse_lod_but_would_without_the_clamp(rng)
     dx = np.tile(np.float32([2.0, 0.0]), (1, n, 1))  # 2 tile widths per pixel: 32 texels, LOD 5
     g = _gbuffer(BORDER_UV[None], dx, np.zeros_like(dx))
     for j in range(4):
-        out = splat_atlas(g, atlas, np.full((1, 1, 1), j), np.ones((1, 1, 1)), filter="trilinear").numpy()
+        out = splat_atlas(g, atlas, np.full((1, 1, 1), j), np.ones((1, 1, 1)), sampler=wt.Sampler(filter="trilinear")).numpy()
         np.testing.assert_allclose(out[0], np.broadcast_to(colours[j], (n, 3)), atol=1e-6)
         # The same reads at an unclamped LOD 4 (cells of 1.5 texels) or 5 (the 1 × 1 level) mix tiles.
         for lod in (4.0, 5.0):
@@ -187,7 +187,7 @@ def test_tile_borders_never_bleed_at_coarse_lod_but_would_without_the_clamp(rng)
     own = wt.TextureArray(layers)
     for j in range(4):
         out = splat_atlas(g, atlas, np.full((1, 1, 1), j), np.ones((1, 1, 1))).numpy()[0]
-        want = wt.sample(own, BORDER_UV, layer=j, lod=float(atlas.max_lod), address="wrap").numpy()
+        want = wt.sample(own, BORDER_UV, layer=j, lod=float(atlas.max_lod)).numpy()
         np.testing.assert_allclose(out, want, atol=1e-5)
         raw = wt.sample(atlas.texture, atlas.uv(j, BORDER_UV).astype(np.float32), lod=3.0).numpy()
         assert np.abs(raw - wt.sample(own, BORDER_UV, layer=j, lod=3.0).numpy()).max() > 0.02
@@ -349,8 +349,8 @@ def test_bad_input_raises_clear_errors(rng):
         splat_atlas(g, atlas.texture, idx, w)
     with pytest.raises(ValueError, match=r"splat_atlas\(\): tiling must have shape \(1,\) or \(4,\)"):
         splat_atlas(g, atlas, idx, w, tiling=[1.0, 2.0])
-    with pytest.raises(ValueError, match=r"splat_atlas\(\): min_lod \(2.0\) must not exceed the atlas' max_lod \(1\)"):
-        splat_atlas(g, atlas, idx, w, min_lod=2.0)
+    with pytest.raises(ValueError, match=r"splat_atlas\(\): sampler.min_lod \(2.0\) must not exceed the atlas' max_lod \(1\)"):
+        splat_atlas(g, atlas, idx, w, sampler=wt.Sampler(min_lod=2.0))
     with pytest.raises(ValueError, match=r"splat_atlas\(\): the G-buffer has no UV set 'uv1'"):
         splat_atlas(g, atlas, idx, w, uv_set="uv1")
     assert isinstance(atlas, Atlas) and "max_lod=1" in repr(atlas)

@@ -2,10 +2,12 @@
 
 The kernels are the same source on both devices; these tests check that they compute the same
 thing there: outputs to float rounding, gradients to the rounding of atomics summed in another
-order. Skipped, with the reason, on a machine without a CUDA device.
+order. Skipped, with the reason, on a machine without a CUDA device. ``WARPTEX_TEST_DEVICE=cpu``
+runs them against the CPU itself (a check of the tests, where no GPU is at hand).
 """
 
 import json
+import os
 import subprocess
 import sys
 
@@ -14,11 +16,13 @@ import pytest
 import warp as wp
 
 import warptex as wt
-from warptex.render import terrain_camera
+from warptex.apps.terrain import terrain
+from warptex.apps.render import terrain_camera
 
-pytestmark = pytest.mark.skipif(not wp.is_cuda_available(), reason="no CUDA device: these tests compare CUDA with the CPU")
+OTHER = os.environ.get("WARPTEX_TEST_DEVICE", "cuda:0")
+pytestmark = pytest.mark.skipif(OTHER.startswith("cuda") and not wp.is_cuda_available(), reason="no CUDA device: these tests compare CUDA with the CPU")
 
-DEVICES = ("cpu", "cuda:0")
+DEVICES = ("cpu", OTHER)
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +30,7 @@ def scene():
     """Seeded inputs, as NumPy: a terrain G-buffer's mesh and camera, textures, splat maps, UVs."""
     rng = np.random.default_rng(5)
     return {
-        "mesh": wt.terrain(resolution=(65, 65)),
+        "mesh": terrain(resolution=(65, 65)),
         "camera": terrain_camera((96, 128)),
         "image": rng.random((48, 40, 4)).astype(np.float32),
         "layers": rng.random((4, 32, 32, 4)).astype(np.float32),
@@ -63,33 +67,38 @@ def test_rasterize_matches_the_cpu(scene):
         np.testing.assert_allclose(cuda[name][covered], cpu[name][covered], rtol=1e-4, atol=1e-4, err_msg=name)
 
 
-SAMPLE_CASES = {
-    "bilinear": {"filter": "bilinear"},
-    "trilinear lods": {"lod": "array"},
-    "nearest border": {"filter": "nearest", "address": "border", "border": (0.2, 0.4, 0.6, 1.0), "lod": 1.3},
-    "hash4": {"method": "hash4", "mirror": True, "lod": "array"},
-    "cheap2": {"method": "cheap2", "lod": "array"},
-    "hex": {"method": "hex", "rotation": 0.5, "lod": "array"},
-    "hex histogram": {"method": "hex", "histogram": True, "lod": 0.8},
+SAMPLE_CASES = {  # (stochastic method or None, its options, sampler fields, LOD: "array" or a number)
+    "bilinear": (None, {}, {"filter": "bilinear"}, None),
+    "trilinear lods": (None, {}, {}, "array"),
+    "nearest border": (None, {}, {"filter": "nearest", "address": "border", "border": (0.2, 0.4, 0.6, 1.0)}, 1.3),
+    "hash4": ("hash4", {"mirror": True}, {}, "array"),
+    "cheap2": ("cheap2", {}, {}, "array"),
+    "hex": ("hex", {"rotation": 0.5}, {}, "array"),
+    "hex histogram": ("hex", {"histogram": True}, {}, 0.8),
 }
 
 
 @pytest.mark.parametrize("case", SAMPLE_CASES)
 def test_sample_and_stochastic_match_the_cpu(scene, case):
     """Output and the gradients to the texels and the UVs (the generated adjoint runs then)."""
-    opts = dict(SAMPLE_CASES[case])
+    method, options, fields, lod = SAMPLE_CASES[case]
 
     def run(device):
-        kw = {k: (wp.array(scene["lod"], dtype=float, device=device) if v == "array" else v) for k, v in opts.items() if k != "histogram"}
         tex = wt.Texture(scene["image"], requires_grad=True, device=device)
         uv = wp.array(scene["uv"], dtype=wp.vec2, device=device, requires_grad=True)
+        kw = {"sampler": wt.Sampler(**fields), "lod": wp.array(scene["lod"], dtype=float, device=device) if lod == "array" else lod}
         read = tex
-        if opts.get("histogram"):
-            hist = wt.prepare_histogram(tex, requires_grad=True)
-            kw["histogram"], read = hist, hist.texture
         tape = wp.Tape()
         with tape:
-            out = wt.stochastic(tex, uv, **kw) if "method" in kw else wt.sample(tex, uv, **kw)
+            if method is None:
+                out = wt.sample(tex, uv, **kw)
+            else:
+                if options.get("histogram"):
+                    hist = wt.prepare_histogram(tex, requires_grad=True)
+                    options_here, read = {**options, "histogram": hist}, hist.texture
+                else:
+                    options_here = options
+                out = wt.stochastic(tex, uv, wt.Stochastic(method, **options_here), **kw)
         out.grad.assign(scene["weights"].reshape(-1, 4)[: len(scene["uv"]), : out.shape[1]])
         tape.backward()
         return {"out": out.numpy(), "uv": uv.grad.numpy(), **{f"texels {k}": read.grad(k) for k in range(read.num_levels)}}
@@ -172,7 +181,7 @@ def test_splat_atlas_matches_the_cpu(scene):
 
 
 def _cli(*args, cwd):
-    result = subprocess.run([sys.executable, "-m", "warptex", *args, "--device", "cuda:0"], capture_output=True, text=True, cwd=cwd, timeout=1800)
+    result = subprocess.run([sys.executable, "-m", "warptex", *args, "--device", OTHER], capture_output=True, text=True, cwd=cwd, timeout=1800)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
     return result
 

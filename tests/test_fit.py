@@ -1,4 +1,4 @@
-"""Fitting (issue 7): parameterisations, blur, loss, entropy and Adam against NumPy references;
+"""Fitting: parameterisations, blur, loss, entropy and Adam against NumPy references;
 gradients of the whole pipeline (rasterised G-buffer → softmax/exp/softplus → splat → loss)
 against finite differences; the loop and the tiling scan on small views; bad input; the example."""
 
@@ -10,13 +10,13 @@ import warp as wp
 import warp.optim
 
 import warptex as wt
+from warptex.apps.terrain import terrain
 from warptex import io
-from warptex.cli import main as cli_main
-from warptex.fit import SplatParameters, blur, gaussian_taps, image_loss, psnr, splat_coverage, weight_entropy
-from warptex.fit_loop import FitView, Stage, fit_splat, render_views
-from warptex.fit_views import Objective, prepare_views
+from warptex.apps.cli import main as cli_main
+from warptex.apps.fit_report import splat_coverage
+from warptex.fit import FitView, Objective, SplatParameters, Stage, blur, fit_splat, gaussian_taps, image_loss, prepare_views, psnr, render_views, weight_entropy
 from warptex.kernels import fit as kf
-from warptex.render import terrain_camera
+from warptex.apps.render import terrain_camera
 
 TRANSITION = 0.2
 OPTIONS = {"projection": "triplanar", "height_blend": TRANSITION}
@@ -42,7 +42,7 @@ def smooth_layers(count: int, size: int = 32, seed: int = 0) -> np.ndarray:
 def scene():
     """A coarse terrain seen by the default camera at 24 × 32, smooth layers, a target rendered
     with random true weights at tiling 0.2 (maps 9 × 9)."""
-    mesh = wt.terrain(resolution=(33, 33))
+    mesh = terrain(resolution=(33, 33))
     g = wt.rasterize(mesh, terrain_camera((24, 32)))
     layers = wt.TextureArray(smooth_layers(4))
     rng = np.random.default_rng(5)
@@ -396,7 +396,7 @@ def test_bad_input_raises_before_any_iteration(scene):
 
 
 def test_cli_reports_bad_input_without_writing_anything(tmp_path, capsys):
-    g = wt.rasterize(wt.terrain(resolution=(17, 17)), terrain_camera((16, 20)))
+    g = wt.rasterize(terrain(resolution=(17, 17)), terrain_camera((16, 20)))
     wt.save_gbuffer(tmp_path / "g.exr", g)
     io.write_png(tmp_path / "small.png", np.full((12, 20, 3), 0.5, np.float32))
     out = tmp_path / "out"
@@ -431,7 +431,18 @@ def test_example_runs_with_few_iterations(tmp_path, capsys):
     spec = importlib.util.spec_from_file_location("fit_splat_example", path)
     example = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(example)
-    assert example.main(["--out", str(tmp_path), "--iters", "5", "--resolution", "24x32", "--report-every", "1"]) == 0
+    result = example.fit_example(tmp_path, iters=6, resolution=(24, 32))
+    assert set(result) == {"psnr", "tiling", "tiling_error", "weight_mae"}
+    assert all(np.isfinite(v) for v in result.values())
+    assert result["tiling_error"] < 0.3 and 0.0 < result["weight_mae"] < 1.0
+    for name in ("target.png", "fitted.png"):
+        image = io.read_image(tmp_path / name)
+        assert image.shape == (24, 64, 3), name  # the two views side by side
+    assert not list(tmp_path.glob(".*.tmp*")), "no temporary files left behind"
+
+
+def test_cli_fit_writes_its_report(tmp_path, capsys):
+    assert cli_main(["fit", "--out", str(tmp_path), "--iters", "5", "--resolution", "24x32", "--report-every", "1"]) == 0
     printed = capsys.readouterr().out
     assert "iter    5/5" in printed and "psnr" in printed and "splat weights MAE" in printed
     for name in FILES:

@@ -13,6 +13,7 @@ import pytest
 import warp as wp
 
 import warptex as wt
+from conftest import with_sampler
 from backward_paths import assert_same_gradients, texel_gradients_both_ways
 
 FILTERS = {"nearest": {"filter": "nearest"}, "bilinear": {"filter": "bilinear"}, "trilinear": {"lod": 1.4}}
@@ -22,7 +23,7 @@ BORDER = (0.3, 0.6, 0.9, 1.0)
 
 def _forward(img, uv, weights, *, mipmaps=True, **kw) -> np.ndarray:
     """Per-sample loss ``Σ_c w · out`` (float64, shape ``[N]``) for a fresh texture of ``img``."""
-    out = wt.sample(wt.Texture(img, mipmaps=mipmaps), uv, **kw).numpy()
+    out = wt.sample(wt.Texture(img, mipmaps=mipmaps), uv, **with_sampler(kw)).numpy()
     return (out.astype(np.float64) * weights).sum(axis=-1)
 
 
@@ -36,7 +37,7 @@ def _backward(img, uv, weights, *, build_on_tape=True, uv_grad=True, **kw):
     with tape:
         if build_on_tape:
             tex.update()
-        out = wt.sample(tex, uv_wp, **kw)
+        out = wt.sample(tex, uv_wp, **with_sampler(kw))
     out.grad.assign(weights.astype(np.float32))
     tape.backward()
     return tex, uv_wp
@@ -222,7 +223,7 @@ def test_hand_written_texel_gradients_equal_the_generated_adjoint(rng, monkeypat
 
     def forward(uv_grad):
         tex = wt.TextureArray(layers, requires_grad=True)
-        return wt.sample(tex, wp.array(uv, dtype=wp.vec2, requires_grad=uv_grad), **kw), [tex]
+        return wt.sample(tex, wp.array(uv, dtype=wp.vec2, requires_grad=uv_grad), **with_sampler(kw)), [tex]
 
     hand, forced, generated, scatters = texel_gradients_both_ways(monkeypatch, threads, forward, rng.normal(size=(n, 3)).astype(np.float32))
     assert scatters == 1

@@ -5,17 +5,19 @@ import pytest
 import warp as wp
 
 import warptex as wt
+from conftest import with_sampler
+from warptex.apps.terrain import terrain
 from backward_paths import assert_same_gradients, texel_gradients_both_ways
 from fd import check_parameter_gradient
 from reference_layers import splat_reference
 from warptex.layers import splat
-from warptex.render import terrain_camera
+from warptex.apps.render import terrain_camera
 
 
 @pytest.fixture(scope="module")
 def terrain_gbuffer():
     """The default terrain (coarse mesh) seen by the default camera at 48 × 64: flat valleys and cliffs."""
-    mesh = wt.terrain(resolution=(65, 65))
+    mesh = terrain(resolution=(65, 65))
     return wt.rasterize(mesh, terrain_camera((48, 64)))
 
 
@@ -185,7 +187,7 @@ def test_hand_written_gradients_equal_the_generated_adjoint(monkeypatch, case, t
     not linear in the texels, always takes the generated adjoint; with a stochastic method the
     tiling is left out (its gradient needs the generated adjoint)."""
     c = dict(BACKWARD_CASES[case])
-    g = wt.rasterize(wt.terrain(resolution=(65, 65)), terrain_camera((192, 192)))
+    g = wt.rasterize(terrain(resolution=(65, 65)), terrain_camera((192, 192)))
     rng = np.random.default_rng(11)
     count = c.pop("layers")
     layer_data = rng.random((count, 24, 20, 4)).astype(np.float32)
@@ -210,7 +212,7 @@ def test_hand_written_gradients_equal_the_generated_adjoint(monkeypatch, case, t
             hist = wt.prepare_histogram(layers, requires_grad=True)
             kw["stochastic"] = wt.Stochastic("hex", histogram=hist)
             textures[0] = hist.texture
-        return splat(g, layers, maps, **kw), textures
+        return splat(g, layers, maps, **with_sampler(kw)), textures
 
     weights = rng.normal(size=(192, 192, 4)).astype(np.float32)
     hand, forced, generated, scatters = texel_gradients_both_ways(monkeypatch, threads, forward, weights)
@@ -249,10 +251,10 @@ def test_bad_input_raises_clear_errors(terrain_gbuffer, rng):
 
 def test_terrain_splat_maps_follow_height_and_slope():
     """The default terrain's rules: weights sum to 1, rock owns the cliffs, snow the high flats."""
-    from warptex.terrain import terrain_slope_height
-    from warptex.terrain_material import terrain_splat_maps
+    from warptex.apps.terrain import terrain_slope_height
+    from warptex.apps.terrain_material import terrain_splat_maps
 
-    mesh = wt.terrain(resolution=(65, 65))
+    mesh = terrain(resolution=(65, 65))
     maps = terrain_splat_maps(mesh, (65, 65))
     assert maps.shape == (65, 65, 4)
     np.testing.assert_allclose(maps.sum(axis=-1), 1.0, atol=1e-6)

@@ -18,7 +18,8 @@ import trimesh
 import warp as wp
 
 import warptex as wt
-from warptex.render import terrain_camera
+from warptex.apps.terrain import terrain
+from warptex.apps.render import terrain_camera
 
 BENCHMARKS = str(Path(__file__).resolve().parents[1] / "benchmarks")
 if BENCHMARKS not in sys.path:
@@ -56,7 +57,7 @@ def _sphere():
 @functools.lru_cache(maxsize=None)
 def _terrain():
     """The default terrain (coarse mesh) at 48 × 64 (as in test_layers), for the UV0 splat."""
-    return wt.rasterize(wt.terrain(resolution=(65, 65)), terrain_camera((48, 64)))
+    return wt.rasterize(terrain(resolution=(65, 65)), terrain_camera((48, 64)))
 
 
 def _source(technique):

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 
 from warptex import io
-from warptex.cli import main
+from warptex.apps.cli import main
 from warptex.gbuffer_io import load_gbuffer
-from warptex.render import run_render
-from warptex.terrain_material import noise_texture
-from warptex.shade import lambert
+from warptex.apps.render import run_render
+from warptex.apps.terrain_material import noise_texture
+from warptex.apps.shade import lambert
 from warptex.gbuffer import GBuffer
 
 OUTPUTS = ("render.png", "albedo.png", "normals.png", "render.exr", "gbuffer.exr")

@@ -6,6 +6,7 @@ import warp as wp
 
 import reference as ref
 import warptex as wt
+from conftest import with_sampler
 
 BORDER = (0.25, 0.5, 0.75, 1.0)
 
@@ -15,7 +16,7 @@ def _image(rng, h, w, c=4):
 
 
 def _sample(tex, uv, **kw):
-    return wt.sample(tex, uv, **kw).numpy()
+    return wt.sample(tex, uv, **with_sampler(kw)).numpy()
 
 
 # -- texel centres ----------------------------------------------------------------------------------
@@ -256,17 +257,13 @@ def test_non_finite_uvs_give_nan_and_never_crash(rng):
         ({"uv": np.zeros((4, 3))}, ValueError, r"sample\(\): uv must have shape \(\.\.\., 2\), got \(4, 3\)"),
         ({"uv": np.zeros(2, dtype=object)}, TypeError, r"sample\(\): uv must hold real numbers"),
         ({"uv": wp.zeros(4, dtype=wp.vec3)}, TypeError, r"sample\(\): uv must be a wp.array of wp.vec2"),
-        ({"filter": "cubic"}, ValueError, r"sample\(\): filter must be one of .*'cubic'"),
-        ({"address": "repeat"}, ValueError, r"sample\(\): address must be one of .*'repeat'"),
-        ({"filter": "trilinear"}, ValueError, r"sample\(\): filter='trilinear' needs lod="),
+        ({"sampler": "bilinear"}, TypeError, r"sample\(\): sampler must be a warptex.Sampler or None, got str"),
+        ({"sampler": wt.Sampler(filter="trilinear")}, ValueError, r"sample\(\): filter='trilinear' needs lod="),
         ({"lod": 1.0, "uv_dx": np.zeros((4, 2)), "uv_dy": np.zeros((4, 2))}, ValueError, "either lod= or uv_dx="),
         ({"uv_dx": np.zeros((4, 2))}, ValueError, "uv_dx and uv_dy must be given together"),
         ({"uv_dx": np.zeros((3, 2)), "uv_dy": np.zeros((3, 2))}, ValueError, r"uv_dx must have the shape of uv"),
         ({"lod": np.zeros(5)}, ValueError, r"sample\(\): lod must have shape \(4,\)"),
         ({"lod": float("nan")}, ValueError, r"sample\(\): lod must be finite, got nan"),
-        ({"lod_bias": "1"}, TypeError, r"sample\(\): lod_bias must be a number"),
-        ({"min_lod": 3.0, "max_lod": 1.0}, ValueError, r"min_lod \(3.0\) must not exceed max_lod"),
-        ({"border": (1, 2, 3, 4, 5)}, ValueError, r"border must be 1 to 4 finite numbers"),
         ({"layer": 1}, ValueError, r"sample\(\): layer must be in \[0, 0\], got 1"),
         ({"layer": np.zeros(4)}, TypeError, r"sample\(\): layer must hold integers"),
         ({"device": "cuda:7"}, (ValueError, RuntimeError), r"cuda"),
@@ -278,6 +275,33 @@ def test_bad_arguments_raise_naming_the_value(kwargs, error, match):
     uv = kwargs.pop("uv")
     with pytest.raises(error, match=match):
         wt.sample(tex, uv, **kwargs)
+
+
+@pytest.mark.parametrize(
+    "fields, error, match",
+    [
+        ({"filter": "cubic"}, ValueError, r"Sampler\(\): filter must be one of .*'cubic'"),
+        ({"address": "repeat"}, ValueError, r"Sampler\(\): address must be one of .*'repeat'"),
+        ({"lod_bias": "1"}, TypeError, r"Sampler\(\): lod_bias must be a number"),
+        ({"lod_bias": float("inf")}, ValueError, r"Sampler\(\): lod_bias must be finite"),
+        ({"min_lod": float("nan")}, ValueError, r"Sampler\(\): min_lod must be finite, got nan"),
+        ({"min_lod": 3.0, "max_lod": 1.0}, ValueError, r"Sampler\(\): min_lod \(3.0\) must not exceed max_lod"),
+        ({"border": (1, 2, 3, 4, 5)}, ValueError, r"Sampler\(\): border must be 1 to 4 finite numbers"),
+        ({"border": (0.5, np.nan)}, ValueError, r"Sampler\(\): border must be 1 to 4 finite numbers"),
+    ],
+)
+def test_bad_sampler_fields_raise_naming_the_value(fields, error, match):
+    with pytest.raises(error, match=match):
+        wt.Sampler(**fields)
+
+
+def test_sampler_normalises_its_fields_and_replace_checks_them():
+    smp = wt.Sampler(filter="NEAREST", address="mirror", border=(0.5, 0.25), max_lod=3)
+    assert smp.filter is wt.Filter.NEAREST and smp.address is wt.Address.MIRROR
+    assert smp.border == (0.5, 0.25, 0.0, 0.0) and smp.max_lod == 3.0 and isinstance(smp.max_lod, float)
+    assert smp.replace(lod_bias=1.0).lod_bias == 1.0 and smp.lod_bias == 0.0
+    with pytest.raises(ValueError, match=r"Sampler\(\): min_lod \(4.0\) must not exceed max_lod \(3.0\)"):
+        smp.replace(min_lod=4.0)
 
 
 def test_sample_refuses_non_textures():

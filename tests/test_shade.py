@@ -8,7 +8,7 @@ import pytest
 import warp as wp
 
 import warptex as wt
-from warptex.shade import SKY, height_to_normal_map, lambert, side_by_side
+from warptex.apps.shade import SKY, height_to_normal_map, lambert, side_by_side
 
 
 def _flat_gbuffer(normal=(0.0, 1.0, 0.0)):

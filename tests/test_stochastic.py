@@ -1,4 +1,4 @@
-"""Stochastic sampling (issue 6): reference agreement, continuity, broken repetition, histograms,
+"""Stochastic sampling: reference agreement, continuity, broken repetition, histograms,
 gradients, determinism and bad input.
 
 Measured figures (autocorrelation peaks at the tile period, histogram moments) are printed; run
@@ -15,7 +15,19 @@ import reference as ref
 import reference_stochastic as rs
 import warptex as wt
 from backward_paths import assert_same_gradients, texel_gradients_both_ways
-from warptex.stochastic import Method, hex_taps, prepare_histogram, stochastic, stochastic_params
+from conftest import with_sampler
+from warptex import Method, Sampler, Stochastic, hex_taps, prepare_histogram
+from warptex._pack import stochastic_args
+
+STOCHASTIC_FIELDS = tuple(f.name for f in dataclasses.fields(Stochastic))
+
+
+def stochastic(tex, uv, **kw):
+    """``wt.stochastic`` with the :class:`Stochastic` and :class:`Sampler` fields among ``kw``
+    gathered into their objects (the cases below list them as keywords)."""
+    kw = dict(kw)
+    options = {k: kw.pop(k) for k in STOCHASTIC_FIELDS if k in kw}
+    return wt.stochastic(tex, uv, Stochastic(**options), **with_sampler(kw))
 
 TEXTURES = ("brick", "grass", "gravel")
 
@@ -115,7 +127,7 @@ def test_method_none_is_plain_sampling(rng):
     tex = wt.Texture(rng.random((8, 8, 4), dtype=np.float32))
     uv = rng.uniform(-3, 3, (500, 2)).astype(np.float32)
     for kw in ({}, {"lod": 1.2}, {"filter": "nearest"}):
-        np.testing.assert_array_equal(stochastic(tex, uv, method="none", **kw).numpy(), wt.sample(tex, uv, **kw).numpy())
+        np.testing.assert_array_equal(stochastic(tex, uv, method="none", **kw).numpy(), wt.sample(tex, uv, **with_sampler(kw)).numpy())
 
 
 def test_lod_comes_from_the_unperturbed_derivatives(rng):
@@ -519,34 +531,37 @@ def test_non_finite_uv_gives_nan_and_large_uv_stays_exact(rng):
     np.testing.assert_allclose(a, rs.hash4([tex.numpy(0).astype(np.float64)], far, seed=1), atol=1e-5)
 
 
-def test_stochastic_params_is_reusable():
+def test_stochastic_args_pack_the_options_for_other_techniques():
     tex = wt.Texture(np.zeros((4, 4, 3), np.float32))
-    params, sampled = stochastic_params("triplanar", tex, method=Method.HEX, seed=3, contrast=2.0, rotation=True)
+    params, sampled = stochastic_args("triplanar", Stochastic(Method.HEX, seed=3, contrast=2.0, rotation=True), tex, Sampler())
     assert sampled is tex and params.method == 3 and params.seed == 3 and params.rotation == 1.0
+    assert (params.blend_lo, params.blend_hi) == (0.25, 0.75)
     hist = prepare_histogram(tex)
-    _, sampled = stochastic_params("triplanar", tex, method="hex", histogram=hist)
+    _, sampled = stochastic_args("triplanar", Stochastic("hex", histogram=hist), tex, Sampler())
     assert sampled is hist.texture
-    with pytest.raises(ValueError, match=r"triplanar\(\): method"):
-        stochastic_params("triplanar", tex, method="quilez")
+    with pytest.raises(ValueError, match=r"triplanar\(\): stochastic sampling needs address 'wrap' or 'mirror'"):
+        stochastic_args("triplanar", Stochastic("hash4"), tex, Sampler(address="clamp"))
+    cheap2 = Stochastic("hash4").replace(method="cheap2")  # an unset blend window follows the method
+    assert cheap2.blend is None and cheap2.blend_window == (0.2, 0.8)
 
 
 BAD_INPUTS = [
-    ({"method": "quilez"}, ValueError, r"stochastic\(\): method must be one of .*'quilez'"),
-    ({"seed": -1}, ValueError, r"stochastic\(\): seed must be in \[0, 2\*\*32\), got -1"),
-    ({"seed": 1.5}, TypeError, r"stochastic\(\): seed must be an int, got float"),
-    ({"blend": (0.8, 0.2)}, ValueError, r"stochastic\(\): blend must be two numbers .*\(0.8, 0.2\)"),
-    ({"blend": (0.1, 0.2, 0.3)}, ValueError, r"stochastic\(\): blend must be two numbers"),
-    ({"mirror": 1}, TypeError, r"stochastic\(\): mirror must be a bool, got int"),
-    ({"contrast": 0.5}, ValueError, r"stochastic\(\): contrast must be >= 1 .*got 0.5"),
-    ({"rotation": 2.0}, ValueError, r"stochastic\(\): rotation must be .*got 2.0"),
-    ({"noise_frequency": 0.0}, ValueError, r"stochastic\(\): noise_frequency and noise_levels must be positive"),
-    ({"address": "clamp"}, ValueError, r"stochastic\(\): address must be 'wrap' or 'mirror' .*'clamp'"),
+    ({"method": "quilez"}, ValueError, r"Stochastic\(\): method must be one of .*'quilez'"),
+    ({"seed": -1}, ValueError, r"Stochastic\(\): seed must be in \[0, 2\*\*32\), got -1"),
+    ({"seed": 1.5}, TypeError, r"Stochastic\(\): seed must be an int, got float"),
+    ({"blend": (0.8, 0.2)}, ValueError, r"Stochastic\(\): blend must be two numbers .*\(0.8, 0.2\)"),
+    ({"blend": (0.1, 0.2, 0.3)}, ValueError, r"Stochastic\(\): blend must be two numbers"),
+    ({"mirror": 1}, TypeError, r"Stochastic\(\): mirror must be a bool, got int"),
+    ({"contrast": 0.5}, ValueError, r"Stochastic\(\): contrast must be >= 1 .*got 0.5"),
+    ({"rotation": 2.0}, ValueError, r"Stochastic\(\): rotation must be .*got 2.0"),
+    ({"noise_frequency": 0.0}, ValueError, r"Stochastic\(\): noise_frequency and noise_levels must be positive"),
+    ({"histogram": "lut"}, TypeError, r"Stochastic\(\): histogram must be a Histogram"),
+    ({"address": "clamp"}, ValueError, r"stochastic\(\): stochastic sampling needs address 'wrap' or 'mirror' .*'clamp'"),
     ({"filter": "trilinear"}, ValueError, r"stochastic\(\): filter='trilinear' needs lod="),
     ({"lod": 1.0, "uv_dx": np.zeros((4, 2)), "uv_dy": np.zeros((4, 2))}, ValueError, r"stochastic\(\): pass either lod="),
     ({"uv_dx": np.zeros((4, 2))}, ValueError, r"stochastic\(\): uv_dx and uv_dy must be given together"),
     ({"uv_dx": np.zeros((3, 2)), "uv_dy": np.zeros((3, 2))}, ValueError, r"stochastic\(\): uv_dx must have the shape of uv"),
     ({"layer": 2}, ValueError, r"stochastic\(\): layer must be in \[0, 0\], got 2"),
-    ({"histogram": "lut"}, TypeError, r"stochastic\(\): histogram must be a Histogram"),
 ]
 
 
@@ -561,14 +576,18 @@ def test_bad_histogram_and_texture_raise():
     tex = wt.Texture(np.zeros((4, 4, 3), np.float32))
     uv = np.zeros((4, 2), np.float32)
     other = prepare_histogram(wt.Texture(np.zeros((8, 4, 3), np.float32)))
-    with pytest.raises(ValueError, match=r"stochastic\(\): histogram was built for .*\(1, 8, 4, 3\).*\(1, 4, 4, 3\)"):
+    with pytest.raises(ValueError, match=r"stochastic\(\): the stochastic histogram was built for .*\(1, 8, 4, 3\).*\(1, 4, 4, 3\)"):
         stochastic(tex, uv, method="hex", histogram=other)
-    with pytest.raises(ValueError, match=r"stochastic\(\): histogram= is used by method='hex' only, got method='hash4'"):
+    with pytest.raises(ValueError, match=r"Stochastic\(\): histogram= is used by method='hex' only, got method='hash4'"):
         stochastic(tex, uv, method="hash4", histogram=prepare_histogram(tex))
     with pytest.raises(TypeError, match=r"stochastic\(\): texture must be a Texture or TextureArray, got ndarray"):
         stochastic(np.zeros((4, 4, 3)), uv)
     with pytest.raises(TypeError, match=r"stochastic\(\): uv must hold real numbers"):
         stochastic(tex, np.array([["a", "b"]]))
+    with pytest.raises(TypeError, match=r"stochastic\(\): stochastic must be None, a method name or a warptex.Stochastic, got dict"):
+        wt.stochastic(tex, uv, {"method": "hex"})
+    with pytest.raises(ValueError, match=r"stochastic\(\): stochastic: Stochastic\(\): method must be one of"):
+        wt.stochastic(tex, uv, "quilez")
     with pytest.raises(ValueError, match=r"prepare_histogram\(\): decorrelate=True needs 3 or 4 channels, the texture has 1"):
         prepare_histogram(wt.Texture(np.zeros((4, 4), np.float32)), decorrelate=True)
     with pytest.raises(ValueError, match=r"prepare_histogram\(\): lut_size must be an int in \[16, 1048576\], got 3"):

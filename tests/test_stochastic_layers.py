@@ -1,5 +1,5 @@
-"""Stochastic sampling inside triplanar, biplanar, triplanar normal mapping and splat layers
-(issue 6): one building block, composed; plain tiling unchanged; gradients; bad input."""
+"""Stochastic sampling inside triplanar, biplanar, triplanar normal mapping and splat layers: one
+building block, composed; plain tiling unchanged; gradients; bad input."""
 
 import functools
 
@@ -13,7 +13,7 @@ import reference_stochastic as rs
 import reference_triplanar as rt
 import warptex as wt
 from fd import check_parameter_gradient
-from warptex.stochastic import Stochastic, prepare_histogram
+from warptex import Stochastic, prepare_histogram
 
 
 def _periodic(h, w, c, seed):
@@ -94,7 +94,7 @@ def test_triplanar_hex_with_histogram_on_the_ground_is_the_standalone_technique(
     dpdx, dpdy = g.position_dx.numpy()[0], g.position_dy.numpy()[0]
     uv = np.stack([-pos[:, 0], pos[:, 2]], -1) * t
     alone = wt.stochastic(
-        tex, uv.astype(np.float32), method="hex", seed=5, contrast=2.0, histogram=hist,
+        tex, uv.astype(np.float32), Stochastic("hex", seed=5, contrast=2.0, histogram=hist),
         uv_dx=(np.stack([-dpdx[:, 0], dpdx[:, 2]], -1) * t).astype(np.float32),
         uv_dy=(np.stack([-dpdy[:, 0], dpdy[:, 2]], -1) * t).astype(np.float32),
     ).numpy()  # fmt: skip
@@ -123,7 +123,7 @@ def test_splat_layers_are_each_sampled_like_the_standalone_technique(method, pro
         flat = lambda v: np.stack([-v[:, 0], v[:, 2]], -1)  # noqa: E731 - the top projection
         uv, dx, dy = flat(pos), flat(g.position_dx.numpy()[0]), flat(g.position_dy.numpy()[0])
     expected = sum(
-        w * wt.stochastic(layers, (uv * t).astype(np.float32), method=method, seed=11, layer=j, uv_dx=(dx * t).astype(np.float32), uv_dy=(dy * t).astype(np.float32)).numpy()
+        w * wt.stochastic(layers, (uv * t).astype(np.float32), Stochastic(method, seed=11), layer=j, uv_dx=(dx * t).astype(np.float32), uv_dy=(dy * t).astype(np.float32)).numpy()
         for j, (w, t) in enumerate(zip(weights, tiling))
     )
     np.testing.assert_allclose(out, expected, atol=2e-6)
@@ -144,9 +144,9 @@ def test_splat_with_height_array_reads_heights_at_the_same_taps():
 def test_stochastic_changes_the_terrain_but_keeps_its_colours(shared_data):
     """On the real terrain layers, hex + histogram changes the texture arrangement but keeps each
     channel's mean and contrast within a few percent of plain tiling's."""
-    from warptex.render import TERRAIN_GRID, terrain_camera
-    from warptex.terrain import terrain
-    from warptex.terrain_material import terrain_layers, terrain_splat_maps
+    from warptex.apps.render import TERRAIN_GRID, terrain_camera
+    from warptex.apps.terrain import terrain
+    from warptex.apps.terrain_material import terrain_layers, terrain_splat_maps
 
     mesh = terrain(resolution=TERRAIN_GRID, seed=0)
     g = wt.rasterize(mesh, terrain_camera((96, 144)))
@@ -230,16 +230,16 @@ def test_bad_stochastic_options_raise_clear_errors():
     hist = prepare_histogram(tex)
     with pytest.raises(TypeError, match=r"triplanar\(\): stochastic must be None, a method name or a warptex.Stochastic, got dict"):
         wt.triplanar(g, tex, stochastic={"method": "hex"})
-    with pytest.raises(ValueError, match=r"biplanar\(\): method must be one of"):
+    with pytest.raises(ValueError, match=r"biplanar\(\): stochastic: Stochastic\(\): method must be one of"):
         wt.biplanar(g, tex, stochastic="hexagonal")
     with pytest.raises(ValueError, match=r"triplanar\(\): stochastic sampling needs address 'wrap' or 'mirror'.*'clamp'"):
-        wt.triplanar(g, tex, stochastic="hash4", address="clamp")
+        wt.triplanar(g, tex, stochastic="hash4", sampler=wt.Sampler(address="clamp"))
     with pytest.raises(ValueError, match=r"triplanar\(\): a stochastic histogram needs one texture for every projection"):
         wt.triplanar(g, tex, textures_per_axis=(tex, other, tex), stochastic=Stochastic(method="hex", histogram=hist))
     with pytest.raises(ValueError, match=r"triplanar_normal\(\): stochastic mirror and rotation"):
         wt.triplanar_normal(g, tex, stochastic=Stochastic(method="hash4", mirror=True))
     layers, ground = _layers(channels=3, size=8), _ground(4)[0]
-    with pytest.raises(ValueError, match=r"splat\(\): histogram was built for \(layers, H, W, C\) = \(1, 8, 8, 3\), the texture is \(4, 8, 8, 3\)"):
+    with pytest.raises(ValueError, match=r"splat\(\): the stochastic histogram was built for \(layers, H, W, C\) = \(1, 8, 8, 3\), the texture is \(4, 8, 8, 3\)"):
         wt.splat(ground, layers, np.ones((2, 2, 4), np.float32), stochastic=Stochastic(method="hex", histogram=hist))
     with pytest.raises(ValueError, match=r"splat\(\): stochastic sampling needs address"):
-        wt.splat(ground, layers, np.ones((2, 2, 4), np.float32), stochastic="cheap2", address="border")
+        wt.splat(ground, layers, np.ones((2, 2, 4), np.float32), stochastic="cheap2", sampler=wt.Sampler(address="border"))

@@ -15,6 +15,7 @@ from PIL import Image
 
 import reference as ref
 import warptex as wt
+from conftest import with_sampler
 from warptex.io import read_image, srgb_to_linear, write_exr, write_png
 
 PHOTOS = ("brick.png", "grass.png", "gravel.png")
@@ -25,7 +26,7 @@ def _image(rng, h, w, c=1):
 
 
 def _sample(tex, uv, **kw):
-    return wt.sample(tex, uv, **kw).numpy()
+    return wt.sample(tex, uv, **with_sampler(kw)).numpy()
 
 
 def _centres(h, w):

@@ -39,7 +39,7 @@ def _uv(n=70000):
 
 TECHNIQUES = {
     "sample": lambda tex, g: wt.sample(tex, _uv(), lod=1.3),
-    "stochastic": lambda tex, g: wt.stochastic(tex, _uv(), method="hex", lod=0.7),
+    "stochastic": lambda tex, g: wt.stochastic(tex, _uv(), "hex", lod=0.7),
     "triplanar": lambda tex, g: wt.triplanar(g, tex, tiling=3.0),
     "splat": lambda tex, g: wt.splat(g, wt.TextureArray(np.stack([tex.numpy()] * 4) * np.float32([1, 0.5, 0.25, 2])[:, None, None, None]), np.random.default_rng(2).random((8, 8, 4)).astype(np.float32), tiling=2.0),
 }

@@ -279,7 +279,7 @@ def test_hand_written_texel_gradients_equal_the_generated_adjoint(monkeypatch, c
             kw = {"textures_per_axis": textures}
         else:
             textures = [wt.Texture(images[0], requires_grad=True)]
-            kw = {"texture": textures[0], **({"filter": "nearest", "address": "mirror"} if "nearest" in case else {})}
+            kw = {"texture": textures[0], **({"sampler": wt.Sampler(filter="nearest", address="mirror")} if "nearest" in case else {})}
         if case in stochastic:
             kw["stochastic"] = stochastic[case]
         elif case.endswith("hex histogram"):

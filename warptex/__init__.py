@@ -1,53 +1,61 @@
 """warptex: differentiable texture sampling as NVIDIA Warp kernels.
 
-The public API: textures (:class:`Texture`, :class:`TextureArray`), :func:`sample` with its
-:class:`Filter` and :class:`Address` modes, image I/O in :mod:`warptex.io`, cameras
-(:func:`look_at`, :func:`orthographic`), G-buffers (:func:`rasterize`, :func:`save_gbuffer`,
-:func:`load_gbuffer`), the procedural :func:`terrain`, the techniques (:func:`triplanar`,
-:func:`biplanar`, :func:`triplanar_normal`, :func:`splat`, the atlas variant
-:func:`splat_atlas`, and :func:`stochastic` anti-tiling sampling), the Lambert preview :func:`lambert`,
-and :func:`set_num_threads` for the CPU threads a launch is split over. Fitting texturing to images:
-:func:`fit_splat` over :class:`SplatParameters` (per-texel logits, log-tiling, softplus sharpness),
-with :class:`FitView` targets and :class:`Stage` schedules; losses, blur and metrics in
-:mod:`warptex.fit`.
+The library:
+
+- textures: :class:`Texture`, :class:`TextureArray` (differentiable mip chains, :func:`mip_sizes`);
+- options every technique takes: :class:`Sampler` (with :class:`Filter`, :class:`Address`) and
+  :class:`Stochastic` (with :class:`Method`);
+- the techniques: :func:`sample`, :func:`stochastic` (with :func:`prepare_histogram`,
+  :class:`Histogram`), :func:`triplanar`, :func:`biplanar`, :func:`triplanar_normal` (with
+  :class:`Space`, :class:`Blend`), :func:`splat` (with :class:`Projection`), and the atlas variant
+  :func:`pack_atlas`, :func:`export_index_maps`, :func:`splat_atlas` (:class:`Atlas`);
+- G-buffers: :func:`rasterize` of a mesh (:func:`load_mesh`) through a :class:`Camera`
+  (:func:`look_at`, :func:`orthographic`) into a :class:`GBuffer`, :func:`save_gbuffer`,
+  :func:`load_gbuffer`; image files in :mod:`warptex.io`;
+- fitting to images: :mod:`warptex.fit` (:class:`~warptex.fit.SplatParameters`,
+  :class:`~warptex.fit.FitView`, :func:`~warptex.fit.fit_splat`...);
+- CPU threads and kernel compilation: :func:`set_num_threads`, :func:`get_num_threads`,
+  :func:`precompile`.
+
+The command line (``warptex render | demo | fit``) and its helpers (the procedural terrain,
+previews, plots) are in :mod:`warptex.apps`, which the library never imports.
 """
 
-from warptex import io
+from warptex import fit, io
 from warptex._launch import get_num_threads, precompile, set_num_threads
+from warptex.atlas import Atlas, export_index_maps, pack_atlas, splat_atlas
 from warptex.camera import Camera, look_at, orthographic
 from warptex.gbuffer import GBuffer, load_mesh, rasterize
 from warptex.gbuffer_io import load_gbuffer, save_gbuffer
-from warptex.atlas import export_index_maps, pack_atlas, splat_atlas
-from warptex.fit import SplatParameters, image_loss
-from warptex.fit_loop import FitView, Stage, fit_splat
-from warptex.layers import splat
-from warptex.sampling import Address, Filter, sample
-from warptex.terrain import terrain
-from warptex.shade import lambert
-from warptex.stochastic import Method, Stochastic, prepare_histogram, stochastic
+from warptex.histogram import Histogram, prepare_histogram
+from warptex.layers import Projection, splat
+from warptex.options import Address, Filter, Method, Sampler, Stochastic
+from warptex.sampling import sample
+from warptex.stochastic import hex_taps, stochastic
 from warptex.texture import Texture, TextureArray, mip_sizes
 from warptex.triplanar import Blend, Space, biplanar, triplanar, triplanar_normal
 
 __all__ = [
     "Address",
+    "Atlas",
     "Blend",
     "Camera",
     "Filter",
-    "FitView",
     "GBuffer",
+    "Histogram",
     "Method",
-    "Texture",
+    "Projection",
+    "Sampler",
     "Space",
-    "SplatParameters",
-    "Stage",
+    "Stochastic",
+    "Texture",
     "TextureArray",
     "biplanar",
     "export_index_maps",
-    "fit_splat",
+    "fit",
     "get_num_threads",
-    "image_loss",
+    "hex_taps",
     "io",
-    "lambert",
     "load_gbuffer",
     "load_mesh",
     "look_at",
@@ -62,9 +70,7 @@ __all__ = [
     "set_num_threads",
     "splat",
     "splat_atlas",
-    "Stochastic",
     "stochastic",
-    "terrain",
     "triplanar",
     "triplanar_normal",
 ]

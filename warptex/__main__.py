@@ -1,7 +1,7 @@
-"""``python -m warptex``: the command line (see :mod:`warptex.cli`)."""
+"""``python -m warptex``: the command line (see :mod:`warptex.apps.cli`)."""
 
 import sys
 
-from warptex.cli import main
+from warptex.apps.cli import main
 
 sys.exit(main())

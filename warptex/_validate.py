@@ -85,3 +85,15 @@ def param_array(func, name, value, shapes, device, *, nonzero=False, nonnegative
     if arr is None:
         arr = wp.array(np.ascontiguousarray(values, np.float32), dtype=float, device=device)
     return arr
+
+
+def check_layer_count(func: str, num_layers: int, maps) -> None:
+    """Splat maps (a ``TextureArray``) of ``M`` maps of ``C`` channels hold weights for
+    ``(M - 1)·C < L <= M·C`` layers."""
+    m, c = maps.num_layers, maps.channels
+    if not (m - 1) * c < num_layers <= m * c:
+        need = -(-num_layers // c)
+        raise ValueError(
+            f"{func}(): {m} splat map(s) of {c} channel(s) hold weights for {(m - 1) * c + 1} to {m * c} layers, "
+            f"but there are {num_layers} layers (use {need} map(s) of {c} channels)"
+        )

@@ -1,6 +1,7 @@
-"""Splat-map terrain texturing through an atlas and index maps (seed 004; issue 5, part 3).
+"""Splat-map terrain texturing through an atlas and index maps: a fixed number of layer reads per
+pixel, however many layers the terrain has.
 
-Three steps, as in the seed:
+Three steps:
 
 1. :func:`export_index_maps` (offline, NumPy): per splat texel, the ``k`` heaviest layers and their
    weights, as an index map and a weight map (``[H, W, k]``).
@@ -24,11 +25,11 @@ import warp as wp
 
 from warptex._launch import per_pixel
 from warptex._op import Kernels, needs_grad, run
-from warptex._validate import as_float, as_float_array, param_array
+from warptex._pack import sampler_args
+from warptex._validate import as_float_array, check_layer_count, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import atlas as ka
-from warptex.layers import check_layer_count
-from warptex.sampling import Filter, make_sampler, surface_sampler
+from warptex.options import Address, Filter, Sampler, as_sampler
 from warptex.texture import Texture, TextureArray
 
 MAX_K = 4  # ka.MAX_ENTRIES: an RGBA index map
@@ -48,7 +49,8 @@ def export_index_maps(splat_maps, k: int = 2, *, num_layers: int | None = None, 
     Args:
         splat_maps: a :class:`TextureArray` (level 0 is read) or an array ``[H, W, C]`` /
             ``[M, H, W, C]`` of finite weights.
-        k: entries per texel, an int in ``[1, min(4, L)]`` (2 or 3 in seed 004).
+        k: entries per texel, an int in ``[1, min(4, L)]`` (2 or 3 are usual: a terrain texel
+            rarely mixes more layers).
         num_layers: ``L``; default every channel of every map, ``M·C``. With fewer, the spare
             channels of the last map are ignored (``(M - 1)·C < L <= M·C``).
         normalize: renormalise the kept weights to sum 1 (else keep them as read, clamped to >= 0).
@@ -173,7 +175,7 @@ class Atlas:
 
 
 def _pack(layers: TextureArray, layout, texture: Texture) -> None:
-    wrap = make_sampler("pack_atlas", filter=Filter.NEAREST, address="wrap")
+    wrap = sampler_args("pack_atlas", Sampler(filter=Filter.NEAREST), has_lod=False)
     g = layout.gutter
     dim = (layout.num_tiles, layout.tile_height + 2 * g, layout.tile_width + 2 * g)
     wp.launch(ka.pack_kernel, dim=dim, inputs=[layers.view, layout, wrap], outputs=[texture.texels], device=texture.device)
@@ -285,20 +287,17 @@ def splat_atlas(
     tiling=1.0,
     normalize: bool = False,
     uv_set: str = "uv0",
-    filter: Filter | str = Filter.AUTO,
-    lod_bias: float = 0.0,
-    min_lod: float = 0.0,
-    max_lod: float = float("inf"),
+    sampler: Sampler | None = None,
     device=None,
 ) -> wp.array:
-    """Blend ``k`` atlas layers per pixel by an index map and a weight map (seed 004).
+    """Blend ``k`` atlas layers per pixel by an index map and a weight map.
 
     Per covered pixel: the index and weight maps are read in ``uv_set`` with *nearest* filtering,
     clamped at the edges (the texel containing the UV; weights belong to the indices of their own
     texel, so blending weights bilinearly across texels of different indices would be wrong). Each
     of the ``k`` entries samples layer ``idx`` at ``uv · tiling[idx]``, wrapped into its tile,
     with the LOD of the pixel footprint in tile texels, clamped to ``[min_lod, min(max_lod,
-    atlas.max_lod)]`` after ``lod_bias`` so mips never bleed across tiles (at level ``ℓ`` the gutter
+    atlas.max_lod)]`` (of the ``sampler``) after its ``lod_bias`` so mips never bleed across tiles (at level ``ℓ`` the gutter
     is ``gutter / 2^ℓ`` texels and bilinear needs >= 1, hence ``ℓ <= log2(gutter)``; see
     :mod:`warptex.kernels.atlas`). The samples are summed with their weights.
 
@@ -313,10 +312,10 @@ def splat_atlas(
         normalize: clamp the weights to >= 0 and divide by their sum (all zero: output 0);
             default: use them as stored (:func:`export_index_maps` already normalises).
         uv_set: the G-buffer UV set of the maps and the layers.
-        filter: ``"auto"`` (trilinear), ``"trilinear"``, ``"bilinear"`` or ``"nearest"`` (the
-            latter two on the nearest allowed level).
-        lod_bias, min_lod, max_lod: as for :func:`warptex.sample`; ``min_lod`` must not exceed
-            ``atlas.max_lod``. ``max_lod=0`` turns mips off.
+        sampler: a :class:`~warptex.Sampler`: its filter (``"auto"`` is trilinear; bilinear and
+            nearest read the nearest allowed level), LOD bias and clamp (``min_lod`` must not
+            exceed ``atlas.max_lod``; ``max_lod=0`` turns mips off). Its address mode must be
+            ``"wrap"``, the default: every tile wraps through its gutter.
         device: Warp device; must be the G-buffer's and the atlas'.
 
     Returns:
@@ -345,13 +344,15 @@ def splat_atlas(
     wts = _map_array(func, "weights", weights, wp.float32, idx.shape, device)
     num = atlas.num_layers
     tiling = param_array(func, "tiling", tiling, ((1,), (num,)), device, nonzero=True)
-    min_lod = as_float(func, "min_lod", min_lod, finite=False)
-    if min_lod > atlas.max_lod:
+    sampler = as_sampler(func, sampler)
+    if sampler.address != Address.WRAP:
+        raise ValueError(f"{func}(): the atlas wraps every layer through its gutter; sampler.address must be 'wrap', got {sampler.address.value!r}")
+    if sampler.min_lod > atlas.max_lod:
         raise ValueError(
-            f"{func}(): min_lod ({min_lod}) must not exceed the atlas' max_lod ({atlas.max_lod}), past which mips bleed across tiles"
+            f"{func}(): sampler.min_lod ({sampler.min_lod}) must not exceed the atlas' max_lod ({atlas.max_lod}), past which mips bleed across tiles"
         )
-    max_lod = min(as_float(func, "max_lod", max_lod, finite=False), float(atlas.max_lod))
-    smp = surface_sampler(func, filter=filter, address="clamp", lod_bias=lod_bias, min_lod=min_lod, max_lod=max_lod)
+    # The tile UV is wrapped in the kernel; the atlas itself is read clamped, up to its safe level.
+    smp = sampler_args(func, sampler.replace(address=Address.CLAMP, max_lod=min(sampler.max_lod, float(atlas.max_lod))), has_lod=True)
 
     h, w = gbuffer.resolution
     count = h * w

@@ -5,7 +5,6 @@ Formulas: :mod:`warptex.kernels.layers`. The atlas + index-map variant is in :mo
 
 from __future__ import annotations
 
-import dataclasses
 import enum
 
 import numpy as np
@@ -13,16 +12,15 @@ import warp as wp
 
 from warptex._launch import per_pixel
 from warptex._op import Kernels, hand_written, needs_grad, run, run_by_hand
+from warptex._pack import MAP_SAMPLER, projection_args, sampler_args, stochastic_args
+from warptex._validate import as_enum, check_layer_count, param_array
 from warptex._warp import active_tape
-from warptex._validate import as_enum, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import layers as kl
-from warptex.kernels import stochastic as kst
 from warptex.kernels import projection as kp
-from warptex.sampling import Address, Filter, make_sampler, surface_sampler
-from warptex.stochastic import Stochastic, as_stochastic, resolve_stochastic
+from warptex.kernels import stochastic as kst
+from warptex.options import Sampler, Stochastic, as_sampler, as_stochastic
 from warptex.texture import TextureArray
-from warptex.triplanar import make_projection
 
 
 class Projection(str, enum.Enum):
@@ -60,17 +58,6 @@ def as_splat_maps(func: str, splat_maps, device) -> TextureArray:
     return TextureArray(data, mipmaps=False, device=device)
 
 
-def check_layer_count(func: str, num_layers: int, maps: TextureArray) -> None:
-    """``M`` maps of ``C`` channels hold weights for ``(M - 1)·C < L <= M·C`` layers."""
-    m, c = maps.num_layers, maps.channels
-    if not (m - 1) * c < num_layers <= m * c:
-        need = -(-num_layers // c)
-        raise ValueError(
-            f"{func}(): {m} splat map(s) of {c} channel(s) hold weights for {(m - 1) * c + 1} to {m * c} layers, "
-            f"but there are {num_layers} layers (use {need} map(s) of {c} channels)"
-        )
-
-
 def splat(
     gbuffer: GBuffer,
     layers: TextureArray,
@@ -87,11 +74,7 @@ def splat(
     offsets=None,
     mirror_fix: bool = True,
     stochastic: Stochastic | str | None = None,
-    filter: Filter | str = Filter.AUTO,
-    address: Address | str = Address.WRAP,
-    lod_bias: float = 0.0,
-    min_lod: float = 0.0,
-    max_lod: float = float("inf"),
+    sampler: Sampler | None = None,
     device=None,
 ) -> wp.array:
     """Blend the ``L`` layers of a texture array by splat-map weights, per pixel of a G-buffer.
@@ -124,8 +107,8 @@ def splat(
             :class:`~warptex.Stochastic` (or a method name), see :func:`warptex.stochastic`. A
             histogram must be built from ``layers``; ``heights`` are read with the same taps,
             blended linearly.
-        filter, address, lod_bias, min_lod, max_lod: how the layers are sampled, as for
-            :func:`warptex.sample` (``"auto"`` is trilinear).
+        sampler: a :class:`~warptex.Sampler` for the layers (and heights); its ``"auto"`` filter
+            is trilinear. The splat maps have their own: bilinear on level 0, clamped.
         device: Warp device; must be the G-buffer's and the textures'.
 
     Returns:
@@ -177,16 +160,16 @@ def splat(
                 )
             params.height_mode, height_tex = kl.HEIGHT_ARRAY, heights
 
-    option = as_stochastic(func, stochastic)
-    stoch, layers_read = resolve_stochastic(func, option, layers, address)
+    option, sampler = as_stochastic(func, stochastic), as_sampler(func, sampler)
+    stoch, layers_read = stochastic_args(func, option, layers, sampler)
     if height_tex is layers:
         height_tex, height_stoch = layers_read, stoch  # heights from a channel of the same (decoded) sample
     else:  # a separate height array: the same taps, without the layers' histogram
-        height_stoch, _ = resolve_stochastic(func, dataclasses.replace(option, histogram=None), height_tex, address)
+        height_stoch, _ = stochastic_args(func, option.replace(histogram=None), height_tex, sampler)
 
-    proj = make_projection(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kp.WEIGHTS_TRIPLANAR, device=device)
-    smp = surface_sampler(func, filter=filter, address=address, lod_bias=lod_bias, min_lod=min_lod, max_lod=max_lod)
-    map_smp = make_sampler(func, filter=Filter.BILINEAR, address=Address.CLAMP, max_lod=0.0)
+    proj = projection_args(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kp.WEIGHTS_TRIPLANAR, device=device)
+    smp = sampler_args(func, sampler, has_lod=True)
+    map_smp = sampler_args(func, MAP_SAMPLER, has_lod=False)
 
     h, w = gbuffer.resolution
     count = h * w

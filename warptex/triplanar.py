@@ -19,16 +19,16 @@ import warp as wp
 
 from warptex._launch import per_pixel
 from warptex._op import Kernels, hand_written, needs_grad, run
+from warptex._pack import projection_args, sampler_args, stochastic_args
+from warptex._validate import as_enum, as_float
 from warptex._warp import active_tape
-from warptex._validate import as_enum, as_float, as_float_array, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import normals as kn
 from warptex.kernels import projection as kp
 from warptex.kernels import triplanar as kt
 from warptex.kernels.stochastic import METHOD_NONE
-from warptex.sampling import Address, Filter, surface_sampler
-from warptex.stochastic import Stochastic, resolve_stochastic
-from warptex.texture import Texture, TextureArray
+from warptex.options import Sampler, Stochastic, as_sampler, as_stochastic
+from warptex.texture import TextureArray
 
 
 class Space(str, enum.Enum):
@@ -72,11 +72,7 @@ def triplanar(
     space: Space | str = Space.WORLD,
     object_to_world=None,
     stochastic: Stochastic | str | None = None,
-    filter: Filter | str = Filter.AUTO,
-    address: Address | str = Address.WRAP,
-    lod_bias: float = 0.0,
-    min_lod: float = 0.0,
-    max_lod: float = float("inf"),
+    sampler: Sampler | None = None,
     device=None,
 ) -> wp.array:
     """Triplanar mapping: three plane projections blended by ``pow(|n|, sharpness)``.
@@ -109,10 +105,10 @@ def triplanar(
         stochastic: ``None`` (plain tiling), or anti-tiling for every projection: a
             :class:`~warptex.Stochastic` (or a method name, ``"hash4"``, ``"cheap2"``, ``"hex"``),
             see :func:`warptex.stochastic`. Each projection's taps share its unperturbed LOD.
-            Needs ``address`` ``"wrap"`` or ``"mirror"``; a histogram needs one texture for all
-            projections.
-        filter, address, lod_bias, min_lod, max_lod: as for :func:`warptex.sample`; ``"auto"``
-            is trilinear.
+            Needs a ``sampler`` address of ``"wrap"`` or ``"mirror"``; a histogram needs one
+            texture for all projections.
+        sampler: a :class:`~warptex.Sampler` for every projection; its ``"auto"`` filter is
+            trilinear (the G-buffer's derivatives give every pixel a LOD).
         device: Warp device; must be the G-buffer's and the textures'.
 
     Returns:
@@ -120,7 +116,11 @@ def triplanar(
         or non-finite. Recorded on the active ``wp.Tape``: gradients reach the texels,
         ``tiling``, ``sharpness`` and ``offsets`` when those are arrays that require them.
     """
-    return _colour("triplanar", kp.WEIGHTS_TRIPLANAR, **locals())
+    setup = _Setup(
+        "triplanar", kp.WEIGHTS_TRIPLANAR, gbuffer, texture, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix,
+        textures_per_axis=textures_per_axis, layer=layer, space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device,
+    )  # fmt: skip
+    return setup.launch(setup.variant(_COLOUR, _COLOUR_STOCHASTIC), setup.channels, [])
 
 
 def biplanar(
@@ -136,11 +136,7 @@ def biplanar(
     space: Space | str = Space.WORLD,
     object_to_world=None,
     stochastic: Stochastic | str | None = None,
-    filter: Filter | str = Filter.AUTO,
-    address: Address | str = Address.WRAP,
-    lod_bias: float = 0.0,
-    min_lod: float = 0.0,
-    max_lod: float = float("inf"),
+    sampler: Sampler | None = None,
     device=None,
 ) -> wp.array:
     """Biplanar mapping (Quilez): only the major and median projections, at most two taps.
@@ -150,7 +146,11 @@ def biplanar(
     mirror fix, offsets, LOD, textures per axis, stochastic sampling, gradients) is as in :func:`triplanar`; the
     default ``sharpness=8`` is Quilez' (exponent 1).
     """
-    return _colour("biplanar", kp.WEIGHTS_BIPLANAR, **locals())
+    setup = _Setup(
+        "biplanar", kp.WEIGHTS_BIPLANAR, gbuffer, texture, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix,
+        textures_per_axis=textures_per_axis, layer=layer, space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device,
+    )  # fmt: skip
+    return setup.launch(setup.variant(_COLOUR, _COLOUR_STOCHASTIC), setup.channels, [])
 
 
 def triplanar_normal(
@@ -170,11 +170,7 @@ def triplanar_normal(
     space: Space | str = Space.WORLD,
     object_to_world=None,
     stochastic: Stochastic | str | None = None,
-    filter: Filter | str = Filter.AUTO,
-    address: Address | str = Address.WRAP,
-    lod_bias: float = 0.0,
-    min_lod: float = 0.0,
-    max_lod: float = float("inf"),
+    sampler: Sampler | None = None,
     device=None,
 ) -> wp.array:
     """Triplanar normal mapping (Golus): unit world-space normals perturbed by a tangent-space map.
@@ -204,21 +200,21 @@ def triplanar_normal(
         is 0 or the surface normal is zero or non-finite. Differentiable like :func:`triplanar`.
     """
     func = "triplanar_normal"
-    opts = dict(locals())
-    blend_id = _BLEND_IDS[as_enum(func, "blend", opts.pop("blend"), Blend)]
-    strength = as_float(func, "strength", opts.pop("strength"))
+    blend_id = _BLEND_IDS[as_enum(func, "blend", blend, Blend)]
+    strength = as_float(func, "strength", strength)
     if strength < 0:
         raise ValueError(f"{func}(): strength must be >= 0, got {strength}")
-    flip_green = bool(opts.pop("flip_green"))
-    weights = kp.WEIGHTS_BIPLANAR if opts.pop("biplanar") else kp.WEIGHTS_TRIPLANAR
-    opts.pop("func")
-    option = opts["stochastic"]
-    if isinstance(option, Stochastic) and (option.mirror or option.rotation):
+    option = as_stochastic(func, stochastic)
+    if option.mirror or option.rotation:
         raise ValueError(f"{func}(): stochastic mirror and rotation would turn a normal map's slopes without its tangent frame; use neither")
-    setup = _setup(func, weights, texture=opts.pop("normal_map"), **opts)
+    setup = _Setup(
+        func, kp.WEIGHTS_BIPLANAR if biplanar else kp.WEIGHTS_TRIPLANAR, gbuffer, normal_map, tiling=tiling, sharpness=sharpness, offsets=offsets,
+        mirror_fix=mirror_fix, textures_per_axis=textures_per_axis, layer=layer, space=space, object_to_world=object_to_world, stochastic=option,
+        sampler=sampler, device=device,
+    )  # fmt: skip
     if setup.channels < 2:
         raise ValueError(f"{func}(): a normal map needs 2 to 4 channels, got {setup.channels}")
-    return setup.launch_normal([setup.channels, strength, int(flip_green), blend_id])
+    return setup.launch_normal([setup.channels, strength, int(bool(flip_green)), blend_id])
 
 
 # -- internals --------------------------------------------------------------------------------------
@@ -233,21 +229,27 @@ _SAMPLES_STOCHASTIC = Kernels(kt.projection_samples_stochastic_kernel, kt.projec
 _NORMAL_FROM_SAMPLES = Kernels(kt.triplanar_normal_from_samples_kernel, None, kt.triplanar_normal_from_samples_kernel)
 
 
-def _colour(func: str, weights: int, **opts) -> wp.array:
-    setup = _setup(func, weights, **opts)
-    return setup.launch(setup.variant(_COLOUR, _COLOUR_STOCHASTIC), setup.channels, [])
-
-
 class _Setup:
-    """Validated launch inputs shared by the three public functions."""
+    """The checked, packed inputs of the three public functions, and their launches."""
 
-    def __init__(self, func, gbuffer, textures, layer, proj, smp, stoch, device):
-        self.func, self.gbuffer, self.textures, self.layer = func, gbuffer, textures, layer
-        self.proj, self.smp, self.stoch, self.device = proj, smp, stoch, device
+    def __init__(self, func, weights, gbuffer, texture, *, tiling, sharpness, offsets, mirror_fix, textures_per_axis, layer, space, object_to_world, stochastic, sampler, device):
+        device = gbuffer_device(func, gbuffer, device)
+        gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask")
+        textures = _textures(func, texture, textures_per_axis, layer, device)
+        object_to_world = _object_to_world(func, space, object_to_world)
+        proj = projection_args(func, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=weights, object_to_world=object_to_world, device=device)
+        option, sampler = as_stochastic(func, stochastic), as_sampler(func, sampler)
+        if option.histogram is not None and not all(t is textures[0] for t in textures):
+            raise ValueError(f"{func}(): a stochastic histogram needs one texture for every projection (textures_per_axis differ)")
+        stoch, sampled = stochastic_args(func, option, textures[0], sampler)
+        if sampled is not textures[0]:  # a histogram: every projection reads its Gaussianised texture
+            textures = [sampled] * 3
+
+        self.gbuffer, self.textures, self.layer, self.device = gbuffer, textures, layer, device
+        self.proj, self.smp, self.stoch = proj, sampler_args(func, sampler, has_lod=True), stoch
         self.channels = textures[0].channels
-        g = gbuffer
-        self.count = g.resolution[0] * g.resolution[1]
-        self.pixels = [a.reshape((self.count,)) for a in (g.position, g.position_dx, g.position_dy, g.normal, g.mask)]
+        self.count = gbuffer.resolution[0] * gbuffer.resolution[1]
+        self.pixels = [a.reshape((self.count,)) for a in (gbuffer.position, gbuffer.position_dx, gbuffer.position_dy, gbuffer.normal, gbuffer.mask)]
         self.texels = [t.view.texels for t in textures]  # what the hand-written gradients differentiate
         self.others = [proj.tiling, proj.sharpness, proj.offsets, *self.pixels]  # what only the generated adjoint does
         self.linear = stoch.histogram == 0  # the histogram blend is not linear in the texels
@@ -280,58 +282,6 @@ class _Setup:
         return out.reshape((*self.gbuffer.resolution, 3))
 
 
-def _setup(
-    func,
-    weights,
-    *,
-    gbuffer,
-    texture,
-    tiling,
-    sharpness,
-    offsets,
-    mirror_fix,
-    textures_per_axis,
-    layer,
-    space,
-    object_to_world,
-    stochastic,
-    filter,
-    address,
-    lod_bias,
-    min_lod,
-    max_lod,
-    device,
-) -> _Setup:
-    device = gbuffer_device(func, gbuffer, device)
-    gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask")
-    textures = _textures(func, texture, textures_per_axis, layer, device)
-
-    proj = make_projection(func, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=weights, space=space, object_to_world=object_to_world, device=device)
-
-    smp = surface_sampler(func, filter=filter, address=address, lod_bias=lod_bias, min_lod=min_lod, max_lod=max_lod)
-    one_texture = all(t is textures[0] for t in textures)
-    stoch, sampled = resolve_stochastic(func, stochastic, textures[0], address, histogram_allowed=one_texture)
-    if sampled is not textures[0]:  # a histogram: every projection reads its Gaussianised texture
-        textures = [sampled] * 3
-    return _Setup(func, gbuffer, textures, layer, proj, smp, stoch, device)
-
-
-def make_projection(func, *, tiling, sharpness, offsets, mirror_fix, weights, space=Space.WORLD, object_to_world=None, device=None) -> kp.ProjectionArgs:
-    """Validate the projection options of a triplanar technique and pack them for the kernels."""
-    proj = kp.ProjectionArgs()
-    proj.tiling = param_array(func, "tiling", tiling, ((1,), (3,)), device, nonzero=True)
-    proj.sharpness = param_array(func, "sharpness", sharpness, ((1,),), device, nonnegative=True)
-    proj.offsets = param_array(func, "offsets", np.zeros((3, 2)) if offsets is None else offsets, ((3, 2),), device)
-    proj.mirror_fix = int(bool(mirror_fix))
-    proj.weights = weights
-    to_object, normal_to_object, normal_to_world = _space_matrices(func, space, object_to_world)
-    proj.world_to_object = wp.mat44(*to_object.reshape(-1))
-    proj.normal_to_object = wp.mat33(*normal_to_object.reshape(-1))
-    proj.normal_to_world = wp.mat33(*normal_to_world.reshape(-1))
-    proj.object_space = int(as_enum(func, "space", space, Space) == Space.OBJECT)
-    return proj
-
-
 def _textures(func, texture, per_axis, layer, device) -> list[TextureArray]:
     if per_axis is None:
         per_axis = (None, None, None)
@@ -352,23 +302,12 @@ def _textures(func, texture, per_axis, layer, device) -> list[TextureArray]:
     return chosen
 
 
-def _space_matrices(func, space, object_to_world):
-    """``(world_to_object 4×4, normal world→object 3×3, normal object→world 3×3)``."""
-    space = as_enum(func, "space", space, Space)
-    if space == Space.WORLD:
+def _object_to_world(func, space, object_to_world):
+    """The object's matrix for ``space="object"`` (required then), ``None`` for world space."""
+    if as_enum(func, "space", space, Space) == Space.WORLD:
         if object_to_world is not None:
             raise ValueError(f"{func}(): object_to_world is only used with space='object'")
-        eye = np.eye(4)
-        return eye, eye[:3, :3], eye[:3, :3]
+        return None
     if object_to_world is None:
         raise ValueError(f"{func}(): space='object' needs object_to_world, the object's 4x4 matrix")
-    m = np.asarray(as_float_array(func, "object_to_world", object_to_world), np.float64)
-    if m.shape != (4, 4) or not np.isfinite(m).all():
-        raise ValueError(f"{func}(): object_to_world must be a finite 4x4 matrix, got shape {m.shape}")
-    if not np.allclose(m[3], [0, 0, 0, 1]):
-        raise ValueError(f"{func}(): object_to_world must be affine (last row 0, 0, 0, 1), got {m[3].tolist()}")
-    linear = m[:3, :3]
-    if abs(np.linalg.det(linear)) < 1e-12:
-        raise ValueError(f"{func}(): object_to_world is singular")
-    # Normals transform by the inverse transpose of the position transform.
-    return np.linalg.inv(m), linear.T, np.linalg.inv(linear).T
+    return object_to_world

@@ -2,7 +2,7 @@
 and the warptex call each technique corresponds to.
 
 Only the builders and :func:`warptex_forward` import warptex (lazily); the peers themselves are
-written from the formulas in ``kernels/`` and DESIGN.md §3, not from warptex code.
+written from the formulas in the docstrings of ``kernels/``, not from warptex code.
 """
 
 from __future__ import annotations
@@ -112,6 +112,6 @@ def warptex_forward(technique: str, data: dict, *, texture=None, gbuffer=None, l
     kind = lod_kind(data)
     kw = {"lod": data["lod"]} if kind == "lod" else {"uv_dx": data["uv_dx"], "uv_dy": data["uv_dy"]} if kind == "derivatives" else {}
     if technique in ("bilinear", "trilinear"):
-        filt = "bilinear" if technique == "bilinear" else "auto"
-        return wt.sample(texture, data["uv"], filter=filt, address="wrap", device=device, **({} if technique == "bilinear" else kw))
-    return wt.stochastic(texture, data["uv"], method=technique, device=device, **opts, **kw)
+        sampler = wt.Sampler(filter="bilinear" if technique == "bilinear" else "auto")
+        return wt.sample(texture, data["uv"], sampler=sampler, device=device, **({} if technique == "bilinear" else kw))
+    return wt.stochastic(texture, data["uv"], wt.Stochastic(technique, **opts), device=device, **kw)

@@ -107,7 +107,7 @@ def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def fit_arguments(args: argparse.Namespace) -> dict:
-    """The keyword arguments of :func:`warptex.fit_demo.run_fit` from parsed :func:`add_fit_arguments` options."""
+    """The keyword arguments of :func:`warptex.apps.fit_demo.run_fit` from parsed :func:`add_fit_arguments` options."""
     if (args.target is None) != (args.gbuffer is None):
         raise ValueError("fit: --target and --gbuffer go together (one G-buffer per target image)")
     return {
@@ -156,12 +156,12 @@ def main(argv: list[str] | None = None) -> int:
     import warp as wp
 
     wp.config.log_level = wp.LOG_WARNING  # no start-up banner or compile log in CLI output
-    from warptex.demo import run_demo
-    from warptex.render import run_render
+    from warptex.apps.demo import run_demo
+    from warptex.apps.render import run_render
 
     try:
         if args.command == "fit":
-            from warptex.fit_demo import run_fit
+            from warptex.apps.fit_demo import run_fit
 
             summary = run_fit(args.out, **fit_arguments(args))
             print(fit_report(summary))

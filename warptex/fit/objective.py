@@ -1,5 +1,5 @@
 """Views to fit: a G-buffer and its target image, checked, subsampled and blurred, and the
-objective that renders them all (:class:`Objective`), for :func:`warptex.fit_loop.fit_splat`.
+objective that renders them all (:class:`Objective`), for :func:`warptex.fit.fit_splat`.
 
 Subsampled stages read every ``stride``-th pixel of the G-buffer and of the target (the
 derivatives, hence the texture LOD, are the full-resolution ones), so a subsampled render of the
@@ -14,13 +14,15 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from warptex.fit import Loss, SplatParameters, blur, image_loss, weight_entropy
+from warptex.fit.losses import Loss, blur, image_loss, weight_entropy
+from warptex.fit.parameters import SplatParameters
 from warptex.gbuffer import FIELDS, GBuffer, gbuffer_device
 from warptex.kernels import fit as kf
-from warptex.layers import check_layer_count, splat
+from warptex._validate import check_layer_count
+from warptex.layers import splat
 from warptex.texture import TextureArray
 
-__all__ = ["FitView", "Objective", "check_inputs", "prepare_views", "subsample_gbuffer"]
+__all__ = ["FitView", "Objective", "check_inputs", "prepare_views", "render_view", "subsample_gbuffer", "views_device"]
 
 
 @dataclass
@@ -85,12 +87,27 @@ class _Prepared:
         return self._levels[sigma]
 
 
+def views_device(func: str, views, device):
+    """The Warp device of a fit: ``device``, which must be the first view's G-buffer's, or that
+    G-buffer's device."""
+    first = views if isinstance(views, FitView) else next(iter(views), None)
+    return gbuffer_device(func, first.gbuffer, device) if isinstance(first, FitView) else wp.get_device(device)
+
+
 def check_inputs(views, layers: TextureArray, params: SplatParameters, *, device=None) -> None:
     """The input checks :func:`fit_splat` runs before its first iteration (call it to fail before
     other work): target and G-buffer sizes, non-finite targets, layer counts, devices."""
-    first = views if isinstance(views, FitView) else next(iter(views), None)
-    device = gbuffer_device("fit_splat", first.gbuffer, device) if isinstance(first, FitView) else wp.get_device(device)
-    prepare_views("fit_splat", views, layers, params, device)
+    prepare_views("fit_splat", views, layers, params, views_device("fit_splat", views, device))
+
+
+def render_view(gbuffer: GBuffer, layers: TextureArray, params: SplatParameters, options: dict, device=None) -> wp.array:
+    """:func:`warptex.splat` of ``gbuffer`` with the current maps, tiling and (when fitted)
+    sharpness of ``params`` and the other splat ``options``."""
+    kw = dict(options)
+    kw["tiling"] = params.tiling
+    if params.sharpness is not None:
+        kw["sharpness"] = params.sharpness
+    return splat(gbuffer, layers, params.maps, device=device, **kw)
 
 
 def prepare_views(func: str, views, layers: TextureArray, params: SplatParameters, device) -> list[_Prepared]:
@@ -162,11 +179,7 @@ class Objective:
         return self._scales[key]
 
     def render(self, view: _Prepared) -> wp.array:
-        kw = dict(self.options)
-        kw["tiling"] = self.params.tiling
-        if self.params.sharpness is not None:
-            kw["sharpness"] = self.params.sharpness
-        return splat(view.gbuffer, self.layers, self.params.maps, device=self.device, **kw)
+        return render_view(view.gbuffer, self.layers, self.params, self.options, self.device)
 
     def __call__(self, sigma: float, stride: int = 1) -> tuple[wp.array, list[wp.array]]:
         """The loss (float64 ``(1,)``, ``requires_grad``) and the sharp renders of every view."""

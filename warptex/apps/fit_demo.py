@@ -1,7 +1,7 @@
 """``warptex fit`` and ``examples/fit_splat.py``: recover splat maps and tiling from images.
 
 Default (synthetic) run: the default terrain seen from several cameras; the target is rendered
-with the true splat maps (:func:`warptex.terrain_material.terrain_splat_maps`: height and slope
+with the true splat maps (:func:`warptex.apps.terrain_material.terrain_splat_maps`: height and slope
 rules) and the true tiling (1/6) with the real layer textures; the fit starts from uniform weights
 and a tiling 20% off, and its result is compared with the truth.
 
@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -21,16 +22,16 @@ import warp as wp
 
 from warptex import io
 from warptex.camera import look_at, orthographic
-from warptex.fit import SplatParameters, psnr, splat_coverage
-from warptex.fit_loop import FitView, check_inputs, default_stages, fit_splat, render_views
-from warptex.fit_report import heat_image, legend, weights_image, write_curve, write_json
+from warptex.fit import FitView, SplatParameters, check_inputs, default_stages, fit_splat, psnr, render_views
+from warptex.apps.fit_report import heat_image, legend, splat_coverage, weights_image, write_curve, write_json
 from warptex.gbuffer import rasterize
 from warptex.gbuffer_io import load_gbuffer
-from warptex.layers import check_layer_count, splat
-from warptex.render import TERRAIN_GRID, terrain_camera
-from warptex.shade import side_by_side
-from warptex.terrain import terrain
-from warptex.terrain_material import LAYER_NAMES, terrain_layers, terrain_splat_maps
+from warptex._validate import check_layer_count
+from warptex.layers import splat
+from warptex.apps.render import TERRAIN_GRID, terrain_camera
+from warptex.apps.shade import side_by_side
+from warptex.apps.terrain import terrain
+from warptex.apps.terrain_material import LAYER_NAMES, terrain_layers, terrain_splat_maps
 from warptex.texture import TextureArray
 
 TRUE_TILING = 1.0 / 6.0  # the default scene's layer repeats per world unit
@@ -87,7 +88,7 @@ def run_fit(
     Args:
         out_dir: output folder (created if missing).
         iters: Adam iterations of the default coarse-to-fine schedule
-            (:func:`warptex.fit_loop.default_stages`); 240 takes about 25 s on 2 CPU cores.
+            (:func:`warptex.fit.default_stages`); 240 takes about 25 s on 2 CPU cores.
         resolution: ``(height, width)`` of each synthetic view (192×256).
         views: synthetic views, 1–3 (:func:`terrain_cameras`); 2 = three-quarter + top-down.
         seed: terrain and layer seed of the synthetic scene.
@@ -124,105 +125,150 @@ def run_fit(
     func = "run_fit"
     start = time.perf_counter()
     device = wp.get_device(device)
-    out = Path(out_dir)
-    user = targets is not None or gbuffers is not None
     options = {"projection": projection, "height_blend": height_blend, "sharpness": sharpness}
-
-    # -- the scene: G-buffers, targets, layers, truth ------------------------------------------------
-    if user:
-        targets = [targets] if isinstance(targets, (str, os.PathLike)) else list(targets or [])
-        gbuffers = [gbuffers] if isinstance(gbuffers, (str, os.PathLike)) else list(gbuffers or [])
-        if not targets or len(targets) != len(gbuffers):
-            raise ValueError(f"{func}(): give one G-buffer per target image, got {len(targets)} target(s) and {len(gbuffers)} G-buffer(s)")
-        gbufs = [load_gbuffer(p, device=device) for p in gbuffers]
-        images = [io.read_image(p) for p in targets]
-        images = [img[..., :3] if img.shape[-1] >= 3 else img[..., :1] for img in images]
-        true_maps = true_tiling = None
-        tiling0 = TRUE_TILING if tiling is None else float(tiling)
+    if targets is not None or gbuffers is not None:
+        problem = user_problem(func, targets, gbuffers, layers=layers, tiling=tiling, options=options, device=device)
     else:
-        mesh = terrain(resolution=TERRAIN_GRID, seed=seed)
-        gbufs = [rasterize(mesh, cam, device=device) for cam in terrain_cameras(resolution, views)]
-        true_maps = terrain_splat_maps(mesh, TERRAIN_GRID)
-        true_tiling = TRUE_TILING
-        if not -1.0 < float(tiling_error) < 10.0:
-            raise ValueError(f"{func}(): tiling_error must be in (-1, 10), got {tiling_error!r}")
-        tiling0 = true_tiling * (1.0 + float(tiling_error))
-    if layers is None:
-        layer_tex, names = terrain_layers(seed=seed, device=device), list(LAYER_NAMES)
-    else:
-        layer_tex = TextureArray.from_files(list(layers), device=device)
-        names = [Path(p).stem for p in layers]
-    if height_blend is not None and layer_tex.channels < 4:
-        raise ValueError(f"{func}(): height blending reads the height from the layers' alpha, but they have {layer_tex.channels} channels; pass RGBA layers or height_blend=None")
-    if not user:
-        truth = TextureArray(true_maps[None], mipmaps=False, device=device)
-        images = [splat(g, layer_tex, truth, tiling=true_tiling, device=device, **options).numpy()[..., :3] for g in gbufs]
-
-    # -- parameters ------------------------------------------------------------------------------------
-    if initial_maps is not None:
-        maps = np.stack([io.read_image(p, data=True) for p in initial_maps])
-        check_layer_count(func, layer_tex.num_layers, TextureArray(maps, mipmaps=False, device=device))
-        weights = maps.transpose(1, 2, 0, 3).reshape(*maps.shape[1:3], -1)[..., : layer_tex.num_layers]
-        weights = np.maximum(weights, 0.0) + 1e-6  # no all-zero texel
-        params = SplatParameters(layer_tex.num_layers, maps.shape[1:3], channels=maps.shape[-1], num_maps=maps.shape[0], weights=weights, tiling=tiling0, device=device)
-    else:
-        params = SplatParameters(layer_tex.num_layers, map_size, channels=map_channels, num_maps=num_maps, tiling=tiling0, device=device)
-    fit_views = [FitView(g, img) for g, img in zip(gbufs, images)]
+        problem = synthetic_problem(func, resolution=resolution, views=views, seed=seed, tiling_error=tiling_error, layers=layers, options=options, device=device)
+    params = initial_parameters(func, problem, initial_maps=initial_maps, map_size=map_size, map_channels=map_channels, num_maps=num_maps, device=device)
     stages = default_stages(iters, fit_tiling=fit_tiling)
 
-    # -- fit ----------------------------------------------------------------------------------------------
-    check_inputs(fit_views, layer_tex, params, device=device)  # fit_splat's checks, before anything renders
-    initial = render_views(fit_views, layer_tex, params, splat_options=options)
-    result = fit_splat(fit_views, layer_tex, params, stages=stages, loss=loss, entropy=entropy, splat_options=options, progress=progress, report_every=report_every, device=device)
-    fitted = render_views(fit_views, layer_tex, params, splat_options=options)
-    weights = params.weights()
+    check_inputs(problem.views, problem.layers, params, device=device)  # fit_splat's checks, before anything renders
+    initial = render_views(problem.views, problem.layers, params, splat_options=options)
+    result = fit_splat(problem.views, problem.layers, params, stages=stages, loss=loss, entropy=entropy, splat_options=options, progress=progress, report_every=report_every, device=device)
+    fitted = render_views(problem.views, problem.layers, params, splat_options=options)
 
-    # -- measurements ------------------------------------------------------------------------------------
+    summary = measure(problem, params, result, entropy=entropy, loss=loss)
+    files = write_outputs(Path(out_dir), problem, params, result, initial, fitted, summary, stages)
+    summary["seconds_total"] = time.perf_counter() - start
+    summary["files"] = files + [str(Path(out_dir) / "summary.json")]
+    write_json(Path(out_dir) / "summary.json", summary)
+    return summary
+
+
+@dataclass
+class Problem:
+    """What a fit fits: the views (G-buffers and target images), the layers and their names, the
+    splat options and the starting tiling; for the synthetic scene also the truth."""
+
+    views: list[FitView]
+    layers: TextureArray
+    names: list[str]
+    options: dict
+    initial_tiling: float
+    true_maps: np.ndarray | None = None
+    true_tiling: float | None = None
+
+    @property
+    def synthetic(self) -> bool:
+        return self.true_maps is not None
+
+
+def _layers(func: str, layers, options: dict, seed: int, device) -> tuple[TextureArray, list[str]]:
+    """The layers (image paths, or the default terrain's) and their names."""
+    if layers is None:
+        tex, names = terrain_layers(seed=seed, device=device), list(LAYER_NAMES)
+    else:
+        tex, names = TextureArray.from_files(list(layers), device=device), [Path(p).stem for p in layers]
+    if options["height_blend"] is not None and tex.channels < 4:
+        raise ValueError(f"{func}(): height blending reads the height from the layers' alpha, but they have {tex.channels} channels; pass RGBA layers or height_blend=None")
+    return tex, names
+
+
+def synthetic_problem(func: str, *, resolution, views: int, seed: int, tiling_error: float, layers, options: dict, device) -> Problem:
+    """The default terrain from ``views`` cameras, rendered with its true splat maps and tiling."""
+    if not -1.0 < float(tiling_error) < 10.0:
+        raise ValueError(f"{func}(): tiling_error must be in (-1, 10), got {tiling_error!r}")
+    mesh = terrain(resolution=TERRAIN_GRID, seed=seed)
+    gbuffers = [rasterize(mesh, cam, device=device) for cam in terrain_cameras(resolution, views)]
+    layer_tex, names = _layers(func, layers, options, seed, device)
+    true_maps = terrain_splat_maps(mesh, TERRAIN_GRID)
+    truth = TextureArray(true_maps[None], mipmaps=False, device=device)
+    targets = [splat(g, layer_tex, truth, tiling=TRUE_TILING, device=device, **options).numpy()[..., :3] for g in gbuffers]
+    return Problem([FitView(g, t) for g, t in zip(gbuffers, targets)], layer_tex, names, options, TRUE_TILING * (1.0 + float(tiling_error)), true_maps, TRUE_TILING)
+
+
+def user_problem(func: str, targets, gbuffers, *, layers, tiling, options: dict, device) -> Problem:
+    """Your target images and their G-buffer EXRs (one per target)."""
+    targets = [targets] if isinstance(targets, (str, os.PathLike)) else list(targets or [])
+    gbuffers = [gbuffers] if isinstance(gbuffers, (str, os.PathLike)) else list(gbuffers or [])
+    if not targets or len(targets) != len(gbuffers):
+        raise ValueError(f"{func}(): give one G-buffer per target image, got {len(targets)} target(s) and {len(gbuffers)} G-buffer(s)")
+    gbufs = [load_gbuffer(p, device=device) for p in gbuffers]
+    images = [io.read_image(p) for p in targets]
+    images = [img[..., :3] if img.shape[-1] >= 3 else img[..., :1] for img in images]
+    layer_tex, names = _layers(func, layers, options, 0, device)
+    return Problem([FitView(g, t) for g, t in zip(gbufs, images)], layer_tex, names, options, TRUE_TILING if tiling is None else float(tiling))
+
+
+def initial_parameters(func: str, problem: Problem, *, initial_maps, map_size, map_channels: int, num_maps, device) -> SplatParameters:
+    """Uniform weights of ``map_size``, or the splat maps of the ``initial_maps`` images."""
+    count = problem.layers.num_layers
+    if initial_maps is None:
+        return SplatParameters(count, map_size, channels=map_channels, num_maps=num_maps, tiling=problem.initial_tiling, device=device)
+    maps = np.stack([io.read_image(p, data=True) for p in initial_maps])
+    check_layer_count(func, count, TextureArray(maps, mipmaps=False, device=device))
+    weights = maps.transpose(1, 2, 0, 3).reshape(*maps.shape[1:3], -1)[..., :count]
+    weights = np.maximum(weights, 0.0) + 1e-6  # no all-zero texel
+    return SplatParameters(count, maps.shape[1:3], channels=maps.shape[-1], num_maps=maps.shape[0], weights=weights, tiling=problem.initial_tiling, device=device)
+
+
+def _coverage(problem: Problem, params: SplatParameters) -> np.ndarray:
+    return splat_coverage([v.gbuffer.uv_sets["uv0"]["uv"].numpy()[v.gbuffer.mask.numpy() > 0] for v in problem.views if "uv0" in v.gbuffer.uv_sets], params.size)
+
+
+def measure(problem: Problem, params: SplatParameters, result, *, entropy: float, loss: str) -> dict:
+    """The summary: PSNR and tiling; against the truth, the tiling error and the weights' MAE on
+    the texels the views cover."""
     fitted_tiling = params.tiling_values().tolist()
     summary = {
-        "mode": "user" if user else "synthetic",
+        "mode": "synthetic" if problem.synthetic else "user",
         "iterations": result.iterations,
         "initial_psnr_db": psnr(result.initial_mse),
         "final_psnr_db": result.final_psnr,
         "final_mse": result.final_mse,
         "psnr_space": "linear RGB in [0, 1], covered pixels of all views",
-        "initial_tiling": tiling0,
+        "initial_tiling": problem.initial_tiling,
         "fitted_tiling": fitted_tiling,
         "tiling_scans": [{"stage": s["stage"], "chosen": s["chosen"]} for s in result.scans],
         "entropy_prior": entropy,
         "loss": loss,
-        "views": len(fit_views),
-        "resolutions": [list(g.resolution) for g in gbufs],
+        "views": len(problem.views),
+        "resolutions": [list(v.gbuffer.resolution) for v in problem.views],
         "map_size": list(params.size),
-        "splat_options": options,
+        "splat_options": problem.options,
         "fit_seconds": result.seconds,
     }
-    coverage = splat_coverage([g.uv_sets["uv0"]["uv"].numpy()[g.mask.numpy() > 0] for g in gbufs if "uv0" in g.uv_sets], params.size)
-    if not user:
-        err = np.abs(weights - true_maps)
+    if problem.synthetic:
+        coverage = _coverage(problem, params)
+        err = np.abs(params.weights() - problem.true_maps)
         covered = coverage >= COVERED
         summary.update(
             {
-                "true_tiling": true_tiling,
-                "tiling_error_percent": 100.0 * abs(fitted_tiling[0] / true_tiling - 1.0),
+                "true_tiling": problem.true_tiling,
+                "tiling_error_percent": 100.0 * abs(fitted_tiling[0] / problem.true_tiling - 1.0),
                 "covered_definition": f"texels whose summed bilinear lookup weight over all covered pixels of all views is >= {COVERED} (about one pixel's worth)",
                 "covered_texels": int(covered.sum()),
                 "covered_fraction": float(covered.mean()),
                 "splat_mae_covered": float(err[covered].mean()),
                 "splat_mae_by_coverage": {f">={t:g}": float(err[coverage >= t].mean()) for t in (1e-6, 0.25, 1.0, 4.0) if (coverage >= t).any()},
                 "splat_mae_all_texels": float(err.mean()),
-                "splat_mae_uniform_start": float(np.abs(1.0 / layer_tex.num_layers - true_maps)[covered].mean()),
+                "splat_mae_uniform_start": float(np.abs(1.0 / problem.layers.num_layers - problem.true_maps)[covered].mean()),
             }
         )
+    return summary
 
-    # -- files ---------------------------------------------------------------------------------------------
+
+def write_outputs(out: Path, problem: Problem, params: SplatParameters, result, initial, fitted, summary: dict, stages) -> list[str]:
+    """The pictures, the fitted maps and the curve (module docstring of ``warptex fit``); the paths written."""
     files = []
 
     def png(name, image, data=False):
-        path = out / name
-        io.write_png(path, image, data=data)
-        files.append(str(path))
+        io.write_png(out / name, image, data=data)
+        files.append(str(out / name))
 
+    gbufs = [v.gbuffer for v in problem.views]
+    images = [v.target for v in problem.views]
     sky = lambda img, g: np.where(g.mask.numpy()[..., None] > 0, img[..., :3], 0.0)  # noqa: E731
     png("target.png", _panels([sky(i, g) for i, g in zip(images, gbufs)], "target"), data=True)
     png("initial.png", _panels([sky(i, g) for i, g in zip(initial, gbufs)], "initial"), data=True)
@@ -236,15 +282,17 @@ def run_fit(
         rows[f"view {k}: fitted, {psnr(float(np.mean((f - t)[covered_px] ** 2))):.1f} dB"] = f
         rows[f"view {k}: |fitted - target| x 8"] = np.clip(8 * np.abs(f - t), 0, 1)
     png("comparison.png", side_by_side(rows, columns=4), data=True)
+    weights = params.weights()
     png("splat_fitted.png", weights_image(weights))
     for m, data in enumerate(params.maps.numpy()):  # the fitted maps as data, e.g. for initial_maps
         path = out / ("splat_fitted.exr" if params.maps.num_layers == 1 else f"splat_fitted_{m}.exr")
         io.write_exr(path, data)
         files.append(str(path))
-    panels = {f"fitted ({legend(names)})": weights_image(weights), "coverage (white: >= 4 px)": heat_image(coverage, vmax=4.0)}
-    if not user:
-        png("splat_true.png", weights_image(true_maps))
-        panels = {"true": weights_image(true_maps), **panels, f"|fitted - true| (white: 0.5), MAE {summary['splat_mae_covered']:.3f}": heat_image(err.mean(axis=-1), vmax=0.5)}
+    panels = {f"fitted ({legend(problem.names)})": weights_image(weights), "coverage (white: >= 4 px)": heat_image(_coverage(problem, params), vmax=4.0)}
+    if problem.synthetic:
+        png("splat_true.png", weights_image(problem.true_maps))
+        err = np.abs(weights - problem.true_maps)
+        panels = {"true": weights_image(problem.true_maps), **panels, f"|fitted - true| (white: 0.5), MAE {summary['splat_mae_covered']:.3f}": heat_image(err.mean(axis=-1), vmax=0.5)}
     png("splat_maps.png", side_by_side(panels, columns=2), data=True)
     marks, at = [], 0
     for stage in stages:
@@ -253,7 +301,4 @@ def run_fit(
         at += stage.iters
     write_curve(out / "curve.png", result.history, stages=marks)
     files.append(str(out / "curve.png"))
-    summary["seconds_total"] = time.perf_counter() - start
-    summary["files"] = files + [str(out / "summary.json")]
-    write_json(out / "summary.json", summary)
-    return summary
+    return files

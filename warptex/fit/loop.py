@@ -22,7 +22,7 @@ The scan is what makes the tiling converge from 20% off; Adam only polishes it. 
 assumption: a tiling outside 0.70–1.42× its initial value is not found by the default schedule
 (pass your own ``stages``).
 
-Subsampled and blurred stages: see :mod:`warptex.fit_views`.
+Subsampled and blurred stages: see :mod:`warptex.fit.objective`.
 """
 
 from __future__ import annotations
@@ -36,13 +36,12 @@ import warp as wp
 import warp.optim
 
 from warptex._validate import as_enum, as_float
-from warptex.fit import Loss, SplatParameters, psnr
-from warptex.fit_views import FitView, Objective, check_inputs, prepare_views
-from warptex.gbuffer import gbuffer_device
-from warptex.layers import splat
+from warptex.fit.losses import Loss, psnr
+from warptex.fit.objective import FitView, Objective, prepare_views, render_view, views_device
+from warptex.fit.parameters import SplatParameters
 from warptex.texture import TextureArray
 
-__all__ = ["FitResult", "FitView", "Stage", "check_inputs", "default_stages", "fit_splat", "render_views"]
+__all__ = ["FitResult", "Stage", "default_stages", "fit_splat", "render_views"]
 
 
 @dataclass(frozen=True)
@@ -200,8 +199,7 @@ def fit_splat(
 
     func = "fit_splat"
     start = time.perf_counter()
-    first = views if isinstance(views, FitView) else next(iter(views), None)
-    device = gbuffer_device(func, first.gbuffer, device) if isinstance(first, FitView) else wp.get_device(device)
+    device = views_device(func, views, device)
     kind = as_enum(func, "loss", loss, Loss)
     entropy = as_float(func, "entropy", entropy)
     if entropy < 0:
@@ -266,8 +264,4 @@ def fit_splat(
 def render_views(views, layers: TextureArray, params: SplatParameters, *, splat_options: dict | None = None) -> list[np.ndarray]:
     """The renders of the views' G-buffers with the current parameters, ``[H, W, C_layers]`` NumPy each."""
     params.apply()
-    kw = dict(splat_options or {})
-    kw["tiling"] = params.tiling
-    if params.sharpness is not None:
-        kw["sharpness"] = params.sharpness
-    return [splat(view.gbuffer, layers, params.maps, **kw).numpy() for view in ([views] if isinstance(views, FitView) else views)]
+    return [render_view(view.gbuffer, layers, params, dict(splat_options or {})).numpy() for view in ([views] if isinstance(views, FitView) else views)]

@@ -25,11 +25,11 @@ from warptex.camera import Camera, look_at
 from warptex.gbuffer import GBuffer, load_mesh, rasterize
 from warptex.gbuffer_io import save_gbuffer
 from warptex.sampling import sample
-from warptex.shade import SKY, lambert, to_rgb
-from warptex.terrain import terrain
+from warptex.apps.shade import SKY, lambert, to_rgb
+from warptex.apps.terrain import terrain
 from warptex.texture import Texture, TextureArray
 from warptex.layers import splat
-from warptex.terrain_material import LAYER_NAMES, noise_texture, terrain_layers, terrain_splat_maps
+from warptex.apps.terrain_material import LAYER_NAMES, noise_texture, terrain_layers, terrain_splat_maps
 from warptex.triplanar import triplanar
 
 
@@ -102,7 +102,7 @@ def run_render(
 
     Args:
         out_dir: output folder (created if missing).
-        mesh_path: a mesh file; ``None`` renders the procedural terrain (:func:`warptex.terrain.terrain`).
+        mesh_path: a mesh file; ``None`` renders the procedural terrain (:func:`warptex.apps.terrain.terrain`).
         texture_path: the texture; default: the mesh's embedded texture, else a procedural ground texture.
         resolution: ``(height, width)``.
         eye, target: camera position and look-at point (default: a three-quarter view framing the mesh).

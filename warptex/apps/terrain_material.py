@@ -14,8 +14,8 @@ import numpy as np
 import trimesh
 
 from warptex import io
-from warptex.terrain import terrain_slope_height
-from warptex.texture import Texture, TextureArray
+from warptex.apps.terrain import terrain_slope_height
+from warptex.texture import TextureArray
 
 LAYER_NAMES = ("grass", "gravel", "rock", "snow")
 #: Linear RGB tints of the greyscale photos (grass.png, gravel.png, brick.png as rock).

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from warptex import io
-from warptex.shade import labelled, to_rgb
+from warptex.apps.shade import labelled, to_rgb
+from warptex.options import Sampler
 from warptex.sampling import sample
 from warptex.texture import Texture
 
@@ -84,8 +85,8 @@ def run_demo(out_dir: str | os.PathLike = "out", *, texture_path=None, resolutio
     start = time.perf_counter()
     renders = {}
     for name, kw in (
-        ("nearest, level 0", {"filter": "nearest"}),
-        ("bilinear, level 0", {"filter": "bilinear"}),
+        ("nearest, level 0", {"sampler": Sampler(filter="nearest")}),
+        ("bilinear, level 0", {"sampler": Sampler(filter="bilinear")}),
         ("trilinear, LOD from derivatives", {"uv_dx": uv_dx, "uv_dy": uv_dy}),
     ):
         colour = to_rgb(sample(tex, uv, device=device, **kw).numpy())
@@ -97,7 +98,7 @@ def run_demo(out_dir: str | os.PathLike = "out", *, texture_path=None, resolutio
     quad_uv = np.stack(np.meshgrid(cells, cells[::-1]), axis=-1).astype(np.float32)
     modes = []
     for mode in ("wrap", "clamp", "mirror", "border"):
-        colour = to_rgb(sample(tex, quad_uv, address=mode, border=(0.1, 0.1, 0.1, 1.0), device=device).numpy())
+        colour = to_rgb(sample(tex, quad_uv, sampler=Sampler(address=mode, border=(0.1, 0.1, 0.1, 1.0)), device=device).numpy())
         modes.append(labelled(colour, mode))
     elapsed = time.perf_counter() - start
 

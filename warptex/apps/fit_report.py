@@ -1,6 +1,6 @@
 """Pictures and files of a splat fit: weights as colours, the loss/PSNR curve, the JSON summary.
 
-Weights and errors are NumPy images; the curve is a :func:`warptex.plot.line_chart`.
+Weights and errors are NumPy images; the curve is a :func:`warptex.apps.plot.line_chart`.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 from warptex import io
-from warptex.plot import line_chart
+from warptex.apps.plot import line_chart
 
 #: Display colours (linear RGB) of layers 0, 1, 2...: green, orange, brown, white, blue, magenta, cyan, yellow.
 PALETTE = np.array(
@@ -63,3 +63,34 @@ def write_json(path, data: dict) -> None:
     with io._atomic_output(os.fspath(path)) as tmp:
         with open(tmp, "w", encoding="utf-8") as f:
             f.write(text)
+
+
+def splat_coverage(uvs, size) -> np.ndarray:
+    """How much each splat-map texel is seen: the sum, over pixels, of the bilinear weight the
+    pixel's lookup gives the texel (the same clamped bilinear read :func:`warptex.splat` makes).
+
+    A texel's coverage is the number of pixel-equivalents whose colour depends on it; 0 means no
+    view constrains it at all (its gradient is exactly 0).
+
+    Args:
+        uvs: one ``[N, 2]`` (or ``[H, W, 2]``) array of splat-map UVs per view, covered pixels only.
+        size: ``(H, W)`` of the splat map.
+
+    Returns:
+        float64 ``[H, W]``.
+    """
+    h, w = size
+    cover = np.zeros(h * w, np.float64)
+    for uv in uvs:
+        uv = np.asarray(uv, np.float64).reshape(-1, 2)
+        uv = uv[np.isfinite(uv).all(axis=1)]
+        x = uv[:, 0] * w - 0.5
+        y = (1.0 - uv[:, 1]) * h - 0.5
+        x0, y0 = np.floor(x), np.floor(y)
+        fx, fy = x - x0, y - y0
+        for dy, wy in ((0, 1 - fy), (1, fy)):
+            for dx, wx in ((0, 1 - fx), (1, fx)):
+                i = np.clip(y0 + dy, 0, h - 1).astype(np.int64)
+                j = np.clip(x0 + dx, 0, w - 1).astype(np.int64)
+                np.add.at(cover, i * w + j, wy * wx)
+    return cover.reshape(h, w)

@@ -1,0 +1,207 @@
+"""Public options and inputs packed into what kernels take: one place for every technique.
+
+- :func:`sampler_args`: a :class:`~warptex.Sampler` as ``SamplerArgs`` (``"auto"`` filtering resolved);
+- :func:`stochastic_args`: a :class:`~warptex.Stochastic` as ``StochasticArgs``, with the texture
+  the kernels must read (a histogram's Gaussianised copy, or the texture itself);
+- :func:`projection_args`: triplanar projection options as ``ProjectionArgs``;
+- per-UV inputs: :func:`vec2_array`, :func:`lod_inputs`, :func:`resolve_layer`, :func:`mip_levels`.
+
+Every error names the public function (``func``) whose argument is wrong.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import warp as wp
+
+from warptex._validate import as_float, as_float_array, param_array
+from warptex.histogram import GAUSSIAN_MEAN, LUT_RANGE
+from warptex.kernels import projection as kp
+from warptex.kernels import sampling as ks
+from warptex.kernels import stochastic as kst
+from warptex.options import Address, Filter, Method, Sampler, Stochastic
+from warptex.texture import Texture, TextureArray
+
+_FILTER_IDS = {Filter.NEAREST: ks.FILTER_NEAREST, Filter.BILINEAR: ks.FILTER_BILINEAR, Filter.TRILINEAR: ks.FILTER_TRILINEAR}
+_ADDRESS_IDS = {Address.WRAP: ks.ADDRESS_WRAP, Address.CLAMP: ks.ADDRESS_CLAMP, Address.MIRROR: ks.ADDRESS_MIRROR, Address.BORDER: ks.ADDRESS_BORDER}
+_METHOD_IDS = {Method.NONE: kst.METHOD_NONE, Method.HASH4: kst.METHOD_HASH4, Method.CHEAP2: kst.METHOD_CHEAP2, Method.HEX: kst.METHOD_HEX}
+
+#: The splat maps' sampler: bilinear on level 0, clamped at the edges (texel centres read exactly).
+MAP_SAMPLER = Sampler(filter=Filter.BILINEAR, address=Address.CLAMP, max_lod=0.0)
+
+
+def sampler_args(func: str, sampler: Sampler, *, has_lod: bool) -> ks.SamplerArgs:
+    """``sampler`` for kernels that have a LOD (``has_lod``; always over a G-buffer) or not:
+    ``"auto"`` is trilinear with one, bilinear without; trilinear without one is an error."""
+    filt = sampler.filter
+    if filt == Filter.AUTO:
+        filt = Filter.TRILINEAR if has_lod else Filter.BILINEAR
+    if filt == Filter.TRILINEAR and not has_lod:
+        raise ValueError(f"{func}(): filter='trilinear' needs lod= or uv_dx=/uv_dy=")
+    smp = ks.SamplerArgs()
+    smp.filter = _FILTER_IDS[filt]
+    smp.address = _ADDRESS_IDS[sampler.address]
+    smp.border = wp.vec4(*sampler.border)
+    smp.lod_bias, smp.min_lod, smp.max_lod = sampler.lod_bias, sampler.min_lod, sampler.max_lod
+    return smp
+
+
+def mip_levels(lod: float, smp: ks.SamplerArgs, num_levels: int) -> tuple[int, float]:
+    """``(level, fraction)`` that ``lod`` reads through ``smp``: the kernels' ``mip_levels`` in the
+    same float32 arithmetic, so a uniform LOD reads exactly the levels the per-sample kernel would."""
+    f32 = np.float32
+    level = f32(lod) + f32(smp.lod_bias)
+    level = min(max(f32(smp.min_lod), level), f32(smp.max_lod))  # wp.clamp(x, a, b) = fmin(fmax(a, x), b)
+    level = min(max(f32(0.0), level), f32(num_levels - 1))
+    if smp.filter == ks.FILTER_TRILINEAR:
+        base = np.floor(level)
+        return int(base), float(f32(level - base))
+    return int(np.floor(level + f32(0.5))), 0.0
+
+
+def stochastic_args(func: str, option: Stochastic, texture: TextureArray, sampler: Sampler) -> tuple[kst.StochasticArgs, TextureArray]:
+    """``(args, sampled)``: ``option`` for kernels, and the texture they must sample:
+    ``histogram.texture`` when the option has a histogram (checked against ``texture``), else
+    ``texture``. Any method but ``"none"`` needs a periodic address mode."""
+    if option.method != Method.NONE and sampler.address not in (Address.WRAP, Address.MIRROR):
+        raise ValueError(f"{func}(): stochastic sampling needs address 'wrap' or 'mirror' (a periodic texture), got {sampler.address.value!r}")
+    args = kst.StochasticArgs()
+    args.method = _METHOD_IDS[option.method]
+    args.seed = wp.uint32(option.seed)
+    args.blend_lo, args.blend_hi = option.blend_window
+    args.mirror = int(option.mirror)
+    args.noise_frequency, args.noise_levels = option.noise_frequency, option.noise_levels
+    args.contrast, args.rotation = option.contrast, option.rotation
+    args.histogram, args.mean, args.lut_size, args.lut_levels, args.decorrelate = 0, GAUSSIAN_MEAN, 0, 0, 0
+    args.lut_lo, args.lut_hi = LUT_RANGE
+    args.channels = texture.channels
+    # Unused arrays are empty rather than null: wp.Tape walks every array field of a struct.
+    args.lut = wp.empty(0, dtype=float, device=texture.device)
+    args.basis = wp.empty(0, dtype=wp.mat33, device=texture.device)
+    args.centre = wp.empty(0, dtype=wp.vec3, device=texture.device)
+    histogram = option.histogram
+    if histogram is None:
+        return args, texture
+    h = histogram.texture
+    have = (h.num_layers, h.height, h.width, h.channels)
+    want = (texture.num_layers, texture.height, texture.width, texture.channels)
+    if have != want:
+        raise ValueError(f"{func}(): the stochastic histogram was built for (layers, H, W, C) = {have}, the texture is {want}")
+    if h.device != texture.device:
+        raise ValueError(f"{func}(): the stochastic histogram is on {h.device} but the texture is on {texture.device}")
+    args.histogram, args.lut, args.lut_size, args.lut_levels = 1, histogram.lut, histogram.lut_size, histogram.levels
+    if histogram.decorrelate:
+        args.decorrelate, args.basis, args.centre = 1, histogram.basis, histogram.centre
+    return args, h
+
+
+def projection_args(func: str, *, tiling, sharpness, offsets, mirror_fix, weights, object_to_world=None, device=None) -> kp.ProjectionArgs:
+    """The projection options of a triplanar technique (or of splat layers mapped triplanar),
+    checked and packed; ``object_to_world`` (a 4×4 affine matrix) projects object space."""
+    proj = kp.ProjectionArgs()
+    proj.tiling = param_array(func, "tiling", tiling, ((1,), (3,)), device, nonzero=True)
+    proj.sharpness = param_array(func, "sharpness", sharpness, ((1,),), device, nonnegative=True)
+    proj.offsets = param_array(func, "offsets", np.zeros((3, 2)) if offsets is None else offsets, ((3, 2),), device)
+    proj.mirror_fix = int(bool(mirror_fix))
+    proj.weights = weights
+    to_object, normal_to_object, normal_to_world = _space_matrices(func, object_to_world)
+    proj.world_to_object = wp.mat44(*to_object.reshape(-1))
+    proj.normal_to_object = wp.mat33(*normal_to_object.reshape(-1))
+    proj.normal_to_world = wp.mat33(*normal_to_world.reshape(-1))
+    proj.object_space = int(object_to_world is not None)
+    return proj
+
+
+def _space_matrices(func: str, object_to_world):
+    """``(world_to_object 4×4, normal world→object 3×3, normal object→world 3×3)``: identities in
+    world space (``object_to_world is None``)."""
+    if object_to_world is None:
+        eye = np.eye(4)
+        return eye, eye[:3, :3], eye[:3, :3]
+    m = np.asarray(as_float_array(func, "object_to_world", object_to_world), np.float64)
+    if m.shape != (4, 4) or not np.isfinite(m).all():
+        raise ValueError(f"{func}(): object_to_world must be a finite 4x4 matrix, got shape {m.shape}")
+    if not np.allclose(m[3], [0, 0, 0, 1]):
+        raise ValueError(f"{func}(): object_to_world must be affine (last row 0, 0, 0, 1), got {m[3].tolist()}")
+    linear = m[:3, :3]
+    if abs(np.linalg.det(linear)) < 1e-12:
+        raise ValueError(f"{func}(): object_to_world is singular")
+    # Normals transform by the inverse transpose of the position transform.
+    return np.linalg.inv(m), linear.T, np.linalg.inv(linear).T
+
+
+# -- per-UV inputs (sample, stochastic) ------------------------------------------------------------
+
+
+def vec2_array(func: str, name: str, value, device) -> wp.array:
+    """``value`` as a contiguous ``wp.array`` of ``vec2`` (a view when it already is one)."""
+    if isinstance(value, wp.array):
+        if value.dtype != wp.vec2:
+            raise TypeError(f"{func}(): {name} must be a wp.array of wp.vec2, got dtype {wp.types.type_repr(value.dtype)}")
+        if value.device != device:
+            raise ValueError(f"{func}(): {name} is on {value.device} but the texture is on {device}")
+        if not value.is_contiguous:
+            raise ValueError(f"{func}(): {name} must be contiguous")
+        return value
+    arr = as_float_array(func, name, value)
+    if arr.ndim < 1 or arr.shape[-1] != 2:
+        raise ValueError(f"{func}(): {name} must have shape (..., 2), got {arr.shape}")
+    return wp.array(np.ascontiguousarray(arr), dtype=wp.vec2, device=device)
+
+
+def _per_sample(func: str, name: str, value, shape, dtype, device) -> wp.array:
+    """A per-sample array of ``dtype`` matching the sample ``shape``."""
+    if isinstance(value, wp.array):
+        if value.dtype != dtype or value.shape != shape or value.device != device:
+            raise ValueError(
+                f"{func}(): {name} must be a wp.array of {wp.types.type_repr(dtype)} with shape {shape} "
+                f"on {device}, got {wp.types.type_repr(value.dtype)} {value.shape} on {value.device}"
+            )
+        return value
+    np_dtype = np.float32 if dtype == wp.float32 else np.int32
+    arr = np.asarray(value)
+    if dtype == wp.int32 and not np.issubdtype(arr.dtype, np.integer):
+        raise TypeError(f"{func}(): {name} must hold integers, got dtype {arr.dtype}")
+    if dtype == wp.float32:
+        arr = as_float_array(func, name, arr)
+    if arr.shape != shape:
+        raise ValueError(f"{func}(): {name} must have shape {shape} (one per UV), got {arr.shape}")
+    return wp.array(np.ascontiguousarray(arr, dtype=np_dtype), dtype=dtype, device=device)
+
+
+def lod_inputs(func: str, lod, uv_dx, uv_dy, shape, device):
+    """``(lod_source, constant_lod, lods, uv_dx, uv_dy)`` for a kernel, flattened, validated."""
+    count = math.prod(shape)
+    if lod is not None and (uv_dx is not None or uv_dy is not None):
+        raise ValueError(f"{func}(): pass either lod= or uv_dx=/uv_dy=, not both")
+    if (uv_dx is None) != (uv_dy is None):
+        raise ValueError(f"{func}(): uv_dx and uv_dy must be given together")
+    if uv_dx is not None:
+        dx = vec2_array(func, "uv_dx", uv_dx, device)
+        dy = vec2_array(func, "uv_dy", uv_dy, device)
+        for name, d in (("uv_dx", dx), ("uv_dy", dy)):
+            if d.shape != shape:
+                raise ValueError(f"{func}(): {name} must have the shape of uv {shape}, got {d.shape}")
+        return ks.LOD_DERIVATIVES, 0.0, None, dx.reshape((count,)), dy.reshape((count,))
+    if isinstance(lod, (int, float, np.integer, np.floating)) and not isinstance(lod, bool):
+        return ks.LOD_CONSTANT, as_float(func, "lod", lod), None, None, None
+    if lod is not None:
+        lods = _per_sample(func, "lod", lod, shape, wp.float32, device).reshape((count,))
+        return ks.LOD_PER_SAMPLE, 0.0, lods, None, None
+    return ks.LOD_NONE, 0.0, None, None, None
+
+
+def resolve_layer(func: str, texture: TextureArray, layer, shape, device):
+    """``(constant_layer, per_sample_layers_or_None)`` for ``layer``, validated against ``texture``;
+    per-sample layers come flattened to one entry per UV, as the kernels read them."""
+    if layer is None:
+        if isinstance(texture, Texture) or texture.num_layers == 1:
+            return 0, None
+        raise ValueError(f"{func}(): layer is required for a TextureArray of {texture.num_layers} layers")
+    if isinstance(layer, (int, np.integer)) and not isinstance(layer, bool):
+        if not 0 <= layer < texture.num_layers:
+            raise ValueError(f"{func}(): layer must be in [0, {texture.num_layers - 1}], got {layer}")
+        return int(layer), None
+    return 0, _per_sample(func, "layer", layer, shape, wp.int32, device).reshape((math.prod(shape),))
