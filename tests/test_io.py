@@ -1,6 +1,10 @@
 """Tests for warptex.io: sRGB curves, PNG/EXR reading and writing, errors, atomic writes."""
 
 import os
+import struct
+import subprocess
+import sys
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -126,10 +130,59 @@ def test_png_row_zero_is_top(tmp_path):
     assert np.all(back[0] == 1.0) and np.all(back[1:] == 0.0)
 
 
-def test_png_nan_and_out_of_range(tmp_path):
-    image = np.array([[np.nan, -3.0, 7.0, np.inf, -np.inf, 0.5]], dtype=np.float32)
+def test_png_out_of_range_is_clipped_and_nan_is_an_error(tmp_path):
+    image = np.array([[-3.0, 7.0, np.inf, -np.inf, 0.5]], dtype=np.float32)
     write_png(tmp_path / "clip.png", image, data=True)
-    np.testing.assert_array_equal(raw_pixels(tmp_path / "clip.png")[1], [[0, 0, 255, 255, 0, 128]])
+    np.testing.assert_array_equal(raw_pixels(tmp_path / "clip.png")[1], [[0, 255, 255, 0, 128]])
+    image[0, 1] = np.nan
+    with pytest.raises(ValueError, match=r"^write_png\(\).* 1 NaN"):
+        write_png(tmp_path / "nan.png", image)
+    assert not (tmp_path / "nan.png").exists()
+
+
+def _png_bytes(codes: np.ndarray) -> bytes:
+    """A PNG of 16-bit ``codes`` [H, W, C] (C = 2, 3, 4), written here byte by byte with Paeth-
+    filtered rows (what image editors write), independently of the reader under test."""
+    h, w, c = codes.shape
+    rows = codes.astype(">u2").view(np.uint8).reshape(h, w * c * 2).astype(np.int32)
+    bpp = 2 * c
+    left, up, up_left = np.zeros_like(rows), np.zeros_like(rows), np.zeros_like(rows)
+    left[:, bpp:], up[1:], up_left[1:, bpp:] = rows[:, :-bpp], rows[:-1], rows[:-1, :-bpp]
+    p = left + up - up_left
+    pa, pb, pc = np.abs(p - left), np.abs(p - up), np.abs(p - up_left)
+    predictor = np.where((pa <= pb) & (pa <= pc), left, np.where(pb <= pc, up, up_left))
+    filtered = ((rows - predictor) % 256).astype(np.uint8)
+    raw = b"".join(b"\x04" + row.tobytes() for row in filtered)
+
+    def chunk(kind, payload):
+        return struct.pack(">I", len(payload)) + kind + payload + struct.pack(">I", zlib.crc32(kind + payload))
+
+    colour_type = {2: 4, 3: 2, 4: 6}[c]
+    header = struct.pack(">IIBBBBB", w, h, 16, colour_type, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b"")
+
+
+@pytest.mark.parametrize("channels", [2, 3, 4])
+@pytest.mark.parametrize("data", [False, True])
+def test_16bit_colour_png_keeps_16_bits(tmp_path, channels, data):
+    codes = np.random.default_rng(channels).integers(0, 65536, size=(9, 11, channels), dtype=np.uint16)
+    codes[0, 0] = 0
+    codes[0, 1] = 65535
+    codes[0, 2] = 257 * 3 + 1  # differs from its 8-bit truncation
+    path = tmp_path / "normal16.png"
+    path.write_bytes(_png_bytes(codes))
+    expected = expected_linear(codes, 65535, data, has_alpha=channels in (2, 4))
+    np.testing.assert_allclose(read_image(path, data=data), expected, rtol=0, atol=1e-7)
+
+    write_png(tmp_path / "again.png", expected, data=data, bits=16)  # and back, 16 bits per channel
+    np.testing.assert_allclose(read_image(tmp_path / "again.png", data=data), expected, rtol=0, atol=1e-7)
+    with Image.open(tmp_path / "again.png") as im:
+        assert im.size == (11, 9)
+
+    broken = tmp_path / "broken16.png"
+    broken.write_bytes(path.read_bytes()[:60])
+    with pytest.raises(ValueError, match=r"^read_image\(\).*broken16"):
+        read_image(broken)
 
 
 def test_read_pillow_modes_and_channel_conversion(tmp_path):
@@ -324,7 +377,10 @@ def test_read_errors(tmp_path):
     truncated.write_bytes(data[: len(data) // 2])
     bad_exr = tmp_path / "bad.exr"
     bad_exr.write_bytes(b"\x76\x2f\x31\x01" + b"\0" * 40)
-    for path in (text, empty, truncated, bad_exr):
+    write_exr(tmp_path / "good.exr", noise)
+    cut_exr = tmp_path / "cut.exr"  # OpenEXR reads no part at all from this one
+    cut_exr.write_bytes((tmp_path / "good.exr").read_bytes()[:400])
+    for path in (text, empty, truncated, bad_exr, cut_exr):
         with pytest.raises(ValueError, match=r"^read_image\(\)") as info:
             read_image(path)
         assert str(path) in str(info.value)
@@ -351,7 +407,7 @@ def test_read_errors(tmp_path):
     (np.array([[object(), object()]]), {}, TypeError),
     (np.array([["a", "b"]]), {}, TypeError),
     (np.zeros((2, 2)), {"bits": 12}, ValueError),
-    (np.zeros((2, 2, 3)), {"bits": 16}, ValueError),
+    (np.full((2, 2, 3), np.nan), {}, ValueError),
 ])
 def test_write_png_errors(tmp_path, image, kwargs, exc):
     with pytest.raises(exc, match=r"^write_png\(\)"):
@@ -383,6 +439,20 @@ def test_failed_write_keeps_old_file(tmp_path, monkeypatch, writer, ext, target,
         writer(path, np.zeros((4, 4, 3), np.float32))
     assert path.read_bytes() == before
     assert os.listdir(tmp_path) == [path.name]
+
+
+def test_temporaries_of_dead_writers_are_removed(tmp_path):
+    """A writer killed mid-write (SIGKILL) leaves its hidden temporary; the next write of the same
+    file removes it, but not one a live process is still writing."""
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    stale = tmp_path / f".img.png.{dead.pid}-0123456789ab.tmp.png"
+    live = tmp_path / f".img.png.{os.getppid()}-0123456789ab.tmp.png"
+    other = tmp_path / f".other.png.{dead.pid}-0123456789ab.tmp.png"
+    for path in (stale, live, other):
+        path.write_bytes(b"x" * 1000)
+    write_png(tmp_path / "img.png", np.zeros((2, 2)))
+    assert sorted(os.listdir(tmp_path)) == sorted([live.name, other.name, "img.png"])
 
 
 def test_write_creates_parents_and_overwrites(tmp_path):

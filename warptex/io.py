@@ -17,7 +17,9 @@ Conventions used throughout ``warptex``:
 from __future__ import annotations
 
 import os
+import re
 import secrets
+import time
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 
@@ -85,8 +87,10 @@ def read_image(path, *, data: bool = False, channels=None) -> np.ndarray:
     16-bit grayscale (modes ``I;16``/``I``, clipped to [0, 65535]) by 65535,
     and 32-bit float images (mode ``F``) are returned unchanged. Palette
     images become RGB (RGBA if they have transparency), ``LA`` keeps its two
-    channels (gray, alpha), other modes such as CMYK become RGB. Pillow reads
-    16-bit colour PNGs at 8-bit precision. Multi-frame files yield their
+    channels (gray, alpha), other modes such as CMYK become RGB. 16-bit
+    colour PNGs (gray+alpha, RGB, RGBA: common for normal and height maps),
+    which Pillow would read at 8 bits, are decoded with libpng (through
+    ``imagecodecs``) and divided by 65535. Multi-frame files yield their
     first frame; EXIF orientation is not applied.
 
     Args:
@@ -110,10 +114,14 @@ def read_image(path, *, data: bool = False, channels=None) -> np.ndarray:
     """
     path = _checked_input_path(path, "read_image")
     with open(path, "rb") as f:
-        if f.read(4) == _EXR_MAGIC:
-            return _read_exr(path, channels, "read_image")[0]
+        head = f.read(26)
+    if head[:4] == _EXR_MAGIC:
+        return _read_exr(path, channels, "read_image")[0]
     if channels is not None:
         channels = _channel_count(channels)
+    if _is_sixteen_bit_colour_png(head):
+        image, has_alpha = _read_sixteen_bit_png(path, data)
+        return image if channels is None else _convert_channels(image, has_alpha, channels)
     try:
         with Image.open(path) as im:
             im.load()
@@ -171,22 +179,22 @@ def exr_channel_names(path) -> tuple[str, ...]:
 def write_png(path, image, *, data: bool = False, bits: int = 8) -> None:
     """Write an image as PNG, atomically, creating missing parent directories.
 
-    Values are clipped to [0, 1] (NaN is written as 0), colour channels are
-    sRGB-encoded unless ``data=True`` (alpha never is), then rounded to the
-    nearest 8- or 16-bit code. Channel counts 1-4 are gray, gray+alpha, RGB
-    and RGBA.
+    Values are clipped to [0, 1] (so +-inf become 1 and 0), colour channels
+    are sRGB-encoded unless ``data=True`` (alpha never is), then rounded to
+    the nearest 8- or 16-bit code. Channel counts 1-4 are gray, gray+alpha,
+    RGB and RGBA. NaN has no colour and is an error.
 
     Args:
         path: ``str`` or ``os.PathLike`` of the file to write.
         image: Array-like of real numbers shaped [H, W] or [H, W, C], C in
             1..4, nominally in [0, 1] (also for integer dtypes).
         data: If True, write values as-is instead of sRGB-encoding colour.
-        bits: 8, or 16 for 1-channel images (Pillow cannot write 16-bit
-            colour PNGs).
+        bits: 8 or 16 per channel (16-bit colour is encoded with libpng
+            through ``imagecodecs``, as Pillow cannot).
 
     Raises:
-        ValueError: On a wrong rank or channel count, an empty image, a bad
-            ``bits`` value, or ``bits=16`` with more than one channel.
+        ValueError: On a wrong rank or channel count, an empty image, NaN
+            values or a bad ``bits`` value.
         TypeError: If ``image`` is not numeric.
     """
     path = _checked_output_path(path, "write_png")
@@ -196,15 +204,23 @@ def write_png(path, image, *, data: bool = False, bits: int = 8) -> None:
         raise ValueError(f"write_png(): image must have 1-4 channels, got {n}")
     if bits not in (8, 16) or isinstance(bits, bool):
         raise ValueError(f"write_png(): bits must be 8 or 16, got {bits!r}")
-    if bits == 16 and n != 1:
-        raise ValueError(f"write_png(): 16-bit PNG is supported for 1-channel images only, got {n} "
-                         "channels (Pillow cannot encode 16-bit colour); use bits=8 or write_exr()")
-    values = np.clip(np.nan_to_num(image, nan=0.0), 0.0, 1.0)
+    nans = int(np.isnan(image).sum())
+    if nans:
+        raise ValueError(f"write_png(): image has {nans} NaN value(s) of {image.size}; a PNG has no NaN "
+                         "(replace them, e.g. np.nan_to_num, or write_exr() to keep them)")
+    values = np.clip(image, 0.0, 1.0)
     if not data:
         n_colour = n - 1 if n in (2, 4) else n
         values[..., :n_colour] = linear_to_srgb(values[..., :n_colour])
     maxval, dtype = (255, np.uint8) if bits == 8 else (65535, np.uint16)
     codes = np.rint(values * maxval).astype(dtype)
+    if bits == 16 and n > 1:
+        import imagecodecs
+
+        encoded = imagecodecs.png_encode(codes)
+        with _atomic_output(path) as tmp, open(tmp, "wb") as f:
+            f.write(encoded)
+        return
     pil_image = Image.fromarray(codes[..., 0] if n == 1 else codes)
     with _atomic_output(path) as tmp:
         pil_image.save(tmp, format="PNG")
@@ -272,6 +288,8 @@ def _read_exr(path: str, channels, fn: str) -> tuple[np.ndarray, tuple[str, ...]
     try:
         exr = OpenEXR.File(path, separate_channels=True)
         parts = exr.parts
+        if not parts:  # OpenEXR reports a cut-short file by reading no parts
+            raise RuntimeError("no readable image in it: truncated or corrupt")
         first = parts[0]
         available = dict(first.channels)
         if channels is None:
@@ -312,6 +330,38 @@ def _default_exr_channels(available: Mapping, path: str, fn: str) -> tuple[str, 
     return names
 
 
+def _is_sixteen_bit_colour_png(head: bytes) -> bool:
+    """Whether a file starting with ``head`` (26 bytes) is a PNG of 16-bit gray+alpha, RGB or RGBA:
+    the signature, then the IHDR chunk's bit depth (byte 24) and colour type (byte 25)."""
+    return len(head) == 26 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR" and head[24] == 16 and head[25] in (2, 4, 6)
+
+
+def _read_sixteen_bit_png(path: str, data: bool) -> tuple[np.ndarray, bool]:
+    import imagecodecs
+
+    try:
+        with open(path, "rb") as f:
+            codes = imagecodecs.png_decode(f.read())
+    except Exception as exc:
+        raise ValueError(f"read_image(): cannot decode '{path}' as an image: {exc}") from exc
+    codes = codes.reshape(codes.shape[0], codes.shape[1], -1)
+    if codes.dtype != np.uint16 or codes.shape[-1] not in (2, 3, 4) or codes.size == 0:
+        raise ValueError(f"read_image(): cannot decode '{path}' as a 16-bit PNG: got {codes.dtype} {codes.shape}")
+    return _codes_to_linear(codes, 65535, data)
+
+
+def _codes_to_linear(codes: np.ndarray, maxval: int, data: bool) -> tuple[np.ndarray, bool]:
+    """Integer codes ``[H, W, C]`` to float32 in [0, 1], colour sRGB-decoded unless ``data``; also
+    whether the last channel is alpha (2 or 4 channels)."""
+    has_alpha = codes.shape[-1] in (2, 4)
+    scale = np.arange(maxval + 1, dtype=np.float64) / maxval
+    linear_lut = scale.astype(np.float32)
+    image = (linear_lut if data else srgb_to_linear(scale))[codes]
+    if has_alpha:
+        image[..., -1] = linear_lut[codes[..., -1]]
+    return image, has_alpha
+
+
 def _pil_to_array(im: Image.Image, data: bool) -> tuple[np.ndarray, bool]:
     """Decode a loaded Pillow image to float32 [H, W, C]; also return whether the last channel is alpha."""
     if im.mode == "F":
@@ -325,13 +375,7 @@ def _pil_to_array(im: Image.Image, data: bool) -> tuple[np.ndarray, bool]:
         if im.mode != target:
             im = im.convert(target)
         codes, maxval = np.asarray(im).reshape(im.height, im.width, -1), 255
-    has_alpha = codes.shape[-1] in (2, 4)
-    scale = np.arange(maxval + 1, dtype=np.float64) / maxval
-    linear_lut = scale.astype(np.float32)
-    image = (linear_lut if data else srgb_to_linear(scale))[codes]
-    if has_alpha:
-        image[..., -1] = linear_lut[codes[..., -1]]
-    return image, has_alpha
+    return _codes_to_linear(codes, maxval, data)
 
 
 def _channel_count(channels) -> int:
@@ -409,13 +453,15 @@ def _checked_output_path(path, fn: str) -> str:
 def _atomic_output(path: str) -> Iterator[str]:
     """Yield a temporary path next to ``path``; on success move it onto ``path``, on error remove it.
 
-    The temporary name keeps the real extension (``.name.<random>.tmp.png``)
-    in case an encoder picks the format from it, and is created with
+    The temporary name (``.name.<pid>-<random>.tmp.png``) keeps the real extension in case an
+    encoder picks the format from it, and names the writing process: temporaries of ``path`` left
+    by a process that no longer exists (killed mid-write) are removed here. It is created with
     ``os.open`` so the final file gets the usual umask-based permissions.
     """
     directory, base = os.path.split(os.path.abspath(path))
     os.makedirs(directory, exist_ok=True)
-    tmp = os.path.join(directory, f".{base}.{secrets.token_hex(6)}.tmp{os.path.splitext(base)[1]}")
+    _remove_stale_temporaries(directory, base)
+    tmp = os.path.join(directory, f".{base}.{os.getpid()}-{secrets.token_hex(6)}.tmp{os.path.splitext(base)[1]}")
     os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
     try:
         yield tmp
@@ -428,3 +474,34 @@ def _atomic_output(path: str) -> Iterator[str]:
         except FileNotFoundError:
             pass
         raise
+
+
+def _remove_stale_temporaries(directory: str, base: str) -> None:
+    pattern = re.compile(re.escape(f".{base}.") + r"(\d+)-[0-9a-f]{12}\.tmp" + re.escape(os.path.splitext(base)[1]) + "$")
+    for name in os.listdir(directory):
+        match = pattern.match(name)
+        if match and not process_alive(int(match.group(1)), os.path.join(directory, name)):
+            try:
+                os.remove(os.path.join(directory, name))
+            except OSError:
+                pass
+
+
+def process_alive(pid: int, path: str | os.PathLike) -> bool:
+    """Whether process ``pid``, which made ``path``, may still be writing it. POSIX: whether the
+    process exists on this machine. Windows, where probing a process can end it: whether ``path``
+    is younger than a day."""
+    if pid == os.getpid():
+        return True
+    if os.name != "nt":
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        except OSError:
+            pass  # exists but is not ours (PermissionError), or we cannot tell: leave it
+        return True
+    try:
+        return time.time() - os.stat(path).st_mtime < 86400.0
+    except OSError:
+        return False
