@@ -85,6 +85,8 @@ def raster_kernel(
             ns = wp.normalize(ns)
         else:
             ns = ng
+        if wp.dot(ns, ng) < 0.0:  # a triangle wound against its neighbours (its vertex normals point
+            ns = -ns  # out of its back): shade it from its front, as its neighbours are
         if wp.dot(ng, d) > 0.0:  # the back of the triangle faces the camera
             ng = -ng
             ns = -ns

@@ -229,13 +229,18 @@ def lod_from_derivatives(tex: TextureView, uv_dx: wp.vec2, uv_dy: wp.vec2) -> fl
 
     The footprint is the longer of the two screen-space derivative vectors, measured in level-0
     texels (the isotropic rule of the OpenGL specification). A zero footprint gives a very negative
-    LOD (about -50), never ``-inf``, so its gradient stays finite.
+    LOD (about -50), never ``-inf``, so its gradient stays finite; a footprint too large for a float
+    (derivatives past ~1e19 texels: the coarsest level) gives 64, never ``+inf``; a NaN derivative
+    gives NaN.
     """
     size = wp.vec2(float(tex.level_width[0]), float(tex.level_height[0]))
     a = wp.cw_mul(uv_dx, size)
     b = wp.cw_mul(uv_dy, size)
-    rho2 = wp.max(wp.max(wp.dot(a, a), wp.dot(b, b)), 1.0e-30)
-    return 0.5 * wp.log2(rho2)
+    aa = wp.dot(a, a)
+    bb = wp.dot(b, b)
+    if wp.isnan(aa + bb):  # wp.max would drop a NaN
+        return wp.nan
+    return 0.5 * wp.log2(wp.min(wp.max(wp.max(aa, bb), 1.0e-30), FLOAT_MAX))
 
 
 @wp.func
@@ -395,12 +400,13 @@ def sample_lod_derivatives(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: 
 @wp.func
 def lod_scale_slope(tex: TextureView, uv_dx: wp.vec2, uv_dy: wp.vec2, scale: float) -> float:
     """``d/ds lod_from_derivatives(tex, uv_dx · s, uv_dy · s)`` at ``s = scale``: ``1 / (s ln 2)``,
-    or 0 where the footprint is below the floor that keeps the LOD finite."""
+    or 0 where the footprint is outside the floor and ceiling that keep the LOD finite."""
     size = wp.vec2(float(tex.level_width[0]), float(tex.level_height[0]))
     a = wp.cw_mul(uv_dx * scale, size)
     b = wp.cw_mul(uv_dy * scale, size)
+    rho2 = wp.max(wp.dot(a, a), wp.dot(b, b))
     slope = 0.0
-    if wp.max(wp.dot(a, a), wp.dot(b, b)) > 1.0e-30:
+    if rho2 > 1.0e-30 and rho2 < FLOAT_MAX:
         slope = 1.0 / (scale * 0.6931471805599453)
     return slope
 

@@ -289,3 +289,20 @@ def test_gltf_scenes_are_flattened_with_their_node_transforms(tmp_path):
     mesh = load_mesh(tmp_path / "scene.glb")
     assert len(mesh.faces) == 24
     np.testing.assert_allclose(mesh.bounds, [[-10.5, -0.5, -0.5], [10.5, 0.5, 0.5]], atol=1e-6)
+
+
+def test_flipped_triangles_shade_like_their_neighbours(tmp_path):
+    """A sphere with every fifth triangle wound the other way (as scanned meshes such as the
+    bunny's ears have): the shading normal of every pixel faces its triangle's front, so the
+    flipped triangles shade as their neighbours do, no dark specks."""
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    faces = np.asarray(sphere.faces).copy()
+    faces[::5] = faces[::5, ::-1]
+    flipped = trimesh.Trimesh(sphere.vertices, faces, process=False)
+    camera = wt.look_at((0.0, 0.5, 3.0), (0.0, 0.0, 0.0), fov_y=45.0, resolution=(64, 64))
+    g = wt.rasterize(flipped, camera)
+    covered = g.mask.numpy() > 0
+    normal, geometric = g.normal.numpy()[covered], g.geometric_normal.numpy()[covered]
+    assert ((normal * geometric).sum(-1) > 0.5).all()
+    agreement = (normal * wt.rasterize(sphere, camera).normal.numpy()[covered]).sum(-1)
+    assert (agreement > 0.0).all() and (agreement > 0.95).mean() > 0.99  # vertex normals shared with flipped faces lean a little

@@ -248,6 +248,25 @@ def test_non_finite_uvs_give_nan_and_never_crash(rng):
             assert np.isnan(out[:3]).all() and np.isfinite(out[3]).all()
 
 
+def test_derivatives_nan_give_nan_and_huge_give_the_coarsest_level(rng):
+    """A NaN derivative is a NaN LOD (as a NaN ``lod`` is); derivatives too large for their squared
+    length to be a float (a tiling of 1e30) read the coarsest level, never NaN."""
+    image = _image(rng, 16, 16)
+    tex = wt.Texture(image)
+    uv = rng.uniform(-2, 3, (6, 2)).astype(np.float32)
+    small = np.full((6, 2), 0.01, np.float32)
+    nan_dx = small.copy()
+    nan_dx[1, 0] = np.nan
+    out = wt.sample(tex, uv, uv_dx=nan_dx, uv_dy=small).numpy()
+    assert np.isnan(out[1]).all() and np.isfinite(np.delete(out, 1, axis=0)).all()
+    out = wt.sample(tex, uv, uv_dy=nan_dx, uv_dx=small).numpy()
+    assert np.isnan(out[1]).all()
+    coarsest = image.mean(axis=(0, 1))  # the 1x1 level of a power-of-two chain
+    for scale in (1e19, 1e25, 3e38):
+        out = wt.sample(tex, uv, uv_dx=small * scale, uv_dy=small).numpy()
+        np.testing.assert_allclose(out, np.broadcast_to(coarsest, out.shape), rtol=1e-5)
+
+
 # -- bad input ------------------------------------------------------------------------------------------
 
 
