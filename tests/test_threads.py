@@ -79,6 +79,45 @@ def test_threaded_launch_gives_the_same_gradients(threads):
     assert np.abs(grads[0][0]).sum() > 0 and grads[0][1][0] != 0
 
 
+@pytest.mark.parametrize("technique", ["triplanar", "sample"])  # generated adjoint; hand-written scatter
+def test_threaded_gradients_are_the_same_bits_whichever_thread_is_slow(technique, threads, monkeypatch):
+    """Reproducible runs: each thread accumulates the same chunks in the same order whatever the
+    timing, so gradients summed from per-thread copies are bit-identical run to run (here one
+    thread or the other is held up, which lets the other take more chunks when they are handed
+    out first come, first served)."""
+    import time
+
+    g = _sphere()
+    weights = np.random.default_rng(3).random((256, 256, 4)).astype(np.float32)
+    uv = _uv(65536)
+    real_run = _launch._Split.run
+    grads = []
+    for slow in (0, 1):
+
+        def run(self, work, slow=slow, **kw):
+            def held_up(worker, k):
+                if worker == slow:
+                    time.sleep(0.05)
+                work(worker, k)
+
+            return real_run(self, held_up, **kw)
+
+        monkeypatch.setattr(_launch._Split, "run", run)
+        threads(2)
+        tex = _texture(requires_grad=True)
+        tiling = wp.array([3.0], dtype=float, requires_grad=True)
+        tape = wp.Tape()
+        with tape:
+            tex.update()
+            out = wt.triplanar(g, tex, tiling=tiling) if technique == "triplanar" else wt.sample(tex, uv, lod=1.3)
+        out.grad.assign(weights.reshape(out.shape))
+        tape.backward()
+        grads.append((tex.grad(), tiling.grad.numpy()))
+    np.testing.assert_array_equal(grads[1][0], grads[0][0])
+    np.testing.assert_array_equal(grads[1][1], grads[0][1])
+    assert np.abs(grads[0][0]).sum() > 0
+
+
 def test_small_launches_are_not_split():
     out = wp.zeros((100, 1), dtype=float)
     calls = []
