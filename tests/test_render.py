@@ -1,12 +1,15 @@
 """The main job (``warptex render``): outputs of the default terrain and of user meshes, and errors."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
+import trimesh
 
 from warptex import io
 from warptex.apps.cli import main
 from warptex.gbuffer_io import load_gbuffer
-from warptex.apps.render import run_render
+from warptex.apps.render import default_camera, run_render
 from warptex.apps.terrain_material import noise_texture
 from warptex.apps.shade import lambert
 from warptex.gbuffer import GBuffer
@@ -72,3 +75,41 @@ def test_render_reports_bad_input(tmp_path, capsys):
     assert "load_mesh(): file not found" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["render", "--eye", "1,2"])
+
+
+def test_render_exr_is_premultiplied(tmp_path):
+    assert main(["--out", str(tmp_path), "--resolution", "24x32"]) == 0
+    rgba = io.read_image(tmp_path / "render.exr", channels=("R", "G", "B", "A"))
+    sky = rgba[..., 3] == 0
+    assert sky.any() and (~sky).any()
+    assert (rgba[sky] == 0).all(), "the sky is transparent black: composites over anything"
+    assert (rgba[~sky, :3] > 0).all()
+
+
+def _quad_with_material(folder: Path, colour) -> Path:
+    """A unit quad in the XZ plane with UVs and an OBJ material whose ``map_Kd`` is a flat colour."""
+    io.write_png(folder / "kd.png", np.tile(np.asarray(colour, np.float32), (8, 8, 1)))
+    (folder / "quad.mtl").write_text("newmtl paint\nKd 1 1 1\nmap_Kd kd.png\n")
+    path = folder / "quad.obj"
+    path.write_text(
+        "mtllib quad.mtl\nv -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl paint\nf 1/1 4/4 3/3 2/2\n"
+    )
+    return path
+
+
+def test_an_obj_materials_map_kd_is_its_texture(tmp_path):
+    mesh = _quad_with_material(tmp_path, (0.8, 0.1, 0.05))
+    paths = run_render(tmp_path / "out", mesh_path=mesh, resolution=(24, 32), progress=False)
+    albedo = io.read_image(paths[1])
+    covered = load_gbuffer(paths[4]).mask.numpy() > 0
+    assert covered.mean() > 0.1
+    np.testing.assert_allclose(albedo[covered].mean(axis=0), [0.8, 0.1, 0.05], atol=0.02)
+
+
+def test_the_default_view_is_from_the_front():
+    """glTF's convention (and most exporters'): a model faces +Z. The default three-quarter view
+    looks from the front, the right and above (the glTF Duck, facing +X+Z, shows its face)."""
+    box = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
+    camera = default_camera(box, (64, 64))
+    offset = np.asarray(camera.eye) - box.bounds.mean(axis=0)
+    assert offset[2] > 0 and offset[1] > 0 and offset[0] > 0

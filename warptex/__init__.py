@@ -21,6 +21,31 @@ The command line (``warptex render | demo | fit``) and its helpers (the procedur
 previews, plots) are in :mod:`warptex.apps`, which the library never imports.
 """
 
+import importlib.util as _importlib_util
+import sys as _sys
+from pathlib import Path as _Path
+
+
+def _import_kernels_of_a_checkout() -> None:
+    """Installed, the Warp code is the subpackage ``warptex.kernels``; in a source checkout it is the
+    folder ``kernels/`` beside ``warptex/``. Register that folder as ``warptex.kernels`` so that a
+    checkout imports exactly as an install does (``python -m warptex``, ``python -m pytest``)."""
+    package = _Path(__file__).resolve().parent
+    checkout_kernels = package.parent / "kernels" / "__init__.py"
+    if (package / "kernels").is_dir() or "warptex.kernels" in _sys.modules or not checkout_kernels.is_file():
+        return
+    spec = _importlib_util.spec_from_file_location("warptex.kernels", checkout_kernels, submodule_search_locations=[str(checkout_kernels.parent)])
+    module = _importlib_util.module_from_spec(spec)
+    _sys.modules["warptex.kernels"] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del _sys.modules["warptex.kernels"]
+        raise
+
+
+_import_kernels_of_a_checkout()
+
 from warptex import fit, io
 from warptex._launch import get_num_threads, precompile, set_num_threads
 from warptex.atlas import Atlas, export_index_maps, pack_atlas, splat_atlas

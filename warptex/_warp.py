@@ -10,13 +10,23 @@ oldest Warp release warptex supports as well):
 - :func:`struct_fields` and :func:`struct_like`: the fields of a ``@wp.struct`` instance, and a new
   instance of the same struct. A threaded backward pass gives each worker copies of the kernel's
   struct arguments whose arrays accumulate their gradients privately.
+
+And :func:`init_quietly`, for the command line: Warp's native library prints a warning to the
+process's stderr on every start on a machine without a CUDA driver, which a CPU user can do
+nothing about.
 """
 
 from __future__ import annotations
 
+import os
+import sys
+import tempfile
 from typing import Any
 
 import warp as wp
+
+#: What Warp's native library prints at start-up where there is no CUDA driver (a CPU machine).
+NO_CUDA_DRIVER_WARNING = "Warp CUDA warning: Could not find or load the NVIDIA CUDA driver."
 
 
 def _runtime():
@@ -37,3 +47,36 @@ def struct_fields(value) -> dict[str, Any]:
 def struct_like(value):
     """A new, default-initialised instance of the struct of ``value``."""
     return value._cls()
+
+
+def init_quietly() -> None:
+    """``wp.init()``, leaving out of stderr the one line Warp's native library prints where there is
+    no CUDA driver; anything else it prints goes through. The line is written by C code straight
+    to file descriptor 2, so descriptor 2 is pointed at a temporary file while Warp starts. Also
+    no start-up banner and no compile log (``log_level``, Warp 1.19; ``quiet`` before)."""
+    if hasattr(wp, "LOG_WARNING"):
+        wp.config.log_level = wp.LOG_WARNING
+    else:
+        wp.config.quiet = True
+    if _initialised():
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile(mode="w+b") as captured:
+        os.dup2(captured.fileno(), 2)
+        try:
+            wp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        captured.seek(0)
+        text = captured.read().decode("utf-8", "replace")
+    kept = [line for line in text.splitlines(keepends=True) if not line.startswith(NO_CUDA_DRIVER_WARNING)]
+    if kept:
+        sys.stderr.write("".join(kept))
+        sys.stderr.flush()
+
+
+def _initialised() -> bool:
+    src = getattr(wp, "_src", None)
+    return (src.context if src is not None else wp.context).runtime is not None

@@ -79,7 +79,8 @@ def _frame(func: str, eye, target, up):
     return eye, forward, right, np.cross(right, forward)
 
 
-def _resolution(func: str, resolution) -> tuple[int, int]:
+def checked_resolution(func: str, resolution) -> tuple[int, int]:
+    """``resolution`` as ``(height, width)`` ints > 0, or a ValueError naming ``func``."""
     try:
         h, w = resolution
     except (TypeError, ValueError):
@@ -102,7 +103,7 @@ def look_at(eye, target, up=(0.0, 1.0, 0.0), fov_y: float = 45.0, resolution=(51
     fov = as_float("look_at", "fov_y", fov_y)
     if not 0.0 < fov < 180.0:
         raise ValueError(f"look_at(): fov_y must be in (0, 180) degrees, got {fov}")
-    return Camera(eye, forward, right, cam_up, _resolution("look_at", resolution), fov_y=fov)
+    return Camera(eye, forward, right, cam_up, checked_resolution("look_at", resolution), fov_y=fov)
 
 
 def orthographic(eye, target, up=(0.0, 1.0, 0.0), height: float = 2.0, resolution=(512, 512)) -> Camera:
@@ -111,4 +112,4 @@ def orthographic(eye, target, up=(0.0, 1.0, 0.0), height: float = 2.0, resolutio
     extent = as_float("orthographic", "height", height)
     if extent <= 0:
         raise ValueError(f"orthographic(): height must be positive, got {extent}")
-    return Camera(eye, forward, right, cam_up, _resolution("orthographic", resolution), ortho_height=extent)
+    return Camera(eye, forward, right, cam_up, checked_resolution("orthographic", resolution), ortho_height=extent)

@@ -127,17 +127,28 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
     """Load a mesh file (OBJ, PLY, STL, GLB/GLTF, ...) as one ``trimesh.Trimesh``.
 
     Scenes are flattened with their node transforms; materials and UVs are kept where trimesh can
-    merge them.
+    merge them. The mesh is checked as :func:`rasterize` checks it (triangles, finite vertices,
+    face indices in range), so a bad file is reported as such, naming it.
+
+    Raises:
+        FileNotFoundError: no such file. ValueError: a folder, or a file that holds no usable mesh.
+        TypeError: ``path`` is not a path.
     """
-    path = os.fspath(path)
+    try:
+        path = os.fspath(path)
+    except TypeError:
+        raise TypeError(f"load_mesh(): path must be str or os.PathLike, got {type(path).__name__}") from None
+    if os.path.isdir(path):
+        raise ValueError(f"load_mesh(): {path!r} is a folder, not a mesh file")
     if not os.path.isfile(path):
         raise FileNotFoundError(f"load_mesh(): file not found: {path!r}")
     try:
         loaded = trimesh.load(path, force="mesh", process=False)
     except Exception as err:  # trimesh raises many types for bad files
-        raise ValueError(f"load_mesh(): cannot read {path!r} as a mesh: {err}") from err
+        raise ValueError(f"load_mesh(): cannot read {path!r} as a mesh: {' '.join(str(err).split())}") from err
     if not isinstance(loaded, trimesh.Trimesh):
         raise ValueError(f"load_mesh(): {path!r} holds no triangle mesh (got {type(loaded).__name__})")
+    checked_geometry(f"load_mesh(): {path!r}:", loaded)
     return loaded
 
 
@@ -184,16 +195,24 @@ def _checked_mesh(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Vertices, faces and smooth vertex normals of a valid mesh, or a ``TypeError``/``ValueError``."""
     if not isinstance(mesh, trimesh.Trimesh):
         raise TypeError(f"rasterize(): mesh must be a trimesh.Trimesh or a path, got {type(mesh).__name__}")
-    vertices = np.asarray(mesh.vertices, np.float64)
-    faces = np.asarray(mesh.faces, np.int64)
+    vertices, faces = checked_geometry("rasterize():", mesh)
+    return vertices, faces, vertex_normals(mesh)
+
+
+def checked_geometry(prefix: str, mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices ``[V, 3]`` float64 and faces ``[F, 3]`` int64 of ``mesh``, or a ``ValueError``
+    starting with ``prefix`` (e.g. ``"rasterize():"``): no triangles, a non-finite vertex, a
+    face index out of range."""
+    vertices = np.asarray(mesh.vertices, np.float64).reshape(-1, 3)
+    faces = np.asarray(mesh.faces, np.int64).reshape(-1, 3)
     if len(faces) == 0 or len(vertices) == 0:
-        raise ValueError(f"rasterize(): the mesh is empty ({len(vertices)} vertices, {len(faces)} faces)")
+        raise ValueError(f"{prefix} the mesh is empty ({len(vertices)} vertices, {len(faces)} faces)")
     if not np.isfinite(vertices).all():
         bad = int(np.argwhere(~np.isfinite(vertices).all(axis=1))[0, 0])
-        raise ValueError(f"rasterize(): vertex {bad} is not finite: {vertices[bad].tolist()}")
+        raise ValueError(f"{prefix} vertex {bad} is not finite: {vertices[bad].tolist()}")
     if faces.min() < 0 or faces.max() >= len(vertices):
-        raise ValueError(f"rasterize(): face indices must be in [0, {len(vertices) - 1}], got [{faces.min()}, {faces.max()}]")
-    return vertices, faces, vertex_normals(mesh)
+        raise ValueError(f"{prefix} face indices must be in [0, {len(vertices) - 1}], got [{faces.min()}, {faces.max()}]")
+    return vertices, faces
 
 
 def vertex_normals(mesh: trimesh.Trimesh) -> np.ndarray:

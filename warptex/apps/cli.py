@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 
@@ -19,11 +20,43 @@ def _resolution(text: str) -> tuple[int, int]:
     return h, w
 
 
+def _count(minimum: int):
+    """An argparse type: an int >= ``minimum``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
+        return value
+
+    return parse
+
+
+def _number(low: float, high: float | None):
+    """An argparse type: a finite float in ``(low, high)`` (``high=None``: no upper bound)."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not (math.isfinite(value) and value > low and (high is None or value < high)):
+            raise argparse.ArgumentTypeError(f"must be a finite number > {low:g}" + ("" if high is None else f" and < {high:g}") + f", got {text!r}")
+        return value
+
+    return parse
+
+
 def _vector(text: str) -> tuple[float, float, float]:
     try:
         x, y, z = (float(v) for v in text.split(","))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected three numbers x,y,z, got {text!r}") from None
+    if not all(math.isfinite(v) for v in (x, y, z)):
+        raise argparse.ArgumentTypeError(f"expected three finite numbers x,y,z, got {text!r}")
     return x, y, z
 
 
@@ -42,8 +75,8 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--resolution", type=_resolution, default=(512, 512), help="image size HxW (default: 512x512)")
     render.add_argument("--eye", type=_vector, default=None, help="camera position x,y,z (default: framing view)")
     render.add_argument("--target", type=_vector, default=None, help="camera look-at point x,y,z (default: mesh centre)")
-    render.add_argument("--fov", type=float, default=45.0, help="vertical field of view in degrees (default: 45)")
-    render.add_argument("--tiling", type=float, default=None, help="texture repeats across UV0 (default: 8, or 1 for an embedded texture)")
+    render.add_argument("--fov", type=_number(0.0, 180.0), default=45.0, help="vertical field of view in degrees (default: 45)")
+    render.add_argument("--tiling", type=_number(0.0, None), default=None, help="texture repeats across UV0 (default: 8, or 1 for an embedded texture)")
     render.add_argument("--seed", type=int, default=0, help="terrain and procedural texture seed (default: 0)")
     render.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0 (default: Warp's default)")
     demo = commands.add_parser(
@@ -83,7 +116,7 @@ def _height_blend(text: str) -> float | None:
 def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``warptex fit`` and ``examples/fit_splat.py`` (see :func:`fit_arguments`)."""
     parser.add_argument("--out", default="out/fit", help="output folder (default: %(default)s)")
-    parser.add_argument("--iters", type=int, default=240, help="Adam iterations, coarse to fine (default: %(default)s)")
+    parser.add_argument("--iters", type=_count(1), default=240, help="Adam iterations, coarse to fine (default: %(default)s)")
     parser.add_argument("--resolution", type=_resolution, default=(192, 256), help="synthetic view size HxW (default: 192x256)")
     parser.add_argument("--views", type=int, default=2, choices=(1, 2, 3), help="synthetic views: 1 three-quarter, 2 + top-down, 3 + opposite corner (default: 2)")
     parser.add_argument("--seed", type=int, default=0, help="terrain and layer seed (default: 0)")
@@ -95,14 +128,14 @@ def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--layers", nargs="+", default=None, help="layer images, RGBA with height in alpha (default: the terrain's four)")
     parser.add_argument("--initial-maps", nargs="+", default=None, help="splat-map images to start from (default: uniform weights)")
     parser.add_argument("--map-size", type=_resolution, default=(129, 129), help="fitted splat-map size HxW (default: 129x129)")
-    parser.add_argument("--map-channels", type=int, default=4, help="channels per splat map (default: 4)")
-    parser.add_argument("--maps", type=int, default=None, help="number of splat maps (default: enough for the layers)")
+    parser.add_argument("--map-channels", type=_count(1), default=4, help="channels per splat map (default: 4)")
+    parser.add_argument("--maps", type=_count(1), default=None, help="number of splat maps (default: enough for the layers)")
     parser.add_argument("--tiling", type=float, default=None, help="initial tiling of your targets (default: 1/6)")
     parser.add_argument("--no-fit-tiling", dest="fit_tiling", action="store_false", help="keep the tiling fixed")
     parser.add_argument("--projection", choices=("uv", "world_xz", "triplanar"), default="triplanar", help="layer projection (default: triplanar)")
     parser.add_argument("--height-blend", type=_height_blend, default=0.2, help="height-blend transition, or none (default: 0.2)")
     parser.add_argument("--sharpness", type=float, default=4.0, help="triplanar sharpness (default: 4)")
-    parser.add_argument("--report-every", type=int, default=20, help="print iter, loss, psnr every N iterations (default: 20)")
+    parser.add_argument("--report-every", type=_count(0), default=20, help="print iter, loss, psnr every N iterations (default: 20)")
     parser.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0 (default: Warp's default)")
 
 
@@ -147,46 +180,85 @@ def fit_report(summary: dict) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or argv[0] not in COMMANDS + ("-h", "--help"):
-        argv.insert(0, "render")  # the default command; its options may be given without naming it
-    args = build_parser().parse_args(argv)
-
-    import warp as wp
-
-    wp.config.log_level = wp.LOG_WARNING  # no start-up banner or compile log in CLI output
-    from warptex.apps.demo import run_demo
-    from warptex.apps.render import run_render
+def version() -> str:
+    """``warptex X.Y.Z (warp-lang A.B.C, Python D.E.F)``, without importing Warp."""
+    from importlib import metadata
 
     try:
-        if args.command == "fit":
-            from warptex.apps.fit_demo import run_fit
+        ours = metadata.version("warptex")
+    except metadata.PackageNotFoundError:  # a checkout that is not installed
+        import re
+        from pathlib import Path
 
-            summary = run_fit(args.out, **fit_arguments(args))
-            print(fit_report(summary))
-            paths = summary["files"]
-        elif args.command == "demo":
-            paths = run_demo(args.out, texture_path=args.texture, resolution=args.resolution, device=args.device)
-        else:
-            paths = run_render(
-                args.out,
-                mesh_path=args.mesh,
-                texture_path=args.texture,
-                resolution=args.resolution,
-                eye=args.eye,
-                target=args.target,
-                fov_y=args.fov,
-                tiling=args.tiling,
-                seed=args.seed,
-                device=args.device,
-            )
-    except (OSError, ValueError, TypeError) as err:
-        print(f"warptex: error: {err}", file=sys.stderr)
+        match = re.search(r'^version = "([^"]+)"', (Path(__file__).resolve().parents[2] / "pyproject.toml").read_text(), re.M)
+        ours = match.group(1) if match else "unknown"
+    try:
+        warp = metadata.version("warp-lang")
+    except metadata.PackageNotFoundError:
+        warp = "not installed"
+    return f"warptex {ours} (warp-lang {warp}, Python {sys.version.split()[0]})"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; the exit status: 0, 1 on an error (one line on stderr, no files
+    written), 2 on bad options (argparse), 130 on Ctrl-C."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] not in COMMANDS + ("-h", "--help", "--version"):
+        argv.insert(0, "render")  # the default command; its options may be given without naming it
+    parser = build_parser()
+    parser.add_argument("--version", action="version", version=version())
+    args = parser.parse_args(argv)
+    try:
+        paths = _run(args)
+    except KeyboardInterrupt:
+        print("warptex: interrupted; no files were written", file=sys.stderr)
+        return 130
+    except (OSError, ValueError, TypeError, MemoryError) as err:
+        print(f"warptex: error: {_one_line(err)}", file=sys.stderr)
+        return 1
+    except RuntimeError as err:
+        if "alloc" not in str(err).lower():  # Warp reports a failed allocation so; anything else is a bug
+            raise
+        print(f"warptex: error: out of memory: {_one_line(err)}", file=sys.stderr)
         return 1
     for path in paths:
         print(f"wrote {path}")
     return 0
+
+
+def _one_line(err: BaseException) -> str:
+    text = " ".join(str(err).split())  # a message spread over lines (OpenEXR's, NumPy's) on one
+    return text or ("out of memory" if isinstance(err, MemoryError) else type(err).__name__)
+
+
+def _run(args: argparse.Namespace) -> list:
+    from warptex._warp import init_quietly
+
+    init_quietly()  # no start-up banner or compile log, no "no CUDA driver" warning on a CPU machine
+    if args.command == "fit":
+        from warptex.apps.fit_demo import run_fit
+
+        summary = run_fit(args.out, **fit_arguments(args))
+        print(fit_report(summary))
+        return summary["files"]
+    if args.command == "demo":
+        from warptex.apps.demo import run_demo
+
+        return run_demo(args.out, texture_path=args.texture, resolution=args.resolution, device=args.device)
+    from warptex.apps.render import run_render
+
+    return run_render(
+        args.out,
+        mesh_path=args.mesh,
+        texture_path=args.texture,
+        resolution=args.resolution,
+        eye=args.eye,
+        target=args.target,
+        fov_y=args.fov,
+        tiling=args.tiling,
+        seed=args.seed,
+        device=args.device,
+    )
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from warptex import io
+from warptex.apps.output import check_output_folder, output_set
 from warptex.apps.shade import labelled, to_rgb
 from warptex.options import Sampler
 from warptex.sampling import sample
@@ -77,6 +78,7 @@ def run_demo(out_dir: str | os.PathLike = "out", *, texture_path=None, resolutio
     Returns:
         The paths written.
     """
+    check_output_folder("run_demo", out_dir)
     image = checker_texture() if texture_path is None else io.read_image(texture_path)
     tex = Texture(image, device=device)
     h, w = resolution
@@ -106,10 +108,10 @@ def run_demo(out_dir: str | os.PathLike = "out", *, texture_path=None, resolutio
     bottom = np.zeros((quad, top.shape[1], 3), np.uint8)
     row = np.concatenate(modes, axis=1)
     bottom[:, : row.shape[1]] = row
-    out_dir = Path(out_dir)
-    png, exr = out_dir / "demo.png", out_dir / "demo_trilinear.exr"
-    io.write_png(png, np.concatenate([top, bottom]).astype(np.float32) / 255.0, data=True)
-    io.write_exr(exr, renders["trilinear, LOD from derivatives"])
+    with output_set(out_dir) as staging:
+        io.write_png(staging / "demo.png", np.concatenate([top, bottom]).astype(np.float32) / 255.0, data=True)
+        io.write_exr(staging / "demo_trilinear.exr", renders["trilinear, LOD from derivatives"])
+    png, exr = Path(out_dir) / "demo.png", Path(out_dir) / "demo_trilinear.exr"
     samples = 3 * h * w + 4 * quad * quad
     print(f"sampled {samples:,} texels in {elapsed:.3f} s (a first run also compiles the kernels)")
     return [png, exr]

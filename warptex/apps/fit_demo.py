@@ -21,19 +21,23 @@ import numpy as np
 import warp as wp
 
 from warptex import io
-from warptex.camera import look_at, orthographic
+from warptex.camera import checked_resolution, look_at, orthographic
 from warptex.fit import FitView, SplatParameters, check_inputs, default_stages, fit_splat, psnr, render_views
 from warptex.apps.fit_report import heat_image, legend, splat_coverage, weights_image, write_curve, write_json
 from warptex.gbuffer import rasterize
 from warptex.gbuffer_io import load_gbuffer
 from warptex._validate import check_layer_count
 from warptex.layers import splat
+from warptex.apps.output import check_memory, check_output_folder, output_set
 from warptex.apps.render import TERRAIN_GRID, terrain_camera
 from warptex.apps.shade import side_by_side
 from warptex.apps.terrain import terrain
 from warptex.apps.terrain_material import LAYER_NAMES, terrain_layers, terrain_splat_maps
 from warptex.texture import TextureArray
 
+#: Peak memory of a fit, measured (peak RSS, 2 views of 192x256 to 768x1024): ~300 MB plus ~630 B
+#: per view pixel (G-buffers, renders, per-thread gradients); with a margin.
+FIT_BYTES = (400e6, 800.0)
 TRUE_TILING = 1.0 / 6.0  # the default scene's layer repeats per world unit
 #: A texel counts as covered when the views' bilinear lookups give it at least this much weight
 #: in all (about one pixel's worth): such a texel's weights change the images.
@@ -124,6 +128,15 @@ def run_fit(
     """
     func = "run_fit"
     start = time.perf_counter()
+    check_output_folder(func, out_dir)
+    if isinstance(iters, bool) or not isinstance(iters, (int, np.integer)) or iters < 1:
+        raise ValueError(f"{func}(): iters must be an int >= 1, got {iters!r}")
+    if targets is None and gbuffers is None:
+        h, w = resolution = checked_resolution(func, resolution)
+        count = views if isinstance(views, (int, np.integer)) else 1  # terrain_cameras() checks it
+        check_memory(func, f"a fit of {count} {h}x{w} view(s)", FIT_BYTES[0] + FIT_BYTES[1] * count * h * w)
+    if isinstance(report_every, bool) or not isinstance(report_every, (int, np.integer)) or report_every < 0:
+        raise ValueError(f"{func}(): report_every must be an int >= 0 (0: never), got {report_every!r}")
     device = wp.get_device(device)
     options = {"projection": projection, "height_blend": height_blend, "sharpness": sharpness}
     if targets is not None or gbuffers is not None:
@@ -131,6 +144,11 @@ def run_fit(
     else:
         problem = synthetic_problem(func, resolution=resolution, views=views, seed=seed, tiling_error=tiling_error, layers=layers, options=options, device=device)
     params = initial_parameters(func, problem, initial_maps=initial_maps, map_size=map_size, map_channels=map_channels, num_maps=num_maps, device=device)
+    if problem.synthetic and tuple(params.size) != problem.true_maps.shape[:2]:
+        raise ValueError(
+            f"{func}(): the synthetic fit is scored against the true {problem.true_maps.shape[0]}x{problem.true_maps.shape[1]} splat maps, "
+            f"so the fitted maps must be that size too, got {params.size[0]}x{params.size[1]} (map_size or initial_maps)"
+        )
     stages = default_stages(iters, fit_tiling=fit_tiling)
 
     check_inputs(problem.views, problem.layers, params, device=device)  # fit_splat's checks, before anything renders
@@ -139,10 +157,11 @@ def run_fit(
     fitted = render_views(problem.views, problem.layers, params, splat_options=options)
 
     summary = measure(problem, params, result, entropy=entropy, loss=loss)
-    files = write_outputs(Path(out_dir), problem, params, result, initial, fitted, summary, stages)
-    summary["seconds_total"] = time.perf_counter() - start
-    summary["files"] = files + [str(Path(out_dir) / "summary.json")]
-    write_json(Path(out_dir) / "summary.json", summary)
+    with output_set(out_dir) as staging:  # every file appears together, or none does
+        names = write_outputs(staging, problem, params, result, initial, fitted, summary, stages) + ["summary.json"]
+        summary["seconds_total"] = time.perf_counter() - start
+        summary["files"] = [str(Path(out_dir) / name) for name in names]
+        write_json(staging / "summary.json", summary)
     return summary
 
 
@@ -206,7 +225,11 @@ def initial_parameters(func: str, problem: Problem, *, initial_maps, map_size, m
     count = problem.layers.num_layers
     if initial_maps is None:
         return SplatParameters(count, map_size, channels=map_channels, num_maps=num_maps, tiling=problem.initial_tiling, device=device)
-    maps = np.stack([io.read_image(p, data=True) for p in initial_maps])
+    images = [io.read_image(p, data=True) for p in initial_maps]
+    if len({image.shape for image in images}) > 1:
+        shapes = ", ".join(f"{Path(p).name}: {image.shape[0]}x{image.shape[1]}x{image.shape[2]}" for p, image in zip(initial_maps, images))
+        raise ValueError(f"{func}(): the initial splat maps must share one size and channel count, got {shapes}")
+    maps = np.stack(images)
     check_layer_count(func, count, TextureArray(maps, mipmaps=False, device=device))
     weights = maps.transpose(1, 2, 0, 3).reshape(*maps.shape[1:3], -1)[..., :count]
     weights = np.maximum(weights, 0.0) + 1e-6  # no all-zero texel
@@ -260,12 +283,13 @@ def measure(problem: Problem, params: SplatParameters, result, *, entropy: float
 
 
 def write_outputs(out: Path, problem: Problem, params: SplatParameters, result, initial, fitted, summary: dict, stages) -> list[str]:
-    """The pictures, the fitted maps and the curve (module docstring of ``warptex fit``); the paths written."""
+    """The pictures, the fitted maps and the curve (module docstring of ``warptex fit``) in the
+    folder ``out``; the names of the files written."""
     files = []
 
     def png(name, image, data=False):
         io.write_png(out / name, image, data=data)
-        files.append(str(out / name))
+        files.append(name)
 
     gbufs = [v.gbuffer for v in problem.views]
     images = [v.target for v in problem.views]
@@ -285,9 +309,9 @@ def write_outputs(out: Path, problem: Problem, params: SplatParameters, result, 
     weights = params.weights()
     png("splat_fitted.png", weights_image(weights))
     for m, data in enumerate(params.maps.numpy()):  # the fitted maps as data, e.g. for initial_maps
-        path = out / ("splat_fitted.exr" if params.maps.num_layers == 1 else f"splat_fitted_{m}.exr")
-        io.write_exr(path, data)
-        files.append(str(path))
+        name = "splat_fitted.exr" if params.maps.num_layers == 1 else f"splat_fitted_{m}.exr"
+        io.write_exr(out / name, data)
+        files.append(name)
     panels = {f"fitted ({legend(problem.names)})": weights_image(weights), "coverage (white: >= 4 px)": heat_image(_coverage(problem, params), vmax=4.0)}
     if problem.synthetic:
         png("splat_true.png", weights_image(problem.true_maps))
@@ -300,5 +324,5 @@ def write_outputs(out: Path, problem: Problem, params: SplatParameters, result, 
         marks.append((at, name))
         at += stage.iters
     write_curve(out / "curve.png", result.history, stages=marks)
-    files.append(str(out / "curve.png"))
+    files.append("curve.png")
     return files

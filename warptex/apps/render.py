@@ -21,10 +21,11 @@ from warptex.kernels import layers as kl
 from warptex.kernels import raster as kr
 from warptex.kernels import sampling as ks
 from warptex.kernels import triplanar as kt
-from warptex.camera import Camera, look_at
+from warptex.camera import Camera, checked_resolution, look_at
 from warptex.gbuffer import GBuffer, load_mesh, rasterize
 from warptex.gbuffer_io import save_gbuffer
 from warptex.sampling import sample
+from warptex.apps.output import check_memory, check_output_folder, output_set
 from warptex.apps.shade import SKY, lambert, to_rgb
 from warptex.apps.terrain import terrain
 from warptex.texture import Texture, TextureArray
@@ -34,12 +35,15 @@ from warptex.triplanar import triplanar
 
 
 TERRAIN_GRID = (129, 129)  # the default terrain's vertex grid, one splat texel per vertex
+#: Peak memory of a render, measured (peak RSS, 512² to 2048²): ~200 MB plus ~260 B per pixel
+#: (G-buffer, mip chains, images); with a margin.
+RENDER_BYTES = (300e6, 320.0)
 
 
 def default_camera(mesh: trimesh.Trimesh, resolution, fov_y: float = 45.0) -> Camera:
     """A three-quarter view from above, far enough that the mesh's bounding sphere fits the view."""
     centre, radius = mesh.bounds.mean(axis=0), np.linalg.norm(mesh.extents) / 2
-    direction = np.array([-0.55, 0.6, 0.75])
+    direction = np.array([0.55, 0.6, 0.75])  # from the front (+Z, glTF's convention) and the right
     half_fov = np.radians(fov_y) / 2 * min(1.0, resolution[1] / resolution[0])
     distance = 1.05 * radius / np.sin(half_fov)
     return look_at(centre + direction / np.linalg.norm(direction) * distance, centre, fov_y=fov_y, resolution=resolution)
@@ -70,7 +74,12 @@ def _terrain_albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, tiling: float | Non
 
 
 def _embedded_texture(mesh: trimesh.Trimesh) -> np.ndarray | None:
-    image = getattr(getattr(mesh.visual, "material", None), "baseColorTexture", None)
+    """The mesh's colour texture (sRGB-decoded): glTF's base colour, or an OBJ material's
+    ``map_Kd``; ``None`` without one."""
+    material = getattr(mesh.visual, "material", None)
+    image = getattr(material, "baseColorTexture", None)
+    if image is None:
+        image = getattr(material, "image", None)
     if image is None:
         return None
     return io.srgb_to_linear(np.asarray(image.convert("RGB"), np.float32) / 255.0)
@@ -119,6 +128,11 @@ def run_render(
     """
     from tqdm import tqdm  # a progress bar over the stages: the first run compiles kernels for seconds
 
+    check_output_folder("run_render", out_dir)
+    h, w = resolution = checked_resolution("run_render", resolution)
+    check_memory("run_render", f"a {h}x{w} render", RENDER_BYTES[0] + RENDER_BYTES[1] * h * w)
+    if tiling is not None and not (np.isfinite(tiling) and tiling > 0):
+        raise ValueError(f"run_render(): tiling must be a finite number > 0, got {tiling!r}")
     stages = tqdm(total=5, desc="render", unit="stage", disable=False if progress else None if progress is None else True)
     stages.set_postfix_str("kernels")
     preload(_kernels(mesh_path is None and texture_path is None), device)  # a cold start compiles them side by side
@@ -154,13 +168,14 @@ def run_render(
     stages.update()
 
     stages.set_postfix_str("write")
-    out = Path(out_dir)
-    paths = [out / "render.png", out / "albedo.png", out / "normals.png", out / "render.exr", out / "gbuffer.exr"]
-    io.write_png(paths[0], lit)
-    io.write_png(paths[1], albedo)
-    io.write_png(paths[2], np.where(covered, g.normal.numpy() * 0.5 + 0.5, 0.0), data=True)
-    io.write_exr(paths[3], np.concatenate([lit, covered.astype(np.float32)], axis=-1))
-    save_gbuffer(paths[4], g)
+    names = ["render.png", "albedo.png", "normals.png", "render.exr", "gbuffer.exr"]
+    with output_set(out_dir) as staging:  # all five files appear together, or none do
+        io.write_png(staging / names[0], lit)
+        io.write_png(staging / names[1], albedo)
+        io.write_png(staging / names[2], np.where(covered, g.normal.numpy() * 0.5 + 0.5, 0.0), data=True)
+        # premultiplied linear RGBA: the sky is transparent black, so it composites over anything
+        io.write_exr(staging / names[3], np.concatenate([np.where(covered, lit, 0.0), covered.astype(np.float32)], axis=-1))
+        save_gbuffer(staging / names[4], g)
     stages.update()
     stages.close()
-    return paths
+    return [Path(out_dir) / name for name in names]

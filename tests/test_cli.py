@@ -1,0 +1,197 @@
+"""The command line as a user meets it: a checkout that imports, --version, one-line errors that
+name the input and write nothing, Ctrl-C, atomic output sets."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from warptex import io
+from warptex.apps import output
+from warptex.apps.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+RENDER_FILES = ["albedo.png", "gbuffer.exr", "normals.png", "render.exr", "render.png"]
+SMALL = ["--resolution", "24x32"]
+
+
+def _python(code: str, cwd: Path) -> subprocess.CompletedProcess:
+    """``python -c code`` in ``cwd`` with this checkout first on the path and any editable-install
+    finder removed: the import a source checkout gets, installed or not."""
+    prelude = (
+        "import sys; "
+        "sys.meta_path[:] = [f for f in sys.meta_path if 'editable' not in repr(f).lower()]; "
+        f"sys.path.insert(0, {str(ROOT)!r}); "
+    )
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    return subprocess.run([sys.executable, "-c", prelude + code], cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
+
+
+def test_a_checkout_imports_its_kernels(tmp_path):
+    done = _python("import warptex, warptex.kernels.sampling as ks; print(warptex.__file__); print(ks.__file__)", tmp_path)
+    assert done.returncode == 0, done.stderr
+    package, kernels = done.stdout.split()
+    assert Path(package) == ROOT / "warptex" / "__init__.py"
+    assert Path(kernels) == ROOT / "kernels" / "sampling.py"
+
+
+def test_python_m_warptex_prints_its_version_without_warp_noise(tmp_path):
+    done = _python("import runpy, sys; sys.argv = ['warptex', '--version']; runpy.run_module('warptex', run_name='__main__')", tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("warptex 0.") and "warp-lang" in done.stdout
+    assert done.stderr == ""
+
+
+def test_cli_errors_are_one_line_without_warp_start_up_noise(tmp_path):
+    done = _python(f"import sys; from warptex.apps.cli import main; sys.exit(main(['--out', {str(tmp_path / 'out')!r}, '--mesh', {str(tmp_path)!r}]))", tmp_path)
+    assert done.returncode == 1
+    assert done.stderr.splitlines() == [f"warptex: error: load_mesh(): {str(tmp_path)!r} is a folder, not a mesh file"]
+    assert done.stdout == "" and not (tmp_path / "out").exists()
+
+
+def _obj(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize(
+    "name, text, message",
+    [
+        ("empty.obj", "# nothing here\n", "the mesh is empty"),
+        ("nan.obj", "v 0 0 0\nv 1 0 0\nv 0 nan 1\nf 1 2 3\n", "vertex 2 is not finite"),
+        ("points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n", "the mesh is empty"),
+    ],
+)
+def test_a_bad_mesh_is_named_before_the_camera_is_framed(tmp_path, capsys, name, text, message):
+    path = _obj(tmp_path / name, text)
+    out = tmp_path / "out"
+    assert main(["--out", str(out), "--mesh", str(path), *SMALL]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"warptex: error: load_mesh(): {str(path)!r}: ") and message in err[0], err
+    assert not out.exists()
+
+
+def test_a_truncated_exr_texture_is_a_clear_error(tmp_path, capsys):
+    io.write_exr(tmp_path / "whole.exr", np.random.default_rng(0).random((32, 32, 3)).astype(np.float32))
+    cut = tmp_path / "cut.exr"
+    cut.write_bytes((tmp_path / "whole.exr").read_bytes()[:400])
+    mesh = _obj(tmp_path / "tri.obj", "v 0 0 0\nv 1 0 0\nv 0 0 1\nf 1 3 2\n")
+    assert main(["--out", str(tmp_path / "out"), "--mesh", str(mesh), "--texture", str(cut), *SMALL]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"warptex: error: read_image(): cannot decode '{cut}'"), err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_resolution_beyond_memory_is_refused_up_front(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(output, "_available_memory", lambda: 2 * 2**30)
+    assert main(["--out", str(tmp_path / "out"), "--resolution", "100000x100000"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["warptex: error: run_render(): a 100000x100000 render needs about 2980.5 GiB of memory, but 2.0 GiB is available; use a smaller resolution"]
+    assert main(["fit", "--out", str(tmp_path / "out"), "--resolution", "20000x20000"]) == 1
+    assert "run_fit(): a fit of 2 20000x20000 view(s) needs about" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_failed_allocations_are_reported_not_raised(tmp_path, capsys, monkeypatch):
+    import warptex.apps.render as render
+
+    def fail(*args, **kwargs):
+        raise RuntimeError("Failed to allocate 8000000000 bytes on device 'cpu'")
+
+    monkeypatch.setattr(render, "rasterize", fail)
+    assert main(["--out", str(tmp_path / "out"), *SMALL]) == 1
+    assert capsys.readouterr().err.strip() == "warptex: error: out of memory: Failed to allocate 8000000000 bytes on device 'cpu'"
+    monkeypatch.setattr(render, "rasterize", lambda *a, **k: (_ for _ in ()).throw(RuntimeError("a bug")))
+    with pytest.raises(RuntimeError, match="a bug"):  # anything else is a bug and keeps its traceback
+        main(["--out", str(tmp_path / "out"), *SMALL])
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--tiling", "nan"], "argument --tiling: must be a finite number > 0"),
+        (["--tiling", "0"], "argument --tiling: must be a finite number > 0"),
+        (["--fov", "180"], "argument --fov: must be a finite number > 0 and < 180"),
+        (["--eye=1,inf,2"], "argument --eye: expected three finite numbers"),
+        (["fit", "--iters", "0"], "argument --iters: must be at least 1"),
+        (["fit", "--report-every", "-1"], "argument --report-every: must be at least 0"),
+    ],
+)
+def test_options_out_of_range_are_refused_by_the_parser(tmp_path, capsys, args, message):
+    with pytest.raises(SystemExit) as info:
+        main([*args, "--out", str(tmp_path / "out")])
+    assert info.value.code == 2 and message in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_fit_checks_map_sizes_before_writing_anything(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["fit", "--out", str(out), "--iters", "2", "--map-size", "2x2", *SMALL]) == 1
+    assert "scored against the true 129x129 splat maps, so the fitted maps must be that size too, got 2x2" in capsys.readouterr().err
+    io.write_exr(tmp_path / "a.exr", np.full((129, 129, 4), 0.25, np.float32))
+    io.write_exr(tmp_path / "b.exr", np.full((65, 65, 4), 0.25, np.float32))
+    assert main(["fit", "--out", str(out), "--iters", "2", "--initial-maps", str(tmp_path / "a.exr"), str(tmp_path / "b.exr"), *SMALL]) == 1
+    assert "must share one size and channel count, got a.exr: 129x129x4, b.exr: 65x65x4" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_a_huge_tiling_renders_finite_colours(tmp_path):
+    assert main(["--out", str(tmp_path), "--tiling", "1e30", *SMALL]) == 0
+    assert np.isfinite(io.read_image(tmp_path / "render.exr")).all()
+
+
+def test_ctrl_c_is_one_line_exit_130_and_keeps_the_previous_files(tmp_path, capsys, monkeypatch):
+    assert main(["--out", str(tmp_path), *SMALL]) == 0
+    before = {name: (tmp_path / name).read_bytes() for name in RENDER_FILES}
+    capsys.readouterr()
+    import warptex.apps.render as render
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(render, "save_gbuffer", interrupted)  # the last file: the others are written by then
+    assert main(["--out", str(tmp_path), "--seed", "5", *SMALL]) == 130
+    captured = capsys.readouterr()
+    assert captured.err.strip() == "warptex: interrupted; no files were written" and "wrote" not in captured.out
+    assert sorted(os.listdir(tmp_path)) == RENDER_FILES
+    assert {name: (tmp_path / name).read_bytes() for name in RENDER_FILES} == before
+
+
+def test_a_killed_runs_staging_folder_is_removed_by_the_next(tmp_path):
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    stale = tmp_path / f".warptex-{dead.pid}-0badc0de.partial"
+    stale.mkdir()
+    (stale / "render.exr").write_bytes(b"x" * 4096)
+    live = tmp_path / f".warptex-{os.getppid()}-0badc0de.partial"  # a run still going: kept
+    live.mkdir()
+    assert main(["--out", str(tmp_path), *SMALL]) == 0
+    assert sorted(os.listdir(tmp_path)) == sorted([live.name, *RENDER_FILES])
+
+
+def test_output_set_moves_files_only_when_all_are_written(tmp_path):
+    (tmp_path / "a.txt").write_text("old a")
+    with pytest.raises(ValueError):
+        with output.output_set(tmp_path) as staging:
+            (staging / "a.txt").write_text("new a")
+            raise ValueError("the second file failed")
+    assert os.listdir(tmp_path) == ["a.txt"] and (tmp_path / "a.txt").read_text() == "old a"
+    with output.output_set(tmp_path / "new") as staging:
+        (staging / "a.txt").write_text("new a")
+        (staging / "b.txt").write_text("new b")
+    assert sorted(os.listdir(tmp_path / "new")) == ["a.txt", "b.txt"]
+    with pytest.raises(OSError, match="is a file"):
+        with output.output_set(tmp_path / "a.txt"):
+            pass
+
+
+def test_an_output_folder_that_is_a_file_is_refused_before_the_work(tmp_path, capsys, monkeypatch):
+    import warptex.apps.render as render
+
+    monkeypatch.setattr(render, "rasterize", None)  # would fail if the render started
+    (tmp_path / "out").write_text("a file")
+    assert main(["--out", str(tmp_path / "out"), *SMALL]) == 1
+    assert capsys.readouterr().err.strip() == f"warptex: error: run_render(): the output folder {str(tmp_path / 'out')!r} is a file"

@@ -1,0 +1,85 @@
+"""A run's output files appear together or not at all.
+
+``warptex render``, ``demo`` and ``fit`` each write several files that belong together (a render
+and its G-buffer; fitted maps and their summary). :func:`output_set` stages them in a hidden
+folder inside the output folder and moves them into place only once every one is written, in one
+quick loop of renames (each atomic; the loop takes microseconds). An error or Ctrl-C removes the
+staging folder and leaves the previous run's files as they were. A staging folder left by a
+killed process (``SIGKILL``, power loss) is removed by the next run into the same folder.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import secrets
+import shutil
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
+
+from warptex import io
+
+_STAGING = re.compile(r"^\.warptex-(\d+)-[0-9a-f]+\.partial$")
+
+
+@contextmanager
+def output_set(out_dir: str | os.PathLike) -> Iterator[Path]:
+    """Stage a run's files: yields a folder to write them into; on success they are moved into
+    ``out_dir`` (created if missing), on any exception none are and the staging folder is removed.
+    Sub-folders are not supported: write files only."""
+    out = check_output_folder("output_set", out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    remove_stale_staging(out)
+    staging = out / f".warptex-{os.getpid()}-{secrets.token_hex(4)}.partial"
+    staging.mkdir()
+    try:
+        yield staging
+        for item in sorted(staging.iterdir()):
+            if not item.name.startswith("."):  # a writer's own hidden temporaries stay behind
+                os.replace(item, out / item.name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def check_output_folder(func: str, out_dir: str | os.PathLike) -> Path:
+    """``out_dir`` as a ``Path``, or an ``OSError`` naming ``func`` when it exists as a file: called
+    before a job's work, so that a bad folder is reported before the work is done."""
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"{func}(): the output folder {str(out)!r} is a file")
+    return out
+
+
+def remove_stale_staging(out: Path) -> list[Path]:
+    """Remove the staging folders in ``out`` whose process is gone; the paths removed."""
+    removed = []
+    for item in out.iterdir():
+        match = _STAGING.match(item.name)
+        if match and item.is_dir() and not io.process_alive(int(match.group(1)), item):
+            shutil.rmtree(item, ignore_errors=True)
+            removed.append(item)
+    return removed
+
+
+def check_memory(func: str, what: str, needed_bytes: float) -> None:
+    """Raise ``MemoryError`` naming ``what`` when a job needs more memory than this machine has
+    available (Linux: ``MemAvailable``; elsewhere the allocation itself reports it), instead of
+    letting the job run the machine out of memory or fail deep inside an allocation."""
+    available = _available_memory()
+    if available is not None and needed_bytes > available:
+        raise MemoryError(
+            f"{func}(): {what} needs about {needed_bytes / 2**30:.1f} GiB of memory, but "
+            f"{available / 2**30:.1f} GiB is available; use a smaller resolution"
+        )
+
+
+def _available_memory() -> int | None:
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
