@@ -170,10 +170,68 @@ def test_texture_properties(rng):
     assert wt.Texture(img, mipmaps=3).level_sizes == sizes[:3]
 
 
-def test_texture_accepts_2d_and_integer_images():
-    tex = wt.Texture(np.arange(12, dtype=np.uint8).reshape(3, 4))
+def test_texture_accepts_2d_images():
+    tex = wt.Texture(np.arange(12, dtype=np.float64).reshape(3, 4))
     assert tex.channels == 1 and tex.numpy().dtype == np.float32
-    np.testing.assert_array_equal(tex.numpy()[..., 0], np.arange(12).reshape(3, 4))  # values as given
+    np.testing.assert_array_equal(tex.numpy()[..., 0], np.arange(12).reshape(3, 4))  # float values as given
+
+
+@pytest.mark.parametrize("dtype, maxval", [(np.uint8, 255), (np.uint16, 65535)])
+@pytest.mark.parametrize("cls", [wt.Texture, wt.TextureArray])
+def test_uint8_and_uint16_texels_are_scaled_to_unit_range_as_read_image_does(tmp_path, cls, dtype, maxval):
+    codes = np.linspace(0, maxval, 12).astype(dtype).reshape(3, 4)
+    tex = cls(codes if cls is wt.Texture else codes[None])
+    got = tex.numpy() if cls is wt.Texture else tex.numpy()[0]
+    assert got.dtype == np.float32 and got.min() == 0.0 and got.max() == 1.0
+    write_png(tmp_path / "codes.png", codes / maxval, data=True, bits=8 if dtype is np.uint8 else 16)
+    np.testing.assert_array_equal(got, read_image(tmp_path / "codes.png", data=True))  # the same floats as the file
+    arr = wt.TextureArray([codes, codes.astype(np.float32) / maxval])  # a list of layers, mixed dtypes
+    np.testing.assert_array_equal(arr.numpy()[0], arr.numpy()[1])
+
+
+@pytest.mark.parametrize("dtype", [np.int8, np.int16, np.int32, np.int64, np.uint32, np.uint64])
+def test_other_integer_texels_are_refused(dtype):
+    with pytest.raises(TypeError, match=rf"Texture\(\): image has integer dtype {np.dtype(dtype)}; pass floats .*uint8 / uint16"):
+        wt.Texture(np.zeros((2, 2), dtype))
+    with pytest.raises(TypeError, match=rf"TextureArray\(\): layers has integer dtype {np.dtype(dtype)}"):
+        wt.TextureArray(np.zeros((1, 2, 2), dtype))
+    with pytest.raises(TypeError, match=rf"TextureArray\(\): layer 1 has integer dtype {np.dtype(dtype)}"):
+        wt.TextureArray([np.zeros((2, 2)), np.zeros((2, 2), dtype)])
+    with pytest.raises(TypeError, match=r"Texture\(\): image has integer dtype int64"):
+        wt.Texture([[0, 1], [1, 0]])  # Python ints: no scale can be guessed
+
+
+def test_ragged_nesting_is_a_clear_error():
+    with pytest.raises(ValueError, match=r"Texture\(\): image must be a rectangular array of numbers, got list"):
+        wt.Texture([[0.0, 1.0], [0.5]])
+    with pytest.raises(ValueError, match=r"TextureArray\(\): layer 1 must be a rectangular array of numbers"):
+        wt.TextureArray([np.zeros((2, 2)), [[0.0, 1.0], [0.5]]])
+
+
+def test_texture_array_from_textures_copies_their_level_0(rng):
+    images = [_image(rng, 8, 6, 4) for _ in range(3)]
+    textures = [wt.Texture(img, requires_grad=True) for img in images]
+    arr = wt.TextureArray(textures, mipmaps=2)
+    assert (arr.num_layers, arr.height, arr.width, arr.channels, arr.num_levels) == (3, 8, 6, 4, 2)
+    np.testing.assert_array_equal(arr.numpy(), np.stack(images))
+    for k, img in enumerate(images):
+        np.testing.assert_allclose(arr.numpy(1)[k], ref.mip_chain(img)[1], rtol=1e-6, atol=1e-7)
+    textures[0].texels.zero_()  # a copy: later changes to the Textures do not reach the array
+    np.testing.assert_array_equal(arr.numpy()[0], images[0])
+    mixed = wt.TextureArray([textures[1], images[2]])  # Textures and arrays together
+    np.testing.assert_array_equal(mixed.numpy(), np.stack(images[1:]))
+    np.testing.assert_array_equal(wt.TextureArray(arr).numpy(), arr.numpy())  # a TextureArray is copied
+    np.testing.assert_array_equal(wt.Texture(textures[1]).numpy(), images[1])  # and so is a Texture
+
+
+def test_texture_array_from_textures_refuses_mismatches(rng):
+    a, b = wt.Texture(_image(rng, 8, 8, 3)), wt.Texture(_image(rng, 8, 4, 3))
+    with pytest.raises(ValueError, match=r"TextureArray\(\): all layers must have the same \(H, W, C\); layer 0 is \(8, 8, 3\) but layer 1 is \(8, 4, 3\)"):
+        wt.TextureArray([a, b])
+    with pytest.raises(ValueError, match=r"layer 0 is \(8, 8, 3\) but layer 1 is \(8, 8, 1\)"):
+        wt.TextureArray([a, wt.Texture(_image(rng, 8, 8, 1))])
+    with pytest.raises(TypeError, match=r"TextureArray\(\): layer 1 is a TextureArray of 2 layers; pass Textures or \[H, W, C\] arrays"):
+        wt.TextureArray([a, wt.TextureArray(_image(rng, 2, 8, 8)[None].repeat(2, 0)[..., 0])])
 
 
 def test_texture_array_properties(rng):

@@ -31,6 +31,10 @@ def mip_sizes(height: int, width: int, max_levels: int | None = None) -> list[tu
     return sizes
 
 
+#: Integer texel dtypes accepted by :class:`Texture` and :class:`TextureArray`, and the value that maps to 1.
+_UNORM_SCALE = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}
+
+
 class TextureArray:
     """``L`` texture layers of one size and channel count, each with its own mip chain.
 
@@ -46,7 +50,12 @@ class TextureArray:
 
     Args:
         layers: ``[L, H, W, C]`` or ``[L, H, W]`` array, or a sequence of ``[H, W, C]`` / ``[H, W]``
-            arrays of equal size; finite real numbers, ``1 <= C <= 4``.
+            arrays or :class:`Texture` objects of equal size and channel count (a Texture contributes its
+            level-0 texels, copied: gradients do not flow back to it), or a :class:`TextureArray`
+            (copied); ``1 <= C <= 4``. Float values are used as given (finite, linear); ``uint8``
+            and ``uint16`` values are scaled to ``[0, 1]`` (divided by 255 and 65535, as
+            :func:`warptex.io.read_image` decodes 8- and 16-bit data); other integer dtypes raise
+            ``TypeError``.
         mipmaps: ``True`` for the full chain down to ``1 × 1``, ``False`` for level 0 only, or an
             int: the maximum number of levels.
         requires_grad: allocate gradient buffers for the texels.
@@ -91,10 +100,21 @@ class TextureArray:
     @classmethod
     def _layers_to_array(cls, layers) -> np.ndarray:
         """Validate ``layers`` and return them as a float32 ``[L, H, W, C]`` array."""
+        if isinstance(layers, TextureArray):
+            if isinstance(layers, Texture):
+                return layers.numpy(0)[None]
+            return layers.numpy(0)
         if isinstance(layers, (list, tuple)):
             if not layers:
                 raise ValueError(f"{cls._name}(): needs at least one layer, got an empty sequence")
-            arrays = [cls._image_to_array(f"layer {i}", x) for i, x in enumerate(layers)]
+            arrays = []
+            for i, x in enumerate(layers):
+                if isinstance(x, TextureArray) and not isinstance(x, Texture):
+                    raise TypeError(
+                        f"{cls._name}(): layer {i} is a {type(x).__name__} of {x.num_layers} layers; pass "
+                        "Textures or [H, W, C] arrays (a TextureArray's layers: its .numpy())"
+                    )
+                arrays.append(x.numpy(0) if isinstance(x, Texture) else cls._image_to_array(f"layer {i}", x))
             for i, a in enumerate(arrays[1:], start=1):
                 if a.shape != arrays[0].shape:
                     raise ValueError(
@@ -102,7 +122,7 @@ class TextureArray:
                         f"{arrays[0].shape} but layer {i} is {a.shape}"
                     )
             return np.stack(arrays)
-        data = as_float_array(cls._name, "layers", layers)
+        data = cls._texel_values("layers", layers)
         if data.ndim == 3:
             data = data[..., None]
         if data.ndim != 4:
@@ -114,7 +134,7 @@ class TextureArray:
     @classmethod
     def _image_to_array(cls, name: str, image) -> np.ndarray:
         """Validate one ``[H, W]`` or ``[H, W, C]`` image and return it as float32 ``[H, W, C]``."""
-        data = as_float_array(cls._name, name, image)
+        data = cls._texel_values(name, image)
         if data.ndim == 2:
             data = data[..., None]
         if data.ndim != 3:
@@ -131,6 +151,24 @@ class TextureArray:
                 f"{cls._name}(): {name} contains non-finite texels, first {data[where]} at (row, col, channel) {where}"
             )
         return np.ascontiguousarray(data, dtype=np.float32)
+
+    @classmethod
+    def _texel_values(cls, name: str, value) -> np.ndarray:
+        """``value`` as float32: floats as given, ``uint8``/``uint16`` scaled to ``[0, 1]`` (like
+        :func:`warptex.io.read_image`), other integer dtypes refused (their range is ambiguous)."""
+        try:
+            arr = np.asarray(value)
+        except (ValueError, TypeError) as err:  # ragged nesting
+            raise ValueError(f"{cls._name}(): {name} must be a rectangular array of numbers, got {type(value).__name__}: {err}") from None
+        if np.issubdtype(arr.dtype, np.integer):
+            scale = _UNORM_SCALE.get(arr.dtype)
+            if scale is None:
+                raise TypeError(
+                    f"{cls._name}(): {name} has integer dtype {arr.dtype}; pass floats (linear, usually in [0, 1]), "
+                    "or uint8 / uint16, which are divided by 255 / 65535"
+                )
+            return (arr / scale).astype(np.float32)
+        return as_float_array(cls._name, name, arr)
 
     @classmethod
     def from_files(
@@ -278,7 +316,11 @@ class Texture(TextureArray):
     :meth:`numpy` and :meth:`grad` return ``[h, w, C]`` and :attr:`texels` has shape ``(H, W)``.
 
     Args:
-        image: ``[H, W, C]`` or ``[H, W]`` array of finite real numbers, ``1 <= C <= 4``.
+        image: ``[H, W, C]`` or ``[H, W]`` array, ``1 <= C <= 4``. Float values are used as given
+            (finite, linear); ``uint8`` and ``uint16`` values are scaled to ``[0, 1]`` (divided by
+            255 and 65535, as :func:`warptex.io.read_image` decodes 8- and 16-bit data, without
+            its sRGB decoding); other integer dtypes raise ``TypeError``. A :class:`Texture` is
+            copied (level 0).
         mipmaps: ``True`` for the full chain, ``False`` for level 0 only, or the maximum number of levels.
         requires_grad: allocate gradient buffers for the texels.
         device: Warp device (``None``: Warp's default device).
@@ -291,6 +333,8 @@ class Texture(TextureArray):
 
     @classmethod
     def _layers_to_array(cls, image) -> np.ndarray:
+        if isinstance(image, Texture):
+            return image.numpy(0)[None]
         return cls._image_to_array("image", image)[None]
 
     @classmethod

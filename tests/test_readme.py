@@ -1,0 +1,413 @@
+"""Every code block of README.md runs, so the README cannot rot.
+
+The README is parsed here: each ```python block is executed (in a fresh namespace, or after the
+blocks it continues, see ``CONTINUES``), and each ``warptex ...`` (or ``python examples/...``)
+command of a ```sh block is run through the CLI's ``main(argv)``, with small-size options
+swapped in so the whole module stays fast. Install steps (``python3 -m venv``, ``pip install``,
+``git clone``) and the test run itself (``pytest``) are the only commands not run. Every block
+and command runs in its own copy of a folder holding the files the README names (``brick.png``,
+``bunny.ply``, ``grass.png``..., all made here; ``out/`` is ``warptex render --out out`` at a small
+size). ``EXPECTED_BLOCKS`` and ``EXPECTED_COMMANDS`` fail when a block or command is added, so it
+cannot slip through untested.
+"""
+
+from __future__ import annotations
+
+import json
+import runpy
+import shlex
+import shutil
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+import warp as wp
+
+import warptex as wt
+from warptex.apps.cli import main as cli_main
+
+REPO = Path(__file__).resolve().parents[1]
+README = REPO / "README.md"
+SHARED = REPO.parent / "shared"
+
+# Fenced blocks per info string: a new block must be added here, and so gets a test.
+EXPECTED_BLOCKS = {"python": 8, "sh": 3, "": 1}
+EXPECTED_COMMANDS = {"warptex": 9, "python": 1, "skipped": 5}
+
+# Python blocks that continue earlier ones (by "<section> #<n>"): they run after those, in one namespace.
+CONTINUES = {
+    "Triplanar, biplanar and triplanar normal mapping #2": ["Triplanar, biplanar and triplanar normal mapping #1"],
+    "Stochastic tiling #2": ["Splat-map layers (terrain) #1", "Stochastic tiling #1"],
+}
+# Text swapped in Python blocks to keep them fast: (block, old, new).
+PYTHON_QUICK = [("Fitting splat maps and tiling to images #2", "iters=240", "iters=3")]
+
+QUICK_RESOLUTION = "48x64"  # of `warptex render` and `warptex demo`, and of the out/ the Python blocks read
+
+
+@dataclass
+class Block:
+    section: str
+    number: int  # 1, 2... within its section
+    lang: str
+    line: int  # of the opening fence, 1-based
+    text: str
+
+    @property
+    def name(self) -> str:
+        return f"{self.section} #{self.number}"
+
+    @property
+    def first_line(self) -> str:
+        return next((ln.strip() for ln in self.text.splitlines() if ln.strip()), "")
+
+
+def readme_blocks() -> list[Block]:
+    blocks, section, counts, open_block = [], "(top)", {}, None
+    for i, line in enumerate(README.read_text(encoding="utf-8").splitlines(), start=1):
+        if open_block is not None:
+            if line.strip() == "```":
+                blocks.append(Block(section, counts[section], open_block[0], open_block[1], "\n".join(open_block[2])))
+                open_block = None
+            else:
+                open_block[2].append(line)
+        elif line.startswith("```"):
+            counts[section] = counts.get(section, 0) + 1
+            open_block = (line[3:].strip().lower(), i, [])
+        elif line.startswith("#"):
+            section = line.lstrip("#").strip()
+    assert open_block is None, f"README.md: the block opened at line {open_block[1]} is never closed"
+    return blocks
+
+
+@dataclass
+class Command:
+    block: Block
+    line: int
+    argv: list[str]
+    kind: str  # "warptex", "python" (a script of the repository) or "skipped"
+
+    @property
+    def id(self) -> str:
+        return f"L{self.line} {shlex.join(self.argv)[:70]}"
+
+
+_INSTALL = (["python3", "-m", "venv"], ["python", "-m", "venv"], ["git", "clone"])
+
+
+def _command_kind(argv: list[str]) -> str:
+    exe = Path(argv[0]).name
+    if exe == "warptex" or argv[:3] in (["python", "-m", "warptex"], ["python3", "-m", "warptex"]):
+        return "warptex"
+    if any(argv[: len(p)] == p for p in _INSTALL) or exe in ("pip", "pip3", "pytest") or argv[1:3] == ["-m", "pip"]:
+        return "skipped"  # install steps, and the test suite itself
+    if exe in ("python", "python3") and len(argv) > 1 and argv[1].endswith(".py"):
+        return "python"
+    raise AssertionError(f"README.md: no rule to test the command {shlex.join(argv)!r}; add one to tests/test_readme.py")
+
+
+def readme_commands() -> list[Command]:
+    commands = []
+    for block in BLOCKS:
+        if block.lang not in ("sh", "bash", "shell", "console"):
+            continue
+        for offset, line in enumerate(block.text.splitlines(), start=1):
+            words = shlex.split(line, comments=True)
+            if words and words[0] == "$":
+                words = words[1:]
+            while words:
+                cut = words.index("&&") if "&&" in words else len(words)
+                commands.append(Command(block, block.line + offset, words[:cut], _command_kind(words[:cut])))
+                words = words[cut + 1 :]
+    return commands
+
+
+BLOCKS = readme_blocks()
+COMMANDS = readme_commands()
+PYTHON_BLOCKS = [b for b in BLOCKS if b.lang == "python"]
+
+
+def test_every_block_and_command_is_accounted_for():
+    found = {}
+    for b in BLOCKS:
+        found[b.lang] = found.get(b.lang, 0) + 1
+    assert found == EXPECTED_BLOCKS, "README.md's code blocks changed: update EXPECTED_BLOCKS (and make sure the new ones run here)"
+    kinds = {}
+    for c in COMMANDS:
+        kinds[c.kind] = kinds.get(c.kind, 0) + 1
+    assert kinds == EXPECTED_COMMANDS, "README.md's shell commands changed: update EXPECTED_COMMANDS"
+    names = {b.name for b in PYTHON_BLOCKS}
+    for name in [*CONTINUES, *(n for deps in CONTINUES.values() for n in deps), *(q[0] for q in PYTHON_QUICK)]:
+        assert name in names, f"tests/test_readme.py names a README block {name!r} that no longer exists"
+    # Text blocks are the layout listing only.
+    assert all(b.section == "Layout" for b in BLOCKS if b.lang == "")
+
+
+# -- the files the README names ------------------------------------------------------------------
+
+
+def _smooth_noise(rng, shape, cells=4):
+    """Tileable smooth noise in [0, 1]: a few low-frequency cosines."""
+    h, w = shape
+    y, x = np.mgrid[0:h, 0:w] / np.array([h, w])[:, None, None]
+    out = np.zeros(shape)
+    for _ in range(6):
+        fy, fx = rng.integers(1, cells + 1, 2)
+        out += np.cos(2 * np.pi * (fy * y + fx * x) + rng.uniform(0, 2 * np.pi))
+    return (out - out.min()) / np.ptp(out)
+
+
+def _make_inputs(folder: Path) -> None:
+    rng = np.random.default_rng(7)
+    # brick.png: a grey brick photo (like ../shared/data/textures/brick.png): light mortar, darker bricks.
+    y, x = np.mgrid[0:64, 0:64]
+    mortar = (y % 16 < 2) | (((x + 16 * ((y // 16) % 2)) % 32) < 2)
+    brick = np.where(mortar, 0.85, 0.35 + 0.15 * rng.random((64, 64)))
+    wt.io.write_png(folder / "brick.png", brick[..., None])
+    # Terrain layers: RGBA, colour and a height in alpha.
+    for k, name in enumerate(("grass", "gravel", "rock", "snow")):
+        colour = np.eye(4)[k][:3] * 0.5 + 0.3 * _smooth_noise(rng, (32, 32))[..., None]
+        wt.io.write_png(folder / f"{name}.png", np.concatenate([colour, _smooth_noise(rng, (32, 32))[..., None]], -1))
+    # One RGBA splat map: the weights of the four layers.
+    weights = np.stack([_smooth_noise(rng, (16, 16), 2) for _ in range(4)], -1) ** 3
+    wt.io.write_png(folder / "splat.png", weights / weights.sum(-1, keepdims=True), data=True)
+    # bunny.ply: a bumpy ball at the Stanford bunny's place and size, without UVs.
+    ball = trimesh.creation.icosphere(subdivisions=4)
+    ball.vertices *= (1 + 0.1 * np.sin(7 * ball.vertices[:, :1]) * np.cos(5 * ball.vertices[:, 1:2]))
+    ball.vertices = ball.vertices * [0.078, 0.077, 0.06] + [-0.017, 0.11, -0.001]
+    ball.export(folder / "bunny.ply")
+    # blender.exr: Blender's Position/Normal/UV/Depth passes of a view layer.
+    camera = wt.look_at((0.0, 0.2, 0.35), (-0.02, 0.11, 0.0), resolution=(24, 32))
+    g = wt.rasterize(str(folder / "bunny.ply"), camera)
+    depth = np.where(g.mask.numpy() > 0, g.depth.numpy(), 1e10)
+    uv = g.position.numpy()[..., :2]
+    planes = np.concatenate([g.position.numpy(), g.normal.numpy(), uv, depth[..., None]], -1)
+    names = [f"ViewLayer.{p}" for p in ("Position.X", "Position.Y", "Position.Z", "Normal.X", "Normal.Y", "Normal.Z", "UV.U", "UV.V", "Depth.Z")]
+    wt.io.write_exr(folder / "blender.exr", planes, channel_names=names)
+    # out/: the quick start's `warptex render --out out`, small.
+    assert cli_main(["render", "--out", str(folder / "out"), "--resolution", QUICK_RESOLUTION]) == 0
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("readme_inputs")
+    _make_inputs(folder)
+    return folder
+
+
+@pytest.fixture
+def workdir(inputs, tmp_path, monkeypatch) -> Path:
+    """A fresh copy of the inputs, as the current directory."""
+    shutil.copytree(inputs, tmp_path, dirs_exist_ok=True)
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+# -- Python blocks -------------------------------------------------------------------------------
+
+
+def _source(block: Block) -> str:
+    text = block.text
+    for name, old, new in PYTHON_QUICK:
+        if name == block.name:
+            assert old in text, f"{block.name}: {old!r} is gone; update PYTHON_QUICK"
+            text = text.replace(old, new)
+    return text
+
+
+def _run_python(block: Block, namespace: dict) -> None:
+    exec(compile(_source(block), f"README.md:{block.line} ({block.name})", "exec"), namespace)  # noqa: S102 (the README is ours)
+
+
+def _shape(x):
+    return tuple(x.shape)
+
+
+def _check_using_it(ns, d):
+    assert _shape(ns["colour"]) == (1000, 1)  # brick.png is grey: C = 1
+    assert ns["tex"].grad().shape == (64, 64, 3) and np.abs(ns["tex"].grad()).sum() > 0
+    assert ns["uv"].grad.numpy().shape == (1000, 2) and np.isfinite(ns["uv"].grad.numpy()).all()
+
+
+def _check_gbuffers(ns, d):
+    g = wt.load_gbuffer(d / "g.exr")
+    assert g.resolution == (512, 512) and g.mask.numpy().sum() > 1000  # the bunny fills the view
+    assert ns["g"].resolution == (24, 32) and "uv0" in ns["g"].uv_sets  # blender.exr, UV pass included
+
+
+def _check_triplanar(ns, d):
+    assert _shape(ns["colour"]) == (512, 512, 1) and _shape(ns["normals"]) == (512, 512, 3)
+    assert ns["image"].shape == (512, 512, 3) and np.isfinite(ns["image"]).all()
+    n = ns["normals"].numpy()[ns["g"].mask.numpy() > 0]
+    np.testing.assert_allclose(np.linalg.norm(n, axis=-1), 1.0, atol=1e-4)
+
+
+def _check_tiling_gradient(ns, d):
+    grad = ns["tiling"].grad.numpy()
+    assert grad.shape == (1,) and np.isfinite(grad).all() and grad[0] != 0
+
+
+def _check_splat(ns, d):
+    assert _shape(ns["colour"]) == (48, 64, 4)
+    assert ns["layers"].num_layers == 4 and ns["layers"].channels == 4
+
+
+def _check_stochastic(ns, d):
+    assert _shape(ns["out"]) == (1000, 1) and np.isfinite(ns["out"].numpy()).all()
+
+
+def _check_stochastic_inside(ns, d):
+    assert _shape(ns["out"]) == (48, 64, 1)
+
+
+def _check_fit(ns, d):
+    assert np.isfinite(ns["result"].final_psnr) and len(ns["result"].history["psnr"]) >= 3
+    assert ns["params"].weights().shape == (129, 129, 4)
+
+
+CHECKS = {
+    "Using it #1": _check_using_it,
+    "G-buffers #1": _check_gbuffers,
+    "Triplanar, biplanar and triplanar normal mapping #1": _check_triplanar,
+    "Triplanar, biplanar and triplanar normal mapping #2": _check_tiling_gradient,
+    "Splat-map layers (terrain) #1": _check_splat,
+    "Stochastic tiling #1": _check_stochastic,
+    "Stochastic tiling #2": _check_stochastic_inside,
+    "Fitting splat maps and tiling to images #2": _check_fit,
+}
+
+
+@pytest.mark.parametrize("block", PYTHON_BLOCKS, ids=[f"L{b.line} {b.name}" for b in PYTHON_BLOCKS])
+def test_python_block(block, workdir):
+    by_name = {b.name: b for b in PYTHON_BLOCKS}
+    namespace = {"__name__": "__readme__"}
+    for before in CONTINUES.get(block.name, []):
+        _run_python(by_name[before], namespace)
+    _run_python(block, namespace)
+    assert block.name in CHECKS, f"add a check of what README block {block.name!r} promises to CHECKS"
+    CHECKS[block.name](namespace, workdir)
+
+
+# -- shell commands --------------------------------------------------------------------------------
+
+
+def _set_option(argv: list[str], option: str, value: str) -> list[str]:
+    """``argv`` with ``option value`` replacing any given value (``--opt v`` or ``--opt=v``), else appended."""
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] == option:
+            i += 2
+            continue
+        if argv[i].startswith(option + "="):
+            i += 1
+            continue
+        out.append(argv[i])
+        i += 1
+    return out + [option, value]
+
+
+def _option(argv: list[str], option: str, default=None):
+    for i, word in enumerate(argv):
+        if word == option and i + 1 < len(argv):
+            return argv[i + 1]
+        if word.startswith(option + "="):
+            return word.split("=", 1)[1]
+    return default
+
+
+def _shared_paths(argv: list[str]) -> list[str]:
+    """``../shared/...`` (beside the repository) as an absolute path; skip when it is absent."""
+    out = []
+    for word in argv:
+        if word.startswith("../shared/"):
+            path = SHARED / word[len("../shared/") :]
+            if not path.exists():
+                pytest.skip(f"{path} not found: this README command needs the shared data folder")
+            word = str(path)
+        out.append(word)
+    return out
+
+
+def _quick(argv: list[str]) -> list[str]:
+    """The README's ``warptex`` arguments with small sizes and few iterations."""
+    argv = _shared_paths(argv)
+    command = argv[0] if argv and argv[0] in ("render", "demo", "fit") else "render"
+    if _option(argv, "--device", "cpu").startswith("cuda") and wp.get_cuda_device_count() == 0:
+        argv = _set_option(argv, "--device", "cpu")  # the command's other options still run
+    if command in ("render", "demo"):
+        argv = _set_option(argv, "--resolution", QUICK_RESOLUTION)
+    else:
+        argv = _set_option(argv, "--iters", "3")
+        argv = _set_option(argv, "--report-every", "1")
+        if "--target" not in argv:
+            argv = _set_option(argv, "--resolution", "24x32")
+        if "--map-size" in argv:
+            argv = _set_option(argv, "--map-size", "16x16")
+    return argv
+
+
+RENDER_FILES = ("render.png", "albedo.png", "normals.png", "render.exr", "gbuffer.exr")
+DEMO_FILES = ("demo.png", "demo_trilinear.exr")
+FIT_FILES = ("target.png", "initial.png", "fitted.png", "comparison.png", "splat_fitted.png", "splat_maps.png",
+             "splat_fitted.exr", "curve.png", "summary.json")  # as the README lists them
+FIT_SYNTHETIC_FILES = ("splat_true.png",)
+
+
+def _check_outputs(argv: list[str], folder: Path, printed: str) -> None:
+    command = argv[0] if argv[0] in ("render", "demo", "fit") else "render"
+    out = folder / _option(argv, "--out", "out/fit" if command == "fit" else "out")
+    wrote = {Path(line[len("wrote ") :]).name for line in printed.splitlines() if line.startswith("wrote ")}
+    if command == "render":
+        for name in RENDER_FILES:
+            assert (out / name).is_file() and name in wrote, f"README promises {name} from warptex {shlex.join(argv)}"
+        h, w = (int(v) for v in QUICK_RESOLUTION.split("x"))
+        assert wt.io.read_image(out / "render.png").shape == (h, w, 3)
+        assert wt.load_gbuffer(out / "gbuffer.exr").resolution == (h, w)
+    elif command == "demo":
+        for name in DEMO_FILES:
+            assert (out / name).is_file() and name in wrote, f"README promises {name} from warptex {shlex.join(argv)}"
+    else:
+        synthetic = "--target" not in argv
+        for name in FIT_FILES + (FIT_SYNTHETIC_FILES if synthetic else ()):
+            assert (out / name).is_file() and name in wrote, f"README promises {name} from warptex {shlex.join(argv)}"
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["iterations"] == 3 and summary["mode"] == ("synthetic" if synthetic else "user")
+        assert "fit: 3 iterations" in printed
+        map_size = tuple(int(v) for v in _option(argv, "--map-size", "129x129").split("x"))
+        assert wt.io.read_image(out / "splat_fitted.exr").shape == (*map_size, 4)
+
+
+WARPTEX_COMMANDS = [c for c in COMMANDS if c.kind == "warptex"]
+
+
+@pytest.mark.parametrize("command", WARPTEX_COMMANDS, ids=[c.id for c in WARPTEX_COMMANDS])
+def test_warptex_command(command, workdir, capsys):
+    argv = command.argv[1:] if Path(command.argv[0]).name == "warptex" else command.argv[3:]
+    argv = _quick(argv)
+    rc = cli_main(argv)
+    captured = capsys.readouterr()
+    assert rc == 0, f"`warptex {shlex.join(argv)}` exited {rc}:\n{captured.err}"
+    _check_outputs(argv, workdir, captured.out)
+
+
+SCRIPT_COMMANDS = [c for c in COMMANDS if c.kind == "python"]
+# Small-run arguments of the repository's scripts: script -> {option: value}.
+SCRIPT_QUICK = {"examples/fit_splat.py": {"--iters": "2"}}
+SCRIPT_FILES = {"examples/fit_splat.py": ("out/fit_example/target.png", "out/fit_example/fitted.png")}
+
+
+@pytest.mark.parametrize("command", SCRIPT_COMMANDS, ids=[c.id for c in SCRIPT_COMMANDS])
+def test_script_command(command, workdir, monkeypatch, capsys):
+    script, argv = command.argv[1], command.argv[2:]
+    assert script in SCRIPT_QUICK, f"add {script}'s small-run options to SCRIPT_QUICK"
+    for option, value in SCRIPT_QUICK[script].items():
+        argv = _set_option(argv, option, value)
+    monkeypatch.setattr(sys, "argv", [str(REPO / script), *argv])
+    with pytest.raises(SystemExit) as exit_:
+        runpy.run_path(str(REPO / script), run_name="__main__")
+    assert exit_.value.code in (0, None), capsys.readouterr().err
+    for name in SCRIPT_FILES.get(script, ()):
+        assert (workdir / name).is_file()
