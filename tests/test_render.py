@@ -70,6 +70,39 @@ def test_noise_texture_tiles_seamlessly():
     assert seam < 2 * inner, "opposite edges continue each other"
 
 
+def test_terrain_layers_are_procedural_seamless_and_distinct(monkeypatch):
+    """The default terrain's four layers are generated (a user's install has no ../shared): no file
+    is opened; each tiles seamlessly, is finite in [0, 1], depends only on its seed, and the four
+    read apart by colour (the fit tells them apart by it): green grass, warm gravel, grey rock,
+    bright blue-white snow."""
+    import builtins
+
+    from warptex.apps.terrain_material import LAYER_NAMES, terrain_layers
+
+    def no_files(*args, **kwargs):
+        raise AssertionError(f"terrain_layers() opened a file: {args}")
+
+    monkeypatch.setattr(builtins, "open", no_files)
+    layers = terrain_layers(size=128, seed=3).numpy()
+    monkeypatch.undo()
+    assert LAYER_NAMES == ("grass", "gravel", "rock", "snow")
+    assert layers.shape == (4, 128, 128, 4) and np.isfinite(layers).all()
+    assert layers.min() >= 0.0 and layers.max() <= 1.0
+    for k, name in enumerate(LAYER_NAMES):
+        layer = layers[k]
+        inner = np.abs(np.diff(layer, axis=1)).mean() + np.abs(np.diff(layer, axis=0)).mean()
+        seam = np.abs(layer[:, 0] - layer[:, -1]).mean() + np.abs(layer[0] - layer[-1]).mean()
+        assert seam < 1.5 * inner, f"{name}: opposite edges continue each other"
+        assert layer[..., 3].std() > 0.02, f"{name}: a height with relief, for height blending"
+    grass, gravel, rock, snow = (layers[k, ..., :3].mean(axis=(0, 1)) for k in range(4))
+    assert grass[1] > grass[0] > grass[2], "grass is green"
+    assert gravel[0] - gravel[2] > 2 * abs(rock[0] - rock[2]) and gravel.mean() > rock.mean(), "gravel is warmer and lighter than rock"
+    assert snow.min() > 0.6 and snow[2] >= snow[0], "snow is bright and a little blue"
+    assert layers[3, ..., 3].mean() > layers[:3, ..., 3].mean(), "snow lies on top"
+    np.testing.assert_array_equal(terrain_layers(size=128, seed=3).numpy(), layers)
+    assert not np.array_equal(terrain_layers(size=128, seed=4).numpy(), layers)
+
+
 def test_render_reports_bad_input(tmp_path, capsys):
     assert main(["render", "--out", str(tmp_path), "--mesh", str(tmp_path / "missing.obj")]) == 1
     assert "load_mesh(): file not found" in capsys.readouterr().err

@@ -1,56 +1,226 @@
-"""The default terrain's material: four layers (grass, gravel, rock, snow) and splat maps from
-height and slope rules, for :func:`warptex.splat`.
+"""The default terrain's material: four procedural layers (grass, gravel, rock, snow) and splat
+maps from height and slope rules, for :func:`warptex.splat`.
 
-The layers are the shared greyscale photographs (``../shared/data/textures``) tinted, with the
-photo's luminance as a height channel for height blending; without the shared folder they are
-procedural noise of the same character, so the main job runs anywhere.
+Every layer is generated in NumPy from periodic noise, so it tiles seamlessly, depends only on its
+seed and costs a few tens of milliseconds: gradient (Perlin) noise on a lattice that wraps around
+the tile, summed over octaves (fBm, ridged), domain-warped by more of the same; and Worley
+(Voronoi) cells whose feature points wrap around the tile. Colours are linear RGB; alpha holds a
+height for height blending: pebbles and rock ridges high, gaps and cracks low, grass tufts
+moderately high, snow high and smooth so that it covers the others.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import trimesh
 
-from warptex import io
 from warptex.apps.terrain import terrain_slope_height
 from warptex.texture import TextureArray
 
 LAYER_NAMES = ("grass", "gravel", "rock", "snow")
-#: Linear RGB tints of the greyscale photos (grass.png, gravel.png, brick.png as rock).
-TINTS = {"grass": (0.55, 0.8, 0.32), "gravel": (0.95, 0.82, 0.62), "rock": (0.85, 0.8, 0.74), "snow": (0.95, 0.97, 1.0)}
-SHARED_TEXTURES = Path(__file__).resolve().parents[2] / "shared" / "data" / "textures"
 
 
-def noise_texture(size: int = 256, *, seed: int = 0, octaves: int = 6) -> np.ndarray:
-    """A tileable, earthy ground texture ``[size, size, 3]`` (linear RGB): fBm of wrapped value noise."""
-    rng = np.random.default_rng(seed)
-    value = np.zeros((size, size))
+# -- periodic noise -----------------------------------------------------------------------------------
+# Coordinates are tile coordinates: (u, v) in [0, 1) covers one tile, and every field below is
+# periodic with period 1 in both, so the textures built from them tile.
+
+
+def _tile_coordinates(size: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(u, v)``, each ``[size, size]``: the texel centres of one tile (u along columns, v down rows)."""
+    t = (np.arange(size) + 0.5) / size
+    return np.meshgrid(t, t)
+
+
+def _gradient_noise(rng: np.random.Generator, x: np.ndarray, y: np.ndarray, period: tuple[int, int]) -> np.ndarray:
+    """Gradient (Perlin) noise in about [-0.7, 0.7] at lattice coordinates ``x, y``: random unit
+    gradients on a ``period = (nx, ny)`` lattice that wraps, so the noise has period ``nx`` in x
+    and ``ny`` in y."""
+    nx, ny = period
+    angle = rng.uniform(0.0, 2.0 * np.pi, (ny, nx))
+    gx, gy = np.cos(angle), np.sin(angle)
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    i0, j0 = x0.astype(np.intp) % nx, y0.astype(np.intp) % ny
+    i1, j1 = (i0 + 1) % nx, (j0 + 1) % ny
+    sx, sy = _fade(fx), _fade(fy)
+
+    def corner(j, i, dx, dy):
+        return gx[j, i] * dx + gy[j, i] * dy
+
+    top = corner(j0, i0, fx, fy) + sx * (corner(j0, i1, fx - 1, fy) - corner(j0, i0, fx, fy))
+    bottom = corner(j1, i0, fx, fy - 1) + sx * (corner(j1, i1, fx - 1, fy - 1) - corner(j1, i0, fx, fy - 1))
+    return top + sy * (bottom - top)
+
+
+def _fade(t: np.ndarray) -> np.ndarray:
+    return t * t * t * (t * (6 * t - 15) + 10)
+
+
+def _fbm(rng, u, v, cells: int, octaves: int, *, gain: float = 0.5, ridged: bool = False, stretch: tuple[int, int] = (1, 1)) -> np.ndarray:
+    """Fractal sum of periodic gradient noise at tile coordinates ``u, v``: octave ``o`` has
+    ``cells · 2^o`` lattice cells per tile (times ``stretch`` per axis, for streaks) and weight
+    ``gain^o``. Roughly in [-1, 1]; ``ridged``: each octave is ``1 - 2|noise|`` first, in
+    [-1, 1] with sharp crests at the noise's zeros."""
+    total, weight, norm = np.zeros_like(u), 1.0, 0.0
     for octave in range(octaves):
-        cells = 4 * 2**octave
-        value += 0.55**octave * _wrapped_bilinear(rng.random((cells, cells), dtype=np.float32), size)
-    value = (value - value.min()) / (value.max() - value.min())
-    dark, mid, light = np.array([0.09, 0.07, 0.04]), np.array([0.16, 0.2, 0.07]), np.array([0.32, 0.29, 0.2])
-    t = value[..., None]
-    return np.where(t < 0.5, dark + (mid - dark) * (2 * t), mid + (light - mid) * (2 * t - 1)).astype(np.float32)
+        nx, ny = cells * 2**octave * stretch[0], cells * 2**octave * stretch[1]
+        layer = _gradient_noise(rng, u * nx, v * ny, (nx, ny)) / 0.7
+        total += weight * ((1.0 - 2.0 * np.abs(layer)) if ridged else layer)
+        norm += weight
+        weight *= gain
+    return total / norm
 
 
-def _wrapped_bilinear(grid: np.ndarray, size: int) -> np.ndarray:
-    """``grid`` ``[n, n]`` magnified to ``[size, size]``: bilinear between texel centres, wrapping
-    at the edges (texture-sampling conventions), so the result tiles."""
-    n = grid.shape[0]
-    x = (np.arange(size) + 0.5) * (n / size) - 0.5
-    i0 = np.floor(x).astype(int)
-    f = (x - i0).astype(np.float32)
-    i0, i1 = i0 % n, (i0 + 1) % n
-    rows = grid[i0] * (1 - f)[:, None] + grid[i1] * f[:, None]
-    return rows[:, i0] * (1 - f)[None, :] + rows[:, i1] * f[None, :]
+def _warp(rng, u, v, amount: float, cells: int = 3, octaves: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """``(u, v)`` displaced by ``amount`` (tile units) of periodic fBm: periodic fields read at the
+    warped coordinates stay periodic, and stop looking like a lattice."""
+    return u + amount * _fbm(rng, u, v, cells, octaves), v + amount * _fbm(rng, u, v, cells, octaves)
+
+
+def _cells(rng, u, v, n: int, jitter: float = 0.9) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Periodic Worley noise: one jittered feature point per cell of an ``n × n`` grid over the
+    tile, wrapping around. Returns ``F1`` and ``F2`` (distances to the nearest and second nearest
+    point, in cell widths) and the nearest point's cell index (``0 .. n²-1``, for per-cell values)."""
+    points = 0.5 + jitter * (rng.random((2, n, n)) - 0.5)
+    x, y = u * n, v * n
+    cx, cy = np.floor(x).astype(np.intp), np.floor(y).astype(np.intp)
+    f1, f2 = np.full(x.shape, np.inf), np.full(x.shape, np.inf)
+    nearest = np.zeros(x.shape, np.intp)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            i, j = (cx + dx) % n, (cy + dy) % n
+            d = np.hypot(cx + dx + points[0, j, i] - x, cy + dy + points[1, j, i] - y)
+            closer = d < f1
+            f2 = np.where(closer, f1, np.minimum(f2, d))
+            nearest = np.where(closer, j * n + i, nearest)
+            f1 = np.minimum(f1, d)
+    return f1, f2, nearest
+
+
+def _unit(x: np.ndarray) -> np.ndarray:
+    """``x`` rescaled to [0, 1] (its minimum to 0, its maximum to 1)."""
+    return (x - x.min()) / max(float(np.ptp(x)), 1e-12)
 
 
 def _smoothstep(e0: float, e1: float, x: np.ndarray) -> np.ndarray:
     t = np.clip((x - e0) / (e1 - e0), 0.0, 1.0)
     return t * t * (3 - 2 * t)
+
+
+def _mix(a, b, t: np.ndarray) -> np.ndarray:
+    """Colours ``a`` and ``b`` (RGB) blended by ``t`` ``[H, W]``: ``[H, W, 3]``."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    return a + (b - a) * np.asarray(t)[..., None]
+
+
+# -- the materials ------------------------------------------------------------------------------------
+# Each takes a generator and the tile coordinates and returns linear RGB [H, W, 3] and height [H, W].
+
+
+def _grass(rng, u, v) -> tuple[np.ndarray, np.ndarray]:
+    """Dense grass seen from above: tufts (Voronoi cells, brighter and higher towards their centres)
+    made of fine blades (thin crests of warped ridged noise), yellow-green to deep green in broad
+    patches with drier, straw-coloured ones, and dark soil showing between the tufts."""
+    patches = _unit(_fbm(rng, *_warp(rng, u, v, 0.08), 4, 4))
+    dry = _smoothstep(0.35, 0.75, _unit(_fbm(rng, u, v, 3, 4)))
+    colour = _mix((0.035, 0.095, 0.012), (0.13, 0.2, 0.03), patches)
+    colour = _mix(colour, (0.2, 0.17, 0.06), 0.7 * dry)
+
+    f1, f2, cell = _cells(rng, *_warp(rng, u, v, 0.03, cells=8), 22)
+    tuft = np.clip(1.0 - f1 / 0.85, 0.0, 1.0) ** 0.7 * (0.6 + 0.4 * rng.random(22 * 22)[cell])
+    bu, bv = _warp(rng, u, v, 0.015, cells=16, octaves=2)
+    blades = np.clip(_fbm(rng, bu, bv, 40, 2, gain=0.6, ridged=True), 0.0, 1.0) ** 3
+    fine = np.clip(_fbm(rng, bu, bv, 96, 1, ridged=True), 0.0, 1.0) ** 2
+    lush = np.clip(0.55 * tuft + 0.35 * blades + 0.2 * fine, 0.0, 1.0)
+    tone = 0.85 + 0.3 * rng.random(22 * 22)[cell]  # each tuft a slightly different shade
+    colour = _mix((0.03, 0.025, 0.012), colour * tone[..., None] * (0.6 + 0.7 * blades)[..., None], _smoothstep(0.1, 0.45, lush))
+    height = 0.1 + 0.6 * lush + 0.1 * patches
+    return colour, height
+
+
+def _gravel(rng, u, v) -> tuple[np.ndarray, np.ndarray]:
+    """Loose gravel: rounded pebbles of warm sand, ochre, brown and beige tints with speckled
+    surfaces, large ones (warped Voronoi cells, each a dome on its distance to the cell edge, its
+    own size and tint) with smaller ones filling their gaps, and dark soil in the gaps left."""
+    palette = np.array([(0.42, 0.33, 0.22), (0.5, 0.4, 0.27), (0.36, 0.29, 0.22), (0.3, 0.21, 0.13), (0.56, 0.48, 0.37), (0.26, 0.2, 0.14)])
+    speckle = 0.8 + 0.35 * _unit(_fbm(rng, u, v, 48, 2, gain=0.7))
+    stain = _fbm(rng, u, v, 6, 3)
+    best_height = np.zeros_like(u)
+    best_colour = _mix((0.07, 0.05, 0.03), (0.13, 0.095, 0.06), _unit(_fbm(rng, u, v, 24, 2)))
+    for n, scale in ((9, 1.0), (17, 0.8), (34, 0.55)):
+        f1, f2, cell = _cells(rng, *_warp(rng, u, v, 0.25 / n, cells=8), n)
+        gap = 0.05 + 0.3 * rng.random(n * n)[cell]  # per pebble: a smaller pebble leaves a wider gap
+        dome = np.sqrt(np.clip((f2 - f1 - gap) / 0.45, 0.0, 1.0))
+        height = scale * dome * (0.75 + 0.25 * rng.random(n * n)[cell])
+        tint = palette[rng.integers(0, len(palette), n * n)[cell]] * (0.75 + 0.5 * rng.random(n * n)[cell])[..., None]
+        colour = tint * (0.5 + 0.5 * dome)[..., None] * (speckle + 0.15 * stain)[..., None]
+        on_top = height > best_height
+        best_height = np.where(on_top, height, best_height)
+        best_colour = np.where(on_top[..., None], colour, best_colour)
+    return best_colour, best_height
+
+
+def _rock(rng, u, v) -> tuple[np.ndarray, np.ndarray]:
+    """Layered blue-grey stone: strata (bands of varied tone with thin dark bedding lines, folded
+    by low-frequency noise), ridged multifractal relief on top, and dark, branching cracks along
+    the edges of warped Voronoi cells, strong in some places and absent in others. Ridges high,
+    cracks and bedding lines low."""
+    fold_u, fold_v = _warp(rng, u, v, 0.12, cells=2)
+    bands = 11
+    strata = bands * fold_v + 0.6 * _fbm(rng, u, v, 8, 3)
+    band_tone = (0.7 + 0.6 * rng.random(bands))[np.floor(strata).astype(np.intp) % bands]
+    bedding = _smoothstep(0.0, 0.12, np.abs(strata - np.round(strata)))
+    ridges = _unit(_fbm(rng, *_warp(rng, u, v, 0.05, cells=4), 6, 5, gain=0.55, ridged=True))
+    grain = _fbm(rng, u, v, 64, 2)
+
+    crack_u, crack_v = _warp(rng, u, v, 0.06, cells=6)
+    f1, f2, _ = _cells(rng, crack_u, crack_v, 5)
+    g1, g2, _ = _cells(rng, crack_u, crack_v, 13)
+    presence = _smoothstep(-0.1, 0.35, _fbm(rng, u, v, 3, 3))
+    cracks = np.maximum(1 - _smoothstep(0.0, 0.06, f2 - f1), presence * (1 - _smoothstep(0.0, 0.05, g2 - g1)))
+
+    base = _mix((0.12, 0.13, 0.15), (0.16, 0.155, 0.155), _smoothstep(0.3, 0.7, _unit(_fbm(rng, fold_u, fold_v, 3, 3))))
+    shade = band_tone * (0.55 + 0.75 * ridges) * (0.6 + 0.4 * bedding) * (1 + 0.12 * grain) * (1 - 0.8 * cracks)
+    height = np.clip(0.15 + 0.55 * ridges + 0.2 * (band_tone - 0.7) + 0.15 * bedding - 0.45 * cracks, 0.0, 1.0)
+    return base * shade[..., None], height
+
+
+def _snow(rng, u, v) -> tuple[np.ndarray, np.ndarray]:
+    """Old snow: bright, slightly blue-white, in soft wind-shaped drifts (warped low-frequency noise)
+    with faint ripples and fine grain, bluer and darker in the hollows. Height high and smooth, so
+    snow covers the other layers."""
+    wu, wv = _warp(rng, u, v, 0.1, cells=2)
+    drifts = _unit(_fbm(rng, wu, wv, 3, 5, gain=0.45))
+    ripples = 0.5 + 0.5 * np.sin(2 * np.pi * (14 * wv + 2 * _fbm(rng, u, v, 2, 2)))
+    ripples *= _smoothstep(0.0, 0.5, _fbm(rng, u, v, 3, 2))
+    grain = _fbm(rng, u, v, 48, 3, gain=0.7)
+    light = np.clip(0.75 * drifts + 0.15 * ripples + 0.1, 0.0, 1.0)
+    colour = _mix((0.5, 0.58, 0.74), (0.88, 0.9, 0.94), light) * (1 + 0.04 * grain)[..., None]
+    height = 0.5 + 0.4 * drifts + 0.05 * ripples + 0.03 * grain
+    return colour, height
+
+
+MATERIALS = {"grass": _grass, "gravel": _gravel, "rock": _rock, "snow": _snow}
+
+
+def terrain_layers(*, size: int = 256, seed: int = 0, device=None) -> TextureArray:
+    """The four layers (:data:`LAYER_NAMES`) as a ``TextureArray`` of ``[4, size, size, 4]``:
+    linear RGB in [0, 1] + height in alpha (in [0, 1]). Each tiles seamlessly and depends only on
+    ``seed``; all four take about 0.2 s at 256 × 256."""
+    u, v = _tile_coordinates(size)
+    layers = []
+    for k, name in enumerate(LAYER_NAMES):
+        colour, height = MATERIALS[name](np.random.default_rng([seed, k]), u, v)
+        layers.append(np.concatenate([np.clip(colour, 0.0, 1.0), np.clip(height, 0.0, 1.0)[..., None]], axis=-1))
+    return TextureArray(np.stack(layers).astype(np.float32), device=device)
+
+
+def noise_texture(size: int = 256, *, seed: int = 0, octaves: int = 6) -> np.ndarray:
+    """A tileable, earthy ground texture ``[size, size, 3]`` (linear RGB): fBm of periodic gradient noise."""
+    value = _unit(_fbm(np.random.default_rng(seed), *_tile_coordinates(size), 4, octaves, gain=0.55))
+    dark, mid, light = np.array([0.09, 0.07, 0.04]), np.array([0.16, 0.2, 0.07]), np.array([0.32, 0.29, 0.2])
+    t = value[..., None]
+    return np.where(t < 0.5, dark + (mid - dark) * (2 * t), mid + (light - mid) * (2 * t - 1)).astype(np.float32)
 
 
 def terrain_splat_maps(mesh: trimesh.Trimesh, grid: tuple[int, int]) -> np.ndarray:
@@ -73,29 +243,3 @@ def terrain_splat_maps(mesh: trimesh.Trimesh, grid: tuple[int, int]) -> np.ndarr
     weights = np.stack([grass, gravel, rock, snow], axis=-1)
     weights /= weights.sum(axis=-1, keepdims=True)
     return weights.reshape(rows, cols, 4).astype(np.float32)
-
-
-def terrain_layers(*, size: int = 256, textures_dir=SHARED_TEXTURES, seed: int = 0, device=None) -> TextureArray:
-    """The four layers as a ``TextureArray`` of ``[4, size, size, 4]``: linear RGB + height (alpha)."""
-    layers = []
-    for k, name in enumerate(LAYER_NAMES):
-        photo = Path(textures_dir) / {"grass": "grass.png", "gravel": "gravel.png", "rock": "brick.png"}.get(name, "")
-        if name != "snow" and photo.is_file():
-            grey = io.read_image(photo)[..., :1]
-            grey = _resize(grey, size)
-        else:
-            grey = noise_texture(size, seed=seed + 17 * k).mean(axis=-1, keepdims=True)
-            grey = 0.6 + 0.4 * (grey - grey.min()) / max(float(np.ptp(grey)), 1e-6) if name == "snow" else grey * 3.0
-        grey = np.clip(grey, 0.0, 1.0)
-        rgb = grey * np.asarray(TINTS[name], np.float32)
-        height = (grey - grey.min()) / max(float(np.ptp(grey)), 1e-6)
-        layers.append(np.concatenate([rgb, height], axis=-1))
-    return TextureArray(np.stack(layers).astype(np.float32), device=device)
-
-
-def _resize(image: np.ndarray, size: int) -> np.ndarray:
-    """Box-downsample ``[H, W, C]`` to ``[size, size, C]`` (sizes must divide; else crop)."""
-    h, w, c = image.shape
-    fh, fw = max(1, h // size), max(1, w // size)
-    image = image[: size * fh, : size * fw]
-    return image.reshape(size, fh, size, fw, c).mean(axis=(1, 3))
