@@ -36,8 +36,12 @@ def as_float(func: str, name: str, value, *, finite: bool = True) -> float:
 
 
 def as_float_array(func: str, name: str, value) -> np.ndarray:
-    """``value`` as a float32 NumPy array, refusing non-numeric data with a ``TypeError``."""
-    arr = np.asarray(value)
+    """``value`` as a float32 NumPy array, refusing non-numeric data with a ``TypeError`` and
+    ragged nested sequences with a ``ValueError``."""
+    try:
+        arr = np.asarray(value)
+    except ValueError as err:
+        raise ValueError(f"{func}(): {name} must be a rectangular array of numbers: {err}") from None
     if arr.dtype == bool or not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
         raise TypeError(f"{func}(): {name} must hold real numbers, got dtype {arr.dtype}")
     return arr.astype(np.float32, copy=False)

@@ -64,10 +64,16 @@ class Camera:
 
 
 def _frame(func: str, eye, target, up):
-    eye, target, up = (np.asarray(v, np.float64).reshape(-1) for v in (eye, target, up))
-    for name, v in (("eye", eye), ("target", target), ("up", up)):
+    vectors = []
+    for name, value in (("eye", eye), ("target", target), ("up", up)):
+        try:
+            v = np.asarray(value, np.float64).reshape(-1)
+        except (TypeError, ValueError):  # strings, objects, ragged sequences
+            raise ValueError(f"{func}(): {name} must be 3 finite numbers, got {value!r}") from None
         if v.shape != (3,) or not np.isfinite(v).all():
             raise ValueError(f"{func}(): {name} must be 3 finite numbers, got {v.tolist()}")
+        vectors.append(v)
+    eye, target, up = vectors
     forward = target - eye
     if np.linalg.norm(forward) < 1e-12:
         raise ValueError(f"{func}(): eye and target must differ, both are {eye.tolist()}")

@@ -24,6 +24,9 @@ documented defaults.
 from __future__ import annotations
 
 import os
+import re
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 import warp as wp
@@ -62,18 +65,24 @@ def save_gbuffer(path: str | os.PathLike, gbuffer: GBuffer) -> None:
     """Write ``gbuffer`` to a float32 multi-channel EXR (channel names in the module docstring), atomically."""
     if not isinstance(gbuffer, GBuffer):
         raise TypeError(f"save_gbuffer(): gbuffer must be a GBuffer, got {type(gbuffer).__name__}")
+    func = "save_gbuffer"
     channels = {}
+    h, w = gbuffer.resolution
 
-    def put(names, values):
-        values = np.asarray(values, np.float32).reshape(*gbuffer.resolution, len(names))
+    def put(field, names, values):
+        values = np.asarray(values, np.float32)
+        if values.size != h * w * len(names):
+            raise ValueError(f"{func}(): the G-buffer is {h}x{w} but its {field} has shape {values.shape}")
+        values = values.reshape(h, w, len(names))
         channels.update({name: values[..., i] for i, name in enumerate(names)})
 
     for name in FIELDS:
-        put(_NAMES[name], getattr(gbuffer, name).numpy())
+        put(name, _NAMES[name], getattr(gbuffer, name).numpy())
     for set_name, arrays in gbuffer.uv_sets.items():
         for name, suffixes in _UV_NAMES.items():
-            put([f"{set_name}.{s}" for s in suffixes], arrays[name].numpy())
-    io.write_exr(path, channels)
+            put(f"{set_name} {name}", [f"{set_name}.{s}" for s in suffixes], arrays[name].numpy())
+    with _named(func):
+        io.write_exr(path, channels)
 
 
 def load_gbuffer(path: str | os.PathLike, *, layer: str | None = None, device=None) -> GBuffer:
@@ -145,7 +154,8 @@ def load_gbuffer(path: str | os.PathLike, *, layer: str | None = None, device=No
 
 def _channel_table(func: str, path, layer: str | None) -> dict[str, np.ndarray]:
     """Every channel of the file as ``[H, W]`` float32, keyed by its name without the view-layer prefix."""
-    planes, names = io.read_exr(path, channels=io.exr_channel_names(path))
+    with _named(func):
+        planes, names = io.read_exr(path, channels=io.exr_channel_names(path))
     # Blender names channels "<view layer>.<pass>.<component>".
     prefixes = {n.rsplit(".", 2)[0] for n in names if n.count(".") >= 2 and n.split(".")[-2] in _BLENDER_PASSES}
     if layer is None:
@@ -156,6 +166,21 @@ def _channel_table(func: str, path, layer: str | None) -> dict[str, np.ndarray]:
         raise ValueError(f"{func}(): '{os.fspath(path)}' has no view layer {layer!r}; it has {sorted(prefixes) or 'none'}")
     strip = f"{layer}." if layer else "\0"
     return {(n[len(strip) :] if n.startswith(strip) else n): planes[..., i] for i, n in enumerate(names)}
+
+
+@contextmanager
+def _named(func: str) -> Iterator[None]:
+    """Errors of the :mod:`warptex.io` calls inside, reported as ``func``'s own: ``"read_exr(): x"``
+    becomes ``"load_gbuffer(): x"`` (same exception type)."""
+    try:
+        yield
+    except (OSError, ValueError, TypeError) as err:
+        message = f"{func}(): " + re.sub(r"^\w+\(\): ", "", str(err))
+        try:
+            renamed = type(err)(message)
+        except TypeError:  # an exception type that takes other arguments
+            renamed = ValueError(message)
+        raise renamed from err
 
 
 def _uv_set_names(table: dict[str, np.ndarray]) -> list[str]:

@@ -172,8 +172,8 @@ def exr_channel_names(path) -> tuple[str, ...]:
     try:
         with OpenEXR.File(path, header_only=True) as exr:
             return tuple(channel.name for channel in exr.header()["channels"])
-    except RuntimeError as exc:
-        raise ValueError(f"exr_channel_names(): cannot decode '{path}' as an OpenEXR image: {exc}") from exc
+    except (RuntimeError, UnicodeDecodeError) as exc:  # a corrupt header may hold a name that is not UTF-8
+        raise ValueError(f"exr_channel_names(): cannot decode '{path}' as an OpenEXR image: {exc}") from None
 
 
 def write_png(path, image, *, data: bool = False, bits: int = 8) -> None:
@@ -300,7 +300,7 @@ def _read_exr(path: str, channels, fn: str) -> tuple[np.ndarray, tuple[str, ...]
                 if (part.height(), part.width()) == size:
                     for name, channel in part.channels.items():
                         available.setdefault(name, channel)
-    except RuntimeError as exc:
+    except (RuntimeError, UnicodeDecodeError) as exc:
         raise ValueError(f"{fn}(): cannot decode '{path}' as an OpenEXR image: {exc}") from exc
     missing = [name for name in channels if name not in available]
     if missing:
@@ -401,7 +401,10 @@ def _convert_channels(image: np.ndarray, has_alpha: bool, channels: int) -> np.n
 
 def _as_image(image, fn: str) -> np.ndarray:
     """Validate array-like pixels and return them as a float32 [H, W, C] array (always a new array)."""
-    array = np.asarray(image)
+    try:
+        array = np.asarray(image)
+    except ValueError as exc:  # ragged nested sequences
+        raise ValueError(f"{fn}(): image must be a rectangular array of numbers: {exc}") from None
     if not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)
             or array.dtype == np.bool_):
         raise TypeError(f"{fn}(): image must hold real numbers, got dtype {array.dtype}")
@@ -446,6 +449,11 @@ def _checked_output_path(path, fn: str) -> str:
     path = _fspath(path, fn)
     if os.path.isdir(path):
         raise ValueError(f"{fn}(): '{path}' is a directory")
+    folder = os.path.dirname(os.path.abspath(path))
+    while not os.path.exists(folder):  # the folders to create: their first existing ancestor must be a folder
+        folder = os.path.dirname(folder)
+    if not os.path.isdir(folder):
+        raise NotADirectoryError(f"{fn}(): cannot write '{path}': '{folder}' is a file, not a folder")
     return path
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import warp as wp
 
 from warptex._launch import per_pixel
@@ -44,7 +45,8 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
     if not isinstance(texture, TextureArray):
         raise TypeError(f"{func}(): texture must be a Texture or TextureArray, got {type(texture).__name__}")
     device = resolve_device(func, device, texture.device)
-    uv = vec2_array(func, "uv", uv, device)
+    uv, given = vec2_array(func, "uv", uv, device), uv
+    single = not isinstance(given, wp.array) and np.ndim(given) == 1  # one UV, shape (2,): a result of shape (C,)
     shape, count = uv.shape, uv.size
     smp = sampler_args(func, as_sampler(func, sampler), has_lod=lod is not None or uv_dx is not None or uv_dy is not None)
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
@@ -61,4 +63,4 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
         inputs = [texture.view, *per_pixel(flat, dx, dy, lods, layers), smp, lod_source, constant_lod, constant_layer]
         kernels = _KERNELS
     run(kernels, count, inputs=inputs, outputs=[out], device=device, by_hand=[texture.view.texels], others=others)
-    return out.reshape((*shape, texture.channels))
+    return out.reshape((*(() if single else shape), texture.channels))

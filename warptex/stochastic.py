@@ -72,7 +72,8 @@ def stochastic(
     option = as_stochastic(func, method)
     sampler = as_sampler(func, sampler)
     params, sampled = stochastic_args(func, option, texture, sampler)
-    uv = vec2_array(func, "uv", uv, device)
+    uv, given = vec2_array(func, "uv", uv, device), uv
+    single = not isinstance(given, wp.array) and np.ndim(given) == 1  # one UV, shape (2,): a result of shape (C,)
     shape, count = uv.shape, uv.size
     smp = sampler_args(func, sampler, has_lod=lod is not None or uv_dx is not None or uv_dy is not None)
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
@@ -82,7 +83,7 @@ def stochastic(
     out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=sampled.requires_grad or needs_grad(*others))
     inputs = [sampled.view, *per_pixel(uv.reshape((count,)), dx, dy, lods, layers), smp, params, lod_source, constant_lod, constant_layer]
     run(_KERNELS, count, inputs=inputs, outputs=[out], device=device, by_hand=[sampled.view.texels], others=others, linear=params.histogram == 0)
-    return out.reshape((*shape, texture.channels))
+    return out.reshape((*(() if single else shape), texture.channels))
 
 
 def hex_taps(uv, *, seed: int = 0, contrast: float = 1.0, rotation: float = 0.0, device=None):
