@@ -15,6 +15,18 @@ BLEND_RNM = wp.constant(2)
 
 
 @wp.func
+def unsquared(n: wp.vec3) -> wp.vec3:
+    """``n`` scaled down by its largest component when that is past 1e18, so that ``|n|²`` does not
+    overflow (past ~1.8e19) and ``wp.normalize`` gives its direction, not 0; ``n`` itself (the same
+    bits) otherwise."""
+    m = wp.max(wp.vec3(wp.abs(n[0]), wp.abs(n[1]), wp.abs(n[2])))
+    result = n
+    if m > 1.0e18 and m <= 3.4028234663852886e38:
+        result = n / m
+    return result
+
+
+@wp.func
 def decode_normal(texel: wp.vec4, channels: wp.int32, strength: float, flip_green: wp.int32) -> wp.vec3:
     """Tangent-space normal of a normal-map texel stored as ``[0, 1]`` data (flat = ``(0.5, 0.5, 1)``).
 

@@ -23,7 +23,7 @@ ground beside it pick their own mip levels.
 import warp as wp
 
 from . import out_of_line
-from .normals import sign_or_one
+from .normals import sign_or_one, unsquared
 from .sampling import SamplerArgs, TextureView, lod_from_derivatives, lod_scale_slope, sample_lod_derivatives
 from .stochastic import StochasticArgs, sample_stochastic_call
 
@@ -175,14 +175,28 @@ def triplanar_weights(n: wp.vec3, sharpness: float) -> wp.vec3:
 
 
 @wp.func
-def biplanar_remap(a: float, exponent: float) -> float:
-    return power_weight(wp.clamp((a - BIPLANAR_EDGE) / (1.0 - BIPLANAR_EDGE), 0.0, 1.0), exponent)
+def biplanar_pair(major: float, median: float, exponent: float) -> wp.vec2:
+    """The unnormalised biplanar weights of the major and median axes (their ``|n|`` components):
+    ``clamp((a - 0.5773) / (1 - 0.5773), 0, 1)^exponent``. Where both powers underflow (high
+    sharpness) each base is first divided by the larger, which leaves the normalised weights as
+    they are; where both bases are 0 (a normal on the diagonal) the weights are equal, their limit."""
+    b0 = wp.clamp((major - BIPLANAR_EDGE) / (1.0 - BIPLANAR_EDGE), 0.0, 1.0)
+    b1 = wp.clamp((median - BIPLANAR_EDGE) / (1.0 - BIPLANAR_EDGE), 0.0, 1.0)
+    w = wp.vec2(power_weight(b0, exponent), power_weight(b1, exponent))
+    if w[0] + w[1] < WEIGHT_EPS:
+        m = wp.max(b0, b1)
+        if m > 0.0:
+            w = wp.vec2(power_weight(b0 / m, exponent), power_weight(b1 / m, exponent))
+        else:
+            w = wp.vec2(1.0, 1.0)
+    return w
 
 
 @wp.func
 def biplanar_weights(n: wp.vec3, sharpness: float) -> wp.vec3:
-    """Quilez' biplanar weights: major and median axes get ``clamp((|n| - 0.5773) / (1 - 0.5773), 0, 1)^(k/8)``,
-    the minor axis 0, normalised to sum 1. Zero for a zero or non-finite normal.
+    """Quilez' biplanar weights: major and median axes get ``clamp((|n| - 0.5773) / (1 - 0.5773), 0, 1)^(k/8)``
+    (:func:`biplanar_pair`), the minor axis 0, normalised to sum 1. Zero for a zero or non-finite
+    normal.
 
     The normal is normalised first (the remap assumes unit length). The minor axis is the smallest
     component (the highest index among ties). Swapping tied major and median axes changes nothing;
@@ -190,16 +204,20 @@ def biplanar_weights(n: wp.vec3, sharpness: float) -> wp.vec3:
     except near the exact diagonal), so the weights are continuous up to that.
     """
     w = wp.vec3(0.0)
-    length = wp.length(n)
+    u = unsquared(n)
+    length = wp.length(u)
     if wp.isfinite(n) and length > 0.0:
-        a = wp.vec3(wp.abs(n[0]), wp.abs(n[1]), wp.abs(n[2])) / length
+        a = wp.vec3(wp.abs(u[0]), wp.abs(u[1]), wp.abs(u[2])) / length
         e = sharpness / 8.0
         if a[2] <= a[0] and a[2] <= a[1]:
-            w = wp.vec3(biplanar_remap(a[0], e), biplanar_remap(a[1], e), 0.0)
+            pair = biplanar_pair(a[0], a[1], e)
+            w = wp.vec3(pair[0], pair[1], 0.0)
         elif a[1] <= a[0]:
-            w = wp.vec3(biplanar_remap(a[0], e), 0.0, biplanar_remap(a[2], e))
+            pair = biplanar_pair(a[0], a[2], e)
+            w = wp.vec3(pair[0], 0.0, pair[1])
         else:
-            w = wp.vec3(0.0, biplanar_remap(a[1], e), biplanar_remap(a[2], e))
+            pair = biplanar_pair(a[1], a[2], e)
+            w = wp.vec3(0.0, pair[0], pair[1])
         w = w / wp.max(w[0] + w[1] + w[2], WEIGHT_EPS)
     return w
 

@@ -592,11 +592,11 @@ def downsample_kernel(tex: TextureView, level: wp.int32, texels: wp.array(dtype=
     y_lo = float(row * h0) / float(h1)
     y_hi = float((row + 1) * h0) / float(h1)
     src = tex.level_offset[level] + layer * h0 * w0
+    norm = float(w1 * h1) / float(w0 * h0)  # applied to each term, so that texels near FLOAT_MAX do not overflow the sum
     acc = wp.vec4(0.0)
     for y in range(int(wp.floor(y_lo)), wp.min(int(wp.ceil(y_hi)), h0)):
         wy = wp.min(y_hi, float(y + 1)) - wp.max(y_lo, float(y))
         for x in range(int(wp.floor(x_lo)), wp.min(int(wp.ceil(x_hi)), w0)):
             wx = wp.min(x_hi, float(x + 1)) - wp.max(x_lo, float(x))
-            acc += texels[src + y * w0 + x] * (wx * wy)
-    dst = tex.level_offset[level + 1] + (layer * h1 + row) * w1 + col
-    texels[dst] = acc * (float(w1 * h1) / float(w0 * h0))
+            acc += texels[src + y * w0 + x] * (wx * wy * norm)
+    texels[tex.level_offset[level + 1] + (layer * h1 + row) * w1 + col] = acc

@@ -167,10 +167,12 @@ def cheap2_taps(uv: wp.vec2, params: StochasticArgs):
 
 @wp.func
 def hex_grid(uv: wp.vec2):
-    """Enclosing triangle of ``uv * HEX_SCALE``: barycentric weights and the vertices' lattice ids.
+    """Enclosing triangle of ``uv * HEX_SCALE``: barycentric weights, the position in the
+    triangle, and the vertices' lattice ids.
 
-    Returns ``(w, v0, v1, v2)``: ``w`` a ``vec3`` summing to 1, ``vk`` the ``vec2i`` of the vertex
-    weighted by ``w[k]``. Lower triangle ``f.x + f.y < 1``: vertices ``b, b+(1,0), b+(0,1)`` with
+    Returns ``(w, f, v0, v1, v2)``: ``w`` a ``vec3`` summing to 1, ``f`` the skewed coordinates'
+    fractions (``uv``'s offset from vertex ``b``), ``vk`` the ``vec2i`` of the vertex weighted by
+    ``w[k]``. Lower triangle ``f.x + f.y < 1``: vertices ``b, b+(1,0), b+(0,1)`` with
     ``(1-f.x-f.y, f.x, f.y)``; upper: ``b+(1,1), b+(1,0), b+(0,1)`` with ``(f.x+f.y-1, 1-f.y, 1-f.x)``.
     """
     # In float64: for large UVs the skewed coordinates are large but their fractions must be exact.
@@ -181,14 +183,24 @@ def hex_grid(uv: wp.vec2):
     bx = wp.floor(sx)
     by = wp.floor(sy)
     f = wp.vec2(float(sx - bx), float(sy - by))
-    i = int(bx)
-    j = int(by)
+    i = lattice_id(bx)
+    j = lattice_id(by)
     w = wp.vec3(1.0 - f[0] - f[1], f[0], f[1])
     v0 = wp.vec2i(i, j)
     if f[0] + f[1] >= 1.0:
         w = wp.vec3(f[0] + f[1] - 1.0, 1.0 - f[1], 1.0 - f[0])
         v0 = wp.vec2i(i + 1, j + 1)
-    return w, v0, wp.vec2i(i + 1, j), wp.vec2i(i, j + 1)
+    return w, f, v0, wp.vec2i(i + 1, j), wp.vec2i(i, j + 1)
+
+
+@wp.func
+def lattice_id(b: wp.float64) -> wp.int32:
+    """A floored skewed coordinate as an int32 lattice id; past 2^30 (UVs beyond ~3e8, where float32
+    UVs are 32 apart) wrapped modulo 2^30, so that neither it nor its neighbour overflows int32."""
+    limit = wp.float64(1073741824.0)
+    if b >= limit or b < -limit:
+        b = b - wp.floor(b / limit) * limit
+    return int(b)
 
 
 @wp.func
@@ -199,23 +211,42 @@ def hex_centre64(v: wp.vec2i) -> wp.vec2d:
 
 
 @wp.func
-def hex_tap(uv: wp.vec2, base: wp.vec2, v: wp.vec2i, params: StochasticArgs) -> wp.vec2:
+def hex_tap(uv: wp.vec2, f: wp.vec2, base: wp.vec2, v: wp.vec2i, step: wp.vec2, params: StochasticArgs) -> wp.vec2:
     """Tap UV of vertex ``v``: ``R(θ) (uv - c) + c + o`` (reduced by :func:`periodic_base`).
 
     ``o = (h.x, h.y)``, ``θ = (2 h.z - 1) π rotation`` from ``hash4_unit(v, seed, STREAM_HEX_VERTEX)``,
-    ``c`` the vertex centre (:func:`hex_centre64`).
+    ``c`` the vertex centre (:func:`hex_centre64`), ``uv - c`` taken in float64. Past ``|uv| = 1e8``,
+    where the vertex ids may have wrapped (:func:`lattice_id`), ``uv - c`` comes instead from the
+    skewed offset ``f - step`` of ``uv`` from the vertex (``step``: the vertex's lattice step from
+    ``b``, see :func:`hex_grid`) mapped back to UV, ``(x + y / 2, y sqrt(3) / 2) / HEX_SCALE``,
+    which stays small however large ``uv``.
     """
     h = hashing.hash4_unit(v[0], v[1], params.seed, STREAM_HEX_VERTEX)
     tap = base + wp.vec2(h[0], h[1])
     if params.rotation != 0.0:
-        # uv - centre in float64: both are large for large UVs, their difference is not.
-        c = hex_centre64(v)
-        d = wp.vec2(float(wp.float64(uv[0]) - c[0]), float(wp.float64(uv[1]) - c[1]))
+        d = wp.vec2(0.0)
+        if wp.abs(uv[0]) < 1.0e8 and wp.abs(uv[1]) < 1.0e8:
+            # uv - centre in float64: both are large for large UVs, their difference is not.
+            c = hex_centre64(v)
+            d = wp.vec2(float(wp.float64(uv[0]) - c[0]), float(wp.float64(uv[1]) - c[1]))
+        else:
+            x = f[0] - step[0]
+            y = f[1] - step[1]
+            d = wp.vec2(x + 0.5 * y, HALF_SQRT3 * y) / HEX_SCALE
         theta = (2.0 * h[2] - 1.0) * PI * params.rotation
         cs = wp.cos(theta)
         sn = wp.sin(theta)
         tap += wp.vec2(cs * d[0] - sn * d[1], sn * d[0] + cs * d[1]) - d
     return tap
+
+
+@wp.func
+def hex_steps(f: wp.vec2):
+    """The lattice steps from ``b`` of the three vertices of :func:`hex_grid`, in its order."""
+    first = wp.vec2(0.0, 0.0)
+    if f[0] + f[1] >= 1.0:
+        first = wp.vec2(1.0, 1.0)
+    return first, wp.vec2(1.0, 0.0), wp.vec2(0.0, 1.0)
 
 
 @wp.func
@@ -244,9 +275,10 @@ def inverse_lut(params: StochasticArgs, layer: wp.int32, level: wp.int32, c: wp.
 def hex_taps(uv: wp.vec2, params: StochasticArgs):
     """``(t0, t1, t2, w)``: the taps of the three vertices of the triangle around ``uv`` and their
     normalised weights."""
-    bary, v0, v1, v2 = hex_grid(uv)
+    bary, f, v0, v1, v2 = hex_grid(uv)
     base = periodic_base(uv)
-    return hex_tap(uv, base, v0, params), hex_tap(uv, base, v1, params), hex_tap(uv, base, v2, params), hex_weights(bary, params.contrast)
+    s0, s1, s2 = hex_steps(f)
+    return hex_tap(uv, f, base, v0, s0, params), hex_tap(uv, f, base, v1, s1, params), hex_tap(uv, f, base, v2, s2, params), hex_weights(bary, params.contrast)
 
 
 @wp.func
@@ -442,12 +474,13 @@ def hex_taps_kernel(
 ):
     """The hex technique's taps at ``uv[i]``: normalised weights, vertex ids and tap UVs (3 each)."""
     i = wp.tid()
-    bary, v0, v1, v2 = hex_grid(uv[i])
+    bary, f, v0, v1, v2 = hex_grid(uv[i])
     weights[i] = hex_weights(bary, params.contrast)
     base = periodic_base(uv[i])
+    s0, s1, s2 = hex_steps(f)
     vertices[i, 0] = v0
     vertices[i, 1] = v1
     vertices[i, 2] = v2
-    taps[i, 0] = hex_tap(uv[i], base, v0, params)
-    taps[i, 1] = hex_tap(uv[i], base, v1, params)
-    taps[i, 2] = hex_tap(uv[i], base, v2, params)
+    taps[i, 0] = hex_tap(uv[i], f, base, v0, s0, params)
+    taps[i, 1] = hex_tap(uv[i], f, base, v1, s1, params)
+    taps[i, 2] = hex_tap(uv[i], f, base, v2, s2, params)

@@ -17,7 +17,7 @@ histogram) are built on the out-of-line blocks of :mod:`warptex.kernels.projecti
 import warp as wp
 
 from . import ADJOINT_MODULE
-from .normals import blend_projected, decode_normal, to_world
+from .normals import blend_projected, decode_normal, to_world, unsquared
 from .projection import (
     ProjectionArgs,
     object_space,
@@ -138,8 +138,8 @@ def projected_normal(texel: wp.vec4, axis: wp.int32, n: wp.vec3, proj: Projectio
 def unit_normal(total: wp.vec3, n: wp.vec3, proj: ProjectionArgs) -> wp.vec3:
     """The blended normal ``total`` in world space, normalised; the surface normal ``n`` where the
     blend cancels out; ``(0, 0, 0)`` where both are zero or non-finite."""
-    world = proj.normal_to_world * total
-    surface = proj.normal_to_world * n
+    world = unsquared(proj.normal_to_world * total)
+    surface = unsquared(proj.normal_to_world * n)
     result = wp.vec3(0.0)
     if wp.length(world) > 1.0e-12 and wp.isfinite(world):
         result = wp.normalize(world)
@@ -151,9 +151,9 @@ def unit_normal(total: wp.vec3, n: wp.vec3, proj: ProjectionArgs) -> wp.vec3:
 @wp.func
 def unit_base_normal(n: wp.vec3) -> wp.vec3:
     """``n`` normalised when it has a length: the blends assume a unit base normal (object space may scale it)."""
-    result = n
-    if wp.length(n) > 0.0:
-        result = wp.normalize(n)
+    result = unsquared(n)
+    if wp.length(result) > 0.0:
+        result = wp.normalize(result)
     return result
 
 
