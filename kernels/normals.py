@@ -9,6 +9,8 @@ Golus, "Normal Mapping for a Triplanar Shader" (2017).
 
 import warp as wp
 
+from .sampling import FLOAT_MAX  # noqa: F401  (the overflow test of unsquared()'s callers)
+
 BLEND_WHITEOUT = wp.constant(0)
 BLEND_UDN = wp.constant(1)
 BLEND_RNM = wp.constant(2)
@@ -16,14 +18,11 @@ BLEND_RNM = wp.constant(2)
 
 @wp.func
 def unsquared(n: wp.vec3) -> wp.vec3:
-    """``n`` scaled down by its largest component when that is past 1e18, so that ``|n|²`` does not
-    overflow (past ~1.8e19) and ``wp.normalize`` gives its direction, not 0; ``n`` itself (the same
-    bits) otherwise."""
-    m = wp.max(wp.vec3(wp.abs(n[0]), wp.abs(n[1]), wp.abs(n[2])))
-    result = n
-    if m > 1.0e18 and m <= 3.4028234663852886e38:
-        result = n / m
-    return result
+    """``n`` divided by its largest component: its direction, with a length in [1, sqrt(3)] whose
+    square cannot overflow. For the rare vectors past ~1.8e19, whose ``|n|²`` is inf and which
+    ``wp.normalize`` would turn into 0; callers test ``wp.length(n) > FLOAT_MAX`` first, so that
+    ordinary vectors keep their bits and their cost."""
+    return n / wp.max(wp.vec3(wp.abs(n[0]), wp.abs(n[1]), wp.abs(n[2])))
 
 
 @wp.func

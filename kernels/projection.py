@@ -23,7 +23,7 @@ ground beside it pick their own mip levels.
 import warp as wp
 
 from . import out_of_line
-from .normals import sign_or_one, unsquared
+from .normals import FLOAT_MAX, sign_or_one, unsquared
 from .sampling import SamplerArgs, TextureView, lod_from_derivatives, lod_scale_slope, sample_lod_derivatives
 from .stochastic import StochasticArgs, sample_stochastic_call
 
@@ -204,8 +204,11 @@ def biplanar_weights(n: wp.vec3, sharpness: float) -> wp.vec3:
     except near the exact diagonal), so the weights are continuous up to that.
     """
     w = wp.vec3(0.0)
-    u = unsquared(n)
-    length = wp.length(u)
+    u = n
+    length = wp.length(n)
+    if length > FLOAT_MAX:  # |n|² overflowed
+        u = unsquared(n)
+        length = wp.length(u)
     if wp.isfinite(n) and length > 0.0:
         a = wp.vec3(wp.abs(u[0]), wp.abs(u[1]), wp.abs(u[2])) / length
         e = sharpness / 8.0

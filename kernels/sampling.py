@@ -238,9 +238,8 @@ def lod_from_derivatives(tex: TextureView, uv_dx: wp.vec2, uv_dy: wp.vec2) -> fl
     b = wp.cw_mul(uv_dy, size)
     aa = wp.dot(a, a)
     bb = wp.dot(b, b)
-    if wp.isnan(aa + bb):  # wp.max would drop a NaN
-        return wp.nan
-    return 0.5 * wp.log2(wp.min(wp.max(wp.max(aa, bb), 1.0e-30), FLOAT_MAX))
+    lod = 0.5 * wp.log2(wp.min(wp.max(wp.max(aa, bb), 1.0e-30), FLOAT_MAX))
+    return wp.where(aa + bb == aa + bb, lod, wp.nan)  # wp.max drops a NaN: put it back (a select, no branch)
 
 
 @wp.func
