@@ -306,3 +306,111 @@ def test_flipped_triangles_shade_like_their_neighbours(tmp_path):
     assert ((normal * geometric).sum(-1) > 0.5).all()
     agreement = (normal * wt.rasterize(sphere, camera).normal.numpy()[covered]).sum(-1)
     assert (agreement > 0.0).all() and (agreement > 0.95).mean() > 0.99  # vertex normals shared with flipped faces lean a little
+
+
+# -- G-buffers from other renderers -------------------------------------------------------------------
+
+
+def _uv_sphere_gbuffer(resolution=(48, 64)):
+    mesh = trimesh.creation.icosphere(subdivisions=4)
+    mesh.visual = trimesh.visual.TextureVisuals(uv=mesh.vertices[:, [0, 1]] * 0.5 + 0.5)
+    return wt.rasterize(mesh, look_at((0.4, 0.6, 3.0), (0.0, 0.0, 0.0), fov_y=45.0, resolution=resolution))
+
+
+def test_from_arrays_keeps_every_field_it_is_given():
+    g = _uv_sphere_gbuffer()
+    a = g.numpy()
+    back = GBuffer.from_arrays(
+        a["position"], a["normal"], a["mask"], uv=a["uv0.uv"], uv_dx=a["uv0.uv_dx"], uv_dy=a["uv0.uv_dy"], tangent=a["uv0.tangent"],
+        position_dx=a["position_dx"], position_dy=a["position_dy"], geometric_normal=a["geometric_normal"], depth=a["depth"],
+        triangle=a["triangle"], camera=g.camera,
+    ).numpy()  # fmt: skip
+    assert sorted(back) == sorted(a)
+    for name in a:
+        np.testing.assert_allclose(back[name], a[name], rtol=1e-6, atol=1e-6, err_msg=name)
+
+
+def test_from_arrays_estimates_missing_derivatives_from_neighbours():
+    """Left out, the derivatives come from screen-space neighbours: on the sphere's interior they
+    match the rasteriser's ray differentials, and a technique reads the same mip levels."""
+    g = _uv_sphere_gbuffer((96, 128))
+    a = g.numpy()
+    covered = a["mask"] > 0
+    est = GBuffer.from_arrays(a["position"], a["normal"], a["mask"], uv=a["uv0.uv"], camera=g.camera)
+    e = est.numpy()
+    np.testing.assert_allclose(e["depth"][covered], a["depth"][covered], rtol=1e-5)
+    inner = covered.copy()  # pixels whose 8 neighbours are covered too
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            inner &= np.roll(np.roll(covered, dr, 0), dc, 1)
+    inner[[0, -1]] = False
+    inner[:, [0, -1]] = False
+    for name in ("position_dx", "position_dy", "uv0.uv_dx", "uv0.uv_dy"):
+        # per pixel, relative: measured 1.2% median, 5.5% at the 95th percentile (the rim, where
+        # finite differences and the tangent plane part ways)
+        err = np.linalg.norm(e[name][inner] - a[name][inner], axis=-1) / np.linalg.norm(a[name][inner], axis=-1)
+        assert np.median(err) < 0.03 and np.percentile(err, 95) < 0.1, name
+    tex = wt.Texture(np.random.default_rng(0).random((64, 64, 3)).astype(np.float32))
+    exact = wt.triplanar(g, tex, tiling=4.0).numpy()[inner]
+    estimated = wt.triplanar(est, tex, tiling=4.0).numpy()[inner]
+    assert np.median(np.abs(estimated - exact)) < 0.01
+
+
+def test_screen_derivatives_take_the_shorter_side_at_a_jump():
+    values = np.array([[0.0, 1.0, 2.0, 50.0, 51.0]])[..., None]
+    covered = np.array([[True, True, True, True, False]])
+    dx, dy = wt.gbuffer.screen_derivatives(values, covered)
+    np.testing.assert_array_equal(dx[0, :, 0], [1.0, 1.0, 1.0, 48.0, 0.0])  # at 50: only its backward side
+    np.testing.assert_array_equal(dy, 0.0)
+
+
+def test_from_arrays_flip_y_reads_bottom_up_rows():
+    g = _uv_sphere_gbuffer()
+    a = g.numpy()
+    flipped = {k: v[::-1] for k, v in a.items()}
+    back = GBuffer.from_arrays(
+        flipped["position"], flipped["normal"], flipped["mask"], uv=flipped["uv0.uv"], uv_dx=flipped["uv0.uv_dx"], uv_dy=-flipped["uv0.uv_dy"],
+        position_dx=flipped["position_dx"], position_dy=-flipped["position_dy"], flip_y=True,
+    ).numpy()  # fmt: skip
+    for name in ("position", "normal", "mask", "uv0.uv", "uv0.uv_dx", "uv0.uv_dy", "position_dx", "position_dy"):
+        np.testing.assert_allclose(back[name], a[name], rtol=1e-6, atol=1e-6, err_msg=name)
+
+
+class _Tensor:
+    """What the bridge needs of a torch tensor (no torch here): ``.detach().cpu().numpy()``."""
+
+    def __init__(self, array):
+        self.array = array
+
+    def detach(self):
+        return self
+
+    def cpu(self):
+        return self
+
+    def numpy(self):
+        return self.array
+
+
+def test_from_arrays_takes_tensors_and_wp_arrays_and_checks_its_input():
+    g = _uv_sphere_gbuffer()
+    a = g.numpy()
+    back = GBuffer.from_arrays(_Tensor(a["position"]), g.normal, _Tensor(a["mask"] > 0)).numpy()
+    np.testing.assert_allclose(back["normal"], a["normal"], atol=1e-6)
+    np.testing.assert_array_equal(back["mask"], a["mask"])
+    assert back["triangle"][a["mask"] > 0].max() == 0 and (back["triangle"][a["mask"] == 0] == -1).all()
+    bad_position = a["position"].copy()
+    bad_position[a["mask"] > 0] = np.nan
+    with pytest.raises(ValueError, match=r"GBuffer.from_arrays\(\): position is not finite at covered pixel"):
+        GBuffer.from_arrays(bad_position, a["normal"], a["mask"])
+    with pytest.raises(ValueError, match=r"GBuffer.from_arrays\(\): normal must have shape \(48, 64, 3\), got \(48, 63, 3\)"):
+        GBuffer.from_arrays(a["position"], a["normal"][:, 1:])
+    with pytest.raises(ValueError, match=r"GBuffer.from_arrays\(\): position must have shape \(H, W, 3\)"):
+        GBuffer.from_arrays(a["position"][..., :2], a["normal"])
+    with pytest.raises(TypeError, match=r"GBuffer.from_arrays\(\): uv must hold real numbers"):
+        GBuffer.from_arrays(a["position"], a["normal"], uv=np.full((48, 64, 2), "x"))
+    with pytest.raises(ValueError, match=r"pass uv too"):
+        GBuffer.from_arrays(a["position"], a["normal"], uv_dx=a["uv0.uv_dx"])
+    nan_outside = a["position"].copy()
+    nan_outside[a["mask"] == 0] = np.nan  # uncovered pixels may hold anything
+    assert GBuffer.from_arrays(nan_outside, a["normal"], a["mask"]).numpy()["mask"].sum() == a["mask"].sum()

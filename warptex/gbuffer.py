@@ -111,6 +111,183 @@ class GBuffer:
         sets = {s: {k: wp.zeros(resolution, dtype=t, device=device) for k, t in UV_FIELDS.items()} for s in uv_sets}
         return cls(**arrays, uv_sets=sets, camera=camera)
 
+    @classmethod
+    def from_arrays(
+        cls,
+        position,
+        normal,
+        mask=None,
+        *,
+        uv=None,
+        position_dx=None,
+        position_dy=None,
+        uv_dx=None,
+        uv_dy=None,
+        tangent=None,
+        geometric_normal=None,
+        depth=None,
+        triangle=None,
+        flip_y: bool = False,
+        camera: Camera | None = None,
+        device=None,
+    ) -> "GBuffer":
+        """A G-buffer from another renderer's per-pixel arrays (nvdiffrast, pytorch3d, Blender
+        passes, your own rasteriser), so that every technique can texture its images.
+
+        Arrays are NumPy, ``wp.array`` or anything with ``.detach().cpu().numpy()`` (a torch
+        tensor), ``(H, W, C)`` (or ``(H, W)`` for one channel), row 0 at the top of the image;
+        they are copied (no gradient flows back to them):
+
+        Args:
+            position: world-space positions ``(H, W, 3)``; sets the resolution.
+            normal: shading normals ``(H, W, 3)``, normalised here (not flipped to face a camera).
+            mask: coverage ``(H, W)``, a pixel is covered where > 0.5 (nvdiffrast:
+                ``rast[..., 3] > 0``); default: where position and normal are finite and the
+                normal is not zero.
+            uv: UV set ``"uv0"`` ``(H, W, 2)``, optional.
+            position_dx, position_dy, uv_dx, uv_dy: change per pixel step right (x) and down (y).
+                **When left out they are estimated** from the covered screen-space neighbours
+                (:func:`screen_derivatives`): central differences, a one-sided difference at the
+                mask's edge or where the two sides disagree by more than 2× (a depth or UV seam),
+                0 on isolated pixels. Exact derivatives (nvdiffrast's ``interpolate`` with
+                ``diff_attrs``, ordered du/dx, du/dy, dv/dx, dv/dy: ``uv_dx = uv_da[..., [0, 2]]``,
+                ``uv_dy = uv_da[..., [1, 3]]``) pick
+                better mip levels at silhouettes and seams.
+            tangent: ``(H, W, 4)`` tangents for UV-space normal maps; default 0.
+            geometric_normal: default ``normal``. depth: default view depth from ``camera``, else
+                1. triangle: triangle ids ``(H, W)``; default 0 where covered.
+            flip_y: the arrays' row 0 is the *bottom* row (OpenGL / nvdiffrast): rows are
+                reversed, and ``position_dy``/``uv_dy`` negated (their "y" pointed up).
+            camera: kept on the G-buffer; gives the default depth.
+            device: Warp device of the arrays.
+
+        Uncovered pixels get the background values (zeros, ``depth = inf``, ``triangle = -1``).
+
+        Raises:
+            ValueError: shapes that disagree with ``position``'s ``(H, W)`` or have the wrong
+                channel count, or non-finite values on covered pixels.
+            TypeError: values that are not numbers.
+        """
+        func = "GBuffer.from_arrays"
+        p = _host_array(func, "position", position, 3, flip_y)
+        h, w = p.shape[:2]
+
+        def get(name, value, channels, negate=False):
+            if value is None:
+                return None
+            a = _host_array(func, name, value, channels, flip_y, (h, w))
+            return -a if negate and flip_y else a
+
+        n = get("normal", normal, 3)
+        covered = (np.isfinite(p).all(-1) & np.isfinite(n).all(-1) & (np.abs(n).max(-1) > 0)) if mask is None else get("mask", mask, 1)[..., 0] > 0.5
+        fields = {
+            "position": p,
+            "normal": n,
+            "geometric_normal": get("geometric_normal", geometric_normal, 3),
+            "depth": get("depth", depth, 1),
+            "triangle": get("triangle", triangle, 1),
+            "position_dx": get("position_dx", position_dx, 3),
+            "position_dy": get("position_dy", position_dy, 3, negate=True),
+        }
+        uv_fields = {"uv": get("uv", uv, 2), "uv_dx": get("uv_dx", uv_dx, 2), "uv_dy": get("uv_dy", uv_dy, 2, negate=True), "tangent": get("tangent", tangent, 4)}
+        if uv_fields["uv"] is None and any(v is not None for v in uv_fields.values()):
+            raise ValueError(f"{func}(): uv_dx, uv_dy and tangent describe a UV set: pass uv too")
+        for name, values in [*fields.items(), *uv_fields.items()]:
+            if values is not None and not np.isfinite(values[covered]).all():
+                bad = np.argwhere(covered & ~np.isfinite(values).all(-1))[0]
+                raise ValueError(f"{func}(): {name} is not finite at covered pixel (row {bad[0]}, column {bad[1]}): {values[tuple(bad)].tolist()}")
+
+        length = np.linalg.norm(fields["normal"], axis=-1, keepdims=True)
+        fields["normal"] = np.where(length > 0, fields["normal"] / np.where(length > 0, length, 1), 0)
+        if fields["geometric_normal"] is None:
+            fields["geometric_normal"] = fields["normal"]
+        else:
+            g = fields["geometric_normal"]
+            g_length = np.linalg.norm(g, axis=-1, keepdims=True)
+            fields["geometric_normal"] = np.where(g_length > 0, g / np.where(g_length > 0, g_length, 1), 0)
+        if fields["depth"] is None:
+            view = (p - camera.eye) @ camera.forward if camera is not None else np.ones((h, w))
+            fields["depth"] = np.asarray(view, np.float32)[..., None]
+        if fields["triangle"] is None:
+            fields["triangle"] = np.zeros((h, w, 1))
+        for name in ("position", "uv"):
+            source = fields if name == "position" else uv_fields
+            if source[name] is None:
+                continue
+            estimated = screen_derivatives(source[name], covered)
+            for k, suffix in enumerate(("_dx", "_dy")):
+                if source[name + suffix] is None:
+                    source[name + suffix] = estimated[k]
+        if uv_fields["uv"] is not None and uv_fields["tangent"] is None:
+            uv_fields["tangent"] = np.zeros((h, w, 4))
+
+        device = wp.get_device(device)
+        background = {"depth": np.inf, "triangle": -1}
+
+        def to_warp(name, values, dtype):
+            values = np.where(covered[..., None], values, background.get(name, 0.0))
+            if dtype in (wp.float32, wp.int32):
+                return wp.array(np.ascontiguousarray(values[..., 0], np.int32 if dtype == wp.int32 else np.float32), dtype=dtype, device=device)
+            return wp.array(np.ascontiguousarray(values, np.float32), dtype=dtype, device=device)
+
+        fields["mask"] = covered[..., None].astype(np.float32)
+        arrays = {name: to_warp(name, fields[name], dtype) for name, dtype in FIELDS.items()}
+        sets = {"uv0": {k: to_warp(k, uv_fields[k], t) for k, t in UV_FIELDS.items()}} if uv_fields["uv"] is not None else {}
+        return cls(**arrays, uv_sets=sets, camera=camera)
+
+
+def screen_derivatives(values: np.ndarray, covered: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Change of per-pixel ``values`` ``(H, W, C)`` per pixel step right (x) and down (y), estimated
+    from covered neighbours: the central difference where both neighbours along the axis are
+    covered and their one-sided differences agree within 2× (by length); else the shorter one-sided
+    difference (a silhouette, a depth jump or a UV seam lies on the other side); 0 where neither
+    neighbour is covered. ``(d/dx, d/dy)``, each ``(H, W, C)`` float32."""
+    v = np.asarray(values, np.float64)
+    out = []
+    for axis in (1, 0):
+        ahead = [slice(None)] * 2
+        behind = [slice(None)] * 2
+        ahead[axis], behind[axis] = slice(1, None), slice(None, -1)
+        step = v[tuple(ahead)] - v[tuple(behind)]
+        ok = covered[tuple(ahead)] & covered[tuple(behind)]
+        forward = np.full_like(v, np.nan)
+        backward = np.full_like(v, np.nan)
+        forward[tuple(behind)] = np.where(ok[..., None], step, np.nan)  # v[i+1] - v[i], at i
+        backward[tuple(ahead)] = np.where(ok[..., None], step, np.nan)  # v[i] - v[i-1], at i
+        f_len = np.linalg.norm(forward, axis=-1, keepdims=True)
+        b_len = np.linalg.norm(backward, axis=-1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            agree = (f_len <= 2 * b_len) & (b_len <= 2 * f_len)
+        shorter = np.where(np.isnan(f_len) | (b_len < f_len), backward, forward)
+        d = np.where(agree, 0.5 * (forward + backward), shorter)
+        out.append(np.where(np.isfinite(d) & covered[..., None], d, 0.0).astype(np.float32))
+    return out[0], out[1]
+
+
+def _host_array(func: str, name: str, value, channels: int, flip_y: bool, shape=None) -> np.ndarray:
+    """``value`` (NumPy, ``wp.array``, or a tensor with ``.detach().cpu().numpy()``) as float64
+    ``(H, W, channels)``, rows reversed when ``flip_y``; ``shape``: the ``(H, W)`` it must have."""
+    if isinstance(value, wp.array):
+        value = value.numpy()
+    elif hasattr(value, "detach") and hasattr(value, "cpu"):
+        value = value.detach().cpu().numpy()
+    try:
+        a = np.asarray(value)
+    except ValueError as err:
+        raise ValueError(f"{func}(): {name} must be a rectangular array of numbers: {err}") from None
+    if a.dtype == bool:
+        a = a.astype(np.float64)
+    if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+        raise TypeError(f"{func}(): {name} must hold real numbers, got dtype {a.dtype}")
+    if a.ndim == 2 and channels == 1:
+        a = a[..., None]
+    expected = "(H, W)" if channels == 1 else f"(H, W, {channels})"
+    if a.ndim != 3 or a.shape[-1] != channels or 0 in a.shape or (shape is not None and a.shape[:2] != tuple(shape)):
+        want = expected if shape is None else expected.replace("H, W", f"{shape[0]}, {shape[1]}")
+        raise ValueError(f"{func}(): {name} must have shape {want}, got {a.shape}")
+    a = a.astype(np.float64)
+    return a[::-1].copy() if flip_y else a
+
 
 def gbuffer_device(func: str, gbuffer, device) -> wp.context.Device:
     """The device a technique launches on over ``gbuffer``: ``device`` if given (it must be the
