@@ -9,7 +9,7 @@ Golus, "Normal Mapping for a Triplanar Shader" (2017).
 
 import warp as wp
 
-from .sampling import FLOAT_MAX  # noqa: F401  (the overflow test of unsquared()'s callers)
+from .sampling import FLOAT_MAX
 
 BLEND_WHITEOUT = wp.constant(0)
 BLEND_UDN = wp.constant(1)
@@ -19,10 +19,20 @@ BLEND_RNM = wp.constant(2)
 @wp.func
 def unsquared(n: wp.vec3) -> wp.vec3:
     """``n`` divided by its largest component: its direction, with a length in [1, sqrt(3)] whose
-    square cannot overflow. For the rare vectors past ~1.8e19, whose ``|n|²`` is inf and which
-    ``wp.normalize`` would turn into 0; callers test ``wp.length(n) > FLOAT_MAX`` first, so that
-    ordinary vectors keep their bits and their cost."""
+    square cannot overflow. For the rare vectors past ~1.8e19, whose ``|n|²`` is inf; callers test
+    ``wp.length(n) > FLOAT_MAX`` first (as :func:`direction` does), so that ordinary vectors keep
+    their bits and their cost."""
     return n / wp.max(wp.vec3(wp.abs(n[0]), wp.abs(n[1]), wp.abs(n[2])))
+
+
+@wp.func
+def direction(v: wp.vec3) -> wp.vec3:
+    """``wp.normalize(v)`` (the same bits), also for a ``v`` past ~1.8e19, whose ``|v|²``
+    overflows and which ``wp.normalize`` would turn into 0: that one is scaled down first."""
+    result = wp.normalize(v)
+    if wp.length(v) > FLOAT_MAX:
+        result = wp.normalize(unsquared(v))
+    return result
 
 
 @wp.func

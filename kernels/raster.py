@@ -8,7 +8,7 @@ them through the triangle's position-to-UV map.
 
 import warp as wp
 
-from .normals import FLOAT_MAX, unsquared
+from .normals import direction
 
 MODULE = "warptex.raster"
 
@@ -81,10 +81,7 @@ def raster_kernel(
         k = indices[3 * f + 2]
         b = wp.vec3(hit.u, hit.v, 1.0 - hit.u - hit.v)
         p = o + d * hit.t
-        ng = wp.cross(points[j] - points[i], points[k] - points[i])
-        if wp.length(ng) > FLOAT_MAX:  # |cross|² overflows past edges of ~3e9
-            ng = unsquared(ng)
-        ng = wp.normalize(ng)
+        ng = direction(wp.cross(points[j] - points[i], points[k] - points[i]))  # |cross|² overflows past edges of ~3e9
         ns = vertex_normals[i] * b[0] + vertex_normals[j] * b[1] + vertex_normals[k] * b[2]
         if wp.length(ns) > 1.0e-12:
             ns = wp.normalize(ns)

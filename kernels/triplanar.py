@@ -17,7 +17,7 @@ histogram) are built on the out-of-line blocks of :mod:`warptex.kernels.projecti
 import warp as wp
 
 from . import ADJOINT_MODULE
-from .normals import FLOAT_MAX, blend_projected, decode_normal, to_world, unsquared
+from .normals import blend_projected, decode_normal, direction, to_world
 from .projection import (
     ProjectionArgs,
     object_space,
@@ -142,13 +142,9 @@ def unit_normal(total: wp.vec3, n: wp.vec3, proj: ProjectionArgs) -> wp.vec3:
     surface = proj.normal_to_world * n
     result = wp.vec3(0.0)
     if wp.length(world) > 1.0e-12 and wp.isfinite(world):
-        result = wp.normalize(world)
-        if wp.length(world) > FLOAT_MAX:  # |world|² overflowed and normalize gave 0
-            result = wp.normalize(unsquared(world))
+        result = direction(world)
     elif wp.length(surface) > 0.0 and wp.isfinite(surface):
-        result = wp.normalize(surface)
-        if wp.length(surface) > FLOAT_MAX:
-            result = wp.normalize(unsquared(surface))
+        result = direction(surface)
     return result
 
 
@@ -157,9 +153,7 @@ def unit_base_normal(n: wp.vec3) -> wp.vec3:
     """``n`` normalised when it has a length: the blends assume a unit base normal (object space may scale it)."""
     result = n
     if wp.length(n) > 0.0:
-        result = wp.normalize(n)
-        if wp.length(n) > FLOAT_MAX:  # |n|² overflowed and normalize gave 0
-            result = wp.normalize(unsquared(n))
+        result = direction(n)
     return result
 
 
