@@ -9,6 +9,7 @@ import numpy as np
 import trimesh
 import warp as wp
 
+from warptex._validate import as_float_array
 from warptex.camera import Camera
 from warptex.kernels import raster as kr
 
@@ -197,14 +198,8 @@ class GBuffer:
                 bad = np.argwhere(covered & ~np.isfinite(values).all(-1))[0]
                 raise ValueError(f"{func}(): {name} is not finite at covered pixel (row {bad[0]}, column {bad[1]}): {values[tuple(bad)].tolist()}")
 
-        length = np.linalg.norm(fields["normal"], axis=-1, keepdims=True)
-        fields["normal"] = np.where(length > 0, fields["normal"] / np.where(length > 0, length, 1), 0)
-        if fields["geometric_normal"] is None:
-            fields["geometric_normal"] = fields["normal"]
-        else:
-            g = fields["geometric_normal"]
-            g_length = np.linalg.norm(g, axis=-1, keepdims=True)
-            fields["geometric_normal"] = np.where(g_length > 0, g / np.where(g_length > 0, g_length, 1), 0)
+        fields["normal"] = _unit_rows(fields["normal"])
+        fields["geometric_normal"] = fields["normal"] if fields["geometric_normal"] is None else _unit_rows(fields["geometric_normal"])
         if fields["depth"] is None:
             view = (p - camera.eye) @ camera.forward if camera is not None else np.ones((h, w))
             fields["depth"] = np.asarray(view, np.float32)[..., None]
@@ -264,6 +259,12 @@ def screen_derivatives(values: np.ndarray, covered: np.ndarray) -> tuple[np.ndar
     return out[0], out[1]
 
 
+def _unit_rows(v: np.ndarray) -> np.ndarray:
+    """Each vector of ``v`` ``(..., 3)`` normalised; zero vectors stay zero."""
+    length = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.where(length > 0, v / np.where(length > 0, length, 1), 0)
+
+
 def _host_array(func: str, name: str, value, channels: int, flip_y: bool, shape=None) -> np.ndarray:
     """``value`` (NumPy, ``wp.array``, or a tensor with ``.detach().cpu().numpy()``) as float64
     ``(H, W, channels)``, rows reversed when ``flip_y``; ``shape``: the ``(H, W)`` it must have."""
@@ -271,21 +272,16 @@ def _host_array(func: str, name: str, value, channels: int, flip_y: bool, shape=
         value = value.numpy()
     elif hasattr(value, "detach") and hasattr(value, "cpu"):
         value = value.detach().cpu().numpy()
-    try:
-        a = np.asarray(value)
-    except ValueError as err:
-        raise ValueError(f"{func}(): {name} must be a rectangular array of numbers: {err}") from None
-    if a.dtype == bool:
-        a = a.astype(np.float64)
-    if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
-        raise TypeError(f"{func}(): {name} must hold real numbers, got dtype {a.dtype}")
+    if isinstance(value, np.ndarray) and value.dtype == bool:  # a coverage mask
+        value = value.astype(np.float32)
+    a = as_float_array(func, name, value)
     if a.ndim == 2 and channels == 1:
         a = a[..., None]
     expected = "(H, W)" if channels == 1 else f"(H, W, {channels})"
     if a.ndim != 3 or a.shape[-1] != channels or 0 in a.shape or (shape is not None and a.shape[:2] != tuple(shape)):
         want = expected if shape is None else expected.replace("H, W", f"{shape[0]}, {shape[1]}")
         raise ValueError(f"{func}(): {name} must have shape {want}, got {a.shape}")
-    a = a.astype(np.float64)
+    a = a.astype(np.float64)  # derivatives are estimated from these
     return a[::-1].copy() if flip_y else a
 
 
