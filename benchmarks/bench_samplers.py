@@ -5,6 +5,8 @@ of the output to every texel of every mip level), on one CPU thread and on all o
 peers in the same process on the same data (``benchmarks/peers``: vectorised NumPy, PyTorch built
 on ``grid_sample``, Dr.Jit's ``Texture2f`` on its LLVM backend; each skipped with its reason when
 not installed), and checks that every peer computes what warptex computes (max abs difference).
+``triplanar_aniso`` is triplanar with the anisotropic filter: no peer has one, so compare its rows
+with warptex's trilinear ``triplanar`` on the same scene.
 
 Scenes: the orthographic unit sphere (positions × 4 as triplanar coordinates; sample techniques
 read the Z projection's UV and derivatives), the default terrain from its default camera, and
@@ -44,10 +46,12 @@ from warptex.apps.render import TERRAIN_GRID, terrain_camera  # noqa: E402
 from warptex.apps.terrain import terrain  # noqa: E402
 from warptex.apps.terrain_material import noise_texture, terrain_splat_maps  # noqa: E402
 
-TECHNIQUES = peers.TECHNIQUES
+# triplanar_aniso: triplanar with the anisotropic filter, against warptex's own trilinear triplanar
+# (no peer filters anisotropically).
+TECHNIQUES = (*peers.TECHNIQUES, "triplanar_aniso")
 SAMPLE_TECHNIQUES = ("bilinear", "trilinear", "hash4", "cheap2", "hex")
 # Texel reads per sample at most (trilinear: 8 per read). Splat: one bilinear map read per 4 layers.
-NOMINAL_TAPS = {"bilinear": 4, "trilinear": 8, "hash4": 32, "cheap2": 16, "hex": 24, "triplanar": 24, "biplanar": 16, "triplanar_normal": 24, "splat4": 4 + 4 * 8, "splat8": 8 + 8 * 8}
+NOMINAL_TAPS = {"bilinear": 4, "trilinear": 8, "hash4": 32, "cheap2": 16, "hex": 24, "triplanar": 24, "triplanar_aniso": 24, "biplanar": 16, "triplanar_normal": 24, "splat4": 4 + 4 * 8, "splat8": 8 + 8 * 8}
 SPHERE_TILING = 4.0
 
 

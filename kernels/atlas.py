@@ -31,7 +31,7 @@ LOD (after bias, before trilinear blending) to that ``ℓ_max``, which the Pytho
 import warp as wp
 
 from . import ADJOINT_MODULE, specialised
-from .sampling import ADDRESS_WRAP, SamplerArgs, TextureView, fetch, lod_from_derivatives, reduce_coord, sample_lod, sample_lod_call, write_channels
+from .sampling import ADDRESS_WRAP, SamplerArgs, TextureView, fetch, footprint_taps, footprint_uv, reduce_coord, sample_lod, sample_lod_call, uv_footprint, write_channels
 
 MODULE = "warptex.atlas"
 
@@ -86,13 +86,15 @@ def _sample_tile(sample, name: str):
     ) -> wp.vec4:
         """Layer ``layer`` sampled from the atlas at layer UV ``uv`` with layer-UV derivatives.
 
-        The LOD is measured in tile texels; ``smp.max_lod`` must already hold the safe clamp.
+        The footprint is measured in tile texels; ``smp.max_lod`` must already hold the safe clamp.
+        An anisotropic footprint's taps are placed in layer UV and each wrapped into the tile, so
+        no tap reads a neighbouring tile.
         """
-        scale = wp.vec2(
-            float(layout.tile_width) / float(atlas.level_width[0]), float(layout.tile_height) / float(atlas.level_height[0])
-        )
-        lod = lod_from_derivatives(atlas, wp.cw_mul(uv_dx, scale), wp.cw_mul(uv_dy, scale))
-        return sample(atlas, 0, tile_uv(atlas, layout, layer, uv), lod, smp)
+        fp = uv_footprint(wp.vec2(float(layout.tile_width), float(layout.tile_height)), uv_dx, uv_dy, smp)
+        result = wp.vec4(0.0)
+        for k in range(footprint_taps(fp)):
+            result += sample(atlas, 0, tile_uv(atlas, layout, layer, footprint_uv(uv, fp, k)), fp[0], smp)
+        return result / fp[3]
 
     return wp.func(specialised(sample_tile, name))
 

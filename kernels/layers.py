@@ -47,8 +47,8 @@ import functools
 import warp as wp
 
 from . import ADJOINT_MODULE, out_of_line, specialised
-from .projection import ProjectionArgs, plane_coords, plane_lod, plane_uv, surface_frame, triplanar_weights, u_sign
-from .sampling import SamplerArgs, TextureView, lod_from_derivatives, lod_scale_slope, read_channels, sample_lod, sample_lod_derivatives, scatter_lod, write_channels
+from .projection import ProjectionArgs, plane_coords, plane_footprint, plane_uv, surface_frame, triplanar_weights, u_sign
+from .sampling import SamplerArgs, TextureView, lod_scale_slope, read_channels, sample_footprint_derivatives, sample_lod, sample_lod_derivatives, scatter_lod, texture_footprint, write_channels
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, sample_stochastic_call, scatter_plain, scatter_stochastic
 
 PROJECT_UV = wp.constant(0)  # UV0 × tiling
@@ -94,24 +94,25 @@ def layer_reads(params: SplatArgs) -> wp.int32:
 @wp.func
 def layer_read(
     tex: TextureView, layer: wp.int32, k: wp.int32, params: SplatArgs, proj: ProjectionArgs, uv0: wp.vec2, uv0_dx: wp.vec2, uv0_dy: wp.vec2,
-    p: wp.vec3, n: wp.vec3, tri_w: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3,
+    p: wp.vec3, n: wp.vec3, tri_w: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, smp: SamplerArgs,
 ):  # fmt: skip
-    """``(uv, lod, weight)`` of read ``k`` of ``layer`` at the layer's tiling: UV0, the world XZ
+    """``(uv, footprint, weight)`` of read ``k`` of ``layer`` at the layer's tiling: UV0, the world XZ
     plane (the triplanar top projection seen from above), or projection ``k`` weighted ``tri_w[k]``."""
     t = layer_tiling(params, layer)
     uv = uv0 * t
-    lod = 0.0
+    fp = wp.vec4()
     weight = 1.0
     if params.projection == PROJECT_UV:
-        lod = lod_from_derivatives(tex, uv0_dx * t, uv0_dy * t)
+        fp = texture_footprint(tex, uv0_dx * t, uv0_dy * t, smp)
     elif params.projection == PROJECT_WORLD_XZ:
-        uv = plane_uv(proj, 1, p, wp.vec3(0.0, 1.0, 0.0), t)
-        lod = plane_lod(tex, 1, dpdx, dpdy, t)
+        up = wp.vec3(0.0, 1.0, 0.0)
+        uv = plane_uv(proj, 1, p, up, t)
+        fp = plane_footprint(tex, proj, 1, up, dpdx, dpdy, t, smp)
     else:
         uv = plane_uv(proj, k, p, n, t)
-        lod = plane_lod(tex, k, dpdx, dpdy, t)
+        fp = plane_footprint(tex, proj, k, n, dpdx, dpdy, t, smp)
         weight = tri_w[k]
-    return uv, lod, weight
+    return uv, fp, weight
 
 
 @wp.func
@@ -217,17 +218,17 @@ def _read_layer(sample, name: str, one_call: bool, decorate=wp.func):
         value = wp.vec4(0.0)
         if wp.static(one_call):  # one call of ``sample``: stochastic sampling is compiled once
             for k in range(layer_reads(params)):
-                uv, lod, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy)
+                uv, fp, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy, smp)
                 if weight > 0.0:
-                    value += weight * sample(tex, layer, uv, lod, smp, stoch)
+                    value += weight * sample(tex, layer, uv, fp, smp, stoch)
         elif params.projection == PROJECT_TRIPLANAR:  # plain: UV and world XZ read without the loop (faster)
             for k in range(layer_reads(params)):
-                uv, lod, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy)
+                uv, fp, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy, smp)
                 if weight > 0.0:
-                    value += weight * sample(tex, layer, uv, lod, smp, stoch)
+                    value += weight * sample(tex, layer, uv, fp, smp, stoch)
         else:
-            uv, lod, weight = layer_read(tex, layer, 0, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy)
-            value = sample(tex, layer, uv, lod, smp, stoch)
+            uv, fp, weight = layer_read(tex, layer, 0, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy, smp)
+            value = sample(tex, layer, uv, fp, smp, stoch)
         return value
 
     return decorate(specialised(read_layer, name))
@@ -243,17 +244,17 @@ def _scatter_layer(scatter, name: str, one_call: bool):
         if grad.shape[0] > 0:
             if wp.static(one_call):  # as in read_layer
                 for k in range(layer_reads(params)):
-                    uv, lod, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy)
+                    uv, fp, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy, smp)
                     if weight > 0.0:
-                        scatter(tex, grad, layer, uv, lod, smp, stoch, weight * g)
+                        scatter(tex, grad, layer, uv, fp, smp, stoch, weight * g)
             elif params.projection == PROJECT_TRIPLANAR:
                 for k in range(layer_reads(params)):
-                    uv, lod, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy)
+                    uv, fp, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy, smp)
                     if weight > 0.0:
-                        scatter(tex, grad, layer, uv, lod, smp, stoch, weight * g)
+                        scatter(tex, grad, layer, uv, fp, smp, stoch, weight * g)
             else:
-                uv, lod, weight = layer_read(tex, layer, 0, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy)
-                scatter(tex, grad, layer, uv, lod, smp, stoch, g)
+                uv, fp, weight = layer_read(tex, layer, 0, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy, smp)
+                scatter(tex, grad, layer, uv, fp, smp, stoch, g)
 
     return wp.func(specialised(scatter_layer, name))
 
@@ -271,16 +272,16 @@ def read_layer_slope(
     p: wp.vec3, n: wp.vec3, tri_w: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, smp: SamplerArgs,
 ):  # fmt: skip
     """``(value, d value / d tiling)`` of ``read_layer`` with plain sampling, as Warp's adjoint takes
-    the derivative."""
+    the derivative (an anisotropic footprint's steps move in proportion to the tiling)."""
     value = wp.vec4(0.0)
     slope = wp.vec4(0.0)
     for k in range(layer_reads(params)):
-        uv, lod, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy)
+        uv, fp, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy, smp)
         if weight > 0.0:
             uv_slope, lod_slope = layer_read_slopes(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, dpdx, dpdy)
-            v, d_u, d_v, d_lod = sample_lod_derivatives(tex, layer, uv, lod, smp)
+            v, d_u, d_v, d_lod, d_spread = sample_footprint_derivatives(tex, layer, uv, fp, smp)
             value += weight * v
-            slope += weight * (d_u * uv_slope[0] + d_v * uv_slope[1] + d_lod * lod_slope)
+            slope += weight * (d_u * uv_slope[0] + d_v * uv_slope[1] + d_lod * lod_slope + d_spread / layer_tiling(params, layer))
     return value, slope
 
 

@@ -17,14 +17,14 @@ Triplanar Shader", 2017) writes ``uvX.x *= sign(n.x)``, ``uvY.x *= sign(n.y)``,
 
 **Level of detail.** Each projection has its own footprint: its UV derivatives are the plane
 components of the G-buffer's ``position_dx``/``position_dy`` times its tiling, so a wall and the
-ground beside it pick their own mip levels.
+ground beside it pick their own mip levels (and, filtered anisotropically, their own axes).
 """
 
 import warp as wp
 
 from . import out_of_line
 from .normals import FLOAT_MAX, sign_or_one, unsquared
-from .sampling import SamplerArgs, TextureView, lod_from_derivatives, lod_scale_slope, sample_lod_derivatives
+from .sampling import SamplerArgs, TextureView, lod_scale_slope, sample_footprint_derivatives, texture_footprint
 from .stochastic import StochasticArgs, sample_stochastic_call
 
 # How the three projections are weighted.
@@ -94,19 +94,29 @@ def plane_uv(proj: ProjectionArgs, axis: wp.int32, p: wp.vec3, n: wp.vec3, tilin
 
 
 @wp.func
-def plane_lod(tex: TextureView, axis: wp.int32, dpdx: wp.vec3, dpdy: wp.vec3, tiling: float) -> float:
-    """Level of detail of projection ``axis`` at ``tiling``, from its own footprint (signs do not matter)."""
-    return lod_from_derivatives(tex, plane_coords(dpdx, axis) * tiling, plane_coords(dpdy, axis) * tiling)
+def plane_derivative(proj: ProjectionArgs, axis: wp.int32, n: wp.vec3, dp: wp.vec3, tiling: float) -> wp.vec2:
+    """The UV derivative of projection ``axis`` at ``tiling`` along a position derivative ``dp``
+    (the offset drops out; the mirror fix flips ``u``)."""
+    c = plane_coords(dp, axis) * tiling
+    return wp.vec2(c[0] * u_sign(n, axis, proj.mirror_fix), c[1])
+
+
+@wp.func
+def plane_footprint(tex: TextureView, proj: ProjectionArgs, axis: wp.int32, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, tiling: float, smp: SamplerArgs) -> wp.vec4:
+    """The filter footprint (``warptex.kernels.sampling``) of projection ``axis`` at ``tiling``,
+    from its own UV derivatives."""
+    return texture_footprint(tex, plane_derivative(proj, axis, n, dpdx, tiling), plane_derivative(proj, axis, n, dpdy, tiling), smp)
 
 
 @wp.func
 def plane_sample_slope(tex: TextureView, layer: wp.int32, proj: ProjectionArgs, axis: wp.int32, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, tiling: float, smp: SamplerArgs):
     """``(value, d value / d tiling)`` of plain sampling of projection ``axis`` at ``tiling``: the
-    UV moves by the (mirror-fixed) plane coordinates, the LOD by ``1 / (tiling ln 2)``."""
-    value, d_u, d_v, d_lod = sample_lod_derivatives(tex, layer, plane_uv(proj, axis, p, n, tiling), plane_lod(tex, axis, dpdx, dpdy, tiling), smp)
+    UV moves by the (mirror-fixed) plane coordinates, the LOD by ``1 / (tiling ln 2)`` and an
+    anisotropic footprint's steps in proportion to ``tiling``."""
+    value, d_u, d_v, d_lod, d_spread = sample_footprint_derivatives(tex, layer, plane_uv(proj, axis, p, n, tiling), plane_footprint(tex, proj, axis, n, dpdx, dpdy, tiling, smp), smp)
     c = plane_coords(p, axis)
     lod_slope = lod_scale_slope(tex, plane_coords(dpdx, axis), plane_coords(dpdy, axis), tiling)
-    return value, d_u * (c[0] * u_sign(n, axis, proj.mirror_fix)) + d_v * c[1] + d_lod * lod_slope
+    return value, d_u * (c[0] * u_sign(n, axis, proj.mirror_fix)) + d_v * c[1] + d_lod * lod_slope + d_spread / tiling
 
 
 @wp.func
@@ -115,8 +125,8 @@ def projection_uv(proj: ProjectionArgs, axis: wp.int32, p: wp.vec3, n: wp.vec3) 
 
 
 @wp.func
-def projection_lod(tex: TextureView, proj: ProjectionArgs, axis: wp.int32, dpdx: wp.vec3, dpdy: wp.vec3) -> float:
-    return plane_lod(tex, axis, dpdx, dpdy, projection_tiling(proj, axis))
+def projection_footprint(tex: TextureView, proj: ProjectionArgs, axis: wp.int32, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, smp: SamplerArgs) -> wp.vec4:
+    return plane_footprint(tex, proj, axis, n, dpdx, dpdy, projection_tiling(proj, axis), smp)
 
 
 # Integer exponents below this are raised by multiplication (power_weight).
@@ -274,5 +284,5 @@ def projection_sample(
     smp: SamplerArgs,
     stoch: StochasticArgs,
 ) -> wp.vec4:
-    """Projection ``axis`` of ``tex`` at ``tiling``, at its own LOD, sampled as ``stoch`` says, out of line."""
-    return sample_stochastic_call(tex, layer, plane_uv(proj, axis, p, n, tiling), plane_lod(tex, axis, dpdx, dpdy, tiling), smp, stoch)
+    """Projection ``axis`` of ``tex`` at ``tiling``, over its own footprint, sampled as ``stoch`` says, out of line."""
+    return sample_stochastic_call(tex, layer, plane_uv(proj, axis, p, n, tiling), plane_footprint(tex, proj, axis, n, dpdx, dpdy, tiling, smp), smp, stoch)

@@ -18,12 +18,13 @@ UV convention (OpenGL / trimesh): ``(0, 0)`` is the bottom-left corner of the im
 
 import warp as wp
 
-from . import ADJOINT_MODULE, out_of_line
+from . import ADJOINT_MODULE, out_of_line, specialised
 
 # Filter modes (mirrored by ``warptex.Filter``).
 FILTER_NEAREST = wp.constant(0)
 FILTER_BILINEAR = wp.constant(1)
 FILTER_TRILINEAR = wp.constant(2)
+FILTER_ANISOTROPIC = wp.constant(3)  # trilinear taps along the footprint's major axis
 
 # Address modes (mirrored by ``warptex.Address``).
 ADDRESS_WRAP = wp.constant(0)
@@ -64,6 +65,7 @@ class SamplerArgs:
     lod_bias: float
     min_lod: float
     max_lod: float
+    max_aniso: float  # the most taps of the anisotropic filter (>= 1)
 
 
 @wp.func
@@ -224,8 +226,9 @@ def sample_bilinear(tex: TextureView, layer: wp.int32, level: wp.int32, uv: wp.v
 
 
 @wp.func
-def lod_from_derivatives(tex: TextureView, uv_dx: wp.vec2, uv_dy: wp.vec2) -> float:
-    """Unclamped level of detail ``log2(footprint)`` of a pixel with UV derivatives ``uv_dx``, ``uv_dy``.
+def footprint_lod(size: wp.vec2, uv_dx: wp.vec2, uv_dy: wp.vec2) -> float:
+    """Unclamped level of detail ``log2(footprint)`` of a pixel with UV derivatives ``uv_dx``,
+    ``uv_dy`` on a level-0 image of ``size`` (width, height) texels.
 
     The footprint is the longer of the two screen-space derivative vectors, measured in level-0
     texels (the isotropic rule of the OpenGL specification). A zero footprint gives a very negative
@@ -233,7 +236,6 @@ def lod_from_derivatives(tex: TextureView, uv_dx: wp.vec2, uv_dy: wp.vec2) -> fl
     (derivatives past ~1e19 texels: the coarsest level) gives 64, never ``+inf``; a NaN derivative
     gives NaN.
     """
-    size = wp.vec2(float(tex.level_width[0]), float(tex.level_height[0]))
     a = wp.cw_mul(uv_dx, size)
     b = wp.cw_mul(uv_dy, size)
     aa = wp.dot(a, a)
@@ -243,13 +245,111 @@ def lod_from_derivatives(tex: TextureView, uv_dx: wp.vec2, uv_dy: wp.vec2) -> fl
 
 
 @wp.func
+def level0_size(tex: TextureView) -> wp.vec2:
+    return wp.vec2(float(tex.level_width[0]), float(tex.level_height[0]))
+
+
+@wp.func
+def lod_from_derivatives(tex: TextureView, uv_dx: wp.vec2, uv_dy: wp.vec2) -> float:
+    """:func:`footprint_lod` on ``tex``' level 0."""
+    return footprint_lod(level0_size(tex), uv_dx, uv_dy)
+
+
+# -- footprints: where a filter reads, and at which LOD -----------------------------------------------
+#
+# A footprint is a ``vec4`` ``(lod, step_u, step_v, taps)``: the filter reads ``taps`` trilinear (or
+# bilinear, nearest) samples at ``uv + step · (k + 1/2 - taps/2)``, ``k = 0 .. taps - 1``, all at
+# ``lod``, and averages them. Every filter but the anisotropic one has one tap and no step, which
+# reads ``uv`` itself, bit for bit as a single sample does.
+
+
+@wp.func
+def point_footprint(lod: float) -> wp.vec4:
+    """The one-tap footprint of a given ``lod``."""
+    return wp.vec4(lod, 0.0, 0.0, 1.0)
+
+
+@wp.func
+def anisotropic_footprint(size: wp.vec2, uv_dx: wp.vec2, uv_dy: wp.vec2, max_aniso: float) -> wp.vec4:
+    """The anisotropic filter's footprint (see the section above) of a pixel with UV derivatives
+    ``uv_dx``, ``uv_dy`` on a level-0 image of ``size`` texels.
+
+    The pixel's footprint in texels is the parallelogram of ``a = uv_dx · size``, ``b = uv_dy ·
+    size``; its ellipse (Heckbert's EWA; the D3D11 specification's anisotropic filter) has axes the
+    singular values of the Jacobian ``J = [a b]``: ``major² = (A + C)/2 + sqrt(((A - C)/2)² + B²)``
+    for ``J Jᵀ = [[A, B], [B, C]]``, and ``minor = |det J| / major``. The LOD is that of the minor
+    axis, raised to ``major / max_aniso`` where needed so that ``taps = ceil(major / 2^lod) <=
+    max_aniso`` trilinear taps, ``2^lod`` apart at most, cover the major axis' length, centred on
+    the UV. The taps are weighted equally (a box along the axis): a pixel integrates its footprint
+    uniformly, and a box matches that integral where a Gaussian would weight the middle and leave the
+    ends under-filtered. Footprints too small, too large or not finite fall back to the isotropic
+    one tap at :func:`footprint_lod`.
+    """
+    a = wp.cw_mul(uv_dx, size)
+    b = wp.cw_mul(uv_dy, size)
+    A = a[0] * a[0] + b[0] * b[0]
+    B = a[0] * a[1] + b[0] * b[1]
+    C = a[1] * a[1] + b[1] * b[1]
+    h = 0.5 * (A - C)
+    root = wp.sqrt(wp.max(h * h + B * B, 1.0e-38))  # floored: no infinite slope where the footprint is round
+    major2 = 0.5 * (A + C) + root
+    result = point_footprint(footprint_lod(size, uv_dx, uv_dy))
+    if major2 > 1.0e-30 and major2 < FLOAT_MAX:  # false for NaN too
+        major = wp.sqrt(major2)
+        minor = wp.abs(a[0] * b[1] - a[1] * b[0]) / major
+        extent = wp.max(minor, major / max_aniso)
+        taps = wp.clamp(wp.ceil(major / extent - 1.0e-3), 1.0, max_aniso)  # a round footprint's rounding is one tap, not two
+        # The major axis: an eigenvector of J Jᵀ for major², the longer of its two expressions.
+        v = wp.vec2(B, major2 - A)
+        other = wp.vec2(major2 - C, B)
+        if wp.dot(other, other) > wp.dot(v, v):
+            v = other
+        length = wp.length(v)
+        e = wp.vec2(1.0, 0.0)
+        if length > 0.0:
+            e = v / length
+        step = e * (major / taps)
+        result = wp.vec4(wp.log2(extent), step[0] / size[0], step[1] / size[1], taps)
+    return result
+
+
+@wp.func
+def uv_footprint(size: wp.vec2, uv_dx: wp.vec2, uv_dy: wp.vec2, smp: SamplerArgs) -> wp.vec4:
+    """The footprint that ``smp``'s filter reads for UV derivatives ``uv_dx``, ``uv_dy`` on a level-0
+    image of ``size`` texels: anisotropic, or one tap at :func:`footprint_lod`."""
+    result = wp.vec4()
+    if smp.filter == FILTER_ANISOTROPIC:
+        result = anisotropic_footprint(size, uv_dx, uv_dy, smp.max_aniso)
+    else:
+        result = point_footprint(footprint_lod(size, uv_dx, uv_dy))
+    return result
+
+
+@wp.func
+def texture_footprint(tex: TextureView, uv_dx: wp.vec2, uv_dy: wp.vec2, smp: SamplerArgs) -> wp.vec4:
+    """:func:`uv_footprint` on ``tex``' level 0."""
+    return uv_footprint(level0_size(tex), uv_dx, uv_dy, smp)
+
+
+@wp.func
+def footprint_taps(fp: wp.vec4) -> wp.int32:
+    return int(fp[3])
+
+
+@wp.func
+def footprint_uv(uv: wp.vec2, fp: wp.vec4, k: wp.int32) -> wp.vec2:
+    """Tap ``k``'s UV: ``uv`` itself for a one-tap footprint."""
+    return uv + wp.vec2(fp[1], fp[2]) * (float(k) + 0.5 - 0.5 * fp[3])
+
+
+@wp.func
 def mip_levels(tex: TextureView, lod: float, smp: SamplerArgs) -> wp.vec2:
     """``(level, fraction)`` that ``lod`` reads: the sampler's bias and ``[min_lod, max_lod]`` clamp,
     then the chain's. Nearest and bilinear read level ``floor(lod + 0.5)`` (fraction 0); trilinear
-    blends ``floor(lod)`` and the next level by the fraction."""
+    (and each anisotropic tap) blends ``floor(lod)`` and the next level by the fraction."""
     l = wp.clamp(wp.clamp(lod + smp.lod_bias, smp.min_lod, smp.max_lod), 0.0, float(tex.num_levels - 1))
     result = wp.vec2(wp.floor(l + 0.5), 0.0)
-    if smp.filter == FILTER_TRILINEAR:
+    if smp.filter >= FILTER_TRILINEAR:  # trilinear, and the anisotropic filter's taps
         result = wp.vec2(wp.floor(l), l - wp.floor(l))
     return result
 
@@ -289,6 +389,23 @@ def sample_lod_call(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, 
     """:func:`sample_lod`, out of line: for the kernels with Warp's generated adjoint, which call
     it from several places; a Warp module then compiles one copy of it and of its adjoint."""
     return sample_lod(tex, layer, uv, lod, smp)
+
+
+def _sample_footprint(sample, name: str, decorate=wp.func):
+    def sample_footprint(tex: TextureView, layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs) -> wp.vec4:
+        """Sample ``layer`` at ``uv`` over the footprint ``fp``: the mean of its taps, each read by
+        :func:`sample_lod` (one tap: exactly ``sample_lod`` at ``fp``'s LOD)."""
+        result = wp.vec4(0.0)
+        for k in range(footprint_taps(fp)):
+            result += sample(tex, layer, footprint_uv(uv, fp, k), fp[0], smp)
+        return result / fp[3]
+
+    return decorate(specialised(sample_footprint, name))
+
+
+sample_footprint = _sample_footprint(sample_lod, "sample_footprint")
+# For the generated-adjoint kernels: out of line, on the out-of-line sample_lod_call.
+sample_footprint_call = _sample_footprint(sample_lod_call, "sample_footprint_call", out_of_line)
 
 
 # -- texel gradients ---------------------------------------------------------------------------------
@@ -345,6 +462,14 @@ def scatter_lod(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32
         scatter_levels(tex, grad, layer, uv, int(lf[0]), lf[1], smp, g)
 
 
+@wp.func
+def scatter_footprint(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, g: wp.vec4):
+    """Add the gradient ``g`` of :func:`sample_footprint` (same arguments) into the texels it reads."""
+    share = g / fp[3]
+    for k in range(footprint_taps(fp)):
+        scatter_lod(tex, grad, layer, footprint_uv(uv, fp, k), fp[0], smp, share)
+
+
 # -- UV and LOD derivatives ---------------------------------------------------------------------------
 #
 # ``sample_lod`` and its derivatives with respect to ``uv`` and ``lod``, in one pass and as Warp's
@@ -397,6 +522,27 @@ def sample_lod_derivatives(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: 
 
 
 @wp.func
+def sample_footprint_derivatives(tex: TextureView, layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs):
+    """``(value, d/du, d/dv, d/dlod, d/dspread)`` of :func:`sample_footprint`: the taps'
+    :func:`sample_lod_derivatives`, averaged; ``d/dspread`` is the derivative along a scale ``s`` of
+    the step between taps (``step · s`` at ``s = 1``), which moves with a tiling as the UV does."""
+    value = wp.vec4(0.0)
+    d_u = wp.vec4(0.0)
+    d_v = wp.vec4(0.0)
+    d_lod = wp.vec4(0.0)
+    d_spread = wp.vec4(0.0)
+    for k in range(footprint_taps(fp)):
+        offset = float(k) + 0.5 - 0.5 * fp[3]
+        v, tap_u, tap_v, tap_lod = sample_lod_derivatives(tex, layer, footprint_uv(uv, fp, k), fp[0], smp)
+        value += v
+        d_u += tap_u
+        d_v += tap_v
+        d_lod += tap_lod
+        d_spread += (tap_u * fp[1] + tap_v * fp[2]) * offset
+    return value / fp[3], d_u / fp[3], d_v / fp[3], d_lod / fp[3], d_spread / fp[3]
+
+
+@wp.func
 def lod_scale_slope(tex: TextureView, uv_dx: wp.vec2, uv_dy: wp.vec2, scale: float) -> float:
     """``d/ds lod_from_derivatives(tex, uv_dx · s, uv_dy · s)`` at ``s = scale``: ``1 / (s ln 2)``,
     or 0 where the footprint is outside the floor and ceiling that keep the LOD finite."""
@@ -435,28 +581,30 @@ def resolve_layer(tex: TextureView, i: wp.int32, layers: wp.array(dtype=wp.int32
 
 
 @wp.func
-def resolve_layer_and_lod(
+def resolve_layer_and_footprint(
     tex: TextureView,
     i: wp.int32,
     uv_dx: wp.array(dtype=wp.vec2),
     uv_dy: wp.array(dtype=wp.vec2),
     lods: wp.array(dtype=float),
     layers: wp.array(dtype=wp.int32),
+    smp: SamplerArgs,
     lod_source: wp.int32,
     constant_lod: float,
     constant_layer: wp.int32,
 ):
-    """Sample ``i``'s layer (per-sample indices clamped to the array) and LOD, by ``lod_source``:
-    the argument conventions of :func:`sample_kernel`, shared by every per-UV sampling kernel."""
+    """Sample ``i``'s layer (per-sample indices clamped to the array) and footprint, by
+    ``lod_source`` (a given LOD: one tap): the argument conventions of :func:`sample_kernel`,
+    shared by every per-UV sampling kernel."""
     layer = resolve_layer(tex, i, layers, constant_layer)
-    lod = 0.0
+    fp = point_footprint(0.0)
     if lod_source == LOD_CONSTANT:
-        lod = constant_lod
+        fp = point_footprint(constant_lod)
     elif lod_source == LOD_PER_SAMPLE:
-        lod = lods[i]
+        fp = point_footprint(lods[i])
     elif lod_source == LOD_DERIVATIVES:
-        lod = lod_from_derivatives(tex, uv_dx[i], uv_dy[i])
-    return layer, lod
+        fp = texture_footprint(tex, uv_dx[i], uv_dy[i], smp)
+    return layer, fp
 
 
 # -- kernels --------------------------------------------------------------------------------------------
@@ -492,8 +640,8 @@ def _sample_kernel(module: str, enable_backward: bool, sample):
         Per-sample layer indices are clamped to the array; optional arrays may be null when unused.
         """
         i = wp.tid()
-        layer, lod = resolve_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
-        write_channels(out, i, sample(tex, layer, uv[i], lod, smp))
+        layer, fp = resolve_layer_and_footprint(tex, i, uv_dx, uv_dy, lods, layers, smp, lod_source, constant_lod, constant_layer)
+        write_channels(out, i, sample(tex, layer, uv[i], fp, smp))
 
     return sample_kernel
 
@@ -523,9 +671,9 @@ def _sample_level_kernel(module: str, enable_backward: bool):
     return sample_level_kernel
 
 
-sample_kernel = _sample_kernel(MODULE, False, sample_lod)
+sample_kernel = _sample_kernel(MODULE, False, sample_footprint)
 sample_level_kernel = _sample_level_kernel(MODULE, enable_backward=False)
-sample_adjoint_kernel = _sample_kernel(ADJOINT_MODULE, True, sample_lod_call)
+sample_adjoint_kernel = _sample_kernel(ADJOINT_MODULE, True, sample_footprint_call)
 sample_level_adjoint_kernel = _sample_level_kernel(ADJOINT_MODULE, enable_backward=True)
 
 
@@ -547,8 +695,8 @@ def sample_texel_grad_kernel(
     """Add the gradient of :func:`sample_kernel` (same inputs) with respect to the texels into
     ``grad``, given its output's gradient ``adj_out``."""
     i = wp.tid()
-    layer, lod = resolve_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
-    scatter_lod(tex, grad, layer, uv[i], lod, smp, read_channels(adj_out, i))
+    layer, fp = resolve_layer_and_footprint(tex, i, uv_dx, uv_dy, lods, layers, smp, lod_source, constant_lod, constant_layer)
+    scatter_footprint(tex, grad, layer, uv[i], fp, smp, read_channels(adj_out, i))
 
 
 @wp.kernel(enable_backward=False, module=GRAD_MODULE)

@@ -1,11 +1,12 @@
 """Stochastic texture sampling that breaks visible tiling: hash4, cheap2 and hex.
 
-One building block, :func:`sample_stochastic`, samples a texture layer at ``uv`` with one level
-of detail ``lod`` for every tap; callers compute that LOD from the *unperturbed* UV derivatives,
-so all taps read the same mip levels and no mip seam appears at cell borders. ``params.method``
-picks the technique at run time:
+One building block, :func:`sample_stochastic`, samples a texture layer at ``uv`` over one filter
+footprint (``warptex.kernels.sampling``: a LOD, and for the anisotropic filter taps along the
+major axis); callers compute it from the *unperturbed* UV derivatives, so all taps read the same
+mip levels and no mip seam appears at cell borders. ``params.method`` picks the technique at run
+time:
 
-* ``METHOD_NONE``: plain :func:`~warptex.kernels.sampling.sample_lod`.
+* ``METHOD_NONE``: plain :func:`~warptex.kernels.sampling.sample_footprint`.
 * ``METHOD_HASH4`` (Quilez, "texture repetition", technique 1): every integer cell
   ``(i, j)`` gets a hashed offset ``o`` and, with ``mirror``, per-axis signs ``s``; the four cells
   around ``uv`` are sampled at ``s * uv + o`` and blended bilinearly with weights
@@ -337,27 +338,34 @@ def histogram_blend(tex: TextureView, layer: wp.int32, acc: wp.vec4, w: wp.vec4,
 
 
 def _sample_stochastic(sample, taps, blend_histogram, name: str, decorate=wp.func):
-    def sample_stochastic(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: SamplerArgs, params: StochasticArgs) -> wp.vec4:
-        """Sample ``layer`` at ``uv`` with the technique ``params.method``, every tap at ``lod``.
+    def sample_stochastic(tex: TextureView, layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, params: StochasticArgs) -> wp.vec4:
+        """Sample ``layer`` at ``uv`` with the technique ``params.method`` over the footprint ``fp``
+        (``warptex.kernels.sampling``), every tap at its LOD.
 
-        ``lod`` is taken as is (then biased and clamped by ``smp`` as in ``sample_lod``); compute it
-        from the unperturbed UV derivatives. Non-finite ``uv`` or ``lod`` give NaN in every channel.
+        Compute the footprint from the unperturbed UV derivatives. An anisotropic footprint's taps
+        are each sampled with the technique, then averaged: the filter integrates the stochastic
+        texture along the footprint. Non-finite ``uv`` or LOD give NaN in every channel.
         """
-        result = wp.vec4(wp.nan)
-        if params.method == METHOD_NONE:  # tested first: plain sampling measured 5% slower after the others' tests
-            result = sample(tex, layer, uv, lod, smp)
-        elif sampling.finite_uv_lod(uv, lod):
-            t0, t1, t2, t3, w = taps(uv, params)
-            mean = wp.vec4(0.0)
-            if params.histogram != 0:
-                mean = wp.vec4(params.mean)
-            result = wp.vec4(0.0)
-            for k in range(4):
-                if w[k] > 0.0:
-                    result += w[k] * (sample(tex, layer, pick_tap(k, t0, t1, t2, t3), lod, smp) - mean)
-            if params.histogram != 0:
-                result = blend_histogram(tex, layer, result, w, lod, smp, params)
-        return result
+        lod = fp[0]
+        result = wp.vec4(0.0)
+        for j in range(sampling.footprint_taps(fp)):
+            at = sampling.footprint_uv(uv, fp, j)
+            value = wp.vec4(wp.nan)
+            if params.method == METHOD_NONE:  # tested first: plain sampling measured 5% slower after the others' tests
+                value = sample(tex, layer, at, lod, smp)
+            elif sampling.finite_uv_lod(at, lod):
+                t0, t1, t2, t3, w = taps(at, params)
+                mean = wp.vec4(0.0)
+                if params.histogram != 0:
+                    mean = wp.vec4(params.mean)
+                value = wp.vec4(0.0)
+                for k in range(4):
+                    if w[k] > 0.0:
+                        value += w[k] * (sample(tex, layer, pick_tap(k, t0, t1, t2, t3), lod, smp) - mean)
+                if params.histogram != 0:
+                    value = blend_histogram(tex, layer, value, w, lod, smp, params)
+            result += value
+        return result / fp[3]
 
     return decorate(specialised(sample_stochastic, name))
 
@@ -381,30 +389,35 @@ sample_stochastic_call = _sample_stochastic(sampling.sample_lod_call, stochastic
 
 
 @wp.func
-def scatter_stochastic(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, lod: float, smp: SamplerArgs, params: StochasticArgs, g: wp.vec4):
+def scatter_stochastic(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, params: StochasticArgs, g: wp.vec4):
     """Add the gradient ``g`` of :func:`sample_stochastic` (same arguments) into the texels it
     reads: each tap's weight times ``g``. Linear blends only (no histogram, which is not linear
     in the texels)."""
     if params.method == METHOD_NONE:
-        sampling.scatter_lod(tex, grad, layer, uv, lod, smp, g)
-    elif sampling.finite_uv_lod(uv, lod):
-        t0, t1, t2, t3, w = stochastic_taps(uv, params)
-        for k in range(4):
-            if w[k] > 0.0:
-                sampling.scatter_lod(tex, grad, layer, pick_tap(k, t0, t1, t2, t3), lod, smp, w[k] * g)
+        sampling.scatter_footprint(tex, grad, layer, uv, fp, smp, g)
+    else:
+        lod = fp[0]
+        share = g / fp[3]
+        for j in range(sampling.footprint_taps(fp)):
+            at = sampling.footprint_uv(uv, fp, j)
+            if sampling.finite_uv_lod(at, lod):
+                t0, t1, t2, t3, w = stochastic_taps(at, params)
+                for k in range(4):
+                    if w[k] > 0.0:
+                        sampling.scatter_lod(tex, grad, layer, pick_tap(k, t0, t1, t2, t3), lod, smp, w[k] * share)
 
 
 @wp.func
-def sample_plain(tex: TextureView, layer: wp.int32, uv: wp.vec2, lod: float, smp: SamplerArgs, params: StochasticArgs) -> wp.vec4:
+def sample_plain(tex: TextureView, layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, params: StochasticArgs) -> wp.vec4:
     """:func:`sample_stochastic` for ``METHOD_NONE`` without the stochastic code (``params`` is not
     read), for the plain variants of kernels that take either."""
-    return sampling.sample_lod(tex, layer, uv, lod, smp)
+    return sampling.sample_footprint(tex, layer, uv, fp, smp)
 
 
 @wp.func
-def scatter_plain(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, lod: float, smp: SamplerArgs, params: StochasticArgs, g: wp.vec4):
+def scatter_plain(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, params: StochasticArgs, g: wp.vec4):
     """:func:`scatter_stochastic` for ``METHOD_NONE`` without the stochastic code."""
-    sampling.scatter_lod(tex, grad, layer, uv, lod, smp, g)
+    sampling.scatter_footprint(tex, grad, layer, uv, fp, smp, g)
 
 
 # -- kernels (the three roles of ``warptex._op.Kernels``; see ``warptex.kernels.sampling``) ------------
@@ -431,8 +444,8 @@ def _stochastic_kernel(module: str, enable_backward: bool, sample):
     ):
         """``out[i, c]`` = channel ``c`` of :func:`sample_stochastic` at ``uv[i]`` (arguments as ``sample_kernel``)."""
         i = wp.tid()
-        layer, lod = sampling.resolve_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
-        sampling.write_channels(out, i, sample(tex, layer, uv[i], lod, smp, params))
+        layer, fp = sampling.resolve_layer_and_footprint(tex, i, uv_dx, uv_dy, lods, layers, smp, lod_source, constant_lod, constant_layer)
+        sampling.write_channels(out, i, sample(tex, layer, uv[i], fp, smp, params))
 
     return stochastic_kernel
 
@@ -460,8 +473,8 @@ def stochastic_texel_grad_kernel(
     """Add the gradient of :func:`stochastic_kernel` (same inputs; linear blends only) with respect
     to the texels into ``grad``, given its output's gradient ``adj_out``."""
     i = wp.tid()
-    layer, lod = sampling.resolve_layer_and_lod(tex, i, uv_dx, uv_dy, lods, layers, lod_source, constant_lod, constant_layer)
-    scatter_stochastic(tex, grad, layer, uv[i], lod, smp, params, sampling.read_channels(adj_out, i))
+    layer, fp = sampling.resolve_layer_and_footprint(tex, i, uv_dx, uv_dy, lods, layers, smp, lod_source, constant_lod, constant_layer)
+    scatter_stochastic(tex, grad, layer, uv[i], fp, smp, params, sampling.read_channels(adj_out, i))
 
 
 @wp.kernel(enable_backward=False, module=MODULE)

@@ -22,7 +22,7 @@ from .projection import (
     ProjectionArgs,
     object_space,
     plane_coords,
-    projection_lod,
+    projection_footprint,
     projection_sample,
     projection_tiling,
     projection_uv,
@@ -30,7 +30,7 @@ from .projection import (
     surface_frame,
     u_sign,
 )
-from .sampling import SamplerArgs, TextureView, read_channels, sample_lod, scatter_lod, write_channels
+from .sampling import SamplerArgs, TextureView, read_channels, sample_footprint, scatter_footprint, write_channels
 from .stochastic import StochasticArgs, sample_stochastic, scatter_stochastic
 
 MODULE = "warptex.triplanar"
@@ -70,17 +70,17 @@ def axis_grad(grad_x: wp.array(dtype=wp.vec4), grad_y: wp.array(dtype=wp.vec4), 
 def sample_one(
     tex: TextureView, layer: wp.int32, axis: wp.int32, proj: ProjectionArgs, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, smp: SamplerArgs, stoch: StochasticArgs
 ) -> wp.vec4:
-    """Projection ``axis`` of ``tex`` at the projection's own LOD, sampled as ``stoch`` says (the
-    stochastic taps all use the unperturbed LOD)."""
-    return sample_stochastic(tex, layer, projection_uv(proj, axis, p, n), projection_lod(tex, proj, axis, dpdx, dpdy), smp, stoch)
+    """Projection ``axis`` of ``tex`` over the projection's own footprint, sampled as ``stoch`` says
+    (the stochastic taps all use the unperturbed footprint's LOD)."""
+    return sample_stochastic(tex, layer, projection_uv(proj, axis, p, n), projection_footprint(tex, proj, axis, n, dpdx, dpdy, smp), smp, stoch)
 
 
 @wp.func
 def sample_one_plain(
     tex: TextureView, layer: wp.int32, axis: wp.int32, proj: ProjectionArgs, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, smp: SamplerArgs, stoch: StochasticArgs
 ) -> wp.vec4:
-    """:func:`sample_one` with plain trilinear sampling (``stoch`` is not read)."""
-    return sample_lod(tex, layer, projection_uv(proj, axis, p, n), projection_lod(tex, proj, axis, dpdx, dpdy), smp)
+    """:func:`sample_one` with plain sampling (``stoch`` is not read)."""
+    return sample_footprint(tex, layer, projection_uv(proj, axis, p, n), projection_footprint(tex, proj, axis, n, dpdx, dpdy, smp), smp)
 
 
 @wp.func
@@ -101,7 +101,7 @@ def scatter_one(
     """Add the gradient ``g`` of projection ``axis`` (as :func:`sample_one` reads it; linear
     blends only) into ``grad``, the texels' gradient; nothing when ``grad`` is empty (not needed)."""
     if grad.shape[0] > 0:
-        scatter_stochastic(tex, grad, layer, projection_uv(proj, axis, p, n), projection_lod(tex, proj, axis, dpdx, dpdy), smp, stoch, g)
+        scatter_stochastic(tex, grad, layer, projection_uv(proj, axis, p, n), projection_footprint(tex, proj, axis, n, dpdx, dpdy, smp), smp, stoch, g)
 
 
 @wp.func
@@ -121,7 +121,7 @@ def scatter_one_plain(
 ):
     """:func:`scatter_one` for plain sampling (as :func:`sample_one_plain` reads it)."""
     if grad.shape[0] > 0:
-        scatter_lod(tex, grad, layer, projection_uv(proj, axis, p, n), projection_lod(tex, proj, axis, dpdx, dpdy), smp, g)
+        scatter_footprint(tex, grad, layer, projection_uv(proj, axis, p, n), projection_footprint(tex, proj, axis, n, dpdx, dpdy, smp), smp, g)
 
 
 @wp.func

@@ -34,7 +34,7 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(1234)
 
 
-SAMPLER_FIELDS = ("filter", "address", "border", "lod_bias", "min_lod", "max_lod")
+SAMPLER_FIELDS = ("filter", "address", "border", "lod_bias", "min_lod", "max_lod", "max_aniso")
 
 
 def with_sampler(kw: dict) -> dict:

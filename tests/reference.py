@@ -108,3 +108,34 @@ def lod_from_derivatives(uv_dx, uv_dy, h: int, w: int) -> np.ndarray:
     a = np.linalg.norm(np.asarray(uv_dx, np.float64) * size, axis=-1)
     b = np.linalg.norm(np.asarray(uv_dy, np.float64) * size, axis=-1)
     return np.log2(np.maximum(a, b))
+
+
+def anisotropic_footprint(uv_dx, uv_dy, h: int, w: int, max_aniso: int = 16):
+    """``(lod, step, taps)`` of the anisotropic filter, in float64: the ellipse of the Jacobian
+    ``J = [uv_dx · size, uv_dy · size]`` by its singular values (an SVD here, not the kernels'
+    closed form), the LOD of the minor axis raised to ``major / max_aniso``, ``ceil(major / 2^lod)``
+    taps along the major axis ``2^lod`` apart at most, ``step`` in UV."""
+    size = np.array([w, h], np.float64)
+    a = np.asarray(uv_dx, np.float64) * size
+    b = np.asarray(uv_dy, np.float64) * size
+    jac = np.stack([a, b], axis=-1)  # [..., 2 (u, v), 2 (dx, dy)]
+    u, s, _ = np.linalg.svd(jac)
+    major, minor = s[..., 0], s[..., 1]
+    extent = np.maximum(minor, major / max_aniso)
+    taps = np.clip(np.ceil(major / extent - 1e-3), 1, max_aniso)
+    step = u[..., :, 0] * (major / taps)[..., None] / size
+    return np.log2(extent), step, taps.astype(np.int64)
+
+
+def anisotropic(chain, uv, uv_dx, uv_dy, mode="wrap", max_aniso: int = 16) -> np.ndarray:
+    """The anisotropic filter: the mean of ``taps`` trilinear samples at ``uv + step · (k + 1/2 -
+    taps/2)``, all at the footprint's LOD."""
+    h, w = chain[0].shape[:2]
+    lod, step, taps = anisotropic_footprint(uv_dx, uv_dy, h, w, max_aniso)
+    uv = np.asarray(uv, np.float64)
+    out = np.zeros((len(uv), chain[0].shape[2]))
+    for k in range(int(taps.max())):
+        live = k < taps
+        at = uv[live] + step[live] * (k + 0.5 - 0.5 * taps[live])[:, None]
+        out[live] += trilinear(chain, at, lod[live], mode)
+    return out / taps[:, None]

@@ -11,9 +11,10 @@ from warptex.apps.cli import main
 def test_demo_writes_png_and_exr(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path), "--resolution", "48x64"]) == 0
     png = io.read_image(tmp_path / "demo.png", data=True)
-    exr = io.read_image(tmp_path / "demo_trilinear.exr")
-    assert png.shape == (48 + 48, 3 * 64, 3)  # ground-plane row, then the address-mode row
-    assert exr.shape == (48, 64, 3) and np.isfinite(exr).all()
+    assert png.shape == (48 + 64, 4 * 64, 3)  # ground-plane row (four filters), then the address-mode row
+    for name in ("demo_trilinear.exr", "demo_anisotropic.exr"):
+        exr = io.read_image(tmp_path / name)
+        assert exr.shape == (48, 64, 3) and np.isfinite(exr).all()
     assert "wrote" in capsys.readouterr().out
 
 

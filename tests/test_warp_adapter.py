@@ -26,7 +26,7 @@ def test_struct_fields_and_a_new_struct_of_the_same_kind():
     smp = ks.SamplerArgs()
     smp.filter, smp.address, smp.lod_bias = 2, 1, 0.5
     fields = _warp.struct_fields(smp)
-    assert list(fields) == ["filter", "address", "border", "lod_bias", "min_lod", "max_lod"]
+    assert list(fields) == ["filter", "address", "border", "lod_bias", "min_lod", "max_lod", "max_aniso"]
     assert fields["filter"] == 2 and fields["lod_bias"] == 0.5
     copy = _warp.struct_like(smp)
     assert type(copy) is type(smp) and copy.filter == 0

@@ -24,7 +24,7 @@ from warptex.kernels import stochastic as kst
 from warptex.options import Address, Filter, Method, Sampler, Stochastic
 from warptex.texture import Texture, TextureArray
 
-_FILTER_IDS = {Filter.NEAREST: ks.FILTER_NEAREST, Filter.BILINEAR: ks.FILTER_BILINEAR, Filter.TRILINEAR: ks.FILTER_TRILINEAR}
+_FILTER_IDS = {Filter.NEAREST: ks.FILTER_NEAREST, Filter.BILINEAR: ks.FILTER_BILINEAR, Filter.TRILINEAR: ks.FILTER_TRILINEAR, Filter.ANISOTROPIC: ks.FILTER_ANISOTROPIC}
 _ADDRESS_IDS = {Address.WRAP: ks.ADDRESS_WRAP, Address.CLAMP: ks.ADDRESS_CLAMP, Address.MIRROR: ks.ADDRESS_MIRROR, Address.BORDER: ks.ADDRESS_BORDER}
 _METHOD_IDS = {Method.NONE: kst.METHOD_NONE, Method.HASH4: kst.METHOD_HASH4, Method.CHEAP2: kst.METHOD_CHEAP2, Method.HEX: kst.METHOD_HEX}
 
@@ -32,19 +32,23 @@ _METHOD_IDS = {Method.NONE: kst.METHOD_NONE, Method.HASH4: kst.METHOD_HASH4, Met
 MAP_SAMPLER = Sampler(filter=Filter.BILINEAR, address=Address.CLAMP, max_lod=0.0)
 
 
-def sampler_args(func: str, sampler: Sampler, *, has_lod: bool) -> ks.SamplerArgs:
-    """``sampler`` for kernels that have a LOD (``has_lod``; always over a G-buffer) or not:
-    ``"auto"`` is trilinear with one, bilinear without; trilinear without one is an error."""
+def sampler_args(func: str, sampler: Sampler, *, has_lod: bool, has_derivatives: bool | None = None) -> ks.SamplerArgs:
+    """``sampler`` for kernels that have a LOD (``has_lod``; always over a G-buffer) or not, and UV
+    derivatives (``has_derivatives``, default ``has_lod``) or not: ``"auto"`` is trilinear with a
+    LOD, bilinear without; trilinear without a LOD, or anisotropic without derivatives, is an error."""
     filt = sampler.filter
     if filt == Filter.AUTO:
         filt = Filter.TRILINEAR if has_lod else Filter.BILINEAR
     if filt == Filter.TRILINEAR and not has_lod:
         raise ValueError(f"{func}(): filter='trilinear' needs lod= or uv_dx=/uv_dy=")
+    if filt == Filter.ANISOTROPIC and not (has_lod if has_derivatives is None else has_derivatives):
+        raise ValueError(f"{func}(): filter='anisotropic' needs uv_dx=/uv_dy= (the footprint's shape); a lod= alone is isotropic")
     smp = ks.SamplerArgs()
     smp.filter = _FILTER_IDS[filt]
     smp.address = _ADDRESS_IDS[sampler.address]
     smp.border = wp.vec4(*sampler.border)
     smp.lod_bias, smp.min_lod, smp.max_lod = sampler.lod_bias, sampler.min_lod, sampler.max_lod
+    smp.max_aniso = float(sampler.max_aniso)
     return smp
 
 
@@ -55,7 +59,7 @@ def mip_levels(lod: float, smp: ks.SamplerArgs, num_levels: int) -> tuple[int, f
     level = f32(lod) + f32(smp.lod_bias)
     level = min(max(f32(smp.min_lod), level), f32(smp.max_lod))  # wp.clamp(x, a, b) = fmin(fmax(a, x), b)
     level = min(max(f32(0.0), level), f32(num_levels - 1))
-    if smp.filter == ks.FILTER_TRILINEAR:
+    if smp.filter >= ks.FILTER_TRILINEAR:  # and the anisotropic filter's taps
         base = np.floor(level)
         return int(base), float(f32(level - base))
     return int(np.floor(level + f32(0.5))), 0.0

@@ -31,7 +31,8 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
         lod: level of detail: a number, or one float per UV (a ``wp.array`` of float receives
             gradients). Exclusive with ``uv_dx``/``uv_dy``.
         uv_dx, uv_dy: screen-space derivatives of ``uv`` along x and y, same shape as ``uv``. The
-            LOD is ``log2(max(|uv_dx * (W, H)|, |uv_dy * (W, H)|))``, the footprint in level-0 texels.
+            LOD is ``log2(max(|uv_dx * (W, H)|, |uv_dy * (W, H)|))``, the footprint in level-0 texels;
+            the ``"anisotropic"`` filter reads their ellipse (:class:`~warptex.Filter`).
         sampler: a :class:`Sampler` (filtering, addressing, LOD bias and clamp); ``None``: the
             defaults, with ``"auto"`` filtering: trilinear when a LOD is given, else bilinear.
         device: Warp device; must be the texture's (``None``: the texture's).
@@ -48,7 +49,7 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
     uv, given = vec2_array(func, "uv", uv, device), uv
     single = not isinstance(given, wp.array) and np.ndim(given) == 1  # one UV, shape (2,): a result of shape (C,)
     shape, count = uv.shape, uv.size
-    smp = sampler_args(func, as_sampler(func, sampler), has_lod=lod is not None or uv_dx is not None or uv_dy is not None)
+    smp = sampler_args(func, as_sampler(func, sampler), has_lod=lod is not None or uv_dx is not None or uv_dy is not None, has_derivatives=uv_dx is not None or uv_dy is not None)
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
     constant_layer, layers = resolve_layer(func, texture, layer, shape, device)
 

@@ -75,7 +75,7 @@ def stochastic(
     uv, given = vec2_array(func, "uv", uv, device), uv
     single = not isinstance(given, wp.array) and np.ndim(given) == 1  # one UV, shape (2,): a result of shape (C,)
     shape, count = uv.shape, uv.size
-    smp = sampler_args(func, sampler, has_lod=lod is not None or uv_dx is not None or uv_dy is not None)
+    smp = sampler_args(func, sampler, has_lod=lod is not None or uv_dx is not None or uv_dy is not None, has_derivatives=uv_dx is not None or uv_dy is not None)
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
     constant_layer, layers = resolve_layer(func, texture, layer, shape, device)
 

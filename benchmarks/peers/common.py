@@ -13,6 +13,7 @@ import numpy as np
 DEFAULTS = {
     "triplanar": {"tiling": 1.0, "sharpness": 4.0},
     "biplanar": {"tiling": 1.0, "sharpness": 8.0},
+    "triplanar_aniso": {"tiling": 1.0, "sharpness": 4.0},
     "triplanar_normal": {"tiling": 1.0, "sharpness": 4.0, "strength": 1.0, "blend": "whiteout"},
     "splat4": {"tiling": 1.0},
     "splat8": {"tiling": 1.0},
@@ -20,7 +21,7 @@ DEFAULTS = {
     "cheap2": {"seed": 0, "blend": (0.2, 0.8), "mirror": False, "noise_frequency": 0.5, "noise_levels": 8.0},
     "hex": {"seed": 0, "contrast": 1.0},
 }
-GBUFFER_TECHNIQUES = ("triplanar", "biplanar", "triplanar_normal", "splat4", "splat8")
+GBUFFER_TECHNIQUES = ("triplanar", "biplanar", "triplanar_normal", "splat4", "splat8", "triplanar_aniso")
 SPLAT_LAYERS = {"splat4": 4, "splat8": 8}
 
 
@@ -107,8 +108,9 @@ def warptex_forward(technique: str, data: dict, *, texture=None, gbuffer=None, l
             return wt.splat(gbuffer, layers, maps, tiling=layer_tiling(data, layers.num_layers), projection="uv", device=device)
         if technique == "triplanar_normal":
             return wt.triplanar_normal(gbuffer, texture, tiling=opts["tiling"], sharpness=opts["sharpness"], strength=opts["strength"], blend=opts["blend"], device=device)
-        fn = wt.triplanar if technique == "triplanar" else wt.biplanar
-        return fn(gbuffer, texture, tiling=opts["tiling"], sharpness=opts["sharpness"], device=device)
+        fn = wt.biplanar if technique == "biplanar" else wt.triplanar
+        sampler = wt.Sampler(filter="anisotropic") if technique == "triplanar_aniso" else None  # warptex only: no peer has it
+        return fn(gbuffer, texture, tiling=opts["tiling"], sharpness=opts["sharpness"], sampler=sampler, device=device)
     kind = lod_kind(data)
     kw = {"lod": data["lod"]} if kind == "lod" else {"uv_dx": data["uv_dx"], "uv_dy": data["uv_dy"]} if kind == "derivatives" else {}
     if technique in ("bilinear", "trilinear"):

@@ -78,12 +78,15 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--fov", type=_number(0.0, 180.0), default=45.0, help="vertical field of view in degrees (default: 45)")
     render.add_argument("--tiling", type=_number(0.0, None), default=None, help="texture repeats across UV0 (default: 8, or 1 for an embedded texture)")
     render.add_argument("--seed", type=int, default=0, help="terrain and procedural texture seed (default: 0)")
+    render.add_argument(
+        "--filter", choices=("nearest", "bilinear", "trilinear", "anisotropic"), default="anisotropic", help="texture filter (default: %(default)s)"
+    )
     render.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0 (default: Warp's default)")
     demo = commands.add_parser(
         "demo",
         help="render the texture-sampling demo (filters and address modes)",
-        description="Sample a texture on a ground plane (nearest, bilinear, trilinear) and show the address "
-        "modes; writes demo.png and demo_trilinear.exr into the output folder.",
+        description="Sample a texture on a ground plane (nearest, bilinear, trilinear, anisotropic) and show the "
+        "address modes; writes demo.png, demo_trilinear.exr and demo_anisotropic.exr into the output folder.",
     )
     demo.add_argument("--out", default="out", help="output folder (default: %(default)s)")
     demo.add_argument("--texture", default=None, help="image file to use (default: a procedural checkerboard)")
@@ -135,6 +138,9 @@ def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--projection", choices=("uv", "world_xz", "triplanar"), default="triplanar", help="layer projection (default: triplanar)")
     parser.add_argument("--height-blend", type=_height_blend, default=0.2, help="height-blend transition, or none (default: 0.2)")
     parser.add_argument("--sharpness", type=float, default=4.0, help="triplanar sharpness (default: 4)")
+    parser.add_argument(
+        "--filter", choices=("bilinear", "trilinear", "anisotropic"), default="anisotropic", help="layer texture filter (default: %(default)s)"
+    )
     parser.add_argument("--report-every", type=_count(0), default=20, help="print iter, loss, psnr every N iterations (default: 20)")
     parser.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0 (default: Warp's default)")
 
@@ -163,6 +169,7 @@ def fit_arguments(args: argparse.Namespace) -> dict:
         "projection": args.projection,
         "height_blend": args.height_blend,
         "sharpness": args.sharpness,
+        "filter": args.filter,
         "report_every": args.report_every,
         "device": args.device,
     }
@@ -257,6 +264,7 @@ def _run(args: argparse.Namespace) -> list:
         fov_y=args.fov,
         tiling=args.tiling,
         seed=args.seed,
+        filter=args.filter,
         device=args.device,
     )
 

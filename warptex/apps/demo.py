@@ -1,8 +1,10 @@
-"""The texture-sampling demo: a ground plane to the horizon, sampled three ways, and the address modes.
+"""The texture-sampling demo: a ground plane to the horizon, sampled four ways, and the address modes.
 
 A picture shows what the sampling core does better than numbers: nearest and bilinear filtering
-of level 0 alias into moiré towards the horizon, trilinear filtering with the LOD taken from the
-pixels' UV derivatives stays clean; and a quad with UVs in ``[-1, 2]`` shows each address mode.
+of level 0 alias into moiré towards the horizon; trilinear filtering with the LOD taken from the
+pixels' UV derivatives stays clean but blurs the distance to grey, because it takes the LOD of the
+footprint's long axis; anisotropic filtering reads taps along that axis at the short axis' LOD
+and keeps the far checks sharp. A quad with UVs in ``[-1, 2]`` shows each address mode.
 """
 
 from __future__ import annotations
@@ -67,7 +69,8 @@ def ground_plane(resolution: tuple[int, int], *, height=1.0, pitch_deg=12.0, fov
 
 
 def run_demo(out_dir: str | os.PathLike = "out", *, texture_path=None, resolution=(360, 480), device=None) -> list[Path]:
-    """Render the demo and write ``demo.png`` (sRGB preview) and ``demo_trilinear.exr`` (linear).
+    """Render the demo and write ``demo.png`` (sRGB preview), ``demo_trilinear.exr`` and
+    ``demo_anisotropic.exr`` (linear).
 
     Args:
         out_dir: folder for the outputs (created if missing).
@@ -89,13 +92,14 @@ def run_demo(out_dir: str | os.PathLike = "out", *, texture_path=None, resolutio
     for name, kw in (
         ("nearest, level 0", {"sampler": Sampler(filter="nearest")}),
         ("bilinear, level 0", {"sampler": Sampler(filter="bilinear")}),
-        ("trilinear, LOD from derivatives", {"uv_dx": uv_dx, "uv_dy": uv_dy}),
+        ("trilinear, LOD from derivatives", {"uv_dx": uv_dx, "uv_dy": uv_dy, "sampler": Sampler(filter="trilinear")}),
+        ("anisotropic, 16 taps", {"uv_dx": uv_dx, "uv_dy": uv_dy, "sampler": Sampler(filter="anisotropic")}),
     ):
         colour = to_rgb(sample(tex, uv, device=device, **kw).numpy())
         renders[name] = np.where(mask[..., None], colour, SKY)
     panels = [labelled(colour, name) for name, colour in renders.items()]
 
-    quad = 3 * w // 4  # four address-mode panels span the three ground-plane panels
+    quad = w  # four address-mode panels span the four ground-plane panels
     cells = np.linspace(-1.0, 2.0, quad, endpoint=False) + 1.5 / quad
     quad_uv = np.stack(np.meshgrid(cells, cells[::-1]), axis=-1).astype(np.float32)
     modes = []
@@ -111,7 +115,8 @@ def run_demo(out_dir: str | os.PathLike = "out", *, texture_path=None, resolutio
     with output_set(out_dir) as staging:
         io.write_png(staging / "demo.png", np.concatenate([top, bottom]).astype(np.float32) / 255.0, data=True)
         io.write_exr(staging / "demo_trilinear.exr", renders["trilinear, LOD from derivatives"])
-    png, exr = Path(out_dir) / "demo.png", Path(out_dir) / "demo_trilinear.exr"
-    samples = 3 * h * w + 4 * quad * quad
+        io.write_exr(staging / "demo_anisotropic.exr", renders["anisotropic, 16 taps"])
+    paths = [Path(out_dir) / name for name in ("demo.png", "demo_trilinear.exr", "demo_anisotropic.exr")]
+    samples = 4 * h * w + 4 * quad * quad
     print(f"sampled {samples:,} texels in {elapsed:.3f} s (a first run also compiles the kernels)")
-    return [png, exr]
+    return paths

@@ -28,6 +28,7 @@ from warptex.gbuffer import rasterize
 from warptex.gbuffer_io import load_gbuffer
 from warptex._validate import check_layer_count
 from warptex.layers import splat
+from warptex.options import Sampler
 from warptex.apps.output import check_memory, check_output_folder, output_set
 from warptex.apps.render import TERRAIN_GRID, terrain_camera
 from warptex.apps.shade import side_by_side
@@ -83,6 +84,7 @@ def run_fit(
     projection: str = "triplanar",
     height_blend: float | None = 0.2,
     sharpness: float = 4.0,
+    filter: str = "anisotropic",
     report_every: int = 20,
     progress: bool | None = None,
     device=None,
@@ -115,6 +117,8 @@ def run_fit(
         fit_tiling: fit the tiling too (scan + Adam) or keep it.
         projection, height_blend, sharpness: the :func:`warptex.splat` options of the targets
             (default: the default scene's: triplanar, 0.2, 4); ``height_blend=None`` for a plain blend.
+        filter: the layers' texture filter (:class:`~warptex.Filter`) for the targets and the
+            fit; default anisotropic, as ``warptex render`` uses.
         report_every: print ``iter, loss, psnr, tiling`` every this many iterations (0: never).
         progress: tqdm progress bar (``None``: only on a terminal).
         device: Warp device.
@@ -138,7 +142,7 @@ def run_fit(
     if isinstance(report_every, bool) or not isinstance(report_every, (int, np.integer)) or report_every < 0:
         raise ValueError(f"{func}(): report_every must be an int >= 0 (0: never), got {report_every!r}")
     device = wp.get_device(device)
-    options = {"projection": projection, "height_blend": height_blend, "sharpness": sharpness}
+    options = {"projection": projection, "height_blend": height_blend, "sharpness": sharpness, "sampler": Sampler(filter=filter)}
     if targets is not None or gbuffers is not None:
         problem = user_problem(func, targets, gbuffers, layers=layers, tiling=tiling, options=options, device=device)
     else:
@@ -259,7 +263,7 @@ def measure(problem: Problem, params: SplatParameters, result, *, entropy: float
         "views": len(problem.views),
         "resolutions": [list(v.gbuffer.resolution) for v in problem.views],
         "map_size": list(params.size),
-        "splat_options": problem.options,
+        "splat_options": {**{k: v for k, v in problem.options.items() if k != "sampler"}, "filter": problem.options["sampler"].filter.value},
         "fit_seconds": result.seconds,
     }
     if problem.synthetic:

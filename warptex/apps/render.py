@@ -30,6 +30,7 @@ from warptex.apps.shade import SKY, lambert, to_rgb
 from warptex.apps.terrain import terrain
 from warptex.texture import Texture, TextureArray
 from warptex.layers import splat
+from warptex.options import Filter, Sampler
 from warptex.apps.terrain_material import LAYER_NAMES, noise_texture, terrain_layers, terrain_splat_maps
 from warptex.triplanar import triplanar
 
@@ -54,22 +55,23 @@ def terrain_camera(resolution, fov_y: float = 45.0) -> Camera:
     return look_at((-30.0, 34.0, 40.0), (2.0, 2.0, -4.0), fov_y=fov_y, resolution=resolution)
 
 
-def _albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, texture: Texture, tiling: float, device) -> np.ndarray:
+def _albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, texture: Texture, tiling: float, sampler: Sampler, device) -> np.ndarray:
     """The material colour: UV0 × tiling when the mesh has UVs, else triplanar with ``tiling``
     repeats across the mesh's largest extent."""
     if "uv0" in gbuffer.uv_sets:
         uv, uv_dx, uv_dy = (np.ascontiguousarray(gbuffer.uv_sets["uv0"][k].numpy() * tiling, np.float32) for k in ("uv", "uv_dx", "uv_dy"))
-        return to_rgb(sample(texture, uv, uv_dx=uv_dx, uv_dy=uv_dy, device=device))
+        return to_rgb(sample(texture, uv, uv_dx=uv_dx, uv_dy=uv_dy, sampler=sampler, device=device))
     scale = tiling / max(float(np.max(mesh.extents)), 1e-12)
-    return to_rgb(triplanar(gbuffer, texture, tiling=scale, device=device))
+    return to_rgb(triplanar(gbuffer, texture, tiling=scale, sampler=sampler, device=device))
 
 
-def _terrain_albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, tiling: float | None, seed: int, device) -> np.ndarray:
+def _terrain_albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, tiling: float | None, seed: int, sampler: Sampler, device) -> np.ndarray:
     """The default terrain's splat material: layers repeat ``tiling`` times per world unit (default 1/6)."""
     maps = terrain_splat_maps(mesh, TERRAIN_GRID)
     layers = terrain_layers(seed=seed, device=device)
     tiling = 1.0 / 6.0 if tiling is None else float(tiling)
-    colour = splat(gbuffer, layers, TextureArray(maps[None], mipmaps=False, device=device), tiling=tiling, projection="triplanar", height_blend=0.2, device=device)
+    maps = TextureArray(maps[None], mipmaps=False, device=device)
+    colour = splat(gbuffer, layers, maps, tiling=tiling, projection="triplanar", height_blend=0.2, sampler=sampler, device=device)
     return to_rgb(colour)
 
 
@@ -104,6 +106,7 @@ def run_render(
     fov_y: float = 45.0,
     tiling: float | None = None,
     seed: int = 0,
+    filter: Filter | str = Filter.ANISOTROPIC,
     progress: bool | None = None,
     device=None,
 ) -> list[Path]:
@@ -120,6 +123,8 @@ def run_render(
             default 1 with an embedded texture, else 8. For the default terrain: layer repeats per
             world unit (default 1/6).
         seed: terrain and procedural texture seed.
+        filter: the texture filter (:class:`~warptex.Filter`); default anisotropic, which keeps
+            surfaces seen at grazing angles (the distant terrain) sharp where trilinear blurs them.
         progress: show a progress bar (``None``: only on a terminal).
         device: Warp device.
 
@@ -129,6 +134,7 @@ def run_render(
     from tqdm import tqdm  # a progress bar over the stages: the first run compiles kernels for seconds
 
     check_output_folder("run_render", out_dir)
+    sampler = Sampler(filter=filter)
     h, w = resolution = checked_resolution("run_render", resolution)
     check_memory("run_render", f"a {h}x{w} render", RENDER_BYTES[0] + RENDER_BYTES[1] * h * w)
     if tiling is not None and not (np.isfinite(tiling) and tiling > 0):
@@ -153,12 +159,12 @@ def run_render(
 
     stages.set_postfix_str("texture")
     if mesh_path is None and texture_path is None:
-        albedo = _terrain_albedo(mesh, g, tiling, seed, device)
+        albedo = _terrain_albedo(mesh, g, tiling, seed, sampler, device)
     else:
         embedded = _embedded_texture(mesh) if texture_path is None else None
         image = io.read_image(texture_path) if texture_path is not None else embedded if embedded is not None else noise_texture(seed=seed)
         tiling = (1.0 if embedded is not None else 8.0) if tiling is None else float(tiling)
-        albedo = _albedo(mesh, g, Texture(image, device=device), tiling, device)
+        albedo = _albedo(mesh, g, Texture(image, device=device), tiling, sampler, device)
     covered = g.mask.numpy()[..., None] > 0
     albedo = np.where(covered, albedo, SKY)
     stages.update()
