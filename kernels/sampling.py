@@ -282,19 +282,24 @@ def anisotropic_footprint(size: wp.vec2, uv_dx: wp.vec2, uv_dy: wp.vec2, max_ani
     max_aniso`` trilinear taps, ``2^lod`` apart at most, cover the major axis' length, centred on
     the UV. The taps are weighted equally (a box along the axis): a pixel integrates its footprint
     uniformly, and a box matches that integral where a Gaussian would weight the middle and leave the
-    ends under-filtered. Footprints too small, too large or not finite fall back to the isotropic
-    one tap at :func:`footprint_lod`.
+    ends under-filtered. Footprints under 1e-6 or over 1e9 texels, or not finite, fall back to the
+    isotropic one tap at :func:`footprint_lod` (level 0, or the coarsest level).
     """
     a = wp.cw_mul(uv_dx, size)
     b = wp.cw_mul(uv_dy, size)
     A = a[0] * a[0] + b[0] * b[0]
-    B = a[0] * a[1] + b[0] * b[1]
     C = a[1] * a[1] + b[1] * b[1]
-    h = 0.5 * (A - C)
-    root = wp.sqrt(wp.max(h * h + B * B, 1.0e-38))  # floored: no infinite slope where the footprint is round
-    major2 = 0.5 * (A + C) + root
+    area = A + C  # the squared footprint, |a|² + |b|²
     result = point_footprint(footprint_lod(size, uv_dx, uv_dy))
-    if major2 > 1.0e-30 and major2 < FLOAT_MAX:  # false for NaN too
+    # Within these bounds (1e-6 to 1e9 texels) nothing below overflows or underflows, so the
+    # generated adjoint stays finite; outside them (and for NaN) one isotropic tap reads level 0
+    # or the coarsest level anyway.
+    if area > 1.0e-12 and area < 1.0e18:
+        B = a[0] * a[1] + b[0] * b[1]
+        h = 0.5 * (A - C)
+        floor = 1.0e-6 * area
+        root = wp.sqrt(wp.max(h * h + B * B, floor * floor))  # floored: no infinite slope where the footprint is round
+        major2 = 0.5 * area + root
         major = wp.sqrt(major2)
         minor = wp.abs(a[0] * b[1] - a[1] * b[0]) / major
         extent = wp.max(minor, major / max_aniso)
@@ -304,10 +309,7 @@ def anisotropic_footprint(size: wp.vec2, uv_dx: wp.vec2, uv_dy: wp.vec2, max_ani
         other = wp.vec2(major2 - C, B)
         if wp.dot(other, other) > wp.dot(v, v):
             v = other
-        length = wp.length(v)
-        e = wp.vec2(1.0, 0.0)
-        if length > 0.0:
-            e = v / length
+        e = v / wp.length(v)  # |v|² >= floor² > 0
         step = e * (major / taps)
         result = wp.vec4(wp.log2(extent), step[0] / size[0], step[1] / size[1], taps)
     return result

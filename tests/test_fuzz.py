@@ -167,7 +167,7 @@ finite_coords = st.one_of(st.floats(-1e6, 1e6, width=32), st.sampled_from([c for
 EXTREMES = [1e30, -1e30, 3.4e38, -3.4e38, 1.2e-38, 1e-45]
 extreme_coords = st.one_of(coords, st.sampled_from(EXTREMES))
 extreme_floats = st.one_of(st.floats(-1e6, 1e6, width=32), st.sampled_from(EXTREMES))
-FILTERS = ["nearest", "bilinear", "trilinear", "auto"]
+FILTERS = ["nearest", "bilinear", "trilinear", "anisotropic", "auto"]
 ADDRESSES = ["wrap", "clamp", "mirror", "border"]
 METHODS = ["none", "hash4", "cheap2", "hex"]
 BAD_DTYPES = [np.bool_, np.complex64, object, "U2"]
@@ -213,6 +213,8 @@ def samplers(draw, *, filters=FILTERS, addresses=ADDRESSES):
         kw["lod_bias"] = draw(st.floats(-20, 20, width=32))
         lo = draw(st.floats(-5, 20, width=32))
         kw["min_lod"], kw["max_lod"] = lo, draw(st.one_of(st.just(INF), st.floats(lo, 40, width=32)))
+    if kw["filter"] == "anisotropic" and draw(st.booleans()):
+        kw["max_aniso"] = draw(st.integers(1, 64))
     return wt.Sampler(**kw)
 
 
