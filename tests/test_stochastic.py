@@ -594,3 +594,13 @@ def test_bad_histogram_and_texture_raise():
         prepare_histogram(tex, lut_size=3)
     with pytest.raises(TypeError, match=r"prepare_histogram\(\): texture must be a Texture or TextureArray, got list"):
         prepare_histogram([[0.0]])
+
+
+def test_a_one_texel_texture_decorrelates_to_itself():
+    """Fuzz finding: one texel has no covariance (NumPy's is NaN, and its eigen-solver then failed);
+    the decorrelation is the identity and the hex blend returns the texel."""
+    texel = np.float32([[[0.63, 0.27, 0.04]]])
+    tex = wt.Texture(texel)
+    hist = prepare_histogram(tex, decorrelate=True)
+    out = wt.stochastic(tex, np.float32([[0.0, 0.0], [0.3, 0.8]]), wt.Stochastic("hex", histogram=hist)).numpy()
+    np.testing.assert_allclose(out, np.broadcast_to(texel[0, 0], (2, 3)), atol=1e-6)

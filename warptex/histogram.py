@@ -126,7 +126,9 @@ def prepare_histogram(texture: TextureArray, *, lut_size: int = 4096, decorrelat
         flat = image.reshape(-1, channels).copy()
         if decorrelate:
             centre = flat[:, :3].mean(axis=0)
-            _, basis = np.linalg.eigh(np.cov(flat[:, :3] - centre, rowvar=False))
+            basis = np.eye(3)  # one texel has no covariance: nothing to decorrelate
+            if len(flat) > 1:
+                _, basis = np.linalg.eigh(np.cov(flat[:, :3] - centre, rowvar=False))
             flat[:, :3] = (flat[:, :3] - centre) @ basis
             bases.append(basis)
             centres.append(centre)
