@@ -12,6 +12,14 @@ plain sampling a tenth slower, and compiling it costs several times more. Colour
 come with hand-written texel gradients, in the ``.grad`` module beside each; the kernels with
 Warp's generated adjoint (for sharpness, offsets, G-buffer gradients, stochastic tiling or a
 histogram) are built on the out-of-line blocks of :mod:`warptex.kernels.projection`, in ``warptex.kernels.ADJOINT_MODULE``.
+
+**Textures per face.** Every kernel takes six textures, one per face of the cube of directions:
+``tex_x``/``tex_y``/``tex_z`` are read where the (projected-space) normal's component along the
+projection's axis is ``>= 0``, ``tex_neg_x``/``tex_neg_y``/``tex_neg_z`` where it is negative
+(:func:`face_texture`), so a ceiling can differ from the floor. One texture for all, or one per
+axis, is the same view passed several times (the results are those of the three-texture kernels,
+bit for bit). The choice flips where ``n[axis] = 0``, where that projection's weight is 0 (for a
+sharpness > 0, triplanar and biplanar alike), so the seam is as continuous as the blend.
 """
 
 import warp as wp
@@ -63,6 +71,39 @@ def axis_grad(grad_x: wp.array(dtype=wp.vec4), grad_y: wp.array(dtype=wp.vec4), 
         grad = grad_y
     elif axis == 2:
         grad = grad_z
+    return grad
+
+
+@wp.func
+def face_texture(
+    tex_x: TextureView, tex_y: TextureView, tex_z: TextureView, tex_neg_x: TextureView, tex_neg_y: TextureView, tex_neg_z: TextureView, axis: wp.int32, n: wp.vec3
+) -> TextureView:
+    """Projection ``axis``' texture on the face the normal ``n`` looks at: the ``+axis`` face's
+    (``tex_x``/``tex_y``/``tex_z``) where ``n[axis] >= 0`` (``sign(0) = +1``, as the mirror fix's
+    :func:`~warptex.kernels.normals.sign_or_one`), else the ``-axis`` face's
+    (``tex_neg_x``/``tex_neg_y``/``tex_neg_z``). Where the choice flips, ``n[axis] = 0``, the
+    projection's weight is 0 (for a sharpness > 0), so the seam blends as the others do."""
+    tex = axis_texture(tex_x, tex_y, tex_z, axis)
+    if n[axis] < 0.0:
+        tex = axis_texture(tex_neg_x, tex_neg_y, tex_neg_z, axis)
+    return tex
+
+
+@wp.func
+def face_grad(
+    grad_x: wp.array(dtype=wp.vec4),
+    grad_y: wp.array(dtype=wp.vec4),
+    grad_z: wp.array(dtype=wp.vec4),
+    grad_neg_x: wp.array(dtype=wp.vec4),
+    grad_neg_y: wp.array(dtype=wp.vec4),
+    grad_neg_z: wp.array(dtype=wp.vec4),
+    axis: wp.int32,
+    n: wp.vec3,
+):
+    """The texel gradient of :func:`face_texture`'s texture."""
+    grad = axis_grad(grad_x, grad_y, grad_z, axis)
+    if n[axis] < 0.0:
+        grad = axis_grad(grad_neg_x, grad_neg_y, grad_neg_z, axis)
     return grad
 
 
@@ -173,6 +214,9 @@ def _colour_kernel(module: str, sample):
         tex_x: TextureView,
         tex_y: TextureView,
         tex_z: TextureView,
+        tex_neg_x: TextureView,
+        tex_neg_y: TextureView,
+        tex_neg_z: TextureView,
         layer: wp.int32,
         position: wp.array(dtype=wp.vec3),
         position_dx: wp.array(dtype=wp.vec3),
@@ -196,7 +240,7 @@ def _colour_kernel(module: str, sample):
             w = projection_weights(proj, n)
             for axis in range(3):
                 if w[axis] > 0.0:
-                    colour += w[axis] * sample(axis_texture(tex_x, tex_y, tex_z, axis), layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
+                    colour += w[axis] * sample(face_texture(tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z, axis, n), layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
         write_channels(out, i, colour)
 
     return triplanar_kernel
@@ -208,6 +252,9 @@ def _colour_texel_grad_kernel(module: str, scatter):
         tex_x: TextureView,
         tex_y: TextureView,
         tex_z: TextureView,
+        tex_neg_x: TextureView,
+        tex_neg_y: TextureView,
+        tex_neg_z: TextureView,
         layer: wp.int32,
         position: wp.array(dtype=wp.vec3),
         position_dx: wp.array(dtype=wp.vec3),
@@ -220,11 +267,15 @@ def _colour_texel_grad_kernel(module: str, scatter):
         grad_x: wp.array(dtype=wp.vec4),
         grad_y: wp.array(dtype=wp.vec4),
         grad_z: wp.array(dtype=wp.vec4),
+        grad_neg_x: wp.array(dtype=wp.vec4),
+        grad_neg_y: wp.array(dtype=wp.vec4),
+        grad_neg_z: wp.array(dtype=wp.vec4),
         adj_out: wp.array2d(dtype=float),
     ):
         """Add the gradient of :func:`triplanar_kernel` (same inputs; linear blends: plain sampling,
-        or stochastic without a histogram) with respect to the texels of ``tex_x``/``tex_y``/``tex_z``
-        into ``grad_x``/``grad_y``/``grad_z`` (empty: not needed), given the output's gradient
+        or stochastic without a histogram) with respect to the texels of the six face textures
+        ``tex_x``... ``tex_neg_z`` into ``grad_x``... ``grad_neg_z`` (empty: not needed; a texture
+        passed for several faces gets one gradient array for all of them), given the output's gradient
         ``adj_out``: each projection's weight times ``adj_out[i]``, added into the texels it read."""
         i = wp.tid()
         if mask[i] != 0.0:
@@ -233,8 +284,8 @@ def _colour_texel_grad_kernel(module: str, scatter):
             g = read_channels(adj_out, i)
             for axis in range(3):
                 if w[axis] > 0.0:
-                    tex = axis_texture(tex_x, tex_y, tex_z, axis)
-                    scatter(tex, axis_grad(grad_x, grad_y, grad_z, axis), layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, w[axis] * g)
+                    tex = face_texture(tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z, axis, n)
+                    scatter(tex, face_grad(grad_x, grad_y, grad_z, grad_neg_x, grad_neg_y, grad_neg_z, axis, n), layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, w[axis] * g)
 
     return triplanar_texel_grad_kernel
 
@@ -244,6 +295,9 @@ def triplanar_adjoint_kernel(
     tex_x: TextureView,
     tex_y: TextureView,
     tex_z: TextureView,
+    tex_neg_x: TextureView,
+    tex_neg_y: TextureView,
+    tex_neg_z: TextureView,
     layer: wp.int32,
     position: wp.array(dtype=wp.vec3),
     position_dx: wp.array(dtype=wp.vec3),
@@ -262,7 +316,7 @@ def triplanar_adjoint_kernel(
         p, n, dpdx, dpdy, w = surface_frame(proj, position[i], normal[i], position_dx[i], position_dy[i])
         for axis in range(3):
             if w[axis] > 0.0:
-                tex = axis_texture(tex_x, tex_y, tex_z, axis)
+                tex = face_texture(tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z, axis, n)
                 colour += w[axis] * projection_sample(tex, layer, proj, axis, p, n, dpdx, dpdy, projection_tiling(proj, axis), smp, stoch)
     write_channels(out, i, colour)
 
@@ -276,6 +330,9 @@ def _normal_kernel(module: str, sample):
         tex_x: TextureView,
         tex_y: TextureView,
         tex_z: TextureView,
+        tex_neg_x: TextureView,
+        tex_neg_y: TextureView,
+        tex_neg_z: TextureView,
         layer: wp.int32,
         position: wp.array(dtype=wp.vec3),
         position_dx: wp.array(dtype=wp.vec3),
@@ -308,7 +365,7 @@ def _normal_kernel(module: str, sample):
             total = wp.vec3(0.0)
             for axis in range(3):
                 if w[axis] > 0.0:
-                    texel = sample(axis_texture(tex_x, tex_y, tex_z, axis), layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
+                    texel = sample(face_texture(tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z, axis, n), layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
                     total += w[axis] * projected_normal(texel, axis, n, proj, channels, strength, flip_green, blend)
             result = unit_normal(total, n, proj)
         write_normal(out, i, result)
@@ -321,6 +378,9 @@ def triplanar_normal_adjoint_kernel(
     tex_x: TextureView,
     tex_y: TextureView,
     tex_z: TextureView,
+    tex_neg_x: TextureView,
+    tex_neg_y: TextureView,
+    tex_neg_z: TextureView,
     layer: wp.int32,
     position: wp.array(dtype=wp.vec3),
     position_dx: wp.array(dtype=wp.vec3),
@@ -345,7 +405,7 @@ def triplanar_normal_adjoint_kernel(
         total = wp.vec3(0.0)
         for axis in range(3):
             if w[axis] > 0.0:
-                tex = axis_texture(tex_x, tex_y, tex_z, axis)
+                tex = face_texture(tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z, axis, n)
                 texel = projection_sample(tex, layer, proj, axis, p, n, dpdx, dpdy, projection_tiling(proj, axis), smp, stoch)
                 total += w[axis] * projected_normal(texel, axis, n, proj, channels, strength, flip_green, blend)
         result = unit_normal(total, n, proj)
@@ -364,6 +424,9 @@ def _projection_samples_kernel(module: str, sample):
         tex_x: TextureView,
         tex_y: TextureView,
         tex_z: TextureView,
+        tex_neg_x: TextureView,
+        tex_neg_y: TextureView,
+        tex_neg_z: TextureView,
         layer: wp.int32,
         position: wp.array(dtype=wp.vec3),
         position_dx: wp.array(dtype=wp.vec3),
@@ -386,7 +449,7 @@ def _projection_samples_kernel(module: str, sample):
             n = unit_base_normal(n)
             for axis in range(3):
                 if w[axis] > 0.0:
-                    samples[i, axis] = sample(axis_texture(tex_x, tex_y, tex_z, axis), layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
+                    samples[i, axis] = sample(face_texture(tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z, axis, n), layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
 
     return projection_samples_kernel
 
@@ -397,6 +460,9 @@ def _projection_texel_grad_kernel(module: str, scatter):
         tex_x: TextureView,
         tex_y: TextureView,
         tex_z: TextureView,
+        tex_neg_x: TextureView,
+        tex_neg_y: TextureView,
+        tex_neg_z: TextureView,
         layer: wp.int32,
         position: wp.array(dtype=wp.vec3),
         position_dx: wp.array(dtype=wp.vec3),
@@ -409,6 +475,9 @@ def _projection_texel_grad_kernel(module: str, scatter):
         grad_x: wp.array(dtype=wp.vec4),
         grad_y: wp.array(dtype=wp.vec4),
         grad_z: wp.array(dtype=wp.vec4),
+        grad_neg_x: wp.array(dtype=wp.vec4),
+        grad_neg_y: wp.array(dtype=wp.vec4),
+        grad_neg_z: wp.array(dtype=wp.vec4),
         adj_samples: wp.array2d(dtype=wp.vec4),
         adj_weights: wp.array(dtype=wp.vec3),
     ):
@@ -422,8 +491,8 @@ def _projection_texel_grad_kernel(module: str, scatter):
             n = unit_base_normal(n)
             for axis in range(3):
                 if w[axis] > 0.0:
-                    tex = axis_texture(tex_x, tex_y, tex_z, axis)
-                    scatter(tex, axis_grad(grad_x, grad_y, grad_z, axis), layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, adj_samples[i, axis])
+                    tex = face_texture(tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z, axis, n)
+                    scatter(tex, face_grad(grad_x, grad_y, grad_z, grad_neg_x, grad_neg_y, grad_neg_z, axis, n), layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, adj_samples[i, axis])
 
     return projection_texel_grad_kernel
 
