@@ -128,7 +128,7 @@ def triplanar(
         "triplanar", kp.WEIGHTS_TRIPLANAR, gbuffer, texture, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix,
         textures_per_axis=textures_per_axis, textures_per_face=textures_per_face, layer=layer, space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device,
     )  # fmt: skip
-    return setup.launch(setup.variant(_COLOUR, _COLOUR_STOCHASTIC), setup.channels, [])
+    return setup.launch(setup.variant(_COLOUR), setup.channels, [])
 
 
 def biplanar(
@@ -159,7 +159,7 @@ def biplanar(
         "biplanar", kp.WEIGHTS_BIPLANAR, gbuffer, texture, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix,
         textures_per_axis=textures_per_axis, textures_per_face=textures_per_face, layer=layer, space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device,
     )  # fmt: skip
-    return setup.launch(setup.variant(_COLOUR, _COLOUR_STOCHASTIC), setup.channels, [])
+    return setup.launch(setup.variant(_COLOUR), setup.channels, [])
 
 
 def triplanar_normal(
@@ -232,12 +232,26 @@ def triplanar_normal(
 # -- internals --------------------------------------------------------------------------------------
 
 
-_COLOUR = Kernels(kt.triplanar_kernel, kt.triplanar_texel_grad_kernel, kt.triplanar_adjoint_kernel)
-_COLOUR_STOCHASTIC = Kernels(kt.triplanar_stochastic_kernel, kt.triplanar_stochastic_texel_grad_kernel, kt.triplanar_adjoint_kernel)
-_NORMAL = Kernels(kt.triplanar_normal_kernel, None, kt.triplanar_normal_adjoint_kernel)
-_NORMAL_STOCHASTIC = Kernels(kt.triplanar_normal_stochastic_kernel, None, kt.triplanar_normal_adjoint_kernel)
-_SAMPLES = Kernels(kt.projection_samples_kernel, kt.projection_texel_grad_kernel)
-_SAMPLES_STOCHASTIC = Kernels(kt.projection_samples_stochastic_kernel, kt.projection_stochastic_texel_grad_kernel)
+# Each technique's kernels by (stochastic, faces): plain or stochastic sampling, one texture per
+# axis or a texture per face (the kernels that choose by face are in modules of their own).
+_COLOUR = {
+    (False, False): Kernels(kt.triplanar_kernel, kt.triplanar_texel_grad_kernel, kt.triplanar_adjoint_kernel),
+    (True, False): Kernels(kt.triplanar_stochastic_kernel, kt.triplanar_stochastic_texel_grad_kernel, kt.triplanar_adjoint_kernel),
+    (False, True): Kernels(kt.triplanar_faces_kernel, kt.triplanar_faces_texel_grad_kernel, kt.triplanar_adjoint_kernel),
+    (True, True): Kernels(kt.triplanar_stochastic_faces_kernel, kt.triplanar_stochastic_faces_texel_grad_kernel, kt.triplanar_adjoint_kernel),
+}
+_NORMAL = {
+    (False, False): Kernels(kt.triplanar_normal_kernel, None, kt.triplanar_normal_adjoint_kernel),
+    (True, False): Kernels(kt.triplanar_normal_stochastic_kernel, None, kt.triplanar_normal_adjoint_kernel),
+    (False, True): Kernels(kt.triplanar_normal_faces_kernel, None, kt.triplanar_normal_adjoint_kernel),
+    (True, True): Kernels(kt.triplanar_normal_stochastic_faces_kernel, None, kt.triplanar_normal_adjoint_kernel),
+}
+_SAMPLES = {
+    (False, False): Kernels(kt.projection_samples_kernel, kt.projection_texel_grad_kernel),
+    (True, False): Kernels(kt.projection_samples_stochastic_kernel, kt.projection_stochastic_texel_grad_kernel),
+    (False, True): Kernels(kt.projection_samples_faces_kernel, kt.projection_faces_texel_grad_kernel),
+    (True, True): Kernels(kt.projection_samples_stochastic_faces_kernel, kt.projection_stochastic_faces_texel_grad_kernel),
+}
 _NORMAL_FROM_SAMPLES = Kernels(kt.triplanar_normal_from_samples_kernel, None, kt.triplanar_normal_from_samples_kernel)
 
 
@@ -260,15 +274,18 @@ class _Setup:
         self.gbuffer, self.textures, self.layer, self.device = gbuffer, textures, layer, device
         self.proj, self.smp, self.stoch = proj, sampler_args(func, sampler, has_lod=True), stoch
         self.channels = textures[0].channels
+        self.faces = any(textures[a] is not textures[a + 3] for a in range(3))  # the kernels' +a, then -a faces
         self.count = gbuffer.resolution[0] * gbuffer.resolution[1]
         self.pixels = [a.reshape((self.count,)) for a in (gbuffer.position, gbuffer.position_dx, gbuffer.position_dy, gbuffer.normal, gbuffer.mask)]
         self.texels = [t.view.texels for t in textures]  # what the hand-written gradients differentiate
         self.others = [proj.tiling, proj.sharpness, proj.offsets, *self.pixels]  # what only the generated adjoint does
         self.linear = stoch.histogram == 0  # the histogram blend is not linear in the texels
 
-    def variant(self, plain: Kernels, stochastic: Kernels) -> Kernels:
-        """``plain`` (built without the stochastic code) when sampling is plain, else ``stochastic``."""
-        return plain if self.stoch.method == METHOD_NONE else stochastic
+    def variant(self, kernels: dict) -> Kernels:
+        """The kernels of ``kernels`` (by ``(stochastic, faces)``) for this call: those built without
+        the stochastic code when sampling is plain, and without the choice by face unless the two
+        faces of an axis have different textures."""
+        return kernels[self.stoch.method != METHOD_NONE, self.faces]
 
     def inputs(self) -> list:
         return [*[t.view for t in self.textures], self.layer, *per_pixel(*self.pixels), self.proj, self.smp, self.stoch]
@@ -284,10 +301,10 @@ class _Setup:
         linearly), in two steps: the projections' samples, stored per pixel with a hand-written
         texel gradient, then the normal from them (its generated adjoint has no sampling to replay)."""
         if active_tape() is None or not needs_grad(*self.texels) or not hand_written(self.others, self.linear):
-            return self.launch(self.variant(_NORMAL, _NORMAL_STOCHASTIC), 3, extra)
+            return self.launch(self.variant(_NORMAL), 3, extra)
         samples = wp.zeros((self.count, 3), dtype=wp.vec4, device=self.device, requires_grad=True)
         weights = wp.zeros(self.count, dtype=wp.vec3, device=self.device)
-        run(self.variant(_SAMPLES, _SAMPLES_STOCHASTIC), self.count, inputs=self.inputs(), outputs=[samples, weights], device=self.device, by_hand=self.texels)
+        run(self.variant(_SAMPLES), self.count, inputs=self.inputs(), outputs=[samples, weights], device=self.device, by_hand=self.texels)
         out = wp.zeros((self.count, 3), dtype=float, device=self.device, requires_grad=True)
         normal, mask = self.pixels[3], self.pixels[4]
         run(_NORMAL_FROM_SAMPLES, self.count, inputs=[*per_pixel(samples, weights, normal, mask), self.proj, *extra], outputs=[out], device=self.device)
