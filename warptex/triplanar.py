@@ -2,7 +2,10 @@
 
 Surfaces without usable UVs are textured by projecting the world (or object) position onto the
 three axis planes, ``p.zy`` (X plane), ``p.xz`` (Y plane) and ``p.xy`` (Z plane), and blending the
-projections by the surface normal. Formulas and conventions: :mod:`warptex.kernels.triplanar`.
+projections by the surface normal. One texture serves every projection, or one per axis
+(``textures_per_axis``), or one per face of the cube of directions (``textures_per_face``: a
+projection reads its ``+`` or ``-`` face's by the sign of the normal, e.g. grass on top and rock
+beneath). Formulas and conventions: :mod:`warptex.kernels.triplanar`.
 
 Differentiable parameters (``tiling``, ``sharpness``, ``offsets``) may be given as float32
 ``wp.array``\\ s with ``requires_grad=True``; a ``wp.Tape`` then carries gradients into them, as it
