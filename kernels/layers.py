@@ -12,14 +12,14 @@ Height-based blending (as Unity's TerrainLit shader does), with transition ``t >
     h_j = height_j · w_j;   m = max_j h_j;   wh_j = max(0, h_j + t - m);   w'_j = wh_j · w_j / Σ_k wh_k · w_k
 
 where ``height_j`` is read at layer ``j``'s UV from a channel of the layer itself or from a
-separate height array.
+separate height array. Small ``t`` gives sharp, height-driven borders; large ``t`` tends to the
+plain blend.
 
 **Layers per face.** Mapped triplanar, a layer may read other array layers on some faces
 (``SplatArgs.face_layers``, :func:`face_layer`): projection ``a`` of layer ``j`` then samples (colour,
 and height from either source) the array layer given for the ``+a`` face where ``n[a] >= 0``, for
 the ``-a`` face elsewhere, with layer ``j``'s tiling; ``j``'s splat weight and its place in the
-height blend are unchanged. Small ``t`` gives sharp, height-driven borders; large ``t`` tends to the
-plain blend.
+height blend are unchanged.
 
 **Kernels.** The layer count is a run-time value (``SplatArgs.num_layers``): every per-layer loop
 is a loop, so a kernel's code does not grow with the layers. Per pixel, the kernels keep each
