@@ -15,6 +15,12 @@ where ``height_j`` is read at layer ``j``'s UV from a channel of the layer itsel
 separate height array. Small ``t`` gives sharp, height-driven borders; large ``t`` tends to the
 plain blend.
 
+**Layers per face.** Mapped triplanar, a layer may read other array layers on some faces
+(``SplatArgs.face_layers``, :func:`face_layer`): projection ``a`` of layer ``j`` then samples (colour,
+and height from either source) the array layer given for the ``+a`` face where ``n[a] >= 0``, for
+the ``-a`` face elsewhere, with layer ``j``'s tiling; ``j``'s splat weight and its place in the
+height blend are unchanged.
+
 **Kernels.** The layer count is a run-time value (``SplatArgs.num_layers``): every per-layer loop
 is a loop, so a kernel's code does not grow with the layers. Per pixel, the kernels keep each
 layer's colour and height in local storage of a fixed *capacity* (:func:`splat_kernels`: 8, 16,
@@ -65,10 +71,14 @@ SPLAT_EPS = wp.constant(1.0e-20)
 @wp.struct
 class SplatArgs:
     """Options of a splat blend, as kernels see them. ``tiling`` holds 1 or L values and
-    ``transition`` 1, as arrays so that a ``wp.Tape`` carries gradients into them."""
+    ``transition`` 1, as arrays so that a ``wp.Tape`` carries gradients into them.
+    ``face_layers`` is empty, or (projection triplanar) holds ``6 L`` array-layer indices: entry
+    ``6 l + f`` is the layer that layer ``l`` reads on face ``f`` (``+x, -x, +y, -y, +z, -z``),
+    see :func:`face_layer`."""
 
     tiling: wp.array(dtype=float)
     transition: wp.array(dtype=float)
+    face_layers: wp.array(dtype=wp.int32)
     projection: wp.int32
     height_mode: wp.int32
     height_channel: wp.int32
@@ -89,6 +99,22 @@ def layer_reads(params: SplatArgs) -> wp.int32:
     if params.projection == PROJECT_TRIPLANAR:
         reads = 3
     return reads
+
+
+@wp.func
+def face_layer(params: SplatArgs, layer: wp.int32, k: wp.int32, n: wp.vec3) -> wp.int32:
+    """The array layer that read ``k`` of ``layer`` samples: ``layer`` itself, or, with
+    ``face_layers`` (projection triplanar), that of the face projection ``k`` sees: ``+k`` where
+    ``n[k] >= 0`` (``sign(0) = +1``, as the mirror fix), else ``-k``. The choice flips where the
+    projection's weight is 0, so the seam blends as the others do. The layer's splat weight, tiling
+    and place in the height blend stay those of ``layer``."""
+    read = layer
+    if params.face_layers.shape[0] > 0 and params.projection == PROJECT_TRIPLANAR:
+        f = 2 * k
+        if n[k] < 0.0:
+            f = f + 1
+        read = params.face_layers[layer * 6 + f]
+    return read
 
 
 @wp.func
@@ -220,12 +246,12 @@ def _read_layer(sample, name: str, one_call: bool, decorate=wp.func):
             for k in range(layer_reads(params)):
                 uv, fp, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy, smp)
                 if weight > 0.0:
-                    value += weight * sample(tex, layer, uv, fp, smp, stoch)
+                    value += weight * sample(tex, face_layer(params, layer, k, n), uv, fp, smp, stoch)
         elif params.projection == PROJECT_TRIPLANAR:  # plain: UV and world XZ read without the loop (faster)
             for k in range(layer_reads(params)):
                 uv, fp, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy, smp)
                 if weight > 0.0:
-                    value += weight * sample(tex, layer, uv, fp, smp, stoch)
+                    value += weight * sample(tex, face_layer(params, layer, k, n), uv, fp, smp, stoch)
         else:
             uv, fp, weight = layer_read(tex, layer, 0, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy, smp)
             value = sample(tex, layer, uv, fp, smp, stoch)
@@ -246,12 +272,12 @@ def _scatter_layer(scatter, name: str, one_call: bool):
                 for k in range(layer_reads(params)):
                     uv, fp, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy, smp)
                     if weight > 0.0:
-                        scatter(tex, grad, layer, uv, fp, smp, stoch, weight * g)
+                        scatter(tex, grad, face_layer(params, layer, k, n), uv, fp, smp, stoch, weight * g)
             elif params.projection == PROJECT_TRIPLANAR:
                 for k in range(layer_reads(params)):
                     uv, fp, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy, smp)
                     if weight > 0.0:
-                        scatter(tex, grad, layer, uv, fp, smp, stoch, weight * g)
+                        scatter(tex, grad, face_layer(params, layer, k, n), uv, fp, smp, stoch, weight * g)
             else:
                 uv, fp, weight = layer_read(tex, layer, 0, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy, smp)
                 scatter(tex, grad, layer, uv, fp, smp, stoch, g)
@@ -279,7 +305,7 @@ def read_layer_slope(
         uv, fp, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy, smp)
         if weight > 0.0:
             uv_slope, lod_slope = layer_read_slopes(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, dpdx, dpdy)
-            v, d_u, d_v, d_lod, d_spread = sample_footprint_derivatives(tex, layer, uv, fp, smp)
+            v, d_u, d_v, d_lod, d_spread = sample_footprint_derivatives(tex, face_layer(params, layer, k, n), uv, fp, smp)
             value += weight * v
             slope += weight * (d_u * uv_slope[0] + d_v * uv_slope[1] + d_lod * lod_slope + d_spread / layer_tiling(params, layer))
     return value, slope

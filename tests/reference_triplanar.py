@@ -136,23 +136,40 @@ def _chains(images, layer):
     return chains
 
 
+def _samples(images, layer, n, uvs, dx, dy, tiling, sampler) -> np.ndarray:
+    """``[3, N, C]``: what each projection reads. ``images``: three (X, Y, Z projections) or six
+    (faces ``+X, -X, +Y, -Y, +Z, -Z``); with six, every face's texture is sampled everywhere and
+    projection ``a`` keeps the ``-a`` face's sample where ``n[a] < 0``, the ``+a`` face's elsewhere."""
+    if len(images) == 3:
+        chains = _chains(images, layer)
+        lods = projection_lods(dx, dy, tiling, [c[0].shape[:2] for c in chains])
+        return sample_projections(chains, uvs, lods, **sampler)
+    assert len(images) == 6, "three projections or six faces"
+    per_sign = []
+    for first in (0, 1):  # the + faces, then the - faces
+        chains = _chains(images[first::2], layer)
+        lods = projection_lods(dx, dy, tiling, [c[0].shape[:2] for c in chains])
+        per_sign.append(sample_projections(chains, uvs, lods, **sampler))
+    negative = (n < 0).T[..., None]  # [3, N, 1]; NaN compares False: the + face
+    return np.where(negative, per_sign[1], per_sign[0])
+
+
 def triplanar(gbuffer: dict, images, *, tiling=1.0, sharpness=4.0, offsets=None, mirror_fix=True, biplanar=False, layer=0, object_to_world=None, **sampler) -> np.ndarray:
     """Reference of ``warptex.triplanar`` (``biplanar=True``: ``warptex.biplanar``).
 
     Args:
         gbuffer: ``GBuffer.numpy()``.
-        images: three level-0 images (X, Y, Z projections), ``[H, W, C]`` or ``[L, H, W, C]``.
+        images: three level-0 images (X, Y, Z projections) or six (faces ``+X, -X, +Y, -Y, +Z,
+            -Z``, chosen by the sign of the projected-space normal), ``[H, W, C]`` or ``[L, H, W, C]``.
         sampler: ``filter``, ``address``, ``lod_bias``, ``min_lod``, ``max_lod``.
 
     Returns:
         ``[H, W, C]`` float64.
     """
     covered, p, n, dx, dy = _inputs(gbuffer, object_to_world)
-    chains = _chains(images, layer)
     w = (biplanar_weights if biplanar else triplanar_weights)(n, sharpness)
     uvs = projection_uvs(p, n, tiling, offsets, mirror_fix)
-    lods = projection_lods(dx, dy, tiling, [c[0].shape[:2] for c in chains])
-    samples = sample_projections(chains, uvs, lods, **sampler)
+    samples = _samples(images, layer, n, uvs, dx, dy, tiling, sampler)
     colour = np.where(w.T[..., None] > 0, w.T[..., None] * samples, 0.0).sum(axis=0)
     out = np.zeros(gbuffer["mask"].shape + (colour.shape[-1],))
     out.reshape(-1, colour.shape[-1])[covered] = colour
@@ -205,16 +222,15 @@ def triplanar_normal(
     **sampler,
 ) -> np.ndarray:
     """Reference of ``warptex.triplanar_normal``: unit world normals ``[H, W, 3]``, 0 off the mask.
+    ``images``: as for :func:`triplanar` (three projections or six faces).
 
     The surface normal is used at unit length in the blends (in object space it is renormalised
     after the inverse-transpose transform, which does not keep lengths).
     """
     covered, p, n, dx, dy = _inputs(gbuffer, object_to_world)
-    chains = _chains(images, layer)
     w = (biplanar_weights if biplanar else triplanar_weights)(n, sharpness)
     uvs = projection_uvs(p, n, tiling, offsets, mirror_fix)
-    lods = projection_lods(dx, dy, tiling, [c[0].shape[:2] for c in chains])
-    texels = sample_projections(chains, uvs, lods, **sampler)  # [3, N, C]
+    texels = _samples(images, layer, n, uvs, dx, dy, tiling, sampler)  # [3, N, C]
     t = decode_normals(texels, strength=strength, flip_green=flip_green)
     if mirror_fix:
         t[..., 0] *= MIRROR[:, None] * sign_or_one(n).T

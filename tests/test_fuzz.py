@@ -730,20 +730,23 @@ def check_surface(func, out, facts, lo, hi, scale, *, unit=False, constant=None,
         assert_within(values[good], min(lo, 0.0), max(hi, 0.0), func, scale)
 
 
-@given(g=gbuffers(with_uv=False), data=texel_data(max_side=8), per_axis=st.booleans(), opts=projection_options(), option=st.one_of(st.none(), stochastic_options()),
-       sampler=st.one_of(st.none(), samplers()), which=st.sampled_from(["triplanar", "biplanar"]))  # fmt: skip
-def test_triplanar_biplanar(g, data, per_axis, opts, option, sampler, which):
+@given(g=gbuffers(with_uv=False), data=texel_data(max_side=8), per_axis=st.booleans(), per_face=st.booleans(), opts=projection_options(),
+       option=st.one_of(st.none(), stochastic_options()), sampler=st.one_of(st.none(), samplers()), which=st.sampled_from(["triplanar", "biplanar"]))  # fmt: skip
+def test_triplanar_biplanar(g, data, per_axis, per_face, opts, option, sampler, which):
     """``triplanar``/``biplanar`` over random G-buffers (zero, NaN, inf, tiny, huge, diagonal normals;
-    positions up to ±1e6 with inf/NaN): 0 where uncovered or without a usable normal, finite and in the
-    texels' range on finite geometry, or a clear error."""
+    positions up to ±1e6 with inf/NaN), with one texture, one per axis or one per face: 0 where
+    uncovered or without a usable normal, finite and in the texels' range on finite geometry, or a
+    clear error."""
     gbuffer, facts = g
     layer = int(data.shape[0] - 1)
     texture = wt.TextureArray(data)
-    textures = None
+    textures = faces = None
     if per_axis:
         textures = [None, wt.TextureArray(data[:, ::-1].copy()), wt.Texture(data[layer, :3, :2]) if layer == 0 else None]
+    if per_face:  # the texels rearranged: the same range
+        faces = [None, wt.TextureArray(data[:, :, ::-1].copy()), None, wt.TextureArray(data[:, ::-1, ::-1].copy()), wt.TextureArray(data[:, :2].copy()), None]
     fn = getattr(wt, which)
-    out = call(which, fn, gbuffer, texture, textures_per_axis=textures, layer=layer, stochastic=option, sampler=sampler, **opts)
+    out = call(which, fn, gbuffer, texture, textures_per_axis=textures, textures_per_face=faces, layer=layer, stochastic=option, sampler=sampler, **opts)
     if out is not None:
         if mips_may_overflow(data):
             return
@@ -767,7 +770,7 @@ def test_triplanar_normal(g, data, opts, option, blend, strength, flip_green, bi
         check_surface("triplanar_normal", out, facts, -1.0, 1.0, 1.0, unit=True)
 
 
-@given(g=gbuffers(with_uv=True), bad=st.sampled_from(["shape", "dtype", "not_gbuffer", "missing_texture", "per_axis", "layer", "space"]))
+@given(g=gbuffers(with_uv=True), bad=st.sampled_from(["shape", "dtype", "not_gbuffer", "missing_texture", "per_axis", "per_face", "layer", "space"]))
 def test_triplanar_bad_arguments(g, bad):
     """Malformed G-buffers and arguments: always a clear error naming the function."""
     gbuffer, facts = g
@@ -784,6 +787,8 @@ def test_triplanar_bad_arguments(g, bad):
         texture = None
     elif bad == "per_axis":
         kw["textures_per_axis"] = [texture, wt.Texture(np.ones((2, 2, 2), np.float32)), None]
+    elif bad == "per_face":
+        kw["textures_per_face"] = [None, None, None, wt.Texture(np.ones((2, 2, 2), np.float32)), None, None]
     elif bad == "layer":
         kw["layer"] = 1
     elif bad == "space":

@@ -34,7 +34,7 @@ README = REPO / "README.md"
 SHARED = REPO.parent / "shared"
 
 # Fenced blocks per info string: a new block must be added here, and so gets a test.
-EXPECTED_BLOCKS = {"python": 8, "sh": 3, "": 1}
+EXPECTED_BLOCKS = {"python": 9, "sh": 3, "": 1}
 EXPECTED_COMMANDS = {"warptex": 9, "python": 1, "skipped": 5}
 
 # Python blocks that continue earlier ones (by "<section> #<n>"): they run after those, in one namespace.
@@ -250,6 +250,21 @@ def _check_tiling_gradient(ns, d):
     assert grad.shape == (1,) and np.isfinite(grad).all() and grad[0] != 0
 
 
+def _check_six_planar(ns, d):
+    g = ns["g"]
+    assert _shape(ns["colour"]) == (128, 128, 4) and _shape(ns["terrain"]) == (128, 128, 4)
+    n, mask = g.normal.numpy(), g.mask.numpy() > 0
+    top, bottom = mask & (n[..., 1] > 0.93), mask & (n[..., 1] < -0.93)  # other weights below (0.4)^8
+    assert top.sum() > 30 and bottom.sum() > 30, (top.sum(), bottom.sum())
+    colour, terrain = ns["colour"].numpy(), ns["terrain"].numpy()
+    for name, region, face in (("top", top, ns["grass"]), ("bottom", bottom, ns["rock"])):
+        alone = wt.triplanar(g, face, sharpness=8.0).numpy()
+        np.testing.assert_allclose(colour[region], alone[region], atol=2e-3, err_msg=f"{name}: that face's texture")
+    plain = wt.splat(g, ns["layers"], ns["maps"], projection="triplanar", sharpness=8.0).numpy()
+    np.testing.assert_allclose(terrain[top], plain[top], atol=2e-3)  # grass reads itself on top
+    assert np.abs(terrain[bottom] - plain[bottom]).max() > 0.05  # and rock beneath
+
+
 def _check_splat(ns, d):
     assert _shape(ns["colour"]) == (48, 64, 4)
     assert ns["layers"].num_layers == 4 and ns["layers"].channels == 4
@@ -273,6 +288,7 @@ CHECKS = {
     "G-buffers #1": _check_gbuffers,
     "Triplanar, biplanar and triplanar normal mapping #1": _check_triplanar,
     "Triplanar, biplanar and triplanar normal mapping #2": _check_tiling_gradient,
+    "A texture per face (six-planar) #1": _check_six_planar,
     "Splat-map layers (terrain) #1": _check_splat,
     "Stochastic tiling #1": _check_stochastic,
     "Stochastic tiling #2": _check_stochastic_inside,

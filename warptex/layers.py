@@ -6,6 +6,7 @@ Formulas: :mod:`warptex.kernels.layers`. The atlas + index-map variant is in :mo
 from __future__ import annotations
 
 import enum
+from typing import Sequence
 
 import numpy as np
 import warp as wp
@@ -73,6 +74,7 @@ def splat(
     sharpness=4.0,
     offsets=None,
     mirror_fix: bool = True,
+    face_layers=None,
     stochastic: Stochastic | str | None = None,
     sampler: Sampler | None = None,
     device=None,
@@ -103,6 +105,16 @@ def splat(
         height_channel: the channel of ``layers`` holding height when ``heights`` is ``None``.
         uv_set: the G-buffer UV set holding the splat-map UVs (and the layer UVs for ``"uv"``).
         sharpness, offsets, mirror_fix: the triplanar options, for ``projection="triplanar"``.
+        face_layers: for ``projection="triplanar"``: which array layers a layer reads on each face
+            of the cube of directions (grass on top, rock beneath). ``None`` (every layer reads
+            itself), or ``L`` entries (a sequence, or an int array ``(L, 6)``), one per layer
+            ``l``: ``None`` (``l`` itself on every face) or 6 layer indices ``(+x, -x, +y, -y,
+            +z, -z)``, where a ``None`` index means ``l`` itself. Projection ``a`` reads the
+            ``+a`` face's layer where the normal has ``n[a] >= 0``, the ``-a`` face's where
+            ``n[a] < 0``; the seam lies where projection ``a``'s weight is 0. The colour (and the
+            height, from ``height_channel`` or ``heights``) is read from that layer at layer
+            ``l``'s tiling; layer ``l``'s splat weight and its place in the height blend are
+            unchanged. Gradients reach the texels of the layers read.
         stochastic: ``None`` (plain tiling), or anti-tiling for every layer: a
             :class:`~warptex.Stochastic` (or a method name), see :func:`warptex.stochastic`. A
             histogram must be built from ``layers``; ``heights`` are read with the same taps,
@@ -167,6 +179,8 @@ def splat(
     else:  # a separate height array: the same taps, without the layers' histogram
         height_stoch, _ = stochastic_args(func, option.replace(histogram=None), height_tex, sampler)
 
+    params.face_layers = _face_layers(func, face_layers, num_layers, params.projection, device)
+
     proj = projection_args(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kp.WEIGHTS_TRIPLANAR, device=device)
     smp = sampler_args(func, sampler, has_lod=True)
     map_smp = sampler_args(func, MAP_SAMPLER, has_lod=False)
@@ -193,6 +207,45 @@ def splat(
     else:
         run(Kernels(kernels["stochastic_forward"], kernels["stochastic_texel_grad"]), count, inputs=inputs, outputs=[out], device=device, by_hand=by_hand)
     return out.reshape((h, w, layers.channels))
+
+
+FACE_NAMES = ("+x", "-x", "+y", "-y", "+z", "-z")
+
+
+def _face_layers(func: str, face_layers, num_layers: int, projection: int, device) -> wp.array:
+    """``face_layers`` checked, as the kernels' int32 array of ``6 L`` indices (``SplatArgs``);
+    empty when not given or when every layer reads itself on every face (the default path)."""
+    empty = wp.empty(0, dtype=wp.int32, device=device)
+    if face_layers is None:
+        return empty
+    if projection != kl.PROJECT_TRIPLANAR:
+        raise ValueError(f"{func}(): face_layers needs projection='triplanar' (the faces are those of the triplanar projections)")
+    if isinstance(face_layers, np.ndarray):
+        if face_layers.ndim != 2 or face_layers.shape[1] != 6:
+            raise ValueError(f"{func}(): face_layers as an array must have shape ({num_layers}, 6), got {face_layers.shape}")
+        face_layers = [list(row) for row in face_layers]
+    if isinstance(face_layers, (str, bytes)) or not isinstance(face_layers, Sequence) or len(face_layers) != num_layers:
+        raise ValueError(
+            f"{func}(): face_layers must be a sequence of {num_layers} entries (one per layer), each None or 6 layer indices "
+            f"(+x, -x, +y, -y, +z, -z), got {face_layers!r}"
+        )
+    table = np.arange(num_layers, dtype=np.int32).repeat(6).reshape(num_layers, 6)
+    for layer, entry in enumerate(face_layers):
+        if entry is None:
+            continue
+        if isinstance(entry, (str, bytes)) or not isinstance(entry, (Sequence, np.ndarray)) or len(entry) != 6:
+            raise ValueError(f"{func}(): face_layers[{layer}] must be None or 6 layer indices (+x, -x, +y, -y, +z, -z), got {entry!r}")
+        for f, index in enumerate(entry):
+            if index is None:
+                continue
+            if isinstance(index, (bool, np.bool_)) or not isinstance(index, (int, np.integer)):
+                raise TypeError(f"{func}(): face_layers[{layer}][{f}] (the {FACE_NAMES[f]} face) must be a layer index or None, got {index!r}")
+            if not 0 <= index < num_layers:
+                raise ValueError(f"{func}(): face_layers[{layer}][{f}] (the {FACE_NAMES[f]} face) must be a layer in [0, {num_layers - 1}], got {index}")
+            table[layer, f] = index
+    if (table == np.arange(num_layers)[:, None]).all():
+        return empty
+    return wp.array(table.reshape(-1), dtype=wp.int32, device=device)
 
 
 def _splat_generated(kernels: dict, count: int, inputs: list, out: wp.array, flat: list, maps: TextureArray, params, map_smp, height_array: bool, sampled_grads: bool, device) -> None:

@@ -2,7 +2,10 @@
 
 Surfaces without usable UVs are textured by projecting the world (or object) position onto the
 three axis planes, ``p.zy`` (X plane), ``p.xz`` (Y plane) and ``p.xy`` (Z plane), and blending the
-projections by the surface normal. Formulas and conventions: :mod:`warptex.kernels.triplanar`.
+projections by the surface normal. One texture serves every projection, or one per axis
+(``textures_per_axis``), or one per face of the cube of directions (``textures_per_face``: a
+projection reads its ``+`` or ``-`` face's by the sign of the normal, e.g. grass on top and rock
+beneath). Formulas and conventions: :mod:`warptex.kernels.triplanar`.
 
 Differentiable parameters (``tiling``, ``sharpness``, ``offsets``) may be given as float32
 ``wp.array``\\ s with ``requires_grad=True``; a ``wp.Tape`` then carries gradients into them, as it
@@ -68,6 +71,7 @@ def triplanar(
     offsets=None,
     mirror_fix: bool = True,
     textures_per_axis: Sequence[TextureArray | None] | None = None,
+    textures_per_face: Sequence[TextureArray | None] | None = None,
     layer: int = 0,
     space: Space | str = Space.WORLD,
     object_to_world=None,
@@ -99,6 +103,13 @@ def triplanar(
         textures_per_axis: ``(x, y, z)``: textures for the X (side), Y (top) and Z (front)
             projections; ``None`` entries fall back to ``texture``. All need ``C`` channels and
             ``layer``; sizes may differ.
+        textures_per_face: ``(+x, -x, +y, -y, +z, -z)``: a texture per face, e.g. grass on top
+            (``+y``) and rock beneath (``-y``). Projection ``a`` reads the ``+a`` face's texture where
+            the normal (in ``space``) has ``n[a] >= 0``, the ``-a`` face's where ``n[a] < 0``; the seam
+            between them lies where projection ``a``'s weight is 0, so it blends as the others do
+            (for ``sharpness > 0``). ``None`` entries fall back to ``textures_per_axis[a]``, then to
+            ``texture``. Same requirements as ``textures_per_axis``; gradients reach every face's
+            texels.
         layer: the layer to read from texture arrays.
         space: :class:`Space`: ``"world"`` or ``"object"`` (needs ``object_to_world``).
         object_to_world: ``(4, 4)`` affine matrix of the object, for ``space="object"``.
@@ -106,7 +117,7 @@ def triplanar(
             :class:`~warptex.Stochastic` (or a method name, ``"hash4"``, ``"cheap2"``, ``"hex"``),
             see :func:`warptex.stochastic`. Each projection's taps share its unperturbed LOD.
             Needs a ``sampler`` address of ``"wrap"`` or ``"mirror"``; a histogram needs one
-            texture for all projections.
+            texture for all projections and faces.
         sampler: a :class:`~warptex.Sampler` for every projection; its ``"auto"`` filter is
             trilinear (the G-buffer's derivatives give every pixel a LOD).
         device: Warp device; must be the G-buffer's and the textures'.
@@ -118,9 +129,9 @@ def triplanar(
     """
     setup = _Setup(
         "triplanar", kp.WEIGHTS_TRIPLANAR, gbuffer, texture, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix,
-        textures_per_axis=textures_per_axis, layer=layer, space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device,
+        textures_per_axis=textures_per_axis, textures_per_face=textures_per_face, layer=layer, space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device,
     )  # fmt: skip
-    return setup.launch(setup.variant(_COLOUR, _COLOUR_STOCHASTIC), setup.channels, [])
+    return setup.launch(setup.variant(_COLOUR), setup.channels, [])
 
 
 def biplanar(
@@ -132,6 +143,7 @@ def biplanar(
     offsets=None,
     mirror_fix: bool = True,
     textures_per_axis: Sequence[TextureArray | None] | None = None,
+    textures_per_face: Sequence[TextureArray | None] | None = None,
     layer: int = 0,
     space: Space | str = Space.WORLD,
     object_to_world=None,
@@ -143,14 +155,14 @@ def biplanar(
 
     The weights are ``clamp((|n_a| - 0.5773) / (1 - 0.5773), 0, 1) ^ (sharpness / 8)`` for the
     major and median axes of the normal, 0 for the minor axis, normalised. Everything else (UVs,
-    mirror fix, offsets, LOD, textures per axis, stochastic sampling, gradients) is as in :func:`triplanar`; the
+    mirror fix, offsets, LOD, textures per axis or per face, stochastic sampling, gradients) is as in :func:`triplanar`; the
     default ``sharpness=8`` is Quilez' (exponent 1).
     """
     setup = _Setup(
         "biplanar", kp.WEIGHTS_BIPLANAR, gbuffer, texture, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix,
-        textures_per_axis=textures_per_axis, layer=layer, space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device,
+        textures_per_axis=textures_per_axis, textures_per_face=textures_per_face, layer=layer, space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device,
     )  # fmt: skip
-    return setup.launch(setup.variant(_COLOUR, _COLOUR_STOCHASTIC), setup.channels, [])
+    return setup.launch(setup.variant(_COLOUR), setup.channels, [])
 
 
 def triplanar_normal(
@@ -162,6 +174,7 @@ def triplanar_normal(
     offsets=None,
     mirror_fix: bool = True,
     textures_per_axis: Sequence[TextureArray | None] | None = None,
+    textures_per_face: Sequence[TextureArray | None] | None = None,
     layer: int = 0,
     blend: Blend | str = Blend.WHITEOUT,
     strength: float = 1.0,
@@ -193,6 +206,8 @@ def triplanar_normal(
             Quilez' default).
         stochastic: as for :func:`triplanar`, without ``mirror`` or ``rotation`` (they would turn
             the map's slopes without turning its tangent frame).
+        textures_per_axis, textures_per_face: normal maps per projection or per face, as the
+            colour textures of :func:`triplanar` (each face's map is read in that face's frame).
         Other arguments: as for :func:`triplanar`.
 
     Returns:
@@ -209,7 +224,7 @@ def triplanar_normal(
         raise ValueError(f"{func}(): stochastic mirror and rotation would turn a normal map's slopes without its tangent frame; use neither")
     setup = _Setup(
         func, kp.WEIGHTS_BIPLANAR if biplanar else kp.WEIGHTS_TRIPLANAR, gbuffer, normal_map, tiling=tiling, sharpness=sharpness, offsets=offsets,
-        mirror_fix=mirror_fix, textures_per_axis=textures_per_axis, layer=layer, space=space, object_to_world=object_to_world, stochastic=option,
+        mirror_fix=mirror_fix, textures_per_axis=textures_per_axis, textures_per_face=textures_per_face, layer=layer, space=space, object_to_world=object_to_world, stochastic=option,
         sampler=sampler, device=device,
     )  # fmt: skip
     if setup.channels < 2:
@@ -220,43 +235,60 @@ def triplanar_normal(
 # -- internals --------------------------------------------------------------------------------------
 
 
-_COLOUR = Kernels(kt.triplanar_kernel, kt.triplanar_texel_grad_kernel, kt.triplanar_adjoint_kernel)
-_COLOUR_STOCHASTIC = Kernels(kt.triplanar_stochastic_kernel, kt.triplanar_stochastic_texel_grad_kernel, kt.triplanar_adjoint_kernel)
-_NORMAL = Kernels(kt.triplanar_normal_kernel, None, kt.triplanar_normal_adjoint_kernel)
-_NORMAL_STOCHASTIC = Kernels(kt.triplanar_normal_stochastic_kernel, None, kt.triplanar_normal_adjoint_kernel)
-_SAMPLES = Kernels(kt.projection_samples_kernel, kt.projection_texel_grad_kernel)
-_SAMPLES_STOCHASTIC = Kernels(kt.projection_samples_stochastic_kernel, kt.projection_stochastic_texel_grad_kernel)
+# Each technique's kernels by (stochastic, faces): plain or stochastic sampling, one texture per
+# axis or a texture per face (the kernels that choose by face are in modules of their own).
+_COLOUR = {
+    (False, False): Kernels(kt.triplanar_kernel, kt.triplanar_texel_grad_kernel, kt.triplanar_adjoint_kernel),
+    (True, False): Kernels(kt.triplanar_stochastic_kernel, kt.triplanar_stochastic_texel_grad_kernel, kt.triplanar_adjoint_kernel),
+    (False, True): Kernels(kt.triplanar_faces_kernel, kt.triplanar_faces_texel_grad_kernel, kt.triplanar_adjoint_kernel),
+    (True, True): Kernels(kt.triplanar_stochastic_faces_kernel, kt.triplanar_stochastic_faces_texel_grad_kernel, kt.triplanar_adjoint_kernel),
+}
+_NORMAL = {
+    (False, False): Kernels(kt.triplanar_normal_kernel, None, kt.triplanar_normal_adjoint_kernel),
+    (True, False): Kernels(kt.triplanar_normal_stochastic_kernel, None, kt.triplanar_normal_adjoint_kernel),
+    (False, True): Kernels(kt.triplanar_normal_faces_kernel, None, kt.triplanar_normal_adjoint_kernel),
+    (True, True): Kernels(kt.triplanar_normal_stochastic_faces_kernel, None, kt.triplanar_normal_adjoint_kernel),
+}
+_SAMPLES = {
+    (False, False): Kernels(kt.projection_samples_kernel, kt.projection_texel_grad_kernel),
+    (True, False): Kernels(kt.projection_samples_stochastic_kernel, kt.projection_stochastic_texel_grad_kernel),
+    (False, True): Kernels(kt.projection_samples_faces_kernel, kt.projection_faces_texel_grad_kernel),
+    (True, True): Kernels(kt.projection_samples_stochastic_faces_kernel, kt.projection_stochastic_faces_texel_grad_kernel),
+}
 _NORMAL_FROM_SAMPLES = Kernels(kt.triplanar_normal_from_samples_kernel, None, kt.triplanar_normal_from_samples_kernel)
 
 
 class _Setup:
     """The checked, packed inputs of the three public functions, and their launches."""
 
-    def __init__(self, func, weights, gbuffer, texture, *, tiling, sharpness, offsets, mirror_fix, textures_per_axis, layer, space, object_to_world, stochastic, sampler, device):
+    def __init__(self, func, weights, gbuffer, texture, *, tiling, sharpness, offsets, mirror_fix, textures_per_axis, textures_per_face, layer, space, object_to_world, stochastic, sampler, device):
         device = gbuffer_device(func, gbuffer, device)
         gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask")
-        textures = _textures(func, texture, textures_per_axis, layer, device)
+        textures = _textures(func, texture, textures_per_axis, textures_per_face, layer, device)
         object_to_world = _object_to_world(func, space, object_to_world)
         proj = projection_args(func, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=weights, object_to_world=object_to_world, device=device)
         option, sampler = as_stochastic(func, stochastic), as_sampler(func, sampler)
         if option.histogram is not None and not all(t is textures[0] for t in textures):
-            raise ValueError(f"{func}(): a stochastic histogram needs one texture for every projection (textures_per_axis differ)")
+            raise ValueError(f"{func}(): a stochastic histogram needs one texture for every projection (textures_per_axis or textures_per_face differ)")
         stoch, sampled = stochastic_args(func, option, textures[0], sampler)
         if sampled is not textures[0]:  # a histogram: every projection reads its Gaussianised texture
-            textures = [sampled] * 3
+            textures = [sampled] * len(textures)
 
         self.gbuffer, self.textures, self.layer, self.device = gbuffer, textures, layer, device
         self.proj, self.smp, self.stoch = proj, sampler_args(func, sampler, has_lod=True), stoch
         self.channels = textures[0].channels
+        self.faces = any(textures[a] is not textures[a + 3] for a in range(3))  # the kernels' +a, then -a faces
         self.count = gbuffer.resolution[0] * gbuffer.resolution[1]
         self.pixels = [a.reshape((self.count,)) for a in (gbuffer.position, gbuffer.position_dx, gbuffer.position_dy, gbuffer.normal, gbuffer.mask)]
         self.texels = [t.view.texels for t in textures]  # what the hand-written gradients differentiate
         self.others = [proj.tiling, proj.sharpness, proj.offsets, *self.pixels]  # what only the generated adjoint does
         self.linear = stoch.histogram == 0  # the histogram blend is not linear in the texels
 
-    def variant(self, plain: Kernels, stochastic: Kernels) -> Kernels:
-        """``plain`` (built without the stochastic code) when sampling is plain, else ``stochastic``."""
-        return plain if self.stoch.method == METHOD_NONE else stochastic
+    def variant(self, kernels: dict) -> Kernels:
+        """The kernels of ``kernels`` (by ``(stochastic, faces)``) for this call: those built without
+        the stochastic code when sampling is plain, and without the choice by face unless the two
+        faces of an axis have different textures."""
+        return kernels[self.stoch.method != METHOD_NONE, self.faces]
 
     def inputs(self) -> list:
         return [*[t.view for t in self.textures], self.layer, *per_pixel(*self.pixels), self.proj, self.smp, self.stoch]
@@ -272,34 +304,58 @@ class _Setup:
         linearly), in two steps: the projections' samples, stored per pixel with a hand-written
         texel gradient, then the normal from them (its generated adjoint has no sampling to replay)."""
         if active_tape() is None or not needs_grad(*self.texels) or not hand_written(self.others, self.linear):
-            return self.launch(self.variant(_NORMAL, _NORMAL_STOCHASTIC), 3, extra)
+            return self.launch(self.variant(_NORMAL), 3, extra)
         samples = wp.zeros((self.count, 3), dtype=wp.vec4, device=self.device, requires_grad=True)
         weights = wp.zeros(self.count, dtype=wp.vec3, device=self.device)
-        run(self.variant(_SAMPLES, _SAMPLES_STOCHASTIC), self.count, inputs=self.inputs(), outputs=[samples, weights], device=self.device, by_hand=self.texels)
+        run(self.variant(_SAMPLES), self.count, inputs=self.inputs(), outputs=[samples, weights], device=self.device, by_hand=self.texels)
         out = wp.zeros((self.count, 3), dtype=float, device=self.device, requires_grad=True)
         normal, mask = self.pixels[3], self.pixels[4]
         run(_NORMAL_FROM_SAMPLES, self.count, inputs=[*per_pixel(samples, weights, normal, mask), self.proj, *extra], outputs=[out], device=self.device)
         return out.reshape((*self.gbuffer.resolution, 3))
 
 
-def _textures(func, texture, per_axis, layer, device) -> list[TextureArray]:
-    if per_axis is None:
-        per_axis = (None, None, None)
-    elif isinstance(per_axis, (str, bytes)) or not isinstance(per_axis, Sequence) or len(per_axis) != 3:
-        raise ValueError(f"{func}(): textures_per_axis must be a sequence of 3 textures (X, Y, Z projections) or None, got {per_axis!r}")
-    chosen = [texture if t is None else t for t in per_axis]
-    for axis, t in zip("XYZ", chosen):
+# The faces in the order of textures_per_face, as (axis, sign) ...
+FACES = ((0, "+"), (0, "-"), (1, "+"), (1, "-"), (2, "+"), (2, "-"))
+# ... and the kernels' order of them: tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z.
+KERNEL_FACES = (0, 2, 4, 1, 3, 5)
+
+
+def _textures(func, texture, per_axis, per_face, layer, device) -> list[TextureArray]:
+    """The six faces' textures in the kernels' order (:data:`KERNEL_FACES`), checked: a face's own
+    texture, else its axis', else ``texture``."""
+    per_axis = _per(func, "textures_per_axis", per_axis, 3, "X, Y, Z projections")
+    faces_given = per_face is not None
+    per_face = _per(func, "textures_per_face", per_face, 6, "+X, -X, +Y, -Y, +Z, -Z faces")
+    chosen, names = [], []
+    for f, (axis, sign) in enumerate(FACES):
+        own = per_face[f] is not None
+        t = per_face[f] if own else texture if per_axis[axis] is None else per_axis[axis]
+        name = f"{sign}{'XYZ'[axis]}" if own else "XYZ"[axis]
+        what = f"the {name} face" if own else f"the {name} projection"
         if t is None:
-            raise ValueError(f"{func}(): no texture for the {axis} projection: pass texture= or all three textures_per_axis")
+            if faces_given:
+                raise ValueError(f"{func}(): no texture for the {sign}{'XYZ'[axis]} face: pass texture=, textures_per_axis or all six textures_per_face")
+            raise ValueError(f"{func}(): no texture for the {name} projection: pass texture= or all three textures_per_axis")
         if not isinstance(t, TextureArray):
-            raise TypeError(f"{func}(): the {axis} projection's texture must be a Texture or TextureArray, got {type(t).__name__}")
+            raise TypeError(f"{func}(): {what}'s texture must be a Texture or TextureArray, got {type(t).__name__}")
         if t.device != device:
-            raise ValueError(f"{func}(): the {axis} projection's texture is on {t.device} but the G-buffer on {device}")
-        if t.channels != chosen[0].channels:
-            raise ValueError(f"{func}(): all projections need the same channel count; X has {chosen[0].channels}, {axis} has {t.channels}")
+            raise ValueError(f"{func}(): {what}'s texture is on {t.device} but the G-buffer on {device}")
+        if chosen and t.channels != chosen[0].channels:
+            raise ValueError(f"{func}(): all projections need the same channel count; {names[0]} has {chosen[0].channels}, {name} has {t.channels}")
         if isinstance(layer, bool) or not isinstance(layer, (int, np.integer)) or not 0 <= layer < t.num_layers:
-            raise ValueError(f"{func}(): layer must be an int in [0, {t.num_layers - 1}] for the {axis} projection's texture, got {layer!r}")
-    return chosen
+            raise ValueError(f"{func}(): layer must be an int in [0, {t.num_layers - 1}] for {what}'s texture, got {layer!r}")
+        chosen.append(t)
+        names.append(name)
+    return [chosen[f] for f in KERNEL_FACES]
+
+
+def _per(func, name, value, count, what) -> Sequence:
+    """``value`` (a sequence of ``count`` textures or ``None``s, or ``None``) as a sequence."""
+    if value is None:
+        return (None,) * count
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != count:
+        raise ValueError(f"{func}(): {name} must be a sequence of {count} textures ({what}) or None, got {value!r}")
+    return value
 
 
 def _object_to_world(func, space, object_to_world):
