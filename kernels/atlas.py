@@ -31,7 +31,7 @@ LOD (after bias, before trilinear blending) to that ``ℓ_max``, which the Pytho
 import warp as wp
 
 from . import ADJOINT_MODULE, specialised
-from .sampling import ADDRESS_WRAP, SamplerArgs, TextureView, fetch, footprint_taps, footprint_uv, reduce_coord, sample_lod, sample_lod_call, uv_footprint, write_channels
+from .sampling import ADDRESS_WRAP, SamplerArgs, TextureView, fetch, footprint_mean, footprint_taps, footprint_uv, reduce_coord, sample_lod, sample_lod_call, uv_footprint, write_channels
 
 MODULE = "warptex.atlas"
 
@@ -94,7 +94,7 @@ def _sample_tile(sample, name: str):
         result = wp.vec4(0.0)
         for k in range(footprint_taps(fp)):
             result += sample(atlas, 0, tile_uv(atlas, layout, layer, footprint_uv(uv, fp, k)), fp[0], smp)
-        return result / fp[3]
+        return footprint_mean(result, fp)
 
     return wp.func(specialised(sample_tile, name))
 

@@ -365,7 +365,7 @@ def _sample_stochastic(sample, taps, blend_histogram, name: str, decorate=wp.fun
                 if params.histogram != 0:
                     value = blend_histogram(tex, layer, value, w, lod, smp, params)
             result += value
-        return result / fp[3]
+        return sampling.footprint_mean(result, fp)
 
     return decorate(specialised(sample_stochastic, name))
 
@@ -397,7 +397,7 @@ def scatter_stochastic(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: w
         sampling.scatter_footprint(tex, grad, layer, uv, fp, smp, g)
     else:
         lod = fp[0]
-        share = g / fp[3]
+        share = sampling.footprint_mean(g, fp)
         for j in range(sampling.footprint_taps(fp)):
             at = sampling.footprint_uv(uv, fp, j)
             if sampling.finite_uv_lod(at, lod):
