@@ -34,7 +34,7 @@ README = REPO / "README.md"
 SHARED = REPO.parent / "shared"
 
 # Fenced blocks per info string: a new block must be added here, and so gets a test.
-EXPECTED_BLOCKS = {"python": 9, "sh": 3, "": 1}
+EXPECTED_BLOCKS = {"python": 10, "sh": 3, "": 1}
 EXPECTED_COMMANDS = {"warptex": 9, "python": 1, "skipped": 5}
 
 # Python blocks that continue earlier ones (by "<section> #<n>"): they run after those, in one namespace.
@@ -265,6 +265,11 @@ def _check_six_planar(ns, d):
     assert np.abs(terrain[bottom] - plain[bottom]).max() > 0.05  # and rock beneath
 
 
+def _check_torch(ns, d):
+    assert _shape(ns["colour"]) == (128, 128, 3) and ns["loss"].item() > 0
+    assert ns["texture"].grad.abs().sum() > 0 and ns["tiling"].grad.shape == () and ns["tiling"].grad != 0
+
+
 def _check_splat(ns, d):
     assert _shape(ns["colour"]) == (48, 64, 4)
     assert ns["layers"].num_layers == 4 and ns["layers"].channels == 4
@@ -285,6 +290,7 @@ def _check_fit(ns, d):
 
 CHECKS = {
     "Using it #1": _check_using_it,
+    "PyTorch #1": _check_torch,
     "G-buffers #1": _check_gbuffers,
     "Triplanar, biplanar and triplanar normal mapping #1": _check_triplanar,
     "Triplanar, biplanar and triplanar normal mapping #2": _check_tiling_gradient,
@@ -298,6 +304,8 @@ CHECKS = {
 
 @pytest.mark.parametrize("block", PYTHON_BLOCKS, ids=[f"L{b.line} {b.name}" for b in PYTHON_BLOCKS])
 def test_python_block(block, workdir):
+    if "import torch" in block.text:
+        pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
     by_name = {b.name: b for b in PYTHON_BLOCKS}
     namespace = {"__name__": "__readme__"}
     for before in CONTINUES.get(block.name, []):

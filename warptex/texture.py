@@ -76,15 +76,33 @@ class TextureArray:
         else:
             raise ValueError(f"{self._name}(): mipmaps must be a bool or a positive int, got {mipmaps!r}")
 
-        self._device = wp.get_device(device)
-        self._channels = channels
-        self._sizes = mip_sizes(height, width, max_levels)
-        offsets = np.cumsum([0] + [num_layers * h * w for h, w in self._sizes])
-        padded = np.zeros((offsets[-1], 4), dtype=np.float32)
-        padded[: offsets[1], :channels] = data.reshape(-1, channels)
+        sizes = mip_sizes(height, width, max_levels)
+        padded = np.zeros((sum(num_layers * h * w for h, w in sizes), 4), dtype=np.float32)
+        padded[: num_layers * height * width, :channels] = data.reshape(-1, channels)
+        self._wrap(wp.array(padded, dtype=wp.vec4, device=device, requires_grad=requires_grad), num_layers, sizes, channels)
+        self.update()
 
-        self._chain = wp.array(padded, dtype=wp.vec4, device=self._device, requires_grad=requires_grad)
-        self._offsets = [int(o) for o in offsets[:-1]]
+    @classmethod
+    def around(cls, chain: wp.array, num_layers: int, sizes: Sequence[tuple[int, int]], channels: int) -> "TextureArray":
+        """A texture array whose mip chain *is* ``chain`` (no copy), for buffers that another
+        framework owns (the PyTorch bridge): a ``wp.array`` of ``vec4`` holding the levels of
+        ``sizes`` (:func:`mip_sizes`) one after another, each ``num_layers`` layers of rows, with
+        ``channels`` channels in use. Levels 1.. are as the buffer holds them: call :meth:`update`
+        to build them from level 0."""
+        if chain.dtype != wp.vec4 or chain.ndim != 1 or chain.shape[0] != sum(num_layers * h * w for h, w in sizes):
+            raise ValueError(f"{cls._name}.around(): chain must be a 1-D wp.array of vec4 holding the levels {list(sizes)} of {num_layers} layer(s)")
+        if not 1 <= channels <= 4:
+            raise ValueError(f"{cls._name}.around(): channels must be in [1, 4], got {channels}")
+        texture = cls.__new__(cls)
+        texture._wrap(chain, num_layers, [tuple(s) for s in sizes], channels)
+        return texture
+
+    def _wrap(self, chain: wp.array, num_layers: int, sizes: list[tuple[int, int]], channels: int) -> None:
+        self._device = chain.device
+        self._channels = channels
+        self._sizes = sizes
+        self._chain = chain
+        self._offsets = [int(o) for o in np.cumsum([0] + [num_layers * h * w for h, w in sizes])[:-1]]
         view = ks.TextureView()
         view.texels = self._chain
         view.level_offset = wp.array(self._offsets, dtype=wp.int32, device=self._device)
@@ -93,7 +111,6 @@ class TextureArray:
         view.num_levels = len(self._sizes)
         view.num_layers = num_layers
         self._view = view
-        self.update()
 
     # -- construction -----------------------------------------------------------------------------
 

@@ -1,0 +1,379 @@
+"""warptex.torch, the PyTorch bridge: every technique's outputs and gradients equal the native
+call's, gradients agree with finite differences, bilinear sampling equals ``grid_sample``, the ops
+compile under ``torch.compile``, and bad input raises clearly."""
+
+from __future__ import annotations
+
+import gc
+
+import numpy as np
+import pytest
+import warp as wp
+
+torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
+
+import warptex as wt  # noqa: E402
+import warptex.torch as wtt  # noqa: E402
+from warptex.apps.render import terrain_camera  # noqa: E402
+from warptex.apps.terrain import terrain  # noqa: E402
+from warptex.torch import _states  # noqa: E402
+
+from fd import check_parameter_gradient  # noqa: E402
+
+TEXTURES = {"texture", "layers", "heights", "splat_maps"}
+
+
+@pytest.fixture(scope="module")
+def gbuffer():
+    return wt.rasterize(terrain(resolution=(17, 17)), terrain_camera((20, 24)))
+
+
+def _t(rng, *shape, low=0.0, high=1.0, grad=True):
+    return torch.tensor(rng.uniform(low, high, shape).astype(np.float32), requires_grad=grad)
+
+
+def _native(name: str, value):
+    """A torch argument as the native functions take it, with gradients where the tensor has them."""
+    if not isinstance(value, torch.Tensor):
+        return value
+    data = value.detach().numpy()
+    grad = value.requires_grad
+    if name in TEXTURES:
+        if name == "splat_maps":
+            return wt.TextureArray(data if data.ndim == 4 else data[None], mipmaps=False, requires_grad=grad)
+        return wt.Texture(data, requires_grad=grad) if data.ndim == 3 else wt.TextureArray(data, requires_grad=grad)
+    if name in ("uv", "uv_dx", "uv_dy"):
+        return wp.array(data, dtype=wp.vec2, requires_grad=grad)
+    if name in ("layer", "indices"):
+        return wp.array(data.astype(np.int32), dtype=wp.int32)
+    return wp.array(data.reshape(-1) if data.ndim == 0 else data, dtype=float, requires_grad=grad)
+
+
+def _native_grad(value):
+    if isinstance(value, wt.TextureArray):
+        return value.grad(0)
+    g = value.grad.numpy()
+    return g.reshape(g.shape[0], 2) if value.dtype == wp.vec2 and g.ndim == 1 else g
+
+
+def _compare(func, native_func, args: dict, positional: tuple, rng, *, rtol=1e-6, atol=1e-7):
+    """``func`` (the bridge) and ``native_func`` on the same inputs: equal outputs, and equal
+    gradients of ``Σ r · out`` for every tensor that requires one."""
+    out = func(*[args[k] for k in positional], **{k: v for k, v in args.items() if k not in positional})
+    r = torch.tensor(rng.standard_normal(tuple(out.shape)).astype(np.float32))
+    (out * r).sum().backward()
+
+    native = {k: _native(k, v) for k, v in args.items()}
+    tape = wp.Tape()
+    with tape:
+        for v in native.values():  # the bridge builds its mips on the tape: coarse-level gradients reach level 0
+            if isinstance(v, wt.TextureArray):
+                v.update()
+        expected = native_func(*[native[k] for k in positional], **{k: v for k, v in native.items() if k not in positional})
+    expected.grad.assign(r.numpy())
+    tape.backward()
+    np.testing.assert_array_equal(out.detach().numpy().reshape(expected.numpy().shape), expected.numpy())
+    checked = 0
+    for k, v in args.items():
+        if isinstance(v, torch.Tensor) and v.requires_grad:
+            np.testing.assert_allclose(v.grad.numpy().reshape(np.shape(_native_grad(native[k]))), _native_grad(native[k]), rtol=rtol, atol=atol, err_msg=k)
+            assert np.abs(v.grad.numpy()).max() > 0, f"{k}: no gradient reached it"
+            checked += 1
+    assert checked > 0
+    return out
+
+
+# -- every technique equals its native call --------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "case",
+    ["bilinear", "trilinear-lod", "anisotropic", "array-per-sample-layer", "clamp"],
+)
+def test_sample_matches_native(case, rng):
+    n = 300
+    args = {"texture": _t(rng, 16, 12, 3), "uv": _t(rng, n, 2, low=-1.0, high=2.0)}
+    if case == "trilinear-lod":
+        args.update(lod=_t(rng, n, low=0.0, high=3.0), sampler=wt.Sampler(filter="trilinear"))
+    elif case == "anisotropic":
+        args.update(uv_dx=_t(rng, n, 2, low=-0.2, high=0.2), uv_dy=_t(rng, n, 2, low=-0.05, high=0.05), sampler=wt.Sampler(filter="anisotropic"))
+    elif case == "array-per-sample-layer":
+        args.update(texture=_t(rng, 3, 8, 8, 4), layer=torch.tensor(rng.integers(0, 3, n)))
+    elif case == "clamp":
+        args.update(sampler=wt.Sampler(address="clamp"))
+    _compare(wtt.sample, wt.sample, args, ("texture", "uv"), rng)
+
+
+@pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])
+def test_stochastic_matches_native(method, rng):
+    args = {"texture": _t(rng, 16, 16, 3), "uv": _t(rng, 200, 2, low=0.0, high=4.0), "method": method, "lod": 0.5, "sampler": wt.Sampler(filter="trilinear")}
+    _compare(wtt.stochastic, wt.stochastic, args, ("texture", "uv", "method"), rng)
+
+
+def test_stochastic_histogram_gradients_reach_the_gaussianised_texture(rng):
+    source = _t(rng, 16, 16, 3, grad=False)
+    h = wtt.prepare_histogram(source, lut_size=64)
+    assert h.texture.shape == source.shape and isinstance(h.lut, torch.Tensor)
+    gauss = h.texture.clone().requires_grad_(True)
+    option = wt.Stochastic(method="hex", histogram=wt.Histogram(**{**h.__dict__, "texture": gauss}))
+    uv = _t(rng, 150, 2, low=0.0, high=3.0)
+    out = wtt.stochastic(source, uv, option)
+    r = torch.tensor(rng.standard_normal(tuple(out.shape)).astype(np.float32))
+    (out * r).sum().backward()
+    assert source.grad is None and np.abs(gauss.grad.numpy()).max() > 0
+
+    native_h = wt.prepare_histogram(wt.Texture(source.numpy()), lut_size=64, requires_grad=True)
+    np.testing.assert_array_equal(native_h.texture.numpy(0), h.texture.numpy())
+    u = wp.array(uv.detach().numpy(), dtype=wp.vec2, requires_grad=True)
+    tape = wp.Tape()
+    with tape:
+        expected = wt.stochastic(wt.Texture(source.numpy()), u, wt.Stochastic(method="hex", histogram=native_h))
+    expected.grad.assign(r.numpy())
+    tape.backward()
+    np.testing.assert_array_equal(out.detach().numpy(), expected.numpy())
+    np.testing.assert_allclose(gauss.grad.numpy(), native_h.texture.grad(0), rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(uv.grad.numpy(), u.grad.numpy(), rtol=1e-6, atol=1e-7)
+
+
+@pytest.mark.parametrize("technique", ["triplanar", "biplanar", "triplanar_normal"])
+def test_projections_match_native(technique, gbuffer, rng):
+    bridge, native = getattr(wtt, technique), getattr(wt, technique)
+    args = {
+        "gbuffer": gbuffer,
+        "texture": _t(rng, 16, 16, 3 if technique == "triplanar_normal" else 4),
+        "tiling": torch.tensor([0.3, 0.25, 0.2], requires_grad=True),
+        "sharpness": torch.tensor(3.0, requires_grad=True),
+        "offsets": _t(rng, 3, 2, low=-0.5, high=0.5),
+    }
+    if technique == "triplanar_normal":
+        args.pop("offsets")  # normal mapping takes no offsets
+    _compare(bridge, native, args, ("gbuffer", "texture"), rng, rtol=2e-5, atol=1e-6)
+
+
+def test_triplanar_textures_per_axis_and_face(gbuffer, rng):
+    args = {
+        "gbuffer": gbuffer,
+        "texture": _t(rng, 8, 8, 3),
+        "textures_per_face": [None, _t(rng, 8, 8, 3), _t(rng, 16, 8, 3), None, None, None],
+        "tiling": 0.3,
+    }
+    out = wtt.triplanar(**args)
+    out.sum().backward()
+    faces = [None if t is None else wt.Texture(t.detach().numpy()) for t in args["textures_per_face"]]
+    expected = wt.triplanar(gbuffer, wt.Texture(args["texture"].detach().numpy()), textures_per_face=faces, tiling=0.3)
+    np.testing.assert_array_equal(out.detach().numpy(), expected.numpy())
+    assert args["textures_per_face"][1].grad is not None and args["texture"].grad is not None
+
+
+@pytest.mark.parametrize("projection", ["uv", "world_xz", "triplanar"])
+def test_splat_matches_native(projection, gbuffer, rng):
+    args = {
+        "gbuffer": gbuffer,
+        "layers": _t(rng, 4, 8, 8, 4),
+        "splat_maps": _t(rng, 6, 6, 4),
+        "heights": _t(rng, 4, 8, 8, 1),
+        "tiling": torch.tensor([2.0, 3.0, 0.5, 1.0], requires_grad=True),
+        "height_blend": torch.tensor(0.2, requires_grad=True),
+        "projection": projection,
+    }
+    if projection != "uv":
+        args["tiling"] = torch.tensor([0.2, 0.3, 0.25, 0.4], requires_grad=True)
+    _compare(wtt.splat, wt.splat, args, ("gbuffer", "layers", "splat_maps"), rng, rtol=2e-5, atol=1e-6)
+
+
+def test_splat_atlas_gradients_reach_layers_weights_and_tiling(gbuffer, rng):
+    layers = _t(rng, 3, 8, 8, 3)
+    indices = torch.tensor(rng.integers(0, 3, (5, 5, 2)))
+    weights = _t(rng, 5, 5, 2)
+    tiling = torch.tensor([2.0, 1.0, 3.0], requires_grad=True)
+    out = wtt.splat_atlas(gbuffer, layers, indices, weights, gutter=2, tiling=tiling)
+    r = torch.tensor(rng.standard_normal(tuple(out.shape)).astype(np.float32))
+    (out * r).sum().backward()
+
+    source = wt.TextureArray(layers.detach().numpy(), mipmaps=False, requires_grad=True)
+    w = wp.array(weights.detach().numpy(), dtype=float, requires_grad=True)
+    til = wp.array(tiling.detach().numpy(), dtype=float, requires_grad=True)
+    tape = wp.Tape()
+    with tape:
+        atlas = wt.pack_atlas(source, gutter=2)
+        expected = wt.splat_atlas(gbuffer, atlas, indices.numpy().astype(np.int32), w, tiling=til)
+    expected.grad.assign(r.numpy())
+    tape.backward()
+    np.testing.assert_array_equal(out.detach().numpy(), expected.numpy())
+    for name, got, want in (("layers", layers.grad, source.grad(0)), ("weights", weights.grad, w.grad.numpy()), ("tiling", tiling.grad, til.grad.numpy())):
+        np.testing.assert_allclose(got.numpy(), want, rtol=2e-5, atol=1e-6, err_msg=name)
+        assert np.abs(got.numpy()).max() > 0, name
+
+
+# -- gradients against finite differences -----------------------------------------------------------
+
+
+def test_texel_gradients_pass_gradcheck(rng):
+    """Sampling is linear in the texels: torch's gradcheck holds at float32 rounding."""
+    texture = torch.tensor(rng.uniform(0, 1, (4, 5, 2)), dtype=torch.float64, requires_grad=True)
+    uv = torch.tensor(rng.uniform(-0.5, 1.5, (12, 2)).astype(np.float32))
+    lod = torch.tensor(rng.uniform(0.0, 2.0, 12).astype(np.float32))
+    smp = wt.Sampler(filter="trilinear", address="mirror")
+    assert torch.autograd.gradcheck(lambda t: wtt.sample(t, uv, lod=lod, sampler=smp).double(), (texture,), eps=1e-2, atol=1e-4, rtol=1e-3)
+
+
+def test_triplanar_texel_gradients_pass_gradcheck(gbuffer, rng):
+    texture = torch.tensor(rng.uniform(0, 1, (4, 4, 1)), dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda t: wtt.triplanar(gbuffer, t, tiling=0.3).double(), (texture,), eps=1e-2, atol=1e-4, rtol=1e-3)
+
+
+PARAMS = {"tiling": 0.3, "sharpness": 3.0}
+
+
+@pytest.mark.parametrize("name", ["tiling", "sharpness"])
+def test_triplanar_parameter_gradients_match_finite_differences(name, gbuffer, rng):
+    texture = torch.tensor(rng.uniform(0, 1, (16, 16, 3)).astype(np.float32))
+    value = np.array([PARAMS[name]])
+
+    def render(v):
+        with torch.no_grad():
+            return wtt.triplanar(gbuffer, texture, **{**PARAMS, name: torch.tensor(v, dtype=torch.float32)}).numpy()
+
+    def gradient(v, r):
+        p = torch.tensor(v, dtype=torch.float32, requires_grad=True)
+        (wtt.triplanar(gbuffer, texture, **{**PARAMS, name: p}) * torch.tensor(r)).sum().backward()
+        return p.grad.numpy()
+
+    r = rng.standard_normal((*gbuffer.resolution, 3))
+    check_parameter_gradient(render, gradient, value, r, 2e-5 if name == "tiling" else 1e-2, rtol=2e-2, atol=2e-2, label=name)
+
+
+def test_splat_map_gradients_match_finite_differences(gbuffer, rng):
+    """Splat maps enter through the weights' normalisation (not linear): a directional derivative."""
+    layers = torch.tensor(rng.uniform(0, 1, (4, 8, 8, 3)).astype(np.float32))
+    maps = torch.tensor(rng.uniform(0.2, 1.0, (6, 6, 4)), dtype=torch.float64, requires_grad=True)
+    r = torch.tensor(rng.standard_normal((*gbuffer.resolution, 3)))
+
+    def loss(m):
+        return (wtt.splat(gbuffer, layers, m, tiling=2.0).double() * r).sum()
+
+    loss(maps).backward()
+    direction = torch.tensor(rng.standard_normal(maps.shape))
+    step = 1e-3
+    with torch.no_grad():
+        numeric = (loss(maps + step * direction) - loss(maps - step * direction)) / (2 * step)
+    analytic = (maps.grad * direction).sum()
+    np.testing.assert_allclose(analytic.item(), numeric.item(), rtol=2e-3, atol=2e-3)
+
+
+# -- torch's own sampler ---------------------------------------------------------------------------
+
+
+def test_bilinear_clamp_sample_equals_grid_sample(rng):
+    """UV (0, 0) is the bottom-left corner; ``grid_sample``'s (-1, -1) the top-left: ``x = 2u - 1``,
+    ``y = 1 - 2v``. Outputs and gradients (texels and UVs) agree."""
+    h, w, c = 7, 9, 3
+    image = rng.uniform(0, 1, (h, w, c)).astype(np.float32)
+    uv_values = rng.uniform(-0.2, 1.2, (500, 2)).astype(np.float32)
+    r = torch.tensor(rng.standard_normal((500, c)).astype(np.float32))
+
+    texture, uv = torch.tensor(image, requires_grad=True), torch.tensor(uv_values, requires_grad=True)
+    ours = wtt.sample(texture, uv, sampler=wt.Sampler(filter="bilinear", address="clamp"))
+    (ours * r).sum().backward()
+
+    texture2, uv2 = torch.tensor(image, requires_grad=True), torch.tensor(uv_values, requires_grad=True)
+    grid = torch.stack([2 * uv2[:, 0] - 1, 1 - 2 * uv2[:, 1]], dim=-1).reshape(1, 500, 1, 2)
+    theirs = torch.nn.functional.grid_sample(texture2.permute(2, 0, 1)[None], grid, mode="bilinear", padding_mode="border", align_corners=False)
+    theirs = theirs[0, :, :, 0].T
+    (theirs * r).sum().backward()
+
+    np.testing.assert_allclose(ours.detach().numpy(), theirs.detach().numpy(), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(texture.grad.numpy(), texture2.grad.numpy(), rtol=1e-5, atol=1e-5)
+    inside = ((uv_values > 0.5 / np.array([w, h])) & (uv_values < 1 - 0.5 / np.array([w, h]))).all(axis=1)  # clamped UVs: torch's slope there is a choice
+    np.testing.assert_allclose(uv.grad.numpy()[inside], uv2.grad.numpy()[inside], rtol=1e-4, atol=1e-4)
+
+
+# -- autograd plumbing -------------------------------------------------------------------------------
+
+
+def test_retain_graph_gives_the_same_gradients_twice(rng):
+    texture, uv = _t(rng, 8, 8, 3), _t(rng, 50, 2)
+    out = wtt.sample(texture, uv)
+    out.sum().backward(retain_graph=True)
+    first = texture.grad.clone(), uv.grad.clone()
+    texture.grad, uv.grad = None, None
+    out.sum().backward()
+    np.testing.assert_array_equal(texture.grad.numpy(), first[0].numpy())
+    np.testing.assert_array_equal(uv.grad.numpy(), first[1].numpy())
+
+
+def test_no_tape_is_kept_without_gradients_and_a_graph_frees_its_tape(rng):
+    texture, uv = _t(rng, 8, 8, 3), _t(rng, 50, 2)
+    gc.collect()
+    before = len(_states)
+    with torch.no_grad():
+        wtt.sample(texture, uv)
+    wtt.sample(texture.detach(), uv.detach())
+    assert len(_states) == before
+    out = wtt.sample(texture, uv)
+    assert len(_states) == before + 1
+    del out
+    gc.collect()
+    assert len(_states) == before
+    wtt.sample(texture, uv).sum().backward()
+    gc.collect()
+    assert len(_states) == before
+
+
+def test_only_the_tensors_that_require_gradients_get_them(gbuffer, rng):
+    texture = _t(rng, 8, 8, 3, grad=False)
+    tiling = torch.tensor(0.3, requires_grad=True)
+    wtt.triplanar(gbuffer, texture, tiling=tiling).sum().backward()
+    assert texture.grad is None and tiling.grad is not None and tiling.grad.shape == ()
+
+
+def test_compiles_into_one_graph(gbuffer, rng):
+    """``torch.compile(fullgraph=True)``: no graph break at the bridge; results equal eager mode."""
+    tensors = wtt.gbuffer_tensors(gbuffer)
+    smp = wt.Sampler(filter="anisotropic")
+
+    def loss(texture, tiling):
+        return wtt.triplanar(tensors, texture, tiling=tiling, sampler=smp).square().mean()
+
+    texture, tiling = _t(rng, 16, 16, 3), torch.tensor(0.3, requires_grad=True)
+    compiled = torch.compile(loss, backend="aot_eager", fullgraph=True)
+    value = compiled(texture, tiling)
+    value.backward()
+    grads = texture.grad.clone(), tiling.grad.clone()
+    texture.grad, tiling.grad = None, None
+    eager = loss(texture, tiling)
+    eager.backward()
+    assert value.item() == eager.item()
+    np.testing.assert_array_equal(grads[0].numpy(), texture.grad.numpy())
+    np.testing.assert_array_equal(grads[1].numpy(), tiling.grad.numpy())
+
+
+def test_opcheck(rng):
+    """torch.library.opcheck: the op's schema, fake (shape) function and autograd registration agree
+    with what it does."""
+    texture, uv = _t(rng, 8, 8, 3), _t(rng, 40, 2)
+    spec, tensors = wtt._op_arguments("sample", {"texture": texture, "uv": uv})
+    torch.library.opcheck(torch.ops.warptex.technique.default, (spec, tensors), test_utils=("test_schema", "test_faketensor", "test_autograd_registration"))
+
+
+# -- bad input ---------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "call, error, match",
+    [
+        (lambda t, uv, g: wtt.sample(t[..., 0], uv), ValueError, r"texture must be a texture \[H, W, C\]"),
+        (lambda t, uv, g: wtt.sample(torch.zeros(8, 8, 5), uv), ValueError, r"1 <= C <= 4, got shape \(8, 8, 5\)"),
+        (lambda t, uv, g: wtt.sample(wt.Texture(np.zeros((4, 4, 3))), uv), TypeError, "texture must be a torch tensor"),
+        (lambda t, uv, g: wtt.sample(t, uv[:, :1]), ValueError, r"uv must have shape \(\.\.\., 2\)"),
+        (lambda t, uv, g: wtt.sample(t, uv, layer=torch.zeros(40)), TypeError, "layer must be an integer tensor"),
+        (lambda t, uv, g: wtt.triplanar({k: v for k, v in g.items() if k != "mask"}, t), ValueError, "G-buffer dict lacks mask"),
+        (lambda t, uv, g: wtt.triplanar({**g, "normal": g["normal"][..., :2].contiguous()}, t), ValueError, r"'normal' must be a torch.float32 tensor of shape \(H, W, 3\)"),
+        (lambda t, uv, g: wtt.triplanar(g, t, tiling=torch.tensor([1.0, 2.0])), ValueError, r"tiling as a wp.array must be float32 with shape \(1,\) or \(3,\)"),
+        (lambda t, uv, g: wtt.stochastic(t, uv, wt.Stochastic(method="hex", histogram=wt.prepare_histogram(wt.Texture(np.ones((4, 4, 3)))))), TypeError, "warptex.torch.prepare_histogram"),
+    ],
+)
+def test_bad_input_raises(call, error, match, gbuffer, rng):
+    texture, uv = _t(rng, 8, 8, 3), _t(rng, 40, 2)
+    with pytest.raises(error, match=match):
+        call(texture, uv, wtt.gbuffer_tensors(gbuffer))
