@@ -57,21 +57,23 @@ def raster_kernel(
     indices: wp.array(dtype=wp.int32),
     face_ids: wp.array(dtype=wp.int32),
     vertex_normals: wp.array(dtype=wp.vec3),
-    cam: CameraView,
-    position: wp.array2d(dtype=wp.vec3),
-    normal: wp.array2d(dtype=wp.vec3),
-    geometric_normal: wp.array2d(dtype=wp.vec3),
-    depth: wp.array2d(dtype=float),
-    mask: wp.array2d(dtype=float),
-    triangle: wp.array2d(dtype=wp.int32),
-    barycentric: wp.array2d(dtype=wp.vec3),
-    position_dx: wp.array2d(dtype=wp.vec3),
-    position_dy: wp.array2d(dtype=wp.vec3),
+    cams: wp.array(dtype=CameraView),
+    position: wp.array3d(dtype=wp.vec3),
+    normal: wp.array3d(dtype=wp.vec3),
+    geometric_normal: wp.array3d(dtype=wp.vec3),
+    depth: wp.array3d(dtype=float),
+    mask: wp.array3d(dtype=float),
+    triangle: wp.array3d(dtype=wp.int32),
+    barycentric: wp.array3d(dtype=wp.vec3),
+    position_dx: wp.array3d(dtype=wp.vec3),
+    position_dy: wp.array3d(dtype=wp.vec3),
 ):
-    """Closest hit per pixel; normals face the camera (flipped on back faces, shading normals bent). ``indices`` holds the
-    triangles in the BVH, ``face_ids`` their index in the mesh. Misses keep the outputs'
-    background values (zeros, ``depth = inf``, ``triangle = -1``) written by the caller."""
-    row, col = wp.tid()
+    """Closest hit per pixel of every view (``cams[view]``: arrays are ``(views, H, W)``, one
+    launch for a batch of cameras); normals face the camera (flipped on back faces, shading normals
+    bent). ``indices`` holds the triangles in the BVH, ``face_ids`` their index in the mesh. Misses
+    keep the outputs' background values (zeros, ``depth = inf``, ``triangle = -1``) written by the caller."""
+    view, row, col = wp.tid()
+    cam = cams[view]
     o, d, do_dx, do_dy, dd_dx, dd_dy = primary_ray(cam, row, col)
     hit = wp.mesh_query_ray(mesh, o, d, 1.0e30)
     if hit.result:
@@ -94,19 +96,19 @@ def raster_kernel(
             ns = -ns
         # Interpolated normals can turn away from the viewer near silhouettes; bend them just
         # enough to face it (cos 0.01 with the view direction), as renderers do.
-        view = -wp.normalize(d)
-        facing = wp.dot(ns, view)
+        towards = -wp.normalize(d)
+        facing = wp.dot(ns, towards)
         if facing < 0.01:
-            ns = wp.normalize(ns + view * (0.01 - facing))
-        position[row, col] = p
-        normal[row, col] = ns
-        geometric_normal[row, col] = ng
-        depth[row, col] = wp.dot(p - cam.eye, cam.forward)
-        mask[row, col] = 1.0
-        triangle[row, col] = face_ids[f]
-        barycentric[row, col] = b
-        position_dx[row, col] = plane_differential(hit.t, d, ng, do_dx, dd_dx)
-        position_dy[row, col] = plane_differential(hit.t, d, ng, do_dy, dd_dy)
+            ns = wp.normalize(ns + towards * (0.01 - facing))
+        position[view, row, col] = p
+        normal[view, row, col] = ns
+        geometric_normal[view, row, col] = ng
+        depth[view, row, col] = wp.dot(p - cam.eye, cam.forward)
+        mask[view, row, col] = 1.0
+        triangle[view, row, col] = face_ids[f]
+        barycentric[view, row, col] = b
+        position_dx[view, row, col] = plane_differential(hit.t, d, ng, do_dx, dd_dx)
+        position_dy[view, row, col] = plane_differential(hit.t, d, ng, do_dy, dd_dy)
 
 
 @wp.func
@@ -123,39 +125,39 @@ def uv_kernel(
     indices: wp.array(dtype=wp.int32),
     uvs: wp.array(dtype=wp.vec2),
     vertex_tangents: wp.array(dtype=wp.vec4),
-    triangle: wp.array2d(dtype=wp.int32),
-    barycentric: wp.array2d(dtype=wp.vec3),
-    normal: wp.array2d(dtype=wp.vec3),
-    position_dx: wp.array2d(dtype=wp.vec3),
-    position_dy: wp.array2d(dtype=wp.vec3),
-    uv: wp.array2d(dtype=wp.vec2),
-    uv_dx: wp.array2d(dtype=wp.vec2),
-    uv_dy: wp.array2d(dtype=wp.vec2),
-    tangent: wp.array2d(dtype=wp.vec4),
+    triangle: wp.array3d(dtype=wp.int32),
+    barycentric: wp.array3d(dtype=wp.vec3),
+    normal: wp.array3d(dtype=wp.vec3),
+    position_dx: wp.array3d(dtype=wp.vec3),
+    position_dy: wp.array3d(dtype=wp.vec3),
+    uv: wp.array3d(dtype=wp.vec2),
+    uv_dx: wp.array3d(dtype=wp.vec2),
+    uv_dy: wp.array3d(dtype=wp.vec2),
+    tangent: wp.array3d(dtype=wp.vec4),
 ):
     """Interpolated UVs, their screen-space derivatives, and the tangent frame of one UV set.
 
     The tangent is the interpolated vertex tangent made orthogonal to the shading normal, with
     the bitangent sign in ``w`` (bitangent = ``w * cross(normal, tangent)``).
     """
-    row, col = wp.tid()
-    f = triangle[row, col]
+    view, row, col = wp.tid()
+    f = triangle[view, row, col]
     if f >= 0:
         i = indices[3 * f]
         j = indices[3 * f + 1]
         k = indices[3 * f + 2]
-        b = barycentric[row, col]
-        uv[row, col] = uvs[i] * b[0] + uvs[j] * b[1] + uvs[k] * b[2]
+        b = barycentric[view, row, col]
+        uv[view, row, col] = uvs[i] * b[0] + uvs[j] * b[1] + uvs[k] * b[2]
         e1 = points[j] - points[i]
         e2 = points[k] - points[i]
         t1 = uvs[j] - uvs[i]
         t2 = uvs[k] - uvs[i]
-        ax = barycentric_change(e1, e2, position_dx[row, col])
-        ay = barycentric_change(e1, e2, position_dy[row, col])
-        uv_dx[row, col] = t1 * ax[0] + t2 * ax[1]
-        uv_dy[row, col] = t1 * ay[0] + t2 * ay[1]
+        ax = barycentric_change(e1, e2, position_dx[view, row, col])
+        ay = barycentric_change(e1, e2, position_dy[view, row, col])
+        uv_dx[view, row, col] = t1 * ax[0] + t2 * ax[1]
+        uv_dy[view, row, col] = t1 * ay[0] + t2 * ay[1]
         tv = vertex_tangents[i] * b[0] + vertex_tangents[j] * b[1] + vertex_tangents[k] * b[2]
-        n = normal[row, col]
+        n = normal[view, row, col]
         t = wp.vec3(tv[0], tv[1], tv[2])
         t = t - n * wp.dot(n, t)
         if wp.length(t) > 1.0e-12:
@@ -163,4 +165,4 @@ def uv_kernel(
             if tv[3] < 0.0:
                 sign = -1.0
             t = wp.normalize(t)
-            tangent[row, col] = wp.vec4(t[0], t[1], t[2], sign)
+            tangent[view, row, col] = wp.vec4(t[0], t[1], t[2], sign)

@@ -33,3 +33,27 @@ def test_quick_benchmark_writes_json_and_plot(tmp_path):
     assert set(data["scaling"]["pixels"]) and set(data["scaling"]["texture"])
     assert (out / "scaling.png").stat().st_size > 1000
     assert "x" in result.stdout and "warptex time" in result.stdout
+
+
+BENCH_TORCH = BENCH.parent / "bench_torch.py"
+BENCH_VIEWS = BENCH.parent / "bench_views.py"
+
+
+@pytest.mark.skipif(not BENCH_TORCH.exists(), reason="benchmarks/ is not part of this checkout")
+def test_bridge_overhead_benchmark_checks_and_reports(tmp_path):
+    pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
+    result = subprocess.run([sys.executable, str(BENCH_TORCH), "--resolution", "32", "--texture-size", "16", "--repeats", "1", "--json", str(tmp_path / "t.json")], capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    rows = json.loads((tmp_path / "t.json").read_text())["rows"]
+    assert {(r["technique"], r["pass"]) for r in rows} == {(t, p) for t in ("triplanar", "splat") for p in ("forward", "forward+backward")}
+    assert all(r["max_abs_diff"] <= 1e-5 and r["native_s"] > 0 and r["bridge_s"] > 0 for r in rows)
+    assert "bridge/native" in result.stdout
+
+
+@pytest.mark.skipif(not BENCH_VIEWS.exists(), reason="benchmarks/ is not part of this checkout")
+def test_batched_views_benchmark_reports(tmp_path):
+    result = subprocess.run([sys.executable, str(BENCH_VIEWS), "--views", "2", "--resolution", "24x32", "--iters", "1", "--repeats", "1", "--json", str(tmp_path / "v.json")], capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    rows = json.loads((tmp_path / "v.json").read_text())["rows"]
+    assert rows[0]["api"] == "warptex.fit.fit_splat" and all(r["batch_s"] > 0 and r["loop_s"] > 0 for r in rows)
+    assert "loop/batch" in result.stdout

@@ -35,7 +35,7 @@ SHARED = REPO.parent / "shared"
 
 # Fenced blocks per info string: a new block must be added here, and so gets a test.
 EXPECTED_BLOCKS = {"python": 10, "sh": 3, "": 1}
-EXPECTED_COMMANDS = {"warptex": 9, "python": 1, "skipped": 5}
+EXPECTED_COMMANDS = {"warptex": 9, "python": 2, "skipped": 5}
 
 # Python blocks that continue earlier ones (by "<section> #<n>"): they run after those, in one namespace.
 CONTINUES = {
@@ -419,13 +419,15 @@ def test_warptex_command(command, workdir, capsys):
 
 SCRIPT_COMMANDS = [c for c in COMMANDS if c.kind == "python"]
 # Small-run arguments of the repository's scripts: script -> {option: value}.
-SCRIPT_QUICK = {"examples/fit_splat.py": {"--iters": "2"}}
-SCRIPT_FILES = {"examples/fit_splat.py": ("out/fit_example/target.png", "out/fit_example/fitted.png")}
+SCRIPT_QUICK = {"examples/fit_splat.py": {"--iters": "2"}, "examples/torch_fit.py": {"--iters": "2"}}
+SCRIPT_FILES = {"examples/fit_splat.py": ("out/fit_example/target.png", "out/fit_example/fitted.png"), "examples/torch_fit.py": ("out/torch_fit/target.png", "out/torch_fit/fitted.png")}
 
 
 @pytest.mark.parametrize("command", SCRIPT_COMMANDS, ids=[c.id for c in SCRIPT_COMMANDS])
 def test_script_command(command, workdir, monkeypatch, capsys):
     script, argv = command.argv[1], command.argv[2:]
+    if script == "examples/torch_fit.py":
+        pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
     assert script in SCRIPT_QUICK, f"add {script}'s small-run options to SCRIPT_QUICK"
     for option, value in SCRIPT_QUICK[script].items():
         argv = _set_option(argv, option, value)

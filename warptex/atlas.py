@@ -354,12 +354,11 @@ def splat_atlas(
     # The tile UV is wrapped in the kernel; the atlas itself is read clamped, up to its safe level.
     smp = sampler_args(func, sampler.replace(address=Address.CLAMP, max_lod=min(sampler.max_lod, float(atlas.max_lod))), has_lod=True)
 
-    h, w = gbuffer.resolution
-    count = h * w
+    count = gbuffer.pixel_count
     uvs = gbuffer.uv_sets[uv_set]
     flat = [a.reshape((count,)) for a in (uvs["uv"], uvs["uv_dx"], uvs["uv_dy"], gbuffer.mask)]
     others = [atlas.texture.view.texels, wts, tiling, *flat]  # all differentiated by the generated adjoint
     out = wp.zeros((count, atlas.channels), dtype=float, device=device, requires_grad=needs_grad(*others))
     inputs = [atlas.texture.view, atlas.layout, idx, wts, tiling, *per_pixel(*flat), smp, int(bool(normalize))]
     run(_KERNELS, count, inputs=inputs, outputs=[out], device=device, others=others)
-    return out.reshape((h, w, atlas.channels))
+    return out.reshape((*gbuffer.resolution, atlas.channels))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 
@@ -32,7 +33,9 @@ UV_FIELDS = {"uv": wp.vec2, "uv_dx": wp.vec2, "uv_dy": wp.vec2, "tangent": wp.ve
 class GBuffer:
     """Per-pixel surface attributes of an ``(H, W)`` image, as ``wp.array``\\ s on one device.
 
-    Every array has shape ``(H, W)``. Pixels the mesh does not cover have ``mask = 0``,
+    Every array has shape ``(H, W)``, or ``(V, H, W)`` for a batch of ``V`` views of one size
+    (:func:`rasterize` with several cameras), which every technique renders in one call;
+    :meth:`view` is one of them. Pixels the mesh does not cover have ``mask = 0``,
     ``triangle = -1``, ``depth = inf`` and zeros elsewhere.
 
     Attributes:
@@ -47,7 +50,8 @@ class GBuffer:
         uv_sets: ``{name: {"uv", "uv_dx", "uv_dy", "tangent"}}`` for every UV set of the mesh
             (``"uv0"`` first): coordinates (``vec2``), their per-pixel derivatives (``vec2``),
             and the tangent (``vec4``: unit xyz orthogonal to ``normal``, bitangent sign in w).
-        camera: the camera that produced it (``None`` when loaded without one).
+        camera: the camera that produced it (``None`` when loaded without one; a tuple of cameras
+            for a batch).
     """
 
     position: wp.array
@@ -59,11 +63,33 @@ class GBuffer:
     position_dx: wp.array
     position_dy: wp.array
     uv_sets: dict[str, dict[str, wp.array]] = field(default_factory=dict)
-    camera: Camera | None = None
+    camera: Camera | tuple[Camera, ...] | None = None
 
     @property
-    def resolution(self) -> tuple[int, int]:
+    def resolution(self) -> tuple[int, ...]:
+        """The arrays' shape: ``(H, W)``, or ``(V, H, W)`` for a batch of views."""
         return tuple(self.mask.shape)
+
+    @property
+    def pixel_count(self) -> int:
+        """Pixels in all: ``H·W``, or ``V·H·W`` for a batch of views."""
+        return math.prod(self.resolution)
+
+    @property
+    def num_views(self) -> int | None:
+        """``V`` for a batch of views, ``None`` for one ``(H, W)`` G-buffer."""
+        return self.resolution[0] if len(self.resolution) == 3 else None
+
+    def view(self, k: int) -> "GBuffer":
+        """View ``k`` of a batch, an ``(H, W)`` G-buffer sharing the batch's memory."""
+        if self.num_views is None:
+            raise ValueError("GBuffer.view(): this G-buffer is one (H, W) view, not a batch")
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k < self.num_views:
+            raise ValueError(f"GBuffer.view(): k must be an int in [0, {self.num_views - 1}], got {k!r}")
+        arrays = {name: getattr(self, name)[int(k)] for name in FIELDS}
+        sets = {s: {f: a[int(k)] for f, a in fields.items()} for s, fields in self.uv_sets.items()}
+        camera = self.camera[int(k)] if isinstance(self.camera, tuple) else self.camera
+        return GBuffer(**arrays, uv_sets=sets, camera=camera)
 
     @property
     def device(self):
@@ -417,7 +443,7 @@ def _camera_view(camera: Camera) -> kr.CameraView:
     return view
 
 
-def rasterize(mesh, camera: Camera, *, device=None) -> GBuffer:
+def rasterize(mesh, camera, *, device=None) -> GBuffer:
     """Rasterise ``mesh`` seen by ``camera`` into a :class:`GBuffer` (primary rays against a BVH).
 
     Degenerate (zero-area) triangles are never hit; a camera inside the mesh sees its back faces
@@ -426,44 +452,61 @@ def rasterize(mesh, camera: Camera, *, device=None) -> GBuffer:
     Args:
         mesh: a ``trimesh.Trimesh`` or a path that :func:`load_mesh` reads. Meshes without normals
             get smooth (area-weighted) vertex normals.
-        camera: from :func:`warptex.camera.look_at` or :func:`warptex.camera.orthographic`.
+        camera: from :func:`warptex.camera.look_at` or :func:`warptex.camera.orthographic`; or a
+            sequence of ``V`` cameras of one resolution, rasterised in one launch against one BVH
+            into a batched G-buffer of ``(V, H, W)`` arrays, which every technique takes (its
+            outputs are ``(V, H, W, C)``).
         device: Warp device for the BVH, the launches and the resulting arrays.
 
     Returns:
-        The G-buffer, with one UV set per set of the mesh (see :func:`mesh_uv_sets`).
+        The G-buffer, with one UV set per set of the mesh (see :func:`mesh_uv_sets`); its
+        ``camera`` is the camera, or the tuple of cameras of a batch.
     """
-    if not isinstance(camera, Camera):
-        raise TypeError(f"rasterize(): camera must be a warptex Camera, got {type(camera).__name__}")
+    func = "rasterize"
+    if isinstance(camera, Camera):
+        cameras, batch = [camera], False
+    elif isinstance(camera, (list, tuple)) and camera and all(isinstance(c, Camera) for c in camera):
+        cameras, batch = list(camera), True
+    else:
+        raise TypeError(f"{func}(): camera must be a warptex Camera or a non-empty sequence of them, got {type(camera).__name__}")
+    resolution = cameras[0].resolution
+    for k, c in enumerate(cameras):
+        if c.resolution != resolution:
+            raise ValueError(f"{func}(): the cameras of a batch must share one resolution; camera 0 has {resolution}, camera {k} {c.resolution}")
     trimesh_mesh = load_mesh(mesh) if isinstance(mesh, (str, os.PathLike)) else mesh
     vertices, faces, normals = _checked_mesh(trimesh_mesh)
     uv_sets = mesh_uv_sets(trimesh_mesh)
     device = wp.get_device(device)
-    resolution = camera.resolution
+    shape = (len(cameras), *resolution)  # the kernels' (views, H, W)
 
     # Zero-area triangles have no plane (no normal, no differentials): they are left out of the
     # BVH, and hits report the index of the face in the full mesh.
     area2 = np.linalg.norm(np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]]), axis=1)
     face_ids = np.flatnonzero(area2 > 0)
     if len(face_ids) == 0:
-        raise ValueError(f"rasterize(): all {len(faces)} triangles of the mesh are degenerate (zero area)")
+        raise ValueError(f"{func}(): all {len(faces)} triangles of the mesh are degenerate (zero area)")
     points = wp.array(vertices.astype(np.float32), dtype=wp.vec3, device=device)
     indices = wp.array(faces.reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
     hit_indices = wp.array(faces[face_ids].reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
     bvh = wp.Mesh(points=points, indices=hit_indices)
-    g = GBuffer.empty(resolution, uv_sets=uv_sets, camera=camera, device=device)
-    barycentric = wp.zeros(resolution, dtype=wp.vec3, device=device)
+    g = GBuffer.empty(shape if batch else resolution, uv_sets=uv_sets, camera=tuple(cameras) if batch else camera, device=device)
+
+    def batched(a: wp.array) -> wp.array:
+        return a.reshape(shape)
+
+    barycentric = wp.zeros(shape, dtype=wp.vec3, device=device)
     wp.launch(
         kr.raster_kernel,
-        dim=resolution,
+        dim=shape,
         inputs=[
             bvh.id,
             points,
             hit_indices,
             wp.array(face_ids.astype(np.int32), dtype=wp.int32, device=device),
             wp.array(normals.astype(np.float32), dtype=wp.vec3, device=device),
-            _camera_view(camera),
+            wp.array([_camera_view(c) for c in cameras], dtype=kr.CameraView, device=device),
         ],
-        outputs=[g.position, g.normal, g.geometric_normal, g.depth, g.mask, g.triangle, barycentric, g.position_dx, g.position_dy],
+        outputs=[batched(a) for a in (g.position, g.normal, g.geometric_normal, g.depth, g.mask, g.triangle)] + [barycentric, batched(g.position_dx), batched(g.position_dy)],
         device=device,
         record_tape=False,
     )
@@ -472,19 +515,19 @@ def rasterize(mesh, camera: Camera, *, device=None) -> GBuffer:
         tangents = vertex_tangents(vertices, faces, normals, uv)
         wp.launch(
             kr.uv_kernel,
-            dim=resolution,
+            dim=shape,
             inputs=[
                 points,
                 indices,
                 wp.array(uv, dtype=wp.vec2, device=device),
                 wp.array(tangents, dtype=wp.vec4, device=device),
-                g.triangle,
+                batched(g.triangle),
                 barycentric,
-                g.normal,
-                g.position_dx,
-                g.position_dy,
+                batched(g.normal),
+                batched(g.position_dx),
+                batched(g.position_dy),
             ],
-            outputs=[out["uv"], out["uv_dx"], out["uv_dy"], out["tangent"]],
+            outputs=[batched(out[k]) for k in ("uv", "uv_dx", "uv_dy", "tangent")],
             device=device,
             record_tape=False,
         )

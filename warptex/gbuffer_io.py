@@ -66,6 +66,8 @@ def save_gbuffer(path: str | os.PathLike, gbuffer: GBuffer) -> None:
     if not isinstance(gbuffer, GBuffer):
         raise TypeError(f"save_gbuffer(): gbuffer must be a GBuffer, got {type(gbuffer).__name__}")
     func = "save_gbuffer"
+    if gbuffer.num_views is not None:
+        raise ValueError(f"{func}(): the G-buffer is a batch of {gbuffer.num_views} views; save one at a time (gbuffer.view(k))")
     channels = {}
     h, w = gbuffer.resolution
 

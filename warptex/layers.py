@@ -185,8 +185,7 @@ def splat(
     smp = sampler_args(func, sampler, has_lod=True)
     map_smp = sampler_args(func, MAP_SAMPLER, has_lod=False)
 
-    h, w = gbuffer.resolution
-    count = h * w
+    count = gbuffer.pixel_count
     uvs = gbuffer.uv_sets[uv_set]
     flat = [a.reshape((count,)) for a in (uvs["uv"], uvs["uv_dx"], uvs["uv_dy"], gbuffer.position, gbuffer.position_dx, gbuffer.position_dy, gbuffer.normal, gbuffer.mask)]
     heights_read = height_tex if params.height_mode == kl.HEIGHT_ARRAY else None
@@ -206,7 +205,7 @@ def splat(
         run(Kernels(kernels["forward"], kernels["texel_grad"]), count, inputs=inputs, outputs=[out], device=device, by_hand=by_hand)
     else:
         run(Kernels(kernels["stochastic_forward"], kernels["stochastic_texel_grad"]), count, inputs=inputs, outputs=[out], device=device, by_hand=by_hand)
-    return out.reshape((h, w, layers.channels))
+    return out.reshape((*gbuffer.resolution, layers.channels))
 
 
 FACE_NAMES = ("+x", "-x", "+y", "-y", "+z", "-z")

@@ -453,11 +453,11 @@ def _out_shape(spec: dict, tensors: list[torch.Tensor]) -> tuple[int, ...]:
 
     if technique in ("sample", "stochastic"):
         return shape(args["uv"])[:-1] + (shape(args["texture"])[-1],)
-    height, width = shape(args["gbuffer"]["$gbuffer"]["mask"])[:2]
+    pixels = shape(args["gbuffer"]["$gbuffer"]["mask"])  # (H, W) or (V, H, W)
     if technique == "triplanar_normal":
-        return (height, width, 3)
+        return (*pixels, 3)
     texture = next(s for s in (first_texture(args.get(k)) for k in ("layers", "texture", "textures_per_axis", "textures_per_face")) if s is not None)
-    return (height, width, texture[-1])
+    return (*pixels, texture[-1])
 
 
 def _decode(value, tensors: list[torch.Tensor], want: set, grads: dict, device):
@@ -525,8 +525,8 @@ def _decode_gbuffer(fields: dict, tensors) -> GBuffer:
 def _gbuffer_array(name: str, t: torch.Tensor, dtype) -> wp.array:
     length = getattr(dtype, "_length_", 1)  # vec3: 3; float32, int32: 1
     scalar = torch.int32 if dtype == wp.int32 else torch.float32
-    if t.dtype != scalar or t.dim() != (2 if length == 1 else 3) or (length > 1 and t.shape[-1] != length):
-        want = "(H, W)" if length == 1 else f"(H, W, {length})"
+    if t.dtype != scalar or t.dim() - (length > 1) not in (2, 3) or (length > 1 and t.shape[-1] != length):
+        want = "(H, W) or (V, H, W)" if length == 1 else f"(H, W, {length}) or (V, H, W, {length})"
         raise ValueError(f"warptex.torch: G-buffer field {name!r} must be a {scalar} tensor of shape {want}, got {t.dtype} {tuple(t.shape)}")
     return wp.from_torch(t, dtype=dtype)
 

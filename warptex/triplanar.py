@@ -278,7 +278,7 @@ class _Setup:
         self.proj, self.smp, self.stoch = proj, sampler_args(func, sampler, has_lod=True), stoch
         self.channels = textures[0].channels
         self.faces = any(textures[a] is not textures[a + 3] for a in range(3))  # the kernels' +a, then -a faces
-        self.count = gbuffer.resolution[0] * gbuffer.resolution[1]
+        self.count = gbuffer.pixel_count
         self.pixels = [a.reshape((self.count,)) for a in (gbuffer.position, gbuffer.position_dx, gbuffer.position_dy, gbuffer.normal, gbuffer.mask)]
         self.texels = [t.view.texels for t in textures]  # what the hand-written gradients differentiate
         self.others = [proj.tiling, proj.sharpness, proj.offsets, *self.pixels]  # what only the generated adjoint does

@@ -262,6 +262,7 @@ def fit_splat(
 
 
 def render_views(views, layers: TextureArray, params: SplatParameters, *, splat_options: dict | None = None) -> list[np.ndarray]:
-    """The renders of the views' G-buffers with the current parameters, ``[H, W, C_layers]`` NumPy each."""
+    """The renders of the views' G-buffers with the current parameters, ``[H, W, C_layers]`` NumPy each
+    (``[V, H, W, C_layers]`` for a batch of views)."""
     params.apply()
     return [render_view(view.gbuffer, layers, params, dict(splat_options or {})).numpy() for view in ([views] if isinstance(views, FitView) else views)]

@@ -27,14 +27,16 @@ __all__ = ["FitView", "Objective", "check_inputs", "prepare_views", "render_view
 
 @dataclass
 class FitView:
-    """One camera view to fit: a G-buffer and the target image it should render to.
+    """One camera view to fit: a G-buffer and the target image it should render to; or a batch of
+    views of one size, rendered in one call per iteration.
 
     Attributes:
-        gbuffer: the view's :class:`GBuffer` ``(H, W)``.
-        target: ``[H, W, C]`` linear colour (finite where the mask is non-zero); compared with the
-            first ``C`` channels of the render.
-        mask: ``[H, W]`` per-pixel loss weights (>= 0); default the G-buffer's coverage mask.
-            Pixels the G-buffer does not cover are never fitted.
+        gbuffer: the view's :class:`GBuffer` ``(H, W)``, or a batch ``(V, H, W)`` (from
+            :func:`~warptex.rasterize` with ``V`` cameras).
+        target: ``[H, W, C]`` linear colour (``[V, H, W, C]`` for a batch; finite where the mask
+            is non-zero); compared with the first ``C`` channels of the render.
+        mask: ``[H, W]`` (``[V, H, W]``) per-pixel loss weights (>= 0); default the G-buffer's
+            coverage mask. Pixels the G-buffer does not cover are never fitted.
     """
 
     gbuffer: GBuffer
@@ -43,12 +45,14 @@ class FitView:
 
 
 def subsample_gbuffer(gbuffer: GBuffer, stride: int) -> GBuffer:
-    """Every ``stride``-th pixel of ``gbuffer`` (rows and columns from 0), derivatives unchanged."""
+    """Every ``stride``-th pixel of ``gbuffer`` (rows and columns from 0, of every view of a
+    batch), derivatives unchanged."""
     if stride == 1:
         return gbuffer
+    pixels = (slice(None),) * (len(gbuffer.resolution) - 2) + (slice(None, None, stride),) * 2
 
     def sub(a: wp.array) -> wp.array:
-        return wp.array(np.ascontiguousarray(a.numpy()[::stride, ::stride]), dtype=a.dtype, device=a.device)
+        return wp.array(np.ascontiguousarray(a.numpy()[pixels]), dtype=a.dtype, device=a.device)
 
     arrays = {name: sub(getattr(gbuffer, name)) for name in FIELDS}
     sets = {s: {k: sub(v) for k, v in arrays_.items()} for s, arrays_ in gbuffer.uv_sets.items()}
@@ -62,6 +66,8 @@ class _Prepared:
     gbuffer: GBuffer
     mask: wp.array  # [H, W]
     target: wp.array  # [H, W, C], 0 where the mask is 0
+    batch: "_Batch | None" = None  # the batch this view is view ``index`` of, rendered with it
+    index: int = 0
     _strided: dict = field(default_factory=dict)
     _levels: dict = field(default_factory=dict)
 
@@ -70,7 +76,8 @@ class _Prepared:
             return self
         if stride not in self._strided:
             sub = lambda a: wp.array(np.ascontiguousarray(a.numpy()[::stride, ::stride]), dtype=float, device=a.device)  # noqa: E731
-            self._strided[stride] = _Prepared(subsample_gbuffer(self.gbuffer, stride), sub(self.mask), sub(self.target))
+            gbuffer = self.batch.at(stride).view(self.index) if self.batch is not None else subsample_gbuffer(self.gbuffer, stride)
+            self._strided[stride] = _Prepared(gbuffer, sub(self.mask), sub(self.target), self.batch, self.index)
         return self._strided[stride]
 
     def level(self, sigma: float) -> tuple[wp.array, wp.array]:
@@ -85,6 +92,19 @@ class _Prepared:
                 weight = blur(mask[..., None], sigma, device=self.mask.device)
                 self._levels[sigma] = (blur(masked, sigma), weight.reshape(mask.shape))
         return self._levels[sigma]
+
+
+@dataclass
+class _Batch:
+    """A batched G-buffer ``(V, H, W)`` whose views are fitted together, with its subsampled versions."""
+
+    gbuffer: GBuffer
+    _strided: dict = field(default_factory=dict)
+
+    def at(self, stride: int) -> GBuffer:
+        if stride not in self._strided:
+            self._strided[stride] = subsample_gbuffer(self.gbuffer, stride)
+        return self._strided[stride]
 
 
 def views_device(func: str, views, device):
@@ -125,38 +145,52 @@ def prepare_views(func: str, views, layers: TextureArray, params: SplatParameter
     views = [views] if isinstance(views, FitView) else list(views)
     if not views:
         raise ValueError(f"{func}(): needs at least one view")
-    prepared = []
+    flat = []  # (label, FitView of one (H, W) view, its batch, its index there)
     for k, view in enumerate(views):
         if not isinstance(view, FitView):
             raise TypeError(f"{func}(): view {k} must be a FitView, got {type(view).__name__}")
         gbuffer_device(func, view.gbuffer, device)
+        count = view.gbuffer.num_views
+        if count is None:
+            flat.append((f"view {k}", view, None, 0))
+            continue
+        target = np.asarray(view.target, np.float32)
+        if target.ndim not in (3, 4) or target.shape[0] != count:
+            raise ValueError(f"{func}(): view {k} is a batch of {count} views: its target must be [V, H, W, C] with V = {count}, got shape {target.shape}")
+        mask = None if view.mask is None else np.asarray(view.mask, np.float32)
+        if mask is not None and (mask.ndim != 3 or mask.shape[0] != count):
+            raise ValueError(f"{func}(): view {k} is a batch of {count} views: its mask must be [V, H, W], got shape {mask.shape}")
+        batch = _Batch(view.gbuffer)
+        flat += [(f"view {k}[{j}]", FitView(view.gbuffer.view(j), target[j], None if mask is None else mask[j]), batch, j) for j in range(count)]
+    prepared = []
+    for k, (label, view, batch, index) in enumerate(flat):
         hw = view.gbuffer.resolution
         target = np.asarray(view.target, np.float32)
         if target.ndim == 2:
             target = target[..., None]
         if target.ndim != 3 or target.shape[:2] != hw:
-            raise ValueError(f"{func}(): view {k}: the target is {target.shape[:2]} (H, W) but its G-buffer is {hw}; they must match")
+            raise ValueError(f"{func}(): {label}: the target is {target.shape[:2]} (H, W) but its G-buffer is {hw}; they must match")
         if not 1 <= target.shape[2] <= layers.channels:
-            raise ValueError(f"{func}(): view {k}: the target has {target.shape[2]} channels but the layers only {layers.channels}")
+            raise ValueError(f"{func}(): {label}: the target has {target.shape[2]} channels but the layers only {layers.channels}")
         if k and target.shape[2] != prepared[0].target.shape[2]:
-            raise ValueError(f"{func}(): view {k}: the target has {target.shape[2]} channels, view 0's {prepared[0].target.shape[2]}")
+            raise ValueError(f"{func}(): {label}: the target has {target.shape[2]} channels, view 0's {prepared[0].target.shape[2]}")
         mask = view.gbuffer.mask.numpy() if view.mask is None else np.asarray(view.mask, np.float32)
         if mask.shape != hw:
-            raise ValueError(f"{func}(): view {k}: mask must have shape {hw}, got {mask.shape}")
+            raise ValueError(f"{func}(): {label}: mask must have shape {hw}, got {mask.shape}")
         if not np.isfinite(mask).all() or (mask < 0).any():
-            raise ValueError(f"{func}(): view {k}: mask must be finite and >= 0")
+            raise ValueError(f"{func}(): {label}: mask must be finite and >= 0")
         mask = mask * (view.gbuffer.mask.numpy() > 0)  # pixels without a surface cannot be fitted
         bad = ~np.isfinite(target) & (mask[..., None] > 0)
         if bad.any():
             where = tuple(int(i) for i in np.argwhere(bad)[0])
             raise ValueError(
-                f"{func}(): view {k}: the target has {int(bad.sum())} non-finite value(s) on covered pixels, "
+                f"{func}(): {label}: the target has {int(bad.sum())} non-finite value(s) on covered pixels, "
                 f"first {target[where]} at (row, col, channel) {where}"
             )
         if mask.sum() <= 0:
-            raise ValueError(f"{func}(): view {k}: no covered pixel to fit (the mask is all 0)")
+            raise ValueError(f"{func}(): {label}: no covered pixel to fit (the mask is all 0)")
         target = np.where(mask[..., None] > 0, target, 0.0).astype(np.float32)
-        prepared.append(_Prepared(view.gbuffer, wp.array(mask, dtype=float, device=device), wp.array(target, dtype=float, device=device)))
+        prepared.append(_Prepared(view.gbuffer, wp.array(mask, dtype=float, device=device), wp.array(target, dtype=float, device=device), batch, index))
     return prepared
 
 
@@ -185,9 +219,15 @@ class Objective:
         """The loss (float64 ``(1,)``, ``requires_grad``) and the sharp renders of every view."""
         total = wp.zeros(1, dtype=wp.float64, device=self.device, requires_grad=True)
         renders = []
+        batches = {}  # id(batch) -> its render (V, H, W, C), one call for all its views
         for full in self.views:
             view = full.at(stride)
-            render = self.render(view)
+            if view.batch is None:
+                render = self.render(view)
+            else:
+                if id(view.batch) not in batches:
+                    batches[id(view.batch)] = render_view(view.batch.at(stride), self.layers, self.params, self.options, self.device)
+                render = batches[id(view.batch)][view.index]  # a view: its gradient lands in the batch's
             renders.append(render)
             target, weight = view.level(sigma)
             if sigma > 0:  # the render is 0 off the G-buffer; the user's mask may hide more
