@@ -196,3 +196,33 @@ def test_fit_runs_on_cuda(tmp_path):
     _cli("fit", "--out", str(tmp_path / "fit"), "--iters", "20", "--resolution", "96x128", cwd=tmp_path)
     summary = json.loads((tmp_path / "fit" / "summary.json").read_text())
     assert np.isfinite(summary["final_psnr_db"]) and summary["final_psnr_db"] > summary["initial_psnr_db"] + 3
+
+
+def test_torch_bridge_on_cuda(scene):
+    """warptex.torch on a CUDA tensor (torch's current stream): the CPU's outputs and gradients,
+    batched views included."""
+    torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
+    import warptex.torch as wtt
+
+    if OTHER.startswith("cuda") and not torch.cuda.is_available():
+        pytest.skip("this PyTorch build has no CUDA")
+    cameras = [scene["camera"], wt.look_at((30.0, 34.0, -40.0), (-2.0, 2.0, 4.0), resolution=(96, 128))]  # a batch of two views
+
+    def run(device):
+        tdev = wp.device_to_torch(device)
+        g = wt.rasterize(scene["mesh"], cameras, device=device)
+        texture = torch.tensor(scene["image"], device=tdev, requires_grad=True)
+        layers = torch.tensor(scene["layers"], device=tdev, requires_grad=True)
+        maps = torch.tensor(scene["maps"][0], device=tdev, requires_grad=True)
+        tiling = torch.tensor(0.3, device=tdev, requires_grad=True)
+        uv = torch.tensor(scene["uv"], device=tdev, requires_grad=True)
+        colour = wtt.triplanar(g, texture, tiling=tiling, sampler=wt.Sampler(filter="anisotropic"))
+        terrain_colour = wtt.splat(g, layers, maps, projection="triplanar", height_blend=0.2, tiling=tiling)
+        sampled = wtt.sample(texture, uv, lod=torch.tensor(scene["lod"], device=tdev))
+        r = torch.tensor(scene["weights"], device=tdev)
+        loss = (colour * r[..., :4]).sum() + (terrain_colour * r[..., :4]).sum() + sampled.sum()
+        loss.backward()
+        out = {"colour": colour, "splat": terrain_colour, "sampled": sampled, "texture.grad": texture.grad, "layers.grad": layers.grad, "maps.grad": maps.grad, "tiling.grad": tiling.grad, "uv.grad": uv.grad}
+        return {k: v.detach().cpu().numpy() for k, v in out.items()}
+
+    _compare(*_on_both(run), rtol=1e-3, atol=1e-4)
