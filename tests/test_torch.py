@@ -320,6 +320,17 @@ def test_no_tape_is_kept_without_gradients_and_a_graph_frees_its_tape(rng):
     assert len(_states) == before
 
 
+def test_no_grad_leaves_every_tensor_alone(gbuffer, rng):
+    """Under torch.no_grad() nothing is recorded, and no tensor that requires gradients is given a
+    .grad (wp.from_torch would allocate one)."""
+    texture, uv, tiling = _t(rng, 8, 8, 3), _t(rng, 30, 2), torch.tensor(0.3, requires_grad=True)
+    lod = _t(rng, 30, low=0.0, high=2.0)
+    with torch.no_grad():
+        wtt.sample(texture, uv, lod=lod)
+        wtt.triplanar(gbuffer, texture, tiling=tiling)
+    assert texture.grad is None and uv.grad is None and tiling.grad is None and lod.grad is None
+
+
 def test_only_the_tensors_that_require_gradients_get_them(gbuffer, rng):
     texture = _t(rng, 8, 8, 3, grad=False)
     tiling = torch.tensor(0.3, requires_grad=True)

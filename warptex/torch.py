@@ -409,7 +409,7 @@ _technique.register_autograd(_backward, setup_context=_setup_context)
 
 def _as_out(grad: torch.Tensor, out: wp.array) -> wp.array:
     """The output gradient as a Warp array shaped like the op's output ``out``."""
-    return wp.from_torch(grad.to(torch.float32).contiguous(), dtype=out.dtype).reshape(out.shape)
+    return wp.from_torch(grad.to(torch.float32).contiguous(), dtype=out.dtype, requires_grad=False).reshape(out.shape)
 
 
 def _warp_device(device: torch.device):
@@ -481,21 +481,23 @@ def _decode(value, tensors: list[torch.Tensor], want: set, grads: dict, device):
 
 
 def _decode_tensor(role: str, i: int, tensors, want, grads, device):
+    # Every Warp view says requires_grad=False or names its gradient buffer: wp.from_torch would
+    # otherwise give a tensor that requires gradients a .grad of its own (the user's, in eager mode).
     t = tensors[i]
     if role in _TEXTURES or role == "histogram":
         return _texture_around(t, mipmaps=role != "splat_maps", index=i if i in want else None, grads=grads, device=device)
     base = role.split(".")[0]
     if role == "histogram.lut":
-        return wp.from_torch(t, dtype=wp.float32)
+        return wp.from_torch(t, dtype=wp.float32, requires_grad=False)
     if role == "histogram.basis":
-        return wp.from_torch(t, dtype=wp.mat33)
+        return wp.from_torch(t, dtype=wp.mat33, requires_grad=False)
     if role == "histogram.centre":
-        return wp.from_torch(t, dtype=wp.vec3)
+        return wp.from_torch(t, dtype=wp.vec3, requires_grad=False)
     if base not in _DIFFERENTIABLE and base not in _INTS:
         return t.cpu().numpy()
     dtype = wp.vec2 if base in _VEC2 else wp.int32 if base in _INTS else wp.float32
     if i not in want:
-        return wp.from_torch(t, dtype=dtype)
+        return wp.from_torch(t, dtype=dtype, requires_grad=False)
     g = torch.zeros_like(t)
     grads[i] = g.clone
     return wp.from_torch(t, dtype=dtype, grad=g)
@@ -528,7 +530,7 @@ def _gbuffer_array(name: str, t: torch.Tensor, dtype) -> wp.array:
     if t.dtype != scalar or t.dim() - (length > 1) not in (2, 3) or (length > 1 and t.shape[-1] != length):
         want = "(H, W) or (V, H, W)" if length == 1 else f"(H, W, {length}) or (V, H, W, {length})"
         raise ValueError(f"warptex.torch: G-buffer field {name!r} must be a {scalar} tensor of shape {want}, got {t.dtype} {tuple(t.shape)}")
-    return wp.from_torch(t, dtype=dtype)
+    return wp.from_torch(t, dtype=dtype, requires_grad=False)
 
 
 def _native_texture(values, dims: int) -> TextureArray:
