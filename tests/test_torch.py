@@ -110,9 +110,10 @@ def test_stochastic_matches_native(method, rng):
     _compare(wtt.stochastic, wt.stochastic, args, ("texture", "uv", "method"), rng)
 
 
-def test_stochastic_histogram_gradients_reach_the_gaussianised_texture(rng):
+@pytest.mark.parametrize("decorrelate", [False, True])
+def test_stochastic_histogram_gradients_reach_the_gaussianised_texture(decorrelate, rng):
     source = _t(rng, 16, 16, 3, grad=False)
-    h = wtt.prepare_histogram(source, lut_size=64)
+    h = wtt.prepare_histogram(source, lut_size=64, decorrelate=decorrelate)
     assert h.texture.shape == source.shape and isinstance(h.lut, torch.Tensor)
     gauss = h.texture.clone().requires_grad_(True)
     option = wt.Stochastic(method="hex", histogram=wt.Histogram(**{**h.__dict__, "texture": gauss}))
@@ -122,7 +123,7 @@ def test_stochastic_histogram_gradients_reach_the_gaussianised_texture(rng):
     (out * r).sum().backward()
     assert source.grad is None and np.abs(gauss.grad.numpy()).max() > 0
 
-    native_h = wt.prepare_histogram(wt.Texture(source.numpy()), lut_size=64, requires_grad=True)
+    native_h = wt.prepare_histogram(wt.Texture(source.numpy()), lut_size=64, decorrelate=decorrelate, requires_grad=True)
     np.testing.assert_array_equal(native_h.texture.numpy(0), h.texture.numpy())
     u = wp.array(uv.detach().numpy(), dtype=wp.vec2, requires_grad=True)
     tape = wp.Tape()

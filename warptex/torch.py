@@ -89,7 +89,8 @@ _VEC2 = {"uv", "uv_dx", "uv_dy"}
 _PARAMS = {"tiling", "sharpness", "offsets", "height_blend"}  # float32 parameter arrays, (1,) for a scalar
 _FLOATS = _PARAMS | {"lod", "weights"}
 _INTS = {"layer", "indices"}
-_DIFFERENTIABLE = _TEXTURES | _VEC2 | _FLOATS | {"histogram"}
+_DIFFERENTIABLE = _TEXTURES | _VEC2 | _FLOATS | {"histogram"}  # "histogram": its Gaussianised texture
+_HISTOGRAM = {"histogram.lut": wp.float32, "histogram.basis": wp.mat33, "histogram.centre": wp.vec3}
 
 
 # -- the public functions ---------------------------------------------------------------------------
@@ -275,20 +276,20 @@ def _encode(func: str, role: str, value, tensors: list):
 def _role_tensor(func: str, role: str, t: torch.Tensor) -> torch.Tensor:
     """``t`` as the op takes it for ``role``: float32 or int32, contiguous, parameters 1-D (torch
     ops, so that autograd carries gradients through the conversion)."""
-    base = role.split(".")[0] if role.startswith("histogram.") else role
     if t.is_complex():
         raise TypeError(f"{func}(): {role} must be real, got {t.dtype}")
-    if base in _INTS:
+    if role in _INTS:
         if t.is_floating_point():
             raise TypeError(f"{func}(): {role} must be an integer tensor, got {t.dtype}")
         return t.to(torch.int32).contiguous()
-    if role.startswith("gbuffer."):
+    if role.startswith("gbuffer."):  # read in place, no gradient (its dtype is checked when decoded)
         return t.detach().contiguous()
-    if role not in _DIFFERENTIABLE and not role.startswith("histogram."):
-        return t.detach().contiguous()  # e.g. object_to_world, face_layers: plain values
-    if not t.is_floating_point():
-        t = t.to(torch.float32)
-    t = t.to(torch.float32).contiguous()
+    if role in _DIFFERENTIABLE:
+        t = t.to(torch.float32).contiguous()
+    elif role.startswith("histogram."):  # the transform's LUT, basis, centre: float32 data
+        return t.detach().to(torch.float32).contiguous()
+    else:  # e.g. object_to_world, face_layers: plain values, passed on as NumPy
+        return t.detach().contiguous()
     if role in _VEC2 and (t.dim() < 2 or t.shape[-1] != 2):
         raise ValueError(f"{func}(): {role} must have shape (..., 2) with a sample axis (uv[None] for one UV), got {tuple(t.shape)}")
     if role in _PARAMS and t.dim() == 0:
@@ -486,16 +487,11 @@ def _decode_tensor(role: str, i: int, tensors, want, grads, device):
     t = tensors[i]
     if role in _TEXTURES or role == "histogram":
         return _texture_around(t, mipmaps=role != "splat_maps", index=i if i in want else None, grads=grads, device=device)
-    base = role.split(".")[0]
-    if role == "histogram.lut":
-        return wp.from_torch(t, dtype=wp.float32, requires_grad=False)
-    if role == "histogram.basis":
-        return wp.from_torch(t, dtype=wp.mat33, requires_grad=False)
-    if role == "histogram.centre":
-        return wp.from_torch(t, dtype=wp.vec3, requires_grad=False)
-    if base not in _DIFFERENTIABLE and base not in _INTS:
+    if role in _HISTOGRAM:
+        return wp.from_torch(t, dtype=_HISTOGRAM[role], requires_grad=False)
+    if role not in _DIFFERENTIABLE and role not in _INTS:
         return t.cpu().numpy()
-    dtype = wp.vec2 if base in _VEC2 else wp.int32 if base in _INTS else wp.float32
+    dtype = wp.vec2 if role in _VEC2 else wp.int32 if role in _INTS else wp.float32
     if i not in want:
         return wp.from_torch(t, dtype=dtype, requires_grad=False)
     g = torch.zeros_like(t)
