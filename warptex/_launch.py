@@ -42,6 +42,9 @@ MIN_PIXELS_PER_THREAD = 16384
 # Chunks per thread (when the pixels allow): costs vary across an image (sky, terrain), so
 # threads take chunks from a queue rather than one fixed share each.
 CHUNKS_PER_THREAD = 4
+# Private gradient copies smaller than this in all are summed on one thread (handing out the work
+# costs more).
+PARALLEL_SUM_BYTES = 1 << 20
 
 _lock = threading.Lock()
 _pool: ThreadPoolExecutor | None = None
@@ -218,7 +221,7 @@ def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads:
     private: list[tuple[wp.array, wp.array]] = []
     shared = [inputs]
     for worker in range(1, workers):
-        copies = {id(t): _private_zeros(t, worker) for t in unique}
+        copies = {id(t): _private(t, worker) for t in unique}
         private += [(t, copies[id(t)]) for t in unique]
         shared.append([copies.get(id(a), a) for a in inputs])
 
@@ -226,8 +229,8 @@ def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads:
         ins, _, dim = split.arguments(shared[worker], k)
         wp.launch(kernel, dim=dim, inputs=ins, device=device, record_tape=False)
 
-    split.run(run, fixed=True)
-    _add_private(private)
+    split.run(run, fixed=True, start=_zeroing(private))
+    _add_private(private, workers)
 
 
 def _workers(device, count: int, threads: int | None) -> int:
@@ -255,8 +258,9 @@ class _Split:
         ins = [_chunk(a, lo, hi, self.count) for a in inputs]
         return ins, [o[lo:hi] for o in self.outputs], hi - lo
 
-    def run(self, work, *, fixed: bool = False) -> None:
-        """``work(worker, chunk)`` for every chunk; worker 0 is the calling thread. Workers take the
+    def run(self, work, *, fixed: bool = False, start=None) -> None:
+        """``work(worker, chunk)`` for every chunk, after ``start(worker)`` (when given) on the
+        worker's thread; worker 0 is the calling thread. Workers take the
         next chunk as they finish one; with ``fixed``, worker ``w`` takes chunks ``w, w + workers,
         ...`` in order instead (interleaved, so each still gets a share of cheap and costly pixels):
         what accumulates into a worker's gradient arrays, and in what order, is then the same on
@@ -264,6 +268,8 @@ class _Split:
         counter = itertools.count()
 
         def loop(worker: int) -> None:
+            if start is not None:
+                start(worker)
             if fixed:
                 for k in range(worker, self.chunks, self.workers):
                     work(worker, k)
@@ -279,16 +285,32 @@ class _Split:
                 f.result()  # waits for every worker; re-raises a worker's exception here
 
 
-def _private_zeros(real: wp.array, worker: int) -> wp.array:
-    """Worker ``worker``'s private accumulator for the gradient array ``real``, zeroed: the one
-    kept from the last backward pass when there is one, else a new one (kept while ``real`` lives)."""
+def _private(real: wp.array, worker: int) -> wp.array:
+    """Worker ``worker``'s private accumulator for the gradient array ``real``: the one kept from
+    the last backward pass when there is one, else a new one (kept while ``real`` lives). The
+    worker zeroes it on its own thread before its first chunk (:func:`_zeroing`), so the copies
+    are zeroed side by side rather than one after another before the launch."""
     copies = _private_arrays.setdefault(real, {})
     mine = copies.get(worker)
     if mine is None:  # keyed by the array itself, whose shape and dtype never change
-        mine = copies[worker] = wp.zeros_like(real)
-    else:
-        mine.zero_()
+        mine = copies[worker] = wp.empty_like(real)
     return mine
+
+
+def _zeroing(private: list[tuple[wp.array, wp.array]]):
+    """``start(worker)`` for :meth:`_Split.run`: zero the accumulators of ``private`` that belong to
+    ``worker`` (recorded as ``(real, mine)`` pairs, worker by worker)."""
+    mine_of = {}
+    for real, mine in private:
+        for worker, copy in _private_arrays[real].items():
+            if copy is mine:
+                mine_of.setdefault(worker, {})[id(mine)] = mine
+
+    def start(worker: int) -> None:
+        for mine in mine_of.get(worker, {}).values():
+            mine.zero_()
+
+    return start
 
 
 def _with_private_grads(a, private: list, worker: int):
@@ -301,7 +323,7 @@ def _with_private_grads(a, private: list, worker: int):
     if wp.types.is_array(a):
         if not a.grad:
             return a
-        mine = _private_zeros(a.grad, worker)
+        mine = _private(a.grad, worker)
         private.append((a.grad, mine))
         return wp.array(ptr=a.ptr, dtype=a.dtype, shape=a.shape, strides=a.strides, device=a.device, grad=mine)
     if wp.types.is_struct(a):
@@ -325,13 +347,34 @@ def _backward(tape, split: _Split) -> None:
         adj_ins = [tape.get_adjoint(a) for a in ins]
         wp.launch(split.kernel, dim=dim, inputs=ins, outputs=outs, adj_inputs=adj_ins, adj_outputs=[o.grad for o in outs], device=split.device, adjoint=True)
 
-    split.run(backward, fixed=True)
-    _add_private(private)
+    split.run(backward, fixed=True, start=_zeroing(private))
+    _add_private(private, split.workers)
 
 
-def _add_private(private: list[tuple[wp.array, wp.array]]) -> None:
+def _add_private(private: list[tuple[wp.array, wp.array]], workers: int) -> None:
     """``real += mine`` for every distinct ``(real, mine)`` pair of gradient arrays (CPU: NumPy
-    views); a gradient that several arguments share has one accumulator per worker, added once."""
+    views); a gradient that several arguments share has one accumulator per worker, added once.
+
+    The arrays are cut into ``workers`` ranges of elements, summed on the workers side by side
+    (NumPy releases the GIL); each element still adds the workers' copies in worker order, so the
+    result is the same bit for bit as one thread adding them."""
+    pairs = []
     for real, mine in {id(mine): (real, mine) for real, mine in private}.values():
-        target = real.numpy()  # CPU arrays: views of the same memory
-        target += mine.numpy()
+        target, source = real.numpy(), mine.numpy()  # CPU arrays: views of the same memory
+        if target.flags.c_contiguous and source.flags.c_contiguous:
+            pairs.append((target.reshape(-1), source.reshape(-1)))
+        else:  # a strided gradient: added whole, on this thread
+            target += source
+    parts = workers if sum(t.nbytes for t, _ in pairs) >= PARALLEL_SUM_BYTES else 1
+
+    def add(part: int) -> None:
+        for target, source in pairs:
+            lo, hi = target.size * part // parts, target.size * (part + 1) // parts
+            target[lo:hi] += source[lo:hi]
+
+    futures = [_executor(workers - 1).submit(add, part) for part in range(1, parts)]
+    try:
+        add(0)
+    finally:
+        for f in futures:
+            f.result()
