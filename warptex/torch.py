@@ -529,6 +529,13 @@ def _gbuffer_array(name: str, t: torch.Tensor, dtype) -> wp.array:
     return wp.from_torch(t, dtype=dtype, requires_grad=False)
 
 
+def _zeros(shape: tuple, device: torch.device) -> torch.Tensor:
+    """float32 zeros on ``device``; on the CPU from NumPy (see :func:`_texture_around`)."""
+    if device.type == "cpu":
+        return torch.from_numpy(np.zeros(shape, np.float32))
+    return torch.zeros(shape, dtype=torch.float32, device=device)
+
+
 def _native_texture(values, dims: int) -> TextureArray:
     return Texture(values) if dims == 3 else TextureArray(values)
 
@@ -536,18 +543,30 @@ def _native_texture(values, dims: int) -> TextureArray:
 def _texture_around(t: torch.Tensor, *, mipmaps: bool, index, grads: dict, device) -> TextureArray:
     """A :class:`Texture` (``t`` ``[H, W, C]``) or :class:`TextureArray` (``[L, H, W, C]``) whose
     chain is a torch buffer holding ``t`` at level 0, its mips built here (on the active tape);
-    with ``index``, gradient buffers whose level 0 ``grads[index]`` returns shaped like ``t``."""
+    with ``index``, gradient buffers whose level 0 ``grads[index]`` returns shaped like ``t``.
+
+    On the CPU the buffers are filled and read through NumPy, not torch: torch runs CPU tensor ops
+    on its OpenMP threads, which keep spinning a while after each op, and the Warp launch that
+    followed a torch copy of a 256² texture ran 20% slower on 2 cores (measured:
+    ``benchmarks/bench_torch.py``)."""
     layers = t.unsqueeze(0) if t.dim() == 3 else t
     num_layers, height, width, channels = layers.shape
     sizes = mip_sizes(height, width, None if mipmaps else 1)
     texels = sum(num_layers * h * w for h, w in sizes)
-    chain = torch.zeros((texels, 4), dtype=torch.float32, device=t.device)
     count = num_layers * height * width
-    chain[:count, :channels] = layers.reshape(count, channels)
+    cpu = t.device.type == "cpu"
+    chain = _zeros((texels, 4), t.device)
+    if cpu:
+        chain.numpy()[:count, :channels] = layers.detach().numpy().reshape(count, channels)
+    else:
+        chain[:count, :channels] = layers.detach().reshape(count, channels)
     grad = None
     if index is not None:
-        grad = torch.zeros_like(chain)
-        grads[index] = lambda: grad[:count, :channels].reshape(t.shape).clone()
+        grad = _zeros((texels, 4), t.device)
+        if cpu:
+            grads[index] = lambda: torch.from_numpy(grad.numpy()[:count, :channels].reshape(t.shape).copy())
+        else:
+            grads[index] = lambda: grad[:count, :channels].reshape(t.shape).clone()
     texture = (Texture if t.dim() == 3 else TextureArray).around(wp.from_torch(chain, dtype=wp.vec4, grad=grad), num_layers, sizes, channels)
     texture.update()
     return texture
