@@ -260,7 +260,7 @@ def lod_from_derivatives(tex: TextureView, uv_dx: wp.vec2, uv_dy: wp.vec2) -> fl
 # A footprint is a ``vec4`` ``(lod, step_u, step_v, taps)``: the filter reads ``taps`` trilinear (or
 # bilinear, nearest) samples at ``uv + step · (k + 1/2 - taps/2)``, ``k = 0 .. taps - 1``, all at
 # ``lod``, and averages them. Every filter but the anisotropic one has one tap and no step, which
-# reads ``uv`` itself, bit for bit as a single sample does.
+# reads ``uv`` itself, bit for bit as a single sample does; so has an anisotropic footprint of one tap.
 
 
 @wp.func
@@ -282,18 +282,19 @@ def anisotropic_footprint(size: wp.vec2, uv_dx: wp.vec2, uv_dy: wp.vec2, max_ani
     max_aniso`` trilinear taps, ``2^lod`` apart at most, cover the major axis' length, centred on
     the UV. The taps are weighted equally (a box along the axis): a pixel integrates its footprint
     uniformly, and a box matches that integral where a Gaussian would weight the middle and leave the
-    ends under-filtered. Footprints under 1e-6 or over 1e9 texels, or not finite, fall back to the
-    isotropic one tap at :func:`footprint_lod` (level 0, or the coarsest level).
+    ends under-filtered. One tap has no step. Footprints under 1e-6 or over 1e9 texels, or not
+    finite, fall back to the isotropic one tap at :func:`footprint_lod` (level 0, or the coarsest
+    level).
     """
     a = wp.cw_mul(uv_dx, size)
     b = wp.cw_mul(uv_dy, size)
     A = a[0] * a[0] + b[0] * b[0]
     C = a[1] * a[1] + b[1] * b[1]
     area = A + C  # the squared footprint, |a|² + |b|²
-    result = point_footprint(footprint_lod(size, uv_dx, uv_dy))
+    result = wp.vec4()
     # Within these bounds (1e-6 to 1e9 texels) nothing below overflows or underflows, so the
     # generated adjoint stays finite; outside them (and for NaN) one isotropic tap reads level 0
-    # or the coarsest level anyway.
+    # or the coarsest level anyway. Only the branch taken computes its LOD (one log2).
     if area > 1.0e-12 and area < 1.0e18:
         B = a[0] * a[1] + b[0] * b[1]
         h = 0.5 * (A - C)
@@ -304,14 +305,19 @@ def anisotropic_footprint(size: wp.vec2, uv_dx: wp.vec2, uv_dy: wp.vec2, max_ani
         minor = wp.abs(a[0] * b[1] - a[1] * b[0]) / major
         extent = wp.max(minor, major / max_aniso)
         taps = wp.clamp(wp.ceil(major / extent - 1.0e-3), 1.0, max_aniso)  # a round footprint's rounding is one tap, not two
-        # The major axis: an eigenvector of J Jᵀ for major², the longer of its two expressions.
-        v = wp.vec2(B, major2 - A)
-        other = wp.vec2(major2 - C, B)
-        if wp.dot(other, other) > wp.dot(v, v):
-            v = other
-        e = v / wp.length(v)  # |v|² >= floor² > 0
-        step = e * (major / taps)
-        result = wp.vec4(wp.log2(extent), step[0] / size[0], step[1] / size[1], taps)
+        if taps == 1.0:
+            result = point_footprint(wp.log2(extent))  # one tap reads the UV itself: no step, no axis
+        else:
+            # The major axis: an eigenvector of J Jᵀ for major², the longer of its two expressions.
+            v = wp.vec2(B, major2 - A)
+            other = wp.vec2(major2 - C, B)
+            if wp.dot(other, other) > wp.dot(v, v):
+                v = other
+            e = v / wp.length(v)  # |v|² >= floor² > 0
+            step = e * (major / taps)
+            result = wp.vec4(wp.log2(extent), step[0] / size[0], step[1] / size[1], taps)
+    else:
+        result = point_footprint(footprint_lod(size, uv_dx, uv_dy))
     return result
 
 
