@@ -29,7 +29,8 @@ The functions take the native functions' arguments (:func:`warptex.sample`, :fun
 Gradients flow through torch autograd to every differentiable tensor: texels, ``uv``, ``lod``,
 ``uv_dx``/``uv_dy``, ``tiling``, ``sharpness``, ``offsets``, splat maps, ``heights``,
 ``height_blend``, atlas ``weights`` and layers, and a histogram's Gaussianised texture
-(:func:`prepare_histogram`). They are the native backward pass's, bit for bit.
+(:func:`prepare_histogram`). Outputs are the native call's bit for bit, gradients the native backward
+pass's (to float rounding; tests/test_torch.py).
 
 How it runs. Each call is one ``torch.library`` custom op (``warptex::technique``), so autograd and
 ``torch.compile`` see a single opaque node. Its forward runs the native function on zero-copy Warp
