@@ -284,7 +284,7 @@ def anisotropic_footprint(size: wp.vec2, uv_dx: wp.vec2, uv_dy: wp.vec2, max_ani
     uniformly, and a box matches that integral where a Gaussian would weight the middle and leave the
     ends under-filtered. One tap has no step. Footprints under 1e-6 or over 1e9 texels, or not
     finite, fall back to the isotropic one tap at :func:`footprint_lod` (level 0, or the coarsest
-    level).
+    level). :func:`uv_footprint` reads a round footprint's one tap inline instead of calling this.
     """
     a = wp.cw_mul(uv_dx, size)
     b = wp.cw_mul(uv_dy, size)
@@ -322,14 +322,58 @@ def anisotropic_footprint(size: wp.vec2, uv_dx: wp.vec2, uv_dy: wp.vec2, max_ani
 
 
 @wp.func
+def round_footprint(a: wp.vec2, b: wp.vec2, aa: float, bb: float) -> bool:
+    """Whether the footprint ``J = [a b]`` (level-0 texels; ``aa = |a|²``, ``bb = |b|²``) is round to
+    float precision: ``(aa - bb)² + (a · b)² < (1e-6 · (aa + bb))²``. Then ``((aa - bb)/2)² + (a ·
+    b)²``, which is ``((A - C)/2)² + B²`` of :func:`anisotropic_footprint` (``JᵀJ`` and ``J Jᵀ``
+    have the same eigenvalues), is below its floor too: its axes are a circle's to float precision,
+    ``a`` and ``b`` orthogonal and equally long. The test is strict, so it is false for a zero
+    footprint, one so small that the right side underflows, and an infinite or NaN one: where it
+    holds, ``aa + bb`` is positive and finite."""
+    h = aa - bb
+    ab = wp.dot(a, b)
+    floor = 1.0e-6 * (aa + bb)
+    return h * h + ab * ab < floor * floor
+
+
+@wp.func_grad(round_footprint)
+def adj_round_footprint(a: wp.vec2, b: wp.vec2, aa: float, bb: float, adj_ret: bool):
+    """A test has no gradient. Without this, Warp's generated adjoint would multiply the test's
+    intermediates by zero, and an overflowed one (huge derivatives) would make the gradient NaN."""
+    pass
+
+
+@wp.func
 def uv_footprint(size: wp.vec2, uv_dx: wp.vec2, uv_dy: wp.vec2, smp: SamplerArgs) -> wp.vec4:
     """The footprint that ``smp``'s filter reads for UV derivatives ``uv_dx``, ``uv_dy`` on a level-0
-    image of ``size`` texels: anisotropic, or one tap at :func:`footprint_lod`."""
+    image of ``size`` texels: anisotropic, or one tap at :func:`footprint_lod`.
+
+    A round anisotropic footprint (:func:`round_footprint`) is one tap, here inline, for about
+    trilinear's work: at ``log2(sqrt(area / 2))``, ``area = |a|² + |b|²``, where trilinear reads
+    ``log2(max(|a|, |b|))``. Both axes are ``sqrt(area / 2)`` to a relative 1e-6 there, so that LOD
+    is the minor axis' (what :func:`anisotropic_footprint` computes) to 1.5e-6, and trilinear's to
+    1.5e-6 too (``a`` and ``b`` are orthogonal and equally long). Its gradient is the one the
+    ellipse's formulas have at a circle (half along each of ``a`` and ``b``), not trilinear's (all
+    along the longer one). Every other anisotropic footprint goes out of line.
+    """
+    a = wp.cw_mul(uv_dx, size)
+    b = wp.cw_mul(uv_dy, size)
+    aa = wp.dot(a, a)
+    bb = wp.dot(b, b)
     result = wp.vec4()
-    if smp.filter == FILTER_ANISOTROPIC:
+    if smp.filter == FILTER_ANISOTROPIC and not round_footprint(a, b, aa, bb):
         result = anisotropic_footprint(size, uv_dx, uv_dy, smp.max_aniso)
     else:
-        result = point_footprint(footprint_lod(size, uv_dx, uv_dy))
+        # One tap: footprint_lod's operations (so trilinear's bits), or a round footprint's mean axis.
+        # One log2 for both keeps this code, inlined at every footprint, small: a second one made
+        # the sm_90 code of warptex.splat8.grad 3% larger.
+        axis2 = 0.0
+        if smp.filter == FILTER_ANISOTROPIC:
+            axis2 = 0.5 * (aa + bb)  # round: positive and finite
+        else:
+            axis2 = wp.min(wp.max(wp.max(aa, bb), 1.0e-30), FLOAT_MAX)
+        lod = 0.5 * wp.log2(axis2)
+        result = point_footprint(wp.where(aa + bb == aa + bb, lod, wp.nan))
     return result
 
 

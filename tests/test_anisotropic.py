@@ -75,6 +75,46 @@ def test_a_round_footprint_is_one_trilinear_tap(rng):
     np.testing.assert_allclose(aniso, tri, atol=2e-5, rtol=0)
 
 
+def test_round_footprint_gradients_split_between_both_derivatives(rng):
+    """A round footprint takes a shortcut (``round_footprint``). Its minor axis has a kink there (the
+    two axes cross), and the derivatives' gradients must be the kink's central difference: half
+    along each derivative, as the ellipse's formulas have it at a circle, not trilinear's (all
+    along the longer one). Zero, tiny and huge round footprints keep finite (zero) gradients."""
+    h, w = 64, 64
+    img = smooth_texture(h, w, seed=3)[..., :2]
+    chain = ref.mip_chain(img)
+    n = 300
+    uv = rng.uniform(0, 1, (n, 2)).astype(np.float32)
+    dx, dy = _footprints(rng, n, (h, w), elongation=(1.0, 1.0), texels=(1.2, 1.8))  # LOD 0.26-0.85: no level switch
+    a, b = dx * (w, h), dy * (w, h)
+    aa, bb, ab = (a * a).sum(-1), (b * b).sum(-1), (a * b).sum(-1)
+    assert (((aa - bb) / 2) ** 2 + ab**2 < (1e-7 * (aa + bb)) ** 2).all()  # round to float32 rounding
+    weights = rng.normal(size=(n, 2))
+    arrays = [wp.array(x, dtype=wp.vec2, requires_grad=True) for x in (dx, dy)]
+    tape = wp.Tape()
+    with tape:
+        out = wt.sample(wt.Texture(img), uv, uv_dx=arrays[0], uv_dy=arrays[1], sampler=ANISO)
+    out.grad.assign(weights.astype(np.float32))
+    tape.backward()
+    grads = [x.grad.numpy().astype(np.float64) for x in arrays]
+    assert all(np.abs(g).max() > 0 for g in grads)
+    loss_dx = lambda x: (ref.anisotropic(chain, uv, x, dy) * weights).sum(-1)  # noqa: E731
+    loss_dy = lambda x: (ref.anisotropic(chain, uv, dx, x) * weights).sum(-1)  # noqa: E731
+    _check_per_sample(loss_dx, dx, grads[0], 1e-5, kink=np.inf)  # every sample is at the kink: keep all
+    _check_per_sample(loss_dy, dy, grads[1], 1e-5, kink=np.inf)
+
+    extreme = np.float32([0.0, 1e-30, 1e-8, 1e25, 1e30])[:, None]
+    dx = wp.array(extreme * (1, 0), dtype=wp.vec2, requires_grad=True)
+    dy = wp.array(extreme * (0, 1), dtype=wp.vec2, requires_grad=True)
+    tape = wp.Tape()
+    with tape:
+        out = wt.sample(wt.Texture(img), np.full((5, 2), 0.3, np.float32), uv_dx=dx, uv_dy=dy, sampler=ANISO)
+    out.grad.fill_(1.0)
+    tape.backward()
+    assert np.isfinite(out.numpy()).all()
+    assert (dx.grad.numpy() == 0).all() and (dy.grad.numpy() == 0).all()
+
+
 def test_degenerate_and_non_finite_footprints():
     """Zero derivatives read level 0 exactly (one tap); a footprint along one line only (zero minor
     axis) takes max_aniso taps at the LOD of major / max_aniso; huge derivatives read the coarsest
