@@ -56,6 +56,8 @@ _SNIPPETS = {
     "stochastic (hex)": "wt.stochastic(texture(GRAD), uv, method='hex', lod=1.5)",
     "triplanar": "wt.triplanar(g, texture(GRAD), tiling=4.0)",
     "triplanar (hash4)": "wt.triplanar(g, texture(GRAD), tiling=4.0, stochastic='hash4')",
+    "triplanar (faces)": "wt.triplanar(g, textures_per_face=[texture(GRAD) for _ in range(6)], tiling=4.0)",
+    "triplanar (faces, hash4)": "wt.triplanar(g, textures_per_face=[texture(GRAD) for _ in range(6)], tiling=4.0, stochastic='hash4')",
     "triplanar_normal": "wt.triplanar_normal(g, texture(GRAD, 3), tiling=4.0)",
     "splat": "wt.splat(g, layers(GRAD), maps, tiling=0.2, projection='triplanar', height_blend=0.2)",
     "splat (hex)": "wt.splat(g, layers(GRAD), maps, tiling=0.2, projection='triplanar', height_blend=0.2, stochastic='hex')",
