@@ -278,3 +278,98 @@ def test_private_copies_summed_in_parallel_give_the_serial_sum_bit_for_bit(gener
     for p, s in zip(parallel + serial[1:], serial + serial[:1]):
         np.testing.assert_array_equal(p, s)
     assert np.abs(serial[0]).sum() > 0
+
+
+@wp.kernel
+def _first_column_only(out: wp.array2d(dtype=float)):
+    out[wp.tid(), 0] = 1.0
+
+
+@pytest.mark.parametrize("n", [1, 4])
+def test_a_launch_zeroes_its_new_outputs_and_their_gradients(n, threads):
+    """Outputs from ``_launch.output`` hold whatever memory they got (here NaN); the launch zeroes
+    them and their gradients chunk by chunk, so what a kernel leaves alone reads 0."""
+    threads(n)
+    out = _launch.output((70000, 2), float, "cpu", requires_grad=True)
+    out.fill_(np.nan)
+    out.grad.fill_(np.nan)
+    _launch.launch(_first_column_only, 70000, inputs=[], outputs=[out], device="cpu")
+    np.testing.assert_array_equal(out.numpy(), np.float32([1, 0]) * np.ones((70000, 1), np.float32))
+    np.testing.assert_array_equal(out.grad.numpy(), 0)
+
+
+def test_chunks_hold_equal_costs_of_covered_pixels():
+    """Over a G-buffer, chunks are cut at equal estimated costs (a pixel the mask leaves out costs
+    UNCOVERED_COST), not equal pixel counts: a view whose top half is sky would otherwise give the
+    threads that take its first chunks almost nothing to do. Deterministic, never an empty chunk."""
+    count, chunks = 1 << 17, 8
+    mask = np.zeros(count, np.float32)
+    mask[count // 2 :] = 1.0
+    mask[count // 2 : count // 2 + 5000 : 7] = 0.0  # a ragged edge
+    bounds = _launch._bounds(count, chunks, wp.array(mask))
+    assert bounds == _launch._bounds(count, chunks, wp.array(mask))
+    assert bounds[0] == 0 and bounds[-1] == count and len(bounds) == chunks + 1 and (np.diff(bounds) > 0).all()
+    shaded = np.float64(mask != 0)
+    cost = shaded + _launch.UNCOVERED_COST * (1 - shaded)
+    costs = np.array([cost[a:b].sum() for a, b in zip(bounds[:-1], bounds[1:])])
+    assert np.abs(costs - cost.sum() / chunks).max() <= _launch.COVERAGE_BLOCK  # cut at whole blocks
+    assert bounds[1] > count // 4  # the sky's pixels go to few chunks
+    even = [count * k // chunks for k in range(chunks + 1)]
+    assert _launch._bounds(count, chunks, None) == even
+    assert _launch._bounds(count, chunks, wp.array(np.ones(count, np.float32))) == even
+    assert _launch._bounds(count, chunks, wp.zeros(count, dtype=float)) == even  # all sky: all alike
+
+
+def test_private_copies_are_left_zero_and_dropped_after_a_failure(threads, monkeypatch):
+    """A backward pass leaves its private gradient copies zeroed for the next (they are zeroed as
+    they are added in). A pass that fails part way leaves them holding part of a sum: they are
+    dropped, and the next pass, with new ones, gives the right gradient."""
+    threads(2)
+    g = _sphere()
+    tex = _texture(requires_grad=True)
+
+    def gradient():
+        tape = wp.Tape()
+        with tape:
+            out = wt.triplanar(g, tex, tiling=3.0)
+        out.grad.fill_(1.0)
+        tape.backward()
+        grad = tex.grad().copy()
+        tex.zero_grad()
+        return grad
+
+    want = gradient()
+    real = tex.view.texels.grad
+    copies = _launch._private_arrays[real]
+    assert set(copies) == {1} and (copies[1].numpy() == 0).all()
+
+    calls, original = [], wp.launch
+
+    def failing(kernel, *args, **kwargs):
+        calls.append(kernel)
+        if len(calls) == 3:  # a chunk of the backward pass, after others ran
+            raise RuntimeError("a chunk failed")
+        return original(kernel, *args, **kwargs)
+
+    tape = wp.Tape()
+    with tape:
+        out = wt.triplanar(g, tex, tiling=3.0)
+    out.grad.fill_(1.0)
+    monkeypatch.setattr(wp, "launch", failing)
+    with pytest.raises(RuntimeError, match="a chunk failed"):
+        tape.backward()
+    monkeypatch.undo()
+    assert real not in _launch._private_arrays
+    tex.zero_grad()
+    np.testing.assert_array_equal(gradient(), want)
+
+
+def test_zero_grad_clears_a_large_gradient_on_the_threads(threads):
+    """``zero_grad`` of a gradient past PARALLEL_SUM_BYTES is split over the threads; every level is zeroed."""
+    threads(3)
+    tex = wt.Texture(np.random.default_rng(6).random((512, 512, 4)).astype(np.float32), requires_grad=True)
+    grad = tex.view.texels.grad
+    assert grad.size * 16 >= _launch.PARALLEL_SUM_BYTES
+    grad.fill_(wp.vec4(1.0, 2.0, 3.0, 4.0))
+    tex.zero_grad()
+    np.testing.assert_array_equal(grad.numpy(), 0)

@@ -15,10 +15,16 @@ disjoint slices already), added into the real gradients once all chunks are done
 therefore summed in a different order than for one launch: equal to float rounding. The order is
 fixed for a given thread count (each thread takes the same chunks in the same order every time),
 so a run is reproducible bit for bit: only a different thread count changes the rounding. The private
-arrays are kept while their real gradient lives and zeroed for the next backward pass: allocating
-them afresh cost more than the whole backward of a small image (page faults, ~0.5 ms per MB here,
-against ~0.02 ms per MB to zero an array in place), at the price of one extra copy of every
-shared gradient per extra thread, held as long as the gradient itself.
+arrays are kept while their real gradient lives, and zeroed as they are added in, ready for the
+next backward pass: allocating them afresh cost more than the whole backward of a small image
+(page faults, ~0.5 ms per MB here, against ~0.07 ms per MB to zero an array in place), at the
+price of one extra copy of every shared gradient per extra thread, held as long as the gradient
+itself.
+
+The same page faults are why a launch's outputs are made with :func:`output` (allocated, not
+touched) and zeroed by :func:`launch` chunk by chunk, on the thread that then fills the chunk:
+``wp.zeros`` of a 12.6 MB output and its gradient measured up to 8 ms on the calling thread where
+the memory came fresh from the system, a third of a one-thread bilinear lookup of as many pixels.
 
 CUDA launches are never split: one launch fills the device.
 """
@@ -33,6 +39,7 @@ import weakref
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, NamedTuple
 
+import numpy as np
 import warp as wp
 
 from warptex._warp import active_tape, struct_fields, struct_like
@@ -40,11 +47,20 @@ from warptex._warp import active_tape, struct_fields, struct_like
 # Below this many pixels per thread, handing work to a thread costs more than it saves.
 MIN_PIXELS_PER_THREAD = 16384
 # Chunks per thread (when the pixels allow): costs vary across an image (sky, terrain), so
-# threads take chunks from a queue rather than one fixed share each.
+# threads take chunks from a queue rather than one fixed share each. More, smaller chunks measured
+# slower (each launch costs ~0.1 ms of Python, partly under the GIL).
 CHUNKS_PER_THREAD = 4
+# Where a G-buffer's mask is known (``covered``), chunks are cut to equal estimated cost rather than
+# equal pixel counts: a pixel it does not cover costs about this much of a covered one (the sky of
+# the terrain view with triplanar mapping: 0.13) ...
+UNCOVERED_COST = 0.1
+# ... counted in blocks of this many pixels.
+COVERAGE_BLOCK = 1024
 # Private gradient copies smaller than this in all are summed on one thread (handing out the work
 # costs more).
 PARALLEL_SUM_BYTES = 1 << 20
+# Elements an accumulator is added and zeroed in at a time (256 KB of floats: in cache between the two).
+SUM_BLOCK = 1 << 16
 
 _lock = threading.Lock()
 _pool: ThreadPoolExecutor | None = None
@@ -85,6 +101,24 @@ class PerPixel(NamedTuple):
     """A kernel argument indexed by the launch index along its first axis (sliced per chunk)."""
 
     array: wp.array | None
+
+
+def output(shape, dtype, device, requires_grad: bool = False) -> wp.array:
+    """A new per-pixel output for :func:`launch` (first axis: one row per pixel), and its gradient
+    when ``requires_grad``: allocated, not zeroed; :func:`launch` zeroes both, chunk by chunk on
+    the threads that fill them (module docstring)."""
+    out = wp.empty(shape, dtype=dtype, device=device)
+    if requires_grad:
+        out.grad = wp.empty(shape, dtype=dtype, device=device)
+    return out
+
+
+def _zero_rows(outputs: list[wp.array]) -> None:
+    """Zero ``outputs`` (a chunk's rows of per-pixel outputs) and their gradients."""
+    for out in outputs:
+        out.zero_()
+        if out.grad is not None:
+            out.grad.zero_()
 
 
 def per_pixel(*arrays: wp.array | None) -> list[PerPixel]:
@@ -154,7 +188,7 @@ GENERATED = "generated"
 """``backward=GENERATED``: record the kernel's generated adjoint (see :func:`launch`)."""
 
 
-def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: int | None = None, backward=None) -> None:
+def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: int | None = None, backward=None, covered: wp.array | None = None) -> None:
     """Launch a per-pixel ``kernel`` over ``count`` pixels, split over CPU threads.
 
     Args:
@@ -162,13 +196,18 @@ def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: 
             arrays (and reads anything else).
         count: pixels to launch.
         inputs: the kernel's inputs; per-pixel arrays wrapped with :func:`per_pixel`.
-        outputs: the kernel's outputs, all per-pixel arrays (first axis ``count``).
+        outputs: the kernel's outputs, all per-pixel arrays (first axis ``count``), new ones from
+            :func:`output`: they and their gradients are zeroed here, each chunk's rows before the
+            kernel runs on them.
         device: the Warp device.
         threads: threads to use (default :func:`get_num_threads`); CUDA always uses one launch.
         backward: what an active ``wp.Tape`` records for the backward pass (when an output requires
             gradients): ``None``, nothing; :data:`GENERATED`, the kernel's generated adjoint (the
             kernel must have one); or ``backward(tape)``, a hand-written gradient (see
             :func:`scatter`) that reads the outputs' ``.grad`` when the tape runs backwards.
+        covered: the pixels' mask (``count`` entries, non-zero where a pixel is shaded), when the
+            launch is over a G-buffer: chunks are then cut to equal estimated costs (see
+            :func:`_bounds`), so that the sky's cheap pixels do not unbalance the threads.
     """
     if count <= 0:
         return
@@ -180,15 +219,17 @@ def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: 
         tape.record_func(functools.partial(backward, tape), arrays=recorded)
     generated = bool(recorded) and backward is GENERATED
     if workers == 1:
+        _zero_rows(outputs)
         wp.launch(kernel, dim=count, inputs=[_chunk(a, 0, count, count) for a in inputs], outputs=outputs, device=device, record_tape=generated)
         return
     for out in outputs:
         if out.shape[0] != count:
             raise RuntimeError(f"warptex internal error: an output has {out.shape[0]} rows for {count} pixels")
-    split = _Split(kernel, device, count, inputs, outputs, workers)
+    split = _Split(kernel, device, count, inputs, outputs, workers, covered)
 
     def forward(worker: int, k: int) -> None:
         ins, outs, dim = split.arguments(inputs, k)
+        _zero_rows(outs)
         wp.launch(kernel, dim=dim, inputs=ins, outputs=outs, device=device, record_tape=False)
 
     split.run(forward)
@@ -196,7 +237,7 @@ def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: 
         tape.record_func(lambda: _backward(tape, split), arrays=recorded)
 
 
-def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads: int | None = None) -> None:
+def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads: int | None = None, covered: wp.array | None = None) -> None:
     """Launch a per-pixel ``kernel`` that *adds* into ``targets``, arrays shared by every pixel
     (texel gradients), split over CPU threads as :func:`launch` splits a launch.
 
@@ -206,7 +247,7 @@ def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads:
 
     Args:
         kernel: a Warp kernel; ``targets`` appear among its ``inputs`` (by identity).
-        count, inputs, device, threads: as for :func:`launch` (no outputs).
+        count, inputs, device, threads, covered: as for :func:`launch` (no outputs).
         targets: the arrays the kernel adds into.
     """
     if count <= 0:
@@ -216,7 +257,7 @@ def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads:
     if workers == 1:
         wp.launch(kernel, dim=count, inputs=[_chunk(a, 0, count, count) for a in inputs], device=device, record_tape=False)
         return
-    split = _Split(kernel, device, count, inputs, [], workers)
+    split = _Split(kernel, device, count, inputs, [], workers, covered)
     unique = list({id(t): t for t in targets}.values())  # one texture may feed several arguments
     private: list[tuple[wp.array, wp.array]] = []
     shared = [inputs]
@@ -229,8 +270,7 @@ def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads:
         ins, _, dim = split.arguments(shared[worker], k)
         wp.launch(kernel, dim=dim, inputs=ins, device=device, record_tape=False)
 
-    split.run(run, fixed=True, start=_zeroing(private))
-    _add_private(private, workers)
+    _run_private(split, run, private)
 
 
 def _workers(device, count: int, threads: int | None) -> int:
@@ -241,12 +281,13 @@ def _workers(device, count: int, threads: int | None) -> int:
 
 class _Split:
     """A launch cut into contiguous chunks, more chunks than workers (a worker whose chunks are
-    cheap, e.g. sky pixels, takes more of them), run by ``workers`` threads taking the next chunk."""
+    cheap, e.g. sky pixels, takes more of them), run by ``workers`` threads taking the next chunk.
+    With a G-buffer's mask (``covered``), the chunks hold equal estimated costs (:func:`_bounds`)."""
 
-    def __init__(self, kernel, device, count: int, inputs: list, outputs: list, workers: int):
+    def __init__(self, kernel, device, count: int, inputs: list, outputs: list, workers: int, covered: wp.array | None = None):
         self.kernel, self.device, self.count, self.inputs, self.outputs, self.workers = kernel, device, count, inputs, outputs, workers
         chunks = max(workers, min(count // MIN_PIXELS_PER_THREAD, workers * CHUNKS_PER_THREAD))
-        self.bounds = [count * k // chunks for k in range(chunks + 1)]
+        self.bounds = _bounds(count, chunks, covered)
 
     @property
     def chunks(self) -> int:
@@ -258,9 +299,8 @@ class _Split:
         ins = [_chunk(a, lo, hi, self.count) for a in inputs]
         return ins, [o[lo:hi] for o in self.outputs], hi - lo
 
-    def run(self, work, *, fixed: bool = False, start=None) -> None:
-        """``work(worker, chunk)`` for every chunk, after ``start(worker)`` (when given) on the
-        worker's thread; worker 0 is the calling thread. Workers take the
+    def run(self, work, *, fixed: bool = False) -> None:
+        """``work(worker, chunk)`` for every chunk; worker 0 is the calling thread. Workers take the
         next chunk as they finish one; with ``fixed``, worker ``w`` takes chunks ``w, w + workers,
         ...`` in order instead (interleaved, so each still gets a share of cheap and costly pixels):
         what accumulates into a worker's gradient arrays, and in what order, is then the same on
@@ -268,8 +308,6 @@ class _Split:
         counter = itertools.count()
 
         def loop(worker: int) -> None:
-            if start is not None:
-                start(worker)
             if fixed:
                 for k in range(worker, self.chunks, self.workers):
                     work(worker, k)
@@ -285,32 +323,47 @@ class _Split:
                 f.result()  # waits for every worker; re-raises a worker's exception here
 
 
+def _bounds(count: int, chunks: int, covered: wp.array | None) -> list[int]:
+    """The ``chunks + 1`` bounds of ``count`` pixels cut into ``chunks`` contiguous chunks: equal
+    pixel counts, or, given the mask ``covered``, equal costs (a covered pixel costs 1, another
+    :data:`UNCOVERED_COST`), cut at whole blocks of :data:`COVERAGE_BLOCK` pixels. Deterministic, so
+    the backward pass's fixed order (see :meth:`_Split.run`) stays reproducible."""
+    if covered is None or count < 2 * COVERAGE_BLOCK * chunks:
+        return [count * k // chunks for k in range(chunks + 1)]
+    mask = covered.numpy().reshape(-1)
+    full = count // COVERAGE_BLOCK * COVERAGE_BLOCK
+    shaded = np.count_nonzero(mask[:full].reshape(-1, COVERAGE_BLOCK), axis=1)
+    sizes = np.full(len(shaded), COVERAGE_BLOCK)
+    if full < count:
+        shaded = np.append(shaded, np.count_nonzero(mask[full:]))
+        sizes = np.append(sizes, count - full)
+    cost = np.cumsum(shaded + UNCOVERED_COST * (sizes - shaded))
+    ends = np.minimum((np.searchsorted(cost, cost[-1] * np.arange(1, chunks) / chunks) + 1) * COVERAGE_BLOCK, count)
+    return sorted({0, count, *(int(e) for e in ends)})  # a chunk never empty (bounds distinct)
+
+
 def _private(real: wp.array, worker: int) -> wp.array:
-    """Worker ``worker``'s private accumulator for the gradient array ``real``: the one kept from
-    the last backward pass when there is one, else a new one (kept while ``real`` lives). The
-    worker zeroes it on its own thread before its first chunk (:func:`_zeroing`), so the copies
-    are zeroed side by side rather than one after another before the launch."""
+    """Worker ``worker``'s private accumulator for the gradient array ``real``, zero: the one kept
+    from the last backward pass when there is one (:func:`_add_private` zeroed it), else a new one
+    (kept while ``real`` lives)."""
     copies = _private_arrays.setdefault(real, {})
     mine = copies.get(worker)
     if mine is None:  # keyed by the array itself, whose shape and dtype never change
-        mine = copies[worker] = wp.empty_like(real)
+        mine = copies[worker] = wp.zeros_like(real)
     return mine
 
 
-def _zeroing(private: list[tuple[wp.array, wp.array]]):
-    """``start(worker)`` for :meth:`_Split.run`: zero the accumulators of ``private`` that belong to
-    ``worker`` (recorded as ``(real, mine)`` pairs, worker by worker)."""
-    mine_of = {}
-    for real, mine in private:
-        for worker, copy in _private_arrays[real].items():
-            if copy is mine:
-                mine_of.setdefault(worker, {})[id(mine)] = mine
-
-    def start(worker: int) -> None:
-        for mine in mine_of.get(worker, {}).values():
-            mine.zero_()
-
-    return start
+def _run_private(split: _Split, work, private: list[tuple[wp.array, wp.array]]) -> None:
+    """``work(worker, chunk)`` for every chunk, in :meth:`_Split.run`'s fixed order, then the
+    private accumulators of ``private`` added into the real gradients (and zeroed again). A
+    failure leaves them holding part of a pass: they are dropped (the next pass makes new ones)."""
+    try:
+        split.run(work, fixed=True)
+        _add_private(private, split.workers)
+    except BaseException:
+        for real, _ in private:
+            _private_arrays.pop(real, None)
+        raise
 
 
 def _with_private_grads(a, private: list, worker: int):
@@ -347,16 +400,16 @@ def _backward(tape, split: _Split) -> None:
         adj_ins = [tape.get_adjoint(a) for a in ins]
         wp.launch(split.kernel, dim=dim, inputs=ins, outputs=outs, adj_inputs=adj_ins, adj_outputs=[o.grad for o in outs], device=split.device, adjoint=True)
 
-    split.run(backward, fixed=True, start=_zeroing(private))
-    _add_private(private, split.workers)
+    _run_private(split, backward, private)
 
 
 def _add_private(private: list[tuple[wp.array, wp.array]], workers: int) -> None:
-    """``real += mine`` for every distinct ``(real, mine)`` pair of gradient arrays (CPU: NumPy
-    views); a gradient that several arguments share has one accumulator per worker, added once.
+    """``real += mine; mine = 0`` for every distinct ``(real, mine)`` pair of gradient arrays (CPU:
+    NumPy views); a gradient that several arguments share has one accumulator per worker, added once.
 
     The arrays are cut into ``workers`` ranges of elements, summed on the workers side by side
-    (NumPy releases the GIL); each element still adds the workers' copies in worker order, so the
+    (NumPy releases the GIL), block by block so that each block of an accumulator is zeroed while
+    it is still in cache; each element still adds the workers' copies in worker order, so the
     result is the same bit for bit as one thread adding them."""
     pairs = []
     for real, mine in {id(mine): (real, mine) for real, mine in private}.values():
@@ -365,16 +418,42 @@ def _add_private(private: list[tuple[wp.array, wp.array]], workers: int) -> None
             pairs.append((target.reshape(-1), source.reshape(-1)))
         else:  # a strided gradient: added whole, on this thread
             target += source
+            source[...] = 0
     parts = workers if sum(t.nbytes for t, _ in pairs) >= PARALLEL_SUM_BYTES else 1
 
     def add(part: int) -> None:
         for target, source in pairs:
             lo, hi = target.size * part // parts, target.size * (part + 1) // parts
-            target[lo:hi] += source[lo:hi]
+            for start in range(lo, hi, SUM_BLOCK):
+                block = slice(start, min(start + SUM_BLOCK, hi))
+                target[block] += source[block]
+                source[block] = 0
 
-    futures = [_executor(workers - 1).submit(add, part) for part in range(1, parts)]
+    _side_by_side(add, parts)
+
+
+def _side_by_side(work, parts: int) -> None:
+    """``work(part)`` for ``part`` in ``0 .. parts - 1``, part 0 on this thread, the others on the
+    pool; returns when all are done (re-raising the first failure)."""
+    futures = [_executor(parts - 1).submit(work, part) for part in range(1, parts)]
     try:
-        add(0)
+        work(0)
     finally:
         for f in futures:
             f.result()
+
+
+def zero(array: wp.array) -> None:
+    """``array.zero_()``; on the CPU, a contiguous array of :data:`PARALLEL_SUM_BYTES` or more is
+    zeroed in ranges on :func:`get_num_threads` threads side by side (one core does not fill the
+    memory bandwidth: a 22 MB texel gradient took 1.8 ms on one thread, 1.2 ms on two here)."""
+    parts = get_num_threads() if array.device.is_cpu and array.is_contiguous and array.size * wp.types.type_size_in_bytes(array.dtype) >= PARALLEL_SUM_BYTES else 1
+    if parts == 1:
+        array.zero_()
+        return
+    flat = array.numpy().reshape(-1)
+
+    def clear(part: int) -> None:
+        flat[flat.size * part // parts : flat.size * (part + 1) // parts] = 0
+
+    _side_by_side(clear, parts)

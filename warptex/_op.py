@@ -68,7 +68,7 @@ def hand_written(others: list, linear: bool = True) -> bool:
     return linear and not needs_grad(*others) and not getattr(_forced, "value", False)
 
 
-def run(kernels: Kernels, count: int, *, inputs: list, outputs: list, device, by_hand: list = (), others: list = (), linear: bool = True) -> None:
+def run(kernels: Kernels, count: int, *, inputs: list, outputs: list, device, by_hand: list = (), others: list = (), linear: bool = True, covered: wp.array | None = None) -> None:
     """Launch ``kernels`` over ``count`` pixels and record the backward pass a ``wp.Tape`` needs.
 
     Args:
@@ -84,29 +84,30 @@ def run(kernels: Kernels, count: int, *, inputs: list, outputs: list, device, by
             the generated adjoint runs.
         linear: whether the blend of taps is linear in the texels (``False``: a histogram blend,
             which only the generated adjoint differentiates).
+        covered: the G-buffer's mask, for a launch over a G-buffer (see :func:`~warptex._launch.launch`).
     """
     tape = active_tape()
     if tape is None or not any(o.requires_grad for o in outputs):
-        launch(kernels.forward, count, inputs=inputs, outputs=outputs, device=device)
+        launch(kernels.forward, count, inputs=inputs, outputs=outputs, device=device, covered=covered)
         return
     if kernels.texel_grad is not None and hand_written(others, linear):
-        backward = _texel_gradients(kernels.texel_grad, count, inputs, outputs, by_hand, device)
-        launch(kernels.forward, count, inputs=inputs, outputs=outputs, device=device, backward=backward)
+        backward = _texel_gradients(kernels.texel_grad, count, inputs, outputs, by_hand, device, covered)
+        launch(kernels.forward, count, inputs=inputs, outputs=outputs, device=device, backward=backward, covered=covered)
         return
     if kernels.adjoint is None:
         raise RuntimeError("warptex internal error: a gradient was asked for that this technique has no kernel for")
-    launch(kernels.adjoint, count, inputs=inputs, outputs=outputs, device=device, backward=GENERATED)
+    launch(kernels.adjoint, count, inputs=inputs, outputs=outputs, device=device, backward=GENERATED, covered=covered)
 
 
-def run_by_hand(kernels: Kernels, count: int, *, inputs: list, outputs: list, device, by_hand: list) -> None:
+def run_by_hand(kernels: Kernels, count: int, *, inputs: list, outputs: list, device, by_hand: list, covered: wp.array | None = None) -> None:
     """:func:`run` for a step whose hand-written gradient is always the one recorded, for a
     technique that composes it with a generated adjoint (e.g. a blend of stored samples)."""
     tape = active_tape()
-    backward = _texel_gradients(kernels.texel_grad, count, inputs, outputs, by_hand, device) if tape is not None else None
-    launch(kernels.forward, count, inputs=inputs, outputs=outputs, device=device, backward=backward)
+    backward = _texel_gradients(kernels.texel_grad, count, inputs, outputs, by_hand, device, covered) if tape is not None else None
+    launch(kernels.forward, count, inputs=inputs, outputs=outputs, device=device, backward=backward, covered=covered)
 
 
-def _texel_gradients(kernel, count: int, inputs: list, outputs: list, by_hand: list, device):
+def _texel_gradients(kernel, count: int, inputs: list, outputs: list, by_hand: list, device, covered=None):
     """``backward(tape)``: ``kernel`` adds the outputs' gradients, through the forward pass, into the
     gradients of the ``by_hand`` arrays that require them."""
 
@@ -118,7 +119,7 @@ def _texel_gradients(kernel, count: int, inputs: list, outputs: list, by_hand: l
             grads.append(per_pixel(grad)[0] if isinstance(a, PerPixel) else grad)
         adjoints = per_pixel(*[o.grad for o in outputs])
         targets = [g for g in grads if g is not None and not isinstance(g, PerPixel)]
-        scatter(kernel, count, inputs=[*inputs, *grads, *adjoints], targets=targets, device=device)
+        scatter(kernel, count, inputs=[*inputs, *grads, *adjoints], targets=targets, device=device, covered=covered)
 
     return backward
 

@@ -23,7 +23,7 @@ import types
 import numpy as np
 import warp as wp
 
-from warptex._launch import per_pixel
+from warptex._launch import output, per_pixel
 from warptex._op import Kernels, needs_grad, run
 from warptex._pack import sampler_args
 from warptex._validate import as_float_array, check_layer_count, param_array
@@ -358,7 +358,7 @@ def splat_atlas(
     uvs = gbuffer.uv_sets[uv_set]
     flat = [a.reshape((count,)) for a in (uvs["uv"], uvs["uv_dx"], uvs["uv_dy"], gbuffer.mask)]
     others = [atlas.texture.view.texels, wts, tiling, *flat]  # all differentiated by the generated adjoint
-    out = wp.zeros((count, atlas.channels), dtype=float, device=device, requires_grad=needs_grad(*others))
+    out = output((count, atlas.channels), dtype=float, device=device, requires_grad=needs_grad(*others))
     inputs = [atlas.texture.view, atlas.layout, idx, wts, tiling, *per_pixel(*flat), smp, int(bool(normalize))]
-    run(_KERNELS, count, inputs=inputs, outputs=[out], device=device, others=others)
+    run(_KERNELS, count, inputs=inputs, outputs=[out], device=device, others=others, covered=flat[3])
     return out.reshape((*gbuffer.resolution, atlas.channels))

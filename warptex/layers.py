@@ -11,7 +11,7 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
-from warptex._launch import per_pixel
+from warptex._launch import output, per_pixel
 from warptex._op import Kernels, hand_written, needs_grad, run, run_by_hand
 from warptex._pack import MAP_SAMPLER, projection_args, sampler_args, stochastic_args
 from warptex._validate import as_enum, check_layer_count, param_array
@@ -195,16 +195,16 @@ def splat(
     by_hand = [layers_read.view.texels, heights_read.view.texels if heights_read else None, maps.view.texels, params.transition, params.tiling if plain else None]
     others = [proj.sharpness, proj.offsets, *flat] + ([] if plain else [params.tiling])
     linear = stoch.histogram == 0 and height_stoch.histogram == 0  # the histogram blend is not linear in the texels
-    out = wp.zeros((count, layers.channels), dtype=float, device=device, requires_grad=needs_grad(*by_hand, *others))
+    out = output((count, layers.channels), dtype=float, device=device, requires_grad=needs_grad(*by_hand, *others))
     kernels = kl.splat_kernels(kl.capacity(num_layers))
     inputs = [layers_read.view, height_tex.view, maps.view, *per_pixel(*flat), params, proj, smp, map_smp, stoch, height_stoch]
     if active_tape() is not None and out.requires_grad and not hand_written(others, linear):
         sampled_grads = needs_grad(by_hand[0], by_hand[1], params.tiling, *others)  # what the stored samples differentiate into
         _splat_generated(kernels, count, inputs, out, flat, maps, params, map_smp, heights_read is not None, sampled_grads, device)
     elif plain:
-        run(Kernels(kernels["forward"], kernels["texel_grad"]), count, inputs=inputs, outputs=[out], device=device, by_hand=by_hand)
+        run(Kernels(kernels["forward"], kernels["texel_grad"]), count, inputs=inputs, outputs=[out], device=device, by_hand=by_hand, covered=flat[7])
     else:
-        run(Kernels(kernels["stochastic_forward"], kernels["stochastic_texel_grad"]), count, inputs=inputs, outputs=[out], device=device, by_hand=by_hand)
+        run(Kernels(kernels["stochastic_forward"], kernels["stochastic_texel_grad"]), count, inputs=inputs, outputs=[out], device=device, by_hand=by_hand, covered=flat[7])
     return out.reshape((*gbuffer.resolution, layers.channels))
 
 
@@ -252,11 +252,11 @@ def _splat_generated(kernels: dict, count: int, inputs: list, out: wp.array, fla
     sample stored per pixel (generated adjoint), then their blend (hand-written gradient, to the
     samples, the splat maps, the transition and the UVs through the maps' reads)."""
     num_layers = params.num_layers
-    samples = wp.zeros((count, num_layers), dtype=wp.vec4, device=device, requires_grad=sampled_grads)
-    height_samples = wp.zeros((count, num_layers if height_array else 1), dtype=float, device=device, requires_grad=sampled_grads and height_array)  # read with separate heights only
-    adjoint = kl.splat_samples_adjoint_kernel
-    run(Kernels(adjoint, None, adjoint), count, inputs=inputs, outputs=[samples, height_samples], device=device)
     uv0, mask = flat[0], flat[7]
+    samples = output((count, num_layers), dtype=wp.vec4, device=device, requires_grad=sampled_grads)
+    height_samples = output((count, num_layers if height_array else 1), dtype=float, device=device, requires_grad=sampled_grads and height_array)  # read with separate heights only
+    adjoint = kl.splat_samples_adjoint_kernel
+    run(Kernels(adjoint, None, adjoint), count, inputs=inputs, outputs=[samples, height_samples], device=device, covered=mask)
     blend_inputs = [maps.view, *per_pixel(uv0, mask), params, map_smp, *per_pixel(samples, height_samples)]
     by_hand = [maps.view.texels, params.transition, *per_pixel(uv0, samples, height_samples)]
-    run_by_hand(Kernels(kernels["blend"], kernels["blend_grad"]), count, inputs=blend_inputs, outputs=[out], device=device, by_hand=by_hand)
+    run_by_hand(Kernels(kernels["blend"], kernels["blend_grad"]), count, inputs=blend_inputs, outputs=[out], device=device, by_hand=by_hand, covered=mask)

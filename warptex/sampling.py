@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from warptex._launch import per_pixel
+from warptex._launch import output, per_pixel
 from warptex._op import Kernels, needs_grad, run
 from warptex._pack import lod_inputs, mip_levels, resolve_layer, sampler_args, vec2_array
 from warptex._validate import resolve_device
@@ -55,7 +55,7 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
 
     flat = uv.reshape((count,))
     others = [uv, dx, dy, lods]
-    out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=texture.requires_grad or needs_grad(*others))
+    out = output((count, texture.channels), dtype=float, device=device, requires_grad=texture.requires_grad or needs_grad(*others))
     if lod_source in (ks.LOD_NONE, ks.LOD_CONSTANT):  # one LOD for all: its levels resolved here
         level, fraction = mip_levels(constant_lod, smp, texture.num_levels)
         inputs = [texture.view, *per_pixel(flat, layers), smp, level, fraction, constant_layer]

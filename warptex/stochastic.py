@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from warptex._launch import per_pixel
+from warptex._launch import output, per_pixel
 from warptex._op import Kernels, needs_grad, run
 from warptex._pack import lod_inputs, resolve_layer, sampler_args, stochastic_args, vec2_array
 from warptex._validate import resolve_device
@@ -80,7 +80,7 @@ def stochastic(
     constant_layer, layers = resolve_layer(func, texture, layer, shape, device)
 
     others = [uv, dx, dy, lods]
-    out = wp.zeros((count, texture.channels), dtype=float, device=device, requires_grad=sampled.requires_grad or needs_grad(*others))
+    out = output((count, texture.channels), dtype=float, device=device, requires_grad=sampled.requires_grad or needs_grad(*others))
     inputs = [sampled.view, *per_pixel(uv.reshape((count,)), dx, dy, lods, layers), smp, params, lod_source, constant_lod, constant_layer]
     run(_KERNELS, count, inputs=inputs, outputs=[out], device=device, by_hand=[sampled.view.texels], others=others, linear=params.histogram == 0)
     return out.reshape((*(() if single else shape), texture.channels))

@@ -9,6 +9,7 @@ import numpy as np
 import warp as wp
 
 from warptex import io
+from warptex._launch import zero
 from warptex._validate import as_float_array
 from warptex.kernels import sampling as ks
 
@@ -303,9 +304,9 @@ class TextureArray:
         return self._level_numpy(self._chain.grad, level)
 
     def zero_grad(self) -> None:
-        """Reset the texel gradients of every level to zero."""
+        """Reset the texel gradients of every level to zero (on the CPU, on warptex's threads)."""
         if self._chain.grad is not None:
-            self._chain.grad.zero_()
+            zero(self._chain.grad)
 
     def _check_level(self, method: str, level) -> None:
         if isinstance(level, bool) or not isinstance(level, (int, np.integer)) or not 0 <= level < self.num_levels:

@@ -20,7 +20,7 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
-from warptex._launch import per_pixel
+from warptex._launch import output, per_pixel
 from warptex._op import Kernels, hand_written, needs_grad, run
 from warptex._pack import projection_args, sampler_args, stochastic_args
 from warptex._validate import as_enum, as_float
@@ -295,8 +295,8 @@ class _Setup:
 
     def launch(self, kernels: Kernels, channels: int, extra: list) -> wp.array:
         """Run ``kernels`` (colour or normal mapping) into a new ``(H, W, channels)`` array."""
-        out = wp.zeros((self.count, channels), dtype=float, device=self.device, requires_grad=needs_grad(*self.texels, *self.others))
-        run(kernels, self.count, inputs=[*self.inputs(), *extra], outputs=[out], device=self.device, by_hand=self.texels, others=self.others, linear=self.linear)
+        out = output((self.count, channels), dtype=float, device=self.device, requires_grad=needs_grad(*self.texels, *self.others))
+        run(kernels, self.count, inputs=[*self.inputs(), *extra], outputs=[out], device=self.device, by_hand=self.texels, others=self.others, linear=self.linear, covered=self.pixels[4])
         return out.reshape((*self.gbuffer.resolution, channels))
 
     def launch_normal(self, extra: list) -> wp.array:
@@ -305,12 +305,12 @@ class _Setup:
         texel gradient, then the normal from them (its generated adjoint has no sampling to replay)."""
         if active_tape() is None or not needs_grad(*self.texels) or not hand_written(self.others, self.linear):
             return self.launch(self.variant(_NORMAL), 3, extra)
-        samples = wp.zeros((self.count, 3), dtype=wp.vec4, device=self.device, requires_grad=True)
-        weights = wp.zeros(self.count, dtype=wp.vec3, device=self.device)
-        run(self.variant(_SAMPLES), self.count, inputs=self.inputs(), outputs=[samples, weights], device=self.device, by_hand=self.texels)
-        out = wp.zeros((self.count, 3), dtype=float, device=self.device, requires_grad=True)
         normal, mask = self.pixels[3], self.pixels[4]
-        run(_NORMAL_FROM_SAMPLES, self.count, inputs=[*per_pixel(samples, weights, normal, mask), self.proj, *extra], outputs=[out], device=self.device)
+        samples = output((self.count, 3), dtype=wp.vec4, device=self.device, requires_grad=True)
+        weights = output(self.count, dtype=wp.vec3, device=self.device)
+        run(self.variant(_SAMPLES), self.count, inputs=self.inputs(), outputs=[samples, weights], device=self.device, by_hand=self.texels, covered=mask)
+        out = output((self.count, 3), dtype=float, device=self.device, requires_grad=True)
+        run(_NORMAL_FROM_SAMPLES, self.count, inputs=[*per_pixel(samples, weights, normal, mask), self.proj, *extra], outputs=[out], device=self.device, covered=mask)
         return out.reshape((*self.gbuffer.resolution, 3))
 
 
