@@ -1,7 +1,9 @@
 """Samples per second of every warptex technique, against the peers a user would pick instead.
 
 For each technique the script times warptex forward and forward+backward (gradients of the sum
-of the output to every texel of every mip level), on one CPU thread and on all of them, then the
+of the output to every texel of every mip level), on 1, 2, 4, ... CPU threads up to all of them
+(``--thread-counts`` picks others, e.g. more threads than cores to see what the per-thread
+gradient copies cost), then the
 peers in the same process on the same data (``benchmarks/peers``: vectorised NumPy, PyTorch built
 on ``grid_sample``, Dr.Jit's ``Texture2f`` on its LLVM backend; each skipped with its reason when
 not installed), and checks that every peer computes what warptex computes (max abs difference).
@@ -184,7 +186,7 @@ def measure_technique(technique: str, scene: str, args, tex, cache, backends: di
 
     forward, forward_backward = warptex_runs(technique, data, objs, args.device)
     reference = {}
-    thread_counts = [None] if cuda else sorted({1, args.threads})  # a CUDA launch fills the device
+    thread_counts = [None] if cuda else args.thread_counts  # a CUDA launch fills the device
     for threads in thread_counts:
         wt.set_num_threads(threads)
         out = forward().numpy()
@@ -192,8 +194,8 @@ def measure_technique(technique: str, scene: str, args, tex, cache, backends: di
         record("warptex", "forward", threads, best_time(forward, args.repeats))
         record("warptex", "forward+backward", threads, best_time(forward_backward, args.repeats))
     wt.set_num_threads(None if cuda else args.threads)
-    peer_threads = thread_counts[-1]
-    single_vs_all = float(np.nanmax(np.abs(reference[peer_threads] - reference[thread_counts[0]]))) if reference[peer_threads].size else 0.0
+    peer_threads = None if cuda else args.threads
+    single_vs_all = max((float(np.nanmax(np.abs(r - reference[thread_counts[0]]))) if r.size else 0.0) for r in reference.values())
 
     expected = reference[peer_threads]
     if "mask" in data:
@@ -219,6 +221,23 @@ def measure_technique(technique: str, scene: str, args, tex, cache, backends: di
     for rec in records:
         rec["threaded_max_abs_diff"] = single_vs_all
     return records
+
+
+def format_thread_scaling(records: list[dict]) -> str:
+    """warptex's speed-up over one thread at each thread count, forward and forward+backward, one
+    line per technique and scene ("" on a GPU, or with one thread count)."""
+    times = {}
+    for r in records:
+        if r["impl"] == "warptex" and r["threads"] is not None:
+            times.setdefault((r["technique"], r["scene"]), {}).setdefault(r["pass"], {})[r["threads"]] = r["seconds"]
+    counts = sorted({t for by_pass in times.values() for runs in by_pass.values() for t in runs})
+    if len(counts) < 2 or 1 not in counts:
+        return ""
+    lines = ["thread scaling (speed-up over 1 thread): " + ", ".join(f"{t} thr" for t in counts[1:])]
+    for (technique, scene), by_pass in times.items():
+        cells = [f"{p} " + " ".join(f"{runs[1] / runs[t]:5.2f}" for t in counts[1:]) for p, runs in by_pass.items()]
+        lines.append(f"  {technique:16s} {scene:8s} " + "   ".join(cells))
+    return "\n".join(lines)
 
 
 def format_rows(records: list[dict], threaded_diff: float) -> str:
@@ -314,6 +333,9 @@ def run(args) -> dict:
         result["scaling"] = scaling(args, backends, report)
         plot_scaling(args.out / "scaling.png", result["scaling"], args.threads if not wp.get_device(args.device).is_cuda else args.device)
         report(f"plot: {args.out / 'scaling.png'}")
+    summary = format_thread_scaling(records)
+    if summary:
+        report(summary)
     return result
 
 
@@ -323,7 +345,9 @@ def parse(argv=None):
     p.add_argument("--json", type=Path, help="write the results here")
     p.add_argument("--out", type=Path, default=Path("bench_out"), help="folder for the scaling plot")
     p.add_argument("--device", default="cpu", help="Warp device: cpu or cuda:N (default: cpu)")
-    p.add_argument("--threads", type=int, default=None, help="threads for the all-core figures (default: every core)")
+    p.add_argument("--threads", type=int, default=None, help="threads for the all-core figures and the peers (default: every core)")
+    p.add_argument("--thread-counts", type=int, nargs="+", default=None, metavar="N",
+                   help="warptex's thread counts (default: 1, 2, 4, ... and --threads; --quick: 1 and --threads)")
     p.add_argument("--repeats", type=int, default=None, help="timed runs per figure (default 5, quick 1)")
     p.add_argument("--techniques", nargs="+", default=list(TECHNIQUES), choices=TECHNIQUES)
     p.add_argument("--peers", nargs="*", default=list(peers.BACKENDS), choices=peers.BACKENDS)
@@ -336,6 +360,10 @@ def parse(argv=None):
     except (RuntimeError, ValueError) as err:
         p.error(f"--device {args.device!r}: {err}")
     args.threads = args.threads or wt.get_num_threads()
+    if args.threads < 1 or any(n < 1 for n in args.thread_counts or ()):
+        p.error("--threads and --thread-counts must be >= 1")
+    doubling = [] if args.quick else [2**k for k in range(1, args.threads.bit_length()) if 2**k < args.threads]
+    args.thread_counts = sorted({1, args.threads, *(args.thread_counts if args.thread_counts is not None else doubling)})
     args.repeats = args.repeats or (1 if args.quick else 5)
     args.sizes = {"sphere": 256, "terrain": 128, "random": 1 << 16} if args.quick else {"sphere": 1024, "terrain": 512, "random": 1 << 20}
     args.texture_size = 256 if args.quick else 1024
