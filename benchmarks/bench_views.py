@@ -8,8 +8,8 @@ against one call per view, Adam from ``torch.optim``) when torch is installed. I
 per view and iteration and the loop's time over the batch's (issue 20 asks for at least 1.5).
 
 Why batching pays on the CPU: warptex splits a launch over threads in chunks of at least 16384
-pixels, so one 192 x 256 view keeps at most 3 threads busy (unevenly), and every call zeroes and
-sums per-thread gradient copies of the textures; a batch fills every core once per iteration.
+pixels, so one 192 x 256 view keeps at most 3 threads busy, and every call sums per-thread
+gradient copies of the textures; a batch fills every core once per iteration.
 
     python benchmarks/bench_views.py                  # 8 views, 5 iterations, 3 repeats
     python benchmarks/bench_views.py --views 4 --resolution 96x128 --json r.json

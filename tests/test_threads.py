@@ -373,3 +373,16 @@ def test_zero_grad_clears_a_large_gradient_on_the_threads(threads):
     grad.fill_(wp.vec4(1.0, 2.0, 3.0, 4.0))
     tex.zero_grad()
     np.testing.assert_array_equal(grad.numpy(), 0)
+
+
+@pytest.mark.parametrize("workers", [2, 3, 4, 16])
+def test_every_worker_gets_as_many_chunks(workers):
+    """The backward pass hands chunks out in a fixed order (w, w + workers, ...): a whole number of
+    chunks per worker gives each the same share (a 192 x 256 view in 3 chunks on 2 workers gave one
+    twice the other's work)."""
+    for count in (workers * _launch.MIN_PIXELS_PER_THREAD, 192 * 256, 5 * _launch.MIN_PIXELS_PER_THREAD + 7, 1 << 20):
+        if count < workers * _launch.MIN_PIXELS_PER_THREAD:
+            continue
+        split = _launch._Split(None, wp.get_device("cpu"), count, [], [], workers)
+        assert split.chunks % workers == 0 and workers <= split.chunks <= workers * _launch.CHUNKS_PER_THREAD
+        assert min(np.diff(split.bounds)) >= _launch.MIN_PIXELS_PER_THREAD

@@ -286,7 +286,9 @@ class _Split:
 
     def __init__(self, kernel, device, count: int, inputs: list, outputs: list, workers: int, covered: wp.array | None = None):
         self.kernel, self.device, self.count, self.inputs, self.outputs, self.workers = kernel, device, count, inputs, outputs, workers
-        chunks = max(workers, min(count // MIN_PIXELS_PER_THREAD, workers * CHUNKS_PER_THREAD))
+        # A whole number of chunks per worker: the backward's fixed order (see run) then gives
+        # every worker the same share (3 chunks on 2 workers left one with twice the other's work).
+        chunks = workers * max(1, min(count // (MIN_PIXELS_PER_THREAD * workers), CHUNKS_PER_THREAD))
         self.bounds = _bounds(count, chunks, covered)
 
     @property
