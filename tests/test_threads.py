@@ -318,6 +318,9 @@ def test_chunks_hold_equal_costs_of_covered_pixels():
     assert _launch._bounds(count, chunks, None) == even
     assert _launch._bounds(count, chunks, wp.array(np.ones(count, np.float32))) == even
     assert _launch._bounds(count, chunks, wp.zeros(count, dtype=float)) == even  # all sky: all alike
+    assert _launch._bounds(count, chunks, wp.array(np.full(count, np.nan, np.float32))) == even  # never NaN bounds
+    odd = _launch._bounds(count, chunks, wp.array(mask * 5.0 - 1.0))  # not a 0/1 mask: still a valid cut
+    assert odd[0] == 0 and odd[-1] == count and (np.diff(odd) > 0).all()
 
 
 def test_private_copies_are_left_zero_and_dropped_after_a_failure(threads, monkeypatch):

@@ -329,16 +329,21 @@ def _bounds(count: int, chunks: int, covered: wp.array | None) -> list[int]:
     """The ``chunks + 1`` bounds of ``count`` pixels cut into ``chunks`` contiguous chunks: equal
     pixel counts, or, given the mask ``covered``, equal costs (a covered pixel costs 1, another
     :data:`UNCOVERED_COST`), cut at whole blocks of :data:`COVERAGE_BLOCK` pixels. Deterministic, so
-    the backward pass's fixed order (see :meth:`_Split.run`) stays reproducible."""
+    the backward pass's fixed order (see :meth:`_Split.run`) stays reproducible.
+
+    The covered pixels of a block are counted as the sum of its mask, exact for the 0/1 masks the
+    rasteriser and ``GBuffer.from_arrays`` write (and 2.5× faster than counting non-zeros: 1.3 ms
+    for 4M pixels); other values only skew the estimate, never the result."""
     if covered is None or count < 2 * COVERAGE_BLOCK * chunks:
         return [count * k // chunks for k in range(chunks + 1)]
     mask = covered.numpy().reshape(-1)
     full = count // COVERAGE_BLOCK * COVERAGE_BLOCK
-    shaded = np.count_nonzero(mask[:full].reshape(-1, COVERAGE_BLOCK), axis=1)
-    sizes = np.full(len(shaded), COVERAGE_BLOCK)
+    shaded = mask[:full].reshape(-1, COVERAGE_BLOCK).sum(axis=1)
+    sizes = np.full(len(shaded), float(COVERAGE_BLOCK))
     if full < count:
-        shaded = np.append(shaded, np.count_nonzero(mask[full:]))
+        shaded = np.append(shaded, mask[full:].sum())
         sizes = np.append(sizes, count - full)
+    shaded = np.clip(np.nan_to_num(shaded), 0.0, sizes)
     cost = np.cumsum(shaded + UNCOVERED_COST * (sizes - shaded))
     ends = np.minimum((np.searchsorted(cost, cost[-1] * np.arange(1, chunks) / chunks) + 1) * COVERAGE_BLOCK, count)
     return sorted({0, count, *(int(e) for e in ends)})  # a chunk never empty (bounds distinct)
