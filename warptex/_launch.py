@@ -280,8 +280,9 @@ def _workers(device, count: int, threads: int | None) -> int:
 
 
 class _Split:
-    """A launch cut into contiguous chunks, more chunks than workers (a worker whose chunks are
-    cheap, e.g. sky pixels, takes more of them), run by ``workers`` threads taking the next chunk.
+    """A launch cut into contiguous chunks, up to :data:`CHUNKS_PER_THREAD` per worker and as many
+    for each (a worker whose chunks are cheap, e.g. sky pixels, takes more of them when they are
+    handed out as workers finish), run by ``workers`` threads taking the next chunk.
     With a G-buffer's mask (``covered``), the chunks hold equal estimated costs (:func:`_bounds`)."""
 
     def __init__(self, kernel, device, count: int, inputs: list, outputs: list, workers: int, covered: wp.array | None = None):
