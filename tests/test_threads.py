@@ -389,3 +389,33 @@ def test_every_worker_gets_as_many_chunks(workers):
         split = _launch._Split(None, wp.get_device("cpu"), count, [], [], workers)
         assert split.chunks % workers == 0 and workers <= split.chunks <= workers * _launch.CHUNKS_PER_THREAD
         assert min(np.diff(split.bounds)) >= _launch.MIN_PIXELS_PER_THREAD
+
+
+@pytest.mark.parametrize("filter_, lod, levels", [("bilinear", None, (0, 0)), ("trilinear", 1.3, (1, 2)), ("nearest", 2.7, (3, 3))])
+def test_a_constant_lod_sums_only_the_levels_it_reads(filter_, lod, levels, threads, monkeypatch):
+    """A lookup at one LOD for all UVs reads one or two mip levels, so its texel gradient lands
+    there only: the per-thread copies are summed over those levels' entries alone, and the
+    gradient of every level still equals one thread's (the other levels' copies stay zero)."""
+    uv = _uv(70000)
+    image = np.random.default_rng(8).random((64, 64, 4)).astype(np.float32)
+    weights = np.random.default_rng(9).random((70000, 4)).astype(np.float32)
+    seen = []
+    real_add = _launch._add_private
+    monkeypatch.setattr(_launch, "_add_private", lambda private, workers, entries=None: (seen.append(dict(entries or {})), real_add(private, workers, entries))[1])
+    grads = []
+    for n in (1, 3):
+        threads(n)
+        tex = wt.Texture(image, requires_grad=True)
+        tape = wp.Tape()
+        with tape:
+            out = wt.sample(tex, uv, lod=lod, sampler=wt.Sampler(filter=filter_, address="wrap"))
+        out.grad.assign(weights)
+        tape.backward()
+        grads.append([tex.grad(level) for level in range(tex.num_levels)])
+        if n == 3:
+            real = tex.view.texels.grad
+            assert [list(e.values()) for e in seen] == [[tex.level_entries(*levels)]]
+            assert all((c.numpy() == 0).all() for c in _launch._private_arrays[real].values())
+    for level, (one, three) in enumerate(zip(*grads)):
+        np.testing.assert_allclose(three, one, rtol=1e-5, atol=1e-6)
+        assert (np.abs(one).sum() > 0) == (levels[0] <= level <= levels[1])

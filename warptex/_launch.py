@@ -237,7 +237,7 @@ def launch(kernel, count: int, *, inputs: list, outputs: list, device, threads: 
         tape.record_func(lambda: _backward(tape, split), arrays=recorded)
 
 
-def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads: int | None = None, covered: wp.array | None = None) -> None:
+def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads: int | None = None, covered: wp.array | None = None, entries: dict | None = None) -> None:
     """Launch a per-pixel ``kernel`` that *adds* into ``targets``, arrays shared by every pixel
     (texel gradients), split over CPU threads as :func:`launch` splits a launch.
 
@@ -249,6 +249,9 @@ def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads:
         kernel: a Warp kernel; ``targets`` appear among its ``inputs`` (by identity).
         count, inputs, device, threads, covered: as for :func:`launch` (no outputs).
         targets: the arrays the kernel adds into.
+        entries: ``{id(target): (start, stop)}`` for targets the kernel adds into only there (the
+            mip levels a constant-LOD lookup reads): only those entries of the private copies
+            are summed (the others stay zero).
     """
     if count <= 0:
         return
@@ -270,7 +273,7 @@ def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads:
         ins, _, dim = split.arguments(shared[worker], k)
         wp.launch(kernel, dim=dim, inputs=ins, device=device, record_tape=False)
 
-    _run_private(split, run, private)
+    _run_private(split, run, private, entries)
 
 
 def _workers(device, count: int, threads: int | None) -> int:
@@ -361,13 +364,14 @@ def _private(real: wp.array, worker: int) -> wp.array:
     return mine
 
 
-def _run_private(split: _Split, work, private: list[tuple[wp.array, wp.array]]) -> None:
+def _run_private(split: _Split, work, private: list[tuple[wp.array, wp.array]], entries: dict | None = None) -> None:
     """``work(worker, chunk)`` for every chunk, in :meth:`_Split.run`'s fixed order, then the
-    private accumulators of ``private`` added into the real gradients (and zeroed again). A
-    failure leaves them holding part of a pass: they are dropped (the next pass makes new ones)."""
+    private accumulators of ``private`` added into the real gradients (and zeroed again; see
+    :func:`_add_private` for ``entries``). A failure leaves them holding part of a pass: they are
+    dropped (the next pass makes new ones)."""
     try:
         split.run(work, fixed=True)
-        _add_private(private, split.workers)
+        _add_private(private, split.workers, entries)
     except BaseException:
         for real, _ in private:
             _private_arrays.pop(real, None)
@@ -411,9 +415,11 @@ def _backward(tape, split: _Split) -> None:
     _run_private(split, backward, private)
 
 
-def _add_private(private: list[tuple[wp.array, wp.array]], workers: int) -> None:
+def _add_private(private: list[tuple[wp.array, wp.array]], workers: int, entries: dict | None = None) -> None:
     """``real += mine; mine = 0`` for every distinct ``(real, mine)`` pair of gradient arrays (CPU:
     NumPy views); a gradient that several arguments share has one accumulator per worker, added once.
+    Where ``entries`` gives ``real`` a ``(start, stop)`` range, only those entries are (the kernel
+    added nowhere else, so the rest of ``mine`` is still zero).
 
     The arrays are cut into ``workers`` ranges of elements, summed on the workers side by side
     (NumPy releases the GIL), block by block so that each block of an accumulator is zeroed while
@@ -422,6 +428,9 @@ def _add_private(private: list[tuple[wp.array, wp.array]], workers: int) -> None
     pairs = []
     for real, mine in {id(mine): (real, mine) for real, mine in private}.values():
         target, source = real.numpy(), mine.numpy()  # CPU arrays: views of the same memory
+        if entries and id(real) in entries:
+            start, stop = entries[id(real)]
+            target, source = target[start:stop], source[start:stop]
         if target.flags.c_contiguous and source.flags.c_contiguous:
             pairs.append((target.reshape(-1), source.reshape(-1)))
         else:  # a strided gradient: added whole, on this thread

@@ -68,7 +68,7 @@ def hand_written(others: list, linear: bool = True) -> bool:
     return linear and not needs_grad(*others) and not getattr(_forced, "value", False)
 
 
-def run(kernels: Kernels, count: int, *, inputs: list, outputs: list, device, by_hand: list = (), others: list = (), linear: bool = True, covered: wp.array | None = None) -> None:
+def run(kernels: Kernels, count: int, *, inputs: list, outputs: list, device, by_hand: list = (), others: list = (), linear: bool = True, covered: wp.array | None = None, touched: list | None = None) -> None:
     """Launch ``kernels`` over ``count`` pixels and record the backward pass a ``wp.Tape`` needs.
 
     Args:
@@ -85,13 +85,16 @@ def run(kernels: Kernels, count: int, *, inputs: list, outputs: list, device, by
         linear: whether the blend of taps is linear in the texels (``False``: a histogram blend,
             which only the generated adjoint differentiates).
         covered: the G-buffer's mask, for a launch over a G-buffer (see :func:`~warptex._launch.launch`).
+        touched: per ``by_hand`` array, the ``(start, stop)`` entries the hand-written gradient can
+            add into, where fewer than all (a constant-LOD lookup reads one or two mip levels): only
+            those are summed from the per-thread copies (``None``: all).
     """
     tape = active_tape()
     if tape is None or not any(o.requires_grad for o in outputs):
         launch(kernels.forward, count, inputs=inputs, outputs=outputs, device=device, covered=covered)
         return
     if kernels.texel_grad is not None and hand_written(others, linear):
-        backward = _texel_gradients(kernels.texel_grad, count, inputs, outputs, by_hand, device, covered)
+        backward = _texel_gradients(kernels.texel_grad, count, inputs, outputs, by_hand, device, covered, touched)
         launch(kernels.forward, count, inputs=inputs, outputs=outputs, device=device, backward=backward, covered=covered)
         return
     if kernels.adjoint is None:
@@ -107,19 +110,21 @@ def run_by_hand(kernels: Kernels, count: int, *, inputs: list, outputs: list, de
     launch(kernels.forward, count, inputs=inputs, outputs=outputs, device=device, backward=backward, covered=covered)
 
 
-def _texel_gradients(kernel, count: int, inputs: list, outputs: list, by_hand: list, device, covered=None):
+def _texel_gradients(kernel, count: int, inputs: list, outputs: list, by_hand: list, device, covered=None, touched=None):
     """``backward(tape)``: ``kernel`` adds the outputs' gradients, through the forward pass, into the
     gradients of the ``by_hand`` arrays that require them."""
 
     def backward(tape):
-        grads = []
-        for a in by_hand:
+        grads, entries = [], {}
+        for a, span in zip(by_hand, touched or [None] * len(by_hand)):
             array = _array(a)
             grad = tape.get_adjoint(array) if array is not None and array.requires_grad else None  # registered for tape.zero()
             grads.append(per_pixel(grad)[0] if isinstance(a, PerPixel) else grad)
+            if grad is not None and span is not None:
+                entries[id(grad)] = span
         adjoints = per_pixel(*[o.grad for o in outputs])
         targets = [g for g in grads if g is not None and not isinstance(g, PerPixel)]
-        scatter(kernel, count, inputs=[*inputs, *grads, *adjoints], targets=targets, device=device, covered=covered)
+        scatter(kernel, count, inputs=[*inputs, *grads, *adjoints], targets=targets, device=device, covered=covered, entries=entries)
 
     return backward
 

@@ -56,12 +56,14 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
     flat = uv.reshape((count,))
     others = [uv, dx, dy, lods]
     out = output((count, texture.channels), dtype=float, device=device, requires_grad=texture.requires_grad or needs_grad(*others))
+    touched = None  # the texel entries the gradient can reach, when known (all levels otherwise)
     if lod_source in (ks.LOD_NONE, ks.LOD_CONSTANT):  # one LOD for all: its levels resolved here
         level, fraction = mip_levels(constant_lod, smp, texture.num_levels)
         inputs = [texture.view, *per_pixel(flat, layers), smp, level, fraction, constant_layer]
         kernels = _LEVEL_KERNELS
+        touched = [texture.level_entries(level, level + (fraction > 0.0))]
     else:
         inputs = [texture.view, *per_pixel(flat, dx, dy, lods, layers), smp, lod_source, constant_lod, constant_layer]
         kernels = _KERNELS
-    run(kernels, count, inputs=inputs, outputs=[out], device=device, by_hand=[texture.view.texels], others=others)
+    run(kernels, count, inputs=inputs, outputs=[out], device=device, by_hand=[texture.view.texels], others=others, touched=touched)
     return out.reshape((*(() if single else shape), texture.channels))

@@ -312,6 +312,12 @@ class TextureArray:
         if isinstance(level, bool) or not isinstance(level, (int, np.integer)) or not 0 <= level < self.num_levels:
             raise ValueError(f"{self._name}.{method}(): level must be an int in [0, {self.num_levels - 1}], got {level!r}")
 
+    def level_entries(self, first: int, last: int) -> tuple[int, int]:
+        """``(start, stop)``: the entries of the texel chain (``view.texels``) that levels ``first``
+        to ``last`` (inclusive) occupy, every layer."""
+        h, w = self._sizes[last]
+        return self._offsets[first], self._offsets[last] + self.num_layers * h * w
+
     def _level_array(self, buffer: wp.array, level: int) -> wp.array:
         h, w = self._sizes[level]
         start = self._offsets[level]
