@@ -418,7 +418,7 @@ def _backward(tape, split: _Split) -> None:
 def _add_private(private: list[tuple[wp.array, wp.array]], workers: int, entries: dict | None = None) -> None:
     """``real += mine; mine = 0`` for every distinct ``(real, mine)`` pair of gradient arrays (CPU:
     NumPy views); a gradient that several arguments share has one accumulator per worker, added once.
-    Where ``entries`` gives ``real`` a ``(start, stop)`` range, only those entries are (the kernel
+    Where ``entries`` gives ``real`` a ``(start, stop)`` range, only those entries are summed (the kernel
     added nowhere else, so the rest of ``mine`` is still zero).
 
     The arrays are cut into ``workers`` ranges of elements, summed on the workers side by side
