@@ -61,7 +61,7 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
         level, fraction = mip_levels(constant_lod, smp, texture.num_levels)
         inputs = [texture.view, *per_pixel(flat, layers), smp, level, fraction, constant_layer]
         kernels = _LEVEL_KERNELS
-        touched = [texture.level_entries(level, level + (fraction > 0.0))]
+        touched = [texture.level_entries(level, level + 1 if fraction > 0.0 else level)]  # trilinear reads the next level too
     else:
         inputs = [texture.view, *per_pixel(flat, dx, dy, lods, layers), smp, lod_source, constant_lod, constant_layer]
         kernels = _KERNELS
