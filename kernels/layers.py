@@ -54,7 +54,7 @@ import warp as wp
 
 from . import ADJOINT_MODULE, out_of_line, specialised
 from .projection import ProjectionArgs, plane_coords, plane_footprint, plane_uv, surface_frame, triplanar_weights, u_sign
-from .sampling import SamplerArgs, TextureView, lod_scale_slope, read_channels, sample_footprint_derivatives, sample_lod, sample_lod_derivatives, scatter_lod, texture_footprint, write_channels
+from .sampling import SamplerArgs, TexelGrad, TextureView, lod_scale_slope, read_channels, sample_footprint_derivatives, sample_lod, sample_lod_derivatives, scatter_lod, texture_footprint, write_channels
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, sample_stochastic_call, scatter_plain, scatter_stochastic
 
 PROJECT_UV = wp.constant(0)  # UV0 × tiling
@@ -214,7 +214,7 @@ def pick_stochastic(stoch: StochasticArgs, height_stoch: StochasticArgs, t: wp.i
 
 
 @wp.func
-def pick_grad(grad_layers: wp.array(dtype=wp.vec4), grad_heights: wp.array(dtype=wp.vec4), t: wp.int32):
+def pick_grad(grad_layers: TexelGrad, grad_heights: TexelGrad, t: wp.int32):
     """The texel gradient of texture ``t`` (see :func:`pick_texture`)."""
     grad = grad_layers
     if t == 1:
@@ -262,12 +262,12 @@ def _read_layer(sample, name: str, one_call: bool, decorate=wp.func):
 
 def _scatter_layer(scatter, name: str, one_call: bool):
     def scatter_layer(
-        tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, params: SplatArgs, proj: ProjectionArgs, uv0: wp.vec2, uv0_dx: wp.vec2, uv0_dy: wp.vec2,
+        tex: TextureView, grad: TexelGrad, layer: wp.int32, params: SplatArgs, proj: ProjectionArgs, uv0: wp.vec2, uv0_dx: wp.vec2, uv0_dy: wp.vec2,
         p: wp.vec3, n: wp.vec3, tri_w: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, smp: SamplerArgs, stoch: StochasticArgs, g: wp.vec4,
     ):  # fmt: skip
         """Add the gradient ``g`` of ``read_layer`` (same arguments; linear blends only) into
         ``grad``, the texels' gradient; nothing when ``grad`` is empty (not needed)."""
-        if grad.shape[0] > 0:
+        if grad.texels.shape[0] > 0:
             if wp.static(one_call):  # as in read_layer
                 for k in range(layer_reads(params)):
                     uv, fp, weight = layer_read(tex, layer, k, params, proj, uv0, uv0_dx, uv0_dy, p, n, tri_w, dpdx, dpdy, smp)
@@ -493,10 +493,10 @@ def splat_kernels(cap: int) -> dict:
         return gm
 
     @wp.func(module=module)
-    def scatter_maps(maps: TextureView, grad_maps: wp.array(dtype=wp.vec4), uv: wp.vec2, map_smp: SamplerArgs, gr: weights_t, params: SplatArgs):
+    def scatter_maps(maps: TextureView, grad_maps: TexelGrad, uv: wp.vec2, map_smp: SamplerArgs, gr: weights_t, params: SplatArgs):
         """Add ``gr``, the gradient of the raw splat values, into the splat-map texels (``grad_maps``;
         nothing when it is empty)."""
-        if grad_maps.shape[0] > 0:
+        if grad_maps.texels.shape[0] > 0:
             for m in range(map_count(params)):
                 scatter_lod(maps, grad_maps, m, uv, 0.0, map_smp, map_gradient(gr, m, params))
 
@@ -586,9 +586,9 @@ def splat_kernels(cap: int) -> dict:
             map_smp: SamplerArgs,
             stoch: StochasticArgs,
             height_stoch: StochasticArgs,
-            grad_layers: wp.array(dtype=wp.vec4),
-            grad_heights: wp.array(dtype=wp.vec4),
-            grad_maps: wp.array(dtype=wp.vec4),
+            grad_layers: TexelGrad,
+            grad_heights: TexelGrad,
+            grad_maps: TexelGrad,
             grad_transition: wp.array(dtype=float),
             grad_tiling: wp.array(dtype=float),
             adj_out: wp.array2d(dtype=float),
@@ -708,7 +708,7 @@ def splat_kernels(cap: int) -> dict:
         map_smp: SamplerArgs,
         samples: wp.array2d(dtype=wp.vec4),
         height_samples: wp.array2d(dtype=float),
-        grad_maps: wp.array(dtype=wp.vec4),
+        grad_maps: TexelGrad,
         grad_transition: wp.array(dtype=float),
         grad_uv0: wp.array(dtype=wp.vec2),
         grad_samples: wp.array2d(dtype=wp.vec4),

@@ -55,6 +55,26 @@ class TextureView:
     num_layers: wp.int32
 
 
+# Entries of a texel gradient per tile of :class:`TexelGrad`: 2**10 vec4 entries, 16 KB.
+TILE_SHIFT = wp.constant(10)
+TILE_MASK = wp.constant((1 << TILE_SHIFT) - 1)
+
+
+@wp.struct
+class TexelGrad:
+    """A texel gradient, where the ``scatter_*`` functions add: ``texels``, laid out as a
+    :class:`TextureView`'s texels (empty: not needed, nothing is added), and ``tiles``, one entry
+    per ``2**TILE_SHIFT`` entries of ``texels`` (empty: not tracked). ``tiles[t] = k > 0`` says
+    that the gradient may be non-zero in tiles ``t .. t + k - 1`` (see :func:`mark_rows`); 0, that
+    nothing was added from tile ``t`` on (other marks may still reach over it).
+
+    warptex's CPU threads add into private copies of a gradient, and sum into the real one only
+    the tiles a copy marked (``warptex._launch``)."""
+
+    texels: wp.array(dtype=wp.vec4)
+    tiles: wp.array(dtype=wp.int32)
+
+
 @wp.struct
 class SamplerArgs:
     """How a texture is filtered and addressed, as kernels see it (packed from ``warptex.Sampler``)."""
@@ -498,30 +518,53 @@ sample_footprint_call = _sample_footprint(sample_lod_call, "sample_footprint_cal
 
 
 @wp.func
-def scatter_texel(grad: wp.array(dtype=wp.vec4), start: wp.int32, w: wp.int32, xi: wp.int32, yi: wp.int32, g: wp.vec4):
-    """Add ``g`` to the gradient of the texel :func:`texel` reads (nothing for the border colour)."""
-    if xi >= 0 and yi >= 0:
-        wp.atomic_add(grad, start + yi * w + xi, g)
+def mark_rows(tiles: wp.array(dtype=wp.int32), start: wp.int32, w: wp.int32, j: wp.int32):
+    """Mark rows ``j`` and ``j + 1`` of a level ``w`` texels wide (as :func:`texel` indexes it)
+    as added into: the tile where row ``j`` starts records how many tiles the two rows reach.
+
+    One mark per bilinear footprint, whose texels all lie in rows ``j0`` and ``j0 + 1``: a load
+    and a rarely taken store. It costs a bilinear backward about 10%, where a mark per texel cost
+    14-22%. Columns are not told apart: a mark covers whole rows."""
+    row = start + j * w
+    t = row >> TILE_SHIFT
+    reach = (((row & TILE_MASK) + 2 * w - 1) >> TILE_SHIFT) + 1
+    if tiles[t] < reach:
+        tiles[t] = reach
 
 
 @wp.func
-def scatter_bilinear(grad: wp.array(dtype=wp.vec4), start: wp.int32, w: wp.int32, i0: wp.int32, i1: wp.int32, j0: wp.int32, j1: wp.int32, fx: float, fy: float, g: wp.vec4):
-    """Add ``g`` times each bilinear weight into the four texels of :func:`bilinear_taps`."""
+def scatter_texel(grad: TexelGrad, start: wp.int32, w: wp.int32, xi: wp.int32, yi: wp.int32, g: wp.vec4):
+    """Add ``g`` to the gradient of the texel :func:`texel` reads (nothing for the border colour)."""
+    if xi >= 0 and yi >= 0:
+        wp.atomic_add(grad.texels, start + yi * w + xi, g)
+
+
+@wp.func
+def scatter_bilinear(grad: TexelGrad, start: wp.int32, w: wp.int32, i0: wp.int32, i1: wp.int32, j0: wp.int32, j1: wp.int32, fx: float, fy: float, g: wp.vec4):
+    """Add ``g`` times each bilinear weight into the four texels of :func:`bilinear_taps`, and
+    mark their rows where tiles are tracked."""
     top = g * (1.0 - fy)
     bottom = g * fy
     scatter_texel(grad, start, w, i0, j0, top * (1.0 - fx))
     scatter_texel(grad, start, w, i1, j0, top * fx)
     scatter_texel(grad, start, w, i0, j1, bottom * (1.0 - fx))
     scatter_texel(grad, start, w, i1, j1, bottom * fx)
+    if grad.tiles.shape[0] > 0:
+        if j0 >= 0:
+            mark_rows(grad.tiles, start, w, j0)  # rows j0 and j0 + 1
+        if j1 >= 0 and (j0 < 0 or j1 < j0 or j1 > j0 + 1):  # j1 is neither j0 nor j0 + 1 (j0 a border row, or j1 wrapped)
+            mark_rows(grad.tiles, start, w, j1)
 
 
 @wp.func
-def scatter_levels(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, level: wp.int32, fraction: float, smp: SamplerArgs, g: wp.vec4):
+def scatter_levels(tex: TextureView, grad: TexelGrad, layer: wp.int32, uv: wp.vec2, level: wp.int32, fraction: float, smp: SamplerArgs, g: wp.vec4):
     """Add the gradient ``g`` of :func:`sample_levels` (same arguments) into the texels it reads."""
     r = wp.vec2(reduce_coord(uv[0], smp.address), reduce_coord(uv[1], smp.address))
     if smp.filter == FILTER_NEAREST:
         start, w, x, y = nearest_tap(tex, layer, level, r, smp)
         scatter_texel(grad, start, w, x, y, g)
+        if grad.tiles.shape[0] > 0 and y >= 0:
+            mark_rows(grad.tiles, start, w, y)
     else:
         finer = g
         if fraction > 0.0:
@@ -533,7 +576,7 @@ def scatter_levels(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.in
 
 
 @wp.func
-def scatter_lod(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, lod: float, smp: SamplerArgs, g: wp.vec4):
+def scatter_lod(tex: TextureView, grad: TexelGrad, layer: wp.int32, uv: wp.vec2, lod: float, smp: SamplerArgs, g: wp.vec4):
     """Add the gradient ``g`` of :func:`sample_lod` (same arguments) into the texels it reads;
     non-finite ``uv`` or ``lod`` read nothing and add nothing."""
     if finite_uv_lod(uv, lod):
@@ -542,7 +585,7 @@ def scatter_lod(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32
 
 
 @out_of_line
-def scatter_taps(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, g: wp.vec4):
+def scatter_taps(tex: TextureView, grad: TexelGrad, layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, g: wp.vec4):
     """:func:`scatter_footprint` for several taps, out of line."""
     share = g * (1.0 / fp[3])
     for k in range(footprint_taps(fp)):
@@ -550,7 +593,7 @@ def scatter_taps(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int3
 
 
 @wp.func
-def scatter_footprint(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, g: wp.vec4):
+def scatter_footprint(tex: TextureView, grad: TexelGrad, layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, g: wp.vec4):
     """Add the gradient ``g`` of :func:`sample_footprint` (same arguments) into the texels it reads."""
     if fp[3] == 1.0:
         scatter_lod(tex, grad, layer, uv, fp[0], smp, g)
@@ -777,7 +820,7 @@ def sample_texel_grad_kernel(
     lod_source: wp.int32,
     constant_lod: float,
     constant_layer: wp.int32,
-    grad: wp.array(dtype=wp.vec4),
+    grad: TexelGrad,
     adj_out: wp.array2d(dtype=float),
 ):
     """Add the gradient of :func:`sample_kernel` (same inputs) with respect to the texels into
@@ -796,7 +839,7 @@ def sample_level_texel_grad_kernel(
     level: wp.int32,
     fraction: float,
     constant_layer: wp.int32,
-    grad: wp.array(dtype=wp.vec4),
+    grad: TexelGrad,
     adj_out: wp.array2d(dtype=float),
 ):
     """Add the gradient of :func:`sample_level_kernel` (same inputs) with respect to the texels into

@@ -32,7 +32,7 @@ periodic address modes (wrap, period 1; mirror, period 2), the only ones stochas
 import warp as wp
 
 from . import ADJOINT_MODULE, hashing, out_of_line, sampling, specialised
-from .sampling import SamplerArgs, TextureView
+from .sampling import SamplerArgs, TexelGrad, TextureView
 
 METHOD_NONE = wp.constant(0)
 METHOD_HASH4 = wp.constant(1)
@@ -389,7 +389,7 @@ sample_stochastic_call = _sample_stochastic(sampling.sample_lod_call, stochastic
 
 
 @wp.func
-def scatter_stochastic(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, params: StochasticArgs, g: wp.vec4):
+def scatter_stochastic(tex: TextureView, grad: TexelGrad, layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, params: StochasticArgs, g: wp.vec4):
     """Add the gradient ``g`` of :func:`sample_stochastic` (same arguments) into the texels it
     reads: each tap's weight times ``g``. Linear blends only (no histogram, which is not linear
     in the texels)."""
@@ -415,7 +415,7 @@ def sample_plain(tex: TextureView, layer: wp.int32, uv: wp.vec2, fp: wp.vec4, sm
 
 
 @wp.func
-def scatter_plain(tex: TextureView, grad: wp.array(dtype=wp.vec4), layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, params: StochasticArgs, g: wp.vec4):
+def scatter_plain(tex: TextureView, grad: TexelGrad, layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, params: StochasticArgs, g: wp.vec4):
     """:func:`scatter_stochastic` for ``METHOD_NONE`` without the stochastic code."""
     sampling.scatter_footprint(tex, grad, layer, uv, fp, smp, g)
 
@@ -467,7 +467,7 @@ def stochastic_texel_grad_kernel(
     lod_source: wp.int32,
     constant_lod: float,
     constant_layer: wp.int32,
-    grad: wp.array(dtype=wp.vec4),
+    grad: TexelGrad,
     adj_out: wp.array2d(dtype=float),
 ):
     """Add the gradient of :func:`stochastic_kernel` (same inputs; linear blends only) with respect

@@ -41,7 +41,7 @@ from .projection import (
     surface_frame,
     u_sign,
 )
-from .sampling import SamplerArgs, TextureView, read_channels, sample_footprint, scatter_footprint, write_channels
+from .sampling import SamplerArgs, TexelGrad, TextureView, read_channels, sample_footprint, scatter_footprint, write_channels
 from .stochastic import StochasticArgs, sample_stochastic, scatter_stochastic
 
 MODULE = "warptex.triplanar"
@@ -72,7 +72,7 @@ def axis_texture(tex_x: TextureView, tex_y: TextureView, tex_z: TextureView, axi
 
 
 @wp.func
-def axis_grad(grad_x: wp.array(dtype=wp.vec4), grad_y: wp.array(dtype=wp.vec4), grad_z: wp.array(dtype=wp.vec4), axis: wp.int32):
+def axis_grad(grad_x: TexelGrad, grad_y: TexelGrad, grad_z: TexelGrad, axis: wp.int32):
     """The texel gradient of :func:`axis_texture`'s texture."""
     grad = grad_x
     if axis == 1:
@@ -108,12 +108,12 @@ def face_texture_per_axis(
 
 @wp.func
 def face_grad(
-    grad_x: wp.array(dtype=wp.vec4),
-    grad_y: wp.array(dtype=wp.vec4),
-    grad_z: wp.array(dtype=wp.vec4),
-    grad_neg_x: wp.array(dtype=wp.vec4),
-    grad_neg_y: wp.array(dtype=wp.vec4),
-    grad_neg_z: wp.array(dtype=wp.vec4),
+    grad_x: TexelGrad,
+    grad_y: TexelGrad,
+    grad_z: TexelGrad,
+    grad_neg_x: TexelGrad,
+    grad_neg_y: TexelGrad,
+    grad_neg_z: TexelGrad,
     axis: wp.int32,
     n: wp.vec3,
 ):
@@ -126,12 +126,12 @@ def face_grad(
 
 @wp.func
 def face_grad_per_axis(
-    grad_x: wp.array(dtype=wp.vec4),
-    grad_y: wp.array(dtype=wp.vec4),
-    grad_z: wp.array(dtype=wp.vec4),
-    grad_neg_x: wp.array(dtype=wp.vec4),
-    grad_neg_y: wp.array(dtype=wp.vec4),
-    grad_neg_z: wp.array(dtype=wp.vec4),
+    grad_x: TexelGrad,
+    grad_y: TexelGrad,
+    grad_z: TexelGrad,
+    grad_neg_x: TexelGrad,
+    grad_neg_y: TexelGrad,
+    grad_neg_z: TexelGrad,
     axis: wp.int32,
     n: wp.vec3,
 ):
@@ -159,7 +159,7 @@ def sample_one_plain(
 @wp.func
 def scatter_one(
     tex: TextureView,
-    grad: wp.array(dtype=wp.vec4),
+    grad: TexelGrad,
     layer: wp.int32,
     axis: wp.int32,
     proj: ProjectionArgs,
@@ -173,14 +173,14 @@ def scatter_one(
 ):
     """Add the gradient ``g`` of projection ``axis`` (as :func:`sample_one` reads it; linear
     blends only) into ``grad``, the texels' gradient; nothing when ``grad`` is empty (not needed)."""
-    if grad.shape[0] > 0:
+    if grad.texels.shape[0] > 0:
         scatter_stochastic(tex, grad, layer, projection_uv(proj, axis, p, n), projection_footprint(tex, proj, axis, n, dpdx, dpdy, smp), smp, stoch, g)
 
 
 @wp.func
 def scatter_one_plain(
     tex: TextureView,
-    grad: wp.array(dtype=wp.vec4),
+    grad: TexelGrad,
     layer: wp.int32,
     axis: wp.int32,
     proj: ProjectionArgs,
@@ -193,7 +193,7 @@ def scatter_one_plain(
     g: wp.vec4,
 ):
     """:func:`scatter_one` for plain sampling (as :func:`sample_one_plain` reads it)."""
-    if grad.shape[0] > 0:
+    if grad.texels.shape[0] > 0:
         scatter_footprint(tex, grad, layer, projection_uv(proj, axis, p, n), projection_footprint(tex, proj, axis, n, dpdx, dpdy, smp), smp, g)
 
 
@@ -296,12 +296,12 @@ def _colour_texel_grad_kernel(module: str, scatter, select, select_grad):
         proj: ProjectionArgs,
         smp: SamplerArgs,
         stoch: StochasticArgs,
-        grad_x: wp.array(dtype=wp.vec4),
-        grad_y: wp.array(dtype=wp.vec4),
-        grad_z: wp.array(dtype=wp.vec4),
-        grad_neg_x: wp.array(dtype=wp.vec4),
-        grad_neg_y: wp.array(dtype=wp.vec4),
-        grad_neg_z: wp.array(dtype=wp.vec4),
+        grad_x: TexelGrad,
+        grad_y: TexelGrad,
+        grad_z: TexelGrad,
+        grad_neg_x: TexelGrad,
+        grad_neg_y: TexelGrad,
+        grad_neg_z: TexelGrad,
         adj_out: wp.array2d(dtype=float),
     ):
         """Add the gradient of :func:`triplanar_kernel` (same inputs; linear blends: plain sampling,
@@ -504,12 +504,12 @@ def _projection_texel_grad_kernel(module: str, scatter, select, select_grad):
         proj: ProjectionArgs,
         smp: SamplerArgs,
         stoch: StochasticArgs,
-        grad_x: wp.array(dtype=wp.vec4),
-        grad_y: wp.array(dtype=wp.vec4),
-        grad_z: wp.array(dtype=wp.vec4),
-        grad_neg_x: wp.array(dtype=wp.vec4),
-        grad_neg_y: wp.array(dtype=wp.vec4),
-        grad_neg_z: wp.array(dtype=wp.vec4),
+        grad_x: TexelGrad,
+        grad_y: TexelGrad,
+        grad_z: TexelGrad,
+        grad_neg_x: TexelGrad,
+        grad_neg_y: TexelGrad,
+        grad_neg_z: TexelGrad,
         adj_samples: wp.array2d(dtype=wp.vec4),
         adj_weights: wp.array(dtype=wp.vec3),
     ):

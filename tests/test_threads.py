@@ -239,9 +239,9 @@ def test_private_accumulators_are_kept_with_their_gradient(threads):
         kept.append(dict(_launch._private_arrays[real]))
         tex.zero_grad()
     assert set(kept[0]) == {1, 2, 3}  # one per worker but the first
-    assert all(kept[k][w] is kept[0][w] for k in range(4) for w in (1, 2, 3))
+    assert all(kept[k][w].array is kept[0][w].array for k in range(4) for w in (1, 2, 3))
 
-    gone = weakref.ref(kept[0][1])
+    gone = weakref.ref(kept[0][1].array)
     del tex, real, kept, tape, out
     gc.collect()
     assert gone() is None
@@ -327,7 +327,7 @@ def test_private_copies_are_left_zero_and_dropped_after_a_failure(threads, monke
     """A backward pass leaves its private gradient copies zeroed for the next (they are zeroed as
     they are added in). A pass that fails part way leaves them holding part of a sum: they are
     dropped, and the next pass, with new ones, gives the right gradient."""
-    threads(2)
+    threads(3)  # tiles are tracked from 3 workers
     g = _sphere()
     tex = _texture(requires_grad=True)
 
@@ -344,7 +344,7 @@ def test_private_copies_are_left_zero_and_dropped_after_a_failure(threads, monke
     want = gradient()
     real = tex.view.texels.grad
     copies = _launch._private_arrays[real]
-    assert set(copies) == {1} and (copies[1].numpy() == 0).all()
+    assert set(copies) == {1, 2} and all((c.array.numpy() == 0).all() and (c.tiles.numpy() == 0).all() for c in copies.values())
 
     calls, original = [], wp.launch
 
@@ -391,19 +391,43 @@ def test_every_worker_gets_as_many_chunks(workers):
         assert min(np.diff(split.bounds)) >= _launch.MIN_PIXELS_PER_THREAD
 
 
-@pytest.mark.parametrize("filter_, lod, levels", [("bilinear", None, (0, 0)), ("trilinear", 1.3, (1, 2)), ("nearest", 2.7, (3, 3))])
-def test_a_constant_lod_sums_only_the_levels_it_reads(filter_, lod, levels, threads, monkeypatch):
-    """A lookup at one LOD for all UVs reads one or two mip levels, so its texel gradient lands
-    there only: the per-thread copies are summed over those levels' entries alone, and the
-    gradient of every level still equals one thread's (the other levels' copies stay zero)."""
-    uv = _uv(70000)
-    image = np.random.default_rng(8).random((64, 64, 4)).astype(np.float32)
-    weights = np.random.default_rng(9).random((70000, 4)).astype(np.float32)
-    seen = []
+def _watch_sums(monkeypatch) -> tuple[list, list]:
+    """``(seen, entries)``: filled as ``_add_private`` runs, with ``_marked_tiles`` of every tracked
+    copy it sums and the ``entries`` it is given."""
+    seen, entries_seen = [], []
     real_add = _launch._add_private
-    monkeypatch.setattr(_launch, "_add_private", lambda private, workers, entries=None: (seen.append(dict(entries or {})), real_add(private, workers, entries))[1])
+
+    def add(private, workers, entries=None):
+        seen.extend(_marked_tiles(c) for _, c in private if c.tiles is not None)
+        entries_seen.append(dict(entries or {}))
+        real_add(private, workers, entries)
+
+    monkeypatch.setattr(_launch, "_add_private", add)
+    return seen, entries_seen
+
+
+def _marked_tiles(copy) -> tuple[np.ndarray, np.ndarray]:
+    """``(marked, written)``: a private copy's tile flags, and which of its tiles hold non-zero entries."""
+    tile = 1 << _launch.TILE_SHIFT
+    values = np.abs(copy.array.numpy()).reshape(copy.array.shape[0], -1).sum(axis=1)
+    written = np.add.reduceat(values, np.arange(0, len(values), tile)) > 0
+    return _launch._tiles_reached(copy.tiles.numpy()), written
+
+
+@pytest.mark.parametrize("filter_, lod, levels", [("bilinear", None, (0, 0)), ("trilinear", 1.3, (1, 2)), ("nearest", 2.7, (3, 3))])
+def test_private_copies_sum_only_the_tiles_they_marked(filter_, lod, levels, threads, monkeypatch):
+    """A private gradient copy marks the tiles its pixels add into: every tile it wrote is marked,
+    none outside the mip levels the lookup reads (one LOD for all UVs reads one or two; a mark
+    covers two rows, so the last row's reaches one row past), and only
+    the marked tiles are summed. The gradient of every level still equals one thread's, and the
+    copies and their marks are left clear. On 2 threads, whose copies are not tracked, only those
+    levels' entries are summed."""
+    uv = _uv(70000)
+    image = np.random.default_rng(8).random((128, 128, 4)).astype(np.float32)
+    weights = np.random.default_rng(9).random((70000, 4)).astype(np.float32)
+    seen, entries = _watch_sums(monkeypatch)
     grads = []
-    for n in (1, 3):
+    for n in (1, 2, 3):
         threads(n)
         tex = wt.Texture(image, requires_grad=True)
         tape = wp.Tape()
@@ -412,10 +436,120 @@ def test_a_constant_lod_sums_only_the_levels_it_reads(filter_, lod, levels, thre
         out.grad.assign(weights)
         tape.backward()
         grads.append([tex.grad(level) for level in range(tex.num_levels)])
-        if n == 3:
-            real = tex.view.texels.grad
-            assert [list(e.values()) for e in seen] == [[tex.level_entries(*levels)]]
-            assert all((c.numpy() == 0).all() for c in _launch._private_arrays[real].values())
-    for level, (one, three) in enumerate(zip(*grads)):
-        np.testing.assert_allclose(three, one, rtol=1e-5, atol=1e-6)
+    real = tex.view.texels.grad
+    tile = 1 << _launch.TILE_SHIFT
+    width = 128 >> levels[1]
+    first = tex._offsets[levels[0]] // tile
+    last = (tex._offsets[levels[1]] + width * width - 1 + width) // tile  # a mark covers two rows: may reach one row past the level
+    assert len(seen) == 2  # 3 threads: workers 1 and 2
+    for marked, written in seen:
+        assert written.any() and not (written & ~marked).any()
+        assert marked[first : last + 1].any() and not marked[:first].any() and not marked[last + 1 :].any()
+    assert [list(e.values()) for e in entries] == [[tex.level_entries(*levels)]] * 2  # on 2 and 3 threads
+    assert all((c.array.numpy() == 0).all() and (c.tiles.numpy() == 0).all() for c in _launch._private_arrays[real].values())
+    for level, (one, *more) in enumerate(zip(*grads)):
+        for other in more:
+            np.testing.assert_allclose(other, one, rtol=1e-5, atol=1e-6)
         assert (np.abs(one).sum() > 0) == (levels[0] <= level <= levels[1])
+
+
+def test_coherent_pixels_mark_a_part_of_the_texture(threads, monkeypatch):
+    """Pixels whose UVs follow the image (a sphere's) give each thread a band of the texture: a
+    private copy marks only part of the tiles, so less than the whole copy is summed, and the
+    gradient equals one thread's."""
+    g = _sphere()
+    image = np.random.default_rng(10).random((256, 256, 4)).astype(np.float32)
+    seen, _ = _watch_sums(monkeypatch)
+    grads = []
+    for n in (1, 3):
+        threads(n)
+        tex = wt.Texture(image, requires_grad=True)
+        tape = wp.Tape()
+        with tape:
+            out = wt.sample(tex, g.uv()["uv"], sampler=wt.Sampler(filter="bilinear", address="wrap"))
+        out.grad.fill_(1.0)
+        tape.backward()
+        grads.append(tex.grad())
+    level0 = 256 * 256 // (1 << _launch.TILE_SHIFT)
+    assert len(seen) == 2  # workers 1 and 2
+    for marked, written in seen:
+        assert not (written & ~marked).any()
+        assert 0 < marked[:level0].sum() < 0.75 * level0
+    np.testing.assert_allclose(grads[1], grads[0], rtol=1e-5, atol=1e-6)
+
+
+def test_add_private_sums_marked_tiles_in_worker_order():
+    """``_add_private`` on hand-made copies: marked tiles are added (each element adding the copies
+    in worker order, bit for bit as a serial sum) and zeroed, unmarked ones left alone, untracked
+    copies added whole; split into parts past PARALLEL_SUM_BYTES alike."""
+    rng = np.random.default_rng(11)
+    tile = 1 << _launch.TILE_SHIFT
+    for entries in (5 * tile + 7, 70 * tile + 3):  # one part; several (past PARALLEL_SUM_BYTES)
+        tiles = -(-entries // tile)
+        real = wp.array(rng.random((entries, 4)).astype(np.float32), dtype=wp.vec4)
+        start = real.numpy().copy()
+        private, want = [], start.copy()
+        for worker in range(3):
+            marks = rng.random(tiles) < 0.5 if worker < 2 else None
+            values = rng.random((entries, 4)).astype(np.float32)
+            if marks is not None:
+                values[~np.repeat(marks, tile)[:entries]] = 0
+            copy = _launch._Copy(wp.array(values, dtype=wp.vec4), None if marks is None else wp.array(marks.astype(np.int32), dtype=wp.int32))
+            private.append((real, copy))
+            want += values
+        _launch._add_private(private, workers=3)
+        np.testing.assert_array_equal(real.numpy(), want)
+        assert all((c.array.numpy() == 0).all() and (c.tiles is None or (c.tiles.numpy() == 0).all()) for _, c in private)
+
+
+@pytest.mark.parametrize("address", ["wrap", "clamp", "mirror", "border"])
+@pytest.mark.parametrize("filter_", ["nearest", "bilinear", "trilinear", "anisotropic"])
+@pytest.mark.parametrize("size", [(300, 37), (3, 2100)])  # rows not aligned with tiles (27.7 a tile); rows wider than one
+def test_tile_marks_cover_every_texel_written(size, filter_, address, threads, monkeypatch):
+    """Whatever the filter and address mode (edges, wrapped rows, border texels), every tile a
+    thread's private copy adds into is marked, and the threaded gradient equals one thread's."""
+    h, w = size
+    rng = np.random.default_rng(12)
+    image = rng.random((2, h, w, 4)).astype(np.float32)
+    n = 60000
+    uv = rng.uniform(-1.5, 2.5, (n, 2)).astype(np.float32)
+    uv[: n // 4] = np.round(uv[: n // 4] * 4) / 4  # on texel and texture edges
+    layer = rng.integers(0, 2, n).astype(np.int32)
+    dx = np.stack([rng.uniform(0.001, 0.05, n), rng.uniform(-0.01, 0.01, n)], axis=1).astype(np.float32)
+    dy = np.stack([rng.uniform(-0.01, 0.01, n), rng.uniform(0.001, 0.2, n)], axis=1).astype(np.float32)
+    weights = rng.random((n, 4)).astype(np.float32)
+    seen, _ = _watch_sums(monkeypatch)
+    # Each thread's pixels in a band of rows, so that a missed mark is not covered by the others'; in
+    # both orders, so that a wrapping footprint falls to a thread with private copies either way.
+    for order in (np.argsort(uv[:, 1] % 1.0), np.argsort(-(uv[:, 1] % 1.0))):
+        grads = []
+        for count in (1, 3):
+            threads(count)
+            tex = wt.TextureArray(image, requires_grad=True)
+            tape = wp.Tape()
+            with tape:
+                out = wt.sample(tex, uv[order], layer=layer[order], uv_dx=dx[order], uv_dy=dy[order], sampler=wt.Sampler(filter=filter_, address=address))
+            out.grad.assign(weights)
+            tape.backward()
+            grads.append(tex.view.texels.grad.numpy().copy())
+        # Float sums of up to ~10^4 terms (clamped edge texels), in another order; a tile left out would lose a third.
+        np.testing.assert_allclose(grads[1], grads[0], rtol=5e-4, atol=1e-4 * np.abs(grads[0]).max())
+
+
+def test_add_private_sums_only_the_entries_given():
+    """``entries`` (the mip levels a constant-LOD lookup reads) limits the sum of an untracked copy
+    to the tiles of that range: what lies outside (here planted against the contract) is not
+    added, and the range is left zero."""
+    tile = 1 << _launch.TILE_SHIFT
+    rng = np.random.default_rng(13)
+    real = wp.zeros(20 * tile, dtype=wp.vec4)
+    values = np.zeros((20 * tile, 4), np.float32)
+    values[5 * tile + 3 : 9 * tile - 7] = rng.random((4 * tile - 10, 4))
+    values[[0, 5 * tile - 1, 9 * tile, -1]] = 7.0  # outside the range's tiles
+    copy = _launch._Copy(wp.array(values, dtype=wp.vec4), None)
+    _launch._add_private([(real, copy)], workers=2, entries={id(real): (5 * tile + 3, 9 * tile - 7)})
+    inside = np.zeros(20 * tile, bool)
+    inside[5 * tile : 9 * tile] = True
+    np.testing.assert_array_equal(real.numpy()[inside], values[inside])
+    assert not real.numpy()[~inside].any() and not copy.array.numpy()[inside].any()
+    np.testing.assert_array_equal(copy.array.numpy()[~inside], values[~inside])

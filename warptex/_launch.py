@@ -19,7 +19,9 @@ arrays are kept while their real gradient lives, and zeroed as they are added in
 next backward pass: allocating them afresh cost more than the whole backward of a small image
 (page faults, ~0.5 ms per MB here, against ~0.07 ms per MB to zero an array in place), at the
 price of one extra copy of every shared gradient per extra thread, held as long as the gradient
-itself.
+itself. From :data:`TRACK_TILES_FROM` threads on, the copies of texel gradients also mark the
+tiles they add into (:class:`~warptex.kernels.sampling.TexelGrad`), and only those are summed:
+threads whose pixels read a part of a texture no longer each pay for all of it.
 
 The same page faults are why a launch's outputs are made with :func:`output` (allocated, not
 touched) and zeroed by :func:`launch` chunk by chunk, on the thread that then fills the chunk:
@@ -31,6 +33,7 @@ CUDA launches are never split: one launch fills the device.
 
 from __future__ import annotations
 
+import bisect
 import functools
 import itertools
 import os
@@ -43,6 +46,7 @@ import numpy as np
 import warp as wp
 
 from warptex._warp import active_tape, struct_fields, struct_like
+from warptex.kernels.sampling import TILE_SHIFT, TexelGrad
 
 # Below this many pixels per thread, handing work to a thread costs more than it saves.
 MIN_PIXELS_PER_THREAD = 16384
@@ -59,6 +63,11 @@ COVERAGE_BLOCK = 1024
 # Private gradient copies smaller than this in all are summed on one thread (handing out the work
 # costs more).
 PARALLEL_SUM_BYTES = 1 << 20
+# Private copies of texel gradients (``TexelGrad`` arguments) mark the tiles they add into from this
+# many workers on, and only those tiles are summed: marking costs the kernel one load per bilinear
+# footprint (10% of a bilinear backward), which the sum repays from 3 workers (at 2 a copy still
+# holds half the texture).
+TRACK_TILES_FROM = 3
 # Elements an accumulator is added and zeroed in at a time (256 KB of floats: in cache between the two).
 SUM_BLOCK = 1 << 16
 
@@ -243,37 +252,61 @@ def scatter(kernel, count: int, *, inputs: list, targets: list, device, threads:
 
     Warp's CPU atomics are plain read-modify-writes, so every worker but the first adds into
     private zeroed copies of ``targets``, summed into them once all chunks are done (equal to a
-    single launch up to float rounding). Not recorded on a tape: this is what a backward step runs.
+    single launch up to float rounding). A kernel argument of type
+    :class:`~warptex.kernels.sampling.TexelGrad` is given here as its gradient array (or ``None``:
+    not needed) and passed as one; a private copy passed so marks the tiles it adds into, and only
+    those are summed (a thread's pixels often read a part of a texture only). Not recorded on a
+    tape: this is what a backward step runs.
 
     Args:
         kernel: a Warp kernel; ``targets`` appear among its ``inputs`` (by identity).
         count, inputs, device, threads, covered: as for :func:`launch` (no outputs).
         targets: the arrays the kernel adds into.
         entries: ``{id(target): (start, stop)}`` for targets the kernel adds into only there (the
-            mip levels a constant-LOD lookup reads): only those entries of the private copies
-            are summed (the others stay zero).
+            mip levels a constant-LOD lookup reads): only the tiles of those entries are summed
+            from the private copies, tracked or not (the rest stays zero).
     """
     if count <= 0:
         return
     device = wp.get_device(device)
     workers = _workers(device, count, threads)
+    texel_grads = {i for i, arg in enumerate(kernel.adj.args) if arg.type is TexelGrad}
+    # Tiles are tracked in the copies of arrays passed only as TexelGrad arguments, from TRACK_TILES_FROM workers.
+    tracked = set() if workers < TRACK_TILES_FROM else {id(a) for i, a in enumerate(inputs) if i in texel_grads} - {id(a) for i, a in enumerate(inputs) if i not in texel_grads}
     if workers == 1:
-        wp.launch(kernel, dim=count, inputs=[_chunk(a, 0, count, count) for a in inputs], device=device, record_tape=False)
+        ins = _texel_grads(inputs, texel_grads, {})
+        wp.launch(kernel, dim=count, inputs=[_chunk(a, 0, count, count) for a in ins], device=device, record_tape=False)
         return
     split = _Split(kernel, device, count, inputs, [], workers, covered)
     unique = list({id(t): t for t in targets}.values())  # one texture may feed several arguments
-    private: list[tuple[wp.array, wp.array]] = []
-    shared = [inputs]
+    private: list[tuple[wp.array, _Copy]] = []
+    shared = [_texel_grads(inputs, texel_grads, {})]
     for worker in range(1, workers):
-        copies = {id(t): _private(t, worker) for t in unique}
+        copies = {id(t): _private(t, worker, tracked=id(t) in tracked) for t in unique}
         private += [(t, copies[id(t)]) for t in unique]
-        shared.append([copies.get(id(a), a) for a in inputs])
+        shared.append(_texel_grads(inputs, texel_grads, copies))
 
     def run(worker: int, k: int) -> None:
         ins, _, dim = split.arguments(shared[worker], k)
         wp.launch(kernel, dim=dim, inputs=ins, device=device, record_tape=False)
 
     _run_private(split, run, private, entries)
+
+
+def _texel_grads(inputs: list, positions: set, copies: dict) -> list:
+    """``inputs`` with each array replaced by its copy in ``copies`` (by id) where it has one, and
+    those at ``positions`` (``TexelGrad`` arguments) made :class:`TexelGrad` structs: the copy and
+    its tiles, the real gradient untracked, or nothing (``None``: not needed)."""
+    result = []
+    for i, a in enumerate(inputs):
+        copy = copies.get(id(a))
+        if i in positions:
+            grad = TexelGrad()
+            grad.texels, grad.tiles = (copy.array, copy.tiles) if copy is not None else (a, None)
+            result.append(grad)
+        else:
+            result.append(copy.array if copy is not None else a)
+    return result
 
 
 def _workers(device, count: int, threads: int | None) -> int:
@@ -353,22 +386,35 @@ def _bounds(count: int, chunks: int, covered: wp.array | None) -> list[int]:
     return sorted({0, count, *(int(e) for e in ends)})  # a chunk never empty (bounds distinct)
 
 
-def _private(real: wp.array, worker: int) -> wp.array:
+class _Copy(NamedTuple):
+    """A worker's private accumulator for a gradient array: ``array``, zero outside the tiles
+    marked in ``tiles`` (one flag per ``2**TILE_SHIFT`` entries; ``None``: not tracked, summed whole)."""
+
+    array: wp.array
+    tiles: wp.array | None
+
+
+def _private(real: wp.array, worker: int, tracked: bool = False) -> _Copy:
     """Worker ``worker``'s private accumulator for the gradient array ``real``, zero: the one kept
     from the last backward pass when there is one (:func:`_add_private` zeroed it), else a new one
-    (kept while ``real`` lives)."""
+    (kept while ``real`` lives); with tile flags when ``tracked`` (a ``TexelGrad`` argument)."""
     copies = _private_arrays.setdefault(real, {})
     mine = copies.get(worker)
     if mine is None:  # keyed by the array itself, whose shape and dtype never change
-        mine = copies[worker] = wp.zeros_like(real)
+        mine = copies[worker] = _Copy(wp.zeros_like(real), None)
+    if not tracked:  # summed whole (its tiles, if any, stay clear: nothing marks them)
+        return _Copy(mine.array, None)
+    if mine.tiles is None:
+        tiles = wp.zeros(-(-real.shape[0] // (1 << TILE_SHIFT)), dtype=wp.int32, device=real.device)
+        mine = copies[worker] = _Copy(mine.array, tiles)
     return mine
 
 
-def _run_private(split: _Split, work, private: list[tuple[wp.array, wp.array]], entries: dict | None = None) -> None:
+def _run_private(split: _Split, work, private: list[tuple[wp.array, _Copy]], entries: dict | None = None) -> None:
     """``work(worker, chunk)`` for every chunk, in :meth:`_Split.run`'s fixed order, then the
     private accumulators of ``private`` added into the real gradients (and zeroed again; see
-    :func:`_add_private` for ``entries``). A failure leaves them holding part of a pass: they are
-    dropped (the next pass makes new ones)."""
+    :func:`_add_private` for ``entries``). A failure leaves them holding part of a pass: they are dropped (the
+    next pass makes new ones)."""
     try:
         split.run(work, fixed=True)
         _add_private(private, split.workers, entries)
@@ -390,7 +436,7 @@ def _with_private_grads(a, private: list, worker: int):
             return a
         mine = _private(a.grad, worker)
         private.append((a.grad, mine))
-        return wp.array(ptr=a.ptr, dtype=a.dtype, shape=a.shape, strides=a.strides, device=a.device, grad=mine)
+        return wp.array(ptr=a.ptr, dtype=a.dtype, shape=a.shape, strides=a.strides, device=a.device, grad=mine.array)
     if wp.types.is_struct(a):
         copy = struct_like(a)
         for name, value in struct_fields(a).items():
@@ -401,10 +447,11 @@ def _with_private_grads(a, private: list, worker: int):
 
 def _backward(tape, split: _Split) -> None:
     """The adjoints of a split launch, run by the same workers: worker 0 accumulates into the real
-    gradients, the others into private copies of the shared ones, added in at the end."""
+    gradients, the others into private copies of the shared ones, added in at the end (summed
+    whole: Warp's generated adjoints do not mark tiles)."""
     for a in split.inputs:  # registers the real gradients with the tape (for tape.zero()), as a recorded launch does
         tape.get_adjoint(a.array if isinstance(a, PerPixel) else a)
-    private: list[tuple[wp.array, wp.array]] = []  # (real gradient, a worker's private one)
+    private: list[tuple[wp.array, _Copy]] = []  # (real gradient, a worker's private one)
     shared = [split.inputs] + [[a if isinstance(a, PerPixel) else _with_private_grads(a, private, w) for a in split.inputs] for w in range(1, split.workers)]
 
     def backward(worker: int, k: int) -> None:
@@ -415,36 +462,77 @@ def _backward(tape, split: _Split) -> None:
     _run_private(split, backward, private)
 
 
-def _add_private(private: list[tuple[wp.array, wp.array]], workers: int, entries: dict | None = None) -> None:
-    """``real += mine; mine = 0`` for every distinct ``(real, mine)`` pair of gradient arrays (CPU:
-    NumPy views); a gradient that several arguments share has one accumulator per worker, added once.
-    Where ``entries`` gives ``real`` a ``(start, stop)`` range, only those entries are summed (the kernel
-    added nowhere else, so the rest of ``mine`` is still zero).
+class _Sum(NamedTuple):
+    """One real gradient (flat NumPy view) and what is added into it: each private copy (flat) with
+    the runs ``(start, stop)`` of tiles where it may be non-zero, in worker order."""
 
-    The arrays are cut into ``workers`` ranges of elements, summed on the workers side by side
-    (NumPy releases the GIL), block by block so that each block of an accumulator is zeroed while
-    it is still in cache; each element still adds the workers' copies in worker order, so the
-    result is the same bit for bit as one thread adding them."""
-    pairs = []
-    for real, mine in {id(mine): (real, mine) for real, mine in private}.values():
-        target, source = real.numpy(), mine.numpy()  # CPU arrays: views of the same memory
-        if entries and id(real) in entries:
-            start, stop = entries[id(real)]
-            target, source = target[start:stop], source[start:stop]
-        if target.flags.c_contiguous and source.flags.c_contiguous:
-            pairs.append((target.reshape(-1), source.reshape(-1)))
-        else:  # a strided gradient: added whole, on this thread
+    target: np.ndarray
+    tile: int  # scalars per tile
+    sources: list
+
+
+def _tiles_reached(marks: np.ndarray) -> np.ndarray:
+    """Which tiles a copy's ``TexelGrad.tiles`` marks reach: ``marks[t] = k`` reaches tiles ``t``
+    to ``t + k - 1``."""
+    index = np.arange(len(marks))
+    return np.maximum.accumulate(np.where(marks > 0, index + marks, 0)) > index
+
+
+def _add_private(private: list[tuple[wp.array, _Copy]], workers: int, entries: dict | None = None) -> None:
+    """``real += mine; mine = 0`` for every distinct ``(real, mine)`` pair of gradient arrays (CPU:
+    NumPy views); a gradient that several arguments share has one accumulator per worker, added
+    once. Where ``mine`` tracks tiles, only the tiles it marked are added and zeroed (the rest is
+    still zero), and the marks are cleared; where ``entries`` gives ``real`` a ``(start, stop)``
+    range, only the tiles of that range (the kernel added nowhere else).
+
+    The tiles of all real gradients are cut into ``workers`` ranges of equal work (marked tiles),
+    summed on the workers side by side (NumPy releases the GIL), block by block so that each block
+    of an accumulator is zeroed while it is still in cache; each element still adds the workers'
+    copies in worker order, so the result is the same bit for bit as one thread adding them."""
+    sums: dict[int, _Sum] = {}
+    for real, mine in {id(mine.array): (real, mine) for real, mine in private}.values():
+        target, source = real.numpy(), mine.array.numpy()  # CPU arrays: views of the same memory
+        marked = None if mine.tiles is None else _tiles_reached(mine.tiles.numpy())
+        if mine.tiles is not None:
+            mine.tiles.zero_()
+        if real.size == 0:
+            continue
+        if not (target.flags.c_contiguous and source.flags.c_contiguous):  # a strided gradient: added whole, on this thread
             target += source
             source[...] = 0
-    parts = workers if sum(t.nbytes for t, _ in pairs) >= PARALLEL_SUM_BYTES else 1
+            continue
+        target, source = target.reshape(-1), source.reshape(-1)
+        tile = (source.size // real.size) << TILE_SHIFT
+        if marked is None:
+            marked = np.ones(-(-source.size // tile), dtype=bool)
+        if entries and id(real) in entries:
+            start, stop = entries[id(real)]
+            marked[: start >> TILE_SHIFT] = False
+            marked[-(-stop >> TILE_SHIFT) :] = False
+        edges = np.flatnonzero(np.diff(marked, prepend=False, append=False))  # starts and stops of runs, alternating
+        sums.setdefault(id(real), _Sum(target, tile, [])).sources.append((source, marked, edges[0::2].tolist(), edges[1::2].tolist()))
+    if not sums:
+        return
+    # Work per tile (copies to add there), every gradient's tiles end to end, cut into equal parts.
+    work = [np.sum([marked for _, marked, _, _ in s.sources], axis=0) for s in sums.values()]
+    offsets = np.cumsum([0] + [len(w) for w in work])
+    cumulative = np.cumsum(np.concatenate(work))
+    nbytes = sum(int(w.sum()) * s.tile * s.target.itemsize for w, s in zip(work, sums.values()))
+    parts = workers if nbytes >= PARALLEL_SUM_BYTES else 1
+    cuts = [0, *(np.searchsorted(cumulative, cumulative[-1] * np.arange(1, parts) / parts) + 1).tolist(), len(cumulative)]
 
     def add(part: int) -> None:
-        for target, source in pairs:
-            lo, hi = target.size * part // parts, target.size * (part + 1) // parts
-            for start in range(lo, hi, SUM_BLOCK):
-                block = slice(start, min(start + SUM_BLOCK, hi))
-                target[block] += source[block]
-                source[block] = 0
+        for s, offset in zip(sums.values(), offsets):
+            lo, hi = max(cuts[part] - offset, 0), min(cuts[part + 1] - offset, len(s.sources[0][1]))
+            for source, _, starts, stops in s.sources:  # worker order
+                for k in range(bisect.bisect_right(stops, lo), len(starts)):
+                    first, last = max(starts[k], lo), min(stops[k], hi)
+                    if first >= last:
+                        break
+                    for start in range(first * s.tile, min(last * s.tile, s.target.size), SUM_BLOCK):
+                        block = slice(start, min(start + SUM_BLOCK, last * s.tile, s.target.size))
+                        s.target[block] += source[block]
+                        source[block] = 0
 
     _side_by_side(add, parts)
 
