@@ -209,7 +209,7 @@ LOOKUPS = {  # sample() keywords, each a way of choosing the levels
 }
 
 
-@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("threads", [1, 2, 3])  # 3: private copies track tiles
 @pytest.mark.parametrize("lookup", LOOKUPS)
 def test_hand_written_texel_gradients_equal_the_generated_adjoint(rng, monkeypatch, lookup, threads):
     """Only texels need gradients: the hand-written texel gradient runs (and only then), and gives

@@ -177,17 +177,18 @@ BACKWARD_CASES = {
 }
 
 
-@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("threads", [1, 2, 3])  # 3: private copies track tiles
 @pytest.mark.parametrize("case", list(BACKWARD_CASES))
 def test_hand_written_gradients_equal_the_generated_adjoint(monkeypatch, case, threads):
     """The hand-written gradient (texels, transition and, for plain sampling, tiling) against the
     generated adjoint (a sharpness array needs gradients too): layers (every level), separate
     heights, splat maps (negative values included, which the clamp cuts), the transition and the
-    tiling, on the terrain at 192² (36 864 pixels: split over two threads). The histogram blend,
+    tiling, on the terrain at 192² (36 864 pixels: split over two threads; 256² over three, whose
+    private copies track tiles). The histogram blend,
     not linear in the texels, always takes the generated adjoint; with a stochastic method the
     tiling is left out (its gradient needs the generated adjoint)."""
     c = dict(BACKWARD_CASES[case])
-    g = wt.rasterize(terrain(resolution=(65, 65)), terrain_camera((192, 192)))
+    g = wt.rasterize(terrain(resolution=(65, 65)), terrain_camera((256, 256) if threads == 3 else (192, 192)))
     rng = np.random.default_rng(11)
     count = c.pop("layers")
     layer_data = rng.random((count, 24, 20, 4)).astype(np.float32)
@@ -214,7 +215,7 @@ def test_hand_written_gradients_equal_the_generated_adjoint(monkeypatch, case, t
             textures[0] = hist.texture
         return splat(g, layers, maps, **with_sampler(kw)), textures
 
-    weights = rng.normal(size=(192, 192, 4)).astype(np.float32)
+    weights = rng.normal(size=(*g.resolution, 4)).astype(np.float32)
     hand, forced, generated, scatters = texel_gradients_both_ways(monkeypatch, threads, forward, weights)
     assert scatters == (0 if histogram else 1)
     assert_same_gradients(hand, forced)

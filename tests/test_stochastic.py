@@ -356,7 +356,7 @@ def test_texel_gradients_match_finite_differences(rng, case, backward):
         np.testing.assert_allclose((grad * direction).sum(), fd, rtol=1e-4, atol=1e-4)
 
 
-@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("threads", [1, 2, 3])  # 3: private copies track tiles
 @pytest.mark.parametrize("case", [*GRAD_CASES, "hex derivatives", "hex histogram"])
 def test_hand_written_texel_gradients_equal_the_generated_adjoint(rng, monkeypatch, case, threads):
     """The hand-written texel gradient (only texels need gradients) gives what the generated adjoint

@@ -253,7 +253,7 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("threads", [1, 2, 3])  # 3: private copies track tiles
 @pytest.mark.parametrize("case", CASES)
 def test_hand_written_texel_gradients_equal_the_generated_adjoint(monkeypatch, case, threads):
     """The hand-written texel gradient (only texels need gradients) against the generated adjoint
