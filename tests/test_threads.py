@@ -414,6 +414,22 @@ def _marked_tiles(copy) -> tuple[np.ndarray, np.ndarray]:
     return _launch._tiles_reached(copy.tiles.numpy()), written
 
 
+def _sample_backward(threads, count, image, uv, out_grad, make=wt.Texture, **kw):
+    """A new texture of ``image`` that requires gradients, after ``wt.sample(tex, uv, **kw)``'s backward
+    pass on ``count`` threads with the output gradient ``out_grad`` (an array, or a value for all)."""
+    threads(count)
+    tex = make(image, requires_grad=True)
+    tape = wp.Tape()
+    with tape:
+        out = wt.sample(tex, uv, **kw)
+    if np.ndim(out_grad):
+        out.grad.assign(out_grad)
+    else:
+        out.grad.fill_(out_grad)
+    tape.backward()
+    return tex
+
+
 @pytest.mark.parametrize("filter_, lod, levels", [("bilinear", None, (0, 0)), ("trilinear", 1.3, (1, 2)), ("nearest", 2.7, (3, 3))])
 def test_private_copies_sum_only_the_tiles_they_marked(filter_, lod, levels, threads, monkeypatch):
     """A private gradient copy marks the tiles its pixels add into: every tile it wrote is marked,
@@ -428,13 +444,7 @@ def test_private_copies_sum_only_the_tiles_they_marked(filter_, lod, levels, thr
     seen, entries = _watch_sums(monkeypatch)
     grads = []
     for n in (1, 2, 3):
-        threads(n)
-        tex = wt.Texture(image, requires_grad=True)
-        tape = wp.Tape()
-        with tape:
-            out = wt.sample(tex, uv, lod=lod, sampler=wt.Sampler(filter=filter_, address="wrap"))
-        out.grad.assign(weights)
-        tape.backward()
+        tex = _sample_backward(threads, n, image, uv, weights, lod=lod, sampler=wt.Sampler(filter=filter_, address="wrap"))
         grads.append([tex.grad(level) for level in range(tex.num_levels)])
     real = tex.view.texels.grad
     tile = 1 << _launch.TILE_SHIFT
@@ -460,16 +470,7 @@ def test_coherent_pixels_mark_a_part_of_the_texture(threads, monkeypatch):
     g = _sphere()
     image = np.random.default_rng(10).random((256, 256, 4)).astype(np.float32)
     seen, _ = _watch_sums(monkeypatch)
-    grads = []
-    for n in (1, 3):
-        threads(n)
-        tex = wt.Texture(image, requires_grad=True)
-        tape = wp.Tape()
-        with tape:
-            out = wt.sample(tex, g.uv()["uv"], sampler=wt.Sampler(filter="bilinear", address="wrap"))
-        out.grad.fill_(1.0)
-        tape.backward()
-        grads.append(tex.grad())
+    grads = [_sample_backward(threads, n, image, g.uv()["uv"], 1.0, sampler=wt.Sampler(filter="bilinear", address="wrap")).grad() for n in (1, 3)]
     level0 = 256 * 256 // (1 << _launch.TILE_SHIFT)
     assert len(seen) == 2  # workers 1 and 2
     for marked, written in seen:
@@ -522,16 +523,9 @@ def test_tile_marks_cover_every_texel_written(size, filter_, address, threads, m
     # Each thread's pixels in a band of rows, so that a missed mark is not covered by the others'; in
     # both orders, so that a wrapping footprint falls to a thread with private copies either way.
     for order in (np.argsort(uv[:, 1] % 1.0), np.argsort(-(uv[:, 1] % 1.0))):
-        grads = []
-        for count in (1, 3):
-            threads(count)
-            tex = wt.TextureArray(image, requires_grad=True)
-            tape = wp.Tape()
-            with tape:
-                out = wt.sample(tex, uv[order], layer=layer[order], uv_dx=dx[order], uv_dy=dy[order], sampler=wt.Sampler(filter=filter_, address=address))
-            out.grad.assign(weights)
-            tape.backward()
-            grads.append(tex.view.texels.grad.numpy().copy())
+        sampler = wt.Sampler(filter=filter_, address=address)
+        texs = [_sample_backward(threads, n, image, uv[order], weights, wt.TextureArray, layer=layer[order], uv_dx=dx[order], uv_dy=dy[order], sampler=sampler) for n in (1, 3)]
+        grads = [tex.view.texels.grad.numpy() for tex in texs]
         # Float sums of up to ~10^4 terms (clamped edge texels), in another order; a tile left out would lose a third.
         np.testing.assert_allclose(grads[1], grads[0], rtol=5e-4, atol=1e-4 * np.abs(grads[0]).max())
 
