@@ -33,8 +33,8 @@ from pathlib import Path
 # Small inputs: the jobs measure compiling, not running.
 _SETUP = """
 import numpy as np, warp as wp, warptex as wt
-from warptex.apps.terrain import terrain
-from warptex.apps.render import terrain_camera
+from warptex.scenes.terrain import terrain
+from warptex.scenes import terrain_camera
 g = wt.rasterize(terrain(resolution=(33, 33)), terrain_camera((64, 64)))
 rng = np.random.default_rng(0)
 def texture(grad=False, channels=4):

@@ -43,10 +43,10 @@ import peers  # noqa: E402  (benchmarks/peers, next to this file)
 from peers import common  # noqa: E402
 
 import warptex as wt  # noqa: E402
-from warptex.apps.plot import line_chart  # noqa: E402
-from warptex.apps.render import TERRAIN_GRID, terrain_camera  # noqa: E402
-from warptex.apps.terrain import terrain  # noqa: E402
-from warptex.apps.terrain_material import noise_texture, terrain_splat_maps  # noqa: E402
+from warptex.plot import line_chart  # noqa: E402
+from warptex.scenes import TERRAIN_GRID, terrain_camera  # noqa: E402
+from warptex.scenes.terrain import terrain  # noqa: E402
+from warptex.scenes.material import noise_texture, terrain_splat_maps  # noqa: E402
 
 # triplanar_aniso: triplanar with the anisotropic filter, against warptex's own trilinear triplanar
 # (no peer filters anisotropically).

@@ -29,9 +29,9 @@ except ImportError:  # pragma: no cover - the message is the point
 
 import warptex as wt
 import warptex.torch as wtt
-from warptex.apps.render import TERRAIN_GRID, terrain_camera
-from warptex.apps.terrain import terrain
-from warptex.apps.terrain_material import noise_texture, terrain_splat_maps
+from warptex.scenes import TERRAIN_GRID, terrain_camera
+from warptex.scenes.terrain import terrain
+from warptex.scenes.material import noise_texture, terrain_splat_maps
 
 LIMIT = 1.10  # the bridge's forward+backward over the native one, at most (issue 20)
 

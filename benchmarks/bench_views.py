@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 
 import warptex as wt
-from warptex.apps.render import TERRAIN_GRID
-from warptex.apps.terrain import terrain
-from warptex.apps.terrain_material import terrain_layers, terrain_splat_maps
+from warptex.scenes import TERRAIN_GRID
+from warptex.scenes.terrain import terrain
+from warptex.scenes.material import terrain_layers, terrain_splat_maps
 from warptex.camera import checked_resolution
 
 OPTIONS = {"projection": "triplanar", "height_blend": 0.2}

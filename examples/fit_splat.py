@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 
 import warptex as wt
-from warptex.apps.fit_demo import terrain_cameras
-from warptex.apps.render import TERRAIN_GRID
-from warptex.apps.terrain import terrain
-from warptex.apps.terrain_material import terrain_layers, terrain_splat_maps
+from warptex.scenes import terrain_cameras
+from warptex.scenes import TERRAIN_GRID
+from warptex.scenes.terrain import terrain
+from warptex.scenes.material import terrain_layers, terrain_splat_maps
 
 TRUE_TILING = 1.0 / 6.0
 

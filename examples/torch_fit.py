@@ -26,10 +26,10 @@ from tqdm import tqdm
 
 import warptex as wt
 import warptex.torch as wtt
-from warptex.apps.fit_demo import terrain_cameras
-from warptex.apps.render import TERRAIN_GRID
-from warptex.apps.terrain import terrain
-from warptex.apps.terrain_material import terrain_layers, terrain_splat_maps
+from warptex.scenes import terrain_cameras
+from warptex.scenes import TERRAIN_GRID
+from warptex.scenes.terrain import terrain
+from warptex.scenes.material import terrain_layers, terrain_splat_maps
 from warptex.fit import default_stages, psnr
 from warptex.fit.losses import gaussian_taps
 

@@ -16,8 +16,8 @@ import pytest
 import warp as wp
 
 import warptex as wt
-from warptex.apps.terrain import terrain
-from warptex.apps.render import terrain_camera
+from warptex.scenes.terrain import terrain
+from warptex.scenes import terrain_camera
 
 OTHER = os.environ.get("WARPTEX_TEST_DEVICE", "cuda:0")
 pytestmark = pytest.mark.skipif(OTHER.startswith("cuda") and not wp.is_cuda_available(), reason="no CUDA device: these tests compare CUDA with the CPU")

@@ -10,13 +10,13 @@ import warp as wp
 import warp.optim
 
 import warptex as wt
-from warptex.apps.terrain import terrain
+from warptex.scenes.terrain import terrain
 from warptex import io
 from warptex.apps.cli import main as cli_main
 from warptex.apps.fit_report import splat_coverage
 from warptex.fit import FitView, Objective, SplatParameters, Stage, blur, fit_splat, gaussian_taps, image_loss, prepare_views, psnr, render_views, weight_entropy
 from warptex.kernels import fit as kf
-from warptex.apps.render import terrain_camera
+from warptex.scenes import terrain_camera
 
 TRANSITION = 0.2
 OPTIONS = {"projection": "triplanar", "height_blend": TRANSITION}

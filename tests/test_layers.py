@@ -6,12 +6,12 @@ import warp as wp
 
 import warptex as wt
 from conftest import with_sampler
-from warptex.apps.terrain import terrain
+from warptex.scenes.terrain import terrain
 from backward_paths import assert_same_gradients, texel_gradients_both_ways
 from fd import check_parameter_gradient
 from reference_layers import splat_reference
 from warptex.layers import splat
-from warptex.apps.render import terrain_camera
+from warptex.scenes import terrain_camera
 
 
 @pytest.fixture(scope="module")
@@ -252,8 +252,8 @@ def test_bad_input_raises_clear_errors(terrain_gbuffer, rng):
 
 def test_terrain_splat_maps_follow_height_and_slope():
     """The default terrain's rules: weights sum to 1, rock owns the cliffs, snow the high flats."""
-    from warptex.apps.terrain import terrain_slope_height
-    from warptex.apps.terrain_material import terrain_splat_maps
+    from warptex.scenes.terrain import terrain_slope_height
+    from warptex.scenes.material import terrain_splat_maps
 
     mesh = terrain(resolution=(65, 65))
     maps = terrain_splat_maps(mesh, (65, 65))

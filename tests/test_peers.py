@@ -18,8 +18,8 @@ import trimesh
 import warp as wp
 
 import warptex as wt
-from warptex.apps.terrain import terrain
-from warptex.apps.render import terrain_camera
+from warptex.scenes.terrain import terrain
+from warptex.scenes import terrain_camera
 
 BENCHMARKS = str(Path(__file__).resolve().parents[1] / "benchmarks")
 if BENCHMARKS not in sys.path:

@@ -10,7 +10,7 @@ from warptex import io
 from warptex.apps.cli import main
 from warptex.gbuffer_io import load_gbuffer
 from warptex.apps.render import default_camera, run_render
-from warptex.apps.terrain_material import noise_texture
+from warptex.scenes.material import noise_texture
 from warptex.apps.shade import lambert
 from warptex.gbuffer import GBuffer
 
@@ -77,7 +77,7 @@ def test_terrain_layers_are_procedural_seamless_and_distinct(monkeypatch):
     bright blue-white snow."""
     import builtins
 
-    from warptex.apps.terrain_material import LAYER_NAMES, terrain_layers
+    from warptex.scenes.material import LAYER_NAMES, terrain_layers
 
     def no_files(*args, **kwargs):
         raise AssertionError(f"terrain_layers() opened a file: {args}")

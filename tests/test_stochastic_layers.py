@@ -144,9 +144,9 @@ def test_splat_with_height_array_reads_heights_at_the_same_taps():
 def test_stochastic_changes_the_terrain_but_keeps_its_colours(shared_data):
     """On the real terrain layers, hex + histogram changes the texture arrangement but keeps each
     channel's mean and contrast within a few percent of plain tiling's."""
-    from warptex.apps.render import TERRAIN_GRID, terrain_camera
-    from warptex.apps.terrain import terrain
-    from warptex.apps.terrain_material import terrain_layers, terrain_splat_maps
+    from warptex.scenes import TERRAIN_GRID, terrain_camera
+    from warptex.scenes.terrain import terrain
+    from warptex.scenes.material import terrain_layers, terrain_splat_maps
 
     mesh = terrain(resolution=TERRAIN_GRID, seed=0)
     g = wt.rasterize(mesh, terrain_camera((96, 144)))

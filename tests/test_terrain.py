@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from warptex.apps.terrain import terrain, terrain_slope_height
+from warptex.scenes.terrain import terrain, terrain_slope_height
 
 
 @pytest.fixture(scope="module")

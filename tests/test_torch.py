@@ -14,8 +14,8 @@ torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip insta
 
 import warptex as wt  # noqa: E402
 import warptex.torch as wtt  # noqa: E402
-from warptex.apps.render import terrain_camera  # noqa: E402
-from warptex.apps.terrain import terrain  # noqa: E402
+from warptex.scenes import terrain_camera  # noqa: E402
+from warptex.scenes.terrain import terrain  # noqa: E402
 from warptex.torch import _states  # noqa: E402
 
 from fd import check_parameter_gradient  # noqa: E402

@@ -4,8 +4,10 @@
 - :mod:`.render`: the main job, a textured, lit render of the procedural terrain or a mesh;
 - :mod:`.demo`: filters and address modes side by side on a ground plane;
 - :mod:`.fit_demo` and :mod:`.fit_report`: ``warptex fit``, recovering splat maps and tiling;
-- :mod:`.terrain` and :mod:`.terrain_material`: the procedural terrain mesh and its layers;
-- :mod:`.shade` and :mod:`.plot`: Lambert previews, labelled panels, line charts.
+- :mod:`.shade`: Lambert previews and labelled panels.
+
+The scenes they share with the benchmarks and tests (the procedural terrain, its layers and
+camera) are in :mod:`warptex.scenes`; line charts in :mod:`warptex.plot`.
 
 These use the library (``warptex``); the library never imports them.
 """

@@ -1,7 +1,7 @@
 """``warptex fit`` and ``examples/fit_splat.py``: recover splat maps and tiling from images.
 
 Default (synthetic) run: the default terrain seen from several cameras; the target is rendered
-with the true splat maps (:func:`warptex.apps.terrain_material.terrain_splat_maps`: height and slope
+with the true splat maps (:func:`warptex.scenes.material.terrain_splat_maps`: height and slope
 rules) and the true tiling (1/6) with the real layer textures; the fit starts from uniform weights
 and a tiling 20% off, and its result is compared with the truth.
 
@@ -21,7 +21,7 @@ import numpy as np
 import warp as wp
 
 from warptex import io
-from warptex.camera import checked_resolution, look_at, orthographic
+from warptex.camera import checked_resolution
 from warptex.fit import FitView, SplatParameters, check_inputs, default_stages, fit_splat, psnr, render_views
 from warptex.apps.fit_report import heat_image, legend, splat_coverage, weights_image, write_curve, write_json
 from warptex.gbuffer import rasterize
@@ -30,10 +30,10 @@ from warptex._validate import check_layer_count
 from warptex.layers import splat
 from warptex.options import Sampler
 from warptex.apps.output import check_memory, check_output_folder, output_set
-from warptex.apps.render import TERRAIN_GRID, terrain_camera
+from warptex.scenes import TERRAIN_GRID, terrain_cameras
 from warptex.apps.shade import side_by_side
-from warptex.apps.terrain import terrain
-from warptex.apps.terrain_material import LAYER_NAMES, terrain_layers, terrain_splat_maps
+from warptex.scenes.terrain import terrain
+from warptex.scenes.material import LAYER_NAMES, terrain_layers, terrain_splat_maps
 from warptex.texture import TextureArray
 
 #: Peak memory of a fit, measured (peak RSS, 2 views of 192x256 to 768x1024): ~300 MB plus ~630 B
@@ -43,19 +43,6 @@ TRUE_TILING = 1.0 / 6.0  # the default scene's layer repeats per world unit
 #: A texel counts as covered when the views' bilinear lookups give it at least this much weight
 #: in all (about one pixel's worth): such a texel's weights change the images.
 COVERED = 1.0
-
-
-def terrain_cameras(resolution, count: int = 2):
-    """``count`` (1–3) cameras on the default terrain: the default three-quarter view; a view
-    straight down (orthographic, the whole terrain); the opposite corner looking back."""
-    cams = [
-        terrain_camera(resolution),
-        orthographic((0.0, 60.0, 0.0), (0.0, 0.0, 0.0), up=(0.0, 0.0, -1.0), height=66.0 * max(1.0, resolution[0] / resolution[1]), resolution=resolution),
-        look_at((30.0, 34.0, -40.0), (-2.0, 2.0, 4.0), resolution=resolution),
-    ]
-    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or not 1 <= count <= len(cams):
-        raise ValueError(f"terrain_cameras(): count must be 1 to {len(cams)}, got {count!r}")
-    return cams[:count]
 
 
 def _panels(images, prefix: str) -> np.ndarray:

@@ -1,6 +1,6 @@
 """Pictures and files of a splat fit: weights as colours, the loss/PSNR curve, the JSON summary.
 
-Weights and errors are NumPy images; the curve is a :func:`warptex.apps.plot.line_chart`.
+Weights and errors are NumPy images; the curve is a :func:`warptex.plot.line_chart`.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 from warptex import io
-from warptex.apps.plot import line_chart
+from warptex.plot import line_chart
 
 #: Display colours (linear RGB) of layers 0, 1, 2...: green, orange, brown, white, blue, magenta, cyan, yellow.
 PALETTE = np.array(

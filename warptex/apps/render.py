@@ -1,7 +1,7 @@
 """The main job: rasterise a mesh (the procedural terrain by default), texture it, light it, save it.
 
 The default terrain is textured with four splat-blended layers (grass, gravel, rock, snow; see
-:mod:`warptex.terrain_material`), each mapped triplanar, height-blended. Other meshes get one
+:mod:`warptex.scenes.material`), each mapped triplanar, height-blended. Other meshes get one
 texture: in their UV0 when they have UVs (their own embedded base-colour texture when they carry
 one), else triplanar. Everything is trilinear-filtered with the LOD from the G-buffer's
 derivatives and Lambert-lit.
@@ -27,15 +27,15 @@ from warptex.gbuffer_io import save_gbuffer
 from warptex.sampling import sample
 from warptex.apps.output import check_memory, check_output_folder, output_set
 from warptex.apps.shade import SKY, lambert, to_rgb
-from warptex.apps.terrain import terrain
+from warptex.scenes import TERRAIN_GRID, terrain_camera
+from warptex.scenes.terrain import terrain
 from warptex.texture import Texture, TextureArray
 from warptex.layers import splat
 from warptex.options import Filter, Sampler
-from warptex.apps.terrain_material import LAYER_NAMES, noise_texture, terrain_layers, terrain_splat_maps
+from warptex.scenes.material import LAYER_NAMES, noise_texture, terrain_layers, terrain_splat_maps
 from warptex.triplanar import triplanar
 
 
-TERRAIN_GRID = (129, 129)  # the default terrain's vertex grid, one splat texel per vertex
 #: Peak memory of a render, measured (peak RSS, 512² to 2048²): ~200 MB plus ~260 B per pixel
 #: (G-buffer, mip chains, images); with a margin.
 RENDER_BYTES = (300e6, 320.0)
@@ -48,11 +48,6 @@ def default_camera(mesh: trimesh.Trimesh, resolution, fov_y: float = 45.0) -> Ca
     half_fov = np.radians(fov_y) / 2 * min(1.0, resolution[1] / resolution[0])
     distance = 1.05 * radius / np.sin(half_fov)
     return look_at(centre + direction / np.linalg.norm(direction) * distance, centre, fov_y=fov_y, resolution=resolution)
-
-
-def terrain_camera(resolution, fov_y: float = 45.0) -> Camera:
-    """The default scene's camera: over the near corner of the default terrain, looking across it."""
-    return look_at((-30.0, 34.0, 40.0), (2.0, 2.0, -4.0), fov_y=fov_y, resolution=resolution)
 
 
 def _albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, texture: Texture, tiling: float, sampler: Sampler, device) -> np.ndarray:
@@ -114,7 +109,7 @@ def run_render(
 
     Args:
         out_dir: output folder (created if missing).
-        mesh_path: a mesh file; ``None`` renders the procedural terrain (:func:`warptex.apps.terrain.terrain`).
+        mesh_path: a mesh file; ``None`` renders the procedural terrain (:func:`warptex.scenes.terrain.terrain`).
         texture_path: the texture; default: the mesh's embedded texture, else a procedural ground texture.
         resolution: ``(height, width)``.
         eye, target: camera position and look-at point (default: a three-quarter view framing the mesh).

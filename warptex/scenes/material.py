@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from warptex.apps.terrain import terrain_slope_height
+from warptex.scenes.terrain import terrain_slope_height
 from warptex.texture import TextureArray
 
 LAYER_NAMES = ("grass", "gravel", "rock", "snow")

@@ -1,0 +1,39 @@
+"""The house rules that keep the layout readable, checked on the source tree (DESIGN.md §1)."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+LIBRARY = [p for d in ("warptex", "kernels") for p in (ROOT / d).rglob("*.py") if "apps" not in p.relative_to(ROOT).parts]
+
+
+def _imports(path: Path) -> set[str]:
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.add(node.module)
+            names.update(f"{node.module}.{a.name}" for a in node.names)
+    return names
+
+
+def _uses_apps(path: Path) -> bool:
+    return any(name == "warptex.apps" or name.startswith("warptex.apps.") for name in _imports(path))
+
+
+@pytest.mark.skipif(not (ROOT / "benchmarks").is_dir(), reason="benchmarks/ is not part of this checkout")
+def test_benchmarks_do_not_import_the_applications():
+    """Scenes the benchmarks share with the apps live in warptex.scenes, which anything may import."""
+    offenders = [str(p.relative_to(ROOT)) for p in (ROOT / "benchmarks").rglob("*.py") if _uses_apps(p)]
+    assert offenders == []
+
+
+def test_the_library_never_imports_the_applications():
+    assert LIBRARY, "no library modules found"
+    offenders = [str(p.relative_to(ROOT)) for p in LIBRARY if _uses_apps(p)]
+    assert offenders == []

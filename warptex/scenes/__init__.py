@@ -1,0 +1,36 @@
+"""Scenes that the command line, the benchmarks and the tests share: the procedural terrain, its
+material, and the camera the default render looks at it from.
+
+- :mod:`.terrain`: :func:`~warptex.scenes.terrain.terrain`, a seeded heightfield mesh with cliffs;
+- :mod:`.material`: its four procedural layers and splat maps, and periodic noise textures.
+
+They are built from the library and NumPy alone, so anything may import them; the applications
+(:mod:`warptex.apps`) are never imported by the library, the benchmarks or these scenes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from warptex.camera import Camera, look_at, orthographic
+
+#: The default terrain's vertex grid, one splat texel per vertex.
+TERRAIN_GRID = (129, 129)
+
+
+def terrain_camera(resolution, fov_y: float = 45.0) -> Camera:
+    """The default scene's camera: over the near corner of the default terrain, looking across it."""
+    return look_at((-30.0, 34.0, 40.0), (2.0, 2.0, -4.0), fov_y=fov_y, resolution=resolution)
+
+
+def terrain_cameras(resolution, count: int = 2):
+    """``count`` (1–3) cameras on the default terrain: the default three-quarter view; a view
+    straight down (orthographic, the whole terrain); the opposite corner looking back."""
+    cams = [
+        terrain_camera(resolution),
+        orthographic((0.0, 60.0, 0.0), (0.0, 0.0, 0.0), up=(0.0, 0.0, -1.0), height=66.0 * max(1.0, resolution[0] / resolution[1]), resolution=resolution),
+        look_at((30.0, 34.0, -40.0), (-2.0, 2.0, 4.0), resolution=resolution),
+    ]
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or not 1 <= count <= len(cams):
+        raise ValueError(f"terrain_cameras(): count must be 1 to {len(cams)}, got {count!r}")
+    return cams[:count]
