@@ -134,11 +134,9 @@ def build(name):
     if name.startswith("warp.optim"):  # Warp's own (warptex's fit uses its Adam)
         import warp.optim
         return
-    import warptex  # every module's kernels are made at import, but for the splat capacities
-    from warptex.kernels import layers
+    from warptex.kernels import all_kernels  # builds every kernel family's configurations
     m = __import__("re").match(r"warptex\\.splat(\\d+)", name)
-    if m:
-        layers.splat_kernels(int(m.group(1)))
+    all_kernels((int(m.group(1)),) if m else (4,))
 
 t = time.perf_counter()
 if target == "cpu":

@@ -2,9 +2,12 @@
 
 This package sees only Warp and its own modules; the public API lives in ``warptex``.
 
+**Kernel families.** Every technique's kernels come from one factory per technique, cached per
+configuration, each per-pixel kernel made from ``@wp.func`` bodies by one shell (:mod:`.family`).
+
 **Warp modules.** Warp compiles all the kernels of one module together, the first time one of them
-is launched, and caches the result. warptex therefore names a Warp module for each kernel (the
-``MODULE`` constants of each file) so that a job compiles only what it runs: a technique's plain
+is launched, and caches the result. warptex therefore names a Warp module for each group of kernels
+(the ``MODULE`` constants of each file) so that a job compiles only what it runs: a technique's plain
 kernels apart from its stochastic ones, forward and hand-written gradient kernels apart from the
 kernels that carry Warp's generated adjoint (recorded only when an input other than the texels
 needs gradients). ``benchmarks/bench_compile.py`` measures every module.
@@ -44,16 +47,20 @@ def out_of_line(f):
     return wp.func(inline=False)(f) if _HAS_INLINE_HINT else wp.func(f)
 
 
+# The modules of every kernel family and plain kernel (``all_kernels`` imports them, registering the families).
+_MODULES = ("sampling", "stochastic", "triplanar", "splat", "atlas", "raster", "fit")
+
 
 def all_kernels(layer_counts=(4,)) -> list:
-    """Every kernel warptex has, the splat kernels for each of ``layer_counts`` included."""
+    """Every kernel warptex has: each kernel family's (:mod:`.family`) in every configuration it
+    lists (the splat kernels for each of ``layer_counts``), and the plain kernels of its modules."""
     import importlib
 
+    from .family import registered_kernels
+
     kernels = []
-    for name in ("sampling", "stochastic", "triplanar", "layers", "atlas", "raster", "fit"):
+    for name in _MODULES:
         module = importlib.import_module(f"{__name__}.{name}")
         kernels += [v for v in vars(module).values() if isinstance(v, wp.Kernel)]
-    layers = importlib.import_module(f"{__name__}.layers")
-    for count in layer_counts:
-        kernels += list(layers.splat_kernels(layers.capacity(count)).values())
-    return kernels
+    kernels += registered_kernels({"layer_counts": tuple(layer_counts)})
+    return list({id(k): k for k in kernels}.values())

@@ -30,8 +30,11 @@ LOD (after bias, before trilinear blending) to that ``ℓ_max``, which the Pytho
 
 import warp as wp
 
-from . import ADJOINT_MODULE, specialised
-from .sampling import ADDRESS_WRAP, SamplerArgs, TextureView, fetch, footprint_mean, footprint_taps, footprint_uv, reduce_coord, sample_lod, sample_lod_call, uv_footprint, write_channels
+from . import specialised
+from .family import Kernels, family, pixel_kernels
+from .filters import sample_lod, sample_lod_outlined
+from .footprint import footprint_mean, footprint_taps, footprint_uv, uv_footprint
+from .texels import ADDRESS_WRAP, SamplerArgs, TextureView, fetch, reduce_coord, write_channels
 
 MODULE = "warptex.atlas"
 
@@ -100,7 +103,7 @@ def _sample_tile(sample, name: str):
 
 
 sample_tile = _sample_tile(sample_lod, "sample_tile")
-sample_tile_call = _sample_tile(sample_lod_call, "sample_tile_call")  # for the generated adjoint
+sample_tile_outlined = _sample_tile(sample_lod_outlined, "sample_tile_outlined")  # for the generated adjoint
 
 
 @wp.func
@@ -109,54 +112,67 @@ def map_texel(n: wp.int32, u: float) -> wp.int32:
     return wp.clamp(int(wp.floor(wp.clamp(u, -1.0, 2.0) * float(n))), 0, n - 1)
 
 
-def _splat_atlas_kernel(module: str, enable_backward: bool, sample_tile):
-    @wp.kernel(enable_backward=enable_backward, module=module)
-    def splat_atlas_kernel(
-        atlas: TextureView,
-        layout: AtlasLayout,
-        indices: wp.array3d(dtype=wp.int32),
-        weights: wp.array3d(dtype=float),
-        tiling: wp.array(dtype=float),
-        uv0: wp.array(dtype=wp.vec2),
-        uv0_dx: wp.array(dtype=wp.vec2),
-        uv0_dy: wp.array(dtype=wp.vec2),
-        mask: wp.array(dtype=float),
-        smp: SamplerArgs,
-        normalize: wp.int32,
-        out: wp.array2d(dtype=float),
-    ):
-        """``out[i]`` = ``Σ_j w_j · layer_{idx_j}(uv0[i] · tiling)`` over the ``k`` index-map entries.
+@wp.struct
+class AtlasArgs:
+    """What every pixel of an atlas splat reads: the atlas and its layout, the index and weight maps
+    (``[h, w, k]``, read with nearest filtering, clamped, in UV0), the layers' tiling (1 or L values),
+    the sampler, and whether the weights are normalised."""
 
-        The index and weight maps (``[h, w, k]``) are read with nearest filtering, clamped, in UV0: the
-        texel containing ``uv0``. Every entry is sampled, zero weights included, so weight gradients
-        are exact. With ``normalize`` the weights are clamped to ``>= 0`` and divided by their sum.
+    atlas: TextureView
+    layout: AtlasLayout
+    indices: wp.array3d(dtype=wp.int32)
+    weights: wp.array3d(dtype=float)
+    tiling: wp.array(dtype=float)
+    smp: SamplerArgs
+    normalize: wp.int32
+
+
+@wp.struct
+class AtlasPixels:
+    """The per-pixel G-buffer arrays an atlas splat reads: UV0, its derivatives and the mask."""
+
+    uv0: wp.array(dtype=wp.vec2)
+    uv0_dx: wp.array(dtype=wp.vec2)
+    uv0_dy: wp.array(dtype=wp.vec2)
+    mask: wp.array(dtype=float)
+
+
+def _atlas_body(sample_tile, name: str):
+    def body(args: AtlasArgs, pixels: AtlasPixels, i: wp.int32, out: wp.array2d(dtype=float)):
+        """``out[i]`` = ``Σ_j w_j · layer_{idx_j}(uv0[i] · tiling)`` over the ``k`` index-map entries
+        of the texel containing ``uv0``. Every entry is sampled, zero weights included, so weight
+        gradients are exact. With ``normalize`` the weights are clamped to ``>= 0`` and divided by their sum.
         """
-        i = wp.tid()
         colour = wp.vec4(0.0)
-        if mask[i] != 0.0:
-            uv = uv0[i]
+        if pixels.mask[i] != 0.0:
+            uv = pixels.uv0[i]
             if wp.isfinite(uv):
-                row = map_texel(indices.shape[0], 1.0 - uv[1])
-                col = map_texel(indices.shape[1], uv[0])
-                k = indices.shape[2]
+                row = map_texel(args.indices.shape[0], 1.0 - uv[1])
+                col = map_texel(args.indices.shape[1], uv[0])
+                k = args.indices.shape[2]
                 total = float(0.0)
                 for j in range(MAX_ENTRIES):
                     if j < k:
-                        total += wp.max(weights[row, col, j], 0.0)
+                        total += wp.max(args.weights[row, col, j], 0.0)
                 for j in range(MAX_ENTRIES):
                     if j < k:
-                        w = weights[row, col, j]
-                        if normalize != 0:
+                        w = args.weights[row, col, j]
+                        if args.normalize != 0:
                             w = wp.max(w, 0.0) / wp.max(total, ATLAS_EPS)
-                        layer = wp.clamp(indices[row, col, j], 0, layout.num_tiles - 1)
-                        t = tiling[wp.min(layer, tiling.shape[0] - 1)]
-                        colour += w * sample_tile(atlas, layout, layer, uv * t, uv0_dx[i] * t, uv0_dy[i] * t, smp)
+                        layer = wp.clamp(args.indices[row, col, j], 0, args.layout.num_tiles - 1)
+                        t = args.tiling[wp.min(layer, args.tiling.shape[0] - 1)]
+                        colour += w * sample_tile(args.atlas, args.layout, layer, uv * t, pixels.uv0_dx[i] * t, pixels.uv0_dy[i] * t, args.smp)
             else:
                 colour = wp.vec4(wp.nan)
         write_channels(out, i, colour)
 
-    return splat_atlas_kernel
+    return wp.func(specialised(body, name))
 
 
-splat_atlas_kernel = _splat_atlas_kernel(MODULE, False, sample_tile)
-splat_atlas_adjoint_kernel = _splat_atlas_kernel(ADJOINT_MODULE, True, sample_tile_call)
+@family()
+def atlas_kernels() -> Kernels:
+    """The atlas splat's forward kernel and its generated adjoint (texels, weights, tiling and the
+    G-buffer's UVs all differentiate through it)."""
+    forward, _, adjoint = pixel_kernels("splat_atlas", module=MODULE, args=AtlasArgs, pixels=AtlasPixels, out=wp.array2d(dtype=float),
+                                        body=_atlas_body(sample_tile, "atlas_pixel"), adjoint_body=_atlas_body(sample_tile_outlined, "atlas_pixel_outlined"))  # fmt: skip
+    return Kernels(forward, None, adjoint)

@@ -9,7 +9,7 @@ Golus, "Normal Mapping for a Triplanar Shader" (2017).
 
 import warp as wp
 
-from .sampling import FLOAT_MAX
+from .texels import FLOAT_MAX
 
 BLEND_WHITEOUT = wp.constant(0)
 BLEND_UDN = wp.constant(1)

@@ -24,8 +24,10 @@ import warp as wp
 
 from . import out_of_line
 from .normals import FLOAT_MAX, sign_or_one, unsquared
-from .sampling import SamplerArgs, TextureView, lod_scale_slope, sample_footprint_derivatives, texture_footprint
-from .stochastic import StochasticArgs, sample_stochastic_call
+from .filters import sample_footprint_derivatives
+from .footprint import lod_scale_slope, texture_footprint
+from .stochastic import StochasticArgs, sample_stochastic_outlined
+from .texels import SamplerArgs, TextureView
 
 # How the three projections are weighted.
 WEIGHTS_TRIPLANAR = wp.constant(0)  # pow(|n|, sharpness), normalised
@@ -56,6 +58,18 @@ class ProjectionArgs:
     object_space: wp.int32  # 0: world space, the matrices are identities and are skipped
     mirror_fix: wp.int32
     weights: wp.int32
+
+
+@wp.struct
+class SurfacePixels:
+    """The per-pixel G-buffer arrays a planar projection reads: world position, its screen-space
+    derivatives, normal, and the coverage mask (0: not shaded)."""
+
+    position: wp.array(dtype=wp.vec3)
+    position_dx: wp.array(dtype=wp.vec3)
+    position_dy: wp.array(dtype=wp.vec3)
+    normal: wp.array(dtype=wp.vec3)
+    mask: wp.array(dtype=float)
 
 
 @wp.func
@@ -260,6 +274,12 @@ def object_space(proj: ProjectionArgs, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dp
     )
 
 
+@wp.func
+def surface(proj: ProjectionArgs, pixels: SurfacePixels, i: wp.int32):
+    """Pixel ``i``'s ``(p, n, dpdx, dpdy)`` in the projected space (:func:`object_space`)."""
+    return object_space(proj, pixels.position[i], pixels.normal[i], pixels.position_dx[i], pixels.position_dy[i])
+
+
 # -- out of line, for the generated-adjoint kernels ---------------------------------------------------
 
 
@@ -285,4 +305,4 @@ def projection_sample(
     stoch: StochasticArgs,
 ) -> wp.vec4:
     """Projection ``axis`` of ``tex`` at ``tiling``, over its own footprint, sampled as ``stoch`` says, out of line."""
-    return sample_stochastic_call(tex, layer, plane_uv(proj, axis, p, n, tiling), plane_footprint(tex, proj, axis, n, dpdx, dpdy, tiling, smp), smp, stoch)
+    return sample_stochastic_outlined(tex, layer, plane_uv(proj, axis, p, n, tiling), plane_footprint(tex, proj, axis, n, dpdx, dpdy, tiling, smp), smp, stoch)

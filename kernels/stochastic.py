@@ -6,7 +6,7 @@ major axis); callers compute it from the *unperturbed* UV derivatives, so all ta
 mip levels and no mip seam appears at cell borders. ``params.method`` picks the technique at run
 time:
 
-* ``METHOD_NONE``: plain :func:`~warptex.kernels.sampling.sample_footprint`.
+* ``METHOD_NONE``: plain :func:`~warptex.kernels.sample_footprint`.
 * ``METHOD_HASH4`` (Quilez, "texture repetition", technique 1): every integer cell
   ``(i, j)`` gets a hashed offset ``o`` and, with ``mirror``, per-axis signs ``s``; the four cells
   around ``uv`` are sampled at ``s * uv + o`` and blended bilinearly with weights
@@ -31,28 +31,24 @@ periodic address modes (wrap, period 1; mirror, period 2), the only ones stochas
 
 import warp as wp
 
-from . import ADJOINT_MODULE, hashing, out_of_line, sampling, specialised
-from .sampling import SamplerArgs, TexelGrad, TextureView
+from . import hashing, out_of_line, specialised
+from .family import Kernels, family, pixel_kernels
+from .filters import sample_footprint, sample_lod, sample_lod_outlined
+from .footprint import footprint_mean, footprint_taps, footprint_uv, mip_levels
+from .hexgrid import hex_grid, hex_steps, hex_tap, hex_weights
+from .sampling import SampleArgs, SampleGrads, SamplePixels, sample_footprint_of, sample_layer
+from .scatter import scatter_footprint, scatter_lod
+from .texels import SamplerArgs, TexelGrad, TextureView, finite_uv_lod, read_channels, write_channels
 
 METHOD_NONE = wp.constant(0)
 METHOD_HASH4 = wp.constant(1)
 METHOD_CHEAP2 = wp.constant(2)
 METHOD_HEX = wp.constant(3)
 
-# Hash streams (the fourth lane of pcg4d), one per use.
+# Hash streams (the fourth lane of pcg4d), one per use; the hex technique's is in .hexgrid.
 STREAM_HASH4_CELL = wp.constant(0)
 STREAM_CHEAP2_OFFSET = wp.constant(1)
 STREAM_CHEAP2_NOISE = wp.constant(2)
-STREAM_HEX_VERTEX = wp.constant(3)
-
-# Triangle grid: p = uv * HEX_SCALE (Heitz & Neyret's 2 sqrt(3): triangle sides of 1/(2 sqrt 3) in
-# UV); skewed coordinates s = (p.x - p.y / sqrt 3, 2 p.y / sqrt 3); vertex (i, j) sits at
-# p = (i + j / 2, j sqrt(3) / 2).
-HEX_SCALE = wp.constant(3.4641016151377544)
-INV_SQRT3 = wp.constant(0.5773502691896258)
-HALF_SQRT3 = wp.constant(0.8660254037844386)
-PI = wp.constant(3.141592653589793)
-
 
 @wp.struct
 class StochasticArgs:
@@ -167,100 +163,6 @@ def cheap2_taps(uv: wp.vec2, params: StochasticArgs):
 
 
 @wp.func
-def hex_grid(uv: wp.vec2):
-    """Enclosing triangle of ``uv * HEX_SCALE``: barycentric weights, the position in the
-    triangle, and the vertices' lattice ids.
-
-    Returns ``(w, f, v0, v1, v2)``: ``w`` a ``vec3`` summing to 1, ``f`` the skewed coordinates'
-    fractions (``uv``'s offset from vertex ``b``), ``vk`` the ``vec2i`` of the vertex weighted by
-    ``w[k]``. Lower triangle ``f.x + f.y < 1``: vertices ``b, b+(1,0), b+(0,1)`` with
-    ``(1-f.x-f.y, f.x, f.y)``; upper: ``b+(1,1), b+(1,0), b+(0,1)`` with ``(f.x+f.y-1, 1-f.y, 1-f.x)``.
-    """
-    # In float64: for large UVs the skewed coordinates are large but their fractions must be exact.
-    px = wp.float64(uv[0]) * wp.float64(HEX_SCALE)
-    py = wp.float64(uv[1]) * wp.float64(HEX_SCALE)
-    sx = px - py * wp.float64(INV_SQRT3)
-    sy = wp.float64(2.0) * wp.float64(INV_SQRT3) * py
-    bx = wp.floor(sx)
-    by = wp.floor(sy)
-    f = wp.vec2(float(sx - bx), float(sy - by))
-    i = lattice_id(bx)
-    j = lattice_id(by)
-    w = wp.vec3(1.0 - f[0] - f[1], f[0], f[1])
-    v0 = wp.vec2i(i, j)
-    if f[0] + f[1] >= 1.0:
-        w = wp.vec3(f[0] + f[1] - 1.0, 1.0 - f[1], 1.0 - f[0])
-        v0 = wp.vec2i(i + 1, j + 1)
-    return w, f, v0, wp.vec2i(i + 1, j), wp.vec2i(i, j + 1)
-
-
-@wp.func
-def lattice_id(b: wp.float64) -> wp.int32:
-    """A floored skewed coordinate as an int32 lattice id; past 2^30 (UVs beyond ~3e8, where float32
-    UVs are 32 apart) wrapped modulo 2^30, so that neither it nor its neighbour overflows int32."""
-    limit = wp.float64(1073741824.0)
-    if b >= limit or b < -limit:
-        b = b - wp.floor(b / limit) * limit
-    return int(b)
-
-
-@wp.func
-def hex_centre64(v: wp.vec2i) -> wp.vec2d:
-    """UV of triangle-grid vertex ``v``, ``(i + j / 2, j sqrt(3) / 2) / HEX_SCALE``, in float64."""
-    scale = wp.float64(HEX_SCALE)
-    return wp.vec2d((wp.float64(v[0]) + wp.float64(0.5) * wp.float64(v[1])) / scale, wp.float64(HALF_SQRT3) * wp.float64(v[1]) / scale)
-
-
-@wp.func
-def hex_tap(uv: wp.vec2, f: wp.vec2, base: wp.vec2, v: wp.vec2i, step: wp.vec2, params: StochasticArgs) -> wp.vec2:
-    """Tap UV of vertex ``v``: ``R(θ) (uv - c) + c + o`` (reduced by :func:`periodic_base`).
-
-    ``o = (h.x, h.y)``, ``θ = (2 h.z - 1) π rotation`` from ``hash4_unit(v, seed, STREAM_HEX_VERTEX)``,
-    ``c`` the vertex centre (:func:`hex_centre64`), ``uv - c`` taken in float64. Past ``|uv| = 1e8``,
-    where the vertex ids may have wrapped (:func:`lattice_id`), ``uv - c`` comes instead from the
-    skewed offset ``f - step`` of ``uv`` from the vertex (``step``: the vertex's lattice step from
-    ``b``, see :func:`hex_grid`) mapped back to UV, ``(x + y / 2, y sqrt(3) / 2) / HEX_SCALE``,
-    which stays small however large ``uv``.
-    """
-    h = hashing.hash4_unit(v[0], v[1], params.seed, STREAM_HEX_VERTEX)
-    tap = base + wp.vec2(h[0], h[1])
-    if params.rotation != 0.0:
-        d = wp.vec2(0.0)
-        if wp.abs(uv[0]) < 1.0e8 and wp.abs(uv[1]) < 1.0e8:
-            # uv - centre in float64: both are large for large UVs, their difference is not.
-            c = hex_centre64(v)
-            d = wp.vec2(float(wp.float64(uv[0]) - c[0]), float(wp.float64(uv[1]) - c[1]))
-        else:
-            x = f[0] - step[0]
-            y = f[1] - step[1]
-            d = wp.vec2(x + 0.5 * y, HALF_SQRT3 * y) / HEX_SCALE
-        theta = (2.0 * h[2] - 1.0) * PI * params.rotation
-        cs = wp.cos(theta)
-        sn = wp.sin(theta)
-        tap += wp.vec2(cs * d[0] - sn * d[1], sn * d[0] + cs * d[1]) - d
-    return tap
-
-
-@wp.func
-def hex_steps(f: wp.vec2):
-    """The lattice steps from ``b`` of the three vertices of :func:`hex_grid`, in its order."""
-    first = wp.vec2(0.0, 0.0)
-    if f[0] + f[1] >= 1.0:
-        first = wp.vec2(1.0, 1.0)
-    return first, wp.vec2(1.0, 0.0), wp.vec2(0.0, 1.0)
-
-
-@wp.func
-def hex_weights(w: wp.vec3, contrast: float) -> wp.vec3:
-    """Barycentric weights raised to ``contrast`` and normalised to sum 1."""
-    p = wp.vec3(0.0)
-    for k in range(3):
-        if w[k] > 0.0:  # pow's adjoint takes log(w): keep exact zeros out of it
-            p[k] = wp.pow(w[k], contrast)
-    return p / (p[0] + p[1] + p[2])
-
-
-@wp.func
 def inverse_lut(params: StochasticArgs, layer: wp.int32, level: wp.int32, c: wp.int32, g: float) -> float:
     """Linear interpolation of channel ``c``'s inverse LUT of mip ``level`` at ``g`` (ends clamped)."""
     n = params.lut_size
@@ -279,7 +181,7 @@ def hex_taps(uv: wp.vec2, params: StochasticArgs):
     bary, f, v0, v1, v2 = hex_grid(uv)
     base = periodic_base(uv)
     s0, s1, s2 = hex_steps(f)
-    return hex_tap(uv, f, base, v0, s0, params), hex_tap(uv, f, base, v1, s1, params), hex_tap(uv, f, base, v2, s2, params), hex_weights(bary, params.contrast)
+    return hex_tap(uv, f, base, v0, s0, params.seed, params.rotation), hex_tap(uv, f, base, v1, s1, params.seed, params.rotation), hex_tap(uv, f, base, v2, s2, params.seed, params.rotation), hex_weights(bary, params.contrast)
 
 
 @wp.func
@@ -323,7 +225,7 @@ def histogram_blend(tex: TextureView, layer: wp.int32, acc: wp.vec4, w: wp.vec4,
     undone."""
     g = acc / wp.sqrt(wp.dot(w, w)) + wp.vec4(params.mean)
     result = wp.vec4(0.0)
-    lf = sampling.mip_levels(tex, lod, smp)
+    lf = mip_levels(tex, lod, smp)
     level = int(lf[0])
     for c in range(4):
         if c < params.channels:
@@ -348,12 +250,12 @@ def _sample_stochastic(sample, taps, blend_histogram, name: str, decorate=wp.fun
         """
         lod = fp[0]
         result = wp.vec4(0.0)
-        for j in range(sampling.footprint_taps(fp)):
-            at = sampling.footprint_uv(uv, fp, j)
+        for j in range(footprint_taps(fp)):
+            at = footprint_uv(uv, fp, j)
             value = wp.vec4(wp.nan)
             if params.method == METHOD_NONE:  # tested first: plain sampling measured 5% slower after the others' tests
                 value = sample(tex, layer, at, lod, smp)
-            elif sampling.finite_uv_lod(at, lod):
+            elif finite_uv_lod(at, lod):
                 t0, t1, t2, t3, w = taps(at, params)
                 mean = wp.vec4(0.0)
                 if params.histogram != 0:
@@ -365,27 +267,27 @@ def _sample_stochastic(sample, taps, blend_histogram, name: str, decorate=wp.fun
                 if params.histogram != 0:
                     value = blend_histogram(tex, layer, value, w, lod, smp, params)
             result += value
-        return sampling.footprint_mean(result, fp)
+        return footprint_mean(result, fp)
 
     return decorate(specialised(sample_stochastic, name))
 
 
 @out_of_line
-def stochastic_taps_call(uv: wp.vec2, params: StochasticArgs):
-    """:func:`stochastic_taps`, out of line (for :func:`sample_stochastic_call`)."""
+def stochastic_taps_outlined(uv: wp.vec2, params: StochasticArgs):
+    """:func:`stochastic_taps`, out of line (for :func:`sample_stochastic_outlined`)."""
     return stochastic_taps(uv, params)
 
 
 @out_of_line
-def histogram_blend_call(tex: TextureView, layer: wp.int32, acc: wp.vec4, w: wp.vec4, lod: float, smp: SamplerArgs, params: StochasticArgs) -> wp.vec4:
-    """:func:`histogram_blend`, out of line (for :func:`sample_stochastic_call`)."""
+def histogram_blend_outlined(tex: TextureView, layer: wp.int32, acc: wp.vec4, w: wp.vec4, lod: float, smp: SamplerArgs, params: StochasticArgs) -> wp.vec4:
+    """:func:`histogram_blend`, out of line (for :func:`sample_stochastic_outlined`)."""
     return histogram_blend(tex, layer, acc, w, lod, smp, params)
 
 
-sample_stochastic = _sample_stochastic(sampling.sample_lod, stochastic_taps, histogram_blend, "sample_stochastic")
+sample_stochastic = _sample_stochastic(sample_lod, stochastic_taps, histogram_blend, "sample_stochastic")
 # For the generated-adjoint kernels: out of line, and built on out-of-line pieces, so that a Warp
 # module holding several such kernels compiles each piece and its adjoint once.
-sample_stochastic_call = _sample_stochastic(sampling.sample_lod_call, stochastic_taps_call, histogram_blend_call, "sample_stochastic_call", out_of_line)
+sample_stochastic_outlined = _sample_stochastic(sample_lod_outlined, stochastic_taps_outlined, histogram_blend_outlined, "sample_stochastic_outlined", out_of_line)
 
 
 @wp.func
@@ -394,87 +296,73 @@ def scatter_stochastic(tex: TextureView, grad: TexelGrad, layer: wp.int32, uv: w
     reads: each tap's weight times ``g``. Linear blends only (no histogram, which is not linear
     in the texels)."""
     if params.method == METHOD_NONE:
-        sampling.scatter_footprint(tex, grad, layer, uv, fp, smp, g)
+        scatter_footprint(tex, grad, layer, uv, fp, smp, g)
     else:
         lod = fp[0]
-        share = sampling.footprint_mean(g, fp)
-        for j in range(sampling.footprint_taps(fp)):
-            at = sampling.footprint_uv(uv, fp, j)
-            if sampling.finite_uv_lod(at, lod):
+        share = footprint_mean(g, fp)
+        for j in range(footprint_taps(fp)):
+            at = footprint_uv(uv, fp, j)
+            if finite_uv_lod(at, lod):
                 t0, t1, t2, t3, w = stochastic_taps(at, params)
                 for k in range(4):
                     if w[k] > 0.0:
-                        sampling.scatter_lod(tex, grad, layer, pick_tap(k, t0, t1, t2, t3), lod, smp, w[k] * share)
+                        scatter_lod(tex, grad, layer, pick_tap(k, t0, t1, t2, t3), lod, smp, w[k] * share)
 
 
 @wp.func
 def sample_plain(tex: TextureView, layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, params: StochasticArgs) -> wp.vec4:
     """:func:`sample_stochastic` for ``METHOD_NONE`` without the stochastic code (``params`` is not
     read), for the plain variants of kernels that take either."""
-    return sampling.sample_footprint(tex, layer, uv, fp, smp)
+    return sample_footprint(tex, layer, uv, fp, smp)
 
 
 @wp.func
 def scatter_plain(tex: TextureView, grad: TexelGrad, layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, params: StochasticArgs, g: wp.vec4):
     """:func:`scatter_stochastic` for ``METHOD_NONE`` without the stochastic code."""
-    sampling.scatter_footprint(tex, grad, layer, uv, fp, smp, g)
+    scatter_footprint(tex, grad, layer, uv, fp, smp, g)
 
 
-# -- kernels (the three roles of ``warptex._op.Kernels``; see ``warptex.kernels.sampling``) ------------
+# -- kernels (see .family) ------------------------------------------------------------------------
 
 MODULE = "warptex.stochastic"
-GRAD_MODULE = MODULE + ".grad"
 
 
-def _stochastic_kernel(module: str, enable_backward: bool, sample):
-    @wp.kernel(enable_backward=enable_backward, module=module)
-    def stochastic_kernel(
-        tex: TextureView,
-        uv: wp.array(dtype=wp.vec2),
-        uv_dx: wp.array(dtype=wp.vec2),
-        uv_dy: wp.array(dtype=wp.vec2),
-        lods: wp.array(dtype=float),
-        layers: wp.array(dtype=wp.int32),
-        smp: SamplerArgs,
-        params: StochasticArgs,
-        lod_source: wp.int32,
-        constant_lod: float,
-        constant_layer: wp.int32,
-        out: wp.array2d(dtype=float),
-    ):
-        """``out[i, c]`` = channel ``c`` of :func:`sample_stochastic` at ``uv[i]`` (arguments as ``sample_kernel``)."""
-        i = wp.tid()
-        layer, fp = sampling.resolve_layer_and_footprint(tex, i, uv_dx, uv_dy, lods, layers, smp, lod_source, constant_lod, constant_layer)
-        sampling.write_channels(out, i, sample(tex, layer, uv[i], fp, smp, params))
+@wp.struct
+class StochasticSampleArgs:
+    """What every sample of a ``stochastic`` launch reads: ``sample`` as for ``sample`` (the
+    per-sample LOD variants), and the technique's options."""
 
-    return stochastic_kernel
+    sample: SampleArgs
+    params: StochasticArgs
 
 
-stochastic_kernel = _stochastic_kernel(MODULE, False, sample_stochastic)
-stochastic_adjoint_kernel = _stochastic_kernel(ADJOINT_MODULE, True, sample_stochastic_call)
+def _stochastic_body(sample, name: str):
+    def body(args: StochasticSampleArgs, pixels: SamplePixels, i: wp.int32, out: wp.array2d(dtype=float)):
+        """``out[i, c]`` = channel ``c`` of :func:`sample_stochastic` at ``pixels.uv[i]``."""
+        a = args.sample
+        write_channels(out, i, sample(a.tex, sample_layer(a, pixels, i), pixels.uv[i], sample_footprint_of(a, pixels, i), a.smp, args.params))
+
+    return wp.func(specialised(body, name))
 
 
-@wp.kernel(enable_backward=False, module=GRAD_MODULE)
-def stochastic_texel_grad_kernel(
-    tex: TextureView,
-    uv: wp.array(dtype=wp.vec2),
-    uv_dx: wp.array(dtype=wp.vec2),
-    uv_dy: wp.array(dtype=wp.vec2),
-    lods: wp.array(dtype=float),
-    layers: wp.array(dtype=wp.int32),
-    smp: SamplerArgs,
-    params: StochasticArgs,
-    lod_source: wp.int32,
-    constant_lod: float,
-    constant_layer: wp.int32,
-    grad: TexelGrad,
-    adj_out: wp.array2d(dtype=float),
-):
-    """Add the gradient of :func:`stochastic_kernel` (same inputs; linear blends only) with respect
-    to the texels into ``grad``, given its output's gradient ``adj_out``."""
-    i = wp.tid()
-    layer, fp = sampling.resolve_layer_and_footprint(tex, i, uv_dx, uv_dy, lods, layers, smp, lod_source, constant_lod, constant_layer)
-    scatter_stochastic(tex, grad, layer, uv[i], fp, smp, params, sampling.read_channels(adj_out, i))
+@wp.func
+def scatter_stochastic_pixel(args: StochasticSampleArgs, pixels: SamplePixels, i: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):
+    """Add the gradient ``adj[i]`` of the stochastic body (linear blends only) into the texels it read."""
+    a = args.sample
+    scatter_stochastic(a.tex, grads.tex, sample_layer(a, pixels, i), pixels.uv[i], sample_footprint_of(a, pixels, i), a.smp, args.params, read_channels(adj, i))
+
+
+stochastic_pixel = _stochastic_body(sample_stochastic, "stochastic_pixel")
+stochastic_pixel_outlined = _stochastic_body(sample_stochastic_outlined, "stochastic_pixel_outlined")
+
+
+@family()
+def stochastic_kernels() -> Kernels:
+    """The ``stochastic`` kernels (per-sample LODs, as ``sample_kernels(level=False)``): the
+    hand-written gradient reaches the texels (linear blends: no histogram)."""
+    kernels = pixel_kernels("stochastic", module=MODULE, args=StochasticSampleArgs, pixels=SamplePixels, out=wp.array2d(dtype=float),
+                            body=stochastic_pixel, scatter=scatter_stochastic_pixel, grads=SampleGrads, adjoint_body=stochastic_pixel_outlined)  # fmt: skip
+    return Kernels(*kernels, grads=("args.sample.tex",))
 
 
 @wp.kernel(enable_backward=False, module=MODULE)
@@ -494,6 +382,6 @@ def hex_taps_kernel(
     vertices[i, 0] = v0
     vertices[i, 1] = v1
     vertices[i, 2] = v2
-    taps[i, 0] = hex_tap(uv[i], f, base, v0, s0, params)
-    taps[i, 1] = hex_tap(uv[i], f, base, v1, s1, params)
-    taps[i, 2] = hex_tap(uv[i], f, base, v2, s2, params)
+    taps[i, 0] = hex_tap(uv[i], f, base, v0, s0, params.seed, params.rotation)
+    taps[i, 1] = hex_tap(uv[i], f, base, v1, s1, params.seed, params.rotation)
+    taps[i, 2] = hex_tap(uv[i], f, base, v2, s2, params.seed, params.rotation)

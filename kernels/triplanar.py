@@ -1,210 +1,122 @@
 """Triplanar and biplanar mapping, and triplanar normal mapping, per pixel over a G-buffer.
 
 The projections, their weights and the mirror fix are the building blocks of
-:mod:`warptex.kernels.projection`. Biplanar mapping (Quilez) is triplanar with a weight function
-that is exactly zero on the minor axis; the kernels skip zero-weight projections, so it reads at
-most two.
+:mod:`warptex.kernels.projection`; the six face textures and the choice among them are in
+:mod:`warptex.kernels.faces`. Biplanar mapping (Quilez) is triplanar with a weight function that is
+exactly zero on the minor axis; the kernels skip zero-weight projections, so it reads at most two.
 
-**Kernels.** Each kernel is built twice from one source (and each twice again, see below):
-reading every projection with plain trilinear sampling (Warp module ``warptex.triplanar``), or
-with the stochastic technique of its
-``StochasticArgs`` (``warptex.triplanar.stochastic``); merely containing the stochastic code made
-plain sampling a tenth slower, and compiling it costs several times more. Colour and normal mapping
-come with hand-written texel gradients, in the ``.grad`` module beside each; the kernels with
-Warp's generated adjoint (for sharpness, offsets, G-buffer gradients, stochastic tiling or a
-histogram) are built on the out-of-line blocks of :mod:`warptex.kernels.projection`, in ``warptex.kernels.ADJOINT_MODULE``.
-
-**Textures per face.** Every kernel takes six textures, one per face of the cube of directions:
-``tex_x``/``tex_y``/``tex_z`` are read where the (projected-space) normal's component along the
-projection's axis is ``>= 0``, ``tex_neg_x``/``tex_neg_y``/``tex_neg_z`` where it is negative
-(:func:`face_texture`), so a ceiling can differ from the floor. The choice flips where
-``n[axis] = 0``, where that projection's weight is 0 (for a sharpness > 0, triplanar and biplanar
-alike), so the seam is as continuous as the blend. Only the kernels of the ``.faces`` modules make
-that choice; the others read ``tex_x``/``tex_y``/``tex_z`` on both faces
-(:func:`face_texture_per_axis`), as they did before faces existed, for one texture or one per axis.
-The generated-adjoint kernels always choose by face (one kernel each; same results).
+**Configurations** (:func:`triplanar_kernels`): colour or normal mapping; plain or ``stochastic``
+sampling (a Warp module of its own: merely containing the stochastic code made plain sampling a
+tenth slower, and compiling it costs several times more); one texture per axis or one per face
+(``faces``, choosing by the normal's sign, again a module of its own). Colour has a hand-written
+texel gradient; normal mapping, which is not linear in the texels, a two-step one (:class:`Staged`):
+the projections' samples stored per pixel with a hand-written texel gradient, then the normal made
+from them by a kernel whose generated adjoint is cheap (it samples nothing). The kernels with Warp's
+generated adjoint (for sharpness, offsets, G-buffer gradients, stochastic tiling or a histogram) are
+one per output, the most general configuration's (stochastic, by face; the same results), built on
+the out-of-line blocks of :mod:`warptex.kernels.projection`.
 """
+
+import functools
 
 import warp as wp
 
-from . import ADJOINT_MODULE
+from . import specialised
+from .faces import FACE_FIELDS, FaceGrads, FaceTextures, face_grad, face_grad_per_axis, face_texture, face_texture_per_axis
+from .family import Kernels, Staged, family, forward_kernel, pixel_kernels
 from .normals import blend_projected, decode_normal, direction, to_world
-from .projection import (
-    ProjectionArgs,
-    object_space,
-    plane_coords,
-    projection_footprint,
-    projection_sample,
-    projection_tiling,
-    projection_uv,
-    projection_weights,
-    surface_frame,
-    u_sign,
-)
-from .sampling import SamplerArgs, TexelGrad, TextureView, read_channels, sample_footprint, scatter_footprint, write_channels
-from .stochastic import StochasticArgs, sample_stochastic, scatter_stochastic
+from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
+from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
+from .texels import SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
 
 MODULE = "warptex.triplanar"
-STOCHASTIC_MODULE = "warptex.triplanar.stochastic"
 GRAD_MODULE = MODULE + ".grad"
-STOCHASTIC_GRAD_MODULE = STOCHASTIC_MODULE + ".grad"
-# The same kernels with a texture per face (module docstring).
-FACES_MODULE = MODULE + ".faces"
-FACES_GRAD_MODULE = FACES_MODULE + ".grad"
-STOCHASTIC_FACES_MODULE = STOCHASTIC_MODULE + ".faces"
-STOCHASTIC_FACES_GRAD_MODULE = STOCHASTIC_FACES_MODULE + ".grad"
+
 # The stochastic kernels loop over the projections (and taps) rather than unroll them: unrolled, the
 # colour and normal kernels held six copies of the stochastic sampling code, 38 s to compile for sm_90.
-for _module in (STOCHASTIC_MODULE, STOCHASTIC_GRAD_MODULE, STOCHASTIC_FACES_MODULE, STOCHASTIC_FACES_GRAD_MODULE):
+for _module in (f"{MODULE}.stochastic{faces}{grad}" for faces in ("", ".faces") for grad in ("", ".grad")):
     wp.set_module_options({"max_unroll": 1}, module=_module)
 
 
-@wp.func
-def axis_texture(tex_x: TextureView, tex_y: TextureView, tex_z: TextureView, axis: wp.int32) -> TextureView:
-    """Projection ``axis``' texture: X ``tex_x``, Y ``tex_y``, Z ``tex_z`` (chosen, then sampled by
-    one call: three inlined copies of the sampling code measured slower)."""
-    tex = tex_x
-    if axis == 1:
-        tex = tex_y
-    elif axis == 2:
-        tex = tex_z
-    return tex
+@wp.struct
+class NormalMapArgs:
+    """How a normal map is read: ``channels`` (2 to 4), the slopes' ``strength``, ``flip_green``
+    for DirectX-style maps, and the ``blend`` with the surface normal (``normals.BLEND_*``)."""
+
+    channels: wp.int32
+    strength: float
+    flip_green: wp.int32
+    blend: wp.int32
+
+
+@wp.struct
+class TriplanarArgs:
+    """What every pixel of a triplanar launch reads: the face textures and the array layer read,
+    the projections, the sampler, the stochastic options, and (normal mapping) the normal map's."""
+
+    faces: FaceTextures
+    layer: wp.int32
+    proj: ProjectionArgs
+    smp: SamplerArgs
+    stoch: StochasticArgs
+    normal_map: NormalMapArgs
+
+
+@wp.struct
+class ProjectionSamples:
+    """Per pixel, what normal mapping reads from each projection (0 where its weight is 0 or the
+    pixel is not covered), and the projections' weights."""
+
+    samples: wp.array2d(dtype=wp.vec4)
+    weights: wp.array(dtype=wp.vec3)
+
+
+@wp.struct
+class NormalBlendArgs:
+    """What the normal made from stored samples reads (filled by name from :class:`TriplanarArgs`)."""
+
+    proj: ProjectionArgs
+    normal_map: NormalMapArgs
+
+
+@wp.struct
+class StoredSamples:
+    """The per-pixel inputs of the normal made from stored samples: the G-buffer's normal and mask
+    and the intermediates of :class:`ProjectionSamples`."""
+
+    normal: wp.array(dtype=wp.vec3)
+    mask: wp.array(dtype=float)
+    samples: wp.array2d(dtype=wp.vec4)
+    weights: wp.array(dtype=wp.vec3)
+
+
+# -- reading one projection ----------------------------------------------------------------------------
+
+
+def _projection_reads(sample, scatter, suffix: str):
+    """``(read, add)``: projection ``axis`` of ``tex`` over the projection's own footprint, sampled
+    with ``sample`` (plain or stochastic: every stochastic tap reads the unperturbed footprint's
+    LOD), and the gradient of that read added into the texel gradient ``grad`` (nothing when it is
+    empty: not needed; linear blends only)."""
+
+    def read(tex: TextureView, layer: wp.int32, axis: wp.int32, args: TriplanarArgs, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3) -> wp.vec4:
+        return sample(tex, layer, projection_uv(args.proj, axis, p, n), projection_footprint(tex, args.proj, axis, n, dpdx, dpdy, args.smp), args.smp, args.stoch)
+
+    def add(tex: TextureView, grad: TexelGrad, layer: wp.int32, axis: wp.int32, args: TriplanarArgs, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, g: wp.vec4):
+        if grad.texels.shape[0] > 0:
+            scatter(tex, grad, layer, projection_uv(args.proj, axis, p, n), projection_footprint(tex, args.proj, axis, n, dpdx, dpdy, args.smp), args.smp, args.stoch, g)
+
+    return wp.func(specialised(read, "read_projection" + suffix)), wp.func(specialised(add, "add_projection" + suffix))
 
 
 @wp.func
-def axis_grad(grad_x: TexelGrad, grad_y: TexelGrad, grad_z: TexelGrad, axis: wp.int32):
-    """The texel gradient of :func:`axis_texture`'s texture."""
-    grad = grad_x
-    if axis == 1:
-        grad = grad_y
-    elif axis == 2:
-        grad = grad_z
-    return grad
-
-
-@wp.func
-def face_texture(
-    tex_x: TextureView, tex_y: TextureView, tex_z: TextureView, tex_neg_x: TextureView, tex_neg_y: TextureView, tex_neg_z: TextureView, axis: wp.int32, n: wp.vec3
-) -> TextureView:
-    """Projection ``axis``' texture on the face the normal ``n`` looks at: the ``+axis`` face's
-    (``tex_x``/``tex_y``/``tex_z``) where ``n[axis] >= 0`` (``sign(0) = +1``, as the mirror fix's
-    :func:`~warptex.kernels.normals.sign_or_one`), else the ``-axis`` face's
-    (``tex_neg_x``/``tex_neg_y``/``tex_neg_z``). Where the choice flips, ``n[axis] = 0``, the
-    projection's weight is 0 (for a sharpness > 0), so the seam blends as the others do."""
-    tex = axis_texture(tex_x, tex_y, tex_z, axis)
-    if n[axis] < 0.0:
-        tex = axis_texture(tex_neg_x, tex_neg_y, tex_neg_z, axis)
-    return tex
-
-
-@wp.func
-def face_texture_per_axis(
-    tex_x: TextureView, tex_y: TextureView, tex_z: TextureView, tex_neg_x: TextureView, tex_neg_y: TextureView, tex_neg_z: TextureView, axis: wp.int32, n: wp.vec3
-) -> TextureView:
-    """:func:`face_texture` where both faces of each axis have one texture, ``tex_x``/``tex_y``/``tex_z``
-    (the ``tex_neg_*`` are not read): what the default kernels select, at the cost they always had."""
-    return axis_texture(tex_x, tex_y, tex_z, axis)
-
-
-@wp.func
-def face_grad(
-    grad_x: TexelGrad,
-    grad_y: TexelGrad,
-    grad_z: TexelGrad,
-    grad_neg_x: TexelGrad,
-    grad_neg_y: TexelGrad,
-    grad_neg_z: TexelGrad,
-    axis: wp.int32,
-    n: wp.vec3,
-):
-    """The texel gradient of :func:`face_texture`'s texture."""
-    grad = axis_grad(grad_x, grad_y, grad_z, axis)
-    if n[axis] < 0.0:
-        grad = axis_grad(grad_neg_x, grad_neg_y, grad_neg_z, axis)
-    return grad
-
-
-@wp.func
-def face_grad_per_axis(
-    grad_x: TexelGrad,
-    grad_y: TexelGrad,
-    grad_z: TexelGrad,
-    grad_neg_x: TexelGrad,
-    grad_neg_y: TexelGrad,
-    grad_neg_z: TexelGrad,
-    axis: wp.int32,
-    n: wp.vec3,
-):
-    """The texel gradient of :func:`face_texture_per_axis`'s texture."""
-    return axis_grad(grad_x, grad_y, grad_z, axis)
-
-
-@wp.func
-def sample_one(
-    tex: TextureView, layer: wp.int32, axis: wp.int32, proj: ProjectionArgs, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, smp: SamplerArgs, stoch: StochasticArgs
-) -> wp.vec4:
-    """Projection ``axis`` of ``tex`` over the projection's own footprint, sampled as ``stoch`` says
-    (the stochastic taps all use the unperturbed footprint's LOD)."""
-    return sample_stochastic(tex, layer, projection_uv(proj, axis, p, n), projection_footprint(tex, proj, axis, n, dpdx, dpdy, smp), smp, stoch)
-
-
-@wp.func
-def sample_one_plain(
-    tex: TextureView, layer: wp.int32, axis: wp.int32, proj: ProjectionArgs, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, smp: SamplerArgs, stoch: StochasticArgs
-) -> wp.vec4:
-    """:func:`sample_one` with plain sampling (``stoch`` is not read)."""
-    return sample_footprint(tex, layer, projection_uv(proj, axis, p, n), projection_footprint(tex, proj, axis, n, dpdx, dpdy, smp), smp)
-
-
-@wp.func
-def scatter_one(
-    tex: TextureView,
-    grad: TexelGrad,
-    layer: wp.int32,
-    axis: wp.int32,
-    proj: ProjectionArgs,
-    p: wp.vec3,
-    n: wp.vec3,
-    dpdx: wp.vec3,
-    dpdy: wp.vec3,
-    smp: SamplerArgs,
-    stoch: StochasticArgs,
-    g: wp.vec4,
-):
-    """Add the gradient ``g`` of projection ``axis`` (as :func:`sample_one` reads it; linear
-    blends only) into ``grad``, the texels' gradient; nothing when ``grad`` is empty (not needed)."""
-    if grad.texels.shape[0] > 0:
-        scatter_stochastic(tex, grad, layer, projection_uv(proj, axis, p, n), projection_footprint(tex, proj, axis, n, dpdx, dpdy, smp), smp, stoch, g)
-
-
-@wp.func
-def scatter_one_plain(
-    tex: TextureView,
-    grad: TexelGrad,
-    layer: wp.int32,
-    axis: wp.int32,
-    proj: ProjectionArgs,
-    p: wp.vec3,
-    n: wp.vec3,
-    dpdx: wp.vec3,
-    dpdy: wp.vec3,
-    smp: SamplerArgs,
-    stoch: StochasticArgs,
-    g: wp.vec4,
-):
-    """:func:`scatter_one` for plain sampling (as :func:`sample_one_plain` reads it)."""
-    if grad.texels.shape[0] > 0:
-        scatter_footprint(tex, grad, layer, projection_uv(proj, axis, p, n), projection_footprint(tex, proj, axis, n, dpdx, dpdy, smp), smp, g)
-
-
-@wp.func
-def projected_normal(texel: wp.vec4, axis: wp.int32, n: wp.vec3, proj: ProjectionArgs, channels: wp.int32, strength: float, flip_green: wp.int32, blend: wp.int32) -> wp.vec3:
+def projected_normal(texel: wp.vec4, axis: wp.int32, n: wp.vec3, proj: ProjectionArgs, nm: NormalMapArgs) -> wp.vec3:
     """Projection ``axis``' normal in world-aligned axes (unweighted): ``texel`` decoded, its ``x``
     mirror-fixed, blended with the unit surface normal ``n`` in the projection's frame, swizzled back."""
-    t = decode_normal(texel, channels, strength, flip_green)
+    t = decode_normal(texel, nm.channels, nm.strength, nm.flip_green)
     t = wp.vec3(t[0] * u_sign(n, axis, proj.mirror_fix), t[1], t[2])
     base = plane_coords(n, axis)
-    return to_world(blend_projected(t, wp.vec3(base[0], base[1], n[axis]), blend), axis)
+    return to_world(blend_projected(t, wp.vec3(base[0], base[1], n[axis]), nm.blend), axis)
 
 
 @wp.func
@@ -212,12 +124,12 @@ def unit_normal(total: wp.vec3, n: wp.vec3, proj: ProjectionArgs) -> wp.vec3:
     """The blended normal ``total`` in world space, normalised; the surface normal ``n`` where the
     blend cancels out; ``(0, 0, 0)`` where both are zero or non-finite."""
     world = proj.normal_to_world * total
-    surface = proj.normal_to_world * n
+    surface_normal = proj.normal_to_world * n
     result = wp.vec3(0.0)
     if wp.length(world) > 1.0e-12 and wp.isfinite(world):
         result = direction(world)
-    elif wp.length(surface) > 0.0 and wp.isfinite(surface):
-        result = direction(surface)
+    elif wp.length(surface_normal) > 0.0 and wp.isfinite(surface_normal):
+        result = direction(surface_normal)
     return result
 
 
@@ -237,369 +149,161 @@ def write_normal(out: wp.array2d(dtype=float), i: wp.int32, value: wp.vec3):
     out[i, 2] = value[2]
 
 
-# -- colour ---------------------------------------------------------------------------------------------
+# -- pixel bodies --------------------------------------------------------------------------------------
 
 
-def _colour_kernel(module: str, sample, select):
-    @wp.kernel(enable_backward=False, module=module)
-    def triplanar_kernel(
-        tex_x: TextureView,
-        tex_y: TextureView,
-        tex_z: TextureView,
-        tex_neg_x: TextureView,
-        tex_neg_y: TextureView,
-        tex_neg_z: TextureView,
-        layer: wp.int32,
-        position: wp.array(dtype=wp.vec3),
-        position_dx: wp.array(dtype=wp.vec3),
-        position_dy: wp.array(dtype=wp.vec3),
-        normal: wp.array(dtype=wp.vec3),
-        mask: wp.array(dtype=float),
-        proj: ProjectionArgs,
-        smp: SamplerArgs,
-        stoch: StochasticArgs,
-        out: wp.array2d(dtype=float),
-    ):
-        """``out[i, c]``: the triplanar (or biplanar) blend of the three (two) plane projections.
+def _bodies(read, add, select, select_grad, suffix: str):
+    """The bodies of one configuration: colour, its texel gradient, normal mapping, and the two-step
+    normal's stored samples with their texel gradient. Uncovered pixels (``mask == 0``) and zero or
+    non-finite normals give 0; zero-weight projections are not read."""
 
-        Uncovered pixels (``mask == 0``) and zero or non-finite normals give 0. Zero-weight
-        projections are not sampled.
-        """
-        i = wp.tid()
-        colour = wp.vec4(0.0)
-        if mask[i] != 0.0:
-            p, n, dpdx, dpdy = object_space(proj, position[i], normal[i], position_dx[i], position_dy[i])
-            w = projection_weights(proj, n)
+    def colour(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out: wp.array2d(dtype=float)):
+        value = wp.vec4(0.0)
+        if pixels.mask[i] != 0.0:
+            p, n, dpdx, dpdy = surface(args.proj, pixels, i)
+            w = projection_weights(args.proj, n)
             for axis in range(3):
                 if w[axis] > 0.0:
-                    colour += w[axis] * sample(select(tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z, axis, n), layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
-        write_channels(out, i, colour)
+                    value += w[axis] * read(select(args.faces, axis, n), args.layer, axis, args, p, n, dpdx, dpdy)
+        write_channels(out, i, value)
 
-    return triplanar_kernel
-
-
-def _colour_texel_grad_kernel(module: str, scatter, select, select_grad):
-    @wp.kernel(enable_backward=False, module=module)
-    def triplanar_texel_grad_kernel(
-        tex_x: TextureView,
-        tex_y: TextureView,
-        tex_z: TextureView,
-        tex_neg_x: TextureView,
-        tex_neg_y: TextureView,
-        tex_neg_z: TextureView,
-        layer: wp.int32,
-        position: wp.array(dtype=wp.vec3),
-        position_dx: wp.array(dtype=wp.vec3),
-        position_dy: wp.array(dtype=wp.vec3),
-        normal: wp.array(dtype=wp.vec3),
-        mask: wp.array(dtype=float),
-        proj: ProjectionArgs,
-        smp: SamplerArgs,
-        stoch: StochasticArgs,
-        grad_x: TexelGrad,
-        grad_y: TexelGrad,
-        grad_z: TexelGrad,
-        grad_neg_x: TexelGrad,
-        grad_neg_y: TexelGrad,
-        grad_neg_z: TexelGrad,
-        adj_out: wp.array2d(dtype=float),
-    ):
-        """Add the gradient of :func:`triplanar_kernel` (same inputs; linear blends: plain sampling,
-        or stochastic without a histogram) with respect to the texels of the six face textures
-        ``tex_x``... ``tex_neg_z`` into ``grad_x``... ``grad_neg_z`` (empty: not needed; a texture
-        passed for several faces gets one gradient array for all of them), given the output's gradient
-        ``adj_out``: each projection's weight times ``adj_out[i]``, added into the texels it read."""
-        i = wp.tid()
-        if mask[i] != 0.0:
-            p, n, dpdx, dpdy = object_space(proj, position[i], normal[i], position_dx[i], position_dy[i])
-            w = projection_weights(proj, n)
-            g = read_channels(adj_out, i)
+    def colour_grad(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
+        if pixels.mask[i] != 0.0:
+            p, n, dpdx, dpdy = surface(args.proj, pixels, i)
+            w = projection_weights(args.proj, n)
+            g = read_channels(adj, i)
             for axis in range(3):
                 if w[axis] > 0.0:
-                    tex = select(tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z, axis, n)
-                    scatter(tex, select_grad(grad_x, grad_y, grad_z, grad_neg_x, grad_neg_y, grad_neg_z, axis, n), layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, w[axis] * g)
+                    add(select(args.faces, axis, n), select_grad(grads, axis, n), args.layer, axis, args, p, n, dpdx, dpdy, w[axis] * g)
 
-    return triplanar_texel_grad_kernel
-
-
-@wp.kernel(module=ADJOINT_MODULE)
-def triplanar_adjoint_kernel(
-    tex_x: TextureView,
-    tex_y: TextureView,
-    tex_z: TextureView,
-    tex_neg_x: TextureView,
-    tex_neg_y: TextureView,
-    tex_neg_z: TextureView,
-    layer: wp.int32,
-    position: wp.array(dtype=wp.vec3),
-    position_dx: wp.array(dtype=wp.vec3),
-    position_dy: wp.array(dtype=wp.vec3),
-    normal: wp.array(dtype=wp.vec3),
-    mask: wp.array(dtype=float),
-    proj: ProjectionArgs,
-    smp: SamplerArgs,
-    stoch: StochasticArgs,
-    out: wp.array2d(dtype=float),
-):
-    """:func:`triplanar_kernel` (either variant) with Warp's generated adjoint, on out-of-line blocks."""
-    i = wp.tid()
-    colour = wp.vec4(0.0)
-    if mask[i] != 0.0:
-        p, n, dpdx, dpdy, w = surface_frame(proj, position[i], normal[i], position_dx[i], position_dy[i])
-        for axis in range(3):
-            if w[axis] > 0.0:
-                tex = face_texture(tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z, axis, n)
-                colour += w[axis] * projection_sample(tex, layer, proj, axis, p, n, dpdx, dpdy, projection_tiling(proj, axis), smp, stoch)
-    write_channels(out, i, colour)
-
-
-# -- normal mapping -------------------------------------------------------------------------------------
-
-
-def _normal_kernel(module: str, sample, select):
-    @wp.kernel(enable_backward=False, module=module)
-    def triplanar_normal_kernel(
-        tex_x: TextureView,
-        tex_y: TextureView,
-        tex_z: TextureView,
-        tex_neg_x: TextureView,
-        tex_neg_y: TextureView,
-        tex_neg_z: TextureView,
-        layer: wp.int32,
-        position: wp.array(dtype=wp.vec3),
-        position_dx: wp.array(dtype=wp.vec3),
-        position_dy: wp.array(dtype=wp.vec3),
-        normal: wp.array(dtype=wp.vec3),
-        mask: wp.array(dtype=float),
-        proj: ProjectionArgs,
-        smp: SamplerArgs,
-        stoch: StochasticArgs,
-        channels: wp.int32,
-        strength: float,
-        flip_green: wp.int32,
-        blend: wp.int32,
-        out: wp.array2d(dtype=float),
-    ):
-        """``out[i, :]``: the unit world-space normal after triplanar normal mapping.
-
-        Each projection's tangent-space normal is decoded, turned into the projection's
-        world-aligned frame (its ``x`` follows the mirror-fixed ``u``), blended with the surface
-        normal there (whiteout, UDN or RNM), swizzled back to world axes, and the weighted sum is
-        normalised. Uncovered pixels, zero or non-finite normals give ``(0, 0, 0)``; if the blend
-        cancels out, the surface normal is returned.
-        """
-        i = wp.tid()
+    def normal(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out: wp.array2d(dtype=float)):
         result = wp.vec3(0.0)
-        if mask[i] != 0.0:
-            p, n, dpdx, dpdy = object_space(proj, position[i], normal[i], position_dx[i], position_dy[i])
-            w = projection_weights(proj, n)
+        if pixels.mask[i] != 0.0:
+            p, n, dpdx, dpdy = surface(args.proj, pixels, i)
+            w = projection_weights(args.proj, n)
             n = unit_base_normal(n)
             total = wp.vec3(0.0)
             for axis in range(3):
                 if w[axis] > 0.0:
-                    texel = sample(select(tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z, axis, n), layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
-                    total += w[axis] * projected_normal(texel, axis, n, proj, channels, strength, flip_green, blend)
-            result = unit_normal(total, n, proj)
+                    texel = read(select(args.faces, axis, n), args.layer, axis, args, p, n, dpdx, dpdy)
+                    total += w[axis] * projected_normal(texel, axis, n, args.proj, args.normal_map)
+            result = unit_normal(total, n, args.proj)
         write_normal(out, i, result)
 
-    return triplanar_normal_kernel
+    def samples(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out: ProjectionSamples):
+        if pixels.mask[i] != 0.0:
+            p, n, dpdx, dpdy = surface(args.proj, pixels, i)
+            w = projection_weights(args.proj, n)
+            out.weights[i] = w
+            n = unit_base_normal(n)
+            for axis in range(3):
+                if w[axis] > 0.0:
+                    out.samples[i, axis] = read(select(args.faces, axis, n), args.layer, axis, args, p, n, dpdx, dpdy)
+
+    def samples_grad(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, grads: FaceGrads, adj: ProjectionSamples):
+        # adj.weights is not read: no gradient reaches the weights on this path.
+        if pixels.mask[i] != 0.0:
+            p, n, dpdx, dpdy = surface(args.proj, pixels, i)
+            w = projection_weights(args.proj, n)
+            n = unit_base_normal(n)
+            for axis in range(3):
+                if w[axis] > 0.0:
+                    add(select(args.faces, axis, n), select_grad(grads, axis, n), args.layer, axis, args, p, n, dpdx, dpdy, adj.samples[i, axis])
+
+    return {name: wp.func(specialised(f, f"triplanar_{name}{suffix}")) for name, f in (("colour", colour), ("colour_grad", colour_grad), ("normal", normal), ("samples", samples), ("samples_grad", samples_grad))}
 
 
-@wp.kernel(module=ADJOINT_MODULE)
-def triplanar_normal_adjoint_kernel(
-    tex_x: TextureView,
-    tex_y: TextureView,
-    tex_z: TextureView,
-    tex_neg_x: TextureView,
-    tex_neg_y: TextureView,
-    tex_neg_z: TextureView,
-    layer: wp.int32,
-    position: wp.array(dtype=wp.vec3),
-    position_dx: wp.array(dtype=wp.vec3),
-    position_dy: wp.array(dtype=wp.vec3),
-    normal: wp.array(dtype=wp.vec3),
-    mask: wp.array(dtype=float),
-    proj: ProjectionArgs,
-    smp: SamplerArgs,
-    stoch: StochasticArgs,
-    channels: wp.int32,
-    strength: float,
-    flip_green: wp.int32,
-    blend: wp.int32,
-    out: wp.array2d(dtype=float),
-):
-    """:func:`triplanar_normal_kernel` (either variant) with Warp's generated adjoint, on out-of-line blocks."""
-    i = wp.tid()
+@wp.func
+def colour_outlined(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out: wp.array2d(dtype=float)):
+    """The colour body (every configuration) on out-of-line blocks, for Warp's generated adjoint."""
+    value = wp.vec4(0.0)
+    if pixels.mask[i] != 0.0:
+        p, n, dpdx, dpdy, w = surface_frame(args.proj, pixels.position[i], pixels.normal[i], pixels.position_dx[i], pixels.position_dy[i])
+        for axis in range(3):
+            if w[axis] > 0.0:
+                tex = face_texture(args.faces, axis, n)
+                value += w[axis] * projection_sample(tex, args.layer, args.proj, axis, p, n, dpdx, dpdy, projection_tiling(args.proj, axis), args.smp, args.stoch)
+    write_channels(out, i, value)
+
+
+@wp.func
+def normal_outlined(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out: wp.array2d(dtype=float)):
+    """The normal-mapping body (every configuration) on out-of-line blocks, for Warp's generated adjoint."""
     result = wp.vec3(0.0)
-    if mask[i] != 0.0:
-        p, n, dpdx, dpdy, w = surface_frame(proj, position[i], normal[i], position_dx[i], position_dy[i])
+    if pixels.mask[i] != 0.0:
+        p, n, dpdx, dpdy, w = surface_frame(args.proj, pixels.position[i], pixels.normal[i], pixels.position_dx[i], pixels.position_dy[i])
         n = unit_base_normal(n)
         total = wp.vec3(0.0)
         for axis in range(3):
             if w[axis] > 0.0:
-                tex = face_texture(tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z, axis, n)
-                texel = projection_sample(tex, layer, proj, axis, p, n, dpdx, dpdy, projection_tiling(proj, axis), smp, stoch)
-                total += w[axis] * projected_normal(texel, axis, n, proj, channels, strength, flip_green, blend)
-        result = unit_normal(total, n, proj)
+                tex = face_texture(args.faces, axis, n)
+                texel = projection_sample(tex, args.layer, args.proj, axis, p, n, dpdx, dpdy, projection_tiling(args.proj, axis), args.smp, args.stoch)
+                total += w[axis] * projected_normal(texel, axis, n, args.proj, args.normal_map)
+        result = unit_normal(total, n, args.proj)
     write_normal(out, i, result)
 
 
-# Normal mapping is not linear in the texels (decode, blend, normalise), so where only texels need
-# gradients it runs in two steps: the projections' samples are stored per pixel with a hand-written
-# texel gradient (projection_samples_kernel, projection_texel_grad_kernel), and the normal is
-# computed from them by a kernel whose generated adjoint is cheap: it samples nothing.
-
-
-def _projection_samples_kernel(module: str, sample, select):
-    @wp.kernel(enable_backward=False, module=module)
-    def projection_samples_kernel(
-        tex_x: TextureView,
-        tex_y: TextureView,
-        tex_z: TextureView,
-        tex_neg_x: TextureView,
-        tex_neg_y: TextureView,
-        tex_neg_z: TextureView,
-        layer: wp.int32,
-        position: wp.array(dtype=wp.vec3),
-        position_dx: wp.array(dtype=wp.vec3),
-        position_dy: wp.array(dtype=wp.vec3),
-        normal: wp.array(dtype=wp.vec3),
-        mask: wp.array(dtype=float),
-        proj: ProjectionArgs,
-        smp: SamplerArgs,
-        stoch: StochasticArgs,
-        samples: wp.array2d(dtype=wp.vec4),
-        weights: wp.array(dtype=wp.vec3),
-    ):
-        """``samples[i, axis]``: what :func:`triplanar_normal_kernel` reads from projection ``axis``
-        (0 where its weight is 0 or the pixel is not covered); ``weights[i]``: the projections' weights."""
-        i = wp.tid()
-        if mask[i] != 0.0:
-            p, n, dpdx, dpdy = object_space(proj, position[i], normal[i], position_dx[i], position_dy[i])
-            w = projection_weights(proj, n)
-            weights[i] = w
-            n = unit_base_normal(n)
-            for axis in range(3):
-                if w[axis] > 0.0:
-                    samples[i, axis] = sample(select(tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z, axis, n), layer, axis, proj, p, n, dpdx, dpdy, smp, stoch)
-
-    return projection_samples_kernel
-
-
-def _projection_texel_grad_kernel(module: str, scatter, select, select_grad):
-    @wp.kernel(enable_backward=False, module=module)
-    def projection_texel_grad_kernel(
-        tex_x: TextureView,
-        tex_y: TextureView,
-        tex_z: TextureView,
-        tex_neg_x: TextureView,
-        tex_neg_y: TextureView,
-        tex_neg_z: TextureView,
-        layer: wp.int32,
-        position: wp.array(dtype=wp.vec3),
-        position_dx: wp.array(dtype=wp.vec3),
-        position_dy: wp.array(dtype=wp.vec3),
-        normal: wp.array(dtype=wp.vec3),
-        mask: wp.array(dtype=float),
-        proj: ProjectionArgs,
-        smp: SamplerArgs,
-        stoch: StochasticArgs,
-        grad_x: TexelGrad,
-        grad_y: TexelGrad,
-        grad_z: TexelGrad,
-        grad_neg_x: TexelGrad,
-        grad_neg_y: TexelGrad,
-        grad_neg_z: TexelGrad,
-        adj_samples: wp.array2d(dtype=wp.vec4),
-        adj_weights: wp.array(dtype=wp.vec3),
-    ):
-        """Add the gradient ``adj_samples`` of :func:`projection_samples_kernel`'s samples (linear
-        blends of taps) into the texels they read, as :func:`triplanar_texel_grad_kernel` does
-        (``adj_weights`` is not read: no gradient reaches the weights on this path)."""
-        i = wp.tid()
-        if mask[i] != 0.0:
-            p, n, dpdx, dpdy = object_space(proj, position[i], normal[i], position_dx[i], position_dy[i])
-            w = projection_weights(proj, n)
-            n = unit_base_normal(n)
-            for axis in range(3):
-                if w[axis] > 0.0:
-                    tex = select(tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z, axis, n)
-                    scatter(tex, select_grad(grad_x, grad_y, grad_z, grad_neg_x, grad_neg_y, grad_neg_z, axis, n), layer, axis, proj, p, n, dpdx, dpdy, smp, stoch, adj_samples[i, axis])
-
-    return projection_texel_grad_kernel
-
-
-@wp.kernel(module=GRAD_MODULE)
-def triplanar_normal_from_samples_kernel(
-    samples: wp.array2d(dtype=wp.vec4),
-    weights: wp.array(dtype=wp.vec3),
-    normal: wp.array(dtype=wp.vec3),
-    mask: wp.array(dtype=float),
-    proj: ProjectionArgs,
-    channels: wp.int32,
-    strength: float,
-    flip_green: wp.int32,
-    blend: wp.int32,
-    out: wp.array2d(dtype=float),
-):
-    """:func:`triplanar_normal_kernel` with each projection's sample and weight read from
-    ``samples`` and ``weights`` (no gradient reaches the weights: this runs only where the
-    sharpness and the G-buffer need none)."""
-    i = wp.tid()
+@wp.func
+def normal_from_samples(args: NormalBlendArgs, pixels: StoredSamples, i: wp.int32, out: wp.array2d(dtype=float)):
+    """The normal-mapping body with each projection's sample and weight read from the stored ones
+    (no gradient reaches the weights: this runs only where the sharpness and the G-buffer need none)."""
     result = wp.vec3(0.0)
-    if mask[i] != 0.0:
-        w = weights[i]
-        n = unit_base_normal(proj.normal_to_object * normal[i])
+    if pixels.mask[i] != 0.0:
+        w = pixels.weights[i]
+        n = unit_base_normal(args.proj.normal_to_object * pixels.normal[i])
         total = wp.vec3(0.0)
         for axis in range(3):
             if w[axis] > 0.0:
-                total += w[axis] * projected_normal(samples[i, axis], axis, n, proj, channels, strength, flip_green, blend)
-        result = unit_normal(total, n, proj)
+                total += w[axis] * projected_normal(pixels.samples[i, axis], axis, n, args.proj, args.normal_map)
+        result = unit_normal(total, n, args.proj)
     write_normal(out, i, result)
 
 
-def _variants(module: str, grad_module: str, sample, scatter, select, select_grad) -> tuple:
-    """The kernels of one module pair: colour, normal, texel gradient, projection samples and their
-    texel gradient, sampling with ``sample``/``scatter`` and choosing textures with ``select``."""
-    return (
-        _colour_kernel(module, sample, select),
-        _normal_kernel(module, sample, select),
-        _colour_texel_grad_kernel(grad_module, scatter, select, select_grad),
-        _projection_samples_kernel(grad_module, sample, select),
-        _projection_texel_grad_kernel(grad_module, scatter, select, select_grad),
-    )
+_PLAIN = _projection_reads(sample_plain, scatter_plain, "_plain")
+_STOCHASTIC = _projection_reads(sample_stochastic, scatter_stochastic, "_stochastic")
+_BODIES = {
+    (stochastic, faces): _bodies(*(_STOCHASTIC if stochastic else _PLAIN), face_texture if faces else face_texture_per_axis, face_grad if faces else face_grad_per_axis,
+                                 ("_stochastic" if stochastic else "") + ("_faces" if faces else ""))  # fmt: skip
+    for stochastic in (False, True)
+    for faces in (False, True)
+}
+#: The texel gradients' input paths (``FaceGrads`` fields), the face textures in :data:`~.faces.FACES` order.
+FACE_GRADS = tuple(f"args.faces.{f}" for f in FACE_FIELDS)
+_CONFIGURATIONS = [{"normal": normal, "stochastic": stochastic, "faces": faces} for normal in (False, True) for stochastic in (False, True) for faces in (False, True)]
 
 
-# One texture per axis (textures_per_face not given, or the same as textures_per_axis).
-(
-    triplanar_kernel,
-    triplanar_normal_kernel,
-    triplanar_texel_grad_kernel,
-    projection_samples_kernel,
-    projection_texel_grad_kernel,
-) = _variants(MODULE, GRAD_MODULE, sample_one_plain, scatter_one_plain, face_texture_per_axis, face_grad_per_axis)
-(
-    triplanar_stochastic_kernel,
-    triplanar_normal_stochastic_kernel,
-    triplanar_stochastic_texel_grad_kernel,
-    projection_samples_stochastic_kernel,
-    projection_stochastic_texel_grad_kernel,
-) = _variants(STOCHASTIC_MODULE, STOCHASTIC_GRAD_MODULE, sample_one, scatter_one, face_texture_per_axis, face_grad_per_axis)
+@family(configurations=_CONFIGURATIONS)
+def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels:
+    """The kernels of colour (or ``normal``) mapping, plain or ``stochastic``, one texture per axis
+    or per face (``faces``): module docstring."""
+    module = MODULE + (".stochastic" if stochastic else "") + (".faces" if faces else "")
+    grad_module = module + ".grad"
+    bodies = _BODIES[stochastic, faces]
+    name = "triplanar" + ("_stochastic" if stochastic else "") + ("_faces" if faces else "")
+    general = stochastic and faces  # the configuration whose generated adjoint every configuration shares
+    if not normal:
+        forward, texel_grad, adjoint = pixel_kernels(name, module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["colour"],
+                                                     scatter=bodies["colour_grad"], grads=FaceGrads, adjoint_body=colour_outlined if general else None)  # fmt: skip
+        if not general:
+            adjoint = triplanar_kernels(normal=False, stochastic=True, faces=True).adjoint
+        return Kernels(forward, texel_grad, adjoint, grads=FACE_GRADS)
+    forward, _, adjoint = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"],
+                                        adjoint_body=normal_outlined if general else None)  # fmt: skip
+    if not general:
+        adjoint = triplanar_kernels(normal=True, stochastic=True, faces=True).adjoint
+    first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,
+                          body=bodies["samples"], scatter=bodies["samples_grad"], grads=FaceGrads)  # fmt: skip
+    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=FACE_GRADS), then=_normal_from_samples(), intermediates=_sample_shapes)
+    return Kernels(forward, None, adjoint, staged=staged)
 
-# A texture per face: the same kernels choosing by the normal's sign, in modules of their own. In the
-# default kernels that choice cost 7% of a plain triplanar sample (selecting a TextureView copies it);
-# here it is paid, and compiled, only where the faces of an axis differ.
-(
-    triplanar_faces_kernel,
-    triplanar_normal_faces_kernel,
-    triplanar_faces_texel_grad_kernel,
-    projection_samples_faces_kernel,
-    projection_faces_texel_grad_kernel,
-) = _variants(FACES_MODULE, FACES_GRAD_MODULE, sample_one_plain, scatter_one_plain, face_texture, face_grad)
-(
-    triplanar_stochastic_faces_kernel,
-    triplanar_normal_stochastic_faces_kernel,
-    triplanar_stochastic_faces_texel_grad_kernel,
-    projection_samples_stochastic_faces_kernel,
-    projection_stochastic_faces_texel_grad_kernel,
-) = _variants(STOCHASTIC_FACES_MODULE, STOCHASTIC_FACES_GRAD_MODULE, sample_one, scatter_one, face_texture, face_grad)
+
+def _sample_shapes(count: int, args) -> dict:
+    return {"samples": ((count, 3), wp.vec4), "weights": ((count,), wp.vec3)}
+
+
+@functools.cache
+def _normal_from_samples() -> Kernels:
+    """The second step of the two-step normal (one kernel for every configuration, with its generated
+    adjoint, in the ``.grad`` module: it runs only where gradients are recorded)."""
+    kernel = forward_kernel(normal_from_samples, NormalBlendArgs, StoredSamples, wp.array2d(dtype=float), module=GRAD_MODULE, name="triplanar_normal_from_samples", enable_backward=True)
+    return Kernels(kernel, None, kernel)

@@ -21,7 +21,7 @@ from test_gradients import _check_per_sample
 from test_triplanar_gradients import smooth_texture
 from warptex.apps.demo import checker_texture, ground_plane
 from warptex.atlas import export_index_maps, pack_atlas, splat_atlas
-from warptex.layers import splat
+from warptex.splat import splat
 
 ANISO = wt.Sampler(filter="anisotropic")
 TRILINEAR = wt.Sampler(filter="trilinear")

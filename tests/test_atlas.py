@@ -3,7 +3,7 @@ gradients, bad input.
 
 G-buffers here are built by hand (``GBuffer.empty`` + ``assign``): the splat path reads weights
 bilinearly between splat texels while the index-map path reads one texel (nearest), so comparisons
-with :func:`warptex.layers.splat` put every pixel's UV0 on a splat-texel centre, where the bilinear
+with :func:`warptex.splat` put every pixel's UV0 on a splat-texel centre, where the bilinear
 read returns that texel exactly and the two paths must agree to rounding.
 """
 
@@ -15,7 +15,7 @@ import warptex as wt
 from fd import check_parameter_gradient
 from reference import texel_centres
 from warptex.atlas import Atlas, export_index_maps, pack_atlas, splat_atlas
-from warptex.layers import splat
+from warptex.splat import splat
 
 
 def _gbuffer(uv, uv_dx=None, uv_dy=None):

@@ -24,7 +24,7 @@ import reference_triplanar as rt
 import warptex as wt
 from backward_paths import assert_same_gradients, texel_gradients_both_ways
 from reference_layers import splat_reference
-from warptex.layers import splat
+from warptex.splat import splat
 from warptex.triplanar import biplanar, triplanar, triplanar_normal
 
 REPO = Path(__file__).resolve().parents[1]

@@ -11,7 +11,8 @@ import trimesh
 import warp as wp
 
 import warptex as wt
-from warptex import _launch
+from warptex import _accumulate, _launch, _threads
+from warptex.kernels.texels import TILE_SHIFT
 
 
 @pytest.fixture
@@ -90,7 +91,7 @@ def test_threaded_gradients_are_the_same_bits_whichever_thread_is_slow(technique
     g = _sphere()
     weights = np.random.default_rng(3).random((256, 256, 4)).astype(np.float32)
     uv = _uv(65536)
-    real_run = _launch._Split.run
+    real_run = _threads.Split.run
     grads = []
     for slow in (0, 1):
 
@@ -102,7 +103,7 @@ def test_threaded_gradients_are_the_same_bits_whichever_thread_is_slow(technique
 
             return real_run(self, held_up, **kw)
 
-        monkeypatch.setattr(_launch._Split, "run", run)
+        monkeypatch.setattr(_threads.Split, "run", run)
         threads(2)
         tex = _texture(requires_grad=True)
         tiling = wp.array([3.0], dtype=float, requires_grad=True)
@@ -118,20 +119,37 @@ def test_threaded_gradients_are_the_same_bits_whichever_thread_is_slow(technique
     assert np.abs(grads[0][0]).sum() > 0
 
 
+@wp.struct
+class _Nothing:
+    unused: wp.int32
+
+
+@wp.struct
+class _Values:
+    x: wp.array(dtype=float)
+
+
+def _values(x: wp.array):
+    pixels = _Values()
+    pixels.x = x
+    return pixels
+
+
+@wp.kernel
+def _add_one(args: _Nothing, pixels: _Values, y: wp.array2d(dtype=float)):
+    i = wp.tid()
+    y[i, 0] = pixels.x[i] + 1.0
+
+
 def test_small_launches_are_not_split():
     out = wp.zeros((100, 1), dtype=float)
     calls = []
 
-    @wp.kernel
-    def count_kernel(x: wp.array(dtype=float), y: wp.array2d(dtype=float)):
-        i = wp.tid()
-        y[i, 0] = x[i] + 1.0
-
     x = wp.array(np.arange(100, dtype=np.float32))
     original = wp.launch
     try:
-        wp.launch = lambda kernel, *a, **k: (kernel is count_kernel and calls.append(k["dim"]), original(kernel, *a, **k))  # only ours: any other launch meanwhile is not this test's
-        _launch.launch(count_kernel, 100, inputs=_launch.per_pixel(x), outputs=[out], device="cpu", threads=4)
+        wp.launch = lambda kernel, *a, **k: (kernel is _add_one and calls.append(k["dim"]), original(kernel, *a, **k))  # only ours: any other launch meanwhile is not this test's
+        _launch.launch(_add_one, 100, args=_Nothing(), pixels=_values(x), out=out, device="cpu", threads=4)
     finally:
         wp.launch = original
     assert calls == [100]
@@ -143,8 +161,8 @@ def test_bad_thread_counts_and_per_pixel_arrays_raise():
         wt.set_num_threads(0)
     with pytest.raises(ValueError, match=r"set_num_threads\(\): threads must be an int >= 1 or None, got 2.5"):
         wt.set_num_threads(2.5)
-    with pytest.raises(RuntimeError, match=r"a per-pixel argument has 10 rows for 40000 pixels"):
-        _launch.launch(None, 40000, inputs=_launch.per_pixel(wp.zeros(10, dtype=float)), outputs=[wp.zeros(40000, dtype=float)], device="cpu", threads=2)
+    with pytest.raises(RuntimeError, match=r"a per-pixel array has 10 rows for 40000 pixels"):
+        _launch.launch(_add_one, 40000, args=_Nothing(), pixels=_values(wp.zeros(10, dtype=float)), out=wp.zeros((40000, 1), dtype=float), device="cpu", threads=2)
 
 
 def test_thread_count_from_the_environment(monkeypatch):
@@ -154,7 +172,7 @@ def test_thread_count_from_the_environment(monkeypatch):
     with pytest.raises(ValueError, match=r"WARPTEX_NUM_THREADS must be an int >= 1, got 'many'"):
         wt.get_num_threads()
     monkeypatch.delenv("WARPTEX_NUM_THREADS")
-    assert wt.get_num_threads() == _launch.cpu_count()
+    assert wt.get_num_threads() == _threads.cpu_count()
 
 
 def test_threaded_backward_gives_per_pixel_and_struct_gradients(threads):
@@ -236,7 +254,7 @@ def test_private_accumulators_are_kept_with_their_gradient(threads):
         out.grad.fill_(1.0)
         tape.backward()
         np.testing.assert_allclose(tex.grad(), want[k // 2], rtol=1e-5, atol=1e-6 * np.abs(want[k // 2]).max())
-        kept.append(dict(_launch._private_arrays[real]))
+        kept.append(dict(_accumulate._private_arrays[real]))
         tex.zero_grad()
     assert set(kept[0]) == {1, 2, 3}  # one per worker but the first
     assert all(kept[k][w].array is kept[0][w].array for k in range(4) for w in (1, 2, 3))
@@ -272,8 +290,8 @@ def test_private_copies_summed_in_parallel_give_the_serial_sum_bit_for_bit(gener
         return results
 
     parallel = gradients()
-    assert tuple(_launch._private_arrays) and parallel[0].nbytes * 4 // 3 > _launch.PARALLEL_SUM_BYTES
-    monkeypatch.setattr(_launch, "PARALLEL_SUM_BYTES", 1 << 62)
+    assert tuple(_accumulate._private_arrays) and parallel[0].nbytes * 4 // 3 > _threads.PARALLEL_SUM_BYTES
+    monkeypatch.setattr(_accumulate, "PARALLEL_SUM_BYTES", 1 << 62)
     serial = gradients()
     for p, s in zip(parallel + serial[1:], serial + serial[:1]):
         np.testing.assert_array_equal(p, s)
@@ -281,7 +299,7 @@ def test_private_copies_summed_in_parallel_give_the_serial_sum_bit_for_bit(gener
 
 
 @wp.kernel
-def _first_column_only(out: wp.array2d(dtype=float)):
+def _first_column_only(args: _Nothing, pixels: _Values, out: wp.array2d(dtype=float)):
     out[wp.tid(), 0] = 1.0
 
 
@@ -293,7 +311,7 @@ def test_a_launch_zeroes_its_new_outputs_and_their_gradients(n, threads):
     out = _launch.output((70000, 2), float, "cpu", requires_grad=True)
     out.fill_(np.nan)
     out.grad.fill_(np.nan)
-    _launch.launch(_first_column_only, 70000, inputs=[], outputs=[out], device="cpu")
+    _launch.launch(_first_column_only, 70000, args=_Nothing(), pixels=_values(wp.empty(0, dtype=float)), out=out, device="cpu")
     np.testing.assert_array_equal(out.numpy(), np.float32([1, 0]) * np.ones((70000, 1), np.float32))
     np.testing.assert_array_equal(out.grad.numpy(), 0)
 
@@ -306,20 +324,20 @@ def test_chunks_hold_equal_costs_of_covered_pixels():
     mask = np.zeros(count, np.float32)
     mask[count // 2 :] = 1.0
     mask[count // 2 : count // 2 + 5000 : 7] = 0.0  # a ragged edge
-    bounds = _launch._bounds(count, chunks, wp.array(mask))
-    assert bounds == _launch._bounds(count, chunks, wp.array(mask))
+    bounds = _threads.bounds(count, chunks, wp.array(mask))
+    assert bounds == _threads.bounds(count, chunks, wp.array(mask))
     assert bounds[0] == 0 and bounds[-1] == count and len(bounds) == chunks + 1 and (np.diff(bounds) > 0).all()
     shaded = np.float64(mask != 0)
-    cost = shaded + _launch.UNCOVERED_COST * (1 - shaded)
+    cost = shaded + _threads.UNCOVERED_COST * (1 - shaded)
     costs = np.array([cost[a:b].sum() for a, b in zip(bounds[:-1], bounds[1:])])
-    assert np.abs(costs - cost.sum() / chunks).max() <= _launch.COVERAGE_BLOCK  # cut at whole blocks
+    assert np.abs(costs - cost.sum() / chunks).max() <= _threads.COVERAGE_BLOCK  # cut at whole blocks
     assert bounds[1] > count // 4  # the sky's pixels go to few chunks
     even = [count * k // chunks for k in range(chunks + 1)]
-    assert _launch._bounds(count, chunks, None) == even
-    assert _launch._bounds(count, chunks, wp.array(np.ones(count, np.float32))) == even
-    assert _launch._bounds(count, chunks, wp.zeros(count, dtype=float)) == even  # all sky: all alike
-    assert _launch._bounds(count, chunks, wp.array(np.full(count, np.nan, np.float32))) == even  # never NaN bounds
-    odd = _launch._bounds(count, chunks, wp.array(mask * 5.0 - 1.0))  # not a 0/1 mask: still a valid cut
+    assert _threads.bounds(count, chunks, None) == even
+    assert _threads.bounds(count, chunks, wp.array(np.ones(count, np.float32))) == even
+    assert _threads.bounds(count, chunks, wp.zeros(count, dtype=float)) == even  # all sky: all alike
+    assert _threads.bounds(count, chunks, wp.array(np.full(count, np.nan, np.float32))) == even  # never NaN bounds
+    odd = _threads.bounds(count, chunks, wp.array(mask * 5.0 - 1.0))  # not a 0/1 mask: still a valid cut
     assert odd[0] == 0 and odd[-1] == count and (np.diff(odd) > 0).all()
 
 
@@ -343,7 +361,7 @@ def test_private_copies_are_left_zero_and_dropped_after_a_failure(threads, monke
 
     want = gradient()
     real = tex.view.texels.grad
-    copies = _launch._private_arrays[real]
+    copies = _accumulate._private_arrays[real]
     assert set(copies) == {1, 2} and all((c.array.numpy() == 0).all() and (c.tiles.numpy() == 0).all() for c in copies.values())
 
     calls, original = [], wp.launch
@@ -362,7 +380,7 @@ def test_private_copies_are_left_zero_and_dropped_after_a_failure(threads, monke
     with pytest.raises(RuntimeError, match="a chunk failed"):
         tape.backward()
     monkeypatch.undo()
-    assert real not in _launch._private_arrays
+    assert real not in _accumulate._private_arrays
     tex.zero_grad()
     np.testing.assert_array_equal(gradient(), want)
 
@@ -372,7 +390,7 @@ def test_zero_grad_clears_a_large_gradient_on_the_threads(threads):
     threads(3)
     tex = wt.Texture(np.random.default_rng(6).random((512, 512, 4)).astype(np.float32), requires_grad=True)
     grad = tex.view.texels.grad
-    assert grad.size * 16 >= _launch.PARALLEL_SUM_BYTES
+    assert grad.size * 16 >= _threads.PARALLEL_SUM_BYTES
     grad.fill_(wp.vec4(1.0, 2.0, 3.0, 4.0))
     tex.zero_grad()
     np.testing.assert_array_equal(grad.numpy(), 0)
@@ -383,35 +401,35 @@ def test_every_worker_gets_as_many_chunks(workers):
     """The backward pass hands chunks out in a fixed order (w, w + workers, ...): a whole number of
     chunks per worker gives each the same share (a 192 x 256 view in 3 chunks on 2 workers gave one
     twice the other's work)."""
-    for count in (workers * _launch.MIN_PIXELS_PER_THREAD, 192 * 256, 5 * _launch.MIN_PIXELS_PER_THREAD + 7, 1 << 20):
-        if count < workers * _launch.MIN_PIXELS_PER_THREAD:
+    for count in (workers * _threads.MIN_PIXELS_PER_THREAD, 192 * 256, 5 * _threads.MIN_PIXELS_PER_THREAD + 7, 1 << 20):
+        if count < workers * _threads.MIN_PIXELS_PER_THREAD:
             continue
-        split = _launch._Split(None, wp.get_device("cpu"), count, [], [], workers)
-        assert split.chunks % workers == 0 and workers <= split.chunks <= workers * _launch.CHUNKS_PER_THREAD
-        assert min(np.diff(split.bounds)) >= _launch.MIN_PIXELS_PER_THREAD
+        split = _threads.Split(count, workers)
+        assert split.chunks % workers == 0 and workers <= split.chunks <= workers * _threads.CHUNKS_PER_THREAD
+        assert min(np.diff(split.bounds)) >= _threads.MIN_PIXELS_PER_THREAD
 
 
 def _watch_sums(monkeypatch) -> tuple[list, list]:
-    """``(seen, entries)``: filled as ``_add_private`` runs, with ``_marked_tiles`` of every tracked
+    """``(seen, entries)``: filled as ``add_private`` runs, with ``_marked_tiles`` of every tracked
     copy it sums and the ``entries`` it is given."""
     seen, entries_seen = [], []
-    real_add = _launch._add_private
+    real_add = _accumulate.add_private
 
     def add(private, workers, entries=None):
         seen.extend(_marked_tiles(c) for _, c in private if c.tiles is not None)
         entries_seen.append(dict(entries or {}))
         real_add(private, workers, entries)
 
-    monkeypatch.setattr(_launch, "_add_private", add)
+    monkeypatch.setattr(_accumulate, "add_private", add)
     return seen, entries_seen
 
 
 def _marked_tiles(copy) -> tuple[np.ndarray, np.ndarray]:
     """``(marked, written)``: a private copy's tile flags, and which of its tiles hold non-zero entries."""
-    tile = 1 << _launch.TILE_SHIFT
+    tile = 1 << TILE_SHIFT
     values = np.abs(copy.array.numpy()).reshape(copy.array.shape[0], -1).sum(axis=1)
     written = np.add.reduceat(values, np.arange(0, len(values), tile)) > 0
-    return _launch._tiles_reached(copy.tiles.numpy()), written
+    return _accumulate.tiles_reached(copy.tiles.numpy()), written
 
 
 def _sample_backward(threads, count, image, uv, out_grad, make=wt.Texture, **kw):
@@ -447,7 +465,7 @@ def test_private_copies_sum_only_the_tiles_they_marked(filter_, lod, levels, thr
         tex = _sample_backward(threads, n, image, uv, weights, lod=lod, sampler=wt.Sampler(filter=filter_, address="wrap"))
         grads.append([tex.grad(level) for level in range(tex.num_levels)])
     real = tex.view.texels.grad
-    tile = 1 << _launch.TILE_SHIFT
+    tile = 1 << TILE_SHIFT
     width = 128 >> levels[1]
     first = tex._offsets[levels[0]] // tile
     last = (tex._offsets[levels[1]] + width * width - 1 + width) // tile  # a mark covers two rows: may reach one row past the level
@@ -456,7 +474,7 @@ def test_private_copies_sum_only_the_tiles_they_marked(filter_, lod, levels, thr
         assert written.any() and not (written & ~marked).any()
         assert marked[first : last + 1].any() and not marked[:first].any() and not marked[last + 1 :].any()
     assert [list(e.values()) for e in entries] == [[tex.level_entries(*levels)]] * 2  # on 2 and 3 threads
-    assert all((c.array.numpy() == 0).all() and (c.tiles.numpy() == 0).all() for c in _launch._private_arrays[real].values())
+    assert all((c.array.numpy() == 0).all() and (c.tiles.numpy() == 0).all() for c in _accumulate._private_arrays[real].values())
     for level, (one, *more) in enumerate(zip(*grads)):
         for other in more:
             np.testing.assert_allclose(other, one, rtol=1e-5, atol=1e-6)
@@ -471,7 +489,7 @@ def test_coherent_pixels_mark_a_part_of_the_texture(threads, monkeypatch):
     image = np.random.default_rng(10).random((256, 256, 4)).astype(np.float32)
     seen, _ = _watch_sums(monkeypatch)
     grads = [_sample_backward(threads, n, image, g.uv()["uv"], 1.0, sampler=wt.Sampler(filter="bilinear", address="wrap")).grad() for n in (1, 3)]
-    level0 = 256 * 256 // (1 << _launch.TILE_SHIFT)
+    level0 = 256 * 256 // (1 << TILE_SHIFT)
     assert len(seen) == 2  # workers 1 and 2
     for marked, written in seen:
         assert not (written & ~marked).any()
@@ -484,7 +502,7 @@ def test_add_private_sums_marked_tiles_in_worker_order():
     in worker order, bit for bit as a serial sum) and zeroed, unmarked ones left alone, untracked
     copies added whole; split into parts past PARALLEL_SUM_BYTES alike."""
     rng = np.random.default_rng(11)
-    tile = 1 << _launch.TILE_SHIFT
+    tile = 1 << TILE_SHIFT
     for entries in (5 * tile + 7, 70 * tile + 3):  # one part; several (past PARALLEL_SUM_BYTES)
         tiles = -(-entries // tile)
         real = wp.array(rng.random((entries, 4)).astype(np.float32), dtype=wp.vec4)
@@ -495,10 +513,10 @@ def test_add_private_sums_marked_tiles_in_worker_order():
             values = rng.random((entries, 4)).astype(np.float32)
             if marks is not None:
                 values[~np.repeat(marks, tile)[:entries]] = 0
-            copy = _launch._Copy(wp.array(values, dtype=wp.vec4), None if marks is None else wp.array(marks.astype(np.int32), dtype=wp.int32))
+            copy = _accumulate.Copy(wp.array(values, dtype=wp.vec4), None if marks is None else wp.array(marks.astype(np.int32), dtype=wp.int32))
             private.append((real, copy))
             want += values
-        _launch._add_private(private, workers=3)
+        _accumulate.add_private(private, workers=3)
         np.testing.assert_array_equal(real.numpy(), want)
         assert all((c.array.numpy() == 0).all() and (c.tiles is None or (c.tiles.numpy() == 0).all()) for _, c in private)
 
@@ -534,14 +552,14 @@ def test_add_private_sums_only_the_entries_given():
     """``entries`` (the mip levels a constant-LOD lookup reads) limits the sum of an untracked copy
     to the tiles of that range: what lies outside (here planted against the contract) is not
     added, and the range is left zero."""
-    tile = 1 << _launch.TILE_SHIFT
+    tile = 1 << TILE_SHIFT
     rng = np.random.default_rng(13)
     real = wp.zeros(20 * tile, dtype=wp.vec4)
     values = np.zeros((20 * tile, 4), np.float32)
     values[5 * tile + 3 : 9 * tile - 7] = rng.random((4 * tile - 10, 4))
     values[[0, 5 * tile - 1, 9 * tile, -1]] = 7.0  # outside the range's tiles
-    copy = _launch._Copy(wp.array(values, dtype=wp.vec4), None)
-    _launch._add_private([(real, copy)], workers=2, entries={id(real): (5 * tile + 3, 9 * tile - 7)})
+    copy = _accumulate.Copy(wp.array(values, dtype=wp.vec4), None)
+    _accumulate.add_private([(real, copy)], workers=2, entries={id(real): (5 * tile + 3, 9 * tile - 7)})
     inside = np.zeros(20 * tile, bool)
     inside[5 * tile : 9 * tile] = True
     np.testing.assert_array_equal(real.numpy()[inside], values[inside])

@@ -7,7 +7,7 @@ The library:
   :class:`Stochastic` (with :class:`Method`);
 - the techniques: :func:`sample`, :func:`stochastic` (with :func:`prepare_histogram`,
   :class:`Histogram`), :func:`triplanar`, :func:`biplanar`, :func:`triplanar_normal` (with
-  :class:`Space`, :class:`Blend`), :func:`splat` (with :class:`Projection`), and the atlas variant
+  :class:`Space`, :class:`Blend`), :func:`splat` (with :class:`LayerProjection`), and the atlas variant
   :func:`pack_atlas`, :func:`export_index_maps`, :func:`splat_atlas` (:class:`Atlas`);
 - G-buffers: :func:`rasterize` of a mesh (:func:`load_mesh`) through a :class:`Camera`
   (:func:`look_at`, :func:`orthographic`) into a :class:`GBuffer`, :func:`save_gbuffer`,
@@ -47,13 +47,14 @@ def _import_kernels_of_a_checkout() -> None:
 _import_kernels_of_a_checkout()
 
 from warptex import fit, io
-from warptex._launch import get_num_threads, precompile, set_num_threads
+from warptex._compile import precompile
+from warptex._threads import get_num_threads, set_num_threads
 from warptex.atlas import Atlas, export_index_maps, pack_atlas, splat_atlas
 from warptex.camera import Camera, look_at, orthographic
 from warptex.gbuffer import GBuffer, load_mesh, rasterize
 from warptex.gbuffer_io import load_gbuffer, save_gbuffer
 from warptex.histogram import Histogram, prepare_histogram
-from warptex.layers import Projection, splat
+from warptex.splat import LayerProjection, splat
 from warptex.options import Address, Filter, Method, Sampler, Stochastic
 from warptex.sampling import sample
 from warptex.stochastic import hex_taps, stochastic
@@ -69,7 +70,7 @@ __all__ = [
     "GBuffer",
     "Histogram",
     "Method",
-    "Projection",
+    "LayerProjection",
     "Sampler",
     "Space",
     "Stochastic",

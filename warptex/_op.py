@@ -1,38 +1,38 @@
-"""How a technique's kernels run, and which backward pass they record: one mechanism for all.
+"""How a technique's kernels run, and which backward pass they record: one decision, for every technique.
 
-Every per-pixel technique has up to three kernels (:class:`Kernels`), built from one source:
+A technique hands :func:`run` its :class:`~warptex.kernels.family.Kernels`, its ``args`` and
+``pixels`` structs and its output's shape; :func:`run` derives everything else from those inputs:
 
-- ``forward``: the outputs, compiled without Warp's generated adjoint;
-- ``texel_grad``: its hand-written gradient. Sampling is linear in the texels, so the gradient of
-  a linear blend of taps adds each tap's weight times the output gradient into the texels it read,
-  at about the cost of one forward pass (Warp's generated adjoint, which replays every function's
-  forward inside its reverse pass, cost five). Its arguments are the forward's inputs, then one
-  gradient array per input it differentiates (:func:`run`'s ``by_hand``), then the outputs'
-  gradients;
-- ``adjoint``: the forward with Warp's generated adjoint, which differentiates everything else
-  (UVs, sharpness, offsets, G-buffer arrays, a histogram blend). It lives in a Warp module of its
-  own, compiled only the first time such a gradient is asked for.
-
-:func:`run` picks one per launch: without a tape (or when no output needs a gradient) the forward
-kernel alone; when every input that needs a gradient is one the texel-gradient kernel serves and
-the blend is linear, the forward kernel with the texel-gradient kernel recorded as its backward;
-otherwise the adjoint kernel. :func:`force_generated_adjoint` makes the last choice whenever a
-backward pass is recorded, so tests compare the two on the same inputs.
+- **which arrays want gradients**: every float array among the inputs that requires them, struct
+  fields included (a texture's texels, ``tiling``, a G-buffer array...). The output requires
+  gradients exactly when one does, so a new differentiable input is never silently left out;
+- **which backward pass is recorded**, once per launch: none without a tape (or when nothing wants
+  a gradient); the hand-written texel gradient (``texel_grad``) when every array that wants one is
+  among those it serves (``Kernels.grads``), the blend of taps is ``linear`` and
+  :func:`force_generated_adjoint` is not in effect; else Warp's generated adjoint (``adjoint``).
+  Sampling is linear in the texels, so the gradient of a linear blend of taps adds each tap's
+  weight times the output gradient into the texels it read, at about the cost of one forward pass;
+  Warp's generated adjoint, which replays every function's forward inside its reverse pass, cost
+  five. Where a path is a :class:`~warptex.kernels.family.Staged` pair of steps, :func:`run`
+  composes it: the first step's intermediates, then the second step with its own backward.
 """
 
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import threading
-from typing import Any
 
 import warp as wp
 
-from warptex._launch import GENERATED, PerPixel, launch, per_pixel, scatter
-from warptex._warp import active_tape
+from warptex._launch import GENERATED, Target, launch, output, scatter
+from warptex._warp import active_tape, scalar_type, struct_fields, struct_like
+from warptex.kernels.family import PIXELS, Kernels, Staged
+from warptex.kernels.texels import TextureView
 
 _forced = threading.local()
+
+# Scalar types of the arrays that can carry gradients.
+_FLOATS = (wp.float16, wp.float32, wp.float64)
 
 
 @contextlib.contextmanager
@@ -47,87 +47,127 @@ def force_generated_adjoint(enabled: bool = True):
         _forced.value = previous
 
 
-@dataclasses.dataclass(frozen=True)
-class Kernels:
-    """One technique's kernels (module docstring). ``texel_grad`` or ``adjoint`` may be ``None``
-    where the technique has no such path."""
-
-    forward: Any
-    texel_grad: Any = None
-    adjoint: Any = None
-
-
-def needs_grad(*arrays) -> bool:
-    """Whether any of ``arrays`` (``wp.array``, :func:`~warptex._launch.per_pixel` entries or ``None``) requires gradients."""
-    return any(_array(a) is not None and _array(a).requires_grad for a in arrays)
+def differentiable(value, path: str = ""):
+    """``(path, array)`` of every float array in ``value`` (an array, a struct or a dict, walked as
+    ``wp.Tape.get_adjoint`` walks it), e.g. ``("args.tex.texels", texels)``."""
+    if wp.types.is_array(value):
+        if scalar_type(value.dtype) in _FLOATS:
+            yield path, value
+    elif wp.types.is_struct(value) or isinstance(value, dict):
+        for name, field in (value if isinstance(value, dict) else struct_fields(value)).items():
+            yield from differentiable(field, f"{path}.{name}" if path else name)
 
 
-def hand_written(others: list, linear: bool = True) -> bool:
-    """Whether a hand-written gradient may be recorded: no array of ``others`` requires gradients,
-    the blend is ``linear``, and :func:`force_generated_adjoint` is not in effect."""
-    return linear and not needs_grad(*others) and not getattr(_forced, "value", False)
+def resolve(inputs: dict, path: str) -> wp.array | None:
+    """The array a gradient path names (``"args.layers"``: a ``TextureView``'s texels)."""
+    value = inputs
+    for name in path.split("."):
+        value = value[name] if isinstance(value, dict) else getattr(value, name)
+    if getattr(value, "_cls", None) is TextureView:  # a texture: its texels
+        value = value.texels
+    return value if wp.types.is_array(value) and value.shape[0] > 0 else None
 
 
-def run(kernels: Kernels, count: int, *, inputs: list, outputs: list, device, by_hand: list = (), others: list = (), linear: bool = True, covered: wp.array | None = None, touched: list | None = None) -> None:
-    """Launch ``kernels`` over ``count`` pixels and record the backward pass a ``wp.Tape`` needs.
+def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linear: bool = True, covered: wp.array | None = None, touched: dict | None = None) -> wp.array:
+    """Launch ``kernels`` over ``count`` pixels into a new output and record the backward pass a
+    ``wp.Tape`` needs (module docstring).
 
     Args:
-        kernels: the technique's :class:`Kernels`.
+        kernels: the technique's :class:`~warptex.kernels.family.Kernels` for this configuration.
         count: pixels (launch size).
-        inputs: the kernels' inputs; per-pixel arrays wrapped with :func:`per_pixel`.
-        outputs: the per-pixel outputs. An output that does not require gradients records nothing.
+        args, pixels: the kernels' fixed and per-pixel argument structs.
+        out: ``(shape, dtype)`` of the output (first axis: ``count``).
         device: the Warp device.
-        by_hand: the arrays ``kernels.texel_grad`` adds gradients into, in its argument order
-            (``None`` where absent; per-pixel ones wrapped with :func:`per_pixel`). Those that require
-            gradients get them; the others are passed as empty arrays.
-        others: every other differentiable array among the inputs: when one requires gradients,
-            the generated adjoint runs.
         linear: whether the blend of taps is linear in the texels (``False``: a histogram blend,
             which only the generated adjoint differentiates).
-        covered: the G-buffer's mask, for a launch over a G-buffer (see :func:`~warptex._launch.launch`).
-        touched: per ``by_hand`` array, the ``(start, stop)`` entries the hand-written gradient can
-            add into, where fewer than all (a constant-LOD lookup reads one or two mip levels): only
-            those are summed from the per-thread copies (``None``: all).
+        covered: the G-buffer's mask, for a launch over a G-buffer (balances the threads' chunks).
+        touched: ``{path: (start, stop)}`` for hand-written gradient targets the kernel adds into
+            only there (a constant-LOD lookup reads one or two mip levels): only those entries are
+            summed from the per-thread copies.
+
+    Returns:
+        the output, requiring gradients when any differentiable input does.
     """
-    tape = active_tape()
-    if tape is None or not any(o.requires_grad for o in outputs):
-        launch(kernels.forward, count, inputs=inputs, outputs=outputs, device=device, covered=covered)
-        return
-    if kernels.texel_grad is not None and hand_written(others, linear):
-        backward = _texel_gradients(kernels.texel_grad, count, inputs, outputs, by_hand, device, covered, touched)
-        launch(kernels.forward, count, inputs=inputs, outputs=outputs, device=device, backward=backward, covered=covered)
-        return
-    if kernels.adjoint is None:
+    inputs = {"args": args, "pixels": pixels}
+    wanted = [a for _, a in differentiable(inputs) if a.requires_grad]
+    result = output(*out, device=device, requires_grad=bool(wanted))
+    if active_tape() is None or not wanted:
+        launch(kernels.forward, count, args=args, pixels=pixels, out=result, device=device, covered=covered)
+    else:
+        _run_path(kernels, _backward_path(kernels, inputs, wanted, linear), count, inputs, result, device, covered, touched)
+    return result
+
+
+def _backward_path(kernels: Kernels, inputs: dict, wanted: list, linear: bool) -> str:
+    """``"texel_grad"`` when the hand-written gradient serves every array in ``wanted``, else ``"adjoint"``."""
+    by_hand = kernels.texel_grad is not None or (kernels.staged is not None and kernels.staged.replaces == "texel_grad")
+    if not by_hand or not linear or getattr(_forced, "value", False):
+        return "adjoint"
+    paths = kernels.grads if kernels.texel_grad is not None else kernels.staged.first.grads
+    served = {id(a) for a in (resolve(inputs, p) for p in paths if p is not None) if a is not None}
+    return "texel_grad" if all(id(a) in served for a in wanted) else "adjoint"
+
+
+def _run_path(kernels: Kernels, path: str, count: int, inputs: dict, result, device, covered, touched) -> None:
+    """Launch ``kernels`` recording the backward ``path`` (or the staged pair that stands for it)."""
+    if kernels.staged is not None and kernels.staged.replaces == path and (kernels.texel_grad if path == "texel_grad" else kernels.adjoint) is None:
+        _run_staged(kernels.staged, count, inputs, result, device, covered)
+    elif path == "texel_grad":
+        launch(kernels.forward, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, covered=covered,
+               backward=_texel_gradient(kernels, count, inputs, result, device, covered, touched))  # fmt: skip
+    elif kernels.adjoint is not None:
+        launch(kernels.adjoint, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, covered=covered, backward=GENERATED)
+    else:
         raise RuntimeError("warptex internal error: a gradient was asked for that this technique has no kernel for")
-    launch(kernels.adjoint, count, inputs=inputs, outputs=outputs, device=device, backward=GENERATED, covered=covered)
 
 
-def run_by_hand(kernels: Kernels, count: int, *, inputs: list, outputs: list, device, by_hand: list, covered: wp.array | None = None) -> None:
-    """:func:`run` for a step whose hand-written gradient is always the one recorded, for a
-    technique that composes it with a generated adjoint (e.g. a blend of stored samples)."""
-    tape = active_tape()
-    backward = _texel_gradients(kernels.texel_grad, count, inputs, outputs, by_hand, device, covered) if tape is not None else None
-    launch(kernels.forward, count, inputs=inputs, outputs=outputs, device=device, backward=backward, covered=covered)
+def _texel_gradient(kernels: Kernels, count: int, inputs: dict, result, device, covered, touched):
+    """``backward(tape)``: ``kernels.texel_grad`` adds the output's gradient, through the forward
+    pass, into the gradients of the inputs ``kernels.grads`` names that require them."""
 
-
-def _texel_gradients(kernel, count: int, inputs: list, outputs: list, by_hand: list, device, covered=None, touched=None):
-    """``backward(tape)``: ``kernel`` adds the outputs' gradients, through the forward pass, into the
-    gradients of the ``by_hand`` arrays that require them."""
-
-    def backward(tape):
-        grads, entries = [], {}
-        for a, span in zip(by_hand, touched or [None] * len(by_hand)):
-            array = _array(a)
+    def backward(tape) -> None:
+        targets, entries = [], {}
+        for path in kernels.grads:
+            array = resolve(inputs, path) if path is not None else None
             grad = tape.get_adjoint(array) if array is not None and array.requires_grad else None  # registered for tape.zero()
-            grads.append(per_pixel(grad)[0] if isinstance(a, PerPixel) else grad)
-            if grad is not None and span is not None:
-                entries[id(grad)] = span
-        adjoints = per_pixel(*[o.grad for o in outputs])
-        targets = [g for g in grads if g is not None and not isinstance(g, PerPixel)]
-        scatter(kernel, count, inputs=[*inputs, *grads, *adjoints], targets=targets, device=device, covered=covered, entries=entries)
+            targets.append(Target(grad, per_pixel=path is not None and path.startswith(PIXELS)))
+            if grad is not None and touched and path in touched:
+                entries[id(grad)] = touched[path]
+        scatter(kernels.texel_grad, count, args=inputs["args"], pixels=inputs["pixels"], grads=targets, adj=_gradient_of(result), device=device, covered=covered, entries=entries)
 
     return backward
 
 
-def _array(a) -> wp.array | None:
-    return a.array if isinstance(a, PerPixel) else a
+def _gradient_of(out):
+    """The gradient arrays of an output: its ``.grad``, or a struct of its fields' ``.grad``."""
+    if wp.types.is_array(out):
+        return out.grad
+    grads = struct_like(out)
+    for name, field in struct_fields(out).items():
+        setattr(grads, name, field.grad)
+    return grads
+
+
+def _run_staged(staged: Staged, count: int, inputs: dict, result, device, covered) -> None:
+    """The two steps of ``staged``: the intermediates (with the backward it replaces), then the
+    output from them (with the other backward); the second step's arguments filled by name."""
+    wanted = [a for p, a in differentiable(inputs) if a.requires_grad and not any(p == t or p.startswith(t + ".") for t in staged.then_only)]
+    intermediates = _struct(staged.first.forward.adj.args[2].type, {})
+    for name, (shape, dtype) in staged.intermediates(count, inputs["args"]).items():
+        setattr(intermediates, name, output(shape, dtype, device, requires_grad=bool(wanted)))
+    second = "adjoint" if staged.replaces == "texel_grad" else "texel_grad"
+    _run_path(staged.first, staged.replaces, count, inputs, intermediates, device, covered, None)
+    then_inputs = {
+        "args": _struct(staged.then.forward.adj.args[0].type, struct_fields(inputs["args"])),
+        "pixels": _struct(staged.then.forward.adj.args[1].type, {**struct_fields(inputs["pixels"]), **struct_fields(intermediates)}),
+    }
+    _run_path(staged.then, second, count, then_inputs, result, device, covered, None)
+
+
+def _struct(struct_t, fields: dict):
+    """A ``struct_t`` whose fields are taken by name from ``fields``."""
+    value = struct_t()
+    for name in struct_t.vars:
+        if name in fields:
+            setattr(value, name, fields[name])
+    return value

@@ -4,7 +4,8 @@
 - :func:`stochastic_args`: a :class:`~warptex.Stochastic` as ``StochasticArgs``, with the texture
   the kernels must read (a histogram's Gaussianised copy, or the texture itself);
 - :func:`projection_args`: triplanar projection options as ``ProjectionArgs``;
-- per-UV inputs: :func:`vec2_array`, :func:`lod_inputs`, :func:`resolve_layer`, :func:`mip_levels`.
+- per-UV inputs: :func:`vec2_array`, :func:`lod_inputs`, :func:`resolve_layer`, :func:`mip_levels`;
+- kernel argument structs: :func:`struct_of` (empty arrays for unused optional ones).
 
 Every error names the public function (``func``) whose argument is wrong.
 """
@@ -19,8 +20,8 @@ import warp as wp
 from warptex._validate import as_float, as_float_array, param_array
 from warptex.histogram import GAUSSIAN_MEAN, LUT_RANGE
 from warptex.kernels import projection as kp
-from warptex.kernels import sampling as ks
 from warptex.kernels import stochastic as kst
+from warptex.kernels import texels as ks
 from warptex.options import Address, Filter, Method, Sampler, Stochastic
 from warptex.texture import Texture, TextureArray
 
@@ -209,3 +210,15 @@ def resolve_layer(func: str, texture: TextureArray, layer, shape, device):
             raise ValueError(f"{func}(): layer must be in [0, {texture.num_layers - 1}], got {layer}")
         return int(layer), None
     return 0, _per_sample(func, "layer", layer, shape, wp.int32, device).reshape((math.prod(shape),))
+
+
+def struct_of(struct_t, device, **fields):
+    """A ``struct_t`` instance with ``fields`` set; an array field given as ``None`` (an unused
+    optional input) gets an empty array of its type, which kernels test with ``shape[0] > 0``."""
+    value = struct_t()
+    for name, field in fields.items():
+        if field is None:
+            ftype = struct_t.vars[name].type
+            field = wp.empty(shape=(0,) * ftype.ndim, dtype=ftype.dtype, device=device)
+        setattr(value, name, field)
+    return value

@@ -1,7 +1,7 @@
 """The few things warptex needs from Warp that its public API does not offer, in one place.
 
 Everything else warptex does with Warp goes through the public API (``wp.*``, ``wp.types``,
-``wp.Tape``). These three reach into Warp's internals, so they live here, each with the reason,
+``wp.Tape``). These reach into Warp's internals, so they live here, each with the reason,
 and ``tests/test_warp_adapter.py`` checks them against the installed Warp (CI runs it against the
 oldest Warp release warptex supports as well):
 
@@ -10,6 +10,7 @@ oldest Warp release warptex supports as well):
 - :func:`struct_fields` and :func:`struct_like`: the fields of a ``@wp.struct`` instance, and a new
   instance of the same struct. A threaded backward pass gives each worker copies of the kernel's
   struct arguments whose arrays accumulate their gradients privately.
+- :func:`scalar_type`: the scalar type of a vector or matrix dtype (which arrays can carry gradients).
 
 And :func:`init_quietly`, for the command line: Warp's native library prints a warning to the
 process's stderr on every start on a machine without a CUDA driver, which a CPU user can do
@@ -42,6 +43,11 @@ def active_tape() -> wp.Tape | None:
 def struct_fields(value) -> dict[str, Any]:
     """``{name: value}`` of every field of the ``@wp.struct`` instance ``value``, in declaration order."""
     return {name: getattr(value, name) for name in value._cls.vars}
+
+
+def scalar_type(dtype):
+    """The scalar type of a Warp dtype: ``wp.float32`` for ``wp.vec2``, ``wp.mat33``, ``float``..."""
+    return getattr(dtype, "_wp_scalar_type_", wp.float32 if dtype is float else dtype)
 
 
 def struct_like(value):

@@ -10,7 +10,7 @@ Three steps:
 3. :func:`splat_atlas`: per pixel, ``k`` atlas reads blended by weight (formulas and the LOD bound
    in :mod:`warptex.kernels.atlas`).
 
-With ``k = L`` and the same LOD it reproduces :func:`warptex.layers.splat` (``projection="uv"``)
+With ``k = L`` and the same LOD it reproduces :func:`warptex.splat` (``projection="uv"``)
 wherever the splat weights are constant over a splat texel (e.g. at splat-texel centres): the splat
 path reads weights bilinearly, the index-map path per texel (nearest).
 """
@@ -23,9 +23,8 @@ import types
 import numpy as np
 import warp as wp
 
-from warptex._launch import output, per_pixel
-from warptex._op import Kernels, needs_grad, run
-from warptex._pack import sampler_args
+from warptex._op import run
+from warptex._pack import sampler_args, struct_of
 from warptex._validate import as_float_array, check_layer_count, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import atlas as ka
@@ -38,7 +37,7 @@ MAX_K = 4  # ka.MAX_ENTRIES: an RGBA index map
 def export_index_maps(splat_maps, k: int = 2, *, num_layers: int | None = None, normalize: bool = True):
     """The ``k`` heaviest layers of every splat texel, as index and weight maps.
 
-    Weights are read as :func:`warptex.layers.splat` reads them: map ``m`` channel ``c`` is layer
+    Weights are read as :func:`warptex.splat` reads them: map ``m`` channel ``c`` is layer
     ``m·C + c``; negative weights count as 0. Layers are ranked by weight, ties going to the lower
     layer index (a stable sort), so the export is deterministic. With ``normalize`` the kept
     weights are divided by their sum; the weight this drops, as a fraction of the texel's total, is
@@ -96,7 +95,6 @@ def _two_adic(n: int) -> int:
     return (n & -n).bit_length() - 1
 
 
-_KERNELS = Kernels(ka.splat_atlas_kernel, None, ka.splat_atlas_adjoint_kernel)
 
 
 class _AtlasTexture(Texture):
@@ -356,9 +354,7 @@ def splat_atlas(
 
     count = gbuffer.pixel_count
     uvs = gbuffer.uv_sets[uv_set]
-    flat = [a.reshape((count,)) for a in (uvs["uv"], uvs["uv_dx"], uvs["uv_dy"], gbuffer.mask)]
-    others = [atlas.texture.view.texels, wts, tiling, *flat]  # all differentiated by the generated adjoint
-    out = output((count, atlas.channels), dtype=float, device=device, requires_grad=needs_grad(*others))
-    inputs = [atlas.texture.view, atlas.layout, idx, wts, tiling, *per_pixel(*flat), smp, int(bool(normalize))]
-    run(_KERNELS, count, inputs=inputs, outputs=[out], device=device, others=others, covered=flat[3])
+    pixels = struct_of(ka.AtlasPixels, device, uv0=uvs["uv"].reshape((count,)), uv0_dx=uvs["uv_dx"].reshape((count,)), uv0_dy=uvs["uv_dy"].reshape((count,)), mask=gbuffer.mask.reshape((count,)))
+    args = struct_of(ka.AtlasArgs, device, atlas=atlas.texture.view, layout=atlas.layout, indices=idx, weights=wts, tiling=tiling, smp=smp, normalize=int(bool(normalize)))
+    out = run(ka.atlas_kernels(), count, args=args, pixels=pixels, out=((count, atlas.channels), float), device=device, covered=pixels.mask)
     return out.reshape((*gbuffer.resolution, atlas.channels))

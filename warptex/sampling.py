@@ -5,16 +5,13 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from warptex._launch import output, per_pixel
-from warptex._op import Kernels, needs_grad, run
-from warptex._pack import lod_inputs, mip_levels, resolve_layer, sampler_args, vec2_array
+from warptex._op import run
+from warptex._pack import lod_inputs, mip_levels, resolve_layer, sampler_args, struct_of, vec2_array
 from warptex._validate import resolve_device
 from warptex.kernels import sampling as ks
+from warptex.kernels import texels as kx
 from warptex.options import Sampler, as_sampler
 from warptex.texture import TextureArray
-
-_KERNELS = Kernels(ks.sample_kernel, ks.sample_texel_grad_kernel, ks.sample_adjoint_kernel)
-_LEVEL_KERNELS = Kernels(ks.sample_level_kernel, ks.sample_level_texel_grad_kernel, ks.sample_level_adjoint_kernel)
 
 
 def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy=None, sampler: Sampler | None = None, device=None) -> wp.array:
@@ -53,17 +50,14 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
     constant_layer, layers = resolve_layer(func, texture, layer, shape, device)
 
-    flat = uv.reshape((count,))
-    others = [uv, dx, dy, lods]
-    out = output((count, texture.channels), dtype=float, device=device, requires_grad=texture.requires_grad or needs_grad(*others))
+    args = ks.SampleArgs()
+    args.tex, args.smp, args.lod_source, args.constant_lod, args.constant_layer = texture.view, smp, lod_source, constant_lod, constant_layer
+    args.level, args.fraction = 0, 0.0
+    pixels = struct_of(ks.SamplePixels, device, uv=uv.reshape((count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
     touched = None  # the texel entries the gradient can reach, when known (all levels otherwise)
-    if lod_source in (ks.LOD_NONE, ks.LOD_CONSTANT):  # one LOD for all: its levels resolved here
-        level, fraction = mip_levels(constant_lod, smp, texture.num_levels)
-        inputs = [texture.view, *per_pixel(flat, layers), smp, level, fraction, constant_layer]
-        kernels = _LEVEL_KERNELS
-        touched = [texture.level_entries(level, level + 1 if fraction > 0.0 else level)]  # trilinear reads the next level too
-    else:
-        inputs = [texture.view, *per_pixel(flat, dx, dy, lods, layers), smp, lod_source, constant_lod, constant_layer]
-        kernels = _KERNELS
-    run(kernels, count, inputs=inputs, outputs=[out], device=device, by_hand=[texture.view.texels], others=others, touched=touched)
+    level = lod_source in (kx.LOD_NONE, kx.LOD_CONSTANT)  # one LOD for all: its levels resolved here
+    if level:
+        args.level, args.fraction = mip_levels(constant_lod, smp, texture.num_levels)
+        touched = {"args.tex": texture.level_entries(args.level, args.level + 1 if args.fraction > 0.0 else args.level)}  # trilinear reads the next level too
+    out = run(ks.sample_kernels(level=level), count, args=args, pixels=pixels, out=((count, texture.channels), float), device=device, touched=touched)
     return out.reshape((*(() if single else shape), texture.channels))

@@ -12,15 +12,14 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from warptex._launch import output, per_pixel
-from warptex._op import Kernels, needs_grad, run
-from warptex._pack import lod_inputs, resolve_layer, sampler_args, stochastic_args, vec2_array
+from warptex._op import run
+from warptex._pack import lod_inputs, resolve_layer, sampler_args, stochastic_args, struct_of, vec2_array
 from warptex._validate import resolve_device
+from warptex.kernels import sampling as ks
 from warptex.kernels import stochastic as kst
 from warptex.options import Method, Sampler, Stochastic, as_sampler, as_stochastic
 from warptex.texture import Texture, TextureArray
 
-_KERNELS = Kernels(kst.stochastic_kernel, kst.stochastic_texel_grad_kernel, kst.stochastic_adjoint_kernel)
 
 
 def stochastic(
@@ -79,10 +78,12 @@ def stochastic(
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
     constant_layer, layers = resolve_layer(func, texture, layer, shape, device)
 
-    others = [uv, dx, dy, lods]
-    out = output((count, texture.channels), dtype=float, device=device, requires_grad=sampled.requires_grad or needs_grad(*others))
-    inputs = [sampled.view, *per_pixel(uv.reshape((count,)), dx, dy, lods, layers), smp, params, lod_source, constant_lod, constant_layer]
-    run(_KERNELS, count, inputs=inputs, outputs=[out], device=device, by_hand=[sampled.view.texels], others=others, linear=params.histogram == 0)
+    plain = ks.SampleArgs()
+    plain.tex, plain.smp, plain.lod_source, plain.constant_lod, plain.constant_layer, plain.level, plain.fraction = sampled.view, smp, lod_source, constant_lod, constant_layer, 0, 0.0
+    args = kst.StochasticSampleArgs()
+    args.sample, args.params = plain, params  # nested structs are set whole: Warp copies their values in
+    pixels = struct_of(ks.SamplePixels, device, uv=uv.reshape((count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
+    out = run(kst.stochastic_kernels(), count, args=args, pixels=pixels, out=((count, texture.channels), float), device=device, linear=params.histogram == 0)
     return out.reshape((*(() if single else shape), texture.channels))
 
 

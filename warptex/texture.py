@@ -9,9 +9,10 @@ import numpy as np
 import warp as wp
 
 from warptex import io
-from warptex._launch import zero
+from warptex._threads import zero
 from warptex._validate import as_float_array
 from warptex.kernels import sampling as ks
+from warptex.kernels import texels as kx
 
 
 def mip_sizes(height: int, width: int, max_levels: int | None = None) -> list[tuple[int, int]]:
@@ -104,7 +105,7 @@ class TextureArray:
         self._sizes = sizes
         self._chain = chain
         self._offsets = [int(o) for o in np.cumsum([0] + [num_layers * h * w for h, w in sizes])[:-1]]
-        view = ks.TextureView()
+        view = kx.TextureView()
         view.texels = self._chain
         view.level_offset = wp.array(self._offsets, dtype=wp.int32, device=self._device)
         view.level_height = wp.array([h for h, _ in self._sizes], dtype=wp.int32, device=self._device)
@@ -254,7 +255,7 @@ class TextureArray:
         return self._chain.requires_grad
 
     @property
-    def view(self) -> ks.TextureView:
+    def view(self) -> kx.TextureView:
         """The texture as kernels take it (:class:`warptex.kernels.sampling.TextureView`)."""
         return self._view
 

@@ -63,7 +63,7 @@ from warptex.atlas import pack_atlas, splat_atlas as _splat_atlas
 from warptex.gbuffer import FIELDS, UV_FIELDS, GBuffer
 from warptex.histogram import Histogram
 from warptex.histogram import prepare_histogram as _prepare_histogram
-from warptex.layers import splat as _splat
+from warptex.splat import splat as _splat
 from warptex.options import Sampler, Stochastic
 from warptex.sampling import sample as _sample
 from warptex.stochastic import stochastic as _stochastic

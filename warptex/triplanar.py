@@ -20,12 +20,11 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
-from warptex._launch import output, per_pixel
-from warptex._op import Kernels, hand_written, needs_grad, run
-from warptex._pack import projection_args, sampler_args, stochastic_args
+from warptex._op import run
+from warptex._pack import projection_args, sampler_args, stochastic_args, struct_of
 from warptex._validate import as_enum, as_float
-from warptex._warp import active_tape
 from warptex.gbuffer import GBuffer, gbuffer_device
+from warptex.kernels import faces as kf
 from warptex.kernels import normals as kn
 from warptex.kernels import projection as kp
 from warptex.kernels import triplanar as kt
@@ -131,7 +130,7 @@ def triplanar(
         "triplanar", kp.WEIGHTS_TRIPLANAR, gbuffer, texture, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix,
         textures_per_axis=textures_per_axis, textures_per_face=textures_per_face, layer=layer, space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device,
     )  # fmt: skip
-    return setup.launch(setup.variant(_COLOUR), setup.channels, [])
+    return setup.launch(setup.channels)
 
 
 def biplanar(
@@ -162,7 +161,7 @@ def biplanar(
         "biplanar", kp.WEIGHTS_BIPLANAR, gbuffer, texture, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix,
         textures_per_axis=textures_per_axis, textures_per_face=textures_per_face, layer=layer, space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device,
     )  # fmt: skip
-    return setup.launch(setup.variant(_COLOUR), setup.channels, [])
+    return setup.launch(setup.channels)
 
 
 def triplanar_normal(
@@ -229,37 +228,16 @@ def triplanar_normal(
     )  # fmt: skip
     if setup.channels < 2:
         raise ValueError(f"{func}(): a normal map needs 2 to 4 channels, got {setup.channels}")
-    return setup.launch_normal([setup.channels, strength, int(bool(flip_green)), blend_id])
+    normal_map = kt.NormalMapArgs()
+    normal_map.channels, normal_map.strength, normal_map.flip_green, normal_map.blend = setup.channels, strength, int(bool(flip_green)), blend_id
+    return setup.launch(3, normal_map)
 
 
 # -- internals --------------------------------------------------------------------------------------
 
 
-# Each technique's kernels by (stochastic, faces): plain or stochastic sampling, one texture per
-# axis or a texture per face (the kernels that choose by face are in modules of their own).
-_COLOUR = {
-    (False, False): Kernels(kt.triplanar_kernel, kt.triplanar_texel_grad_kernel, kt.triplanar_adjoint_kernel),
-    (True, False): Kernels(kt.triplanar_stochastic_kernel, kt.triplanar_stochastic_texel_grad_kernel, kt.triplanar_adjoint_kernel),
-    (False, True): Kernels(kt.triplanar_faces_kernel, kt.triplanar_faces_texel_grad_kernel, kt.triplanar_adjoint_kernel),
-    (True, True): Kernels(kt.triplanar_stochastic_faces_kernel, kt.triplanar_stochastic_faces_texel_grad_kernel, kt.triplanar_adjoint_kernel),
-}
-_NORMAL = {
-    (False, False): Kernels(kt.triplanar_normal_kernel, None, kt.triplanar_normal_adjoint_kernel),
-    (True, False): Kernels(kt.triplanar_normal_stochastic_kernel, None, kt.triplanar_normal_adjoint_kernel),
-    (False, True): Kernels(kt.triplanar_normal_faces_kernel, None, kt.triplanar_normal_adjoint_kernel),
-    (True, True): Kernels(kt.triplanar_normal_stochastic_faces_kernel, None, kt.triplanar_normal_adjoint_kernel),
-}
-_SAMPLES = {
-    (False, False): Kernels(kt.projection_samples_kernel, kt.projection_texel_grad_kernel),
-    (True, False): Kernels(kt.projection_samples_stochastic_kernel, kt.projection_stochastic_texel_grad_kernel),
-    (False, True): Kernels(kt.projection_samples_faces_kernel, kt.projection_faces_texel_grad_kernel),
-    (True, True): Kernels(kt.projection_samples_stochastic_faces_kernel, kt.projection_stochastic_faces_texel_grad_kernel),
-}
-_NORMAL_FROM_SAMPLES = Kernels(kt.triplanar_normal_from_samples_kernel, None, kt.triplanar_normal_from_samples_kernel)
-
-
 class _Setup:
-    """The checked, packed inputs of the three public functions, and their launches."""
+    """The checked, packed inputs of the three public functions, and their launch."""
 
     def __init__(self, func, weights, gbuffer, texture, *, tiling, sharpness, offsets, mirror_fix, textures_per_axis, textures_per_face, layer, space, object_to_world, stochastic, sampler, device):
         device = gbuffer_device(func, gbuffer, device)
@@ -274,60 +252,37 @@ class _Setup:
         if sampled is not textures[0]:  # a histogram: every projection reads its Gaussianised texture
             textures = [sampled] * len(textures)
 
-        self.gbuffer, self.textures, self.layer, self.device = gbuffer, textures, layer, device
-        self.proj, self.smp, self.stoch = proj, sampler_args(func, sampler, has_lod=True), stoch
-        self.channels = textures[0].channels
-        self.faces = any(textures[a] is not textures[a + 3] for a in range(3))  # the kernels' +a, then -a faces
+        faces = kf.FaceTextures()
+        for name, t in zip(kf.FACE_FIELDS, textures):
+            setattr(faces, name, t.view)
+        self.args = kt.TriplanarArgs()
+        self.args.faces, self.args.layer, self.args.proj, self.args.smp, self.args.stoch = faces, layer, proj, sampler_args(func, sampler, has_lod=True), stoch
+        self.args.normal_map = kt.NormalMapArgs()
+        self.gbuffer, self.device, self.channels = gbuffer, device, textures[0].channels
+        self.stochastic = stoch.method != METHOD_NONE
+        self.faces = any(textures[2 * a] is not textures[2 * a + 1] for a in range(3))  # a face of some axis differs from its opposite
         self.count = gbuffer.pixel_count
-        self.pixels = [a.reshape((self.count,)) for a in (gbuffer.position, gbuffer.position_dx, gbuffer.position_dy, gbuffer.normal, gbuffer.mask)]
-        self.texels = [t.view.texels for t in textures]  # what the hand-written gradients differentiate
-        self.others = [proj.tiling, proj.sharpness, proj.offsets, *self.pixels]  # what only the generated adjoint does
+        self.pixels = struct_of(kp.SurfacePixels, device, **{name: getattr(gbuffer, name).reshape((self.count,)) for name in ("position", "position_dx", "position_dy", "normal", "mask")})
         self.linear = stoch.histogram == 0  # the histogram blend is not linear in the texels
 
-    def variant(self, kernels: dict) -> Kernels:
-        """The kernels of ``kernels`` (by ``(stochastic, faces)``) for this call: those built without
-        the stochastic code when sampling is plain, and without the choice by face unless the two
-        faces of an axis have different textures."""
-        return kernels[self.stoch.method != METHOD_NONE, self.faces]
-
-    def inputs(self) -> list:
-        return [*[t.view for t in self.textures], self.layer, *per_pixel(*self.pixels), self.proj, self.smp, self.stoch]
-
-    def launch(self, kernels: Kernels, channels: int, extra: list) -> wp.array:
-        """Run ``kernels`` (colour or normal mapping) into a new ``(H, W, channels)`` array."""
-        out = output((self.count, channels), dtype=float, device=self.device, requires_grad=needs_grad(*self.texels, *self.others))
-        run(kernels, self.count, inputs=[*self.inputs(), *extra], outputs=[out], device=self.device, by_hand=self.texels, others=self.others, linear=self.linear, covered=self.pixels[4])
+    def launch(self, channels: int, normal_map: kt.NormalMapArgs | None = None) -> wp.array:
+        """Run colour mapping (or, given ``normal_map``, normal mapping) into a new ``(H, W, channels)`` array."""
+        if normal_map is not None:
+            self.args.normal_map = normal_map
+        kernels = kt.triplanar_kernels(normal=normal_map is not None, stochastic=self.stochastic, faces=self.faces)
+        out = run(kernels, self.count, args=self.args, pixels=self.pixels, out=((self.count, channels), float), device=self.device, linear=self.linear, covered=self.pixels.mask)
         return out.reshape((*self.gbuffer.resolution, channels))
-
-    def launch_normal(self, extra: list) -> wp.array:
-        """Run triplanar normal mapping. Where only texels need gradients (and the taps blend
-        linearly), in two steps: the projections' samples, stored per pixel with a hand-written
-        texel gradient, then the normal from them (its generated adjoint has no sampling to replay)."""
-        if active_tape() is None or not needs_grad(*self.texels) or not hand_written(self.others, self.linear):
-            return self.launch(self.variant(_NORMAL), 3, extra)
-        normal, mask = self.pixels[3], self.pixels[4]
-        samples = output((self.count, 3), dtype=wp.vec4, device=self.device, requires_grad=True)
-        weights = output(self.count, dtype=wp.vec3, device=self.device)
-        run(self.variant(_SAMPLES), self.count, inputs=self.inputs(), outputs=[samples, weights], device=self.device, by_hand=self.texels, covered=mask)
-        out = output((self.count, 3), dtype=float, device=self.device, requires_grad=True)
-        run(_NORMAL_FROM_SAMPLES, self.count, inputs=[*per_pixel(samples, weights, normal, mask), self.proj, *extra], outputs=[out], device=self.device, covered=mask)
-        return out.reshape((*self.gbuffer.resolution, 3))
-
-
-# The faces in the order of textures_per_face, as (axis, sign) ...
-FACES = ((0, "+"), (0, "-"), (1, "+"), (1, "-"), (2, "+"), (2, "-"))
-# ... and the kernels' order of them: tex_x, tex_y, tex_z, tex_neg_x, tex_neg_y, tex_neg_z.
-KERNEL_FACES = (0, 2, 4, 1, 3, 5)
 
 
 def _textures(func, texture, per_axis, per_face, layer, device) -> list[TextureArray]:
-    """The six faces' textures in the kernels' order (:data:`KERNEL_FACES`), checked: a face's own
-    texture, else its axis', else ``texture``."""
+    """The six faces' textures (in the order of ``warptex.kernels.faces.FACES``: +x, -x, +y, -y, +z,
+    -z), checked: a face's own texture, else its axis', else ``texture``."""
     per_axis = _per(func, "textures_per_axis", per_axis, 3, "X, Y, Z projections")
     faces_given = per_face is not None
     per_face = _per(func, "textures_per_face", per_face, 6, "+X, -X, +Y, -Y, +Z, -Z faces")
     chosen, names = [], []
-    for f, (axis, sign) in enumerate(FACES):
+    for f, face in enumerate(kf.FACES):
+        axis, sign = f // 2, face[0]
         own = per_face[f] is not None
         t = per_face[f] if own else texture if per_axis[axis] is None else per_axis[axis]
         name = f"{sign}{'XYZ'[axis]}" if own else "XYZ"[axis]
@@ -346,7 +301,7 @@ def _textures(func, texture, per_axis, per_face, layer, device) -> list[TextureA
             raise ValueError(f"{func}(): layer must be an int in [0, {t.num_layers - 1}] for {what}'s texture, got {layer!r}")
         chosen.append(t)
         names.append(name)
-    return [chosen[f] for f in KERNEL_FACES]
+    return chosen
 
 
 def _per(func, name, value, count, what) -> Sequence:

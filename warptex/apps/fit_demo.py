@@ -27,7 +27,7 @@ from warptex.apps.fit_report import heat_image, legend, splat_coverage, weights_
 from warptex.gbuffer import rasterize
 from warptex.gbuffer_io import load_gbuffer
 from warptex._validate import check_layer_count
-from warptex.layers import splat
+from warptex.splat import splat
 from warptex.options import Sampler
 from warptex.apps.output import check_memory, check_output_folder, output_set
 from warptex.scenes import TERRAIN_GRID, terrain_cameras

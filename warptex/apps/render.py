@@ -16,8 +16,8 @@ import numpy as np
 import trimesh
 
 from warptex import io
-from warptex._launch import preload
-from warptex.kernels import layers as kl
+from warptex._compile import preload
+from warptex.kernels import splat as kl
 from warptex.kernels import raster as kr
 from warptex.kernels import sampling as ks
 from warptex.kernels import triplanar as kt
@@ -30,7 +30,7 @@ from warptex.apps.shade import SKY, lambert, to_rgb
 from warptex.scenes import TERRAIN_GRID, terrain_camera
 from warptex.scenes.terrain import terrain
 from warptex.texture import Texture, TextureArray
-from warptex.layers import splat
+from warptex.splat import splat
 from warptex.options import Filter, Sampler
 from warptex.scenes.material import LAYER_NAMES, noise_texture, terrain_layers, terrain_splat_maps
 from warptex.triplanar import triplanar
@@ -86,8 +86,8 @@ def _kernels(terrain_material: bool) -> list:
     """The kernels a render runs: rasterisation, mip chains, and the splat or sampling ones."""
     used = [kr.raster_kernel, ks.downsample_kernel]
     if terrain_material:
-        return used + [kl.splat_kernels(kl.capacity(len(LAYER_NAMES)))["forward"]]
-    return used + [ks.sample_kernel, kt.triplanar_kernel]
+        return used + [kl.splat_kernels(capacity=kl.capacity(len(LAYER_NAMES)), stochastic=False).forward]
+    return used + [ks.sample_kernels(level=False).forward, kt.triplanar_kernels(normal=False, stochastic=False, faces=False).forward]
 
 
 def run_render(

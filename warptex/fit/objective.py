@@ -19,7 +19,7 @@ from warptex.fit.parameters import SplatParameters
 from warptex.gbuffer import FIELDS, GBuffer, gbuffer_device
 from warptex.kernels import fit as kf
 from warptex._validate import check_layer_count
-from warptex.layers import splat
+from warptex.splat import splat
 from warptex.texture import TextureArray
 
 __all__ = ["FitView", "Objective", "check_inputs", "prepare_views", "render_view", "subsample_gbuffer", "views_device"]

@@ -11,21 +11,20 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
-from warptex._launch import output, per_pixel
-from warptex._op import Kernels, hand_written, needs_grad, run, run_by_hand
-from warptex._pack import MAP_SAMPLER, projection_args, sampler_args, stochastic_args
+from warptex._op import run
+from warptex._pack import MAP_SAMPLER, projection_args, sampler_args, stochastic_args, struct_of
 from warptex._validate import as_enum, check_layer_count, param_array
-from warptex._warp import active_tape
 from warptex.gbuffer import GBuffer, gbuffer_device
-from warptex.kernels import layers as kl
 from warptex.kernels import projection as kp
+from warptex.kernels import splat as kl
+from warptex.kernels import splat_layers as ksl
 from warptex.kernels import stochastic as kst
 from warptex.options import Sampler, Stochastic, as_sampler, as_stochastic
 from warptex.texture import TextureArray
 
 
-class Projection(str, enum.Enum):
-    """Where the layers are read.
+class LayerProjection(str, enum.Enum):
+    """Where :func:`splat`'s layers are read.
 
     - ``UV``: the G-buffer's UV set (``uv_set``) × the layer's tiling.
     - ``WORLD_XZ``: world ``(-x, z)`` × tiling: the triplanar top projection (reads unmirrored
@@ -39,7 +38,7 @@ class Projection(str, enum.Enum):
     TRIPLANAR = "triplanar"
 
 
-_PROJECTION_IDS = {Projection.UV: kl.PROJECT_UV, Projection.WORLD_XZ: kl.PROJECT_WORLD_XZ, Projection.TRIPLANAR: kl.PROJECT_TRIPLANAR}
+_PROJECTION_IDS = {LayerProjection.UV: ksl.PROJECT_UV, LayerProjection.WORLD_XZ: ksl.PROJECT_WORLD_XZ, LayerProjection.TRIPLANAR: ksl.PROJECT_TRIPLANAR}
 
 
 def as_splat_maps(func: str, splat_maps, device) -> TextureArray:
@@ -65,7 +64,7 @@ def splat(
     splat_maps,
     *,
     tiling=1.0,
-    projection: Projection | str = Projection.UV,
+    projection: LayerProjection | str = LayerProjection.UV,
     normalize: bool = True,
     height_blend=None,
     heights: TextureArray | None = None,
@@ -95,7 +94,7 @@ def splat(
             ``M = ceil(L / C)`` maps; spare channels of the last map are ignored.
         tiling: layer repeats per UV unit (or per world unit): a number, ``L`` numbers, or a float32
             ``wp.array`` of shape ``(1,)`` or ``(L,)`` (receives gradients). Non-zero.
-        projection: :class:`Projection`: ``"uv"``, ``"world_xz"`` or ``"triplanar"``.
+        projection: :class:`LayerProjection`: ``"uv"``, ``"world_xz"`` or ``"triplanar"``.
         normalize: divide the weights by their sum.
         height_blend: ``None`` for a plain blend, or the transition ``t > 0`` of height-based
             blending (a number or a float32 ``wp.array`` of shape ``(1,)``, receives gradients):
@@ -139,17 +138,17 @@ def splat(
     check_layer_count(func, num_layers, maps)
     gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask", f"{uv_set}.uv", f"{uv_set}.uv_dx", f"{uv_set}.uv_dy")
 
-    params = kl.SplatArgs()
+    params = ksl.SplatParams()
     params.num_layers, params.map_channels = num_layers, maps.channels
     params.tiling = param_array(func, "tiling", tiling, ((1,), (num_layers,)), device, nonzero=True)
-    params.projection = _PROJECTION_IDS[as_enum(func, "projection", projection, Projection)]
+    params.projection = _PROJECTION_IDS[as_enum(func, "projection", projection, LayerProjection)]
     params.normalize = int(bool(normalize))
     params.height_channel = 0
     height_tex = layers
     if height_blend is None:
         if heights is not None:
             raise ValueError(f"{func}(): heights are only used with height_blend=<transition>")
-        params.height_mode = kl.HEIGHT_NONE
+        params.height_mode = ksl.HEIGHT_NONE
         params.transition = wp.zeros(1, dtype=float, device=device)
     else:
         params.transition = param_array(func, "height_blend", height_blend, ((1,),), device)
@@ -161,7 +160,7 @@ def splat(
                     f"{func}(): height_channel must be a channel of the layers (0 to {layers.channels - 1}), got {height_channel!r}; "
                     "pass heights= for layers without a height channel"
                 )
-            params.height_mode, params.height_channel = kl.HEIGHT_CHANNEL, int(height_channel)
+            params.height_mode, params.height_channel = ksl.HEIGHT_CHANNEL, int(height_channel)
         else:
             if not isinstance(heights, TextureArray):
                 raise TypeError(f"{func}(): heights must be a TextureArray, got {type(heights).__name__}")
@@ -170,7 +169,7 @@ def splat(
                     f"{func}(): heights must have {num_layers} one-channel layers on {device}, "
                     f"got {heights.num_layers} layer(s) of {heights.channels} channel(s) on {heights.device}"
                 )
-            params.height_mode, height_tex = kl.HEIGHT_ARRAY, heights
+            params.height_mode, height_tex = ksl.HEIGHT_ARRAY, heights
 
     option, sampler = as_stochastic(func, stochastic), as_sampler(func, sampler)
     stoch, layers_read = stochastic_args(func, option, layers, sampler)
@@ -181,30 +180,19 @@ def splat(
 
     params.face_layers = _face_layers(func, face_layers, num_layers, params.projection, device)
 
-    proj = projection_args(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kp.WEIGHTS_TRIPLANAR, device=device)
-    smp = sampler_args(func, sampler, has_lod=True)
-    map_smp = sampler_args(func, MAP_SAMPLER, has_lod=False)
+    args = ksl.SplatArgs()
+    args.layers, args.heights, args.maps, args.params = layers_read.view, height_tex.view, maps.view, params
+    args.proj = projection_args(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kp.WEIGHTS_TRIPLANAR, device=device)
+    args.smp, args.map_smp = sampler_args(func, sampler, has_lod=True), sampler_args(func, MAP_SAMPLER, has_lod=False)
+    args.stoch, args.height_stoch = stoch, height_stoch
 
     count = gbuffer.pixel_count
     uvs = gbuffer.uv_sets[uv_set]
-    flat = [a.reshape((count,)) for a in (uvs["uv"], uvs["uv_dx"], uvs["uv_dy"], gbuffer.position, gbuffer.position_dx, gbuffer.position_dy, gbuffer.normal, gbuffer.mask)]
-    heights_read = height_tex if params.height_mode == kl.HEIGHT_ARRAY else None
-    plain = stoch.method == kst.METHOD_NONE
-    # What the hand-written gradient differentiates (the texel-gradient kernels' gradient arguments),
-    # and what only Warp's generated adjoint does (the tiling too, with a stochastic method).
-    by_hand = [layers_read.view.texels, heights_read.view.texels if heights_read else None, maps.view.texels, params.transition, params.tiling if plain else None]
-    others = [proj.sharpness, proj.offsets, *flat] + ([] if plain else [params.tiling])
+    arrays = {"uv0": uvs["uv"], "uv0_dx": uvs["uv_dx"], "uv0_dy": uvs["uv_dy"], **{name: getattr(gbuffer, name) for name in ("position", "position_dx", "position_dy", "normal", "mask")}}
+    pixels = struct_of(kl.SplatPixels, device, **{name: a.reshape((count,)) for name, a in arrays.items()})
+    kernels = kl.splat_kernels(capacity=kl.capacity(num_layers), stochastic=stoch.method != kst.METHOD_NONE)
     linear = stoch.histogram == 0 and height_stoch.histogram == 0  # the histogram blend is not linear in the texels
-    out = output((count, layers.channels), dtype=float, device=device, requires_grad=needs_grad(*by_hand, *others))
-    kernels = kl.splat_kernels(kl.capacity(num_layers))
-    inputs = [layers_read.view, height_tex.view, maps.view, *per_pixel(*flat), params, proj, smp, map_smp, stoch, height_stoch]
-    if active_tape() is not None and out.requires_grad and not hand_written(others, linear):
-        sampled_grads = needs_grad(by_hand[0], by_hand[1], params.tiling, *others)  # what the stored samples differentiate into
-        _splat_generated(kernels, count, inputs, out, flat, maps, params, map_smp, heights_read is not None, sampled_grads, device)
-    elif plain:
-        run(Kernels(kernels["forward"], kernels["texel_grad"]), count, inputs=inputs, outputs=[out], device=device, by_hand=by_hand, covered=flat[7])
-    else:
-        run(Kernels(kernels["stochastic_forward"], kernels["stochastic_texel_grad"]), count, inputs=inputs, outputs=[out], device=device, by_hand=by_hand, covered=flat[7])
+    out = run(kernels, count, args=args, pixels=pixels, out=((count, layers.channels), float), device=device, linear=linear, covered=pixels.mask)
     return out.reshape((*gbuffer.resolution, layers.channels))
 
 
@@ -217,7 +205,7 @@ def _face_layers(func: str, face_layers, num_layers: int, projection: int, devic
     empty = wp.empty(0, dtype=wp.int32, device=device)
     if face_layers is None:
         return empty
-    if projection != kl.PROJECT_TRIPLANAR:
+    if projection != ksl.PROJECT_TRIPLANAR:
         raise ValueError(f"{func}(): face_layers needs projection='triplanar' (the faces are those of the triplanar projections)")
     if isinstance(face_layers, np.ndarray):
         if face_layers.ndim != 2 or face_layers.shape[1] != 6:
@@ -245,18 +233,3 @@ def _face_layers(func: str, face_layers, num_layers: int, projection: int, devic
     if (table == np.arange(num_layers)[:, None]).all():
         return empty
     return wp.array(table.reshape(-1), dtype=wp.int32, device=device)
-
-
-def _splat_generated(kernels: dict, count: int, inputs: list, out: wp.array, flat: list, maps: TextureArray, params, map_smp, height_array: bool, sampled_grads: bool, device) -> None:
-    """:func:`splat` where Warp's generated adjoint is needed, in two steps: every weighted layer's
-    sample stored per pixel (generated adjoint), then their blend (hand-written gradient, to the
-    samples, the splat maps, the transition and the UVs through the maps' reads)."""
-    num_layers = params.num_layers
-    uv0, mask = flat[0], flat[7]
-    samples = output((count, num_layers), dtype=wp.vec4, device=device, requires_grad=sampled_grads)
-    height_samples = output((count, num_layers if height_array else 1), dtype=float, device=device, requires_grad=sampled_grads and height_array)  # read with separate heights only
-    adjoint = kl.splat_samples_adjoint_kernel
-    run(Kernels(adjoint, None, adjoint), count, inputs=inputs, outputs=[samples, height_samples], device=device, covered=mask)
-    blend_inputs = [maps.view, *per_pixel(uv0, mask), params, map_smp, *per_pixel(samples, height_samples)]
-    by_hand = [maps.view.texels, params.transition, *per_pixel(uv0, samples, height_samples)]
-    run_by_hand(Kernels(kernels["blend"], kernels["blend_grad"]), count, inputs=blend_inputs, outputs=[out], device=device, by_hand=by_hand, covered=mask)

@@ -10,7 +10,7 @@ from warptex.scenes.terrain import terrain
 from backward_paths import assert_same_gradients, texel_gradients_both_ways
 from fd import check_parameter_gradient
 from reference_layers import splat_reference
-from warptex.layers import splat
+from warptex.splat import splat
 from warptex.scenes import terrain_camera
 
 

@@ -1,0 +1,163 @@
+"""One way to make kernel variants: kernel families, cached per configuration, and the pixel kernels.
+
+A *kernel family* is what one technique launches (``sample``, ``triplanar``, ``splat``...), built
+from one source for a *configuration*: keyword values that change what is compiled, such as
+``stochastic=True`` or ``capacity=8``. :func:`family` turns a builder into a factory cached per
+configuration (a Warp kernel must be built once: every build is a new kernel to compile) and
+registers it with the configurations :func:`warptex.kernels.all_kernels` compiles ahead of time.
+A factory returns :class:`Kernels`; ``warptex._op.run`` launches them and picks the backward pass.
+
+**Pixel kernels.** Every per-pixel kernel has one of two signatures, made by :func:`pixel_kernels`
+from ``@wp.func`` bodies, so that a technique writes what one pixel does and nothing else:
+
+- ``forward(args, pixels, out)`` runs ``body(args, pixels, i, out)`` for pixel ``i = wp.tid()``.
+  ``args`` is a struct of what every pixel reads (textures, options); ``pixels`` a struct of
+  per-pixel arrays (first axis: one entry per pixel); ``out`` the output, a per-pixel array or a
+  struct of them. Compiled without Warp's generated adjoint, and once more with it (the
+  ``adjoint`` kernel, in ``ADJOINT_MODULE``, on the out-of-line blocks of ``adjoint_body``);
+- ``texel_grad(args, pixels, grads, adj)`` runs ``scatter(args, pixels, i, grads, adj)``: the
+  hand-written gradient, which adds the output gradients ``adj`` (typed as ``out``) into
+  ``grads``, a struct of gradient targets: one field per input it differentiates, in the order of
+  :attr:`Kernels.grads`, a :class:`~warptex.kernels.texels.TexelGrad` for a texture's texels or an
+  array for anything else (empty: not needed, nothing is added).
+
+``warptex._launch`` cuts a launch into chunks along the pixels: it slices every array of ``pixels``,
+``out`` and ``adj``, and the ``grads`` fields of per-pixel inputs (paths ``pixels.*``).
+"""
+
+
+import dataclasses
+import functools
+from typing import Any, Callable, Iterable
+
+import warp as wp
+
+from . import ADJOINT_MODULE
+
+#: Gradient paths that name a per-pixel input start with this (see :attr:`Kernels.grads`).
+PIXELS = "pixels."
+
+
+@dataclasses.dataclass(frozen=True)
+class Staged:
+    """A two-step alternative to one of a technique's backward paths: ``first`` stores per-pixel
+    intermediates, ``then`` makes the output from them.
+
+    ``replaces`` is the path it stands in for, ``"texel_grad"`` or ``"adjoint"``; each step has the
+    other backward of the two (``first`` the one ``replaces`` names, ``then`` the other), so that
+    the costly sampling is differentiated by hand and the cheap blend by Warp, or the other way
+    round. ``first`` takes the technique's ``args`` and ``pixels``; ``intermediates(count, args)``
+    gives its outputs as ``{field: (shape, dtype)}`` (the fields of ``first``'s ``out`` struct).
+    ``then`` takes an ``args`` struct and a ``pixels`` struct whose fields are filled by name from the
+    technique's ``args``, and from its ``pixels`` and the intermediates. ``then_only`` names the
+    inputs (paths) only ``then`` differentiates: when they alone want gradients, the intermediates
+    need none and ``first``'s backward is not recorded.
+    """
+
+    replaces: str
+    first: "Kernels"
+    then: "Kernels"
+    intermediates: Callable[[int, Any], dict]
+    then_only: tuple = ()
+
+
+@dataclasses.dataclass(frozen=True)
+class Kernels:
+    """One configuration of a kernel family (module docstring).
+
+    Attributes:
+        forward: ``forward(args, pixels, out)``, without Warp's generated adjoint.
+        texel_grad: ``texel_grad(args, pixels, grads, adj)``, the hand-written gradient, or ``None``.
+        adjoint: ``forward`` with Warp's generated adjoint, or ``None``.
+        grads: for each field of ``texel_grad``'s ``grads`` struct, the input it differentiates: a
+            dotted path into the kernel's arguments (``"args.layers"``: a ``TextureView``'s texels;
+            ``"args.params.tiling"``, ``"pixels.samples"``: an array), or ``None`` where this
+            configuration differentiates nothing there. Every other differentiable input is left to
+            ``adjoint``.
+        staged: a two-step alternative to a backward path, or ``None``.
+    """
+
+    forward: Any
+    texel_grad: Any = None
+    adjoint: Any = None
+    grads: tuple = ()
+    staged: Staged | None = None
+
+    def all(self) -> list:
+        """Every Warp kernel of this configuration, the staged steps' included."""
+        kernels = [k for k in (self.forward, self.texel_grad, self.adjoint) if k is not None]
+        if self.staged is not None:
+            kernels += self.staged.first.all() + self.staged.then.all()
+        return kernels
+
+
+# Every family's cached factory, with the configurations all_kernels() compiles.
+_FAMILIES: list[tuple[Callable, Callable[[dict], Iterable[dict]]]] = []
+
+
+def family(configurations: Callable[[dict], Iterable[dict]] | Iterable[dict] = ({},)):
+    """Decorator: ``build(**configuration) -> Kernels`` as a factory cached per configuration,
+    registered for :func:`warptex.kernels.all_kernels`.
+
+    Args:
+        configurations: the configurations to compile ahead of time (``warptex.precompile``): a
+            sequence of keyword dicts, or a function of ``all_kernels``' options (e.g.
+            ``layer_counts``) returning one.
+    """
+
+    def register(build: Callable[..., Kernels]) -> Callable[..., Kernels]:
+        cached = functools.cache(build)
+        listed = configurations if callable(configurations) else (lambda options, fixed=tuple(configurations): fixed)
+        _FAMILIES.append((cached, listed))
+        return cached
+
+    return register
+
+
+def registered_kernels(options: dict) -> list:
+    """Every kernel of every registered family, in each of its configurations for ``options``."""
+    kernels = []
+    for factory, configurations in _FAMILIES:
+        for configuration in configurations(options):
+            kernels += factory(**configuration).all()
+    return kernels
+
+
+def pixel_kernels(name: str, *, module: str, args, pixels, out, body, scatter=None, grads=None, adjoint_body=None, grad_module: str | None = None):
+    """``(forward, texel_grad, adjoint)``: the pixel kernels of one configuration (module docstring).
+
+    Args:
+        name: the kernels' name stem, unique among the kernels of their Warp modules.
+        module: the Warp module of ``forward``; ``texel_grad`` goes into ``grad_module`` (default
+            ``module + ".grad"``: a job that needs no gradient does not compile it), ``adjoint``
+            into ``ADJOINT_MODULE``.
+        args, pixels, out: the struct types of the fixed and the per-pixel arguments, and the
+            output's type (an array type or a struct of per-pixel arrays).
+        body: ``@wp.func body(args, pixels, i, out)``, what pixel ``i`` computes.
+        scatter: ``@wp.func scatter(args, pixels, i, grads, adj)``, its hand-written gradient, with
+            ``grads`` (the struct type of its targets); ``None``: no texel-gradient kernel.
+        adjoint_body: the ``body`` to compile with Warp's generated adjoint (on out-of-line blocks,
+            which such a module then compiles once with their adjoints); ``None``: no adjoint kernel.
+    """
+    forward = forward_kernel(body, args, pixels, out, module=module, name=f"{name}_forward", enable_backward=False)
+    texel_grad = None if scatter is None else _texel_grad(scatter, args, pixels, grads, out, module=grad_module or module + ".grad", name=f"{name}_texel_grad")
+    adjoint = None if adjoint_body is None else forward_kernel(adjoint_body, args, pixels, out, module=ADJOINT_MODULE, name=f"{name}_adjoint", enable_backward=True)
+    return forward, texel_grad, adjoint
+
+
+def forward_kernel(body, args_t, pixels_t, out_t, *, module: str, name: str, enable_backward: bool):
+    """The ``forward(args, pixels, out)`` kernel of ``body`` alone (see :func:`pixel_kernels`)."""
+
+    @wp.kernel(enable_backward=enable_backward, module=module, name=name)
+    def forward(args: args_t, pixels: pixels_t, out: out_t):
+        body(args, pixels, wp.tid(), out)
+
+    return forward
+
+
+def _texel_grad(scatter, args_t, pixels_t, grads_t, adj_t, *, module: str, name: str):
+    @wp.kernel(enable_backward=False, module=module, name=name)
+    def texel_grad(args: args_t, pixels: pixels_t, grads: grads_t, adj: adj_t):
+        scatter(args, pixels, wp.tid(), grads, adj)
+
+    return texel_grad

@@ -1,0 +1,100 @@
+"""Texel gradients: the ``scatter_*`` twins of the filters, which add where the filters read.
+
+Sampling is linear in the texels: the gradient of a sample with respect to the texel array is the
+output gradient times each tap's filter weight, added into the texels the forward pass read. The
+``scatter_*`` functions mirror the ``sample_*`` ones (the same taps, from the same ``*_taps``
+functions) and add instead of read. The texel-gradient kernels built on them replace Warp's
+generated adjoint where only texels need gradients: that adjoint replays every function's forward
+pass inside its reverse pass and measured 4.7× slower on triplanar.
+"""
+
+import warp as wp
+
+from . import out_of_line
+from .filters import bilinear_taps, nearest_tap
+from .footprint import footprint_taps, footprint_uv, mip_levels
+from .texels import FILTER_NEAREST, TILE_MASK, TILE_SHIFT, SamplerArgs, TexelGrad, TextureView, finite_uv_lod, reduce_coord
+
+
+@wp.func
+def mark_rows(tiles: wp.array(dtype=wp.int32), start: wp.int32, w: wp.int32, j: wp.int32):
+    """Mark rows ``j`` and ``j + 1`` of a level ``w`` texels wide (as :func:`texel` indexes it)
+    as added into: the tile where row ``j`` starts records how many tiles the two rows reach.
+
+    One mark per bilinear footprint, whose texels all lie in rows ``j0`` and ``j0 + 1``: a load
+    and a rarely taken store. It costs a bilinear backward about 10%, where a mark per texel cost
+    14-22%. Columns are not told apart: a mark covers whole rows."""
+    row = start + j * w
+    t = row >> TILE_SHIFT
+    reach = (((row & TILE_MASK) + 2 * w - 1) >> TILE_SHIFT) + 1
+    if tiles[t] < reach:
+        tiles[t] = reach
+
+
+@wp.func
+def scatter_texel(grad: TexelGrad, start: wp.int32, w: wp.int32, xi: wp.int32, yi: wp.int32, g: wp.vec4):
+    """Add ``g`` to the gradient of the texel :func:`texel` reads (nothing for the border colour)."""
+    if xi >= 0 and yi >= 0:
+        wp.atomic_add(grad.texels, start + yi * w + xi, g)
+
+
+@wp.func
+def scatter_bilinear(grad: TexelGrad, start: wp.int32, w: wp.int32, i0: wp.int32, i1: wp.int32, j0: wp.int32, j1: wp.int32, fx: float, fy: float, g: wp.vec4):
+    """Add ``g`` times each bilinear weight into the four texels of :func:`bilinear_taps`, and
+    mark their rows where tiles are tracked."""
+    top = g * (1.0 - fy)
+    bottom = g * fy
+    scatter_texel(grad, start, w, i0, j0, top * (1.0 - fx))
+    scatter_texel(grad, start, w, i1, j0, top * fx)
+    scatter_texel(grad, start, w, i0, j1, bottom * (1.0 - fx))
+    scatter_texel(grad, start, w, i1, j1, bottom * fx)
+    if grad.tiles.shape[0] > 0:
+        if j0 >= 0:
+            mark_rows(grad.tiles, start, w, j0)  # rows j0 and j0 + 1
+        if j1 >= 0 and (j0 < 0 or j1 < j0 or j1 > j0 + 1):  # j1 is neither j0 nor j0 + 1 (j0 a border row, or j1 wrapped)
+            mark_rows(grad.tiles, start, w, j1)
+
+
+@wp.func
+def scatter_levels(tex: TextureView, grad: TexelGrad, layer: wp.int32, uv: wp.vec2, level: wp.int32, fraction: float, smp: SamplerArgs, g: wp.vec4):
+    """Add the gradient ``g`` of :func:`sample_levels` (same arguments) into the texels it reads."""
+    r = wp.vec2(reduce_coord(uv[0], smp.address), reduce_coord(uv[1], smp.address))
+    if smp.filter == FILTER_NEAREST:
+        start, w, x, y = nearest_tap(tex, layer, level, r, smp)
+        scatter_texel(grad, start, w, x, y, g)
+        if grad.tiles.shape[0] > 0 and y >= 0:
+            mark_rows(grad.tiles, start, w, y)
+    else:
+        finer = g
+        if fraction > 0.0:
+            finer = g * (1.0 - fraction)
+            start, w, i0, i1, j0, j1, fx, fy = bilinear_taps(tex, layer, level + 1, r, smp)
+            scatter_bilinear(grad, start, w, i0, i1, j0, j1, fx, fy, g * fraction)
+        start, w, i0, i1, j0, j1, fx, fy = bilinear_taps(tex, layer, level, r, smp)
+        scatter_bilinear(grad, start, w, i0, i1, j0, j1, fx, fy, finer)
+
+
+@wp.func
+def scatter_lod(tex: TextureView, grad: TexelGrad, layer: wp.int32, uv: wp.vec2, lod: float, smp: SamplerArgs, g: wp.vec4):
+    """Add the gradient ``g`` of :func:`sample_lod` (same arguments) into the texels it reads;
+    non-finite ``uv`` or ``lod`` read nothing and add nothing."""
+    if finite_uv_lod(uv, lod):
+        lf = mip_levels(tex, lod, smp)
+        scatter_levels(tex, grad, layer, uv, int(lf[0]), lf[1], smp, g)
+
+
+@out_of_line
+def scatter_taps(tex: TextureView, grad: TexelGrad, layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, g: wp.vec4):
+    """:func:`scatter_footprint` for several taps, out of line."""
+    share = g * (1.0 / fp[3])
+    for k in range(footprint_taps(fp)):
+        scatter_lod(tex, grad, layer, footprint_uv(uv, fp, k), fp[0], smp, share)
+
+
+@wp.func
+def scatter_footprint(tex: TextureView, grad: TexelGrad, layer: wp.int32, uv: wp.vec2, fp: wp.vec4, smp: SamplerArgs, g: wp.vec4):
+    """Add the gradient ``g`` of :func:`sample_footprint` (same arguments) into the texels it reads."""
+    if fp[3] == 1.0:
+        scatter_lod(tex, grad, layer, uv, fp[0], smp, g)
+    else:
+        scatter_taps(tex, grad, layer, uv, fp, smp, g)

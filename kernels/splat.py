@@ -1,0 +1,363 @@
+"""Splat-map terrain texturing, part 2: the kernels (options and layer reads: :mod:`.splat_layers`;
+the blend: :mod:`.splat_blend`).
+
+**Configurations** (:func:`splat_kernels`): a *capacity* of layers (8, 16, 32...: the layer count is
+a run-time value, every per-layer loop is a loop, so a kernel's code does not grow with the layers),
+and plain or ``stochastic`` sampling, each in a Warp module of its own (``warptex.splat8``,
+``warptex.splat8.stochastic``), as for triplanar.
+
+**Hand-written gradient.** Warp's generated adjoint replays each sampling function's forward pass
+inside its reverse pass (about 5× the forward here). Where only texels, the transition and, with
+plain sampling, the tiling need gradients (no sharpness, offsets or G-buffer gradients) and every
+blend of taps is linear (no histogram), the texel-gradient kernel computes them directly: per pixel
+it replays the forward once, takes the blend's derivatives by hand (``blend_backward``), and adds
+each layer's colour gradient into the texels the layer read, each weight's into the splat-map
+texels, and each layer's colour gradient times the sample's derivative along its tiling into the
+tiling::
+
+    colour = Σ w''_j c_j                          ∂/∂c_j = w''_j · g,   ∂/∂w''_j = g · c_j
+    w''_j = v_j / max(Σ v, ε),  v_j = wh_j w'_j     (height blending, from h_j = height_j · w'_j)
+    w'_j = w_j / max(Σ w, ε)                        (normalize),  w_j = max(splat_j, 0)
+
+Where Warp's ``max`` has ties its adjoint takes the second operand; the hand-written one does the
+same (the running height maximum credits the last layer at the maximum).
+
+**Other gradients** (sharpness, offsets, the G-buffer, a stochastic method's tiling, a histogram)
+take two steps (:class:`~.family.Staged`): every weighted layer's sample stored per pixel with
+Warp's generated adjoint (a loop over layers that only writes, which that adjoint differentiates
+exactly), then the blend of the stored samples, its gradient by hand as above.
+"""
+
+import functools
+
+import warp as wp
+
+from . import ADJOINT_MODULE, specialised
+from .family import Kernels, Staged, family, forward_kernel, pixel_kernels
+from .projection import surface_frame
+from .splat_blend import blend_functions, capacity
+from .splat_layers import (
+    HEIGHT_ARRAY,
+    HEIGHT_CHANNEL,
+    HEIGHT_NONE,
+    PROJECT_TRIPLANAR,
+    LayerPoint,
+    SplatArgs,
+    SplatParams,
+    layer_textures,
+    layer_weighted,
+    pick_grad,
+    pick_stochastic,
+    pick_texture,
+    read_layer_outlined,
+    read_layer_plain,
+    read_layer_slope,
+    read_layer_stochastic,
+    scatter_layer_plain,
+    scatter_layer_stochastic,
+    surface_weights,
+)
+from .texels import SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
+
+@wp.struct
+class SplatPixels:
+    """The per-pixel G-buffer arrays a splat reads: UV0 and its derivatives, world position, its
+    derivatives, normal, and the coverage mask."""
+
+    uv0: wp.array(dtype=wp.vec2)
+    uv0_dx: wp.array(dtype=wp.vec2)
+    uv0_dy: wp.array(dtype=wp.vec2)
+    position: wp.array(dtype=wp.vec3)
+    position_dx: wp.array(dtype=wp.vec3)
+    position_dy: wp.array(dtype=wp.vec3)
+    normal: wp.array(dtype=wp.vec3)
+    mask: wp.array(dtype=float)
+
+
+@wp.struct
+class SplatGrads:
+    """The hand-written gradient's targets (empty: not needed)."""
+
+    layers: TexelGrad
+    heights: TexelGrad
+    maps: TexelGrad
+    transition: wp.array(dtype=float)
+    tiling: wp.array(dtype=float)
+
+
+@wp.struct
+class SplatSamples:
+    """Per pixel, every weighted layer's sample (0 for the others) and, with separate heights, its height."""
+
+    samples: wp.array2d(dtype=wp.vec4)
+    height_samples: wp.array2d(dtype=float)
+
+
+@wp.struct
+class BlendArgs:
+    """What the blend of stored samples reads (filled by name from :class:`~.splat_layers.SplatArgs`)."""
+
+    maps: TextureView
+    params: SplatParams
+    map_smp: SamplerArgs
+
+
+@wp.struct
+class BlendPixels:
+    """The per-pixel inputs of the blend of stored samples."""
+
+    uv0: wp.array(dtype=wp.vec2)
+    mask: wp.array(dtype=float)
+    samples: wp.array2d(dtype=wp.vec4)
+    height_samples: wp.array2d(dtype=float)
+
+
+@wp.struct
+class BlendGrads:
+    """The blend's hand-written gradient's targets: the splat maps' texels, the transition, UV0
+    (through the maps' reads) and the stored samples (per pixel)."""
+
+    maps: TexelGrad
+    transition: wp.array(dtype=float)
+    uv0: wp.array(dtype=wp.vec2)
+    samples: wp.array2d(dtype=wp.vec4)
+    height_samples: wp.array2d(dtype=float)
+
+
+@wp.func
+def layer_point(args: SplatArgs, pixels: SplatPixels, i: wp.int32) -> LayerPoint:
+    """Where pixel ``i`` reads its layers (world space: a splat projects no object space)."""
+    pt = LayerPoint()
+    pt.uv0 = pixels.uv0[i]
+    pt.uv0_dx = pixels.uv0_dx[i]
+    pt.uv0_dy = pixels.uv0_dy[i]
+    pt.p = pixels.position[i]
+    pt.n = pixels.normal[i]
+    pt.dpdx = pixels.position_dx[i]
+    pt.dpdy = pixels.position_dy[i]
+    pt.tri_w = surface_weights(args.params, args.proj, pt.n)
+    return pt
+
+
+def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> dict:
+    """The forward and texel-gradient bodies for ``cap`` layers, reading layers with ``read_layer``
+    (``plain``: a call each for colour and height, faster; else one call for both, so that stochastic
+    sampling is compiled once)."""
+    f = blend_functions(cap)
+    weights_t, colours_t = f.weights_t, f.colours_t
+
+    def make(func, name):
+        return wp.func(specialised(func, f"splat{cap}_{name}{suffix}"), module=f"warptex.splat{cap}")
+
+    def read_layers_of(args: SplatArgs, pt: LayerPoint, w1: weights_t):
+        """``(c, hv)``: every weighted layer's colour and raw height."""
+        params = args.params
+        c = colours_t()
+        hv = weights_t()
+        for j in range(params.num_layers):
+            if w1[j] > 0.0:
+                if wp.static(plain):
+                    value = read_layer(args.layers, j, args, pt, args.stoch)
+                    c[j] = value
+                    if params.height_mode == HEIGHT_CHANNEL:
+                        hv[j] = value[params.height_channel]
+                    elif params.height_mode == HEIGHT_ARRAY:
+                        hv[j] = read_layer(args.heights, j, args, pt, args.height_stoch)[0]
+                else:
+                    for t in range(layer_textures(params)):
+                        value = read_layer(pick_texture(args.layers, args.heights, t), j, args, pt, pick_stochastic(args.stoch, args.height_stoch, t))
+                        if t == 0:
+                            c[j] = value
+                            if params.height_mode == HEIGHT_CHANNEL:
+                                hv[j] = value[params.height_channel]
+                        else:
+                            hv[j] = value[0]
+        return c, hv
+
+    read_layers = make(read_layers_of, "read_layers")
+
+    def forward(args: SplatArgs, pixels: SplatPixels, i: wp.int32, out: wp.array2d(dtype=float)):
+        """``out[i, c]``: the layers blended by the splat maps; 0 where the mask is 0."""
+        colour = wp.vec4(0.0)
+        if pixels.mask[i] != 0.0:
+            pt = layer_point(args, pixels, i)
+            r, w0, total, w1 = f.splat_weights(args.maps, pt.uv0, args.map_smp, args.params)
+            c, hv = read_layers(args, pt, w1)
+            colour = f.blend(w1, c, hv, args.params)
+        write_channels(out, i, colour)
+
+    def scatter(args: SplatArgs, pixels: SplatPixels, i: wp.int32, grads: SplatGrads, adj: wp.array2d(dtype=float)):
+        """Add the gradient ``adj[i]`` of :func:`forward` (linear blends of taps) into ``grads``:
+        the forward replayed (with, for the tiling, the colours' and heights' slopes), then its blend
+        reversed into the transition, the tiling (plain sampling only), the splat maps and the texels."""
+        if pixels.mask[i] != 0.0:
+            params = args.params
+            pt = layer_point(args, pixels, i)
+            r, w0, total, w1 = f.splat_weights(args.maps, pt.uv0, args.map_smp, params)
+            c = colours_t()
+            hv = weights_t()
+            dc = colours_t()
+            dhv = weights_t()
+            tiling_grads = grads.tiling.shape[0] > 0
+            if tiling_grads and wp.static(plain):  # the stochastic kernels never take the tiling's gradient by hand
+                for j in range(params.num_layers):
+                    if w1[j] > 0.0:
+                        value, slope = read_layer_slope(args.layers, j, args, pt)
+                        c[j] = value
+                        dc[j] = slope
+                        if params.height_mode == HEIGHT_ARRAY:
+                            height, height_slope = read_layer_slope(args.heights, j, args, pt)
+                            hv[j] = height[0]
+                            dhv[j] = height_slope[0]
+                        elif params.height_mode == HEIGHT_CHANNEL:
+                            hv[j] = c[j, params.height_channel]
+            else:
+                c, hv = read_layers(args, pt, w1)
+            gw1, gc, ghv, g_t = f.blend_backward(w1, c, hv, params, read_channels(adj, i))
+            if grads.transition.shape[0] > 0 and params.height_mode != HEIGHT_NONE:
+                wp.atomic_add(grads.transition, 0, g_t)
+            if tiling_grads:
+                for j in range(params.num_layers):
+                    if w1[j] > 0.0:
+                        wp.atomic_add(grads.tiling, wp.min(j, grads.tiling.shape[0] - 1), wp.dot(gc[j], dc[j]) + ghv[j] * dhv[j])
+            gr = f.weights_backward(r, w0, total, gw1, params)
+            f.scatter_maps(args.maps, grads.maps, pt.uv0, args.map_smp, gr, params)
+            for j in range(params.num_layers):
+                if w1[j] > 0.0:
+                    if wp.static(plain):
+                        scatter_layer(args.layers, grads.layers, j, args, pt, args.stoch, gc[j])
+                        if params.height_mode == HEIGHT_ARRAY:
+                            scatter_layer(args.heights, grads.heights, j, args, pt, args.height_stoch, wp.vec4(ghv[j], 0.0, 0.0, 0.0))
+                    else:
+                        for t in range(layer_textures(params)):
+                            g = gc[j]
+                            if t == 1:
+                                g = wp.vec4(ghv[j], 0.0, 0.0, 0.0)
+                            tex = pick_texture(args.layers, args.heights, t)
+                            scatter_layer(tex, pick_grad(grads.layers, grads.heights, t), j, args, pt, pick_stochastic(args.stoch, args.height_stoch, t), g)
+
+    return make(forward, "forward"), make(scatter, "scatter")
+
+
+@wp.func
+def samples_outlined(args: SplatArgs, pixels: SplatPixels, i: wp.int32, out: SplatSamples):
+    """``out.samples[i, j]``: layer ``j`` as the splat kernels read it, for every layer with a
+    positive splat value (others stay 0); ``out.height_samples[i, j]``: its separate height. The first
+    step of the two-step path, with Warp's generated adjoint on out-of-line blocks (module docstring)."""
+    if pixels.mask[i] != 0.0:
+        pt = LayerPoint()
+        pt.uv0 = pixels.uv0[i]
+        pt.uv0_dx = pixels.uv0_dx[i]
+        pt.uv0_dy = pixels.uv0_dy[i]
+        p, n, dpdx, dpdy, tri_w = surface_frame(args.proj, pixels.position[i], pixels.normal[i], pixels.position_dx[i], pixels.position_dy[i])
+        pt.p = p
+        pt.n = n
+        pt.dpdx = dpdx
+        pt.dpdy = dpdy
+        pt.tri_w = wp.vec3(0.0)
+        if args.params.projection == PROJECT_TRIPLANAR:
+            pt.tri_w = tri_w
+        for j in range(args.params.num_layers):
+            if layer_weighted(args.maps, pt.uv0, args.map_smp, j, args.params.map_channels):
+                out.samples[i, j] = read_layer_outlined(args.layers, j, args, pt, args.stoch)
+                if args.params.height_mode == HEIGHT_ARRAY:
+                    height = read_layer_outlined(args.heights, j, args, pt, args.height_stoch)
+                    out.height_samples[i, j] = height[0]
+
+
+def _blend_bodies(cap: int):
+    """The blend of stored samples for ``cap`` layers, and its hand-written gradient."""
+    f = blend_functions(cap)
+    weights_t, colours_t = f.weights_t, f.colours_t
+
+    def stored_layers_of(pixels: BlendPixels, i: wp.int32, w1: weights_t, params: SplatParams):
+        """``(c, hv)``: the colours and heights the first step stored."""
+        c = colours_t()
+        hv = weights_t()
+        for j in range(params.num_layers):
+            if w1[j] > 0.0:
+                c[j] = pixels.samples[i, j]
+                if params.height_mode == HEIGHT_CHANNEL:
+                    hv[j] = c[j, params.height_channel]
+                elif params.height_mode == HEIGHT_ARRAY:
+                    hv[j] = pixels.height_samples[i, j]
+        return c, hv
+
+    stored_layers = wp.func(specialised(stored_layers_of, f"splat{cap}_stored_layers"), module=f"warptex.splat{cap}")
+
+    def blend(args: BlendArgs, pixels: BlendPixels, i: wp.int32, out: wp.array2d(dtype=float)):
+        """The forward body's blend, of the layers the first step stored."""
+        colour = wp.vec4(0.0)
+        if pixels.mask[i] != 0.0:
+            r, w0, total, w1 = f.splat_weights(args.maps, pixels.uv0[i], args.map_smp, args.params)
+            c, hv = stored_layers(pixels, i, w1, args.params)
+            colour = f.blend(w1, c, hv, args.params)
+        write_channels(out, i, colour)
+
+    def blend_grad(args: BlendArgs, pixels: BlendPixels, i: wp.int32, grads: BlendGrads, adj: wp.array2d(dtype=float)):
+        """The gradient of :func:`blend` into the splat-map texels, the transition, UV0 (through the
+        maps' reads) and the stored samples (empty targets: not needed)."""
+        if pixels.mask[i] != 0.0:
+            params = args.params
+            uv = pixels.uv0[i]
+            r, w0, total, w1 = f.splat_weights(args.maps, uv, args.map_smp, params)
+            c, hv = stored_layers(pixels, i, w1, params)
+            gw1, gc, ghv, g_t = f.blend_backward(w1, c, hv, params, read_channels(adj, i))
+            if grads.transition.shape[0] > 0 and params.height_mode != HEIGHT_NONE:
+                wp.atomic_add(grads.transition, 0, g_t)
+            gr = f.weights_backward(r, w0, total, gw1, params)
+            f.scatter_maps(args.maps, grads.maps, uv, args.map_smp, gr, params)
+            if grads.uv0.shape[0] > 0:
+                grads.uv0[i] = grads.uv0[i] + f.maps_uv_gradient(args.maps, uv, args.map_smp, gr, params)
+            for j in range(params.num_layers):
+                if w1[j] > 0.0:
+                    if grads.samples.shape[0] > 0:
+                        grads.samples[i, j] = grads.samples[i, j] + gc[j]
+                    if params.height_mode == HEIGHT_ARRAY and grads.height_samples.shape[0] > 0:
+                        grads.height_samples[i, j] = grads.height_samples[i, j] + ghv[j]
+
+    make = lambda func, name: wp.func(specialised(func, f"splat{cap}_{name}"), module=f"warptex.splat{cap}")  # noqa: E731
+    return make(blend, "blend"), make(blend_grad, "blend_grad")
+
+
+def _sample_shapes(count: int, args) -> dict:
+    layers = args.params.num_layers
+    separate = args.params.height_mode == HEIGHT_ARRAY  # heights read separately: one per layer, else a placeholder column
+    return {"samples": ((count, layers), wp.vec4), "height_samples": ((count, layers if separate else 1), float)}
+
+
+@functools.cache
+def _samples() -> Kernels:
+    """The first step of the two-step path, one kernel for every capacity (forward and generated adjoint)."""
+    kernel = forward_kernel(samples_outlined, SplatArgs, SplatPixels, SplatSamples, module=ADJOINT_MODULE, name="splat_samples_adjoint", enable_backward=True)
+    return Kernels(kernel, None, kernel)
+
+
+@functools.cache
+def _staged(cap: int) -> Staged:
+    """The two-step path of ``cap`` layers: the samples and their blend."""
+    blend, blend_grad = _blend_bodies(cap)
+    module = f"warptex.splat{cap}.blend"
+    forward, texel_grad, _ = pixel_kernels(f"splat{cap}_blend", module=module, grad_module=module, args=BlendArgs, pixels=BlendPixels, out=wp.array2d(dtype=float),
+                                           body=blend, scatter=blend_grad, grads=BlendGrads)  # fmt: skip
+    then = Kernels(forward, texel_grad, grads=("args.maps", "args.params.transition", "pixels.uv0", "pixels.samples", "pixels.height_samples"))
+    return Staged(replaces="adjoint", first=_samples(), then=then, intermediates=_sample_shapes, then_only=("args.maps", "args.params.transition"))
+
+
+def _configurations(options: dict) -> list:
+    return [{"capacity": capacity(count), "stochastic": stochastic} for count in options.get("layer_counts", (4,)) for stochastic in (False, True)]
+
+
+@family(configurations=_configurations)
+def splat_kernels(*, capacity: int, stochastic: bool) -> Kernels:
+    """The splat kernels for up to ``capacity`` layers (a :func:`~.splat_blend.capacity`), plain or
+    ``stochastic`` (module docstring): the hand-written gradient reaches the layers', heights' and
+    splat maps' texels, the transition and (plain sampling only) the tiling; anything else takes the
+    two-step path."""
+    module = f"warptex.splat{capacity}" + (".stochastic" if stochastic else "")
+    read, scatter = (read_layer_stochastic, scatter_layer_stochastic) if stochastic else (read_layer_plain, scatter_layer_plain)
+    body, scatter_body = _bodies(capacity, read, scatter, plain=not stochastic, suffix="_stochastic" if stochastic else "")
+    forward, texel_grad, _ = pixel_kernels(f"splat{capacity}" + ("_stochastic" if stochastic else ""), module=module, args=SplatArgs, pixels=SplatPixels, out=wp.array2d(dtype=float),
+                                           body=body, scatter=scatter_body, grads=SplatGrads)  # fmt: skip
+    grads = ("args.layers", "args.heights", "args.maps", "args.params.transition", None if stochastic else "args.params.tiling")
+    return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity))

@@ -1,0 +1,220 @@
+"""Textures as kernels see them: storage, samplers, address modes, texel fetch, channel I/O.
+
+Texture storage (see :class:`TextureView`): the texels of all layers and all mip levels live in
+one flat ``wp.array`` of ``vec4`` (unused channels are zero), level by level. Inside level ``k``,
+the layers follow each other, each stored row-major with row 0 at the *top* of the image::
+
+    index(layer, k, row, col) = level_offset[k] + (layer * h_k + row) * w_k + col
+
+so level 0 of every layer is the contiguous prefix of the buffer, shaped ``(layers, H, W)``.
+
+UV convention (OpenGL / trimesh): ``(0, 0)`` is the bottom-left corner of the image as viewed,
+``(1, 1)`` the top-right. Texel ``(row i, col j)`` of a ``w × h`` level has its centre at
+``u = (j + 0.5) / w``, ``v = 1 - (i + 0.5) / h``.
+
+Every technique addresses and fetches texels through the ``@wp.func`` blocks here; filtering is in
+:mod:`.filters`, footprints and levels of detail in :mod:`.footprint`, texel gradients in
+:mod:`.scatter`.
+"""
+
+import warp as wp
+
+# Filter modes (mirrored by ``warptex.Filter``).
+FILTER_NEAREST = wp.constant(0)
+FILTER_BILINEAR = wp.constant(1)
+FILTER_TRILINEAR = wp.constant(2)
+FILTER_ANISOTROPIC = wp.constant(3)  # trilinear taps along the footprint's major axis
+
+# Address modes (mirrored by ``warptex.Address``).
+ADDRESS_WRAP = wp.constant(0)
+ADDRESS_CLAMP = wp.constant(1)
+ADDRESS_MIRROR = wp.constant(2)
+ADDRESS_BORDER = wp.constant(3)
+
+# Where a sampling kernel takes its level of detail from.
+LOD_NONE = wp.constant(0)  # level 0
+LOD_CONSTANT = wp.constant(1)  # one value for every sample
+LOD_PER_SAMPLE = wp.constant(2)  # an array of LODs
+LOD_DERIVATIVES = wp.constant(3)  # from screen-space UV derivatives
+
+
+# The largest finite float32: |x| <= FLOAT_MAX is false exactly for NaN and infinities.
+FLOAT_MAX = wp.constant(3.4028234663852886e38)
+
+
+@wp.struct
+class TextureView:
+    """A texture array with its mip chain, as kernels see it (layout in the module docstring)."""
+
+    texels: wp.array(dtype=wp.vec4)
+    level_offset: wp.array(dtype=wp.int32)
+    level_width: wp.array(dtype=wp.int32)
+    level_height: wp.array(dtype=wp.int32)
+    num_levels: wp.int32
+    num_layers: wp.int32
+
+
+# Entries of a texel gradient per tile of :class:`TexelGrad`: 2**10 vec4 entries, 16 KB.
+TILE_SHIFT = wp.constant(10)
+TILE_MASK = wp.constant((1 << TILE_SHIFT) - 1)
+
+
+@wp.struct
+class TexelGrad:
+    """A texel gradient, where the ``scatter_*`` functions add: ``texels``, laid out as a
+    :class:`TextureView`'s texels (empty: not needed, nothing is added), and ``tiles``, one entry
+    per ``2**TILE_SHIFT`` entries of ``texels`` (empty: not tracked). ``tiles[t] = k > 0`` says
+    that the gradient may be non-zero in tiles ``t .. t + k - 1`` (see :func:`mark_rows`); 0, that
+    nothing was added from tile ``t`` on (other marks may still reach over it).
+
+    warptex's CPU threads add into private copies of a gradient, and sum into the real one only
+    the tiles a copy marked (``warptex._launch``)."""
+
+    texels: wp.array(dtype=wp.vec4)
+    tiles: wp.array(dtype=wp.int32)
+
+
+@wp.struct
+class SamplerArgs:
+    """How a texture is filtered and addressed, as kernels see it (packed from ``warptex.Sampler``)."""
+
+    filter: wp.int32
+    address: wp.int32
+    border: wp.vec4
+    lod_bias: float
+    min_lod: float
+    max_lod: float
+    max_aniso: float  # the most taps of the anisotropic filter (>= 1)
+
+
+@wp.func
+def address_near(i: wp.int32, n: wp.int32, address: wp.int32) -> wp.int32:
+    """Map a texel index of a *reduced* coordinate onto ``[0, n)``; ``-1`` means "outside" for border.
+
+    Nearest and bilinear filtering of a coordinate reduced by :func:`reduce_coord` read indices
+    in ``[-1, n]`` for wrap and ``[-n - 1, 2n]`` for mirror (``v`` is flipped), which a compare
+    and an add place: wrap is exact on ``[-n, 2n)``, mirror on ``[-2n, 4n)``. An integer remainder
+    here, even on a branch never taken, measured a quarter of a bilinear sample's time: the compiler
+    computes it speculatively. :func:`address_index` takes any index.
+    """
+    r = i
+    if address == ADDRESS_WRAP:
+        if r < 0:
+            r += n
+        elif r >= n:
+            r -= n
+    elif address == ADDRESS_CLAMP:
+        r = wp.clamp(i, 0, n - 1)
+    elif address == ADDRESS_MIRROR:
+        if r < 0:
+            r = -1 - r
+        elif r >= 2 * n:
+            r -= 2 * n
+        if r >= n:
+            r = 2 * n - 1 - r
+    elif i < 0 or i >= n:
+        r = -1
+    return r
+
+
+@wp.func
+def address_index(i: wp.int32, n: wp.int32, address: wp.int32) -> wp.int32:
+    """Map any integer texel index onto ``[0, n)``; ``-1`` means "outside" for the border mode."""
+    r = i
+    if address == ADDRESS_WRAP:
+        r = i % n
+        if r < 0:
+            r += n
+    elif address == ADDRESS_MIRROR:
+        period = 2 * n
+        r = i % period
+        if r < 0:
+            r += period
+        if r >= n:
+            r = period - 1 - r
+    else:
+        r = address_near(i, n, address)
+    return r
+
+
+@wp.func
+def reduce_coord(u: float, address: wp.int32) -> float:
+    """Bring a texture coordinate into one period of its address mode, exactly.
+
+    ``u - floor(u)`` is exact in floating point, so a UV of 1000.25 addresses the same texels as
+    0.25 does (scaling 1000.25 by the texture size first would lose the fraction). Clamp and border
+    read constant values beyond one texture width, so the coordinate is clamped to ``[-1, 2]``,
+    which also keeps the integer conversion in range.
+    """
+    r = u
+    if address == ADDRESS_WRAP:
+        r = u - wp.floor(u)
+    elif address == ADDRESS_MIRROR:
+        r = u - 2.0 * wp.floor(0.5 * u)
+    else:
+        r = wp.clamp(u, -1.0, 2.0)
+    return r
+
+
+@wp.func
+def finite_uv_lod(uv: wp.vec2, lod: float) -> bool:
+    """Whether ``uv`` and ``lod`` are finite: three compares (``wp.isfinite`` on them measured 20%
+    of a bilinear sample's time on the CPU)."""
+    return wp.abs(uv[0]) <= FLOAT_MAX and wp.abs(uv[1]) <= FLOAT_MAX and wp.abs(lod) <= FLOAT_MAX
+
+
+@wp.func
+def write_channels(out: wp.array2d(dtype=float), i: wp.int32, value: wp.vec4):
+    """``out[i, c] = value[c]`` for the ``1..4`` channels of ``out``, unrolled (a loop over
+    ``out.shape[1]`` measured a third slower than a bilinear tap)."""
+    channels = out.shape[1]
+    out[i, 0] = value[0]
+    if channels > 1:
+        out[i, 1] = value[1]
+    if channels > 2:
+        out[i, 2] = value[2]
+    if channels > 3:
+        out[i, 3] = value[3]
+
+
+@wp.func
+def texel(tex: TextureView, start: wp.int32, w: wp.int32, xi: wp.int32, yi: wp.int32, smp: SamplerArgs) -> wp.vec4:
+    """The texel at addressed column ``xi``, row ``yi`` of the ``w``-wide image starting at
+    ``start``, or the border colour where either index is ``-1``."""
+    value = smp.border
+    if xi >= 0 and yi >= 0:
+        value = tex.texels[start + yi * w + xi]
+    return value
+
+
+@wp.func
+def fetch(tex: TextureView, layer: wp.int32, level: wp.int32, x: wp.int32, y: wp.int32, smp: SamplerArgs) -> wp.vec4:
+    """One texel of ``level`` at column ``x``, row ``y`` (row 0 on top), after addressing."""
+    w = tex.level_width[level]
+    h = tex.level_height[level]
+    start = tex.level_offset[level] + layer * h * w
+    return texel(tex, start, w, address_index(x, w, smp.address), address_index(y, h, smp.address), smp)
+
+
+@wp.func
+def read_channels(a: wp.array2d(dtype=float), i: wp.int32) -> wp.vec4:
+    """Row ``i`` of a ``(n, 1..4)`` float array as a ``vec4`` (missing channels 0): the reverse of
+    :func:`write_channels`, for output gradients."""
+    channels = a.shape[1]
+    value = wp.vec4(a[i, 0], 0.0, 0.0, 0.0)
+    if channels > 1:
+        value[1] = a[i, 1]
+    if channels > 2:
+        value[2] = a[i, 2]
+    if channels > 3:
+        value[3] = a[i, 3]
+    return value
+
+
+@wp.func
+def resolve_layer(tex: TextureView, i: wp.int32, layers: wp.array(dtype=wp.int32), constant_layer: wp.int32) -> wp.int32:
+    """Sample ``i``'s layer: ``layers[i]`` clamped to the array when per-sample layers are given."""
+    layer = constant_layer
+    if layers.shape[0] > 0:
+        layer = wp.clamp(layers[i], 0, tex.num_layers - 1)
+    return layer

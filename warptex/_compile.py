@@ -1,0 +1,34 @@
+"""Compiling warptex's kernels ahead of their first launch, side by side on every core."""
+
+from __future__ import annotations
+
+import warp as wp
+
+from warptex._threads import cpu_count
+
+
+def preload(kernels, device=None) -> None:
+    """Compile (or load from Warp's kernel cache) the Warp modules of ``kernels`` for ``device``,
+    side by side on every core.
+
+    Warp compiles a module the first time one of its kernels runs, one module after another. A job
+    that knows which kernels it will run calls this first, so that a cold start compiles them in
+    parallel (each compile is single-threaded, on the CPU and with NVRTC alike).
+    """
+    modules = list({id(k.module): k.module for k in kernels}.values())
+    if modules:
+        wp.force_load(device=wp.get_device(device), modules=modules, max_workers=min(len(modules), cpu_count()))
+
+
+def precompile(device=None, *, layer_counts=(4,)) -> None:
+    """Compile every warptex kernel for ``device`` now, side by side on every core, into Warp's
+    kernel cache (the first run of each kernel then starts at once).
+
+    Args:
+        device: Warp device (``None``: Warp's default).
+        layer_counts: the layer counts whose splat kernels to compile (they come in sizes of 8,
+            16, 32... layers).
+    """
+    from warptex.kernels import all_kernels
+
+    preload(all_kernels(layer_counts), device)
