@@ -47,20 +47,17 @@ def out_of_line(f):
     return wp.func(inline=False)(f) if _HAS_INLINE_HINT else wp.func(f)
 
 
-# The modules of every kernel family and plain kernel (``all_kernels`` imports them, registering the families).
-_MODULES = ("sampling", "stochastic", "triplanar", "splat", "atlas", "raster", "fit")
-
-
 def all_kernels(layer_counts=(4,)) -> list:
     """Every kernel warptex has: each kernel family's (:mod:`.family`) in every configuration it
     lists (the splat kernels for each of ``layer_counts``), and the plain kernels of its modules."""
     import importlib
+    import pkgutil
 
     from .family import registered_kernels
 
     kernels = []
-    for name in _MODULES:
-        module = importlib.import_module(f"{__name__}.{name}")
+    for info in pkgutil.iter_modules(__path__):  # every module: importing them registers their families
+        module = importlib.import_module(f"{__name__}.{info.name}")
         kernels += [v for v in vars(module).values() if isinstance(v, wp.Kernel)]
     kernels += registered_kernels({"layer_counts": tuple(layer_counts)})
     return list({id(k): k for k in kernels}.values())

@@ -13,10 +13,11 @@ import warp as wp
 torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
 
 import warptex as wt  # noqa: E402
-import warptex.torch as wtt  # noqa: E402
+import warptex.torch as wtt
+from warptex._torch_spec import op_arguments  # noqa: E402
 from warptex.scenes import terrain_camera  # noqa: E402
 from warptex.scenes.terrain import terrain  # noqa: E402
-from warptex.torch import _states  # noqa: E402
+from warptex._torch_op import _states  # noqa: E402
 
 from fd import check_parameter_gradient  # noqa: E402
 
@@ -360,11 +361,27 @@ def test_compiles_into_one_graph(gbuffer, rng):
     np.testing.assert_array_equal(grads[1].numpy(), tiling.grad.numpy())
 
 
+@pytest.mark.parametrize("dtype", [torch.float64, torch.float16])
+def test_outputs_keep_the_inputs_floating_dtype(dtype, rng):
+    """Computed in float32, returned in the inputs' floating dtype (torch's promotion), as is every
+    gradient: a float64 pipeline stays float64, and the values are the float32 ones, cast."""
+    texture, uv = _t(rng, 8, 8, 3), _t(rng, 40, 2)
+    wide_texture = texture.detach().to(dtype).requires_grad_()
+    wide_uv = uv.detach().to(dtype).requires_grad_()
+    out = wtt.sample(wide_texture, wide_uv)
+    assert out.dtype == dtype
+    np.testing.assert_array_equal(out.detach().float().numpy(), wtt.sample(wide_texture.detach().float(), wide_uv.detach().float()).to(dtype).float().numpy())
+    out.sum().backward()
+    assert wide_texture.grad.dtype == dtype and wide_uv.grad.dtype == dtype
+    mixed = wtt.sample(texture.detach(), uv.detach().double())  # float32 texels, float64 UVs: float64
+    assert mixed.dtype == torch.float64
+
+
 def test_opcheck(rng):
     """torch.library.opcheck: the op's schema, fake (shape) function and autograd registration agree
     with what it does."""
     texture, uv = _t(rng, 8, 8, 3), _t(rng, 40, 2)
-    spec, tensors = wtt._op_arguments("sample", {"texture": texture, "uv": uv})
+    spec, tensors = op_arguments("sample", {"texture": texture, "uv": uv})
     torch.library.opcheck(torch.ops.warptex.technique.default, (spec, tensors), test_utils=("test_schema", "test_faketensor", "test_autograd_registration"))
 
 
@@ -383,6 +400,8 @@ def test_opcheck(rng):
         (lambda t, uv, g: wtt.triplanar({**g, "normal": g["normal"][..., :2].contiguous()}, t), ValueError, r"'normal' must be a torch.float32 tensor of shape \(H, W, 3\)"),
         (lambda t, uv, g: wtt.triplanar(g, t, tiling=torch.tensor([1.0, 2.0])), ValueError, r"tiling as a wp.array must be float32 with shape \(1,\) or \(3,\)"),
         (lambda t, uv, g: wtt.stochastic(t, uv, wt.Stochastic(method="hex", histogram=wt.prepare_histogram(wt.Texture(np.ones((4, 4, 3)))))), TypeError, "warptex.torch.prepare_histogram"),
+        (lambda t, uv, g: wtt.triplanar(g, t.detach().numpy()), TypeError, r"warptex.torch.triplanar\(\): texture must be a torch tensor, got a NumPy array"),
+        (lambda t, uv, g: wtt.sample(t, uv.detach().numpy()), TypeError, r"warptex.torch.sample\(\): uv must be a torch tensor, got a NumPy array"),
     ],
 )
 def test_bad_input_raises(call, error, match, gbuffer, rng):

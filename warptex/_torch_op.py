@@ -1,0 +1,281 @@
+"""The PyTorch bridge's op (see :mod:`warptex.torch` for what it does and how to use it).
+
+Each call is one ``torch.library`` custom op, ``warptex::technique``, taking a spec and its tensors
+(:mod:`warptex._torch_spec`). Its forward runs the native function on zero-copy Warp views of the
+tensors (on torch's current CUDA stream), under a ``wp.Tape`` when a gradient will be needed; the
+tape is kept for ``warptex::technique_backward``, which runs it once per ``backward()`` and returns
+the gradients as new tensors. The tape lives as long as the autograd graph that holds it (a token
+tensor saved in the graph; its finaliser forgets the tape).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import threading
+import weakref
+from typing import Any
+
+import numpy as np
+import torch
+import warp as wp
+
+from warptex._torch_spec import DIFFERENTIABLE, HISTOGRAM, INTS, TECHNIQUES, TEXTURES, VEC2, op_arguments, out_shape, parse
+from warptex.gbuffer import FIELDS, UV_FIELDS, GBuffer
+from warptex.histogram import Histogram
+from warptex.options import Sampler, Stochastic
+from warptex.texture import Texture, TextureArray, mip_sizes
+
+
+def call(name: str, args: dict[str, Any]) -> torch.Tensor:
+    """Run technique ``name`` on ``args`` through the op; the output is computed in float32 and
+    returned in the floating dtype of the differentiable tensors among ``args`` (torch's promotion:
+    float64 inputs give a float64 output; their gradients come back in their own dtypes)."""
+    spec, tensors = op_arguments(name, args)
+    out, _token = torch.ops.warptex.technique(spec, tensors)
+    dtype = _result_dtype(args)
+    return out if dtype == torch.float32 else out.to(dtype)
+
+
+def _result_dtype(args: dict) -> torch.dtype:
+    """The promoted floating dtype of the differentiable tensors among ``args`` (float32 without any)."""
+    result = None
+    for role, t in _tensors(args):
+        if t.is_floating_point() and role in DIFFERENTIABLE:
+            result = t.dtype if result is None else torch.promote_types(result, t.dtype)
+    return torch.float32 if result is None else result
+
+
+def _tensors(value, role: str | None = None):
+    """``(role, tensor)`` of every tensor in an argument dict (or list) as ``call`` takes it."""
+    if isinstance(value, torch.Tensor):
+        yield role, value
+    elif isinstance(value, dict):
+        for k, v in value.items():
+            yield from _tensors(v, k if role is None else role)
+    elif isinstance(value, (list, tuple)):
+        for v in value:
+            yield from _tensors(v, role)
+
+
+# The recorded tapes, by token, until the token tensor (saved in the autograd graph) dies.
+_states: dict[int, "_State"] = {}
+_tokens = itertools.count(1)
+_states_lock = threading.Lock()
+
+
+@dataclasses.dataclass
+class _State:
+    tape: wp.Tape
+    out: wp.array
+    grads: dict[int, Any]  # tensor index -> a function returning its gradient (a new tensor)
+
+
+@torch.library.custom_op("warptex::technique", mutates_args=())
+def _technique(spec: str, tensors: list[torch.Tensor]) -> list[torch.Tensor]:
+    s = parse(spec)
+    device = _warp_device(tensors[0].device)
+    with _torch_stream(device):
+        grads: dict[int, Any] = {}
+        want = set(s["grad"])
+        tape = wp.Tape() if want else None
+        if tape is not None:
+            with tape:  # textures are built on the tape too: their mips' gradients reach level 0
+                args = _decode(s["args"], tensors, want, grads, device)
+                out = _run(s["technique"], args)
+        else:
+            args = _decode(s["args"], tensors, want, grads, device)
+            out = _run(s["technique"], args)
+        result = wp.to_torch(out, requires_grad=False)
+    if tape is None:
+        return [result, torch.zeros(1, dtype=torch.int64)]
+    with _states_lock:
+        key = next(_tokens)
+        _states[key] = _State(tape, out, grads)
+    token = torch.tensor([key], dtype=torch.int64)
+    weakref.finalize(token, _forget, key)
+    return [result, token]
+
+
+def _forget(key: int) -> None:
+    with _states_lock:
+        _states.pop(key, None)
+
+
+@_technique.register_fake
+def _(spec, tensors):
+    s = parse(spec)
+    return [tensors[0].new_empty(out_shape(s, tensors), dtype=torch.float32), torch.empty(1, dtype=torch.int64)]
+
+
+@torch.library.custom_op("warptex::technique_backward", mutates_args=())
+def _technique_backward(token: torch.Tensor, grad: torch.Tensor, spec: str, tensors: list[torch.Tensor]) -> list[torch.Tensor]:
+    with _states_lock:
+        state = _states.get(int(token[0]))
+    if state is None:
+        raise RuntimeError("warptex.torch: the recorded forward pass is gone (was backward() called after the graph was freed?)")
+    device = _warp_device(grad.device)
+    with _torch_stream(device):
+        state.tape.zero()  # a second backward() (retain_graph=True) starts afresh
+        wp.copy(state.out.grad, _as_out(grad, state.out))
+        state.tape.backward()
+        return [state.grads[i]() if i in state.grads else t.new_empty(0) for i, t in enumerate(tensors)]
+
+
+@_technique_backward.register_fake
+def _(token, grad, spec, tensors):
+    want = set(parse(spec)["grad"])
+    return [torch.empty_like(t) if i in want else t.new_empty(0) for i, t in enumerate(tensors)]
+
+
+def _setup_context(ctx, inputs, output):
+    spec, tensors = inputs
+    ctx.spec = spec
+    ctx.save_for_backward(output[1], *tensors)
+
+
+def _backward(ctx, grads):
+    token, *tensors = ctx.saved_tensors
+    grad = grads[0]
+    want = set(parse(ctx.spec)["grad"])
+    if grad is None or not want:
+        return None, [None] * len(tensors)
+    result = torch.ops.warptex.technique_backward(token, grad.contiguous(), ctx.spec, tensors)
+    return None, [r if i in want else None for i, r in enumerate(result)]
+
+
+_technique.register_autograd(_backward, setup_context=_setup_context)
+
+
+def _as_out(grad: torch.Tensor, out: wp.array) -> wp.array:
+    """The output gradient as a Warp array shaped like the op's output ``out``."""
+    return wp.from_torch(grad.to(torch.float32).contiguous(), dtype=out.dtype, requires_grad=False).reshape(out.shape)
+
+
+def _warp_device(device: torch.device):
+    wp.init()  # the Warp device of a torch device needs Warp started (a no-op once it is)
+    return wp.device_from_torch(device)
+
+
+def _torch_stream(device):
+    """Warp on torch's current stream of ``device`` (CUDA), so the op is ordered with torch's work."""
+    if device.is_cuda:
+        return wp.ScopedStream(wp.stream_from_torch(torch.cuda.current_stream(device.ordinal)))
+    return wp.ScopedDevice(device)
+
+
+def _run(name: str, args: dict) -> wp.array:
+    """The native call of technique ``name`` (its positional arguments by name, the rest by keyword)."""
+    technique = TECHNIQUES[name]
+    return technique.native(*[args.pop(k) for k in technique.positional], **args)
+
+
+def _decode(value, tensors: list[torch.Tensor], want: set, grads: dict, device):
+    """The native arguments of a spec: tensors as Warp views (or textures built around them), with
+    gradient buffers where ``want`` asks, whose readers go into ``grads``."""
+    if isinstance(value, list):
+        return [_decode(v, tensors, want, grads, device) for v in value]
+    if not isinstance(value, dict):
+        return value
+    if "$t" in value:
+        return _decode_tensor(value["role"], value["$t"], tensors, want, grads, device)
+    if "$gbuffer" in value:
+        return _decode_gbuffer(value["$gbuffer"], tensors)
+    if "$sampler" in value:
+        return Sampler(**_decode(value["$sampler"], tensors, want, grads, device))
+    if "$stochastic" in value:
+        return Stochastic(**_decode(value["$stochastic"], tensors, want, grads, device))
+    if "$histogram" in value:
+        return Histogram(**_decode(value["$histogram"], tensors, want, grads, device))
+    return {k: _decode(v, tensors, want, grads, device) for k, v in value.items()}
+
+
+def _decode_tensor(role: str, i: int, tensors, want, grads, device):
+    # Every Warp view says requires_grad=False or names its gradient buffer: wp.from_torch would
+    # otherwise give a tensor that requires gradients a .grad of its own (the user's, in eager mode).
+    t = tensors[i]
+    if role in TEXTURES or role == "histogram":
+        return _texture_around(t, mipmaps=role != "splat_maps", index=i if i in want else None, grads=grads, device=device)
+    if role in HISTOGRAM:
+        return wp.from_torch(t, dtype=HISTOGRAM[role], requires_grad=False)
+    if role not in DIFFERENTIABLE and role not in INTS:
+        return t.cpu().numpy()
+    dtype = wp.vec2 if role in VEC2 else wp.int32 if role in INTS else wp.float32
+    if i not in want:
+        return wp.from_torch(t, dtype=dtype, requires_grad=False)
+    g = torch.zeros_like(t)
+    grads[i] = g.clone
+    return wp.from_torch(t, dtype=dtype, grad=g)
+
+
+def _decode_gbuffer(fields: dict, tensors) -> GBuffer:
+    arrays, sets = {}, {}
+    for name, ref in fields.items():
+        if not (isinstance(ref, dict) and "$t" in ref):
+            raise TypeError(f"warptex.torch: G-buffer field {name!r} must be a tensor")
+        t = tensors[ref["$t"]]
+        if "." in name:
+            set_name, key = name.split(".", 1)
+            if key not in UV_FIELDS:
+                raise ValueError(f"warptex.torch: unknown G-buffer UV field {name!r} (UV fields: {', '.join(UV_FIELDS)})")
+            sets.setdefault(set_name, {})[key] = _gbuffer_array(name, t, UV_FIELDS[key])
+        elif name in FIELDS:
+            arrays[name] = _gbuffer_array(name, t, FIELDS[name])
+        else:
+            raise ValueError(f"warptex.torch: unknown G-buffer field {name!r} (fields: {', '.join(FIELDS)})")
+    missing = [name for name in FIELDS if name not in arrays]
+    if missing:
+        raise ValueError(f"warptex.torch: the G-buffer dict lacks {', '.join(missing)}; make it with warptex.torch.gbuffer_tensors(gbuffer)")
+    return GBuffer(**arrays, uv_sets=sets)
+
+
+def _gbuffer_array(name: str, t: torch.Tensor, dtype) -> wp.array:
+    length = getattr(dtype, "_length_", 1)  # vec3: 3; float32, int32: 1
+    scalar = torch.int32 if dtype == wp.int32 else torch.float32
+    if t.dtype != scalar or t.dim() - (length > 1) not in (2, 3) or (length > 1 and t.shape[-1] != length):
+        want = "(H, W) or (V, H, W)" if length == 1 else f"(H, W, {length}) or (V, H, W, {length})"
+        raise ValueError(f"warptex.torch: G-buffer field {name!r} must be a {scalar} tensor of shape {want}, got {t.dtype} {tuple(t.shape)}")
+    return wp.from_torch(t, dtype=dtype, requires_grad=False)
+
+
+def _zeros(shape: tuple, device: torch.device) -> torch.Tensor:
+    """float32 zeros on ``device``; on the CPU from NumPy (see :func:`_texture_around`)."""
+    if device.type == "cpu":
+        return torch.from_numpy(np.zeros(shape, np.float32))
+    return torch.zeros(shape, dtype=torch.float32, device=device)
+
+
+def native_texture(values, dims: int) -> TextureArray:
+    return Texture(values) if dims == 3 else TextureArray(values)
+
+
+def _texture_around(t: torch.Tensor, *, mipmaps: bool, index, grads: dict, device) -> TextureArray:
+    """A :class:`Texture` (``t`` ``[H, W, C]``) or :class:`TextureArray` (``[L, H, W, C]``) whose
+    chain is a torch buffer holding ``t`` at level 0, its mips built here (on the active tape);
+    with ``index``, gradient buffers whose level 0 ``grads[index]`` returns shaped like ``t``.
+
+    On the CPU the buffers are filled and read through NumPy, not torch: torch runs CPU tensor ops
+    on its OpenMP threads, which keep spinning a while after each op, and the Warp launch that
+    followed a torch copy of a 256² texture ran 20% slower on 2 cores (measured:
+    ``benchmarks/bench_torch.py``)."""
+    layers = t.unsqueeze(0) if t.dim() == 3 else t
+    num_layers, height, width, channels = layers.shape
+    sizes = mip_sizes(height, width, None if mipmaps else 1)
+    texels = sum(num_layers * h * w for h, w in sizes)
+    count = num_layers * height * width
+    cpu = t.device.type == "cpu"
+    chain = _zeros((texels, 4), t.device)
+    if cpu:
+        chain.numpy()[:count, :channels] = layers.detach().numpy().reshape(count, channels)
+    else:
+        chain[:count, :channels] = layers.detach().reshape(count, channels)
+    grad = None
+    if index is not None:
+        grad = _zeros((texels, 4), t.device)
+        if cpu:
+            grads[index] = lambda: torch.from_numpy(grad.numpy()[:count, :channels].reshape(t.shape).copy())
+        else:
+            grads[index] = lambda: grad[:count, :channels].reshape(t.shape).clone()
+    texture = (Texture if t.dim() == 3 else TextureArray).around(wp.from_torch(chain, dtype=wp.vec4, grad=grad), num_layers, sizes, channels)
+    texture.update()
+    return texture
