@@ -8,9 +8,11 @@ negative (:func:`face_texture`). Where the choice flips, ``n[a] = 0``, projectio
 0 (for a sharpness > 0, triplanar and biplanar alike), so the seam blends as the others do.
 
 Kernels that read one texture per axis (both faces the same: the default) choose with
-:func:`axis_texture` instead, which never looks at the ``-`` faces: choosing by face costs 7% of a
+:func:`face_texture_per_axis` instead, which never looks at the ``-`` faces: choosing by face costs 7% of a
 plain triplanar sample (selecting a ``TextureView`` copies it), paid only where faces differ.
 """
+
+from typing import Any
 
 import warp as wp
 
@@ -51,61 +53,45 @@ FACE_FIELDS = ("px", "nx", "py", "ny", "pz", "nz")
 
 
 @wp.func
-def axis_texture(faces: FaceTextures, axis: wp.int32) -> TextureView:
-    """Projection ``axis``' texture on its ``+`` face (chosen, then sampled by one call: three
-    inlined copies of the sampling code measured slower)."""
-    tex = faces.px
+def on_axis(px: Any, py: Any, pz: Any, axis: wp.int32):
+    """Projection ``axis``' value among its ``+`` faces' (a texture or its gradient: chosen, then
+    used by one call; three inlined copies of the sampling code measured slower)."""
+    value = px
     if axis == 1:
-        tex = faces.py
+        value = py
     elif axis == 2:
-        tex = faces.pz
-    return tex
+        value = pz
+    return value
+
+
+@wp.func
+def on_face(px: Any, nx: Any, py: Any, ny: Any, pz: Any, nz: Any, axis: wp.int32, n: wp.vec3):
+    """Projection ``axis``' value on the face the normal ``n`` looks at (module docstring)."""
+    value = on_axis(px, py, pz, axis)
+    if n[axis] < 0.0:
+        value = on_axis(nx, ny, nz, axis)
+    return value
 
 
 @wp.func
 def face_texture(faces: FaceTextures, axis: wp.int32, n: wp.vec3) -> TextureView:
-    """Projection ``axis``' texture on the face the normal ``n`` looks at (module docstring)."""
-    tex = axis_texture(faces, axis)
-    if n[axis] < 0.0:
-        tex = faces.nx
-        if axis == 1:
-            tex = faces.ny
-        elif axis == 2:
-            tex = faces.nz
-    return tex
+    """Projection ``axis``' texture on the face the normal ``n`` looks at."""
+    return on_face(faces.px, faces.nx, faces.py, faces.ny, faces.pz, faces.nz, axis, n)
 
 
 @wp.func
 def face_texture_per_axis(faces: FaceTextures, axis: wp.int32, n: wp.vec3) -> TextureView:
-    """:func:`face_texture` where both faces of each axis have one texture: :func:`axis_texture`."""
-    return axis_texture(faces, axis)
-
-
-@wp.func
-def axis_grad(grads: FaceGrads, axis: wp.int32):
-    """The texel gradient of :func:`axis_texture`'s texture."""
-    grad = grads.px
-    if axis == 1:
-        grad = grads.py
-    elif axis == 2:
-        grad = grads.pz
-    return grad
+    """:func:`face_texture` where both faces of each axis have one texture: the ``+`` face's."""
+    return on_axis(faces.px, faces.py, faces.pz, axis)
 
 
 @wp.func
 def face_grad(grads: FaceGrads, axis: wp.int32, n: wp.vec3):
     """The texel gradient of :func:`face_texture`'s texture."""
-    grad = axis_grad(grads, axis)
-    if n[axis] < 0.0:
-        grad = grads.nx
-        if axis == 1:
-            grad = grads.ny
-        elif axis == 2:
-            grad = grads.nz
-    return grad
+    return on_face(grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, axis, n)
 
 
 @wp.func
 def face_grad_per_axis(grads: FaceGrads, axis: wp.int32, n: wp.vec3):
     """The texel gradient of :func:`face_texture_per_axis`'s texture."""
-    return axis_grad(grads, axis)
+    return on_axis(grads.px, grads.py, grads.pz, axis)

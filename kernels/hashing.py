@@ -24,6 +24,12 @@ SHIFT_16 = wp.constant(wp.uint32(16))
 SHIFT_8 = wp.constant(wp.uint32(8))
 INV_2_24 = wp.constant(1.0 / 16777216.0)
 
+# The streams (the fourth lane) of warptex's uses: one each, so their random values are independent.
+STREAM_HASH4_CELL = wp.constant(0)  # stochastic hash4: each cell's offset
+STREAM_CHEAP2_OFFSET = wp.constant(1)  # stochastic cheap2: the offsets its noise picks among
+STREAM_CHEAP2_NOISE = wp.constant(2)  # stochastic cheap2: the value noise
+STREAM_HEX_VERTEX = wp.constant(3)  # stochastic hex: each triangle-grid vertex's offset and angle
+
 
 @wp.func
 def pcg4d(a: wp.uint32, b: wp.uint32, c: wp.uint32, d: wp.uint32) -> wp.vec4ui:

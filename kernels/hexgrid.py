@@ -2,15 +2,13 @@
 UV, its barycentric weights, and each vertex's randomly offset (and rotated) tap.
 
 Offsets and angles come from :func:`~warptex.kernels.hashing.hash4_unit` with the stream
-:data:`STREAM_HEX_VERTEX`, so results are deterministic per seed on every device.
+``STREAM_HEX_VERTEX``, so results are deterministic per seed on every device.
 """
 
 import warp as wp
 
 from . import hashing
-
-# The hash stream of the hex technique's vertices (the fourth lane of pcg4d; see stochastic.py).
-STREAM_HEX_VERTEX = wp.constant(3)
+from .hashing import STREAM_HEX_VERTEX
 
 # Triangle grid: p = uv * HEX_SCALE (Heitz & Neyret's 2 sqrt(3): triangle sides of 1/(2 sqrt 3) in
 # UV); skewed coordinates s = (p.x - p.y / sqrt 3, 2 p.y / sqrt 3); vertex (i, j) sits at

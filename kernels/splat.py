@@ -46,9 +46,7 @@ from .splat_layers import (
     SplatParams,
     layer_textures,
     layer_weighted,
-    pick_grad,
-    pick_stochastic,
-    pick_texture,
+    pick,
     read_layer_outlined,
     read_layer_plain,
     read_layer_slope,
@@ -165,7 +163,7 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> di
                         hv[j] = read_layer(args.heights, j, args, pt, args.height_stoch)[0]
                 else:
                     for t in range(layer_textures(params)):
-                        value = read_layer(pick_texture(args.layers, args.heights, t), j, args, pt, pick_stochastic(args.stoch, args.height_stoch, t))
+                        value = read_layer(pick(args.layers, args.heights, t), j, args, pt, pick(args.stoch, args.height_stoch, t))
                         if t == 0:
                             c[j] = value
                             if params.height_mode == HEIGHT_CHANNEL:
@@ -233,8 +231,8 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> di
                             g = gc[j]
                             if t == 1:
                                 g = wp.vec4(ghv[j], 0.0, 0.0, 0.0)
-                            tex = pick_texture(args.layers, args.heights, t)
-                            scatter_layer(tex, pick_grad(grads.layers, grads.heights, t), j, args, pt, pick_stochastic(args.stoch, args.height_stoch, t), g)
+                            tex = pick(args.layers, args.heights, t)
+                            scatter_layer(tex, pick(grads.layers, grads.heights, t), j, args, pt, pick(args.stoch, args.height_stoch, t), g)
 
     return make(forward, "forward"), make(scatter, "scatter")
 

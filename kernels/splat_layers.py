@@ -50,6 +50,8 @@ with Warp's generated adjoint (a loop over layers that only writes, which that a
 differentiates exactly), and the blend kernel reads them, its gradient by hand as above.
 """
 
+from typing import Any
+
 import warp as wp
 
 from . import out_of_line, specialised
@@ -130,10 +132,7 @@ def layer_tiling(params: SplatParams, layer: wp.int32) -> float:
 @wp.func
 def layer_reads(params: SplatParams) -> wp.int32:
     """Reads per layer: the three projections when mapped triplanar, else one."""
-    reads = 1
-    if params.projection == PROJECT_TRIPLANAR:
-        reads = 3
-    return reads
+    return wp.where(params.projection == PROJECT_TRIPLANAR, 3, 1)
 
 
 @wp.func
@@ -218,38 +217,19 @@ def map_count(params: SplatParams) -> wp.int32:
 @wp.func
 def layer_textures(params: SplatParams) -> wp.int32:
     """Textures read per layer: the layer, and its separate height (``HEIGHT_ARRAY``)."""
-    count = 1
-    if params.height_mode == HEIGHT_ARRAY:
-        count = 2
-    return count
+    return wp.where(params.height_mode == HEIGHT_ARRAY, 2, 1)
 
 
 @wp.func
-def pick_texture(layers: TextureView, heights: TextureView, t: wp.int32) -> TextureView:
-    """Texture ``t`` of :func:`layer_textures` (chosen, then read by one call: the code that reads a
-    layer is compiled once, not once for colours and once for heights)."""
-    tex = layers
+def pick(layers_value: Any, heights_value: Any, t: wp.int32):
+    """What texture ``t`` of :func:`layer_textures` reads with: ``layers_value`` for the layer,
+    ``heights_value`` for its separate height (a texture, its stochastic options or its texel
+    gradient: chosen, then read by one call, so the code that reads a layer is compiled once, not
+    once for colours and once for heights)."""
+    value = layers_value
     if t == 1:
-        tex = heights
-    return tex
-
-
-@wp.func
-def pick_stochastic(stoch: StochasticArgs, height_stoch: StochasticArgs, t: wp.int32) -> StochasticArgs:
-    """The stochastic options of texture ``t`` (see :func:`pick_texture`)."""
-    st = stoch
-    if t == 1:
-        st = height_stoch
-    return st
-
-
-@wp.func
-def pick_grad(grad_layers: TexelGrad, grad_heights: TexelGrad, t: wp.int32):
-    """The texel gradient of texture ``t`` (see :func:`pick_texture`)."""
-    grad = grad_layers
-    if t == 1:
-        grad = grad_heights
-    return grad
+        value = heights_value
+    return value
 
 
 @wp.func

@@ -35,6 +35,7 @@ from . import hashing, out_of_line, specialised
 from .family import Kernels, family, pixel_kernels
 from .filters import sample_footprint, sample_lod, sample_lod_outlined
 from .footprint import footprint_mean, footprint_taps, footprint_uv, mip_levels
+from .hashing import STREAM_CHEAP2_NOISE, STREAM_CHEAP2_OFFSET, STREAM_HASH4_CELL
 from .hexgrid import hex_grid, hex_steps, hex_tap, hex_weights
 from .sampling import SampleArgs, SampleGrads, SamplePixels, sample_footprint_of, sample_layer
 from .scatter import scatter_footprint, scatter_lod
@@ -45,10 +46,6 @@ METHOD_HASH4 = wp.constant(1)
 METHOD_CHEAP2 = wp.constant(2)
 METHOD_HEX = wp.constant(3)
 
-# Hash streams (the fourth lane of pcg4d), one per use; the hex technique's is in .hexgrid.
-STREAM_HASH4_CELL = wp.constant(0)
-STREAM_CHEAP2_OFFSET = wp.constant(1)
-STREAM_CHEAP2_NOISE = wp.constant(2)
 
 @wp.struct
 class StochasticArgs:

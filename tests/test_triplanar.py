@@ -524,6 +524,7 @@ def test_bad_input_raises_with_a_clear_message(small_g):
         (ValueError, r"offsets must have shape \(3, 2\), got \(2, 3\)", lambda: triplanar(g, tex, offsets=np.zeros((2, 3)))),
         (ValueError, r"space must be one of 'world', 'object'", lambda: triplanar(g, tex, space="tangent")),
         (ValueError, r"space='object' needs object_to_world", lambda: triplanar(g, tex, space="object")),
+        (TypeError, r"biplanar\(\) got an unexpected keyword argument 'tilling'", lambda: wt.biplanar(g, tex, tilling=2.0)),
         (ValueError, r"object_to_world is only used with space='object'", lambda: triplanar(g, tex, object_to_world=np.eye(4))),
         (ValueError, r"object_to_world is singular", lambda: triplanar(g, tex, space="object", object_to_world=np.diag([1.0, 0.0, 1.0, 1.0]))),
         (ValueError, r"object_to_world must be a finite 4x4 matrix", lambda: triplanar(g, tex, space="object", object_to_world=np.eye(3))),

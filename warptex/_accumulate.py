@@ -27,7 +27,7 @@ import numpy as np
 import warp as wp
 
 from warptex._threads import PARALLEL_SUM_BYTES, Split, side_by_side
-from warptex._warp import struct_fields, struct_like
+from warptex._warp import map_arrays
 from warptex.kernels.texels import TILE_SHIFT
 
 # Private copies of texel gradients (``TexelGrad`` fields) mark the tiles they add into from this
@@ -80,25 +80,22 @@ def run_private(split: Split, work, copies: list[tuple[wp.array, Copy]], entries
         raise
 
 
-def with_private_grads(a, copies: list, worker: int):
-    """``a`` with every array that has a gradient (also inside structs) replaced by a view of the
-    same data whose gradient is ``worker``'s zeroed private accumulator, recorded in ``copies``.
+def with_private_grads(value, copies: list, worker: int):
+    """``value`` (an array or a struct) with every array that has a gradient replaced by a view of
+    the same data whose gradient is ``worker``'s zeroed private accumulator, recorded in ``copies``.
 
     Adjoint kernels accumulate into the ``grad`` of the *forward* arrays of struct fields (Warp
     ignores the adjoint struct there), so private accumulators must sit in the forward arguments.
     """
-    if wp.types.is_array(a):
+
+    def private_view(a: wp.array) -> wp.array:
         if not a.grad:
             return a
         mine = private(a.grad, worker)
         copies.append((a.grad, mine))
         return wp.array(ptr=a.ptr, dtype=a.dtype, shape=a.shape, strides=a.strides, device=a.device, grad=mine.array)
-    if wp.types.is_struct(a):
-        copy = struct_like(a)
-        for name, value in struct_fields(a).items():
-            setattr(copy, name, with_private_grads(value, copies, worker))
-        return copy
-    return a
+
+    return map_arrays(value, private_view)
 
 
 class _Sum(NamedTuple):

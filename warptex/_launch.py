@@ -28,7 +28,7 @@ import warp as wp
 
 from warptex._accumulate import TRACK_TILES_FROM, Copy, private, run_private, with_private_grads
 from warptex._threads import Split, workers_for
-from warptex._warp import active_tape, struct_fields, struct_like
+from warptex._warp import active_tape, map_arrays, struct_fields, struct_like
 from warptex.kernels.texels import TexelGrad
 
 GENERATED = "generated"
@@ -57,14 +57,7 @@ def arrays(value) -> Iterator[wp.array]:
 def sliced(value, lo: int, hi: int):
     """Rows ``lo .. hi`` of a per-pixel argument: an array sliced (an empty one, an unused optional
     input, as it is), or a struct with every array field sliced."""
-    if wp.types.is_array(value):
-        return value if value.shape[0] == 0 else value[lo:hi]
-    if wp.types.is_struct(value):
-        copy = struct_like(value)
-        for name, field in struct_fields(value).items():
-            setattr(copy, name, sliced(field, lo, hi))
-        return copy
-    return value
+    return map_arrays(value, lambda a: a if a.shape[0] == 0 else a[lo:hi])
 
 
 def _zero_rows(out) -> None:

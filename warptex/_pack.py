@@ -17,7 +17,7 @@ import math
 import numpy as np
 import warp as wp
 
-from warptex._validate import as_float, as_float_array, param_array
+from warptex._validate import as_device_array, as_float, as_float_array, param_array
 from warptex.histogram import GAUSSIAN_MEAN, LUT_RANGE
 from warptex.kernels import projection as kp
 from warptex.kernels import stochastic as kst
@@ -145,11 +145,7 @@ def vec2_array(func: str, name: str, value, device) -> wp.array:
     if isinstance(value, wp.array):
         if value.dtype != wp.vec2:
             raise TypeError(f"{func}(): {name} must be a wp.array of wp.vec2, got dtype {wp.types.type_repr(value.dtype)}")
-        if value.device != device:
-            raise ValueError(f"{func}(): {name} is on {value.device} but the texture is on {device}")
-        if not value.is_contiguous:
-            raise ValueError(f"{func}(): {name} must be contiguous")
-        return value
+        return as_device_array(func, name, value, device, beside="the texture is")
     arr = as_float_array(func, name, value)
     if arr.ndim < 1 or arr.shape[-1] != 2:
         raise ValueError(f"{func}(): {name} must have shape (..., 2), got {arr.shape}")

@@ -101,3 +101,22 @@ def check_layer_count(func: str, num_layers: int, maps) -> None:
             f"{func}(): {m} splat map(s) of {c} channel(s) hold weights for {(m - 1) * c + 1} to {m * c} layers, "
             f"but there are {num_layers} layers (use {need} map(s) of {c} channels)"
         )
+
+
+def as_on_device(func: str, name: str, value, kind: type, what: str, device, *, beside: str = "the G-buffer"):
+    """``value``, checked to be a ``kind`` (described as ``what``, e.g. "a TextureArray") on ``device``,
+    where ``beside`` (what sets the device) is: a ``TypeError`` or ``ValueError`` naming ``func`` else."""
+    if not isinstance(value, kind):
+        raise TypeError(f"{func}(): {name} must be {what}, got {type(value).__name__}")
+    if value.device != device:
+        raise ValueError(f"{func}(): {name} is on {value.device} but {beside} on {device}")
+    return value
+
+
+def as_device_array(func: str, name: str, value: wp.array, device, *, beside: str) -> wp.array:
+    """A ``wp.array`` input checked to be on ``device`` (where ``beside`` is) and contiguous."""
+    if value.device != device:
+        raise ValueError(f"{func}(): {name} is on {value.device} but {beside} on {device}")
+    if not value.is_contiguous:
+        raise ValueError(f"{func}(): {name} must be contiguous")
+    return value

@@ -10,6 +10,7 @@ oldest Warp release warptex supports as well):
 - :func:`struct_fields` and :func:`struct_like`: the fields of a ``@wp.struct`` instance, and a new
   instance of the same struct. A threaded backward pass gives each worker copies of the kernel's
   struct arguments whose arrays accumulate their gradients privately.
+- :func:`map_arrays`: a struct (or array) with its arrays replaced, built on the two above.
 - :func:`scalar_type`: the scalar type of a vector or matrix dtype (which arrays can carry gradients).
 
 And :func:`init_quietly`, for the command line: Warp's native library prints a warning to the
@@ -43,6 +44,19 @@ def active_tape() -> wp.Tape | None:
 def struct_fields(value) -> dict[str, Any]:
     """``{name: value}`` of every field of the ``@wp.struct`` instance ``value``, in declaration order."""
     return {name: getattr(value, name) for name in value._cls.vars}
+
+
+def map_arrays(value, f):
+    """``value`` with every array ``a`` in it replaced by ``f(a)``: an array, or a struct (nested
+    ones included: a new instance, set field by field, so that it packs the new arrays)."""
+    if wp.types.is_array(value):
+        return f(value)
+    if wp.types.is_struct(value):
+        copy = struct_like(value)
+        for name, field in struct_fields(value).items():
+            setattr(copy, name, map_arrays(field, f))
+        return copy
+    return value
 
 
 def scalar_type(dtype):

@@ -25,7 +25,7 @@ import warp as wp
 
 from warptex._op import run
 from warptex._pack import sampler_args, struct_of
-from warptex._validate import as_float_array, check_layer_count, param_array
+from warptex._validate import as_device_array, as_float_array, as_on_device, check_layer_count, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import atlas as ka
 from warptex.options import Address, Filter, Sampler, as_sampler
@@ -258,11 +258,7 @@ def _map_array(func, name, value, dtype, shape, device) -> wp.array:
             want = "(H, W, k)" if shape is None else str(shape)
             got = f"{wp.types.type_repr(value.dtype)} {value.shape}"
             raise ValueError(f"{func}(): {name} must be a wp.array of {wp.types.type_repr(dtype)} with shape {want}, got {got}")
-        if value.device != device:
-            raise ValueError(f"{func}(): {name} is on {value.device} but the G-buffer on {device}")
-        if not value.is_contiguous:
-            raise ValueError(f"{func}(): {name} must be contiguous")
-        return value
+        return as_device_array(func, name, value, device, beside="the G-buffer")
     arr = np.asarray(value)
     if dtype == wp.int32 and not np.issubdtype(arr.dtype, np.integer):
         raise TypeError(f"{func}(): {name} must hold integers, got dtype {arr.dtype}")
@@ -324,10 +320,7 @@ def splat_atlas(
     """
     func = "splat_atlas"
     device = gbuffer_device(func, gbuffer, device)
-    if not isinstance(atlas, Atlas):
-        raise TypeError(f"{func}(): atlas must be an Atlas (from pack_atlas), got {type(atlas).__name__}")
-    if atlas.device != device:
-        raise ValueError(f"{func}(): the atlas is on {atlas.device} but the G-buffer on {device}")
+    as_on_device(func, "atlas", atlas, Atlas, "an Atlas (from pack_atlas)", device)
     gbuffer.require(func, "mask", f"{uv_set}.uv", f"{uv_set}.uv_dx", f"{uv_set}.uv_dy")
     idx = _map_array(func, "indices", indices, wp.int32, None, device)
     k = idx.shape[2]

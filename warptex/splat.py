@@ -13,7 +13,7 @@ import warp as wp
 
 from warptex._op import run
 from warptex._pack import MAP_SAMPLER, projection_args, sampler_args, stochastic_args, struct_of
-from warptex._validate import as_enum, check_layer_count, param_array
+from warptex._validate import as_enum, as_on_device, check_layer_count, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import projection as kp
 from warptex.kernels import splat as kl
@@ -129,10 +129,7 @@ def splat(
     """
     func = "splat"
     device = gbuffer_device(func, gbuffer, device)
-    if not isinstance(layers, TextureArray):
-        raise TypeError(f"{func}(): layers must be a TextureArray, got {type(layers).__name__}")
-    if layers.device != device:
-        raise ValueError(f"{func}(): layers are on {layers.device} but the G-buffer on {device}")
+    as_on_device(func, "layers", layers, TextureArray, "a TextureArray", device)
     maps = as_splat_maps(func, splat_maps, device)
     num_layers = layers.num_layers
     check_layer_count(func, num_layers, maps)

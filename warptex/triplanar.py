@@ -133,34 +133,29 @@ def triplanar(
     return setup.launch(setup.channels)
 
 
-def biplanar(
-    gbuffer: GBuffer,
-    texture: TextureArray | None = None,
-    *,
-    tiling=1.0,
-    sharpness=8.0,
-    offsets=None,
-    mirror_fix: bool = True,
-    textures_per_axis: Sequence[TextureArray | None] | None = None,
-    textures_per_face: Sequence[TextureArray | None] | None = None,
-    layer: int = 0,
-    space: Space | str = Space.WORLD,
-    object_to_world=None,
-    stochastic: Stochastic | str | None = None,
-    sampler: Sampler | None = None,
-    device=None,
-) -> wp.array:
+def biplanar(gbuffer: GBuffer, texture: TextureArray | None = None, *, sharpness=8.0, **options) -> wp.array:
     """Biplanar mapping (Quilez): only the major and median projections, at most two taps.
 
     The weights are ``clamp((|n_a| - 0.5773) / (1 - 0.5773), 0, 1) ^ (sharpness / 8)`` for the
     major and median axes of the normal, 0 for the minor axis, normalised. Everything else (UVs,
-    mirror fix, offsets, LOD, textures per axis or per face, stochastic sampling, gradients) is as in :func:`triplanar`; the
-    default ``sharpness=8`` is Quilez' (exponent 1).
+    mirror fix, offsets, LOD, textures per axis or per face, stochastic sampling, gradients) is as in
+    :func:`triplanar`; the default ``sharpness=8`` is Quilez' (exponent 1).
+
+    Args:
+        gbuffer, texture: as for :func:`triplanar`.
+        sharpness: the blend exponent ``k >= 0`` (a number or a float32 ``wp.array`` of shape
+            ``(1,)``, receives gradients); the weights' exponent is ``k / 8``.
+        options: :func:`triplanar`'s other keywords, with its defaults: ``tiling``, ``offsets``,
+            ``mirror_fix``, ``textures_per_axis``, ``textures_per_face``, ``layer``, ``space``,
+            ``object_to_world``, ``stochastic``, ``sampler``, ``device``.
+
+    Returns:
+        As :func:`triplanar`.
     """
-    setup = _Setup(
-        "biplanar", kp.WEIGHTS_BIPLANAR, gbuffer, texture, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix,
-        textures_per_axis=textures_per_axis, textures_per_face=textures_per_face, layer=layer, space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device,
-    )  # fmt: skip
+    unknown = sorted(set(options) - set(_Setup.OPTIONS))
+    if unknown:
+        raise TypeError(f"biplanar() got an unexpected keyword argument {unknown[0]!r} (its options are triplanar()'s: {', '.join(_Setup.OPTIONS)})")
+    setup = _Setup("biplanar", kp.WEIGHTS_BIPLANAR, gbuffer, texture, sharpness=sharpness, **options)
     return setup.launch(setup.channels)
 
 
@@ -239,7 +234,13 @@ def triplanar_normal(
 class _Setup:
     """The checked, packed inputs of the three public functions, and their launch."""
 
-    def __init__(self, func, weights, gbuffer, texture, *, tiling, sharpness, offsets, mirror_fix, textures_per_axis, textures_per_face, layer, space, object_to_world, stochastic, sampler, device):
+    #: The keyword options every projection function takes (``biplanar``'s ``**options``).
+    OPTIONS = ("tiling", "offsets", "mirror_fix", "textures_per_axis", "textures_per_face", "layer", "space", "object_to_world", "stochastic", "sampler", "device")
+
+    def __init__(
+        self, func, weights, gbuffer, texture, *, tiling=1.0, sharpness=4.0, offsets=None, mirror_fix=True, textures_per_axis=None, textures_per_face=None,
+        layer=0, space=Space.WORLD, object_to_world=None, stochastic=None, sampler=None, device=None,
+    ):  # fmt: skip
         device = gbuffer_device(func, gbuffer, device)
         gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask")
         textures = _textures(func, texture, textures_per_axis, textures_per_face, layer, device)
