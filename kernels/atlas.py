@@ -30,7 +30,7 @@ LOD (after bias, before trilinear blending) to that ``ℓ_max``, which the Pytho
 
 import warp as wp
 
-from . import specialised
+from . import inlined, specialised
 from .family import Kernels, family, pixel_kernels
 from .filters import sample_lod, sample_lod_outlined
 from .footprint import footprint_mean, footprint_taps, footprint_uv, uv_footprint
@@ -166,7 +166,7 @@ def _atlas_body(sample_tile, name: str):
                 colour = wp.vec4(wp.nan)
         write_channels(out, i, colour)
 
-    return wp.func(specialised(body, name))
+    return inlined(specialised(body, name))
 
 
 @family()

@@ -1,14 +1,18 @@
 """The faces of the cube of directions, and the texture a triplanar projection reads on each.
 
+The choice takes the six faces' values one by one (a texture, its texel gradient): passed as one
+struct, a ``FaceTextures`` was copied whole into the call, 1.4 KB per pixel (an extra ``memcpy``
+per pixel, 6% of a triplanar forward's instructions).
+
 One face order everywhere, public and kernel alike: ``+x, -x, +y, -y, +z, -z`` (:data:`FACES`), so
 face ``f`` is axis ``f // 2`` seen from its ``+`` (``f`` even) or ``-`` side. Projection ``a`` reads
 the ``+a`` face's texture where the (projected-space) normal has ``n[a] >= 0`` (``sign(0) = +1``,
 as the mirror fix's :func:`~warptex.kernels.normals.sign_or_one`), the ``-a`` face's where it is
-negative (:func:`face_texture`). Where the choice flips, ``n[a] = 0``, projection ``a``'s weight is
+negative (:func:`on_face`). Where the choice flips, ``n[a] = 0``, projection ``a``'s weight is
 0 (for a sharpness > 0, triplanar and biplanar alike), so the seam blends as the others do.
 
 Kernels that read one texture per axis (both faces the same: the default) choose with
-:func:`face_texture_per_axis` instead, which never looks at the ``-`` faces: choosing by face costs 7% of a
+:func:`on_axis_face` instead, which never looks at the ``-`` faces: choosing by face costs 7% of a
 plain triplanar sample (selecting a ``TextureView`` copies it), paid only where faces differ.
 """
 
@@ -74,24 +78,7 @@ def on_face(px: Any, nx: Any, py: Any, ny: Any, pz: Any, nz: Any, axis: wp.int32
 
 
 @wp.func
-def face_texture(faces: FaceTextures, axis: wp.int32, n: wp.vec3) -> TextureView:
-    """Projection ``axis``' texture on the face the normal ``n`` looks at."""
-    return on_face(faces.px, faces.nx, faces.py, faces.ny, faces.pz, faces.nz, axis, n)
-
-
-@wp.func
-def face_texture_per_axis(faces: FaceTextures, axis: wp.int32, n: wp.vec3) -> TextureView:
-    """:func:`face_texture` where both faces of each axis have one texture: the ``+`` face's."""
-    return on_axis(faces.px, faces.py, faces.pz, axis)
-
-
-@wp.func
-def face_grad(grads: FaceGrads, axis: wp.int32, n: wp.vec3):
-    """The texel gradient of :func:`face_texture`'s texture."""
-    return on_face(grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, axis, n)
-
-
-@wp.func
-def face_grad_per_axis(grads: FaceGrads, axis: wp.int32, n: wp.vec3):
-    """The texel gradient of :func:`face_texture_per_axis`'s texture."""
-    return on_axis(grads.px, grads.py, grads.pz, axis)
+def on_axis_face(px: Any, nx: Any, py: Any, ny: Any, pz: Any, nz: Any, axis: wp.int32, n: wp.vec3):
+    """:func:`on_face` where both faces of each axis have one value: the ``+`` face's, whatever the
+    normal (the ``-`` faces are not looked at)."""
+    return on_axis(px, py, pz, axis)

@@ -5,6 +5,10 @@ from one source for a *configuration*: keyword values that change what is compil
 ``stochastic=True`` or ``capacity=8``. :func:`family` turns a builder into a factory cached per
 configuration (a Warp kernel must be built once: every build is a new kernel to compile) and
 registers it with the configurations :func:`warptex.kernels.all_kernels` compiles ahead of time.
+Those configurations are built when the family is defined (at import): Warp compiles a module with
+the kernels it holds when first launched, and a kernel added to it later would change it and
+compile it all again. Configurations built later (a splat of more layers) go into modules of their
+own.
 A factory returns :class:`Kernels`; ``warptex._op.run`` launches them and picks the backward pass.
 
 **Pixel kernels.** Every per-pixel kernel has one of two signatures, made by :func:`pixel_kernels`
@@ -109,6 +113,8 @@ def family(configurations: Callable[[dict], Iterable[dict]] | Iterable[dict] = (
         cached = functools.cache(build)
         listed = configurations if callable(configurations) else (lambda options, fixed=tuple(configurations): fixed)
         _FAMILIES.append((cached, listed))
+        for configuration in listed({}):  # built now: a Warp module holds every kernel it ever will
+            cached(**configuration)
         return cached
 
     return register

@@ -8,7 +8,7 @@ addressing and channel I/O in :mod:`.texels`, levels of detail and footprints in
 import warp as wp
 
 from .family import Kernels, family, pixel_kernels
-from . import specialised
+from . import inlined, specialised
 from .filters import sample_footprint, sample_footprint_outlined, sample_levels
 from .footprint import point_footprint, texture_footprint
 from .scatter import scatter_footprint, scatter_levels
@@ -84,16 +84,16 @@ def _footprint_bodies(sample, name: str):
         """``out[i, c]`` = channel ``c`` of the texture sampled at ``pixels.uv[i]``."""
         write_channels(out, i, sample(args.tex, sample_layer(args, pixels, i), pixels.uv[i], sample_footprint_of(args, pixels, i), args.smp))
 
-    return wp.func(specialised(body, name))
+    return inlined(specialised(body, name))
 
 
-@wp.func
+@inlined
 def scatter_sample(args: SampleArgs, pixels: SamplePixels, i: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):
     """Add the gradient ``adj[i]`` of the per-sample body into the texels it read."""
     scatter_footprint(args.tex, grads.tex, sample_layer(args, pixels, i), pixels.uv[i], sample_footprint_of(args, pixels, i), args.smp, read_channels(adj, i))
 
 
-@wp.func
+@inlined
 def sample_level_pixel(args: SampleArgs, pixels: SamplePixels, i: wp.int32, out: wp.array2d(dtype=float)):
     """The per-sample body for one LOD shared by every sample (``args.level``, ``args.fraction``)."""
     layer = sample_layer(args, pixels, i)
@@ -103,7 +103,7 @@ def sample_level_pixel(args: SampleArgs, pixels: SamplePixels, i: wp.int32, out:
     write_channels(out, i, result)
 
 
-@wp.func
+@inlined
 def scatter_sample_level(args: SampleArgs, pixels: SamplePixels, i: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):
     """Add the gradient ``adj[i]`` of :func:`sample_level_pixel` into the texels it read."""
     if finite_uv_lod(pixels.uv[i], 0.0):

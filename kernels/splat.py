@@ -32,7 +32,7 @@ import functools
 
 import warp as wp
 
-from . import ADJOINT_MODULE, specialised
+from . import ADJOINT_MODULE, inlined, specialised
 from .family import Kernels, Staged, family, forward_kernel, pixel_kernels
 from .projection import surface_frame
 from .splat_blend import blend_functions, capacity
@@ -122,7 +122,7 @@ class BlendGrads:
     height_samples: wp.array2d(dtype=float)
 
 
-@wp.func
+@inlined
 def layer_point(args: SplatArgs, pixels: SplatPixels, i: wp.int32) -> LayerPoint:
     """Where pixel ``i`` reads its layers (world space: a splat projects no object space)."""
     pt = LayerPoint()
@@ -144,8 +144,6 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> di
     f = blend_functions(cap)
     weights_t, colours_t = f.weights_t, f.colours_t
 
-    def make(func, name):
-        return wp.func(specialised(func, f"splat{cap}_{name}{suffix}"), module=f"warptex.splat{cap}")
 
     def read_layers_of(args: SplatArgs, pt: LayerPoint, w1: weights_t):
         """``(c, hv)``: every weighted layer's colour and raw height."""
@@ -172,7 +170,7 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> di
                             hv[j] = value[0]
         return c, hv
 
-    read_layers = make(read_layers_of, "read_layers")
+    read_layers = inlined(specialised(read_layers_of, f"splat{cap}_read_layers{suffix}"), module=f"warptex.splat{cap}")
 
     def forward(args: SplatArgs, pixels: SplatPixels, i: wp.int32, out: wp.array2d(dtype=float)):
         """``out[i, c]``: the layers blended by the splat maps; 0 where the mask is 0."""
@@ -234,10 +232,10 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> di
                             tex = pick(args.layers, args.heights, t)
                             scatter_layer(tex, pick(grads.layers, grads.heights, t), j, args, pt, pick(args.stoch, args.height_stoch, t), g)
 
-    return make(forward, "forward"), make(scatter, "scatter")
+    return inlined(specialised(forward, f"splat{cap}_forward{suffix}"), module=f"warptex.splat{cap}"), inlined(specialised(scatter, f"splat{cap}_scatter{suffix}"), module=f"warptex.splat{cap}")
 
 
-@wp.func
+@inlined
 def samples_outlined(args: SplatArgs, pixels: SplatPixels, i: wp.int32, out: SplatSamples):
     """``out.samples[i, j]``: layer ``j`` as the splat kernels read it, for every layer with a
     positive splat value (others stay 0); ``out.height_samples[i, j]``: its separate height. The first
@@ -314,8 +312,7 @@ def _blend_bodies(cap: int):
                     if params.height_mode == HEIGHT_ARRAY and grads.height_samples.shape[0] > 0:
                         grads.height_samples[i, j] = grads.height_samples[i, j] + ghv[j]
 
-    make = lambda func, name: wp.func(specialised(func, f"splat{cap}_{name}"), module=f"warptex.splat{cap}")  # noqa: E731
-    return make(blend, "blend"), make(blend_grad, "blend_grad")
+    return inlined(specialised(blend, f"splat{cap}_blend"), module=f"warptex.splat{cap}"), inlined(specialised(blend_grad, f"splat{cap}_blend_grad"), module=f"warptex.splat{cap}")
 
 
 def _sample_shapes(count: int, args) -> dict:

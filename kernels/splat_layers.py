@@ -54,7 +54,7 @@ from typing import Any
 
 import warp as wp
 
-from . import out_of_line, specialised
+from . import inlined, out_of_line, specialised
 from .filters import sample_footprint_derivatives, sample_lod
 from .footprint import lod_scale_slope, texture_footprint
 from .projection import ProjectionArgs, plane_coords, plane_footprint, plane_uv, triplanar_weights, u_sign
@@ -291,16 +291,17 @@ def _layer_reads(sample, scatter, suffix: str, one_call: bool, decorate=wp.func)
 
     loop = wp.func(specialised(read_projections, "read_projections" + suffix))
     add_loop = wp.func(specialised(scatter_projections, "scatter_projections" + suffix))
-    return decorate(specialised(read_layer, "read_layer" + suffix)), wp.func(specialised(scatter_layer, "scatter_layer" + suffix))
+    return decorate(specialised(read_layer, "read_layer" + suffix)), inlined(specialised(scatter_layer, "scatter_layer" + suffix))
 
 
-read_layer_plain, scatter_layer_plain = _layer_reads(sample_plain, scatter_plain, "_plain", one_call=False)
-read_layer_stochastic, scatter_layer_stochastic = _layer_reads(sample_stochastic, scatter_stochastic, "_stochastic", one_call=True)
+# Inlined where they are read: they take the launch's SplatArgs, which a call would copy whole, per layer.
+read_layer_plain, scatter_layer_plain = _layer_reads(sample_plain, scatter_plain, "_plain", one_call=False, decorate=inlined)
+read_layer_stochastic, scatter_layer_stochastic = _layer_reads(sample_stochastic, scatter_stochastic, "_stochastic", one_call=True, decorate=inlined)
 # For the generated adjoint: out of line, on the out-of-line stochastic sampler.
 read_layer_outlined, _ = _layer_reads(sample_stochastic_outlined, scatter_stochastic, "_outlined", one_call=True, decorate=out_of_line)
 
 
-@wp.func
+@inlined
 def read_layer_slope(tex: TextureView, layer: wp.int32, args: SplatArgs, pt: LayerPoint):
     """``(value, d value / d tiling)`` of ``read_layer`` with plain sampling, as Warp's adjoint takes
     the derivative (an anisotropic footprint's steps move in proportion to the tiling)."""

@@ -31,7 +31,7 @@ periodic address modes (wrap, period 1; mirror, period 2), the only ones stochas
 
 import warp as wp
 
-from . import hashing, out_of_line, specialised
+from . import hashing, inlined, out_of_line, specialised
 from .family import Kernels, family, pixel_kernels
 from .filters import sample_footprint, sample_lod, sample_lod_outlined
 from .footprint import footprint_mean, footprint_taps, footprint_uv, mip_levels
@@ -339,10 +339,10 @@ def _stochastic_body(sample, name: str):
         a = args.sample
         write_channels(out, i, sample(a.tex, sample_layer(a, pixels, i), pixels.uv[i], sample_footprint_of(a, pixels, i), a.smp, args.params))
 
-    return wp.func(specialised(body, name))
+    return inlined(specialised(body, name))
 
 
-@wp.func
+@inlined
 def scatter_stochastic_pixel(args: StochasticSampleArgs, pixels: SamplePixels, i: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):
     """Add the gradient ``adj[i]`` of the stochastic body (linear blends only) into the texels it read."""
     a = args.sample

@@ -21,8 +21,8 @@ import functools
 
 import warp as wp
 
-from . import specialised
-from .faces import FACE_FIELDS, FaceGrads, FaceTextures, face_grad, face_grad_per_axis, face_texture, face_texture_per_axis
+from . import ADJOINT_MODULE, inlined, specialised
+from .faces import FACE_FIELDS, FaceGrads, FaceTextures, on_axis_face, on_face
 from .family import Kernels, Staged, family, forward_kernel, pixel_kernels
 from .normals import blend_projected, decode_normal, direction, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
@@ -106,7 +106,7 @@ def _projection_reads(sample, scatter, suffix: str):
         if grad.texels.shape[0] > 0:
             scatter(tex, grad, layer, projection_uv(args.proj, axis, p, n), projection_footprint(tex, args.proj, axis, n, dpdx, dpdy, args.smp), args.smp, args.stoch, g)
 
-    return wp.func(specialised(read, "read_projection" + suffix)), wp.func(specialised(add, "add_projection" + suffix))
+    return inlined(specialised(read, "read_projection" + suffix)), inlined(specialised(add, "add_projection" + suffix))
 
 
 @wp.func
@@ -152,7 +152,7 @@ def write_normal(out: wp.array2d(dtype=float), i: wp.int32, value: wp.vec3):
 # -- pixel bodies --------------------------------------------------------------------------------------
 
 
-def _bodies(read, add, select, select_grad, suffix: str):
+def _bodies(read, add, select, suffix: str):
     """The bodies of one configuration: colour, its texel gradient, normal mapping, and the two-step
     normal's stored samples with their texel gradient. Uncovered pixels (``mask == 0``) and zero or
     non-finite normals give 0; zero-weight projections are not read."""
@@ -164,7 +164,7 @@ def _bodies(read, add, select, select_grad, suffix: str):
             w = projection_weights(args.proj, n)
             for axis in range(3):
                 if w[axis] > 0.0:
-                    value += w[axis] * read(select(args.faces, axis, n), args.layer, axis, args, p, n, dpdx, dpdy)
+                    value += w[axis] * read(select(args.faces.px, args.faces.nx, args.faces.py, args.faces.ny, args.faces.pz, args.faces.nz, axis, n), args.layer, axis, args, p, n, dpdx, dpdy)
         write_channels(out, i, value)
 
     def colour_grad(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
@@ -174,7 +174,7 @@ def _bodies(read, add, select, select_grad, suffix: str):
             g = read_channels(adj, i)
             for axis in range(3):
                 if w[axis] > 0.0:
-                    add(select(args.faces, axis, n), select_grad(grads, axis, n), args.layer, axis, args, p, n, dpdx, dpdy, w[axis] * g)
+                    add(select(args.faces.px, args.faces.nx, args.faces.py, args.faces.ny, args.faces.pz, args.faces.nz, axis, n), select(grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, axis, n), args.layer, axis, args, p, n, dpdx, dpdy, w[axis] * g)
 
     def normal(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out: wp.array2d(dtype=float)):
         result = wp.vec3(0.0)
@@ -185,7 +185,7 @@ def _bodies(read, add, select, select_grad, suffix: str):
             total = wp.vec3(0.0)
             for axis in range(3):
                 if w[axis] > 0.0:
-                    texel = read(select(args.faces, axis, n), args.layer, axis, args, p, n, dpdx, dpdy)
+                    texel = read(select(args.faces.px, args.faces.nx, args.faces.py, args.faces.ny, args.faces.pz, args.faces.nz, axis, n), args.layer, axis, args, p, n, dpdx, dpdy)
                     total += w[axis] * projected_normal(texel, axis, n, args.proj, args.normal_map)
             result = unit_normal(total, n, args.proj)
         write_normal(out, i, result)
@@ -198,7 +198,7 @@ def _bodies(read, add, select, select_grad, suffix: str):
             n = unit_base_normal(n)
             for axis in range(3):
                 if w[axis] > 0.0:
-                    out.samples[i, axis] = read(select(args.faces, axis, n), args.layer, axis, args, p, n, dpdx, dpdy)
+                    out.samples[i, axis] = read(select(args.faces.px, args.faces.nx, args.faces.py, args.faces.ny, args.faces.pz, args.faces.nz, axis, n), args.layer, axis, args, p, n, dpdx, dpdy)
 
     def samples_grad(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, grads: FaceGrads, adj: ProjectionSamples):
         # adj.weights is not read: no gradient reaches the weights on this path.
@@ -208,12 +208,12 @@ def _bodies(read, add, select, select_grad, suffix: str):
             n = unit_base_normal(n)
             for axis in range(3):
                 if w[axis] > 0.0:
-                    add(select(args.faces, axis, n), select_grad(grads, axis, n), args.layer, axis, args, p, n, dpdx, dpdy, adj.samples[i, axis])
+                    add(select(args.faces.px, args.faces.nx, args.faces.py, args.faces.ny, args.faces.pz, args.faces.nz, axis, n), select(grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, axis, n), args.layer, axis, args, p, n, dpdx, dpdy, adj.samples[i, axis])
 
-    return {name: wp.func(specialised(f, f"triplanar_{name}{suffix}")) for name, f in (("colour", colour), ("colour_grad", colour_grad), ("normal", normal), ("samples", samples), ("samples_grad", samples_grad))}
+    return {name: inlined(specialised(f, f"triplanar_{name}{suffix}")) for name, f in (("colour", colour), ("colour_grad", colour_grad), ("normal", normal), ("samples", samples), ("samples_grad", samples_grad))}
 
 
-@wp.func
+@inlined
 def colour_outlined(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out: wp.array2d(dtype=float)):
     """The colour body (every configuration) on out-of-line blocks, for Warp's generated adjoint."""
     value = wp.vec4(0.0)
@@ -221,12 +221,12 @@ def colour_outlined(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out
         p, n, dpdx, dpdy, w = surface_frame(args.proj, pixels.position[i], pixels.normal[i], pixels.position_dx[i], pixels.position_dy[i])
         for axis in range(3):
             if w[axis] > 0.0:
-                tex = face_texture(args.faces, axis, n)
+                tex = on_face(args.faces.px, args.faces.nx, args.faces.py, args.faces.ny, args.faces.pz, args.faces.nz, axis, n)
                 value += w[axis] * projection_sample(tex, args.layer, args.proj, axis, p, n, dpdx, dpdy, projection_tiling(args.proj, axis), args.smp, args.stoch)
     write_channels(out, i, value)
 
 
-@wp.func
+@inlined
 def normal_outlined(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out: wp.array2d(dtype=float)):
     """The normal-mapping body (every configuration) on out-of-line blocks, for Warp's generated adjoint."""
     result = wp.vec3(0.0)
@@ -236,14 +236,14 @@ def normal_outlined(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out
         total = wp.vec3(0.0)
         for axis in range(3):
             if w[axis] > 0.0:
-                tex = face_texture(args.faces, axis, n)
+                tex = on_face(args.faces.px, args.faces.nx, args.faces.py, args.faces.ny, args.faces.pz, args.faces.nz, axis, n)
                 texel = projection_sample(tex, args.layer, args.proj, axis, p, n, dpdx, dpdy, projection_tiling(args.proj, axis), args.smp, args.stoch)
                 total += w[axis] * projected_normal(texel, axis, n, args.proj, args.normal_map)
         result = unit_normal(total, n, args.proj)
     write_normal(out, i, result)
 
 
-@wp.func
+@inlined
 def normal_from_samples(args: NormalBlendArgs, pixels: StoredSamples, i: wp.int32, out: wp.array2d(dtype=float)):
     """The normal-mapping body with each projection's sample and weight read from the stored ones
     (no gradient reaches the weights: this runs only where the sharpness and the G-buffer need none)."""
@@ -262,39 +262,13 @@ def normal_from_samples(args: NormalBlendArgs, pixels: StoredSamples, i: wp.int3
 _PLAIN = _projection_reads(sample_plain, scatter_plain, "_plain")
 _STOCHASTIC = _projection_reads(sample_stochastic, scatter_stochastic, "_stochastic")
 _BODIES = {
-    (stochastic, faces): _bodies(*(_STOCHASTIC if stochastic else _PLAIN), face_texture if faces else face_texture_per_axis, face_grad if faces else face_grad_per_axis,
-                                 ("_stochastic" if stochastic else "") + ("_faces" if faces else ""))  # fmt: skip
+    (stochastic, faces): _bodies(*(_STOCHASTIC if stochastic else _PLAIN), on_face if faces else on_axis_face, ("_stochastic" if stochastic else "") + ("_faces" if faces else ""))
     for stochastic in (False, True)
     for faces in (False, True)
 }
 #: The texel gradients' input paths (``FaceGrads`` fields), the face textures in :data:`~.faces.FACES` order.
 FACE_GRADS = tuple(f"args.faces.{f}" for f in FACE_FIELDS)
 _CONFIGURATIONS = [{"normal": normal, "stochastic": stochastic, "faces": faces} for normal in (False, True) for stochastic in (False, True) for faces in (False, True)]
-
-
-@family(configurations=_CONFIGURATIONS)
-def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels:
-    """The kernels of colour (or ``normal``) mapping, plain or ``stochastic``, one texture per axis
-    or per face (``faces``): module docstring."""
-    module = MODULE + (".stochastic" if stochastic else "") + (".faces" if faces else "")
-    grad_module = module + ".grad"
-    bodies = _BODIES[stochastic, faces]
-    name = "triplanar" + ("_stochastic" if stochastic else "") + ("_faces" if faces else "")
-    general = stochastic and faces  # the configuration whose generated adjoint every configuration shares
-    if not normal:
-        forward, texel_grad, adjoint = pixel_kernels(name, module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["colour"],
-                                                     scatter=bodies["colour_grad"], grads=FaceGrads, adjoint_body=colour_outlined if general else None)  # fmt: skip
-        if not general:
-            adjoint = triplanar_kernels(normal=False, stochastic=True, faces=True).adjoint
-        return Kernels(forward, texel_grad, adjoint, grads=FACE_GRADS)
-    forward, _, adjoint = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"],
-                                        adjoint_body=normal_outlined if general else None)  # fmt: skip
-    if not general:
-        adjoint = triplanar_kernels(normal=True, stochastic=True, faces=True).adjoint
-    first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,
-                          body=bodies["samples"], scatter=bodies["samples_grad"], grads=FaceGrads)  # fmt: skip
-    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=FACE_GRADS), then=_normal_from_samples(), intermediates=_sample_shapes)
-    return Kernels(forward, None, adjoint, staged=staged)
 
 
 def _sample_shapes(count: int, args) -> dict:
@@ -307,3 +281,30 @@ def _normal_from_samples() -> Kernels:
     adjoint, in the ``.grad`` module: it runs only where gradients are recorded)."""
     kernel = forward_kernel(normal_from_samples, NormalBlendArgs, StoredSamples, wp.array2d(dtype=float), module=GRAD_MODULE, name="triplanar_normal_from_samples", enable_backward=True)
     return Kernels(kernel, None, kernel)
+
+
+@functools.cache
+def _adjoint(normal: bool):
+    """The generated-adjoint kernel of colour (or ``normal``) mapping, one for every configuration:
+    the most general one's (stochastic, by face), on the out-of-line blocks."""
+    body = normal_outlined if normal else colour_outlined
+    return forward_kernel(body, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=ADJOINT_MODULE, name="triplanar" + ("_normal" if normal else "") + "_adjoint", enable_backward=True)
+
+
+@family(configurations=_CONFIGURATIONS)
+def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels:
+    """The kernels of colour (or ``normal``) mapping, plain or ``stochastic``, one texture per axis
+    or per face (``faces``): module docstring."""
+    module = MODULE + (".stochastic" if stochastic else "") + (".faces" if faces else "")
+    grad_module = module + ".grad"
+    bodies = _BODIES[stochastic, faces]
+    name = "triplanar" + ("_stochastic" if stochastic else "") + ("_faces" if faces else "")
+    if not normal:
+        forward, texel_grad, _ = pixel_kernels(name, module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["colour"],
+                                               scatter=bodies["colour_grad"], grads=FaceGrads)  # fmt: skip
+        return Kernels(forward, texel_grad, _adjoint(False), grads=FACE_GRADS)
+    forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
+    first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,
+                          body=bodies["samples"], scatter=bodies["samples_grad"], grads=FaceGrads)  # fmt: skip
+    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=FACE_GRADS), then=_normal_from_samples(), intermediates=_sample_shapes)
+    return Kernels(forward, None, _adjoint(True), staged=staged)

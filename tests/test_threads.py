@@ -287,10 +287,11 @@ def test_private_copies_summed_in_parallel_give_the_serial_sum_bit_for_bit(gener
             tape.backward()
             results.append(tex.grad().copy())
             tex.zero_grad()
+        assert tuple(_accumulate._private_arrays), "the threads added into private copies"  # kept while tex lives
         return results
 
     parallel = gradients()
-    assert tuple(_accumulate._private_arrays) and parallel[0].nbytes * 4 // 3 > _threads.PARALLEL_SUM_BYTES
+    assert parallel[0].nbytes * 4 // 3 > _threads.PARALLEL_SUM_BYTES
     monkeypatch.setattr(_accumulate, "PARALLEL_SUM_BYTES", 1 << 62)
     serial = gradients()
     for p, s in zip(parallel + serial[1:], serial + serial[:1]):

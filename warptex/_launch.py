@@ -22,6 +22,7 @@ CUDA launches are never split: one launch fills the device.
 from __future__ import annotations
 
 import functools
+import weakref
 from typing import Iterator, NamedTuple
 
 import warp as wp
@@ -101,7 +102,7 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
     tape = active_tape()
     recorded = [a for a in arrays(out) if a.requires_grad] if tape is not None and backward is not None else []
     if recorded and backward is not GENERATED:
-        tape.record_func(functools.partial(backward, tape), arrays=recorded)
+        tape.record_func(_on(tape, backward), arrays=recorded)
     generated = bool(recorded) and backward is GENERATED
     workers = workers_for(device, count, threads)
     if workers == 1:
@@ -118,10 +119,20 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
 
     split.run(forward)
     if generated:
-        tape.record_func(lambda: _backward(tape, kernel, split, args, pixels, out, device), arrays=recorded)
+        tape.record_func(_on(tape, functools.partial(_backward, kernel=kernel, split=split, args=args, pixels=pixels, out=out, device=device)), arrays=recorded)
 
 
-def _backward(tape, kernel, split: Split, args, pixels, out, device) -> None:
+def _on(tape, backward):
+    """``backward(tape)`` as the argument-less function ``wp.Tape.record_func`` records, holding the
+    tape weakly: a tape that held itself through its own records would be freed only by Python's
+    cycle collector, and until then keep its outputs and their gradients (tens of MB) alive, so the
+    next pass allocated fresh memory and paid its page faults (a third more time for a bilinear
+    forward and backward, measured)."""
+    ref = weakref.ref(tape)
+    return lambda: backward(ref())
+
+
+def _backward(tape, *, kernel, split: Split, args, pixels, out, device) -> None:
     """The adjoints of a split launch, run by the same workers: worker 0 accumulates into the real
     gradients, the others into private copies of the shared ones (``args``' arrays), added in at the
     end (summed whole: Warp's generated adjoints do not mark tiles)."""
