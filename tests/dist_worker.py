@@ -25,23 +25,11 @@ from warptex.fit.distributed import Reducer
 from warptex.scenes import terrain_camera
 from warptex.scenes.terrain import terrain
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_fit import smooth_layers  # noqa: E402  (the layers of the one-process fit tests)
+
 OPTIONS = {"projection": "triplanar", "height_blend": 0.2}
 STAGES = [Stage(4, sigma=1.0, lr_logits=0.2), Stage(0, scan=(0.35, 21)), Stage(5, lr_logits=0.1, lr_tiling=0.005, decay=0.2)]
-
-
-def smooth_layers(count: int, size: int = 32, seed: int = 0) -> np.ndarray:
-    """``[count, size, size, 4]`` smooth periodic layers (as tests/test_fit.py's)."""
-    rng = np.random.default_rng(seed)
-    y, x = np.meshgrid((np.arange(size) + 0.5) / size, (np.arange(size) + 0.5) / size, indexing="ij")
-    out = []
-    for _ in range(count):
-        img = np.full((size, size, 4), 0.5)
-        img[..., :3] = rng.uniform(0.2, 0.8, 3)
-        for _ in range(3):
-            fx, fy = rng.integers(-2, 3, size=2)
-            img += 0.08 * np.sin(2 * np.pi * (fx * x + fy * y)[..., None] + rng.uniform(0, 2 * np.pi, 4))
-        out.append(np.clip(img, 0.0, 1.0))
-    return np.stack(out).astype(np.float32)
 
 
 def scene():

@@ -11,7 +11,7 @@ Warp thread each (``WARPTEX_NUM_THREADS=1``):
 - a rank killed, or stopped, mid-fit ends the run with an error within 60 s and leaves the
   previous output set as it was.
 
-Skipped without PyTorch (the distributed fit needs torch.distributed).
+The tests that run ranks skip without PyTorch (the distributed fit needs torch.distributed).
 """
 
 from __future__ import annotations
@@ -33,10 +33,17 @@ import pytest
 from warptex import io
 from warptex.apps.cli import main as cli_main
 
-torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]'): the distributed fit needs torch.distributed")
-dist = pytest.importorskip("torch.distributed", reason="this PyTorch build has no torch.distributed")
-if not dist.is_available() or not dist.is_gloo_available():
-    pytest.skip("this PyTorch build has no gloo backend", allow_module_level=True)
+from warptex.apps.distributed import from_environment
+from warptex.fit import shard
+
+try:
+    import torch.distributed as dist
+
+    GLOO = dist.is_available() and dist.is_gloo_available()
+except ImportError:
+    dist, GLOO = None, False
+linux = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="finds torchrun's processes in /proc")
+needs_gloo = pytest.mark.skipif(not GLOO, reason="needs PyTorch with torch.distributed's gloo backend (pip install 'warptex[torch]')")
 
 ROOT = Path(__file__).resolve().parents[1]
 FIT = ["fit", "--iters", "6", "--resolution", "32x40", "--report-every", "0"]
@@ -44,6 +51,44 @@ FIT = ["fit", "--iters", "6", "--resolution", "32x40", "--report-every", "0"]
 # fit, 3e-5 for examples/torch_fit.py (the tiling scan's summed losses move its parabola's vertex in
 # the last bits, and Adam's first steps, which normalise each gradient, carry that on).
 WEIGHT_ROUNDING = 1e-4
+
+
+# -- the split and the environment (no PyTorch needed) ----------------------------------------------------
+
+
+def test_shard_deals_views_out_as_distributed_sampler_does():
+    views = [f"view {k}" for k in range(7)]
+    assert [shard(views, rank=r, world_size=3) for r in range(3)] == [["view 0", "view 3", "view 6"], ["view 1", "view 4"], ["view 2", "view 5"]]
+    assert shard(views, rank=0, world_size=1) == views
+    assert sorted(v for r in range(7) for v in shard(views, rank=r, world_size=7)) == sorted(views)
+    with pytest.raises(ValueError, match=r"shard\(\): 3 ranks need at least 3 views \(one each\), got 2"):
+        shard(views[:2], rank=0, world_size=3)
+    with pytest.raises(ValueError, match=r"shard\(\): rank must be < world_size = 2, got 2"):
+        shard(views, rank=2, world_size=2)
+    with pytest.raises(ValueError, match=r"shard\(\): world_size must be an int >= 1, got 0"):
+        shard(views, rank=0, world_size=0)
+
+
+def test_torchrun_environment(monkeypatch):
+    for name in ("WORLD_SIZE", "RANK", "LOCAL_RANK", "LOCAL_WORLD_SIZE"):
+        monkeypatch.delenv(name, raising=False)
+    assert from_environment() is None  # not started by torchrun
+    monkeypatch.setenv("WORLD_SIZE", "1")
+    monkeypatch.setenv("RANK", "0")
+    assert from_environment() is None  # one process: the plain fit
+    monkeypatch.setenv("WORLD_SIZE", "4")
+    monkeypatch.setenv("RANK", "3")
+    monkeypatch.setenv("LOCAL_RANK", "1")
+    monkeypatch.setenv("LOCAL_WORLD_SIZE", "2")
+    job = from_environment()
+    assert (job.rank, job.world_size, job.local_rank, job.local_world_size) == (3, 4, 1, 2)
+    assert str(job.device("cpu")) == "cpu"
+    monkeypatch.setenv("RANK", "4")
+    with pytest.raises(ValueError, match=r"fit: torchrun gave RANK=4 and WORLD_SIZE=4; expected 0 <= RANK < WORLD_SIZE"):
+        from_environment()
+    monkeypatch.setenv("RANK", "x")
+    with pytest.raises(ValueError, match=r"fit: WORLD_SIZE is set, so this is a torchrun job, but RANK='x' is not a whole number"):
+        from_environment()
 
 
 def _env() -> dict:
@@ -80,6 +125,7 @@ def _same_fit(one, two) -> None:
     assert s2["iterations"] == 6 and s2["views"] == 2
 
 
+@needs_gloo
 def test_torchrun_two_ranks_fit_the_default_problem_as_one_process_does(tmp_path, monkeypatch):
     two = _run(_torchrun("-m", "warptex", *FIT, "--out", str(tmp_path / "two")), tmp_path)
     assert two.returncode == 0, two.stderr[-3000:]
@@ -90,6 +136,7 @@ def test_torchrun_two_ranks_fit_the_default_problem_as_one_process_does(tmp_path
     assert [p.name for p in (tmp_path / "two").iterdir() if p.name.startswith(".")] == []
 
 
+@needs_gloo
 def test_two_torchrun_nodes_meet_at_a_rendezvous_endpoint(tmp_path, monkeypatch):
     # What the README says for several machines, with both "machines" here: one torchrun per node,
     # the same c10d rendezvous endpoint and id.
@@ -105,6 +152,7 @@ def test_two_torchrun_nodes_meet_at_a_rendezvous_endpoint(tmp_path, monkeypatch)
     _same_fit(_one_process_fit(tmp_path / "one", monkeypatch), _fitted(tmp_path / "two"))
 
 
+@needs_gloo
 def test_torch_fit_example_on_two_ranks_matches_one_process(tmp_path):
     example = str(ROOT / "examples" / "torch_fit.py")
     args = ["--iters", "6", "--resolution", "32x40"]
@@ -129,6 +177,7 @@ def _worker():
     return module
 
 
+@needs_gloo
 def test_what_the_number_of_ranks_does_to_the_bits(tmp_path, monkeypatch):
     monkeypatch.setenv("WARPTEX_NUM_THREADS", "1")
     (tmp_path / "1").mkdir()
@@ -164,6 +213,7 @@ def test_what_the_number_of_ranks_does_to_the_bits(tmp_path, monkeypatch):
             assert messages["works after the errors"] == "no error"
 
 
+@needs_gloo
 def test_a_one_rank_group_fits_the_same_bits_as_no_group(tmp_path, monkeypatch):
     monkeypatch.setenv("WARPTEX_NUM_THREADS", "1")
     worker = _worker()
@@ -255,6 +305,8 @@ def _fit_and_stop_rank_1(tmp_path: Path, stop: signal.Signals, extra=()) -> tupl
     return said[0][0] - stopped, time.monotonic() - stopped, status, said[0][1]
 
 
+@needs_gloo
+@linux
 def test_a_rank_killed_mid_fit_fails_the_run_at_once_and_keeps_the_previous_outputs(tmp_path):
     before = _previous_set(tmp_path / "out")
     error_after, ended_after, status, said = _fit_and_stop_rank_1(tmp_path, signal.SIGKILL)
@@ -264,6 +316,8 @@ def test_a_rank_killed_mid_fit_fails_the_run_at_once_and_keeps_the_previous_outp
     assert {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in (tmp_path / "out").iterdir()} == before
 
 
+@needs_gloo
+@linux
 def test_a_rank_that_stops_answering_fails_the_run_after_the_timeout(tmp_path):
     before = _previous_set(tmp_path / "out")
     error_after, ended_after, status, said = _fit_and_stop_rank_1(tmp_path, signal.SIGSTOP, ["--dist-timeout", "5"])
