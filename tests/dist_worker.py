@@ -3,7 +3,8 @@ under ``torchrun``; with no ``WORLD_SIZE`` it is the one-process fit they are co
 
 ``python tests/dist_worker.py OUT``: fits the small scene (3 views of a coarse terrain, smooth
 layers, 9 × 9 maps, a short schedule with a tiling scan and the entropy prior) twice, each rank its
-share of the views, and writes ``OUT/rank{r}.npz`` (raw parameters, history, world size). Under
+share of the views, and once more with a different start on every rank but 0, and writes
+``OUT/rank{r}.npz`` (raw parameters, history, world size). Under
 torchrun it also provokes the failures every rank must report alike and writes their messages to
 ``OUT/rank{r}.json``: one rank's bad view, ranks with different settings, diverged parameters.
 """
@@ -46,8 +47,8 @@ def scene():
     return views, layers
 
 
-def fit(views, layers, group, **kw):
-    params = SplatParameters(4, (9, 9), tiling=0.24)
+def fit(views, layers, group, tiling=0.24, **kw):
+    params = SplatParameters(4, (9, 9), tiling=tiling)
     result = fit_splat(views, layers, params, stages=STAGES, entropy=1e-3, splat_options=OPTIONS, progress=False, process_group=group, **kw)
     return params, result
 
@@ -70,9 +71,10 @@ def main(out: Path) -> None:
         dist.init_process_group("gloo", timeout=timedelta(seconds=30))
         group, rank, world = dist.group.WORLD, dist.get_rank(), dist.get_world_size()
     mine = shard(views, rank=rank, world_size=world)
-    runs = [fit(mine, layers, group) for _ in range(2)]  # twice: reproducible within a rank count
-    (params, result), (again, _) = runs
-    arrays = {f"{k}{suffix}": getattr(p, k).numpy() for suffix, p in (("", params), ("_again", again)) for k in ("logits", "log_tiling")}
+    params, result = fit(mine, layers, group)
+    again, _ = fit(mine, layers, group)  # reproducible within a rank count
+    moved, _ = fit(mine, layers, group, tiling=0.24 + 0.05 * rank)  # ranks above 0 start elsewhere: rank 0's start is broadcast
+    arrays = {f"{k}{suffix}": getattr(p, k).numpy() for suffix, p in (("", params), ("_again", again), ("_moved", moved)) for k in ("logits", "log_tiling")}
     np.savez(out / f"rank{rank}.npz", **arrays, loss=result.history["loss"], mse=result.history["mse"], final_mse=result.final_mse, world_size=result.world_size)
     if group is None:
         return

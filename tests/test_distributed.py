@@ -195,6 +195,7 @@ def test_what_the_number_of_ranks_does_to_the_bits(tmp_path, monkeypatch):
             for k in params:  # every rank holds rank 0's bits, and a second fit gives them again
                 np.testing.assert_array_equal(run[k], runs[0][k], err_msg=f"{ranks} ranks: rank {r}'s {k}")
                 np.testing.assert_array_equal(run[f"{k}_again"], run[k], err_msg=f"{ranks} ranks: rank {r}'s second fit")
+                np.testing.assert_array_equal(run[f"{k}_moved"], run[k], err_msg=f"{ranks} ranks: rank {r} started elsewhere")
         first = runs[0]
         # Against one process: float rounding (each rank backpropagates its views' texel gradients
         # through the softmax before they are summed), not the same bits.
