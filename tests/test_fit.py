@@ -445,6 +445,12 @@ def test_cli_fit_writes_its_report(tmp_path, capsys):
     assert cli_main(["fit", "--out", str(tmp_path), "--iters", "5", "--resolution", "24x32", "--report-every", "1"]) == 0
     printed = capsys.readouterr().out
     assert "iter    5/5" in printed and "psnr" in printed and "splat weights MAE" in printed
+    # The column that jumps where a stage starts is named for what it is, and the stages are announced.
+    assert not [line for line in printed.splitlines() if line.startswith("iter") and "loss" in line]
+    assert "iter    5/5  stage 3  objective " in printed
+    assert "'objective' is the stage's loss (blurred, on the stage's pixels, + prior), so it jumps where a stage starts" in printed
+    assert "stage 0: 1 iteration, blur 2 px, every 2nd pixel" in printed and "stage 1: tiling scan of 71 tilings" in printed
+    assert "stage 3: 3 iterations, sharp" in printed
     for name in FILES:
         assert (tmp_path / name).stat().st_size > 0, name
     assert not list(tmp_path.glob(".*.tmp*")), "no temporary files left behind"
@@ -455,6 +461,42 @@ def test_cli_fit_writes_its_report(tmp_path, capsys):
     assert summary["final_psnr_db"] > summary["initial_psnr_db"]
     curve = io.read_image(tmp_path / "curve.png")
     assert curve.shape[0] > 200 and curve.shape[1] > 400  # a chart, not a placeholder
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--seed", "-1"], "argument --seed: must be at least 0, got -1"),
+        (["--target", "x.png"], "--target and --gbuffer go together, one G-buffer per target image; got 1 --target and 0 --gbuffer"),
+        (["--gbuffer", "g.exr"], "got 0 --target and 1 --gbuffer"),
+        (["--target", "a.png", "--target", "b.png", "--gbuffer", "g.exr"], "got 2 --target and 1 --gbuffer"),
+        (["--dist-timeout", "0"], "argument --dist-timeout: must be a finite number > 0"),
+    ],
+)
+def test_bad_fit_options_exit_2_with_the_fit_usage(tmp_path, capsys, args, message):
+    with pytest.raises(SystemExit) as info:
+        cli_main(["fit", *args, "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and message in err and err.startswith("usage: warptex fit"), err
+    assert not (tmp_path / "out").exists()
+
+
+def test_fit_help_prints_percent_signs_once(capsys):
+    with pytest.raises(SystemExit) as info:
+        cli_main(["fit", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert info.value.code == 0 and "weights and a tiling 20% off." in text and "%%" not in text
+    assert "torchrun --nproc-per-node N -m warptex fit" in text
+
+
+def test_layers_without_height_name_the_cli_option(tmp_path, capsys):
+    io.write_png(tmp_path / "pat.png", np.full((8, 8, 3), 0.5, np.float32))
+    out = tmp_path / "out"
+    assert cli_main(["fit", "--out", str(out), "--layers", str(tmp_path / "pat.png"), "--iters", "2", "--resolution", "16x16"]) == 1
+    err = capsys.readouterr().err
+    assert "height blending reads the height from the layers' alpha, but they have 3 channels" in err
+    assert "turn the height blend off (--height-blend none" in err
+    assert not out.exists()
 
 
 def test_cli_fits_a_users_target_and_gbuffer(tmp_path, capsys):

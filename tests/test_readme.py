@@ -2,7 +2,8 @@
 
 The README is parsed here: each ```python block is executed (in a fresh namespace, or after the
 blocks it continues, see ``CONTINUES``), and each ``warptex ...`` (or ``python examples/...``)
-command of a ```sh block is run through the CLI's ``main(argv)``, with small-size options
+command of a ```sh block is run through the CLI's ``main(argv)`` (``torchrun ... -m warptex`` in
+its own processes), with small-size options
 swapped in so the whole module stays fast. Install steps (``python3 -m venv``, ``pip install``,
 ``git clone``) and the test run itself (``pytest``) are the only commands not run. Every block
 and command runs in its own copy of a folder holding the files the README names (``brick.png``,
@@ -14,9 +15,11 @@ cannot slip through untested.
 from __future__ import annotations
 
 import json
+import os
 import runpy
 import shlex
 import shutil
+import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,7 +38,7 @@ SHARED = REPO.parent / "shared"
 
 # Fenced blocks per info string: a new block must be added here, and so gets a test.
 EXPECTED_BLOCKS = {"python": 10, "sh": 3, "": 1}
-EXPECTED_COMMANDS = {"warptex": 9, "python": 2, "skipped": 5}
+EXPECTED_COMMANDS = {"warptex": 9, "python": 2, "skipped": 5, "torchrun": 1}
 
 # Python blocks that continue earlier ones (by "<section> #<n>"): they run after those, in one namespace.
 CONTINUES = {
@@ -88,7 +91,7 @@ class Command:
     block: Block
     line: int
     argv: list[str]
-    kind: str  # "warptex", "python" (a script of the repository) or "skipped"
+    kind: str  # "warptex", "torchrun" (``torchrun ... -m warptex``), "python" (a script of the repository) or "skipped"
 
     @property
     def id(self) -> str:
@@ -102,6 +105,8 @@ def _command_kind(argv: list[str]) -> str:
     exe = Path(argv[0]).name
     if exe == "warptex" or argv[:3] in (["python", "-m", "warptex"], ["python3", "-m", "warptex"]):
         return "warptex"
+    if exe == "torchrun" and "-m" in argv and argv[argv.index("-m") + 1 :][:1] == ["warptex"]:
+        return "torchrun"
     if any(argv[: len(p)] == p for p in _INSTALL) or exe in ("pip", "pip3", "pytest") or argv[1:3] == ["-m", "pip"]:
         return "skipped"  # install steps, and the test suite itself
     if exe in ("python", "python3") and len(argv) > 1 and argv[1].endswith(".py"):
@@ -415,6 +420,20 @@ def test_warptex_command(command, workdir, capsys):
     captured = capsys.readouterr()
     assert rc == 0, f"`warptex {shlex.join(argv)}` exited {rc}:\n{captured.err}"
     _check_outputs(argv, workdir, captured.out)
+
+
+TORCHRUN_COMMANDS = [c for c in COMMANDS if c.kind == "torchrun"]
+
+
+@pytest.mark.parametrize("command", TORCHRUN_COMMANDS, ids=[c.id for c in TORCHRUN_COMMANDS])
+def test_torchrun_command(command, workdir):
+    pytest.importorskip("torch.distributed", reason="PyTorch is not installed (pip install 'warptex[torch]'): torchrun comes with it")
+    cut = command.argv.index("-m")
+    launcher, argv = command.argv[1:cut], _quick(command.argv[cut + 2 :])
+    env = {**os.environ, "WARPTEX_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "PYTHONPATH": str(REPO)}
+    done = subprocess.run([sys.executable, "-m", "torch.distributed.run", *launcher, "-m", "warptex", *argv], cwd=workdir, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, f"`torchrun {shlex.join(command.argv[1:])}` exited {done.returncode}:\n{done.stderr[-3000:]}"
+    _check_outputs(argv, workdir, done.stdout)
 
 
 SCRIPT_COMMANDS = [c for c in COMMANDS if c.kind == "python"]

@@ -97,10 +97,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="fit splat maps and tiling to images (the default terrain, or your targets)",
         description="Recover splat maps and tiling from images by gradient descent. Without --target: the "
         "default terrain rendered with true splat maps and tiling is the target, the fit starts from uniform "
-        "weights and a tiling 20%% off. Writes target.png, initial.png, fitted.png, comparison.png, "
+        "weights and a tiling 20% off. Under torchrun (torchrun --nproc-per-node N -m warptex fit) the views are split "
+        "over the N processes. Writes target.png, initial.png, fitted.png, comparison.png, "
         "splat_true.png, splat_fitted.png, splat_maps.png, splat_fitted.exr, curve.png and summary.json.",
     )
     add_fit_arguments(fit)
+    parser.commands = {"render": render, "demo": demo, "fit": fit}  # for errors in a command's own usage
     return parser
 
 
@@ -122,7 +124,7 @@ def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--iters", type=_count(1), default=240, help="Adam iterations, coarse to fine (default: %(default)s)")
     parser.add_argument("--resolution", type=_resolution, default=(192, 256), help="synthetic view size HxW (default: 192x256)")
     parser.add_argument("--views", type=int, default=2, choices=(1, 2, 3), help="synthetic views: 1 three-quarter, 2 + top-down, 3 + opposite corner (default: 2)")
-    parser.add_argument("--seed", type=int, default=0, help="terrain and layer seed (default: 0)")
+    parser.add_argument("--seed", type=_count(0), default=0, help="terrain and layer seed, >= 0 (default: 0)")
     parser.add_argument("--tiling-error", type=float, default=0.2, help="synthetic start: tiling x (1 + this) (default: 0.2)")
     parser.add_argument("--entropy", type=float, default=1e-4, help="weight-entropy prior, 0 for none (default: 1e-4)")
     parser.add_argument("--loss", choices=("l2", "l1"), default="l2", help="image loss in linear space (default: l2)")
@@ -141,14 +143,22 @@ def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--filter", choices=("bilinear", "trilinear", "anisotropic"), default="anisotropic", help="layer texture filter (default: %(default)s)"
     )
-    parser.add_argument("--report-every", type=_count(0), default=20, help="print iter, loss, psnr every N iterations (default: 20)")
-    parser.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0 (default: Warp's default)")
+    parser.add_argument("--report-every", type=_count(0), default=20, help="print iter, stage objective, psnr every N iterations (default: 20)")
+    parser.add_argument(
+        "--dist-timeout", type=_number(0.0, None), default=30.0, help="under torchrun: seconds a process waits for the others during the fit before failing the run (default: 30)"
+    )
+    parser.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0; under torchrun cuda is cuda:LOCAL_RANK (default: Warp's default)")
+
+
+def check_fit_options(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """The checks of ``warptex fit`` options that involve several of them: ``parser.error`` (exit 2)."""
+    if (args.target is None) != (args.gbuffer is None) or len(args.target or []) != len(args.gbuffer or []):
+        parser.error(f"--target and --gbuffer go together, one G-buffer per target image; got {len(args.target or [])} --target and {len(args.gbuffer or [])} --gbuffer")
 
 
 def fit_arguments(args: argparse.Namespace) -> dict:
-    """The keyword arguments of :func:`warptex.apps.fit_demo.run_fit` from parsed :func:`add_fit_arguments` options."""
-    if (args.target is None) != (args.gbuffer is None):
-        raise ValueError("fit: --target and --gbuffer go together (one G-buffer per target image)")
+    """The keyword arguments of :func:`warptex.apps.fit_demo.run_fit` from parsed :func:`add_fit_arguments` options
+    (checked by :func:`check_fit_options`)."""
     return {
         "iters": args.iters,
         "resolution": args.resolution,
@@ -171,13 +181,15 @@ def fit_arguments(args: argparse.Namespace) -> dict:
         "sharpness": args.sharpness,
         "filter": args.filter,
         "report_every": args.report_every,
+        "dist_timeout": args.dist_timeout,
         "device": args.device,
     }
 
 
 def fit_report(summary: dict) -> str:
     """The result lines printed after a fit."""
-    lines = [f"fit: {summary['iterations']} iterations in {summary['fit_seconds']:.1f} s; PSNR {summary['initial_psnr_db']:.2f} -> {summary['final_psnr_db']:.2f} dB"]
+    processes = f" on {summary['world_size']} processes" if summary.get("world_size", 1) > 1 else ""
+    lines = [f"fit: {summary['iterations']} iterations{processes} in {summary['fit_seconds']:.1f} s; PSNR {summary['initial_psnr_db']:.2f} -> {summary['final_psnr_db']:.2f} dB"]
     tiling = ", ".join(f"{t:.6f}" for t in summary["fitted_tiling"])
     if summary["mode"] == "synthetic":
         lines.append(f"fit: tiling {tiling} (true {summary['true_tiling']:.6f}, error {summary['tiling_error_percent']:.3f}%)")
@@ -215,15 +227,22 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     parser.add_argument("--version", action="version", version=version())
     args = parser.parse_args(argv)
+    if args.command == "fit":
+        check_fit_options(parser.commands["fit"], args)
     try:
         paths = _run(args)
-    except KeyboardInterrupt:
-        print("warptex: interrupted; no files were written", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM under torchrun (apps.distributed.Terminated)
+        print(f"warptex: {str(err) or 'interrupted'}; no files were written", file=sys.stderr)
+        return getattr(err, "status", 130)
     except (OSError, ValueError, TypeError, MemoryError) as err:
         print(f"warptex: error: {_one_line(err)}", file=sys.stderr)
         return 1
     except RuntimeError as err:
+        from warptex.fit.distributed import DistributedError
+
+        if isinstance(err, DistributedError):  # another process of a torchrun job failed
+            print(f"warptex: error: {_one_line(err)}", file=sys.stderr)
+            return 1
         if "alloc" not in str(err).lower():  # Warp reports a failed allocation so; anything else is a bug
             raise
         print(f"warptex: error: out of memory: {_one_line(err)}", file=sys.stderr)
@@ -243,11 +262,7 @@ def _run(args: argparse.Namespace) -> list:
 
     init_quietly()  # no start-up banner or compile log, no "no CUDA driver" warning on a CPU machine
     if args.command == "fit":
-        from warptex.apps.fit_demo import run_fit
-
-        summary = run_fit(args.out, **fit_arguments(args))
-        print(fit_report(summary))
-        return summary["files"]
+        return _fit(args)
     if args.command == "demo":
         from warptex.apps.demo import run_demo
 
@@ -267,6 +282,28 @@ def _run(args: argparse.Namespace) -> list:
         filter=args.filter,
         device=args.device,
     )
+
+
+def _fit(args: argparse.Namespace) -> list:
+    """``warptex fit``, in one process or as a rank of a torchrun job (:mod:`warptex.apps.distributed`)."""
+    from warptex.apps.distributed import from_environment
+    from warptex.apps.fit_demo import run_fit
+
+    kwargs = fit_arguments(args)
+    job = from_environment()
+    if job is None:
+        summary = run_fit(args.out, **kwargs)
+    else:
+        try:
+            kwargs["device"] = job.device(args.device)
+            job.start(kwargs["device"])
+            summary = run_fit(args.out, job=job, **kwargs)
+            job.finish()
+        finally:
+            job.close()
+    if summary["files"]:
+        print(fit_report(summary))
+    return summary["files"]
 
 
 if __name__ == "__main__":

@@ -22,7 +22,7 @@ import warp as wp
 
 from warptex import io
 from warptex.camera import checked_resolution
-from warptex.fit import FitView, SplatParameters, check_inputs, default_stages, fit_splat, psnr, render_views
+from warptex.fit import FitView, SplatParameters, check_inputs, default_stages, fit_splat, psnr, render_views, shard
 from warptex.apps.fit_report import heat_image, legend, splat_coverage, weights_image, write_curve, write_json
 from warptex.gbuffer import rasterize
 from warptex.gbuffer_io import load_gbuffer
@@ -74,6 +74,8 @@ def run_fit(
     filter: str = "anisotropic",
     report_every: int = 20,
     progress: bool | None = None,
+    job=None,
+    dist_timeout: float = 30.0,
     device=None,
 ) -> dict:
     """Fit splat maps (and tiling) to images and write the results into ``out_dir``.
@@ -106,12 +108,19 @@ def run_fit(
             (default: the default scene's: triplanar, 0.2, 4); ``height_blend=None`` for a plain blend.
         filter: the layers' texture filter (:class:`~warptex.Filter`) for the targets and the
             fit; default anisotropic, as ``warptex render`` uses.
-        report_every: print ``iter, loss, psnr, tiling`` every this many iterations (0: never).
+        report_every: print ``iter, stage, objective, psnr, tiling`` every this many iterations
+            (0: never).
         progress: tqdm progress bar (``None``: only on a terminal).
+        job: the torchrun job (:class:`warptex.apps.distributed.Job`, started) this process is a
+            rank of, or ``None``: rank ``r`` fits views ``r, r + world_size, ...``
+            (:func:`warptex.fit.shard`) and loads only those; rank 0 loads all of them for the
+            pictures and alone writes the outputs.
+        dist_timeout: with ``job``, the seconds a rank waits for the others in a collective.
         device: Warp device.
 
     Returns:
-        The summary written to ``summary.json`` (with ``"files"``: the paths written).
+        The summary written to ``summary.json`` (with ``"files"``: the paths written, and
+        ``"world_size"``); on ranks other than 0, which write nothing, ``{"files": [], ...}``.
 
     Raises:
         ValueError: bad input, before any iteration: a target and its G-buffer of different
@@ -129,11 +138,12 @@ def run_fit(
     if isinstance(report_every, bool) or not isinstance(report_every, (int, np.integer)) or report_every < 0:
         raise ValueError(f"{func}(): report_every must be an int >= 0 (0: never), got {report_every!r}")
     device = wp.get_device(device)
+    rank, world = (0, 1) if job is None else (job.rank, job.world_size)
     options = {"projection": projection, "height_blend": height_blend, "sharpness": sharpness, "sampler": Sampler(filter=filter)}
     if targets is not None or gbuffers is not None:
-        problem = user_problem(func, targets, gbuffers, layers=layers, tiling=tiling, options=options, device=device)
+        problem = user_problem(func, targets, gbuffers, layers=layers, tiling=tiling, options=options, rank=rank, world_size=world, device=device)
     else:
-        problem = synthetic_problem(func, resolution=resolution, views=views, seed=seed, tiling_error=tiling_error, layers=layers, options=options, device=device)
+        problem = synthetic_problem(func, resolution=resolution, views=views, seed=seed, tiling_error=tiling_error, layers=layers, options=options, rank=rank, world_size=world, device=device)
     params = initial_parameters(func, problem, initial_maps=initial_maps, map_size=map_size, map_channels=map_channels, num_maps=num_maps, device=device)
     if problem.synthetic and tuple(params.size) != problem.true_maps.shape[:2]:
         raise ValueError(
@@ -143,8 +153,12 @@ def run_fit(
     stages = default_stages(iters, fit_tiling=fit_tiling)
 
     check_inputs(problem.views, problem.layers, params, device=device)  # fit_splat's checks, before anything renders
-    initial = render_views(problem.views, problem.layers, params, splat_options=options)
-    result = fit_splat(problem.views, problem.layers, params, stages=stages, loss=loss, entropy=entropy, splat_options=options, progress=progress, report_every=report_every, device=device)
+    mine = problem.views if rank else shard(problem.views, rank=0, world_size=world)
+    initial = render_views(problem.views, problem.layers, params, splat_options=options)  # also compiles the kernels
+    group = None if job is None else job.ready(dist_timeout)
+    result = fit_splat(mine, problem.layers, params, stages=stages, loss=loss, entropy=entropy, splat_options=options, progress=progress, report_every=report_every, process_group=group, device=device)
+    if rank:
+        return {"rank": rank, "world_size": world, "iterations": result.iterations, "files": []}
     fitted = render_views(problem.views, problem.layers, params, splat_options=options)
 
     summary = measure(problem, params, result, entropy=entropy, loss=loss)
@@ -181,16 +195,23 @@ def _layers(func: str, layers, options: dict, seed: int, device) -> tuple[Textur
     else:
         tex, names = TextureArray.from_files(list(layers), device=device), [Path(p).stem for p in layers]
     if options["height_blend"] is not None and tex.channels < 4:
-        raise ValueError(f"{func}(): height blending reads the height from the layers' alpha, but they have {tex.channels} channels; pass RGBA layers or height_blend=None")
+        raise ValueError(f"{func}(): height blending reads the height from the layers' alpha, but they have {tex.channels} channels; pass RGBA layers, or turn the height blend off (--height-blend none; height_blend=None in Python)")
     return tex, names
 
 
-def synthetic_problem(func: str, *, resolution, views: int, seed: int, tiling_error: float, layers, options: dict, device) -> Problem:
-    """The default terrain from ``views`` cameras, rendered with its true splat maps and tiling."""
+def _wanted(items: list, rank: int, world_size: int) -> list:
+    """The items rank ``rank`` loads: all on rank 0 (it draws every view), else its shard."""
+    mine = shard(items, rank=rank, world_size=world_size)  # fewer views than ranks fail on every rank
+    return items if rank == 0 else mine
+
+
+def synthetic_problem(func: str, *, resolution, views: int, seed: int, tiling_error: float, layers, options: dict, rank: int = 0, world_size: int = 1, device) -> Problem:
+    """The default terrain from ``views`` cameras, rendered with its true splat maps and tiling
+    (of a job's rank ``rank``: the views :func:`_wanted`)."""
     if not -1.0 < float(tiling_error) < 10.0:
         raise ValueError(f"{func}(): tiling_error must be in (-1, 10), got {tiling_error!r}")
     mesh = terrain(resolution=TERRAIN_GRID, seed=seed)
-    gbuffers = [rasterize(mesh, cam, device=device) for cam in terrain_cameras(resolution, views)]
+    gbuffers = [rasterize(mesh, cam, device=device) for cam in _wanted(terrain_cameras(resolution, views), rank, world_size)]
     layer_tex, names = _layers(func, layers, options, seed, device)
     true_maps = terrain_splat_maps(mesh, TERRAIN_GRID)
     truth = TextureArray(true_maps[None], mipmaps=False, device=device)
@@ -198,12 +219,14 @@ def synthetic_problem(func: str, *, resolution, views: int, seed: int, tiling_er
     return Problem([FitView(g, t) for g, t in zip(gbuffers, targets)], layer_tex, names, options, TRUE_TILING * (1.0 + float(tiling_error)), true_maps, TRUE_TILING)
 
 
-def user_problem(func: str, targets, gbuffers, *, layers, tiling, options: dict, device) -> Problem:
-    """Your target images and their G-buffer EXRs (one per target)."""
+def user_problem(func: str, targets, gbuffers, *, layers, tiling, options: dict, rank: int = 0, world_size: int = 1, device) -> Problem:
+    """Your target images and their G-buffer EXRs (one per target; of a job's rank ``rank``: the
+    views :func:`_wanted`)."""
     targets = [targets] if isinstance(targets, (str, os.PathLike)) else list(targets or [])
     gbuffers = [gbuffers] if isinstance(gbuffers, (str, os.PathLike)) else list(gbuffers or [])
     if not targets or len(targets) != len(gbuffers):
         raise ValueError(f"{func}(): give one G-buffer per target image, got {len(targets)} target(s) and {len(gbuffers)} G-buffer(s)")
+    targets, gbuffers = _wanted(targets, rank, world_size), _wanted(gbuffers, rank, world_size)
     gbufs = [load_gbuffer(p, device=device) for p in gbuffers]
     images = [io.read_image(p) for p in targets]
     images = [img[..., :3] if img.shape[-1] >= 3 else img[..., :1] for img in images]
@@ -252,6 +275,7 @@ def measure(problem: Problem, params: SplatParameters, result, *, entropy: float
         "map_size": list(params.size),
         "splat_options": {**{k: v for k, v in problem.options.items() if k != "sampler"}, "filter": problem.options["sampler"].filter.value},
         "fit_seconds": result.seconds,
+        "world_size": result.world_size,
     }
     if problem.synthetic:
         coverage = _coverage(problem, params)

@@ -43,8 +43,9 @@ def heat_image(values: np.ndarray, *, vmax: float, scale: int = 3) -> np.ndarray
 
 
 def write_curve(path, history: dict, *, stages=()) -> None:
-    """Write the fit's curves to ``path`` (PNG, atomically): PSNR (dB) per iteration and the loss
-    (log scale); ``stages`` ``[(first iteration, name)]`` are marked by dashed lines."""
+    """Write the fit's curves to ``path`` (PNG, atomically): PSNR (dB) per iteration and the stage's
+    objective (``history["loss"]``, log scale); ``stages`` ``[(first iteration, name)]`` are marked
+    by dashed lines."""
     its = list(range(len(history["loss"])))
     psnr = [v if math.isfinite(v) else None for v in history["psnr"]]
     loss = [v if v > 0 and math.isfinite(v) else None for v in history["loss"]]
@@ -52,7 +53,7 @@ def write_curve(path, history: dict, *, stages=()) -> None:
         path,
         [
             {"series": {"PSNR": (its, psnr)}, "xlabel": "iteration", "ylabel": "dB", "title": "PSNR of the sharp render vs the target", "marks": stages},
-            {"series": {"loss": (its, loss)}, "xlabel": "iteration", "ylabel": "loss", "title": "the stage's objective (blurred, + prior)", "logy": True, "marks": stages},
+            {"series": {"objective": (its, loss)}, "xlabel": "iteration", "ylabel": "objective", "title": "the stage's objective (blurred, + prior)", "logy": True, "marks": stages},
         ],
     )
 

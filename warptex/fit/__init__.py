@@ -6,15 +6,19 @@
   :func:`psnr`;
 - :class:`FitView` and :class:`Objective` (:mod:`.objective`): the views to fit, checked,
   subsampled and blurred, rendered with :func:`warptex.splat`;
-- :func:`fit_splat` (:mod:`.loop`): Adam, coarse to fine, with a tiling scan (:func:`default_stages`).
+- :func:`fit_splat` (:mod:`.loop`): Adam, coarse to fine, with a tiling scan (:func:`default_stages`);
+  data-parallel over the ranks of a ``torch.distributed`` process group (:mod:`.distributed`:
+  :func:`shard` splits the views, :class:`DistributedError` says a rank failed).
 """
 
+from warptex.fit.distributed import DistributedError, shard
 from warptex.fit.loop import FitResult, Stage, default_stages, fit_splat, render_views
 from warptex.fit.losses import Loss, blur, gaussian_taps, image_loss, psnr, weight_entropy
 from warptex.fit.objective import FitView, Objective, check_inputs, prepare_views
 from warptex.fit.parameters import SplatParameters
 
 __all__ = [
+    "DistributedError",
     "FitResult",
     "FitView",
     "Loss",
@@ -30,5 +34,6 @@ __all__ = [
     "prepare_views",
     "psnr",
     "render_views",
+    "shard",
     "weight_entropy",
 ]

@@ -106,6 +106,8 @@ class FitResult:
             views, every pixel).
         iterations: Adam iterations run.
         seconds: wall time of the call (checks and target preparation included).
+        world_size: the number of ranks that fitted (1 without a process group); the history and
+            the errors are of all ranks' views, the same on every rank.
     """
 
     history: dict = field(default_factory=lambda: {"loss": [], "mse": [], "psnr": [], "tiling": [], "stage": []})
@@ -116,11 +118,13 @@ class FitResult:
     final_psnr: float = float("nan")
     iterations: int = 0
     seconds: float = 0.0
+    world_size: int = 1
 
 
 def _scan_tiling(objective: Objective, stage: Stage) -> dict:
-    """Evaluate the loss at ``log_tiling + δ`` for ``steps`` values of ``δ`` in ``±half_range``;
-    set ``log_tiling`` to the best, refined by the vertex of a parabola through its neighbours."""
+    """Evaluate the loss at ``log_tiling + δ`` for ``steps`` values of ``δ`` in ``±half_range``
+    (of all ranks' views: one sum over the ranks); set ``log_tiling`` to the best, refined by the
+    vertex of a parabola through its neighbours."""
     half_range, steps = stage.scan
     params = objective.params
     base = params.log_tiling.numpy().astype(np.float64)
@@ -130,7 +134,7 @@ def _scan_tiling(objective: Objective, stage: Stage) -> dict:
         params.log_tiling.assign((base + d).astype(np.float32))
         params.apply()
         losses.append(float(objective(stage.sigma, stage.stride)[0].numpy()[0]))
-    losses = np.asarray(losses)
+    losses = np.asarray(losses if objective.reduce is None else objective.reduce(losses))
     k = int(np.argmin(losses))
     best = deltas[k]
     if 0 < k < len(deltas) - 1:
@@ -160,6 +164,7 @@ def fit_splat(
     splat_options: dict | None = None,
     progress: bool | None = None,
     report_every: int = 0,
+    process_group=None,
     device=None,
 ) -> FitResult:
     """Fit splat weights (and tiling, and sharpness) so that the views render like their targets.
@@ -171,7 +176,7 @@ def fit_splat(
 
     Args:
         views: a :class:`FitView` or a list of them; several views constrain the splat maps
-            wherever any of them sees the surface.
+            wherever any of them sees the surface. With ``process_group``: this rank's views.
         layers: the ``L`` layers (:class:`TextureArray`), as for :func:`warptex.splat`.
         params: the parameters to fit, updated in place.
         stages: the schedule; default :func:`default_stages` of ``iters`` (with sharpness when
@@ -184,7 +189,16 @@ def fit_splat(
             ``height_blend``, ``sharpness``...), the same as the target's; ``tiling`` and, when
             optimised, ``sharpness`` come from ``params``.
         progress: show a tqdm progress bar (``None``: only on a terminal).
-        report_every: also print ``iter, loss, psnr, tiling`` every this many iterations (0: never).
+        report_every: also print ``iter, stage, objective, psnr, tiling`` every this many
+            iterations, and a line where each stage starts (0: never). The objective is the
+            stage's loss (blurred, on its pixels, plus the prior), so it jumps where a stage
+            starts; the PSNR is of the sharp render.
+        process_group: fit data-parallel on a ``torch.distributed`` process group (gloo on the
+            CPU, NCCL on CUDA; PyTorch is imported only then): every rank calls ``fit_splat``
+            with its own ``views`` (split them with :func:`~warptex.fit.shard`) and the same
+            settings; rank 0's ``params`` are broadcast, the gradients are summed over the ranks
+            and every rank ends with the same parameters; only rank 0 prints.
+            :mod:`warptex.fit.distributed` says how. ``None`` (default): one process.
         device: Warp device (default the first G-buffer's).
 
     Returns:
@@ -193,12 +207,99 @@ def fit_splat(
     Raises:
         ValueError, TypeError: bad input, before any iteration: a target and its G-buffer of
             different sizes, non-finite target values on covered pixels, splat maps that cannot
-            hold the layers, a bad schedule...
+            hold the layers, a bad schedule... With a process group, on every rank when one
+            rank's input is bad or the ranks' settings differ.
+        DistributedError: another rank died, failed or stopped answering during the fit.
     """
     from tqdm import tqdm
 
     func = "fit_splat"
     start = time.perf_counter()
+    reducer = None
+    if process_group is not None:
+        from warptex.fit.distributed import Reducer
+
+        reducer = Reducer(func, process_group)
+    error, settings = None, {}
+    try:
+        device, kind, entropy, options, prepared, stages = _checked(func, views, layers, params, stages, iters, loss, entropy, splat_options, device)
+        if reducer is not None:
+            shape = (params.num_layers, params.size, params.maps.texels.shape, params.log_tiling.shape, params.sharpness is not None)
+            settings = {"stages": stages, "loss": kind, "entropy": entropy, "parameters": shape, "layers": layers.texels, "target channels": prepared[0].target.shape[2]}
+            settings.update({f"splat_options[{k!r}]": v for k, v in sorted(options.items())})
+    except (ValueError, TypeError) as err:
+        if reducer is None:
+            raise
+        error, device = err, None
+    if reducer is not None:
+        reducer.agree(error, settings, device)
+        reducer.broadcast(params.arrays)
+        if reducer.rank != 0:
+            progress, report_every = False, 0
+
+    objective = Objective(prepared, layers, params, options, kind, entropy if reducer is None or reducer.rank == 0 else 0.0, device, reduce=None if reducer is None else reducer.sum)
+    objective.normalise([(0.0, 1)] + [key for s in stages for key in ((s.sigma, s.stride), (0.0, s.stride))])
+    params.apply()
+    result = FitResult(stages=stages, initial_mse=objective.sharp_mse(objective(0.0)[1]), world_size=1 if reducer is None else reducer.world_size)
+    total = sum(s.iters for s in stages)
+    bar = tqdm(total=total, desc="fit", unit="it", disable=False if progress else None if progress is None else True)
+    if report_every:
+        bar.write("fit: 'objective' is the stage's loss (blurred, on the stage's pixels, + prior), so it jumps where a stage starts; 'psnr' is the sharp render's")
+    it = 0
+    for index, stage in enumerate(stages):
+        if report_every:
+            bar.write(f"stage {index}: " + _describe(stage))
+        if stage.scan is not None:
+            bar.set_postfix_str(f"stage {index}: tiling scan")
+            result.scans.append({"stage": index, **_scan_tiling(objective, stage)})
+            if report_every:
+                bar.write(f"stage {index}: tiling scan chose {result.scans[-1]['chosen']:.6f}")
+        optimisers = _optimisers(params, stage)
+        for k in range(stage.iters):
+            factor = stage.decay + (1 - stage.decay) * 0.5 * (1 + math.cos(math.pi * k / max(stage.iters - 1, 1)))
+            tape = wp.Tape()
+            with tape:
+                params.apply()
+                value, renders = objective(stage.sigma, stage.stride)
+            tape.backward(loss=value)
+            loss_value, mse = float(value.numpy()[0]), objective.sharp_mse(renders, stage.stride, local=True)
+            if reducer is not None:  # every rank's gradients summed, and its share of loss and MSE
+                loss_value, mse = (float(v) for v in reducer.sum_gradients([a.grad for a in params.arrays], [loss_value, mse]))
+            for opt, lr in optimisers:
+                opt.lr = lr * factor
+                opt.step([opt.params[0].grad])
+            tape.zero()
+            params.zero_grad()
+            h = result.history
+            for key, v in (("loss", loss_value), ("mse", mse), ("psnr", psnr(mse)), ("tiling", float(params.tiling.numpy()[0])), ("stage", index)):
+                h[key].append(v)
+            it += 1
+            bar.update()
+            bar.set_postfix(objective=f"{loss_value:.3e}", psnr=f"{psnr(mse):.2f}", tiling=f"{h['tiling'][-1]:.5f}")
+            if report_every and (it % report_every == 0 or it == total):
+                bar.write(f"iter {it:4d}/{total}  stage {index}  objective {loss_value:.4e}  psnr {psnr(mse):6.2f} dB  tiling {h['tiling'][-1]:.6f}")
+    bar.close()
+    params.apply()
+    result.final_mse = objective.sharp_mse(objective(0.0)[1])
+    result.final_psnr = psnr(result.final_mse)
+    result.iterations = it
+    if reducer is not None:
+        reducer.check_same(params.arrays)
+    result.seconds = time.perf_counter() - start
+    return result
+
+
+def _describe(stage: Stage) -> str:
+    """What a stage does, for the report."""
+    pixels = "" if stage.stride == 1 else f", every {stage.stride}{'nd' if stage.stride == 2 else 'rd' if stage.stride == 3 else 'th'} pixel"
+    scan = "" if stage.scan is None else f"tiling scan of {int(stage.scan[1])} tilings within exp(±{stage.scan[0]:g})"
+    if stage.iters == 0:
+        return scan + pixels
+    return (scan + ", then " if scan else "") + f"{stage.iters} iteration{'s' if stage.iters != 1 else ''}, " + (f"blur {stage.sigma:g} px" if stage.sigma > 0 else "sharp") + pixels
+
+
+def _checked(func, views, layers, params, stages, iters, loss, entropy, splat_options, device):
+    """:func:`fit_splat`'s checks: the device, loss, prior, splat options, prepared views and schedule."""
     device = views_device(func, views, device)
     kind = as_enum(func, "loss", loss, Loss)
     entropy = as_float(func, "entropy", entropy)
@@ -217,48 +318,7 @@ def fit_splat(
             raise ValueError(f"{func}(): stages must be Stage objects with iters >= 0, sigma >= 0, stride >= 1 and learning rates >= 0, got {s!r}")
         if s.scan is not None and (len(s.scan) != 2 or not s.scan[0] > 0 or int(s.scan[1]) < 3):
             raise ValueError(f"{func}(): a stage's scan must be (half_range > 0, steps >= 3), got {s.scan!r}")
-
-    objective = Objective(prepared, layers, params, options, kind, entropy, device)
-    params.apply()
-    result = FitResult(stages=stages, initial_mse=objective.sharp_mse(objective(0.0)[1]))
-    total = sum(s.iters for s in stages)
-    bar = tqdm(total=total, desc="fit", unit="it", disable=False if progress else None if progress is None else True)
-    it = 0
-    for index, stage in enumerate(stages):
-        if stage.scan is not None:
-            bar.set_postfix_str(f"stage {index}: tiling scan")
-            result.scans.append({"stage": index, **_scan_tiling(objective, stage)})
-            if report_every:
-                bar.write(f"stage {index}: tiling scan chose {result.scans[-1]['chosen']:.6f}")
-        optimisers = _optimisers(params, stage)
-        for k in range(stage.iters):
-            factor = stage.decay + (1 - stage.decay) * 0.5 * (1 + math.cos(math.pi * k / max(stage.iters - 1, 1)))
-            tape = wp.Tape()
-            with tape:
-                params.apply()
-                value, renders = objective(stage.sigma, stage.stride)
-            tape.backward(loss=value)
-            for opt, lr in optimisers:
-                opt.lr = lr * factor
-                opt.step([opt.params[0].grad])
-            tape.zero()
-            params.zero_grad()
-            mse, loss_value = objective.sharp_mse(renders, stage.stride), float(value.numpy()[0])
-            h = result.history
-            for key, v in (("loss", loss_value), ("mse", mse), ("psnr", psnr(mse)), ("tiling", float(params.tiling.numpy()[0])), ("stage", index)):
-                h[key].append(v)
-            it += 1
-            bar.update()
-            bar.set_postfix(loss=f"{loss_value:.3e}", psnr=f"{psnr(mse):.2f}", tiling=f"{h['tiling'][-1]:.5f}")
-            if report_every and (it % report_every == 0 or it == total):
-                bar.write(f"iter {it:4d}/{total}  loss {loss_value:.4e}  psnr {psnr(mse):6.2f} dB  tiling {h['tiling'][-1]:.6f}")
-    bar.close()
-    params.apply()
-    result.final_mse = objective.sharp_mse(objective(0.0)[1])
-    result.final_psnr = psnr(result.final_mse)
-    result.iterations = it
-    result.seconds = time.perf_counter() - start
-    return result
+    return device, kind, entropy, options, prepared, stages
 
 
 def render_views(views, layers: TextureArray, params: SplatParameters, *, splat_options: dict | None = None) -> list[np.ndarray]:

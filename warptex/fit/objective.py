@@ -198,19 +198,27 @@ class Objective:
     """Render every view, mask, blur, and sum the per-view losses (and the entropy prior) into one
     float64 scalar; ``objective(sigma, stride)`` returns it with the sharp renders."""
 
-    def __init__(self, views: list[_Prepared], layers: TextureArray, params: SplatParameters, options: dict, loss: Loss, entropy: float, device):
+    def __init__(self, views: list[_Prepared], layers: TextureArray, params: SplatParameters, options: dict, loss: Loss, entropy: float, device, *, reduce=None):
         self.views, self.layers, self.params, self.options = views, layers, params, options
         self.loss, self.entropy, self.device = loss, entropy, device
+        self.reduce = reduce  # sums float64 vectors over the ranks of a distributed fit (None: one process)
         self.channels = views[0].target.shape[2]
         self._scales = {}
 
+    def normalise(self, keys) -> None:
+        """Compute the normalisations of the ``(sigma, stride)`` keys now (one sum over the ranks
+        for all of them)."""
+        keys = [k for k in dict.fromkeys(keys) if k not in self._scales]
+        totals = [sum(float(v.at(stride).level(sigma)[1].numpy().astype(np.float64).sum()) for v in self.views) for sigma, stride in keys]
+        if self.reduce is not None and keys:
+            totals = self.reduce(totals)
+        for key, total in zip(keys, totals):
+            self._scales[key] = 1.0 / (float(total) * self.channels)
+
     def _scale(self, sigma: float, stride: int) -> float:
-        """One normalisation for all views, ``1 / (C · Σ weight)``: views count by their pixels."""
-        key = (sigma, stride)
-        if key not in self._scales:
-            total = sum(float(v.at(stride).level(sigma)[1].numpy().astype(np.float64).sum()) for v in self.views)
-            self._scales[key] = 1.0 / (total * self.channels)
-        return self._scales[key]
+        """One normalisation for all views (of all ranks), ``1 / (C · Σ weight)``: views count by their pixels."""
+        self.normalise([(sigma, stride)])
+        return self._scales[(sigma, stride)]
 
     def render(self, view: _Prepared) -> wp.array:
         return render_view(view.gbuffer, self.layers, self.params, self.options, self.device)
@@ -239,12 +247,14 @@ class Objective:
             weight_entropy(self.params, self.entropy, out=total)
         return total, renders
 
-    def sharp_mse(self, renders: list[wp.array], stride: int = 1) -> float:
-        """The mean squared error of sharp renders (from :meth:`__call__`) over all views."""
+    def sharp_mse(self, renders: list[wp.array], stride: int = 1, *, local: bool = False) -> float:
+        """The mean squared error of sharp renders (from :meth:`__call__`) over all views (of all
+        ranks; ``local``: this rank's share of it)."""
         mse = wp.zeros(1, dtype=wp.float64, device=self.device)
         for full, render in zip(self.views, renders):
             view = full.at(stride)
             image_loss(render, view.target, weight=view.mask, loss=Loss.L2, scale=self._scale(0.0, stride), out=mse, device=self.device)
-        return float(mse.numpy()[0])
+        value = float(mse.numpy()[0])
+        return value if local or self.reduce is None else float(self.reduce([value])[0])
 
 
