@@ -31,7 +31,7 @@ from warptex._warp import paused_tape
 from warptex.gbuffer import GBuffer, checked_geometry, gbuffer_device, load_mesh, mesh_uv_sets, vertex_normals, vertex_tangents
 from warptex.kernels import bake as kb
 from warptex.kernels import raster as kr
-from warptex.unwrap import ATLAS_FILL, UVLayout, checked_size, unwrap
+from warptex.unwrap import ATLAS_FILL, UVLayout, bakeable_faces, checked_size, face_areas, unusable_reason, unwrap
 
 #: Peak memory of a bake, measured (peak RSS, bunny, 512² to 4096²): ~300 MB plus ~400 B per texel
 #: (texture-space G-buffer, the technique's outputs, PNG encoding); with a margin.
@@ -102,10 +102,7 @@ def texture_gbuffer(layout: UVLayout, size: int, *, gutter: int = 8, device=None
     shape = (size, size)
     faces = np.asarray(layout.faces, np.int64)
     world = np.asarray(layout.vertices, np.float64)
-    p, t = world[faces], np.asarray(layout.uv, np.float64)[faces]
-    world_area = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    uv_area = np.abs(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
-    face_ids = np.flatnonzero((world_area > 1e-12 * world_area.max()) & (uv_area > 0))
+    face_ids = bakeable_faces(world, faces, layout.uv)
     if len(face_ids) == 0:
         raise ValueError(f"{func}(): no triangle has area both in the world and in the atlas")
 
@@ -214,8 +211,8 @@ def bake(
         normal: ``gbuffer -> (H, W, 3) wp.array`` of unit world-space normals, baked as a
             tangent-space normal map (:func:`tangent_space`), or ``None``.
         size: texels per side, in ``[2, 16384]``.
-        padding: texels between xatlas's charts; default ``2 · gutter`` (each chart's gutter then
-            has room up to the midpoint between charts).
+        padding: texels between xatlas's charts; default ``gutter``: neighbouring charts' gutters
+            then meet midway, and background is left only farther than ``gutter`` from every chart.
         gutter: texels filled around each chart; default :func:`default_gutter` for ``view_size``.
         view_size: pixels across which the asset is meant to be seen whole (sets the default gutter).
         force_atlas: make an xatlas atlas even when the mesh's UVs are usable.
@@ -248,19 +245,14 @@ def bake(
     _dry_run(func, technique, normal, uv_sets, device)
 
     own = uv_sets.get("uv0")
-    fill = ATLAS_FILL if own is None else max(_uv_fill(mesh, own), 1e-6)
+    force_atlas = bool(force_atlas) or bool(unusable_reason(own, np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64), device=device))
+    fill = ATLAS_FILL if force_atlas else max(float(face_areas(mesh.vertices, mesh.faces, own)[1].sum()), 1e-6)
     gutter = default_gutter(mesh, size, view_size=view_size, uv_fill=fill) if gutter is None else int(gutter)
-    layout = unwrap(mesh, size=size, padding=2 * gutter if padding is None else int(padding), force_atlas=force_atlas, device=device)
+    layout = unwrap(mesh, size=size, padding=gutter if padding is None else int(padding), force_atlas=force_atlas, device=device)
     g, coverage = texture_gbuffer(layout, size, gutter=gutter, device=device)
     color = technique(g) if technique is not None else None
     normal_map = tangent_space(g, normal(g)) if normal is not None else None
     return Baked(layout, g, coverage, color, normal_map, gutter)
-
-
-def _uv_fill(mesh: trimesh.Trimesh, uv: np.ndarray) -> float:
-    """The share of the unit square the mesh's UV triangles cover."""
-    t = np.asarray(uv, np.float64)[np.asarray(mesh.faces)]
-    return float(np.abs(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])).sum() / 2)
 
 
 def _dry_run(func: str, technique, normal, uv_sets: dict, device) -> None:

@@ -20,6 +20,7 @@ from PIL import Image
 from warptex import io
 from warptex._output import check_output_folder, output_set
 from warptex.bake import Baked
+from warptex.gbuffer import load_mesh
 
 
 def texture_images(baked: Baked) -> dict[str, np.ndarray]:
@@ -83,6 +84,35 @@ def export_gltf(baked: Baked, path: str | os.PathLike) -> list[Path]:
         glb = trimesh.exchange.gltf.export_glb(mesh, include_normals=True, tree_postprocessor=_gltf_tangents)
         (staging / path.name).write_bytes(glb)
     return [path] + [path.parent / n for n in names.values()]
+
+
+def load_gltf(path: str | os.PathLike) -> tuple[trimesh.Trimesh, dict[str, np.ndarray]]:
+    """A glTF file holding one mesh (as :func:`export_gltf` writes it), with its vertex normals
+    kept (:func:`warptex.load_mesh` flattens scenes, which recomputes them), and its material's
+    textures: ``{"color": [H, W, C] linear float32, "normal": [H, W, 3] data in [0, 1]}`` (those
+    it has). The mesh's node transform is applied.
+
+    Raises:
+        ValueError: the file does not hold exactly one triangle mesh.
+    """
+    func = "load_gltf"
+    mesh = load_mesh(path)  # the checks and errors of every mesh file
+    scene = trimesh.load(os.fspath(path), process=False)
+    parts = list(scene.graph.nodes_geometry) if isinstance(scene, trimesh.Scene) else []
+    if len(parts) != 1:
+        raise ValueError(f"{func}(): {os.fspath(path)!r} holds {len(parts)} mesh instances, not 1")
+    transform, name = scene.graph[parts[0]]
+    single = scene.geometry[name]
+    normals = np.asarray(single.vertex_normals, np.float64) @ np.linalg.inv(transform[:3, :3])
+    mesh.vertex_normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    material = getattr(mesh.visual, "material", None)
+    textures = {}
+    for kind, attribute, data in (("color", "baseColorTexture", False), ("normal", "normalTexture", True)):
+        image = getattr(material, attribute, None)
+        if image is not None:
+            codes = np.asarray(image.convert("RGB"), np.float32) / 255.0
+            textures[kind] = codes if data else io.srgb_to_linear(codes)
+    return mesh, textures
 
 
 def _gltf_tangents(tree: dict) -> None:

@@ -38,7 +38,8 @@ class UVLayout:
         vertices: ``[V', 3]`` float64 world positions.
         faces: ``[F, 3]`` int64, face ``f`` is the input mesh's face ``f``.
         uv: ``[V', 2]`` float32 atlas UVs in ``[0, 1]`` (warptex's convention: v up).
-        normals: ``[V', 3]`` float64 unit vertex normals (the input mesh's).
+        normals: ``[V', 3]`` float64 unit vertex normals (the input mesh's; ``+z`` for a vertex of
+            zero-area faces only, which has none).
         vertex_map: ``[V']`` int64, the input vertex each vertex comes from.
         source: ``"mesh"`` (the mesh's own UV0) or ``"xatlas"``.
         reason: why the mesh's UVs were not used (``""`` when they were).
@@ -89,7 +90,7 @@ def unusable_reason(uv: np.ndarray | None, vertices: np.ndarray, faces: np.ndarr
     used = uv[np.unique(faces)]
     if used.min() < 0.0 or used.max() > 1.0:
         return f"its UVs leave the texture (they span [{used.min():.3g}, {used.max():.3g}], not inside [0, 1])"
-    ids = _bakeable_faces(vertices, faces, uv)
+    ids = bakeable_faces(vertices, faces, uv)
     if len(ids) == 0:
         return "every UV triangle has zero area"
     device = wp.get_device(device)
@@ -128,7 +129,10 @@ def unwrap(mesh: trimesh.Trimesh, *, size: int = 2048, padding: int = 8, force_a
         raise ValueError(f"{func}(): padding must be an int >= 0 (texels between charts), got {padding!r}")
     vertices, faces = checked_geometry(f"{func}():", mesh)
     normals = vertex_normals(mesh)
-    reason = "an atlas was asked for" if force_atlas else unusable_reason(mesh_uv_sets(mesh).get("uv0"), vertices, faces, device=device)
+    # A vertex of zero-area faces only has no normal; glTF wants unit ones, and no face with area
+    # can show it: any unit vector does.
+    normals[np.linalg.norm(normals, axis=1) == 0] = (0.0, 0.0, 1.0)
+    reason = unusable_reason(mesh_uv_sets(mesh).get("uv0"), vertices, faces, device=device) or ("an atlas was asked for" if force_atlas else "")
     if not reason:
         uv = mesh_uv_sets(mesh)["uv0"]
         return UVLayout(vertices, faces, uv, normals, np.arange(len(vertices)), "mesh", mesh=mesh)
@@ -136,13 +140,22 @@ def unwrap(mesh: trimesh.Trimesh, *, size: int = 2048, padding: int = 8, force_a
     return UVLayout(vertices[vertex_map], new_faces, uv, normals[vertex_map], vertex_map, "xatlas", reason, int(padding), mesh)
 
 
-def _bakeable_faces(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Indices of the faces with area both in the world and in UV space."""
-    p, t = vertices[faces], np.asarray(uv, np.float64)[faces]
-    world = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+def face_areas(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """Each face's area ``[F]`` in the world, and in UV space (``None`` without ``uv``), float64."""
+    p = np.asarray(vertices, np.float64)[faces]
+    world = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    if uv is None:
+        return world, None
+    t = np.asarray(uv, np.float64)[faces]
     e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-    texture = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-    return np.flatnonzero((world > 1e-12 * max(world.max(), 1e-300)) & (texture > 1e-14))
+    return world, 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
+def bakeable_faces(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Indices of the faces with area both in the world and in UV space: the others hold no texel
+    (no UV area) or no surface (no world area: no normal, no Jacobian)."""
+    world, texture = face_areas(vertices, faces, uv)
+    return np.flatnonzero((world > 1e-12 * max(world.max(), 1e-300)) & (texture > 0))
 
 
 def _xatlas(func: str, vertices: np.ndarray, faces: np.ndarray, size: int, padding: int):
@@ -155,13 +168,13 @@ def _xatlas(func: str, vertices: np.ndarray, faces: np.ndarray, size: int, paddi
     # asserts and stalls on coordinates near 1e30 and drops triangles of area near 1e-60).
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
     unit = (vertices - lo) / max(float(np.linalg.norm(hi - lo)), 1e-300)
-    p = unit[faces]
-    area = 0.5 * float(np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum())
+    world, _ = face_areas(unit, faces)
+    area = float(world.sum())
     if not area > 1e-12:
         raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: its {len(faces)} triangles have no area")
     texels_per_unit = math.sqrt(ATLAS_FILL * size * size / area)
     asked = math.ceil(padding * PADDING_MARGIN)
-    for _ in range(4):
+    for _ in range(8):
         atlas = xatlas.Atlas()
         try:
             atlas.add_mesh(unit.astype(np.float32), faces.astype(np.uint32))
@@ -175,17 +188,17 @@ def _xatlas(func: str, vertices: np.ndarray, faces: np.ndarray, size: int, paddi
         extent = max(atlas.width, atlas.height)
         if extent <= size * PADDING_MARGIN:
             break
-        texels_per_unit *= 0.97 * size / extent  # too large to keep the padding when scaled down: again, smaller
+        texels_per_unit *= min(0.9, 0.97 * size / extent)  # too large to keep the padding when scaled down: again, smaller
     else:
-        raise ValueError(f"{func}(): xatlas cannot pack this mesh into {size}² texels with {padding} texels of padding")
+        raise ValueError(f"{func}(): xatlas cannot pack this mesh's charts into {size}² texels with {padding} texels of padding between them; use a larger size or less padding")
     vertex_map, new_faces, uv = atlas[0]
     # xatlas gives u = x / width, v = y / height; one scale for both keeps texels square.
     uv = (uv * np.array([atlas.width, atlas.height], np.float64) / extent).astype(np.float32)
     new_faces = new_faces.astype(np.int64)
     if len(new_faces) != len(faces) or not (vertex_map[new_faces] == faces).all():
         raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: it changed the mesh's triangles")
-    t = uv[new_faces].astype(np.float64)
-    lost = np.flatnonzero(~np.isfinite(t).all(axis=(1, 2)) | ((np.abs(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])) <= 0) & (np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1) > 1e-9)))
+    _, texture = face_areas(unit[vertex_map], new_faces, uv)
+    lost = np.flatnonzero(~np.isfinite(uv[new_faces]).all(axis=(1, 2)) | ((texture <= 0) & (world > 1e-9)))
     if len(lost):
         raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: {len(lost)} triangles with area got no UV area (e.g. face {lost[0]})")
     return vertex_map.astype(np.int64), new_faces, np.clip(uv, 0.0, 1.0)

@@ -31,6 +31,7 @@ from warptex.sampling import sample
 from warptex._output import check_memory, check_output_folder, output_set
 from warptex.apps.shade import SKY, lambert, to_rgb
 from warptex.scenes import TERRAIN_GRID, terrain_camera
+from warptex.scenes import framing_camera as default_camera
 from warptex.scenes.terrain import terrain
 from warptex.texture import Texture, TextureArray
 from warptex.layers import splat
@@ -42,15 +43,6 @@ from warptex.triplanar import triplanar
 #: Peak memory of a render, measured (peak RSS, 512² to 2048²): ~200 MB plus ~260 B per pixel
 #: (G-buffer, mip chains, images); with a margin.
 RENDER_BYTES = (300e6, 320.0)
-
-
-def default_camera(mesh: trimesh.Trimesh, resolution, fov_y: float = 45.0) -> Camera:
-    """A three-quarter view from above, far enough that the mesh's bounding sphere fits the view."""
-    centre, radius = mesh.bounds.mean(axis=0), np.linalg.norm(mesh.extents) / 2
-    direction = np.array([0.55, 0.6, 0.75])  # from the front (+Z, glTF's convention) and the right
-    half_fov = np.radians(fov_y) / 2 * min(1.0, resolution[1] / resolution[0])
-    distance = 1.05 * radius / np.sin(half_fov)
-    return look_at(centre + direction / np.linalg.norm(direction) * distance, centre, fov_y=fov_y, resolution=resolution)
 
 
 def _albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, texture: Texture, tiling: float, sampler: Sampler, device) -> np.ndarray:
