@@ -71,10 +71,12 @@ def materials(texture: np.ndarray, mesh: trimesh.Trimesh, tiling: float, sampler
 
 
 def uv_lookup(texture: np.ndarray, g: wt.GBuffer, sampler: wt.Sampler) -> np.ndarray:
-    """``texture`` read through the G-buffer's UV0 (the asset as an engine draws it), ``[H, W, C]``."""
+    """``texture`` read through the G-buffer's UV0 as an engine draws the asset (clamped to the
+    edge, as the GLB's sampler says), ``[H, W, C]``."""
     uv = g.uv("uv0")
     flat = [np.ascontiguousarray(uv[k].numpy().reshape(-1, 2)) for k in ("uv", "uv_dx", "uv_dy")]
-    return wt.sample(wt.Texture(texture), flat[0], uv_dx=flat[1], uv_dy=flat[2], sampler=sampler).numpy().reshape(*g.resolution, -1)
+    clamped = sampler.replace(address="clamp")
+    return wt.sample(wt.Texture(texture), flat[0], uv_dx=flat[1], uv_dy=flat[2], sampler=clamped).numpy().reshape(*g.resolution, -1)
 
 
 def eroded(mask: np.ndarray) -> np.ndarray:

@@ -192,17 +192,21 @@ def separated(a0: wp.vec2, a1: wp.vec2, a2: wp.vec2, b0: wp.vec2, b1: wp.vec2, b
     return result
 
 
+@wp.func
+def uv_triangle(uv_points: wp.array(dtype=wp.vec3), uv_indices: wp.array(dtype=wp.int32), t: wp.int32):
+    """The corners of triangle ``t`` of the UV mesh (``z = 0``) as ``vec2`` values."""
+    a = uv_points[uv_indices[3 * t]]
+    b = uv_points[uv_indices[3 * t + 1]]
+    c = uv_points[uv_indices[3 * t + 2]]
+    return wp.vec2(a[0], a[1]), wp.vec2(b[0], b[1]), wp.vec2(c[0], c[1])
+
+
 @wp.kernel(enable_backward=False, module=MODULE)
 def overlap_kernel(uv_mesh: wp.uint64, uv_points: wp.array(dtype=wp.vec3), uv_indices: wp.array(dtype=wp.int32), tolerance: float, overlaps: wp.array(dtype=wp.int32)):
     """For each triangle of the UV mesh, a later triangle (in the BVH's order) whose interior
     overlaps its own by more than ``tolerance`` (separating-axis test), or -1."""
     t = wp.tid()
-    a0v = uv_points[uv_indices[3 * t]]
-    a1v = uv_points[uv_indices[3 * t + 1]]
-    a2v = uv_points[uv_indices[3 * t + 2]]
-    a0 = wp.vec2(a0v[0], a0v[1])
-    a1 = wp.vec2(a1v[0], a1v[1])
-    a2 = wp.vec2(a2v[0], a2v[1])
+    a0, a1, a2 = uv_triangle(uv_points, uv_indices, t)
     lower = wp.vec3(wp.min(a0[0], wp.min(a1[0], a2[0])), wp.min(a0[1], wp.min(a1[1], a2[1])), -1.0)
     upper = wp.vec3(wp.max(a0[0], wp.max(a1[0], a2[0])), wp.max(a0[1], wp.max(a1[1], a2[1])), 1.0)
     found = wp.int32(-1)
@@ -210,12 +214,7 @@ def overlap_kernel(uv_mesh: wp.uint64, uv_points: wp.array(dtype=wp.vec3), uv_in
     other = wp.int32(0)
     while wp.mesh_query_aabb_next(query, other):
         if other > t and found < 0:
-            b0v = uv_points[uv_indices[3 * other]]
-            b1v = uv_points[uv_indices[3 * other + 1]]
-            b2v = uv_points[uv_indices[3 * other + 2]]
-            b0 = wp.vec2(b0v[0], b0v[1])
-            b1 = wp.vec2(b1v[0], b1v[1])
-            b2 = wp.vec2(b2v[0], b2v[1])
+            b0, b1, b2 = uv_triangle(uv_points, uv_indices, other)
             if separated(a0, a1, a2, b0, b1, b2, tolerance) == 0 and separated(b0, b1, b2, a0, a1, a2, tolerance) == 0:
                 found = other
     overlaps[t] = found

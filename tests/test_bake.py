@@ -111,7 +111,7 @@ def test_texture_gbuffer_matches_a_numpy_reference_and_steps_between_texels():
     assert layout.source == "xatlas" and layout.reason == "the mesh has no UVs"
     g, coverage = wt.texture_gbuffer(layout, size, gutter=gutter)
     triangle, mask, covered = g.triangle.numpy(), g.mask.numpy() > 0, coverage.numpy() > 0
-    assert (mask == (triangle >= 0)).all() and (covered <= mask).all() and covered.mean() > 0.3
+    assert (mask == (triangle >= 0)).all() and (covered <= mask).all() and covered.mean() > 0.15
     ref = numpy_texture_gbuffer(layout, triangle)
     for name in ("position", "position_dx", "position_dy", "normal"):
         np.testing.assert_allclose(getattr(g, name).numpy()[mask], ref[name][mask], atol=2e-5, rtol=1e-4, err_msg=name)
@@ -220,6 +220,9 @@ def test_xatlas_atlases_cover_the_mesh_without_overlap_and_keep_the_padding(shar
     g, coverage = wt.texture_gbuffer(layout, size, gutter=0)
     chart = _chart_of_face(layout.faces, len(layout.uv))[np.maximum(g.triangle.numpy(), 0)]
     chart = np.where(coverage.numpy() > 0, chart, -1)
+    rows, cols = np.nonzero(chart >= 0)
+    border = padding // 2  # charts keep half the padding from the edges, room for their gutters
+    assert min(rows.min(), cols.min()) >= border and max(rows.max(), cols.max()) < size - border
     for dy in range(-padding + 1, padding):
         for dx in range(-padding + 1, padding):
             a = chart[max(dy, 0) : size + min(dy, 0), max(dx, 0) : size + min(dx, 0)]
@@ -466,6 +469,8 @@ def test_export_writes_the_glb_and_its_pngs(exported):
     material = tree["materials"][0]
     assert "baseColorTexture" in material["pbrMetallicRoughness"] and "normalTexture" in material
     assert all(image["mimeType"] == "image/png" for image in tree["images"])
+    assert tree["samplers"] == [{"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}]  # an atlas does not repeat
+    assert [t["sampler"] for t in tree["textures"]] == [0, 0]
     # The PNGs are the bake, encoded (colour sRGB, the normal map n / 2 + 1/2), with background filled.
     images = texture_images(baked)
     srgb = wt.io.linear_to_srgb(np.clip(images["color"], 0, 1))

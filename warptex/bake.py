@@ -124,7 +124,7 @@ def texture_gbuffer(layout: UVLayout, size: int, *, gutter: int = 8, device=None
             seed, other = other, seed
             step //= 2
 
-    sets = mesh_uv_sets(layout.mesh)
+    sets = mesh_uv_sets(layout.mesh) if layout.mesh is not None else {}
     g = GBuffer.empty(shape, uv_sets=[*sets, "atlas"], device=device)
     barycentric = wp.zeros(shape, dtype=wp.vec3, device=device)
     coverage = wp.zeros(shape, dtype=float, device=device)
@@ -144,8 +144,7 @@ def texture_gbuffer(layout: UVLayout, size: int, *, gutter: int = 8, device=None
     # an atlas seam splits none of their tangents.
     batched = [a.reshape((1, *shape)) for a in (g.triangle, barycentric, g.normal, g.position_dx, g.position_dy)]
     vertex_map = np.asarray(layout.vertex_map, np.int64)
-    mesh_vertices, mesh_faces = np.asarray(layout.mesh.vertices, np.float64), vertex_map[faces]
-    jobs = [(name, uv[vertex_map], vertex_tangents(mesh_vertices, mesh_faces, vertex_normals(layout.mesh), uv)[vertex_map]) for name, uv in sets.items()]
+    jobs = [(name, uv[vertex_map], vertex_tangents(np.asarray(layout.mesh.vertices, np.float64), vertex_map[faces], vertex_normals(layout.mesh), uv)[vertex_map]) for name, uv in sets.items()]
     jobs.append(("atlas", layout.uv, layout.tangents()))
     for name, uv, tangents in jobs:
         out = g.uv_sets[name]

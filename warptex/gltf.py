@@ -5,7 +5,8 @@ The GLB is written by trimesh: the mesh with its atlas UVs (``TEXCOORD_0``), ver
 metallic-roughness material (metallic 0, roughness 1) with ``baseColorTexture`` (sRGB PNG) and,
 when a normal map was baked, ``normalTexture`` (linear PNG, OpenGL/glTF convention: green along
 +v) with the vertex tangents it was baked against (``TANGENT``; trimesh writes extra vertex
-attributes with a leading underscore, which one rename in its JSON tree makes glTF's own).
+attributes with a leading underscore, which one rename in its JSON tree makes glTF's own). The
+textures are sampled trilinear and clamped to the edge (:data:`SAMPLER`).
 """
 
 from __future__ import annotations
@@ -81,7 +82,7 @@ def export_gltf(baked: Baked, path: str | os.PathLike) -> list[Path]:
         mesh.visual = trimesh.visual.TextureVisuals(uv=baked.layout.uv, material=material)
         if "normal" in names:
             mesh.vertex_attributes["TANGENT"] = baked.layout.tangents().astype(np.float32)
-        glb = trimesh.exchange.gltf.export_glb(mesh, include_normals=True, tree_postprocessor=_gltf_tangents)
+        glb = trimesh.exchange.gltf.export_glb(mesh, include_normals=True, tree_postprocessor=_postprocess)
         (staging / path.name).write_bytes(glb)
     return [path] + [path.parent / n for n in names.values()]
 
@@ -115,13 +116,22 @@ def load_gltf(path: str | os.PathLike) -> tuple[trimesh.Trimesh, dict[str, np.nd
     return mesh, textures
 
 
-def _gltf_tangents(tree: dict) -> None:
-    """trimesh writes extra vertex attributes as ``_NAME``; ``_TANGENT`` is glTF's ``TANGENT``."""
+#: The textures' glTF sampler: trilinear, clamped to the edge. An atlas is not a tiling texture:
+#: repeating it would read the opposite border's texels at charts that touch an edge.
+SAMPLER = {"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}
+
+
+def _postprocess(tree: dict) -> None:
+    """The JSON tree trimesh made, finished: its ``_TANGENT`` vertex attribute (trimesh writes extra
+    attributes as ``_NAME``) becomes glTF's ``TANGENT``, and every texture gets :data:`SAMPLER`."""
     for mesh in tree.get("meshes", []):
         for primitive in mesh.get("primitives", []):
             attributes = primitive.get("attributes", {})
             if "_TANGENT" in attributes:
                 attributes["TANGENT"] = attributes.pop("_TANGENT")
+    tree["samplers"] = [dict(SAMPLER)]
+    for texture in tree.get("textures", []):
+        texture["sampler"] = 0
 
 
 def _image(path: Path) -> Image.Image:

@@ -174,6 +174,7 @@ def _xatlas(func: str, vertices: np.ndarray, faces: np.ndarray, size: int, paddi
         raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: its {len(faces)} triangles have no area")
     texels_per_unit = math.sqrt(ATLAS_FILL * size * size / area)
     asked = math.ceil(padding * PADDING_MARGIN)
+    border = (asked + 1) // 2  # charts keep half the padding from the texture's edges: room for their gutters
     for _ in range(8):
         atlas = xatlas.Atlas()
         try:
@@ -185,7 +186,7 @@ def _xatlas(func: str, vertices: np.ndarray, faces: np.ndarray, size: int, paddi
             raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: {err}") from err
         if atlas.atlas_count != 1:
             raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: it made {atlas.atlas_count} atlases, not 1")
-        extent = max(atlas.width, atlas.height)
+        extent = max(atlas.width, atlas.height) + 2 * border
         if extent <= size * PADDING_MARGIN:
             break
         texels_per_unit *= min(0.9, 0.97 * size / extent)  # too large to keep the padding when scaled down: again, smaller
@@ -193,7 +194,7 @@ def _xatlas(func: str, vertices: np.ndarray, faces: np.ndarray, size: int, paddi
         raise ValueError(f"{func}(): xatlas cannot pack this mesh's charts into {size}² texels with {padding} texels of padding between them; use a larger size or less padding")
     vertex_map, new_faces, uv = atlas[0]
     # xatlas gives u = x / width, v = y / height; one scale for both keeps texels square.
-    uv = (uv * np.array([atlas.width, atlas.height], np.float64) / extent).astype(np.float32)
+    uv = ((uv * np.array([atlas.width, atlas.height], np.float64) + border) / extent).astype(np.float32)
     new_faces = new_faces.astype(np.int64)
     if len(new_faces) != len(faces) or not (vertex_map[new_faces] == faces).all():
         raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: it changed the mesh's triangles")

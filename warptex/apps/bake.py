@@ -130,14 +130,14 @@ def run_bake(
     elif technique == "splat":
         layers = TextureArray([io.read_image(p, channels=4) for p in layer_paths], device=device)
         maps = TextureArray(io.read_image(splat_path, data=True, channels=4)[None], mipmaps=False, device=device)
-        colour = functools.partial(splat, layers=layers, splat_maps=maps, tiling=1.0 / 6.0 if tiling is None else tiling, projection="triplanar", height_blend=0.2, stochastic=stochastic, sampler=sampler, device=device)
+        colour = functools.partial(splat, layers=layers, splat_maps=maps, tiling=1.0 / 6.0 if tiling is None else tiling, projection="triplanar", height_blend=0.2, sampler=sampler, device=device)
     else:
         image = io.read_image(texture_path) if texture_path is not None else noise_texture(seed=seed)
         tiling = 8.0 if tiling is None else float(tiling)
         colour = triplanar_material(mesh, Texture(image, device=device), tiling, sampler, device, technique=triplanar if technique == "triplanar" else biplanar)
-        colour = functools.partial(colour, stochastic=stochastic)
         if normal_map_path is not None:
             maps = Texture(io.read_image(normal_map_path, data=True, channels=3), device=device)
             normal = functools.partial(triplanar_normal, normal_map=maps, tiling=colour.keywords["tiling"], biplanar=technique == "biplanar", stochastic=stochastic, sampler=sampler, device=device)
+    colour = functools.partial(colour, stochastic=stochastic) if stochastic else colour
     baked = bake(mesh, colour, normal=normal, size=size, padding=padding, gutter=gutter, device=device)
     return export_gltf(baked, out_path)

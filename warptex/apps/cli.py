@@ -275,23 +275,9 @@ def _run(args: argparse.Namespace) -> list:
     if args.command == "bake":
         from warptex.apps.bake import run_bake
 
-        return run_bake(
-            args.out,
-            mesh_path=args.mesh,
-            texture_path=args.texture,
-            layer_paths=args.layers,
-            splat_path=args.splat,
-            normal_map_path=args.normal_map,
-            technique=args.technique,
-            stochastic=args.stochastic,
-            size=args.size,
-            padding=args.padding,
-            gutter=args.gutter,
-            tiling=args.tiling,
-            seed=args.seed,
-            filter=args.filter,
-            device=args.device,
-        )
+        paths = {"mesh_path": args.mesh, "texture_path": args.texture, "layer_paths": args.layers, "splat_path": args.splat, "normal_map_path": args.normal_map}
+        options = {k: getattr(args, k) for k in ("technique", "stochastic", "size", "padding", "gutter", "tiling", "seed", "filter", "device")}
+        return run_bake(args.out, **paths, **options)
     if args.command == "demo":
         from warptex.apps.demo import run_demo
 
