@@ -62,6 +62,7 @@ _SNIPPETS = {
     "splat": "wt.splat(g, layers(GRAD), maps, tiling=0.2, projection='triplanar', height_blend=0.2)",
     "splat (hex)": "wt.splat(g, layers(GRAD), maps, tiling=0.2, projection='triplanar', height_blend=0.2, stochastic='hex')",
     "splat_atlas": "wt.splat_atlas(g, wt.pack_atlas(layers(), requires_grad=GRAD), *wt.export_index_maps(maps, k=2), tiling=4.0)",
+    "bake (triplanar)": "wt.bake(__import__('trimesh').creation.icosphere(), lambda b: wt.triplanar(b, texture(GRAD), tiling=4.0), size=128).color",
 }
 
 
@@ -78,6 +79,7 @@ def _technique_jobs() -> dict:
 
 JOBS = {
     "render": {"cli": ["render", "--out", "{tmp}", "--resolution", "512x512"]},
+    "bake": {"cli": ["bake", "--out", "{tmp}/asset.glb", "--size", "512"]},
     "fit": {"cli": ["fit", "--out", "{tmp}", "--iters", "4"]},
     **_technique_jobs(),
 }

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from warptex import io
-from warptex.apps import output
+from warptex import _output as output
 from warptex.apps.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]

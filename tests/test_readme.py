@@ -37,8 +37,8 @@ README = REPO / "README.md"
 SHARED = REPO.parent / "shared"
 
 # Fenced blocks per info string: a new block must be added here, and so gets a test.
-EXPECTED_BLOCKS = {"python": 10, "sh": 3, "": 1}
-EXPECTED_COMMANDS = {"warptex": 9, "python": 2, "skipped": 5, "torchrun": 1}
+EXPECTED_BLOCKS = {"python": 12, "sh": 4, "": 1}
+EXPECTED_COMMANDS = {"warptex": 12, "python": 2, "skipped": 5, "torchrun": 1}
 
 # Python blocks that continue earlier ones (by "<section> #<n>"): they run after those, in one namespace.
 CONTINUES = {
@@ -46,7 +46,11 @@ CONTINUES = {
     "Stochastic tiling #2": ["Splat-map layers (terrain) #1", "Stochastic tiling #1"],
 }
 # Text swapped in Python blocks to keep them fast: (block, old, new).
-PYTHON_QUICK = [("Fitting splat maps and tiling to images #2", "iters=240", "iters=3")]
+PYTHON_QUICK = [
+    ("Fitting splat maps and tiling to images #2", "iters=240", "iters=3"),
+    ("Baking into a UV texture, exported as glTF #1", "size=2048", "size=256"),
+    ("Baking into a UV texture, exported as glTF #3", "1024", "128"),
+]
 
 QUICK_RESOLUTION = "48x64"  # of `warptex render` and `warptex demo`, and of the out/ the Python blocks read
 
@@ -288,6 +292,18 @@ def _check_stochastic_inside(ns, d):
     assert _shape(ns["out"]) == (48, 64, 1)
 
 
+def _check_bake(ns, d):
+    assert _shape(ns["baked"].color) == (256, 256, 1) and _shape(ns["baked"].normal) == (256, 256, 3)
+    assert ns["baked"].layout.source == "xatlas"
+    for name in ("bunny.glb", "bunny_color.png", "bunny_normal.png"):
+        assert (d / "out" / name).is_file(), name
+
+
+def _check_bake_torch(ns, d):
+    assert tuple(ns["baked"].shape) == (128, 128, 3) and ns["g"].resolution == (128, 128)
+    assert ns["texture"].grad.abs().sum() > 0 and ns["tiling"].grad != 0
+
+
 def _check_fit(ns, d):
     assert np.isfinite(ns["result"].final_psnr) and len(ns["result"].history["psnr"]) >= 3
     assert ns["params"].weights().shape == (129, 129, 4)
@@ -304,6 +320,8 @@ CHECKS = {
     "Stochastic tiling #1": _check_stochastic,
     "Stochastic tiling #2": _check_stochastic_inside,
     "Fitting splat maps and tiling to images #2": _check_fit,
+    "Baking into a UV texture, exported as glTF #1": _check_bake,
+    "Baking into a UV texture, exported as glTF #3": _check_bake_torch,
 }
 
 
@@ -363,10 +381,12 @@ def _shared_paths(argv: list[str]) -> list[str]:
 def _quick(argv: list[str]) -> list[str]:
     """The README's ``warptex`` arguments with small sizes and few iterations."""
     argv = _shared_paths(argv)
-    command = argv[0] if argv and argv[0] in ("render", "demo", "fit") else "render"
+    command = argv[0] if argv and argv[0] in ("render", "demo", "fit", "bake") else "render"
     if _option(argv, "--device", "cpu").startswith("cuda") and wp.get_cuda_device_count() == 0:
         argv = _set_option(argv, "--device", "cpu")  # the command's other options still run
-    if command in ("render", "demo"):
+    if command == "bake":
+        argv = _set_option(argv, "--size", "256")
+    elif command in ("render", "demo"):
         argv = _set_option(argv, "--resolution", QUICK_RESOLUTION)
     else:
         argv = _set_option(argv, "--iters", "3")
@@ -386,10 +406,14 @@ FIT_SYNTHETIC_FILES = ("splat_true.png",)
 
 
 def _check_outputs(argv: list[str], folder: Path, printed: str) -> None:
-    command = argv[0] if argv[0] in ("render", "demo", "fit") else "render"
-    out = folder / _option(argv, "--out", "out/fit" if command == "fit" else "out")
+    command = argv[0] if argv[0] in ("render", "demo", "fit", "bake") else "render"
+    out = folder / _option(argv, "--out", {"fit": "out/fit", "bake": "out/asset.glb"}.get(command, "out"))
     wrote = {Path(line[len("wrote ") :]).name for line in printed.splitlines() if line.startswith("wrote ")}
-    if command == "render":
+    if command == "bake":
+        for name in (out.name, f"{out.stem}_color.png"):
+            assert (out.parent / name).is_file() and name in wrote, f"README promises {name} from warptex {shlex.join(argv)}"
+        assert wt.io.read_image(out.parent / f"{out.stem}_color.png").shape == (256, 256, 3)
+    elif command == "render":
         for name in RENDER_FILES:
             assert (out / name).is_file() and name in wrote, f"README promises {name} from warptex {shlex.join(argv)}"
         h, w = (int(v) for v in QUICK_RESOLUTION.split("x"))

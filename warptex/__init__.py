@@ -12,6 +12,9 @@ The library:
 - G-buffers: :func:`rasterize` of a mesh (:func:`load_mesh`) through a :class:`Camera`
   (:func:`look_at`, :func:`orthographic`) into a :class:`GBuffer`, :func:`save_gbuffer`,
   :func:`load_gbuffer`; image files in :mod:`warptex.io`;
+- baking into a UV atlas and exporting glTF: :func:`bake` (:class:`Baked`), its texture-space
+  G-buffer :func:`texture_gbuffer` over a :func:`unwrap` layout (:class:`UVLayout`),
+  :func:`tangent_space` normal maps, :func:`export_gltf`;
 - fitting to images: :mod:`warptex.fit` (:class:`~warptex.fit.SplatParameters`,
   :class:`~warptex.fit.FitView`, :func:`~warptex.fit.fit_splat`...);
 - CPU threads and kernel compilation: :func:`set_num_threads`, :func:`get_num_threads`,
@@ -50,9 +53,11 @@ from warptex import fit, io
 from warptex._compile import precompile
 from warptex._threads import get_num_threads, set_num_threads
 from warptex.atlas import Atlas, export_index_maps, pack_atlas, splat_atlas
+from warptex.bake import Baked, bake, tangent_space, texture_gbuffer
 from warptex.camera import Camera, look_at, orthographic
 from warptex.gbuffer import GBuffer, load_mesh, rasterize
 from warptex.gbuffer_io import load_gbuffer, save_gbuffer
+from warptex.gltf import export_gltf
 from warptex.histogram import Histogram, prepare_histogram
 from warptex.splat import LayerProjection, splat
 from warptex.options import Address, Filter, Method, Sampler, Stochastic
@@ -60,10 +65,12 @@ from warptex.sampling import sample
 from warptex.stochastic import hex_taps, stochastic
 from warptex.texture import Texture, TextureArray, mip_sizes
 from warptex.triplanar import Blend, Space, biplanar, triplanar, triplanar_normal
+from warptex.unwrap import UVLayout, unwrap
 
 __all__ = [
     "Address",
     "Atlas",
+    "Baked",
     "Blend",
     "Camera",
     "Filter",
@@ -76,7 +83,10 @@ __all__ = [
     "Stochastic",
     "Texture",
     "TextureArray",
+    "UVLayout",
+    "bake",
     "biplanar",
+    "export_gltf",
     "export_index_maps",
     "fit",
     "get_num_threads",
@@ -97,7 +107,10 @@ __all__ = [
     "splat",
     "splat_atlas",
     "stochastic",
+    "tangent_space",
+    "texture_gbuffer",
     "triplanar",
     "triplanar_normal",
+    "unwrap",
 ]
 __version__ = "0.1.0"

@@ -7,6 +7,7 @@ oldest Warp release warptex supports as well):
 
 - :func:`active_tape`: the ``wp.Tape`` being recorded. Warp records its own launches on it but does
   not say which it is; warptex records its threaded launches and hand-written gradients there too.
+  :func:`paused_tape` stops recording for a block (a bake's argument check on an empty G-buffer).
 - :func:`struct_fields` and :func:`struct_like`: the fields of a ``@wp.struct`` instance, and a new
   instance of the same struct. A threaded backward pass gives each worker copies of the kernel's
   struct arguments whose arrays accumulate their gradients privately.
@@ -20,6 +21,7 @@ nothing about.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import tempfile
@@ -39,6 +41,17 @@ def _runtime():
 def active_tape() -> wp.Tape | None:
     """The ``wp.Tape`` being recorded (inside its ``with`` block), or ``None``."""
     return _runtime().tape
+
+
+@contextlib.contextmanager
+def paused_tape():
+    """Launches inside this block are not recorded on the active ``wp.Tape`` (if any)."""
+    runtime = _runtime()
+    tape, runtime.tape = runtime.tape, None
+    try:
+        yield
+    finally:
+        runtime.tape = tape
 
 
 def struct_fields(value) -> dict[str, Any]:

@@ -1,6 +1,6 @@
 """Terrain texturing: texture-array layers blended by splat maps, with height-based blending.
 
-Formulas: :mod:`warptex.kernels.layers`. The atlas + index-map variant is in :mod:`warptex.atlas`.
+Formulas: :mod:`warptex.kernels.splat_layers` and :mod:`warptex.kernels.splat`. The atlas + index-map variant is in :mod:`warptex.atlas`.
 """
 
 from __future__ import annotations

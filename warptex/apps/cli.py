@@ -1,4 +1,4 @@
-"""Command line: ``warptex [render|demo|fit] [options]`` (also ``python -m warptex``); ``render`` is the default."""
+"""Command line: ``warptex [render|demo|fit|bake] [options]`` (also ``python -m warptex``); ``render`` is the default."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import sys
 
 
-COMMANDS = ("render", "demo", "fit")
+COMMANDS = ("render", "demo", "fit", "bake")
 
 
 def _resolution(text: str) -> tuple[int, int]:
@@ -102,7 +102,31 @@ def build_parser() -> argparse.ArgumentParser:
         "splat_true.png, splat_fitted.png, splat_maps.png, splat_fitted.exr, curve.png and summary.json.",
     )
     add_fit_arguments(fit)
-    parser.commands = {"render": render, "demo": demo, "fit": fit}  # for errors in a command's own usage
+    bake = commands.add_parser(
+        "bake",
+        help="bake a mesh's texturing into a UV atlas and export a glTF asset (.glb)",
+        description="Texture a mesh as render does (or with the technique named), bake it into the mesh's UV atlas "
+        "(its own UVs when usable, else an automatic atlas from xatlas) and write OUT (.glb) with OUT_color.png "
+        "(and OUT_normal.png with --normal-map, OUT_alpha.png for layers with height in alpha) beside it.",
+    )
+    bake.add_argument("--out", default="out/asset.glb", help="the .glb file to write (default: %(default)s)")
+    bake.add_argument("--mesh", default=None, help="mesh file: OBJ, PLY, STL, GLB/GLTF... (default: procedural terrain)")
+    bake.add_argument("--technique", choices=("triplanar", "biplanar", "splat"), default=None, help="texturing (default: splat for the terrain or with --layers, else triplanar)")
+    bake.add_argument("--texture", default=None, help="texture image for triplanar/biplanar (default: procedural ground)")
+    bake.add_argument("--normal-map", default=None, help="tangent-space normal map (OpenGL style), mapped like the texture and baked too")
+    bake.add_argument("--layers", nargs="+", default=None, help="splat layer images (RGBA, height in alpha), with --splat")
+    bake.add_argument("--splat", default=None, help="RGBA splat map in the mesh's UV0 weighing --layers (4 per map)")
+    bake.add_argument("--stochastic", choices=("hash4", "cheap2", "hex"), default=None, help="anti-tiling for the texture or layers (default: none)")
+    bake.add_argument("--size", type=_count(2), default=2048, help="atlas texels per side (default: %(default)s)")
+    bake.add_argument("--padding", type=_count(0), default=None, help="texels between the atlas's charts (default: twice the gutter)")
+    bake.add_argument("--gutter", type=_count(0), default=None, help="texels filled around each chart (default: enough for the mips of a 512-pixel view)")
+    bake.add_argument("--tiling", type=_number(0.0, None), default=None, help="texture repeats across the mesh (default: 8; layers: 1/6 per unit)")
+    bake.add_argument("--seed", type=int, default=0, help="terrain and procedural texture seed (default: 0)")
+    bake.add_argument(
+        "--filter", choices=("nearest", "bilinear", "trilinear", "anisotropic"), default="anisotropic", help="texture filter (default: %(default)s)"
+    )
+    bake.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0 (default: Warp's default)")
+    parser.commands = {"render": render, "demo": demo, "fit": fit, "bake": bake}  # for errors in a command's own usage
     return parser
 
 
@@ -263,6 +287,12 @@ def _run(args: argparse.Namespace) -> list:
     init_quietly()  # no start-up banner or compile log, no "no CUDA driver" warning on a CPU machine
     if args.command == "fit":
         return _fit(args)
+    if args.command == "bake":
+        from warptex.apps.bake import run_bake
+
+        paths = {"mesh_path": args.mesh, "texture_path": args.texture, "layer_paths": args.layers, "splat_path": args.splat, "normal_map_path": args.normal_map}
+        options = {k: getattr(args, k) for k in ("technique", "stochastic", "size", "padding", "gutter", "tiling", "seed", "filter", "device")}
+        return run_bake(args.out, **paths, **options)
     if args.command == "demo":
         from warptex.apps.demo import run_demo
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from warptex import io
-from warptex.apps.output import check_output_folder, output_set
+from warptex._output import check_output_folder, output_set
 from warptex.apps.shade import labelled, to_rgb
 from warptex.options import Sampler
 from warptex.sampling import sample

@@ -29,7 +29,7 @@ from warptex.gbuffer_io import load_gbuffer
 from warptex._validate import check_layer_count
 from warptex.splat import splat
 from warptex.options import Sampler
-from warptex.apps.output import check_memory, check_output_folder, output_set
+from warptex._output import check_memory, check_output_folder, output_set
 from warptex.scenes import TERRAIN_GRID, terrain_cameras
 from warptex.apps.shade import side_by_side
 from warptex.scenes.terrain import terrain

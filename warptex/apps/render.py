@@ -9,11 +9,14 @@ derivatives and Lambert-lit.
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import trimesh
+import warp as wp
 
 from warptex import io
 from warptex._compile import preload
@@ -25,9 +28,10 @@ from warptex.camera import Camera, checked_resolution, look_at
 from warptex.gbuffer import GBuffer, load_mesh, rasterize
 from warptex.gbuffer_io import save_gbuffer
 from warptex.sampling import sample
-from warptex.apps.output import check_memory, check_output_folder, output_set
+from warptex._output import check_memory, check_output_folder, output_set
 from warptex.apps.shade import SKY, lambert, to_rgb
 from warptex.scenes import TERRAIN_GRID, terrain_camera
+from warptex.scenes import framing_camera as default_camera
 from warptex.scenes.terrain import terrain
 from warptex.texture import Texture, TextureArray
 from warptex.splat import splat
@@ -41,33 +45,34 @@ from warptex.triplanar import triplanar
 RENDER_BYTES = (300e6, 320.0)
 
 
-def default_camera(mesh: trimesh.Trimesh, resolution, fov_y: float = 45.0) -> Camera:
-    """A three-quarter view from above, far enough that the mesh's bounding sphere fits the view."""
-    centre, radius = mesh.bounds.mean(axis=0), np.linalg.norm(mesh.extents) / 2
-    direction = np.array([0.55, 0.6, 0.75])  # from the front (+Z, glTF's convention) and the right
-    half_fov = np.radians(fov_y) / 2 * min(1.0, resolution[1] / resolution[0])
-    distance = 1.05 * radius / np.sin(half_fov)
-    return look_at(centre + direction / np.linalg.norm(direction) * distance, centre, fov_y=fov_y, resolution=resolution)
-
-
 def _albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, texture: Texture, tiling: float, sampler: Sampler, device) -> np.ndarray:
     """The material colour: UV0 × tiling when the mesh has UVs, else triplanar with ``tiling``
     repeats across the mesh's largest extent."""
     if "uv0" in gbuffer.uv_sets:
         uv, uv_dx, uv_dy = (np.ascontiguousarray(gbuffer.uv_sets["uv0"][k].numpy() * tiling, np.float32) for k in ("uv", "uv_dx", "uv_dy"))
         return to_rgb(sample(texture, uv, uv_dx=uv_dx, uv_dy=uv_dy, sampler=sampler, device=device))
+    return to_rgb(triplanar_material(mesh, texture, tiling, sampler, device)(gbuffer))
+
+
+def triplanar_material(mesh: trimesh.Trimesh, texture: Texture, tiling: float, sampler: Sampler, device, technique=triplanar) -> Callable[[GBuffer], wp.array]:
+    """``technique`` (:func:`~warptex.triplanar` or :func:`~warptex.biplanar`) of ``texture`` with
+    ``tiling`` repeats across the mesh's largest extent, as a function of a G-buffer."""
     scale = tiling / max(float(np.max(mesh.extents)), 1e-12)
-    return to_rgb(triplanar(gbuffer, texture, tiling=scale, sampler=sampler, device=device))
+    return functools.partial(technique, texture=texture, tiling=scale, sampler=sampler, device=device)
+
+
+def terrain_material(mesh: trimesh.Trimesh, tiling: float | None, seed: int, sampler: Sampler, device) -> Callable[[GBuffer], wp.array]:
+    """The default terrain's splat material as a function of a G-buffer: four layers mapped
+    triplanar, height-blended, repeating ``tiling`` times per world unit (default 1/6)."""
+    maps = TextureArray(terrain_splat_maps(mesh, TERRAIN_GRID)[None], mipmaps=False, device=device)
+    layers = terrain_layers(seed=seed, device=device)
+    tiling = 1.0 / 6.0 if tiling is None else float(tiling)
+    return functools.partial(splat, layers=layers, splat_maps=maps, tiling=tiling, projection="triplanar", height_blend=0.2, sampler=sampler, device=device)
 
 
 def _terrain_albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, tiling: float | None, seed: int, sampler: Sampler, device) -> np.ndarray:
-    """The default terrain's splat material: layers repeat ``tiling`` times per world unit (default 1/6)."""
-    maps = terrain_splat_maps(mesh, TERRAIN_GRID)
-    layers = terrain_layers(seed=seed, device=device)
-    tiling = 1.0 / 6.0 if tiling is None else float(tiling)
-    maps = TextureArray(maps[None], mipmaps=False, device=device)
-    colour = splat(gbuffer, layers, maps, tiling=tiling, projection="triplanar", height_blend=0.2, sampler=sampler, device=device)
-    return to_rgb(colour)
+    """The default terrain's splat material (:func:`terrain_material`) on ``gbuffer``, as RGB."""
+    return to_rgb(terrain_material(mesh, tiling, seed, sampler, device)(gbuffer))
 
 
 def _embedded_texture(mesh: trimesh.Trimesh) -> np.ndarray | None:

@@ -2,7 +2,8 @@
 material, and the camera the default render looks at it from.
 
 - :mod:`.terrain`: :func:`~warptex.scenes.terrain.terrain`, a seeded heightfield mesh with cliffs;
-- :mod:`.material`: its four procedural layers and splat maps, and periodic noise textures.
+- :mod:`.material`: its four procedural layers and splat maps, and periodic noise textures;
+- :func:`framing_camera`: the default view of any mesh (``warptex render --mesh``, the bake benchmark).
 
 They are built from the library and NumPy alone, so anything may import them; the applications
 (:mod:`warptex.apps`) are never imported by the library, the benchmarks or these scenes.
@@ -16,6 +17,16 @@ from warptex.camera import Camera, look_at, orthographic
 
 #: The default terrain's vertex grid, one splat texel per vertex.
 TERRAIN_GRID = (129, 129)
+
+
+def framing_camera(mesh, resolution, fov_y: float = 45.0) -> Camera:
+    """A three-quarter view of ``mesh`` from above (from the front, +Z, glTF's convention, and the
+    right), far enough that its bounding sphere fits the view: ``warptex render``'s default camera."""
+    centre, radius = mesh.bounds.mean(axis=0), np.linalg.norm(mesh.extents) / 2
+    direction = np.array([0.55, 0.6, 0.75])
+    half_fov = np.radians(fov_y) / 2 * min(1.0, resolution[1] / resolution[0])
+    distance = 1.05 * radius / np.sin(half_fov)
+    return look_at(centre + direction / np.linalg.norm(direction) * distance, centre, fov_y=fov_y, resolution=resolution)
 
 
 def terrain_camera(resolution, fov_y: float = 45.0) -> Camera:

@@ -1,7 +1,8 @@
 """A run's output files appear together or not at all.
 
-``warptex render``, ``demo`` and ``fit`` each write several files that belong together (a render
-and its G-buffer; fitted maps and their summary). :func:`output_set` stages them in a hidden
+``warptex render``, ``demo``, ``fit`` and ``bake`` (and :func:`warptex.export_gltf`) each write
+several files that belong together (a render and its G-buffer; fitted maps and their summary; a
+glTF asset and its textures). :func:`output_set` stages them in a hidden
 folder inside the output folder and moves them into place only once every one is written, in one
 quick loop of renames (each atomic; the loop takes microseconds). An error or Ctrl-C removes the
 staging folder and leaves the previous run's files as they were. A staging folder left by a
@@ -17,6 +18,8 @@ import shutil
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
+
+import warp as wp
 
 from warptex import io
 
@@ -62,15 +65,19 @@ def remove_stale_staging(out: Path) -> list[Path]:
     return removed
 
 
-def check_memory(func: str, what: str, needed_bytes: float) -> None:
+def check_memory(func: str, what: str, needed_bytes: float, device=None) -> None:
     """Raise ``MemoryError`` naming ``what`` when a job needs more memory than this machine has
-    available (Linux: ``MemAvailable``; elsewhere the allocation itself reports it), instead of
-    letting the job run the machine out of memory or fail deep inside an allocation."""
+    available (Linux: ``MemAvailable``; elsewhere the allocation itself reports it), or, on a CUDA
+    ``device``, more than the device has free, instead of letting the job run the machine out of
+    memory or fail deep inside an allocation."""
     available = _available_memory()
+    where = "available"
+    if device is not None and wp.get_device(device).is_cuda:
+        available, where = getattr(wp.get_device(device), "free_memory", None), f"free on {wp.get_device(device)}"
     if available is not None and needed_bytes > available:
         raise MemoryError(
             f"{func}(): {what} needs about {needed_bytes / 2**30:.1f} GiB of memory, but "
-            f"{available / 2**30:.1f} GiB is available; use a smaller resolution"
+            f"{available / 2**30:.1f} GiB is {where}; use a smaller resolution"
         )
 
 

@@ -1,0 +1,143 @@
+"""``warptex bake``: texture a mesh as ``warptex render`` does, bake it into a UV atlas, export glTF.
+
+The mesh (the procedural terrain by default) gets the material ``render`` gives it, or the one the
+options name: one texture mapped triplanar or biplanar (optionally anti-tiled, with a normal map),
+or splat-blended layers. :func:`warptex.bake.bake` evaluates it over the texture-space G-buffer
+of the mesh's atlas (its own UV0 when usable, else xatlas), and :func:`warptex.gltf.export_gltf`
+writes ``asset.glb`` with ``asset_color.png`` (and ``asset_normal.png``, ``asset_alpha.png``)
+beside it, all at once.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from pathlib import Path
+
+import numpy as np
+
+from warptex import io
+from warptex._compile import preload
+from warptex._output import check_memory, check_output_folder
+from warptex.apps.render import terrain_material, triplanar_material
+from warptex.bake import BAKE_BYTES, bake
+from warptex.gbuffer import load_mesh
+from warptex.gltf import export_gltf
+from warptex.kernels import bake as kb
+from warptex.kernels import splat as kl
+from warptex.kernels import raster as kr
+from warptex.kernels import sampling as ks
+from warptex.kernels import triplanar as kt
+from warptex.splat import splat
+from warptex.options import Filter, Sampler
+from warptex.scenes import TERRAIN_GRID
+from warptex.scenes.material import noise_texture
+from warptex.scenes.terrain import terrain
+from warptex.texture import Texture, TextureArray
+from warptex.triplanar import biplanar, triplanar, triplanar_normal
+from warptex.unwrap import checked_size
+
+TECHNIQUES = ("triplanar", "biplanar", "splat")
+
+
+def _choose_technique(func: str, technique, mesh_path, texture_path, layer_paths, splat_path, normal_map_path) -> str:
+    """The technique to bake, with the options checked against it before any work."""
+    if (layer_paths is None) != (splat_path is None) and mesh_path is not None:
+        raise ValueError(f"{func}(): --layers and --splat go together (layer images and the splat map that weighs them in UV0)")
+    if technique is None:
+        technique = "splat" if layer_paths is not None or (mesh_path is None and texture_path is None) else "triplanar"
+    if technique not in TECHNIQUES:
+        raise ValueError(f"{func}(): technique must be one of {', '.join(TECHNIQUES)}, got {technique!r}")
+    if technique == "splat":
+        if mesh_path is not None and layer_paths is None:
+            raise ValueError(f"{func}(): technique 'splat' needs layers: pass --layers L1 L2 ... and --splat MAP (or no --mesh, for the terrain's own)")
+        if texture_path is not None:
+            raise ValueError(f"{func}(): --texture is for triplanar and biplanar; splat reads --layers")
+        if normal_map_path is not None:
+            raise ValueError(f"{func}(): --normal-map works with triplanar and biplanar, not splat")
+    elif layer_paths is not None:
+        raise ValueError(f"{func}(): --layers and --splat are for technique 'splat', not {technique!r}")
+    return technique
+
+
+def _kernels(technique: str, stochastic, normal_mapped: bool, num_layers: int) -> list:
+    """The kernels a bake runs: the texture-space G-buffer's, mip chains, and the technique's."""
+    used = [kb.chart_kernel, kr.uv_kernel, ks.downsample_kernel]
+    if technique == "splat":
+        return used + [kl.splat_kernels(capacity=kl.capacity(num_layers), stochastic=stochastic is not None).forward]
+    used.append(kt.triplanar_kernels(normal=False, stochastic=stochastic is not None, faces=False).forward)
+    if normal_mapped:
+        used.append(kt.triplanar_kernels(normal=True, stochastic=stochastic is not None, faces=False).forward)
+    return used
+
+
+def run_bake(
+    out_path: str | os.PathLike = "out/asset.glb",
+    *,
+    mesh_path=None,
+    texture_path=None,
+    layer_paths=None,
+    splat_path=None,
+    normal_map_path=None,
+    technique: str | None = None,
+    stochastic: str | None = None,
+    size: int = 2048,
+    padding: int | None = None,
+    gutter: int | None = None,
+    tiling: float | None = None,
+    seed: int = 0,
+    filter: Filter | str = Filter.ANISOTROPIC,
+    device=None,
+) -> list[Path]:
+    """Bake a mesh's texturing and write ``out_path`` (``.glb``) and its textures beside it.
+
+    Args:
+        out_path: the GLB to write; ``<stem>_color.png`` etc. go beside it.
+        mesh_path: a mesh file; ``None``: the procedural terrain with its splat layers.
+        texture_path: the texture for triplanar/biplanar (default: a procedural ground texture).
+        layer_paths, splat_path: layer images (RGBA, height in alpha) and the RGBA splat map in
+            UV0 that weighs them (4 layers per map), for ``technique="splat"``.
+        normal_map_path: a tangent-space normal map (data), mapped like the texture and baked
+            into ``<stem>_normal.png`` and the GLB's normal texture.
+        technique: ``"triplanar"``, ``"biplanar"`` or ``"splat"`` (default: splat for the
+            terrain or with layers, else triplanar).
+        stochastic: anti-tiling for the texture or layers (``"hash4"``, ``"cheap2"``, ``"hex"``).
+        size: atlas texels per side. padding, gutter: see :func:`warptex.bake.bake`.
+        tiling: as for ``warptex render`` (texture repeats across the mesh's largest extent,
+            default 8; layers: repeats per world unit, default 1/6).
+        seed: terrain and procedural texture seed. filter: the texture filter. device: Warp device.
+
+    Returns:
+        The paths written, the GLB first.
+    """
+    func = "run_bake"
+    out_path = Path(out_path)
+    if out_path.suffix.lower() != ".glb":
+        raise ValueError(f"{func}(): the output must be a .glb file, got {str(out_path)!r}")
+    check_output_folder(func, out_path.parent)
+    technique = _choose_technique(func, technique, mesh_path, texture_path, layer_paths, splat_path, normal_map_path)
+    size = checked_size(func, size)
+    check_memory(func, f"a {size}x{size} bake", BAKE_BYTES[0] + BAKE_BYTES[1] * size * size, device)
+    if tiling is not None and not (np.isfinite(tiling) and tiling > 0):
+        raise ValueError(f"{func}(): tiling must be a finite number > 0, got {tiling!r}")
+    sampler = Sampler(filter=filter)
+    preload(_kernels(technique, stochastic, normal_map_path is not None, len(layer_paths or ()) or 4), device)  # compiled side by side on a cold start
+
+    mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
+    normal = None
+    if technique == "splat" and mesh_path is None:
+        colour = terrain_material(mesh, tiling, seed, sampler, device)
+    elif technique == "splat":
+        layers = TextureArray([io.read_image(p, channels=4) for p in layer_paths], device=device)
+        maps = TextureArray(io.read_image(splat_path, data=True, channels=4)[None], mipmaps=False, device=device)
+        colour = functools.partial(splat, layers=layers, splat_maps=maps, tiling=1.0 / 6.0 if tiling is None else tiling, projection="triplanar", height_blend=0.2, sampler=sampler, device=device)
+    else:
+        image = io.read_image(texture_path) if texture_path is not None else noise_texture(seed=seed)
+        tiling = 8.0 if tiling is None else float(tiling)
+        colour = triplanar_material(mesh, Texture(image, device=device), tiling, sampler, device, technique=triplanar if technique == "triplanar" else biplanar)
+        if normal_map_path is not None:
+            maps = Texture(io.read_image(normal_map_path, data=True, channels=3), device=device)
+            normal = functools.partial(triplanar_normal, normal_map=maps, tiling=colour.keywords["tiling"], biplanar=technique == "biplanar", stochastic=stochastic, sampler=sampler, device=device)
+    colour = functools.partial(colour, stochastic=stochastic) if stochastic else colour
+    baked = bake(mesh, colour, normal=normal, size=size, padding=padding, gutter=gutter, device=device)
+    return export_gltf(baked, out_path)

@@ -1,0 +1,205 @@
+"""UV layouts for baking: a mesh's own first UV set when it is usable, else an xatlas atlas.
+
+A UV set is usable for baking when every UV lies inside the texture (``[0, 1]``) and no two
+triangles overlap in UV space (mirrored or stacked charts would have to share texels): each UV
+triangle is tested against those whose bounds it meets (a BVH of the UV triangles, see
+:func:`warptex.kernels.bake.overlap_kernel`) with the separating-axis test, so triangles that only
+share an edge or a corner do not count. Otherwise the mesh is unwrapped by
+`xatlas <https://github.com/jpcy/xatlas>`_ into charts packed ``padding`` texels apart.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+import warp as wp
+
+from warptex.gbuffer import checked_geometry, mesh_uv_sets, vertex_normals, vertex_tangents
+from warptex.kernels import bake as kb
+
+# Two UV triangles overlap when they penetrate by more than this (UV units, 1/50 of a texel at
+# 1024²): rounding where triangles share an edge stays far below it.
+OVERLAP_TOLERANCE = 2e-5
+# xatlas is asked for an atlas this much of the texture's area would hold, and for this much more
+# padding than asked: its packing fills 40-50% of the square before padding on the meshes tried, and
+# an atlas up to this much larger than the texture is scaled down into it without losing padding.
+ATLAS_FILL = 0.45
+PADDING_MARGIN = 1.15
+
+
+@dataclass
+class UVLayout:
+    """A mesh as it is baked: its triangles with atlas UVs, split where the atlas has seams.
+
+    Attributes:
+        vertices: ``[V', 3]`` float64 world positions.
+        faces: ``[F, 3]`` int64, face ``f`` is the input mesh's face ``f``.
+        uv: ``[V', 2]`` float32 atlas UVs in ``[0, 1]`` (warptex's convention: v up).
+        normals: ``[V', 3]`` float64 unit vertex normals (the input mesh's; ``+z`` for a vertex of
+            zero-area faces only, which has none).
+        vertex_map: ``[V']`` int64, the input vertex each vertex comes from.
+        source: ``"mesh"`` (the mesh's own UV0) or ``"xatlas"``.
+        reason: why the mesh's UVs were not used (``""`` when they were).
+        padding: texels between charts (xatlas), ``None`` for the mesh's own UVs.
+        mesh: the input mesh.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    uv: np.ndarray
+    normals: np.ndarray
+    vertex_map: np.ndarray
+    source: str
+    reason: str = ""
+    padding: int | None = None
+    mesh: trimesh.Trimesh | None = None
+
+    def trimesh(self) -> trimesh.Trimesh:
+        """The layout as a ``trimesh.Trimesh`` with its normals and atlas UVs (no texture yet)."""
+        mesh = trimesh.Trimesh(self.vertices, self.faces, vertex_normals=self.normals, process=False)
+        mesh.visual = trimesh.visual.TextureVisuals(uv=self.uv)
+        return mesh
+
+    def tangents(self) -> np.ndarray:
+        """``[V', 4]`` float32 vertex tangents of the atlas UVs (xyz unit, w the bitangent sign), as
+        the rasteriser computes them (:func:`warptex.gbuffer.vertex_tangents`): the frame a baked
+        normal map is in, and the GLB's ``TANGENT``."""
+        return vertex_tangents(self.vertices, self.faces, self.normals, self.uv)
+
+
+def checked_size(func: str, size) -> int:
+    """The bake size as an int in ``[2, 16384]``, or a ``TypeError``/``ValueError`` naming ``func``."""
+    if isinstance(size, bool) or not isinstance(size, (int, np.integer)):
+        raise TypeError(f"{func}(): size must be an int (texels per side), got {type(size).__name__}")
+    if not 2 <= size <= 16384:
+        raise ValueError(f"{func}(): size must be in [2, 16384] texels (engines load textures of at most 16384²), got {size}")
+    return int(size)
+
+
+def unusable_reason(uv: np.ndarray | None, vertices: np.ndarray, faces: np.ndarray, *, device=None) -> str:
+    """Why the UV set ``uv`` ``[V, 2]`` cannot be baked into (``""`` if it can): missing, outside
+    ``[0, 1]``, or two triangles overlapping (named by their face indices)."""
+    if uv is None:
+        return "the mesh has no UVs"
+    uv = np.asarray(uv, np.float64)
+    if not np.isfinite(uv).all():
+        return "its UVs are not all finite"
+    used = uv[np.unique(faces)]
+    if used.min() < 0.0 or used.max() > 1.0:
+        return f"its UVs leave the texture (they span [{used.min():.3g}, {used.max():.3g}], not inside [0, 1])"
+    ids = bakeable_faces(vertices, faces, uv)
+    if len(ids) == 0:
+        return "every UV triangle has zero area"
+    device = wp.get_device(device)
+    points = wp.array(np.concatenate([uv, np.zeros((len(uv), 1))], axis=1).astype(np.float32), dtype=wp.vec3, device=device)
+    indices = wp.array(faces[ids].reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
+    bvh = wp.Mesh(points=points, indices=indices)
+    overlaps = wp.empty(len(ids), dtype=wp.int32, device=device)
+    wp.launch(kb.overlap_kernel, dim=len(ids), inputs=[bvh.id, points, indices, OVERLAP_TOLERANCE], outputs=[overlaps], device=device, record_tape=False)
+    found = overlaps.numpy()
+    hits = np.flatnonzero(found >= 0)
+    if len(hits):
+        return f"its UV charts overlap ({len(hits)} triangles, e.g. faces {ids[hits[0]]} and {ids[found[hits[0]]]})"
+    return ""
+
+
+def unwrap(mesh: trimesh.Trimesh, *, size: int = 2048, padding: int = 8, force_atlas: bool = False, device=None) -> UVLayout:
+    """The UV layout to bake ``mesh`` into: its first UV set (``"uv0"``) when usable (see the
+    module docstring), else (or with ``force_atlas``) an automatic atlas from xatlas.
+
+    Args:
+        mesh: a ``trimesh.Trimesh``.
+        size: texels per side of the texture the atlas is made for.
+        padding: texels between xatlas's charts (the gutters live there), ``>= 0``.
+        force_atlas: make an atlas even when the mesh's UVs are usable.
+        device: Warp device for the overlap test.
+
+    Raises:
+        TypeError, ValueError: a bad argument, or a mesh xatlas cannot unwrap (no triangle with
+            area, non-finite vertices, or xatlas leaving a triangle without UV area).
+    """
+    func = "unwrap"
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise TypeError(f"{func}(): mesh must be a trimesh.Trimesh, got {type(mesh).__name__}")
+    size = checked_size(func, size)
+    if isinstance(padding, bool) or not isinstance(padding, (int, np.integer)) or padding < 0:
+        raise ValueError(f"{func}(): padding must be an int >= 0 (texels between charts), got {padding!r}")
+    vertices, faces = checked_geometry(f"{func}():", mesh)
+    normals = vertex_normals(mesh)
+    # A vertex of zero-area faces only has no normal; glTF wants unit ones, and no face with area
+    # can show it: any unit vector does.
+    normals[np.linalg.norm(normals, axis=1) == 0] = (0.0, 0.0, 1.0)
+    reason = unusable_reason(mesh_uv_sets(mesh).get("uv0"), vertices, faces, device=device) or ("an atlas was asked for" if force_atlas else "")
+    if not reason:
+        uv = mesh_uv_sets(mesh)["uv0"]
+        return UVLayout(vertices, faces, uv, normals, np.arange(len(vertices)), "mesh", mesh=mesh)
+    vertex_map, new_faces, uv = _xatlas(func, vertices, faces, size, int(padding))
+    return UVLayout(vertices[vertex_map], new_faces, uv, normals[vertex_map], vertex_map, "xatlas", reason, int(padding), mesh)
+
+
+def face_areas(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """Each face's area ``[F]`` in the world, and in UV space (``None`` without ``uv``), float64."""
+    p = np.asarray(vertices, np.float64)[faces]
+    world = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    if uv is None:
+        return world, None
+    t = np.asarray(uv, np.float64)[faces]
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    return world, 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
+def bakeable_faces(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Indices of the faces with area both in the world and in UV space: the others hold no texel
+    (no UV area) or no surface (no world area: no normal, no Jacobian)."""
+    world, texture = face_areas(vertices, faces, uv)
+    return np.flatnonzero((world > 1e-12 * max(world.max(), 1e-300)) & (texture > 0))
+
+
+def _xatlas(func: str, vertices: np.ndarray, faces: np.ndarray, size: int, padding: int):
+    """xatlas's atlas of the mesh scaled into a ``size``² texture: ``(vertex_map, faces, uv)``."""
+    try:
+        import xatlas
+    except ImportError as err:  # a dependency; only a broken install lacks it
+        raise ImportError(f"{func}(): the mesh needs an automatic UV atlas, which needs the xatlas package (pip install xatlas)") from err
+    # Charts do not depend on scale: a unit-sized copy keeps xatlas's arithmetic in range (it
+    # asserts and stalls on coordinates near 1e30 and drops triangles of area near 1e-60).
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    unit = (vertices - lo) / max(float(np.linalg.norm(hi - lo)), 1e-300)
+    world, _ = face_areas(unit, faces)
+    area = float(world.sum())
+    if not area > 1e-12:
+        raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: its {len(faces)} triangles have no area")
+    texels_per_unit = math.sqrt(ATLAS_FILL * size * size / area)
+    asked = math.ceil(padding * PADDING_MARGIN)
+    border = (asked + 1) // 2  # charts keep half the padding from the texture's edges: room for their gutters
+    for _ in range(8):
+        atlas = xatlas.Atlas()
+        try:
+            atlas.add_mesh(unit.astype(np.float32), faces.astype(np.uint32))
+            options = xatlas.PackOptions()
+            options.padding, options.bilinear, options.texels_per_unit = asked, True, texels_per_unit
+            atlas.generate(xatlas.ChartOptions(), options)
+        except RuntimeError as err:
+            raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: {err}") from err
+        if atlas.atlas_count != 1:
+            raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: it made {atlas.atlas_count} atlases, not 1")
+        extent = max(atlas.width, atlas.height) + 2 * border
+        if extent <= size * PADDING_MARGIN:
+            break
+        texels_per_unit *= min(0.9, 0.97 * size / extent)  # too large to keep the padding when scaled down: again, smaller
+    else:
+        raise ValueError(f"{func}(): xatlas cannot pack this mesh's charts into {size}² texels with {padding} texels of padding between them; use a larger size or less padding")
+    vertex_map, new_faces, uv = atlas[0]
+    # xatlas gives u = x / width, v = y / height; one scale for both keeps texels square.
+    uv = ((uv * np.array([atlas.width, atlas.height], np.float64) + border) / extent).astype(np.float32)
+    new_faces = new_faces.astype(np.int64)
+    if len(new_faces) != len(faces) or not (vertex_map[new_faces] == faces).all():
+        raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: it changed the mesh's triangles")
+    _, texture = face_areas(unit[vertex_map], new_faces, uv)
+    lost = np.flatnonzero(~np.isfinite(uv[new_faces]).all(axis=(1, 2)) | ((texture <= 0) & (world > 1e-9)))
+    if len(lost):
+        raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: {len(lost)} triangles with area got no UV area (e.g. face {lost[0]})")
+    return vertex_map.astype(np.int64), new_faces, np.clip(uv, 0.0, 1.0)
