@@ -223,6 +223,9 @@ CAMERA = look_at((0, 0, 5), (0, 0, 0), resolution=(16, 16))
         (trimesh.Trimesh([[0, 0, 0], [1, np.nan, 0], [0, 1, 0]], [[0, 1, 2]], process=False), ValueError, r"vertex 1 is not finite"),
         (trimesh.Trimesh([[0, 0, 0], [1, 1, 1], [2, 2, 2]], [[0, 1, 2]], process=False), ValueError, r"all 1 triangles .* degenerate"),
         (np.zeros((3, 3)), TypeError, r"rasterize\(\): mesh must be a trimesh.Trimesh or a path"),
+        (trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], process=False,
+                         visual=trimesh.visual.TextureVisuals(uv=[[0, 0], [1, np.inf], [0, 1]])),
+         ValueError, r"rasterize\(\): UV set 'uv0' is not finite at 1 vertices, e.g. vertex 1: \[1.0, inf\]"),
     ],
 )
 def test_bad_meshes_raise(mesh, error, match):

@@ -101,3 +101,16 @@ def check_layer_count(func: str, num_layers: int, maps) -> None:
             f"{func}(): {m} splat map(s) of {c} channel(s) hold weights for {(m - 1) * c + 1} to {m * c} layers, "
             f"but there are {num_layers} layers (use {need} map(s) of {c} channels)"
         )
+
+
+def checked_device(who: str, device):
+    """``wp.get_device(device)``, or a ``ValueError`` starting with ``who`` (``"rasterize()"``,
+    ``"--device"``) that says which devices this machine has (Warp's own says only "Invalid device
+    identifier")."""
+    try:
+        return wp.get_device(device)
+    except (ValueError, RuntimeError):
+        pass
+    have = ", ".join(d.alias for d in wp.get_devices())
+    cuda = "" if wp.get_cuda_device_count() else "no CUDA device is available here; "
+    raise ValueError(f"{who}: device {device!r} does not exist: {cuda}the devices are {have}")

@@ -13,8 +13,9 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
     """Load a mesh file (OBJ, PLY, STL, GLB/GLTF, ...) as one ``trimesh.Trimesh``.
 
     Scenes are flattened with their node transforms; materials and UVs are kept where trimesh can
-    merge them. The mesh is checked as :func:`rasterize` checks it (triangles, finite vertices,
-    face indices in range), so a bad file is reported as such, naming it.
+    merge them. The mesh is checked as :func:`rasterize` checks it (triangles, finite vertices and
+    UVs, face indices in range), so a bad file is reported as such, naming it, before anything
+    is rendered.
 
     Raises:
         FileNotFoundError: no such file. ValueError: a folder, or a file that holds no usable mesh.
@@ -28,14 +29,44 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
         raise ValueError(f"load_mesh(): {path!r} is a folder, not a mesh file")
     if not os.path.isfile(path):
         raise FileNotFoundError(f"load_mesh(): file not found: {path!r}")
+    _check_signature(path)
     try:
         loaded = trimesh.load(path, force="mesh", process=False)
     except Exception as err:  # trimesh raises many types for bad files
         raise ValueError(f"load_mesh(): cannot read {path!r} as a mesh: {' '.join(str(err).split())}") from err
     if not isinstance(loaded, trimesh.Trimesh):
         raise ValueError(f"load_mesh(): {path!r} holds no triangle mesh (got {type(loaded).__name__})")
+    if len(loaded.faces) == 0:
+        _no_faces(path)
     checked_geometry(f"load_mesh(): {path!r}:", loaded)
     return loaded
+
+
+# Formats whose files start with a signature, by extension: a file that lacks it is not that format
+# (trimesh would report a failure deep inside its parser instead).
+_SIGNATURES = {".glb": b"glTF"}
+
+
+def _check_signature(path: str) -> None:
+    expected = _SIGNATURES.get(os.path.splitext(path)[1].lower())
+    if expected is None:
+        return
+    with open(path, "rb") as f:
+        head = f.read(len(expected))
+    if head != expected:
+        raise ValueError(f"load_mesh(): {path!r} is not a binary glTF (.glb) file: it starts with {head!r}, "
+                         f"a .glb file with {expected!r}")
+
+
+def _no_faces(path: str) -> None:
+    """Raise the error for a file that holds no triangles, saying what it holds instead."""
+    try:
+        whole = trimesh.load(path, process=False)  # a point cloud, a scene of lines...: count its vertices
+        count = len(getattr(whole, "vertices", ()))
+    except Exception:  # noqa: BLE001 (the face-less file is the error to report)
+        count = 0
+    holds = f"{count} vertices and no faces" if count else "no vertices and no faces"
+    raise ValueError(f"load_mesh(): {path!r} holds {holds}; warptex renders triangle meshes")
 
 
 def mesh_uv_sets(mesh: trimesh.Trimesh) -> dict[str, np.ndarray]:
@@ -80,7 +111,7 @@ def vertex_tangents(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray
 def checked_geometry(prefix: str, mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
     """Vertices ``[V, 3]`` float64 and faces ``[F, 3]`` int64 of ``mesh``, or a ``ValueError``
     starting with ``prefix`` (e.g. ``"rasterize():"``): no triangles, a non-finite vertex, a
-    face index out of range."""
+    face index out of range, a non-finite UV (which would texture its triangles with NaN)."""
     vertices = np.asarray(mesh.vertices, np.float64).reshape(-1, 3)
     faces = np.asarray(mesh.faces, np.int64).reshape(-1, 3)
     if len(faces) == 0 or len(vertices) == 0:
@@ -90,6 +121,12 @@ def checked_geometry(prefix: str, mesh: trimesh.Trimesh) -> tuple[np.ndarray, np
         raise ValueError(f"{prefix} vertex {bad} is not finite: {vertices[bad].tolist()}")
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise ValueError(f"{prefix} face indices must be in [0, {len(vertices) - 1}], got [{faces.min()}, {faces.max()}]")
+    for name, uv in mesh_uv_sets(mesh).items():
+        finite = np.isfinite(uv).all(axis=1)
+        if not finite.all():
+            bad = int(np.argwhere(~finite)[0, 0])
+            raise ValueError(f"{prefix} UV set {name!r} is not finite at {int((~finite).sum())} vertices, "
+                             f"e.g. vertex {bad}: {uv[bad].tolist()}")
     return vertices, faces
 
 

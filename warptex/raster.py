@@ -8,6 +8,7 @@ import numpy as np
 import trimesh
 import warp as wp
 
+from warptex._validate import checked_device
 from warptex.camera import Camera
 from warptex.gbuffer import GBuffer
 from warptex.kernels import raster as kr
@@ -64,7 +65,7 @@ def rasterize(mesh, camera, *, device=None) -> GBuffer:
     trimesh_mesh = load_mesh(mesh) if isinstance(mesh, (str, os.PathLike)) else mesh
     vertices, faces, normals = _checked_mesh(trimesh_mesh)
     uv_sets = mesh_uv_sets(trimesh_mesh)
-    device = wp.get_device(device)
+    device = checked_device(f"{func}()", device)
     shape = (len(cameras), *resolution)  # the kernels' (views, H, W)
 
     # Zero-area triangles have no plane (no normal, no differentials): they are left out of the

@@ -242,6 +242,10 @@ def _run(args: argparse.Namespace) -> list:
     from warptex._warp import init_quietly
 
     init_quietly()  # no start-up banner or compile log, no "no CUDA driver" warning on a CPU machine
+    if args.device is not None:
+        from warptex._validate import checked_device
+
+        checked_device("--device", args.device)  # before any work: which devices there are
     if args.command == "fit":
         from warptex.apps.fit_demo import run_fit
 
