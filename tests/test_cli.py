@@ -229,3 +229,41 @@ def test_a_missing_cuda_device_says_which_devices_there_are(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
     with pytest.raises(ValueError, match=r"rasterize\(\): device 'cuda:0' does not exist: no CUDA device is available here"):
         wt.rasterize(trimesh.creation.box(), wt.look_at((0, 0, 5), (0, 0, 0), resolution=(8, 8)), device="cuda:0")
+
+
+def test_a_top_down_view_and_an_eye_typed_with_a_space(tmp_path, monkeypatch):
+    """Issue 34: ``--eye 0,10,0 --target 0,0,0`` failed (up parallel to the view) and
+    ``--eye -30,25,40`` (a space, not ``=``) failed with "expected one argument"."""
+    import warptex.apps.render as render
+
+    cameras = []
+    real = render.rasterize
+    monkeypatch.setattr(render, "rasterize", lambda mesh, camera, **kw: cameras.append(camera) or real(mesh, camera, **kw))
+    assert main(["--out", str(tmp_path / "top"), "--eye", "0,10,0", "--target", "0,0,0", *SMALL]) == 0
+    np.testing.assert_allclose(cameras[-1].up, [0, 0, -1], atol=1e-12)
+    assert main(["render", "--out", str(tmp_path / "space"), "--eye", "-30,25,40", "--target", "-1.5,0,0", *SMALL]) == 0
+    np.testing.assert_allclose(cameras[-1].eye, [-30, 25, 40])
+    assert main(["--out", str(tmp_path / "up"), "--eye", "0,10,0", "--target", "0,0,0", "--up", "1,0,0", *SMALL]) == 0
+    np.testing.assert_allclose(cameras[-1].up, [1, 0, 0], atol=1e-12)
+
+
+def test_tiling_help_says_what_it_means_for_each_kind_of_mesh(capsys):
+    with pytest.raises(SystemExit):
+        main(["render", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for case in ("Default terrain: layer repeats per world unit (default 1/6", "A mesh with UVs: repeats across UV0",
+                 "A mesh without UVs (mapped triplanar): repeats across the mesh's largest extent (default 8)"):
+        assert case in text, case
+
+
+def test_the_layer_of_an_exr_texture_is_chosen_on_the_command_line(tmp_path, capsys):
+    planes = {f"{layer}.{c}": np.full((8, 8), v, np.float32) for layer, v in (("diffuse", 0.8), ("specular", 0.1)) for c in "RGB"}
+    io.write_exr(tmp_path / "layers.exr", planes)
+    mesh = _obj(tmp_path / "tri.obj", "v -1 -1 0\nv 1 -1 0\nv 0 1 0\nf 1 2 3\n")
+    args = ["--mesh", str(mesh), "--texture", str(tmp_path / "layers.exr"), "--eye", "0,0,3", "--target", "0,0,0", *SMALL]
+    assert main(["--out", str(tmp_path / "none"), *args]) == 1
+    assert "holds several layers ['diffuse', 'specular'] and no default one; choose one with layer= (warptex render: --texture-layer)" in capsys.readouterr().err
+    assert main(["--out", str(tmp_path / "out"), *args, "--texture-layer", "specular"]) == 0
+    albedo = io.read_image(tmp_path / "out" / "albedo.png")
+    centre = albedo[12, 16]
+    np.testing.assert_allclose(centre, 0.1, atol=0.01)

@@ -63,9 +63,15 @@ class Camera:
         return np.broadcast_to(self.eye, (h, w, 3)).copy(), self.forward + offset
 
 
+#: The up vector when none is given: world +Y; looking straight down (or up) along it, -Z (or +Z),
+#: so that a top-down view has +X to the right and -Z (a map's north, glTF's back) at the top.
+DEFAULT_UP = (0.0, 1.0, 0.0)
+
+
 def _frame(func: str, eye, target, up):
+    fallback = up is None
     vectors = []
-    for name, value in (("eye", eye), ("target", target), ("up", up)):
+    for name, value in (("eye", eye), ("target", target), ("up", DEFAULT_UP if fallback else up)):
         try:
             v = np.asarray(value, np.float64).reshape(-1)
         except (TypeError, ValueError):  # strings, objects, ragged sequences
@@ -79,7 +85,12 @@ def _frame(func: str, eye, target, up):
         raise ValueError(f"{func}(): eye and target must differ, both are {eye.tolist()}")
     forward /= np.linalg.norm(forward)
     right = np.cross(forward, up)
-    if np.linalg.norm(right) < 1e-9 * max(np.linalg.norm(up), 1e-300):
+    if fallback and np.linalg.norm(right) < 1e-9:  # looking along +-Y
+        up = np.array([0.0, 0.0, -1.0 if forward[1] < 0 else 1.0])
+        right = np.cross(forward, up)
+    if np.linalg.norm(up) == 0:
+        raise ValueError(f"{func}(): up must not be zero, got {up.tolist()}")
+    if np.linalg.norm(right) < 1e-9 * np.linalg.norm(up):
         raise ValueError(f"{func}(): up {up.tolist()} must not be parallel to the view direction {forward.tolist()}")
     right /= np.linalg.norm(right)
     return eye, forward, right, np.cross(right, forward)
@@ -96,12 +107,13 @@ def checked_resolution(func: str, resolution) -> tuple[int, int]:
     return int(h), int(w)
 
 
-def look_at(eye, target, up=(0.0, 1.0, 0.0), fov_y: float = 45.0, resolution=(512, 512)) -> Camera:
+def look_at(eye, target, up=None, fov_y: float = 45.0, resolution=(512, 512)) -> Camera:
     """A pinhole camera at ``eye`` looking at ``target``.
 
     Args:
         eye, target: world-space points, 3 numbers each.
-        up: world direction that appears upward in the image (not parallel to the view).
+        up: world direction that appears upward in the image (not parallel to the view); ``None``:
+            +Y, or, for a view straight down (up) the Y axis, -Z (+Z): see :data:`DEFAULT_UP`.
         fov_y: vertical field of view in degrees, in ``(0, 180)``.
         resolution: ``(height, width)`` in pixels.
     """
@@ -112,8 +124,9 @@ def look_at(eye, target, up=(0.0, 1.0, 0.0), fov_y: float = 45.0, resolution=(51
     return Camera(eye, forward, right, cam_up, checked_resolution("look_at", resolution), fov_y=fov)
 
 
-def orthographic(eye, target, up=(0.0, 1.0, 0.0), height: float = 2.0, resolution=(512, 512)) -> Camera:
-    """An orthographic camera at ``eye`` looking at ``target``, seeing ``height`` world units vertically."""
+def orthographic(eye, target, up=None, height: float = 2.0, resolution=(512, 512)) -> Camera:
+    """An orthographic camera at ``eye`` looking at ``target``, seeing ``height`` world units
+    vertically; ``up`` as :func:`look_at` takes it."""
     eye, forward, right, cam_up = _frame("orthographic", eye, target, up)
     extent = as_float("orthographic", "height", height)
     if extent <= 0:

@@ -72,11 +72,20 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--out", default="out", help="output folder (default: %(default)s)")
     render.add_argument("--mesh", default=None, help="mesh file: OBJ, PLY, STL, GLB/GLTF... (default: procedural terrain)")
     render.add_argument("--texture", default=None, help="texture image (default: the mesh's own, else procedural ground)")
+    render.add_argument("--texture-layer", default=None, metavar="NAME", help="the layer of an EXR texture to read, e.g. diffuse for diffuse.R, diffuse.G... (default: its only or unprefixed layer)")
     render.add_argument("--resolution", type=_resolution, default=(512, 512), help="image size HxW (default: 512x512)")
     render.add_argument("--eye", type=_vector, default=None, help="camera position x,y,z (default: framing view)")
     render.add_argument("--target", type=_vector, default=None, help="camera look-at point x,y,z (default: mesh centre)")
+    render.add_argument("--up", type=_vector, default=None, help="world direction shown upward x,y,z (default: 0,1,0; 0,0,-1 when looking straight down)")
     render.add_argument("--fov", type=_number(0.0, 180.0), default=45.0, help="vertical field of view in degrees (default: 45)")
-    render.add_argument("--tiling", type=_number(0.0, None), default=None, help="texture repeats across UV0 (default: 8, or 1 for an embedded texture)")
+    render.add_argument(
+        "--tiling",
+        type=_number(0.0, None),
+        default=None,
+        help="how often the texture repeats; its unit depends on the mesh. Default terrain: layer repeats per world unit "
+        "(default 1/6, one repeat per 6 units). A mesh with UVs: repeats across UV0 (default 1 with the mesh's own "
+        "texture, else 8). A mesh without UVs (mapped triplanar): repeats across the mesh's largest extent (default 8)",
+    )
     render.add_argument("--seed", type=int, default=0, help="terrain and procedural texture seed (default: 0)")
     render.add_argument(
         "--filter", choices=("nearest", "bilinear", "trilinear", "anisotropic"), default="anisotropic", help="texture filter (default: %(default)s)"
@@ -209,7 +218,7 @@ def version() -> str:
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; the exit status: 0, 1 on an error (one line on stderr, no files
     written), 2 on bad options (argparse), 130 on Ctrl-C."""
-    argv = list(sys.argv[1:] if argv is None else argv)
+    argv = _joined_vectors(list(sys.argv[1:] if argv is None else argv))
     if not argv or argv[0] not in COMMANDS + ("-h", "--help", "--version"):
         argv.insert(0, "render")  # the default command; its options may be given without naming it
     parser = build_parser()
@@ -231,6 +240,21 @@ def main(argv: list[str] | None = None) -> int:
     for path in paths:
         print(f"wrote {path}")
     return 0
+
+
+VECTOR_OPTIONS = ("--eye", "--target", "--up")
+
+
+def _joined_vectors(argv: list[str]) -> list[str]:
+    """``--eye -30,25,40`` as ``--eye=-30,25,40``: argparse takes a value that starts with ``-``
+    and is not one plain number for an option, and would report "expected one argument"."""
+    out = []
+    for word in argv:
+        if out and out[-1] in VECTOR_OPTIONS and word[:1] == "-" and (word[1:2].isdigit() or word[1:2] == "."):
+            out[-1] = f"{out[-1]}={word}"
+        else:
+            out.append(word)
+    return out
 
 
 def _one_line(err: BaseException) -> str:
@@ -262,9 +286,11 @@ def _run(args: argparse.Namespace) -> list:
         args.out,
         mesh_path=args.mesh,
         texture_path=args.texture,
+        texture_layer=args.texture_layer,
         resolution=args.resolution,
         eye=args.eye,
         target=args.target,
+        up=args.up,
         fov_y=args.fov,
         tiling=args.tiling,
         seed=args.seed,

@@ -95,9 +95,11 @@ def run_render(
     *,
     mesh_path=None,
     texture_path=None,
+    texture_layer: str | None = None,
     resolution=(512, 512),
     eye=None,
     target=None,
+    up=None,
     fov_y: float = 45.0,
     tiling: float | None = None,
     seed: int = 0,
@@ -111,12 +113,16 @@ def run_render(
         out_dir: output folder (created if missing).
         mesh_path: a mesh file; ``None`` renders the procedural terrain (:func:`warptex.scenes.terrain.terrain`).
         texture_path: the texture; default: the mesh's embedded texture, else a procedural ground texture.
+        texture_layer: the layer of an EXR texture to read (:func:`warptex.io.read_image`'s ``layer``).
         resolution: ``(height, width)``.
         eye, target: camera position and look-at point (default: a three-quarter view framing the mesh).
+        up: the world direction shown upward (default: +Y, or -Z looking straight down; see
+            :func:`warptex.camera.look_at`).
         fov_y: vertical field of view, degrees.
-        tiling: texture repeats across UV0 (or, triplanar, across the mesh's largest extent without UVs);
-            default 1 with an embedded texture, else 8. For the default terrain: layer repeats per
-            world unit (default 1/6).
+        tiling: how often the texture repeats, in a unit that depends on the mesh. The default
+            terrain: layer repeats per world unit (default 1/6, one repeat per 6 units). A mesh with
+            UVs: repeats across UV0 (default 1 with its embedded texture, else 8). A mesh without
+            UVs, mapped triplanar: repeats across the mesh's largest extent (default 8).
         seed: terrain and procedural texture seed.
         filter: the texture filter (:class:`~warptex.Filter`); default anisotropic, which keeps
             surfaces seen at grazing angles (the distant terrain) sharp where trilinear blurs them.
@@ -129,6 +135,8 @@ def run_render(
     from tqdm import tqdm  # a progress bar over the stages: the first run compiles kernels for seconds
 
     check_output_folder("run_render", out_dir)
+    if texture_layer is not None and texture_path is None:
+        raise ValueError(f"run_render(): texture_layer={texture_layer!r} names a layer of the texture file, but no texture_path is given")
     sampler = Sampler(filter=filter)
     h, w = resolution = checked_resolution("run_render", resolution)
     check_memory("run_render", f"a {h}x{w} render", RENDER_BYTES[0] + RENDER_BYTES[1] * h * w)
@@ -140,12 +148,12 @@ def run_render(
     stages.set_postfix_str("mesh")
     mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
     framing = terrain_camera(resolution, fov_y) if mesh_path is None else default_camera(mesh, resolution, fov_y)
-    if eye is None and target is None:
+    if eye is None and target is None and up is None:
         camera = framing
     else:
         eye = framing.eye if eye is None else eye
         target = mesh.bounds.mean(axis=0) if target is None else target
-        camera = look_at(eye, target, fov_y=fov_y, resolution=resolution)
+        camera = look_at(eye, target, up, fov_y=fov_y, resolution=resolution)
     stages.update()
 
     stages.set_postfix_str("rasterise")
@@ -157,7 +165,7 @@ def run_render(
         albedo = _terrain_albedo(mesh, g, tiling, seed, sampler, device)
     else:
         embedded = _embedded_texture(mesh) if texture_path is None else None
-        image = io.read_image(texture_path) if texture_path is not None else embedded if embedded is not None else noise_texture(seed=seed)
+        image = io.read_image(texture_path, layer=texture_layer) if texture_path is not None else embedded if embedded is not None else noise_texture(seed=seed)
         tiling = (1.0 if embedded is not None else 8.0) if tiling is None else float(tiling)
         albedo = _albedo(mesh, g, Texture(image, device=device), tiling, sampler, device)
     covered = g.mask.numpy()[..., None] > 0
