@@ -50,7 +50,7 @@ def all_kernels(layer_counts=(4,)) -> list:
     import importlib
 
     kernels = []
-    for name in ("sampling", "stochastic", "triplanar", "layers", "atlas", "raster", "fit"):
+    for name in ("sampling", "stochastic", "triplanar", "layers", "atlas", "raster", "resolve", "fit"):
         module = importlib.import_module(f"{__name__}.{name}")
         kernels += [v for v in vars(module).values() if isinstance(v, wp.Kernel)]
     layers = importlib.import_module(f"{__name__}.layers")

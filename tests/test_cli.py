@@ -96,7 +96,7 @@ def test_a_resolution_beyond_memory_is_refused_up_front(tmp_path, capsys, monkey
     monkeypatch.setattr(output, "_available_memory", lambda: 2 * 2**30)
     assert main(["--out", str(tmp_path / "out"), "--resolution", "100000x100000"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == ["warptex: error: run_render(): a 100000x100000 render needs about 2980.5 GiB of memory, but 2.0 GiB is available; use a smaller resolution"]
+    assert err == ["warptex: error: run_render(): a 100000x100000 render of 4 samples per pixel needs about 11921.2 GiB of memory, but 2.0 GiB is available; use a smaller resolution or fewer samples"]
     assert main(["fit", "--out", str(tmp_path / "out"), "--resolution", "20000x20000"]) == 1
     assert "run_fit(): a fit of 2 20000x20000 view(s) needs about" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()

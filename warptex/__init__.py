@@ -55,6 +55,7 @@ from warptex.gbuffer_io import load_gbuffer, save_gbuffer
 from warptex.histogram import Histogram, prepare_histogram
 from warptex.layers import Projection, splat
 from warptex.options import Address, Filter, Method, Sampler, Stochastic
+from warptex.resolve import resolve
 from warptex.sampling import sample
 from warptex.stochastic import hex_taps, stochastic
 from warptex.texture import Texture, TextureArray, mip_sizes
@@ -90,6 +91,7 @@ __all__ = [
     "precompile",
     "prepare_histogram",
     "rasterize",
+    "resolve",
     "sample",
     "save_gbuffer",
     "set_num_threads",

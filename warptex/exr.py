@@ -66,6 +66,27 @@ def exr_channel_names(path) -> tuple[str, ...]:
     return _channel_names(_checked_input_path(path, "exr_channel_names"), "exr_channel_names")
 
 
+# Header attributes every file has (OpenEXR writes them): not "extra" ones.
+_STANDARD_ATTRIBUTES = {"channels", "compression", "dataWindow", "displayWindow", "lineOrder", "pixelAspectRatio",
+                        "screenWindowCenter", "screenWindowWidth", "type", "name", "version", "chunkCount", "tiles"}
+
+
+def exr_attributes(path) -> dict:
+    """The extra header attributes of an EXR file's first part (those beyond OpenEXR's standard
+    ones, e.g. what :func:`write_exr`'s ``attributes`` wrote), read from its header only.
+
+    Raises:
+        FileNotFoundError: if the file does not exist.
+        ValueError: if it is not a readable OpenEXR file.
+    """
+    path = _checked_input_path(path, "exr_attributes")
+    try:
+        with OpenEXR.File(path, header_only=True) as exr:  # closing it empties its header: copy first
+            return {k: v for k, v in exr.header().items() if k not in _STANDARD_ATTRIBUTES}
+    except (RuntimeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"exr_attributes(): cannot decode '{path}' as an OpenEXR image: {exc}") from None
+
+
 def _channel_names(path: str, fn: str) -> tuple[str, ...]:
     try:
         with OpenEXR.File(path, header_only=True) as exr:
@@ -74,7 +95,7 @@ def _channel_names(path: str, fn: str) -> tuple[str, ...]:
         raise ValueError(f"{fn}(): cannot decode '{path}' as an OpenEXR image: {exc}") from None
 
 
-def write_exr(path, image, *, channel_names: Sequence[str] | None = None, half: bool = False) -> None:
+def write_exr(path, image, *, channel_names: Sequence[str] | None = None, half: bool = False, attributes: Mapping | None = None) -> None:
     """Write an OpenEXR file (ZIP compression), atomically, creating missing parent directories.
 
     Args:
@@ -87,6 +108,8 @@ def write_exr(path, image, *, channel_names: Sequence[str] | None = None, half: 
             with a dict.
         half: If True, store float16 (values beyond +-65504 become +-inf);
             otherwise float32.
+        attributes: Extra header attributes ``{name: value}`` (ints, floats,
+            strings, float64 ``(3,)`` arrays...), read back by :func:`exr_attributes`.
 
     Raises:
         ValueError: On a wrong rank, empty image, mismatched channel sizes,
@@ -124,6 +147,10 @@ def write_exr(path, image, *, channel_names: Sequence[str] | None = None, half: 
         dtype = np.float16 if half else np.float32
         channels = {name: np.ascontiguousarray(p[..., 0], dtype=dtype) for name, p in zip(names, planes)}
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    for key, value in (attributes or {}).items():
+        if not isinstance(key, str) or key in header or key in _STANDARD_ATTRIBUTES:
+            raise ValueError(f"write_exr(): attribute names must be str and not standard ones, got {key!r}")
+        header[key] = value
     with _atomic_output(path) as tmp:
         OpenEXR.File(header, channels).write(tmp)
 

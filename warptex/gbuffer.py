@@ -49,6 +49,14 @@ class GBuffer:
             and the tangent (``vec4``: unit xyz orthogonal to ``normal``, bitangent sign in w).
         camera: the camera that produced it (``None`` when loaded without one; a tuple of cameras
             for a batch).
+        samples: samples per image pixel (1, 4, 9, ...): a supersampled G-buffer
+            (:func:`~warptex.rasterize` with ``samples=``) holds each pixel's stratified samples in
+            an ``s × s`` block (``s² = samples``), so its arrays are ``s``-times the image's size;
+            :func:`~warptex.resolve` averages a technique's output over the blocks.
+        origin: float64 ``(3,)`` world point that ``position`` is relative to (camera-relative
+            rendering, for scenes far from the world origin): the world position is
+            ``origin + position`` (:meth:`world_position`). Techniques that project the position
+            (triplanar, world-XZ and triplanar layers) add it exactly, in float64.
     """
 
     position: wp.array
@@ -61,6 +69,21 @@ class GBuffer:
     position_dy: wp.array
     uv_sets: dict[str, dict[str, wp.array]] = field(default_factory=dict)
     camera: Camera | tuple[Camera, ...] | None = None
+    samples: int = 1
+    origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self):
+        self.origin = np.array(self.origin, np.float64).reshape(-1)
+        if self.origin.shape != (3,) or not np.isfinite(self.origin).all():
+            raise ValueError(f"GBuffer: origin must be 3 finite numbers, got {self.origin.tolist()}")
+        root = math.isqrt(self.samples) if isinstance(self.samples, (int, np.integer)) and not isinstance(self.samples, bool) and self.samples > 0 else 0
+        if root == 0 or root * root != self.samples:
+            raise ValueError(f"GBuffer: samples must be a square number (1, 4, 9, ...), got {self.samples!r}")
+
+    def world_position(self) -> np.ndarray:
+        """World-space positions as float64 NumPy, ``origin + position`` (0 where uncovered)."""
+        p = self.position.numpy().astype(np.float64)
+        return np.where(self.mask.numpy()[..., None] > 0, p + self.origin, 0.0)
 
     @property
     def resolution(self) -> tuple[int, ...]:
@@ -86,7 +109,7 @@ class GBuffer:
         arrays = {name: getattr(self, name)[int(k)] for name in FIELDS}
         sets = {s: {f: a[int(k)] for f, a in fields.items()} for s, fields in self.uv_sets.items()}
         camera = self.camera[int(k)] if isinstance(self.camera, tuple) else self.camera
-        return GBuffer(**arrays, uv_sets=sets, camera=camera)
+        return GBuffer(**arrays, uv_sets=sets, camera=camera, samples=self.samples, origin=self.origin)
 
     @property
     def device(self):
@@ -126,14 +149,14 @@ class GBuffer:
         return out
 
     @classmethod
-    def empty(cls, resolution, *, uv_sets=(), camera=None, device=None) -> "GBuffer":
+    def empty(cls, resolution, *, uv_sets=(), camera=None, samples=1, origin=(0.0, 0.0, 0.0), device=None) -> "GBuffer":
         """A G-buffer where no pixel is covered (the background values)."""
         device = wp.get_device(device)
         arrays = {name: wp.zeros(resolution, dtype=dtype, device=device) for name, dtype in FIELDS.items()}
         arrays["depth"].fill_(float("inf"))
         arrays["triangle"].fill_(-1)
         sets = {s: {k: wp.zeros(resolution, dtype=t, device=device) for k, t in UV_FIELDS.items()} for s in uv_sets}
-        return cls(**arrays, uv_sets=sets, camera=camera)
+        return cls(**arrays, uv_sets=sets, camera=camera, samples=samples, origin=origin)
 
     @classmethod
     def from_arrays(
@@ -153,6 +176,8 @@ class GBuffer:
         triangle=None,
         flip_y: bool = False,
         camera: Camera | None = None,
+        origin=(0.0, 0.0, 0.0),
+        samples: int = 1,
         device=None,
     ) -> "GBuffer":
         """A G-buffer from another renderer's per-pixel arrays (nvdiffrast, pytorch3d, Blender
@@ -183,6 +208,9 @@ class GBuffer:
             flip_y: the arrays' row 0 is the *bottom* row (OpenGL / nvdiffrast): rows are
                 reversed, and ``position_dy``/``uv_dy`` negated (their "y" pointed up).
             camera: kept on the G-buffer; gives the default depth.
+            origin: the world point ``position`` is relative to (float64; see :class:`GBuffer`).
+            samples: samples per pixel when the arrays hold ``s × s`` blocks of stratified
+                samples per image pixel (:class:`GBuffer`); 1 for one per pixel.
             device: Warp device of the arrays.
 
         Uncovered pixels get the background values (zeros, ``depth = inf``, ``triangle = -1``).
@@ -224,7 +252,7 @@ class GBuffer:
         fields["normal"] = _unit_rows(fields["normal"])
         fields["geometric_normal"] = fields["normal"] if fields["geometric_normal"] is None else _unit_rows(fields["geometric_normal"])
         if fields["depth"] is None:
-            view = (p - camera.eye) @ camera.forward if camera is not None else np.ones((h, w))
+            view = (p + origin - camera.eye) @ camera.forward if camera is not None else np.ones((h, w))
             fields["depth"] = np.asarray(view, np.float32)[..., None]
         if fields["triangle"] is None:
             fields["triangle"] = np.zeros((h, w, 1))
@@ -251,7 +279,7 @@ class GBuffer:
         fields["mask"] = covered[..., None].astype(np.float32)
         arrays = {name: to_warp(name, fields[name], dtype) for name, dtype in FIELDS.items()}
         sets = {"uv0": {k: to_warp(k, uv_fields[k], t) for k, t in UV_FIELDS.items()}} if uv_fields["uv"] is not None else {}
-        return cls(**arrays, uv_sets=sets, camera=camera)
+        return cls(**arrays, uv_sets=sets, camera=camera, samples=samples, origin=origin)
 
 
 def screen_derivatives(values: np.ndarray, covered: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -20,7 +20,7 @@ import numpy as np
 from PIL import Image
 
 from warptex._files import _as_image, _atomic_output, _checked_input_path, _checked_output_path, _fspath, process_alive  # noqa: F401 (re-exported)
-from warptex.exr import EXR_MAGIC, _read_exr, exr_channel_names, exr_layers, read_exr, write_exr
+from warptex.exr import EXR_MAGIC, _read_exr, exr_attributes, exr_channel_names, exr_layers, read_exr, write_exr
 
 __all__ = [
     "srgb_to_linear",
@@ -29,6 +29,7 @@ __all__ = [
     "read_exr",
     "exr_channel_names",
     "exr_layers",
+    "exr_attributes",
     "write_png",
     "write_exr",
 ]

@@ -50,6 +50,14 @@ def _number(low: float, high: float | None):
     return parse
 
 
+def _square(text: str) -> int:
+    """An argparse type: a square number >= 1 (samples per pixel)."""
+    value = _count(1)(text)
+    if math.isqrt(value) ** 2 != value:
+        raise argparse.ArgumentTypeError(f"must be a square number of samples per pixel (1, 4, 9, 16, ...), got {value}")
+    return value
+
+
 def _vector(text: str) -> tuple[float, float, float]:
     try:
         x, y, z = (float(v) for v in text.split(","))
@@ -87,6 +95,7 @@ def build_parser() -> argparse.ArgumentParser:
         "texture, else 8). A mesh without UVs (mapped triplanar): repeats across the mesh's largest extent (default 8)",
     )
     render.add_argument("--seed", type=int, default=0, help="terrain and procedural texture seed (default: 0)")
+    render.add_argument("--samples", type=_square, default=4, help="stratified samples per pixel, 1, 4, 9, 16... (anti-aliasing; default: 4)")
     render.add_argument(
         "--filter", choices=("nearest", "bilinear", "trilinear", "anisotropic"), default="anisotropic", help="texture filter (default: %(default)s)"
     )
@@ -294,6 +303,7 @@ def _run(args: argparse.Namespace) -> list:
         fov_y=args.fov,
         tiling=args.tiling,
         seed=args.seed,
+        samples=args.samples,
         filter=args.filter,
         device=args.device,
     )

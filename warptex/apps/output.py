@@ -81,7 +81,7 @@ def remove_stale_staging(out: Path) -> list[Path]:
     return removed
 
 
-def check_memory(func: str, what: str, needed_bytes: float) -> None:
+def check_memory(func: str, what: str, needed_bytes: float, hint: str = "use a smaller resolution") -> None:
     """Raise ``MemoryError`` naming ``what`` when a job needs more memory than this machine has
     available (Linux: ``MemAvailable``; elsewhere the allocation itself reports it), instead of
     letting the job run the machine out of memory or fail deep inside an allocation."""
@@ -89,7 +89,7 @@ def check_memory(func: str, what: str, needed_bytes: float) -> None:
     if available is not None and needed_bytes > available:
         raise MemoryError(
             f"{func}(): {what} needs about {needed_bytes / 2**30:.1f} GiB of memory, but "
-            f"{available / 2**30:.1f} GiB is available; use a smaller resolution"
+            f"{available / 2**30:.1f} GiB is available; {hint}"
         )
 
 

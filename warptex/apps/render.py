@@ -3,12 +3,14 @@
 The default terrain is textured with four splat-blended layers (grass, gravel, rock, snow; see
 :mod:`warptex.scenes.material`), each mapped triplanar, height-blended. Other meshes get one
 texture: in their UV0 when they have UVs (their own embedded base-colour texture when they carry
-one), else triplanar. Everything is trilinear-filtered with the LOD from the G-buffer's
-derivatives and Lambert-lit.
+one), else triplanar. Every pixel takes several stratified samples (``samples``), each filtered
+anisotropically at its own footprint, lit by a key light and a sky fill
+(:func:`warptex.apps.shade.sun_and_sky`), and averaged with its coverage as alpha.
 """
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -24,11 +26,12 @@ from warptex.kernels import triplanar as kt
 from warptex.camera import Camera, checked_resolution, look_at
 from warptex.gbuffer import GBuffer, load_mesh, rasterize
 from warptex.gbuffer_io import save_gbuffer
+from warptex.resolve import resolve
 from warptex.sampling import sample
 from warptex.apps.output import check_memory, check_output_folder, output_set
-from warptex.apps.shade import SKY, lambert, to_rgb
+from warptex.apps.shade import SKY, sun_and_sky, to_rgb
 from warptex.scenes import TERRAIN_GRID, terrain_camera
-from warptex.scenes.terrain import terrain
+from warptex.scenes.terrain import terrain, terrain_normal_grid
 from warptex.texture import Texture, TextureArray
 from warptex.layers import splat
 from warptex.options import Filter, Sampler
@@ -36,9 +39,12 @@ from warptex.scenes.material import LAYER_NAMES, noise_texture, terrain_layers, 
 from warptex.triplanar import triplanar
 
 
-#: Peak memory of a render, measured (peak RSS, 512² to 2048²): ~200 MB plus ~260 B per pixel
+#: Peak memory of a render, measured (peak RSS, 512² to 2048²): ~200 MB plus ~260 B per sample
 #: (G-buffer, mip chains, images); with a margin.
 RENDER_BYTES = (300e6, 320.0)
+#: Samples per pixel of a render (2 × 2, stratified): anti-aliased silhouettes and texture detail
+#: with the cold start of ``warptex render`` inside 10 s on two cores.
+DEFAULT_SAMPLES = 4
 
 
 def default_camera(mesh: trimesh.Trimesh, resolution, fov_y: float = 45.0) -> Camera:
@@ -60,14 +66,31 @@ def _albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, texture: Texture, tiling: f
     return to_rgb(triplanar(gbuffer, texture, tiling=scale, sampler=sampler, device=device))
 
 
+#: Splat-map texels per terrain grid cell in the preview: smooth layer borders at the default view.
+SPLAT_UPSAMPLE = 4
+
+
 def _terrain_albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, tiling: float | None, seed: int, sampler: Sampler, device) -> np.ndarray:
     """The default terrain's splat material: layers repeat ``tiling`` times per world unit (default 1/6)."""
-    maps = terrain_splat_maps(mesh, TERRAIN_GRID)
+    maps = terrain_splat_maps(mesh, TERRAIN_GRID, upsample=SPLAT_UPSAMPLE)
     layers = terrain_layers(seed=seed, device=device)
     tiling = 1.0 / 6.0 if tiling is None else float(tiling)
     maps = TextureArray(maps[None], mipmaps=False, device=device)
     colour = splat(gbuffer, layers, maps, tiling=tiling, projection="triplanar", height_blend=0.2, sampler=sampler, device=device)
     return to_rgb(colour)
+
+
+def _smooth_terrain_normals(mesh: trimesh.Trimesh, gbuffer: GBuffer) -> None:
+    """Replace the terrain G-buffer's shading normals by :func:`terrain_normal_grid`'s, looked up
+    bilinearly in UV0 (cells, not triangles: no sawtooth on the cliffs); the geometry stays."""
+    rows, cols = TERRAIN_GRID
+    grid = Texture(terrain_normal_grid(mesh, TERRAIN_GRID), mipmaps=False, device=gbuffer.device)
+    uv = gbuffer.uv("uv0")["uv"].numpy()
+    texel = (uv * [cols - 1, rows - 1] + 0.5) / [cols, rows]  # vertex (r, c) onto texel (r, c)'s centre
+    n = sample(grid, texel.astype(np.float32), sampler=Sampler(filter="bilinear", address="clamp"), device=gbuffer.device).numpy()
+    length = np.linalg.norm(n, axis=-1, keepdims=True)
+    covered = gbuffer.mask.numpy()[..., None] > 0
+    gbuffer.normal.assign(np.where(covered & (length > 0), n / np.maximum(length, 1e-30), gbuffer.normal.numpy()).astype(np.float32))
 
 
 def _embedded_texture(mesh: trimesh.Trimesh) -> np.ndarray | None:
@@ -86,7 +109,7 @@ def _kernels(terrain_material: bool) -> list:
     """The kernels a render runs: rasterisation, mip chains, and the splat or sampling ones."""
     used = [kr.raster_kernel, ks.downsample_kernel]
     if terrain_material:
-        return used + [kl.splat_kernels(kl.capacity(len(LAYER_NAMES)))["forward"]]
+        return used + [ks.sample_kernel, kl.splat_kernels(kl.capacity(len(LAYER_NAMES)))["forward"]]
     return used + [ks.sample_kernel, kt.triplanar_kernel]
 
 
@@ -103,6 +126,7 @@ def run_render(
     fov_y: float = 45.0,
     tiling: float | None = None,
     seed: int = 0,
+    samples: int = DEFAULT_SAMPLES,
     filter: Filter | str = Filter.ANISOTROPIC,
     progress: bool | None = None,
     device=None,
@@ -124,6 +148,10 @@ def run_render(
             UVs: repeats across UV0 (default 1 with its embedded texture, else 8). A mesh without
             UVs, mapped triplanar: repeats across the mesh's largest extent (default 8).
         seed: terrain and procedural texture seed.
+        samples: stratified samples per pixel, 1, 4, 9, 16, ... (:func:`warptex.rasterize`): the
+            image is anti-aliased, silhouettes get fractional coverage (``render.exr``'s alpha),
+            and textures are filtered at one sample's footprint. ``gbuffer.exr`` holds one sample
+            per pixel (its centre), the size of the images.
         filter: the texture filter (:class:`~warptex.Filter`); default anisotropic, which keeps
             surfaces seen at grazing angles (the distant terrain) sharp where trilinear blurs them.
         progress: show a progress bar (``None``: only on a terminal).
@@ -139,12 +167,15 @@ def run_render(
         raise ValueError(f"run_render(): texture_layer={texture_layer!r} names a layer of the texture file, but no texture_path is given")
     sampler = Sampler(filter=filter)
     h, w = resolution = checked_resolution("run_render", resolution)
-    check_memory("run_render", f"a {h}x{w} render", RENDER_BYTES[0] + RENDER_BYTES[1] * h * w)
+    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1 or math.isqrt(int(samples)) ** 2 != samples:
+        raise ValueError(f"run_render(): samples must be a square number of samples per pixel (1, 4, 9, 16, ...), got {samples!r}")
+    check_memory("run_render", f"a {h}x{w} render of {samples} samples per pixel", RENDER_BYTES[0] + RENDER_BYTES[1] * h * w * samples, "use a smaller resolution or fewer samples")
     if tiling is not None and not (np.isfinite(tiling) and tiling > 0):
         raise ValueError(f"run_render(): tiling must be a finite number > 0, got {tiling!r}")
     stages = tqdm(total=5, desc="render", unit="stage", disable=False if progress else None if progress is None else True)
+    terrain_material = mesh_path is None and texture_path is None
     stages.set_postfix_str("kernels")
-    preload(_kernels(mesh_path is None and texture_path is None), device)  # a cold start compiles them side by side
+    preload(_kernels(terrain_material), device)  # a cold start compiles them side by side
     stages.set_postfix_str("mesh")
     mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
     framing = terrain_camera(resolution, fov_y) if mesh_path is None else default_camera(mesh, resolution, fov_y)
@@ -157,34 +188,43 @@ def run_render(
     stages.update()
 
     stages.set_postfix_str("rasterise")
-    g = rasterize(mesh, camera, device=device)
+    g = rasterize(mesh, camera, samples=samples, device=device)
+    if mesh_path is None:
+        _smooth_terrain_normals(mesh, g)
     stages.update()
 
     stages.set_postfix_str("texture")
-    if mesh_path is None and texture_path is None:
+    if terrain_material:
         albedo = _terrain_albedo(mesh, g, tiling, seed, sampler, device)
     else:
         embedded = _embedded_texture(mesh) if texture_path is None else None
         image = io.read_image(texture_path, layer=texture_layer) if texture_path is not None else embedded if embedded is not None else noise_texture(seed=seed)
         tiling = (1.0 if embedded is not None else 8.0) if tiling is None else float(tiling)
         albedo = _albedo(mesh, g, Texture(image, device=device), tiling, sampler, device)
-    covered = g.mask.numpy()[..., None] > 0
-    albedo = np.where(covered, albedo, SKY)
     stages.update()
 
     stages.set_postfix_str("shade")
-    lit = lambert(g, albedo)
+    lit = sun_and_sky(g, albedo)
+    # Premultiplied samples (0 where the mesh is missed), resolved to pixels in one launch:
+    # colours whose alpha is the pixel's coverage, so silhouettes blend with the sky.
+    covered = g.mask.numpy()[..., None]
+    normal = g.normal.numpy() * 0.5 + 0.5
+    pixels = resolve(np.concatenate([lit * covered, albedo * covered, normal * covered, covered], axis=-1), samples, device=device).numpy()
+    lit, albedo, normal, alpha = pixels[..., 0:3], pixels[..., 3:6], pixels[..., 6:9], pixels[..., 9:10]
+    centre = g if samples == 1 else rasterize(mesh, camera, device=device)  # gbuffer.exr: one sample per pixel
+    if mesh_path is None and samples != 1:
+        _smooth_terrain_normals(mesh, centre)
     stages.update()
 
     stages.set_postfix_str("write")
     names = ["render.png", "albedo.png", "normals.png", "render.exr", "gbuffer.exr"]
     with output_set(out_dir) as staging:  # all five files appear together, or none do
-        io.write_png(staging / names[0], lit)
-        io.write_png(staging / names[1], albedo)
-        io.write_png(staging / names[2], np.where(covered, g.normal.numpy() * 0.5 + 0.5, 0.0), data=True)
-        # premultiplied linear RGBA: the sky is transparent black, so it composites over anything
-        io.write_exr(staging / names[3], np.concatenate([np.where(covered, lit, 0.0), covered.astype(np.float32)], axis=-1))
-        save_gbuffer(staging / names[4], g)
+        io.write_png(staging / names[0], lit + (1.0 - alpha) * SKY)
+        io.write_png(staging / names[1], albedo + (1.0 - alpha) * SKY)
+        io.write_png(staging / names[2], normal, data=True)  # over black
+        # premultiplied linear RGBA, alpha the pixel's coverage: the sky is transparent black, so it composites over anything
+        io.write_exr(staging / names[3], np.concatenate([lit, alpha], axis=-1))
+        save_gbuffer(staging / names[4], centre)
     stages.update()
     stages.close()
     return [Path(out_dir) / name for name in names]
