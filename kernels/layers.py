@@ -53,7 +53,7 @@ import functools
 import warp as wp
 
 from . import ADJOINT_MODULE, out_of_line, specialised
-from .projection import ProjectionArgs, plane_coords, plane_footprint, plane_uv, surface_frame, triplanar_weights, u_sign
+from .projection import ProjectionArgs, plane_coords, plane_footprint, plane_uv, slope_coords, surface_frame, triplanar_weights, u_sign
 from .sampling import SamplerArgs, TexelGrad, TextureView, lod_scale_slope, read_channels, sample_footprint_derivatives, sample_lod, sample_lod_derivatives, scatter_lod, texture_footprint, write_channels
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, sample_stochastic_call, scatter_plain, scatter_stochastic
 
@@ -158,7 +158,7 @@ def layer_read_slopes(
     if params.projection == PROJECT_UV:
         lod_slope = lod_scale_slope(tex, uv0_dx, uv0_dy, t)
     else:
-        c = plane_coords(p, axis)
+        c = slope_coords(proj, p, axis)
         uv_slope = wp.vec2(c[0] * u_sign(n, axis, proj.mirror_fix), c[1])
         lod_slope = lod_scale_slope(tex, plane_coords(dpdx, axis), plane_coords(dpdy, axis), t)
     return uv_slope, lod_slope

@@ -181,7 +181,8 @@ def splat(
 
     params.face_layers = _face_layers(func, face_layers, num_layers, params.projection, device)
 
-    proj = projection_args(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kp.WEIGHTS_TRIPLANAR, device=device)
+    proj = projection_args(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kp.WEIGHTS_TRIPLANAR,
+                           origin=gbuffer.origin, address=sampler.address, device=device)  # fmt: skip
     smp = sampler_args(func, sampler, has_lod=True)
     map_smp = sampler_args(func, MAP_SAMPLER, has_lod=False)
 
