@@ -157,3 +157,23 @@ def test_the_default_view_is_from_the_front():
     camera = default_camera(box, (64, 64))
     offset = np.asarray(camera.eye) - box.bounds.mean(axis=0)
     assert offset[2] > 0 and offset[1] > 0 and offset[0] > 0
+
+
+def test_default_framing_shows_a_models_front(shared_data):
+    """Issue 34: monkey.glb was framed from high above (35°) and to the side. Its face (towards +Z)
+    is the side that shows the most triangles (298 of 48 × 48 pixels, the back of its head 112):
+    the camera now looks at the face, from 22° above and a little to the right."""
+    from warptex.gbuffer import load_mesh
+
+    camera = default_camera(load_mesh(shared_data / "meshes" / "monkey.glb"), (64, 64))
+    assert camera.forward[2] < -0.8 and -0.45 < camera.forward[1] < 0 and camera.up[1] > 0.9, (camera.forward, camera.up)
+
+
+def test_a_z_up_model_is_framed_upright():
+    """A model stored with Blender's axes (Z up, facing -Y): its detailed side is seen along +Y,
+    so it is taken to be Z-up and framed with +Z up in the picture, from the front."""
+    rock = trimesh.creation.icosphere(subdivisions=2)
+    face = trimesh.creation.icosphere(subdivisions=5)  # much denser: the "face"
+    face.vertices = face.vertices * [0.5, 0.2, 0.5] + [0.0, -0.9, 0.0]
+    camera = default_camera(trimesh.util.concatenate([rock, face]), (64, 64))
+    assert camera.forward[1] > 0.75 and camera.up[2] > 0.9, (camera.forward, camera.up)
