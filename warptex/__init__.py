@@ -48,6 +48,7 @@ _import_kernels_of_a_checkout()
 
 from warptex import fit, io
 from warptex._launch import get_num_threads, precompile, set_num_threads
+from warptex._warp import init_quietly
 from warptex.atlas import Atlas, export_index_maps, pack_atlas, splat_atlas
 from warptex.camera import Camera, look_at, orthographic
 from warptex.gbuffer import GBuffer, load_mesh, rasterize
@@ -81,6 +82,7 @@ __all__ = [
     "fit",
     "get_num_threads",
     "hex_taps",
+    "init_quietly",
     "io",
     "load_gbuffer",
     "load_mesh",

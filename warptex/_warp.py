@@ -11,9 +11,9 @@ oldest Warp release warptex supports as well):
   instance of the same struct. A threaded backward pass gives each worker copies of the kernel's
   struct arguments whose arrays accumulate their gradients privately.
 
-And :func:`init_quietly`, for the command line: Warp's native library prints a warning to the
-process's stderr on every start on a machine without a CUDA driver, which a CPU user can do
-nothing about.
+And :func:`init_quietly` (public as ``warptex.init_quietly``), for the command line and the
+examples: Warp's native library prints a warning to the process's stderr on every start on a
+machine without a CUDA driver, which a CPU user can do nothing about.
 """
 
 from __future__ import annotations
