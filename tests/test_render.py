@@ -5,6 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+import warp as wp
 
 from warptex import io
 from warptex.apps.cli import main
@@ -177,3 +178,74 @@ def test_a_z_up_model_is_framed_upright():
     face.vertices = face.vertices * [0.5, 0.2, 0.5] + [0.0, -0.9, 0.0]
     camera = default_camera(trimesh.util.concatenate([rock, face]), (64, 64))
     assert camera.forward[1] > 0.75 and camera.up[2] > 0.9, (camera.forward, camera.up)
+
+
+# -- the preview's look (issue 34 item 9) ----------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def terrain_view():
+    import warptex as wt
+    from warptex.scenes import TERRAIN_GRID, terrain_camera
+    from warptex.scenes.terrain import terrain
+
+    mesh = terrain(resolution=TERRAIN_GRID, seed=0)
+    return mesh, wt.rasterize(mesh, terrain_camera((128, 128)))
+
+
+def test_the_preview_light_has_contrast(terrain_view):
+    """Lit ÷ albedo over the default view: Lambert with 0.2 ambient was flat (median 0.85, the
+    90th percentile 2× the 10th); the key light and sky fill spread it 3× or more."""
+    from warptex.apps.shade import sun_and_sky
+
+    _, g = terrain_view
+    albedo = np.full((*g.resolution, 3), 0.5, np.float32)
+    covered = g.mask.numpy() > 0
+    for light, at_least in ((lambda: lambert(g, albedo), None), (lambda: sun_and_sky(g, albedo), 3.0)):
+        ratio = (light() / albedo)[covered].mean(axis=-1)
+        p10, p90 = np.percentile(ratio, [10, 90])
+        if at_least is None:
+            assert p90 / p10 < 2.2  # the old look, for reference
+        else:
+            assert p90 / p10 >= at_least and p10 < 0.4 and 0.7 < np.median(ratio) < 1.1, (p10, np.median(ratio), p90)
+
+
+def test_terrain_shading_normals_have_no_sawtooth(terrain_view):
+    """Interpolated per triangle, the vertex normals kinked along every cell's diagonal: a sawtooth
+    on the cliffs. Looked up over the grid cells (smoothed), their pixel-to-pixel second
+    differences, the sawtooth's signature, fall to about half (measured 0.070 from 0.139)."""
+    from warptex.apps.render import _smooth_terrain_normals
+    from warptex.gbuffer import GBuffer
+
+    mesh, g = terrain_view
+    raw = g.normal.numpy()
+    smooth = GBuffer(**{k: getattr(g, k) for k in ("position", "geometric_normal", "depth", "mask", "triangle", "position_dx", "position_dy")},
+                     normal=wp.clone(g.normal), uv_sets=g.uv_sets)
+    _smooth_terrain_normals(mesh, smooth)
+    n = smooth.normal.numpy()
+    covered = g.mask.numpy() > 0
+    inner = covered[:, 1:-1] & covered[:, :-2] & covered[:, 2:]
+    steep = inner & (raw[:, 1:-1, 1] < 0.8)  # slopes past ~37°: the cliffs
+
+    def roughness(v):
+        return np.linalg.norm(v[:, 2:] - 2 * v[:, 1:-1] + v[:, :-2], axis=-1)[steep].mean()
+
+    assert steep.sum() > 200
+    assert roughness(n) < 0.6 * roughness(raw), (roughness(n), roughness(raw))
+    np.testing.assert_allclose(np.linalg.norm(n[covered], axis=-1), 1.0, atol=1e-5)
+    assert (n[covered] @ np.array([0.0, 1.0, 0.0]) > 0).all()  # still facing up, as the terrain does
+
+
+def test_preview_splat_maps_are_finer_and_keep_the_vertex_weights():
+    """The preview's splat maps have 4 texels per grid cell, so layer borders (snow against rock)
+    step 4× finer at the default view; at the vertices they are the one-per-vertex maps."""
+    from warptex.scenes.material import terrain_splat_maps
+    from warptex.scenes.terrain import terrain
+
+    mesh = terrain(resolution=(33, 33), seed=0)
+    coarse, fine = terrain_splat_maps(mesh, (33, 33)), terrain_splat_maps(mesh, (33, 33), upsample=4)
+    assert fine.shape == (129, 129, 4)
+    np.testing.assert_allclose(fine[::4, ::4], coarse, atol=1e-6)
+    np.testing.assert_allclose(fine.sum(-1), 1.0, atol=1e-5)
+    with pytest.raises(ValueError, match=r"terrain_splat_maps\(\): upsample must be an int >= 1"):
+        terrain_splat_maps(mesh, (33, 33), upsample=0)
