@@ -1,4 +1,4 @@
-"""Command line: ``warptex [render|demo|fit] [options]`` (also ``python -m warptex``); ``render`` is the default."""
+"""Command line: ``warptex [render|demo|fit|assets] [options]`` (also ``python -m warptex``); ``render`` is the default."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import sys
 
 
-COMMANDS = ("render", "demo", "fit")
+COMMANDS = ("render", "demo", "fit", "assets")
 
 
 def _resolution(text: str) -> tuple[int, int]:
@@ -119,6 +119,15 @@ def build_parser() -> argparse.ArgumentParser:
         "splat_true.png, splat_fitted.png, splat_maps.png, splat_fitted.exr, curve.png and summary.json.",
     )
     add_fit_arguments(fit)
+    assets = commands.add_parser(
+        "assets",
+        help="write the sample inputs the README's snippets read (the terrain's layers and splat map)",
+        description="Write grass.png, gravel.png, rock.png and snow.png (RGBA: colour, height in alpha) and "
+        "splat.png (their weights) of the default terrain into the output folder.",
+    )
+    assets.add_argument("--out", default="assets", help="output folder (default: %(default)s)")
+    assets.add_argument("--seed", type=int, default=0, help="terrain and layer seed (default: 0)")
+    assets.add_argument("--device", default=None, help=argparse.SUPPRESS)
     return parser
 
 
@@ -285,6 +294,10 @@ def _run(args: argparse.Namespace) -> list:
         summary = run_fit(args.out, **fit_arguments(args))
         print(fit_report(summary))
         return summary["files"]
+    if args.command == "assets":
+        from warptex.apps.assets import run_assets
+
+        return run_assets(args.out, seed=args.seed)
     if args.command == "demo":
         from warptex.apps.demo import run_demo
 

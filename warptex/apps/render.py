@@ -95,17 +95,18 @@ def _terrain_albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, tiling: float | Non
     return to_rgb(colour)
 
 
-def _smooth_terrain_normals(mesh: trimesh.Trimesh, gbuffer: GBuffer) -> None:
-    """Replace the terrain G-buffer's shading normals by :func:`terrain_normal_grid`'s, looked up
-    bilinearly in UV0 (cells, not triangles: no sawtooth on the cliffs); the geometry stays."""
-    rows, cols = TERRAIN_GRID
-    grid = Texture(terrain_normal_grid(mesh, TERRAIN_GRID), mipmaps=False, device=gbuffer.device)
-    uv = gbuffer.uv("uv0")["uv"].numpy()
-    texel = (uv * [cols - 1, rows - 1] + 0.5) / [cols, rows]  # vertex (r, c) onto texel (r, c)'s centre
-    n = sample(grid, texel.astype(np.float32), sampler=Sampler(filter="bilinear", address="clamp"), device=gbuffer.device).numpy()
-    length = np.linalg.norm(n, axis=-1, keepdims=True)
-    covered = gbuffer.mask.numpy()[..., None] > 0
-    gbuffer.normal.assign(np.where(covered & (length > 0), n / np.maximum(length, 1e-30), gbuffer.normal.numpy()).astype(np.float32))
+#: Passes of terrain_normal_grid's [1, 2, 1] filter over the preview terrain's vertex normals.
+NORMAL_SMOOTHING = 2
+
+
+def _smooth_normals(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """The terrain with its vertex normals smoothed (:func:`terrain_normal_grid`): interpolated
+    across each triangle, the raw ones kink along every cell's diagonal, a sawtooth on the
+    cliffs; smoothed, neighbouring triangles' normals differ too little to show it. The geometry
+    stays as it is."""
+    smooth = mesh.copy()
+    smooth.vertex_normals = terrain_normal_grid(mesh, TERRAIN_GRID, smoothing=NORMAL_SMOOTHING).reshape(-1, 3)
+    return smooth
 
 
 def _embedded_texture(mesh: trimesh.Trimesh) -> np.ndarray | None:
@@ -124,7 +125,7 @@ def _kernels(terrain_material: bool) -> list:
     """The kernels a render runs: rasterisation, mip chains, and the splat or sampling ones."""
     used = [kr.raster_kernel, ks.downsample_kernel]
     if terrain_material:
-        return used + [ks.sample_kernel, kl.splat_kernels(kl.capacity(len(LAYER_NAMES)))["forward"]]
+        return used + [kl.splat_kernels(kl.capacity(len(LAYER_NAMES)))["forward"]]
     return used + [ks.sample_kernel, kt.triplanar_kernel]
 
 
@@ -203,9 +204,8 @@ def run_render(
     stages.update()
 
     stages.set_postfix_str("rasterise")
-    g = rasterize(mesh, camera, samples=samples, device=device)
-    if mesh_path is None:
-        _smooth_terrain_normals(mesh, g)
+    shaded = _smooth_normals(mesh) if mesh_path is None else mesh  # the splat rules keep the terrain's own normals
+    g = rasterize(shaded, camera, samples=samples, device=device)
     stages.update()
 
     stages.set_postfix_str("texture")
@@ -226,9 +226,7 @@ def run_render(
     normal = g.normal.numpy() * 0.5 + 0.5
     pixels = resolve(np.concatenate([lit * covered, albedo * covered, normal * covered, covered], axis=-1), samples, device=device).numpy()
     lit, albedo, normal, alpha = pixels[..., 0:3], pixels[..., 3:6], pixels[..., 6:9], pixels[..., 9:10]
-    centre = g if samples == 1 else rasterize(mesh, camera, device=device)  # gbuffer.exr: one sample per pixel
-    if mesh_path is None and samples != 1:
-        _smooth_terrain_normals(mesh, centre)
+    centre = g if samples == 1 else rasterize(shaded, camera, device=device)  # gbuffer.exr: one sample per pixel
     stages.update()
 
     stages.set_postfix_str("write")
