@@ -31,8 +31,10 @@ class CameraView:
 
 @wp.func
 def stratum_shift(strata: wp.int32, k: wp.int32) -> float:
-    """How far a sample sits from its stratum's centre, in strata, along the axis the *other*
-    index ``k`` does not run along: ``((k mod s) + 0.5) / s - 0.5`` (0 for one stratum)."""
+    """A sample's shift from the centre of its cell of the fine grid, in cells:
+    ``((k mod s) + 0.5) / s - 0.5``, where ``k`` is its index along the *other* axis (its x shift
+    follows its row stratum, its y shift its column stratum: no two samples of a pixel share a
+    row or a column of the ``s² × s²`` sub-grid). 0 for one stratum."""
     s = wp.max(strata, 1)
     return (float(k % s) + 0.5) / float(s) - 0.5
 
