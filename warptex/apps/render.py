@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import os
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -85,12 +86,17 @@ def _albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, texture: Texture, tiling: f
 SPLAT_UPSAMPLE = 4
 
 
-def _terrain_albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, tiling: float | None, seed: int, sampler: Sampler, device) -> np.ndarray:
-    """The default terrain's splat material: layers repeat ``tiling`` times per world unit (default 1/6)."""
+def _terrain_material(mesh: trimesh.Trimesh, seed: int, device) -> tuple[TextureArray, TextureArray]:
+    """The default terrain's layers and (finer, :data:`SPLAT_UPSAMPLE`) splat maps, made in NumPy:
+    a render makes them on a second thread while it rasterises."""
     maps = terrain_splat_maps(mesh, TERRAIN_GRID, upsample=SPLAT_UPSAMPLE)
-    layers = terrain_layers(seed=seed, device=device)
+    return terrain_layers(seed=seed, device=device), TextureArray(maps[None], mipmaps=False, device=device)
+
+
+def _terrain_albedo(gbuffer: GBuffer, material: tuple[TextureArray, TextureArray], tiling: float | None, sampler: Sampler, device) -> np.ndarray:
+    """The default terrain's splat material: layers repeat ``tiling`` times per world unit (default 1/6)."""
+    layers, maps = material
     tiling = 1.0 / 6.0 if tiling is None else float(tiling)
-    maps = TextureArray(maps[None], mipmaps=False, device=device)
     colour = splat(gbuffer, layers, maps, tiling=tiling, projection="triplanar", height_blend=0.2, sampler=sampler, device=device)
     return to_rgb(colour)
 
@@ -204,13 +210,16 @@ def run_render(
     stages.update()
 
     stages.set_postfix_str("rasterise")
-    shaded = _smooth_normals(mesh) if mesh_path is None else mesh  # the splat rules keep the terrain's own normals
-    g = rasterize(shaded, camera, samples=samples, device=device)
+    with ThreadPoolExecutor(1) as pool:  # the material's NumPy beside the rasteriser's kernel (both release the GIL)
+        material = pool.submit(_terrain_material, mesh, seed, device) if terrain_material else None
+        shaded = _smooth_normals(mesh) if mesh_path is None else mesh  # the splat rules keep the terrain's own normals
+        g = rasterize(shaded, camera, samples=samples, device=device)
+        material = material.result() if material is not None else None
     stages.update()
 
     stages.set_postfix_str("texture")
     if terrain_material:
-        albedo = _terrain_albedo(mesh, g, tiling, seed, sampler, device)
+        albedo = _terrain_albedo(g, material, tiling, sampler, device)
     else:
         embedded = _embedded_texture(mesh) if texture_path is None else None
         image = io.read_image(texture_path, layer=texture_layer) if texture_path is not None else embedded if embedded is not None else noise_texture(seed=seed)
