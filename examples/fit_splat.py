@@ -68,6 +68,7 @@ def main(argv=None) -> int:
     parser.add_argument("--iters", type=int, default=240, help="Adam iterations (default: %(default)s)")
     parser.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0")
     args = parser.parse_args(argv)
+    wt.init_quietly()  # no Warp banner, CUDA-driver warning or compile log between the progress lines
     r = fit_example(args.out, iters=args.iters, device=args.device)
     print(f"PSNR {r['psnr']:.2f} dB, tiling {r['tiling']:.6f} ({100 * r['tiling_error']:.3f}% off), splat weights MAE {r['weight_mae']:.4f}")
     print(f"wrote {args.out}/target.png and {args.out}/fitted.png")

@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
-import warp as wp
 
 import warptex as wt
 from warptex import io
@@ -103,7 +102,7 @@ def main(argv=None) -> None:
     parser.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0")
     args = parser.parse_args(argv)
     height, width = (int(v) for v in args.resolution.lower().split("x"))
-    wp.config.log_level = wp.LOG_WARNING
+    wt.init_quietly()  # no Warp banner, CUDA-driver warning or compile log between our lines
     path = render_plane(
         args.out, texture_path=args.texture, resolution=(height, width), tiling=args.tiling, seed=args.seed,
         contrast=args.contrast, device=args.device,

@@ -206,6 +206,7 @@ def main(argv=None) -> int:
     parser.add_argument("--views", type=int, default=2, choices=(1, 2, 3), help="camera views fitted together (default: %(default)s)")
     parser.add_argument("--resolution", default="192x256", help="view size HxW (default: %(default)s)")
     args = parser.parse_args(argv)
+    wt.init_quietly()  # no Warp banner, CUDA-driver warning or compile log between the progress lines
     if args.iters < 0:
         parser.error("--iters must be >= 0")
     resolution = tuple(int(v) for v in args.resolution.split("x"))

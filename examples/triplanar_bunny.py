@@ -113,7 +113,7 @@ def main(argv=None) -> None:
     parser.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0")
     args = parser.parse_args(argv)
     height, width = (int(v) for v in args.resolution.lower().split("x"))
-    wp.config.log_level = wp.LOG_WARNING
+    wt.init_quietly()  # no Warp banner, CUDA-driver warning or compile log between our lines
     path = render_bunny(
         args.out,
         mesh_path=args.mesh,

@@ -58,6 +58,44 @@ class ProjectionArgs:
     object_space: wp.int32  # 0: world space, the matrices are identities and are skipped
     mirror_fix: wp.int32
     weights: wp.int32
+    origin: wp.vec3d  # the projected space's coordinates of the G-buffer's origin (its positions are relative to it)
+    origin_mode: wp.int32  # ORIGIN_NONE, ORIGIN_FOLDED or ORIGIN_EXACT: how origin_uv adds it
+
+
+# How plane UVs add the G-buffer's float64 origin (camera-relative positions, far from the world origin).
+ORIGIN_NONE = wp.constant(0)  # the origin is the world origin: nothing to add
+ORIGIN_FOLDED = wp.constant(1)  # origin × tiling less whole multiples of 2 (the period of wrap and mirror), in float64
+ORIGIN_EXACT = wp.constant(2)  # origin × tiling, in float64, rounded to float32 (clamp, border: no period)
+
+
+@wp.func
+def origin_uv(proj: ProjectionArgs, axis: wp.int32, tiling: float) -> wp.vec2:
+    """What the origin adds to projection ``axis``'s plane coordinates × ``tiling``, computed in
+    float64 so that far from the world origin whole texture periods leave before float32 does
+    (its derivative along the tiling is the origin's plane coordinates, as it should be)."""
+    uv = wp.vec2(0.0)
+    if proj.origin_mode != ORIGIN_NONE:
+        a = proj.origin[0]
+        b = proj.origin[1]
+        if axis == 0:
+            a = proj.origin[2]
+        elif axis == 1:
+            b = proj.origin[2]
+        t = wp.float64(tiling)
+        u = a * t
+        v = b * t
+        if proj.origin_mode == ORIGIN_FOLDED:
+            u = u - wp.floor(u * wp.float64(0.5)) * wp.float64(2.0)
+            v = v - wp.floor(v * wp.float64(0.5)) * wp.float64(2.0)
+        uv = wp.vec2(wp.float32(u), wp.float32(v))
+    return uv
+
+
+@wp.func
+def slope_coords(proj: ProjectionArgs, p: wp.vec3, axis: wp.int32) -> wp.vec2:
+    """The plane coordinates of the whole position (origin included): what a plane UV moves by per unit of tiling."""
+    o = wp.vec3(wp.float32(proj.origin[0]), wp.float32(proj.origin[1]), wp.float32(proj.origin[2]))
+    return plane_coords(p + o, axis)
 
 
 @wp.struct
@@ -103,7 +141,7 @@ def projection_tiling(proj: ProjectionArgs, axis: wp.int32) -> float:
 @wp.func
 def plane_uv(proj: ProjectionArgs, axis: wp.int32, p: wp.vec3, n: wp.vec3, tiling: float) -> wp.vec2:
     """UV of projection ``axis`` at ``tiling``: plane coordinates × tiling, ``u`` mirror-fixed, plus the offset."""
-    c = plane_coords(p, axis) * tiling
+    c = plane_coords(p, axis) * tiling + origin_uv(proj, axis, tiling)
     return wp.vec2(c[0] * u_sign(n, axis, proj.mirror_fix) + proj.offsets[axis, 0], c[1] + proj.offsets[axis, 1])
 
 
@@ -128,7 +166,7 @@ def plane_sample_slope(tex: TextureView, layer: wp.int32, proj: ProjectionArgs, 
     UV moves by the (mirror-fixed) plane coordinates, the LOD by ``1 / (tiling ln 2)`` and an
     anisotropic footprint's steps in proportion to ``tiling``."""
     value, d_u, d_v, d_lod, d_spread = sample_footprint_derivatives(tex, layer, plane_uv(proj, axis, p, n, tiling), plane_footprint(tex, proj, axis, n, dpdx, dpdy, tiling, smp), smp)
-    c = plane_coords(p, axis)
+    c = slope_coords(proj, p, axis)
     lod_slope = lod_scale_slope(tex, plane_coords(dpdx, axis), plane_coords(dpdy, axis), tiling)
     return value, d_u * (c[0] * u_sign(n, axis, proj.mirror_fix)) + d_v * c[1] + d_lod * lod_slope + d_spread / tiling
 

@@ -26,14 +26,25 @@ class CameraView:
     width: wp.int32
     height: wp.int32
     orthographic: wp.int32
+    strata: wp.int32  # samples per pixel side (>= 1): warptex.camera.Camera.supersampled's pattern
+
+
+@wp.func
+def stratum_shift(strata: wp.int32, k: wp.int32) -> float:
+    """A sample's shift from the centre of its cell of the fine grid, in cells:
+    ``((k mod s) + 0.5) / s - 0.5``, where ``k`` is its index along the *other* axis (its x shift
+    follows its row stratum, its y shift its column stratum: no two samples of a pixel share a
+    row or a column of the ``s² × s²`` sub-grid). 0 for one stratum."""
+    s = wp.max(strata, 1)
+    return (float(k % s) + 0.5) / float(s) - 0.5
 
 
 @wp.func
 def primary_ray(cam: CameraView, row: wp.int32, col: wp.int32):
     """Origin and direction (forward component 1) of the ray through a pixel centre, and their
     derivatives per pixel step along x and y: ``(origin, dir, d_origin_dx, d_origin_dy, d_dir_dx, d_dir_dy)``."""
-    x = 2.0 * (float(col) + 0.5) / float(cam.width) - 1.0
-    y = 1.0 - 2.0 * (float(row) + 0.5) / float(cam.height)
+    x = 2.0 * (float(col) + 0.5 - stratum_shift(cam.strata, row)) / float(cam.width) - 1.0
+    y = 1.0 - 2.0 * (float(row) + 0.5 + stratum_shift(cam.strata, col)) / float(cam.height)
     offset = cam.right * (x * cam.half_x) + cam.up * (y * cam.half_y)
     step_x = cam.right * (2.0 * cam.half_x / float(cam.width))
     step_y = cam.up * (-2.0 * cam.half_y / float(cam.height))

@@ -57,7 +57,7 @@ import warp as wp
 from . import inlined, out_of_line, specialised
 from .filters import sample_footprint_derivatives, sample_lod
 from .footprint import lod_scale_slope, texture_footprint
-from .projection import ProjectionArgs, plane_coords, plane_footprint, plane_uv, triplanar_weights, u_sign
+from .projection import ProjectionArgs, plane_coords, plane_footprint, plane_uv, slope_coords, triplanar_weights, u_sign
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, sample_stochastic_outlined, scatter_plain, scatter_stochastic
 from .texels import SamplerArgs, TexelGrad, TextureView
 
@@ -187,7 +187,7 @@ def layer_read_slopes(tex: TextureView, layer: wp.int32, k: wp.int32, args: Spla
     if args.params.projection == PROJECT_UV:
         lod_slope = lod_scale_slope(tex, pt.uv0_dx, pt.uv0_dy, t)
     else:
-        c = plane_coords(pt.p, axis)
+        c = slope_coords(args.proj, pt.p, axis)
         uv_slope = wp.vec2(c[0] * u_sign(n, axis, args.proj.mirror_fix), c[1])
         lod_slope = lod_scale_slope(tex, plane_coords(pt.dpdx, axis), plane_coords(pt.dpdy, axis), t)
     return uv_slope, lod_slope

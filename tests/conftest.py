@@ -10,6 +10,22 @@ wp.config.log_level = wp.LOG_WARNING
 wp.init()
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+REPO_OUT = Path(__file__).resolve().parents[1] / "out"
+
+
+def _snapshot(folder: Path) -> dict:
+    return {p: p.stat().st_mtime_ns for p in folder.rglob("*")} if folder.is_dir() else {}
+
+
+@pytest.fixture(scope="session", autouse=True)
+def repository_out_is_left_alone():
+    """Tests write under ``tmp_path``: the repository's ``out/`` is the user's render folder (issue
+    34 found the suite writing ``out/sixplanar_sphere.png`` there). Any file a test run adds to or
+    changes in it is an error of the session."""
+    before = _snapshot(REPO_OUT)
+    yield
+    changed = sorted(str(p) for p, t in _snapshot(REPO_OUT).items() if before.get(p) != t)
+    assert not changed, f"tests wrote into the repository's out/ (write under tmp_path): {changed}"
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -8,7 +8,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
+import warp as wp
 
+import warptex as wt
 from warptex import io
 from warptex import _output as output
 from warptex.apps.cli import main
@@ -60,9 +63,13 @@ def _obj(path: Path, text: str) -> Path:
 @pytest.mark.parametrize(
     "name, text, message",
     [
-        ("empty.obj", "# nothing here\n", "the mesh is empty"),
+        ("empty.obj", "# nothing here\n", "holds no vertices and no faces; warptex renders triangle meshes"),
         ("nan.obj", "v 0 0 0\nv 1 0 0\nv 0 nan 1\nf 1 2 3\n", "vertex 2 is not finite"),
-        ("points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n", "the mesh is empty"),
+        ("points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n", "holds 3 vertices and no faces; warptex renders triangle meshes"),
+        # issue 34: a NaN UV was found only when write_png refused the NaN image, leaving an empty folder
+        ("nan_uv.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt nan 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n",
+         "UV set 'uv0' is not finite at 1 vertices, e.g. vertex 0: [nan, 0.0]"),
+        ("text.glb", "this is a text file, not a binary glTF\n", "is not a binary glTF (.glb) file: it starts with b'this', a .glb file with b'glTF'"),
     ],
 )
 def test_a_bad_mesh_is_named_before_the_camera_is_framed(tmp_path, capsys, name, text, message):
@@ -70,7 +77,7 @@ def test_a_bad_mesh_is_named_before_the_camera_is_framed(tmp_path, capsys, name,
     out = tmp_path / "out"
     assert main(["--out", str(out), "--mesh", str(path), *SMALL]) == 1
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith(f"warptex: error: load_mesh(): {str(path)!r}: ") and message in err[0], err
+    assert len(err) == 1 and err[0].startswith(f"warptex: error: load_mesh(): {str(path)!r}") and message in err[0], err
     assert not out.exists()
 
 
@@ -89,7 +96,7 @@ def test_a_resolution_beyond_memory_is_refused_up_front(tmp_path, capsys, monkey
     monkeypatch.setattr(output, "_available_memory", lambda: 2 * 2**30)
     assert main(["--out", str(tmp_path / "out"), "--resolution", "100000x100000"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == ["warptex: error: run_render(): a 100000x100000 render needs about 2980.5 GiB of memory, but 2.0 GiB is available; use a smaller resolution"]
+    assert err == ["warptex: error: run_render(): a 100000x100000 render of 4 samples per pixel needs about 11921.2 GiB of memory, but 2.0 GiB is available; use a smaller resolution or fewer samples"]
     assert main(["fit", "--out", str(tmp_path / "out"), "--resolution", "20000x20000"]) == 1
     assert "run_fit(): a fit of 2 20000x20000 view(s) needs about" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
@@ -195,3 +202,68 @@ def test_an_output_folder_that_is_a_file_is_refused_before_the_work(tmp_path, ca
     (tmp_path / "out").write_text("a file")
     assert main(["--out", str(tmp_path / "out"), *SMALL]) == 1
     assert capsys.readouterr().err.strip() == f"warptex: error: run_render(): the output folder {str(tmp_path / 'out')!r} is a file"
+
+
+def test_an_output_folder_that_cannot_be_made_is_named_up_front(tmp_path, capsys):
+    """Issue 34: ``--out /proc/nope`` printed a bare ``[Errno 2]``. The folder is tried before
+    the work, and whatever the probe made is removed again."""
+    locked = tmp_path / "file"
+    locked.write_text("")
+    assert main(["--out", str(locked / "sub"), *SMALL]) == 1
+    assert capsys.readouterr().err.strip() == f"warptex: error: run_render(): cannot write into the output folder {str(locked / 'sub')!r}: Not a directory"
+    if Path("/proc/self").exists():
+        assert main(["--out", "/proc/nope", *SMALL]) == 1
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("warptex: error: run_render(): cannot write into the output folder '/proc/nope': ") and "Errno" not in err, err
+    assert main(["--out", str(tmp_path / "a" / "b"), "--mesh", str(tmp_path / "missing.obj"), *SMALL]) == 1
+    capsys.readouterr()
+    assert not (tmp_path / "a").exists()  # the probe's folders are gone
+
+
+@pytest.mark.skipif(wp.get_cuda_device_count() > 0, reason="a CUDA device is present: cuda:0 exists")
+def test_a_missing_cuda_device_says_which_devices_there_are(tmp_path, capsys):
+    for command in ([], ["demo"]):
+        assert main([*command, "--out", str(tmp_path / "out"), "--device", "cuda:0", *SMALL]) == 1
+        err = capsys.readouterr().err.strip()
+        assert err == "warptex: error: --device: device 'cuda:0' does not exist: no CUDA device is available here; the devices are cpu", err
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(ValueError, match=r"rasterize\(\): device 'cuda:0' does not exist: no CUDA device is available here"):
+        wt.rasterize(trimesh.creation.box(), wt.look_at((0, 0, 5), (0, 0, 0), resolution=(8, 8)), device="cuda:0")
+
+
+def test_a_top_down_view_and_an_eye_typed_with_a_space(tmp_path, monkeypatch):
+    """Issue 34: ``--eye 0,10,0 --target 0,0,0`` failed (up parallel to the view) and
+    ``--eye -30,25,40`` (a space, not ``=``) failed with "expected one argument"."""
+    import warptex.apps.render as render
+
+    cameras = []
+    real = render.rasterize
+    monkeypatch.setattr(render, "rasterize", lambda mesh, camera, **kw: cameras.append(camera) or real(mesh, camera, **kw))
+    assert main(["--out", str(tmp_path / "top"), "--eye", "0,10,0", "--target", "0,0,0", *SMALL]) == 0
+    np.testing.assert_allclose(cameras[-1].up, [0, 0, -1], atol=1e-12)
+    assert main(["render", "--out", str(tmp_path / "space"), "--eye", "-30,25,40", "--target", "-1.5,0,0", *SMALL]) == 0
+    np.testing.assert_allclose(cameras[-1].eye, [-30, 25, 40])
+    assert main(["--out", str(tmp_path / "up"), "--eye", "0,10,0", "--target", "0,0,0", "--up", "1,0,0", *SMALL]) == 0
+    np.testing.assert_allclose(cameras[-1].up, [1, 0, 0], atol=1e-12)
+
+
+def test_tiling_help_says_what_it_means_for_each_kind_of_mesh(capsys):
+    with pytest.raises(SystemExit):
+        main(["render", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for case in ("Default terrain: layer repeats per world unit (default 1/6", "A mesh with UVs: repeats across UV0",
+                 "A mesh without UVs (mapped triplanar): repeats across the mesh's largest extent (default 8)"):
+        assert case in text, case
+
+
+def test_the_layer_of_an_exr_texture_is_chosen_on_the_command_line(tmp_path, capsys):
+    planes = {f"{layer}.{c}": np.full((8, 8), v, np.float32) for layer, v in (("diffuse", 0.8), ("specular", 0.1)) for c in "RGB"}
+    io.write_exr(tmp_path / "layers.exr", planes)
+    mesh = _obj(tmp_path / "tri.obj", "v -1 -1 0\nv 1 -1 0\nv 0 1 0\nf 1 2 3\n")
+    args = ["--mesh", str(mesh), "--texture", str(tmp_path / "layers.exr"), "--eye", "0,0,3", "--target", "0,0,0", *SMALL]
+    assert main(["--out", str(tmp_path / "none"), *args]) == 1
+    assert "holds several layers ['diffuse', 'specular'] and no default one; choose one with layer= (warptex render: --texture-layer)" in capsys.readouterr().err
+    assert main(["--out", str(tmp_path / "out"), *args, "--texture-layer", "specular"]) == 0
+    albedo = io.read_image(tmp_path / "out" / "albedo.png")
+    centre = albedo[12, 16]
+    np.testing.assert_allclose(centre, 0.1, atol=0.01)

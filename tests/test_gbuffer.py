@@ -223,6 +223,9 @@ CAMERA = look_at((0, 0, 5), (0, 0, 0), resolution=(16, 16))
         (trimesh.Trimesh([[0, 0, 0], [1, np.nan, 0], [0, 1, 0]], [[0, 1, 2]], process=False), ValueError, r"vertex 1 is not finite"),
         (trimesh.Trimesh([[0, 0, 0], [1, 1, 1], [2, 2, 2]], [[0, 1, 2]], process=False), ValueError, r"all 1 triangles .* degenerate"),
         (np.zeros((3, 3)), TypeError, r"rasterize\(\): mesh must be a trimesh.Trimesh or a path"),
+        (trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], process=False,
+                         visual=trimesh.visual.TextureVisuals(uv=[[0, 0], [1, np.inf], [0, 1]])),
+         ValueError, r"rasterize\(\): UV set 'uv0' is not finite at 1 vertices, e.g. vertex 1: \[1.0, inf\]"),
     ],
 )
 def test_bad_meshes_raise(mesh, error, match):
@@ -260,7 +263,8 @@ def test_unreadable_mesh_files(tmp_path):
     "call, match",
     [
         (lambda: look_at((0, 0, 0), (0, 0, 0)), r"look_at\(\): eye and target must differ"),
-        (lambda: look_at((0, 0, 0), (0, 1, 0)), r"look_at\(\): up \[0.0, 1.0, 0.0\] must not be parallel"),
+        (lambda: look_at((0, 0, 0), (0, 1, 0), up=(0, 1, 0)), r"look_at\(\): up \[0.0, 1.0, 0.0\] must not be parallel"),
+        (lambda: look_at((0, 0, 0), (0, 1, 0), up=(0, 0, 0)), r"look_at\(\): up must not be zero"),
         (lambda: look_at((0, 0, 1), (0, 0, 0), resolution=(0, 4)), r"look_at\(\): resolution must be two positive ints"),
         (lambda: look_at((0, 0, 1), (0, 0, 0), fov_y=180), r"look_at\(\): fov_y must be in \(0, 180\)"),
         (lambda: look_at((0, np.nan, 1), (0, 0, 0)), r"look_at\(\): eye must be 3 finite numbers"),
@@ -270,6 +274,22 @@ def test_unreadable_mesh_files(tmp_path):
 def test_bad_cameras_raise(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+@pytest.mark.parametrize("make", [look_at, orthographic])
+def test_a_view_straight_down_or_up_picks_its_own_up_vector(make):
+    """Issue 34: a top-down view failed, the default up vector being parallel to the view. Without
+    ``up``, a view along -Y has +X right and -Z up in the image; along +Y, +X right and +Z up."""
+    down = make((0, 10, 0), (0, 0, 0))
+    np.testing.assert_allclose(down.right, [1, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(down.up, [0, 0, -1], atol=1e-12)
+    up = make((0, -10, 0), (0, 0, 0))
+    np.testing.assert_allclose(up.right, [1, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(up.up, [0, 0, 1], atol=1e-12)
+    tilted = make((0, 10, 0), (0, 0, 0), up=(1, 0, 0))  # an explicit up is kept
+    np.testing.assert_allclose(tilted.up, [1, 0, 0], atol=1e-12)
+    oblique = make((3, 10, 4), (0, 0, 0))  # the default +Y elsewhere, as before
+    assert oblique.up[1] > 0 and abs(oblique.right[1]) < 1e-12
 
 
 def test_look_at_frame_is_right_handed_and_y_up():

@@ -14,6 +14,7 @@ import pytest
 from PIL import Image
 
 from warptex.io import linear_to_srgb, read_exr, read_image, srgb_to_linear, write_exr, write_png
+from warptex import io as wio
 
 TEXTURES = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "textures"
 
@@ -504,3 +505,56 @@ def test_real_texture_round_trips(texture, tmp_path):
     back, names = read_exr(tmp_path / "copy.exr")
     assert names == ("Y",)
     np.testing.assert_array_equal(back.view(np.uint32), image.view(np.uint32))
+
+
+# -- EXR layers (issue 34): channels are ordered by their suffix, never alphabetically -------------
+
+
+def _layered_exr(path, names):
+    """An EXR whose channel ``names[i]`` holds the value ``i`` everywhere."""
+    write_exr(path, {n: np.full((2, 3), i, np.float32) for i, n in enumerate(names)})
+
+
+@pytest.mark.parametrize("stored, expected", [
+    (("diffuse.A", "diffuse.B", "diffuse.G", "diffuse.R"), ("diffuse.R", "diffuse.G", "diffuse.B", "diffuse.A")),
+    (("diffuse.B", "diffuse.G", "diffuse.R"), ("diffuse.R", "diffuse.G", "diffuse.B")),
+    (("ViewLayer.Normal.Z", "ViewLayer.Normal.Y", "ViewLayer.Normal.X"), ("ViewLayer.Normal.X", "ViewLayer.Normal.Y", "ViewLayer.Normal.Z")),
+    (("UV.V", "UV.A", "UV.U"), ("UV.U", "UV.V", "UV.A")),
+    (("P.Z", "P.X", "P.Y"), ("P.X", "P.Y", "P.Z")),
+])
+def test_exr_single_layer_read_in_suffix_order(tmp_path, stored, expected):
+    _layered_exr(tmp_path / "l.exr", stored)
+    back, names = read_exr(tmp_path / "l.exr")
+    assert names == expected
+    np.testing.assert_array_equal(back[0, 0], [stored.index(n) for n in expected])
+    np.testing.assert_array_equal(read_image(tmp_path / "l.exr")[0, 0], [stored.index(n) for n in expected])
+
+
+def test_exr_layer_is_chosen_by_name(tmp_path):
+    stored = ("diffuse.B", "diffuse.G", "diffuse.R", "specular.A", "specular.B", "specular.G", "specular.R")
+    _layered_exr(tmp_path / "two.exr", stored)
+    with pytest.raises(ValueError, match=r"read_image\(\): .*two.exr' holds several layers \['diffuse', 'specular'\].*layer="):
+        read_image(tmp_path / "two.exr")
+    np.testing.assert_array_equal(read_image(tmp_path / "two.exr", layer="specular")[0, 0], [6, 5, 4, 3])
+    back, names = read_exr(tmp_path / "two.exr", layer="diffuse")
+    assert names == ("diffuse.R", "diffuse.G", "diffuse.B")
+    np.testing.assert_array_equal(back[0, 0], [2, 1, 0])
+    back, names = read_exr(tmp_path / "two.exr", channels=["G", "R"], layer="specular")  # names inside the layer
+    assert names == ("specular.G", "specular.R")
+    with pytest.raises(ValueError, match=r"has no layer 'albedo'; its layers: 'diffuse', 'specular'"):
+        read_image(tmp_path / "two.exr", layer="albedo")
+    with pytest.raises(TypeError, match=r"read_exr\(\): layer must be a str"):
+        read_exr(tmp_path / "two.exr", layer=3)
+    assert wio.exr_layers(tmp_path / "two.exr") == {"diffuse": stored[:3], "specular": stored[3:]}
+
+
+def test_exr_default_layer_wins_over_named_ones(tmp_path):
+    _layered_exr(tmp_path / "d.exr", ("B", "G", "R", "depth.Z", "normal.X", "normal.Y", "normal.Z"))
+    assert read_exr(tmp_path / "d.exr")[1] == ("R", "G", "B")
+    assert read_exr(tmp_path / "d.exr", layer="normal")[1] == ("normal.X", "normal.Y", "normal.Z")
+
+
+def test_layer_of_a_png_is_refused(tmp_path):
+    write_png(tmp_path / "a.png", np.zeros((2, 2, 3)))
+    with pytest.raises(ValueError, match=r"read_image\(\): layer='diffuse' names an EXR layer, but .*a.png' is not an OpenEXR file"):
+        read_image(tmp_path / "a.png", layer="diffuse")

@@ -6,9 +6,11 @@ command of a ```sh block is run through the CLI's ``main(argv)`` (``torchrun ...
 its own processes), with small-size options
 swapped in so the whole module stays fast. Install steps (``python3 -m venv``, ``pip install``,
 ``git clone``) and the test run itself (``pytest``) are the only commands not run. Every block
-and command runs in its own copy of a folder holding the files the README names (``brick.png``,
-``bunny.ply``, ``grass.png``..., all made here; ``out/`` is ``warptex render --out out`` at a small
-size). ``EXPECTED_BLOCKS`` and ``EXPECTED_COMMANDS`` fail when a block or command is added, so it
+and command runs in its own copy of a folder made only by the README's own commands (``out/`` is
+``warptex render --out out`` at a small size, ``assets/`` is ``warptex assets --out assets``),
+with ``../shared`` beside it as beside the repository: a snippet that reads a file nobody has
+fails here (issue 34 found ``rock.png``, ``snow.png`` and ``splat.png`` named but made nowhere);
+blocks that read ``../shared`` skip when it is absent. ``EXPECTED_BLOCKS`` and ``EXPECTED_COMMANDS`` fail when a block or command is added, so it
 cannot slip through untested.
 """
 
@@ -26,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import trimesh
 import warp as wp
 
 import warptex as wt
+from warptex.apps.assets import ASSET_NAMES
 from warptex.apps.cli import main as cli_main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -37,8 +39,8 @@ README = REPO / "README.md"
 SHARED = REPO.parent / "shared"
 
 # Fenced blocks per info string: a new block must be added here, and so gets a test.
-EXPECTED_BLOCKS = {"python": 12, "sh": 4, "": 1}
-EXPECTED_COMMANDS = {"warptex": 12, "python": 2, "skipped": 5, "torchrun": 1}
+EXPECTED_BLOCKS = {"python": 13, "sh": 5, "": 1}
+EXPECTED_COMMANDS = {"warptex": 14, "python": 2, "skipped": 5, "torchrun": 1}
 
 # Python blocks that continue earlier ones (by "<section> #<n>"): they run after those, in one namespace.
 CONTINUES = {
@@ -49,7 +51,7 @@ CONTINUES = {
 PYTHON_QUICK = [
     ("Fitting splat maps and tiling to images #2", "iters=240", "iters=3"),
     ("Baking into a UV texture, exported as glTF #1", "size=2048", "size=256"),
-    ("Baking into a UV texture, exported as glTF #3", "1024", "128"),
+    ("Baking into a UV texture, exported as glTF #3", "1024", "512"),
 ]
 
 QUICK_RESOLUTION = "48x64"  # of `warptex render` and `warptex demo`, and of the out/ the Python blocks read
@@ -158,46 +160,15 @@ def test_every_block_and_command_is_accounted_for():
 # -- the files the README names ------------------------------------------------------------------
 
 
-def _smooth_noise(rng, shape, cells=4):
-    """Tileable smooth noise in [0, 1]: a few low-frequency cosines."""
-    h, w = shape
-    y, x = np.mgrid[0:h, 0:w] / np.array([h, w])[:, None, None]
-    out = np.zeros(shape)
-    for _ in range(6):
-        fy, fx = rng.integers(1, cells + 1, 2)
-        out += np.cos(2 * np.pi * (fy * y + fx * x) + rng.uniform(0, 2 * np.pi))
-    return (out - out.min()) / np.ptp(out)
-
-
 def _make_inputs(folder: Path) -> None:
-    rng = np.random.default_rng(7)
-    # brick.png: a grey brick photo (like ../shared/data/textures/brick.png): light mortar, darker bricks.
-    y, x = np.mgrid[0:64, 0:64]
-    mortar = (y % 16 < 2) | (((x + 16 * ((y // 16) % 2)) % 32) < 2)
-    brick = np.where(mortar, 0.85, 0.35 + 0.15 * rng.random((64, 64)))
-    wt.io.write_png(folder / "brick.png", brick[..., None])
-    # Terrain layers: RGBA, colour and a height in alpha.
-    for k, name in enumerate(("grass", "gravel", "rock", "snow")):
-        colour = np.eye(4)[k][:3] * 0.5 + 0.3 * _smooth_noise(rng, (32, 32))[..., None]
-        wt.io.write_png(folder / f"{name}.png", np.concatenate([colour, _smooth_noise(rng, (32, 32))[..., None]], -1))
-    # One RGBA splat map: the weights of the four layers.
-    weights = np.stack([_smooth_noise(rng, (16, 16), 2) for _ in range(4)], -1) ** 3
-    wt.io.write_png(folder / "splat.png", weights / weights.sum(-1, keepdims=True), data=True)
-    # bunny.ply: a bumpy ball at the Stanford bunny's place and size, without UVs.
-    ball = trimesh.creation.icosphere(subdivisions=4)
-    ball.vertices *= (1 + 0.1 * np.sin(7 * ball.vertices[:, :1]) * np.cos(5 * ball.vertices[:, 1:2]))
-    ball.vertices = ball.vertices * [0.078, 0.077, 0.06] + [-0.017, 0.11, -0.001]
-    ball.export(folder / "bunny.ply")
-    # blender.exr: Blender's Position/Normal/UV/Depth passes of a view layer.
-    camera = wt.look_at((0.0, 0.2, 0.35), (-0.02, 0.11, 0.0), resolution=(24, 32))
-    g = wt.rasterize(str(folder / "bunny.ply"), camera)
-    depth = np.where(g.mask.numpy() > 0, g.depth.numpy(), 1e10)
-    uv = g.position.numpy()[..., :2]
-    planes = np.concatenate([g.position.numpy(), g.normal.numpy(), uv, depth[..., None]], -1)
-    names = [f"ViewLayer.{p}" for p in ("Position.X", "Position.Y", "Position.Z", "Normal.X", "Normal.Y", "Normal.Z", "UV.U", "UV.V", "Depth.Z")]
-    wt.io.write_exr(folder / "blender.exr", planes, channel_names=names)
-    # out/: the quick start's `warptex render --out out`, small.
-    assert cli_main(["render", "--out", str(folder / "out"), "--resolution", QUICK_RESOLUTION]) == 0
+    """What the README says to run before its snippets: the quick start's render (small) and
+    ``warptex assets``; ``../shared`` is linked beside the folder, as it lies beside the repository."""
+    repo = folder / "repo"
+    repo.mkdir()
+    assert cli_main(["render", "--out", str(repo / "out"), "--resolution", QUICK_RESOLUTION]) == 0
+    assert cli_main(["assets", "--out", str(repo / "assets")]) == 0
+    if SHARED.is_dir():
+        (folder / "shared").symlink_to(SHARED, target_is_directory=True)
 
 
 @pytest.fixture(scope="module")
@@ -209,10 +180,10 @@ def inputs(tmp_path_factory) -> Path:
 
 @pytest.fixture
 def workdir(inputs, tmp_path, monkeypatch) -> Path:
-    """A fresh copy of the inputs, as the current directory."""
-    shutil.copytree(inputs, tmp_path, dirs_exist_ok=True)
-    monkeypatch.chdir(tmp_path)
-    return tmp_path
+    """A fresh copy of the inputs (``repo/``, ``../shared`` beside it), ``repo/`` the current directory."""
+    shutil.copytree(inputs, tmp_path, dirs_exist_ok=True, symlinks=True)
+    monkeypatch.chdir(tmp_path / "repo")
+    return tmp_path / "repo"
 
 
 # -- Python blocks -------------------------------------------------------------------------------
@@ -244,7 +215,14 @@ def _check_using_it(ns, d):
 def _check_gbuffers(ns, d):
     g = wt.load_gbuffer(d / "g.exr")
     assert g.resolution == (512, 512) and g.mask.numpy().sum() > 1000  # the bunny fills the view
-    assert ns["g"].resolution == (24, 32) and "uv0" in ns["g"].uv_sets  # blender.exr, UV pass included
+    assert ns["g"].resolution == (512, 512) and ns["g"].uv_sets == {}
+
+
+def _check_supersampled(ns, d):
+    assert ns["g"].samples == 16 and ns["g"].resolution == (512, 512) and _shape(ns["colour"]) == (512, 512, 1)
+    alpha = ns["alpha"].numpy()
+    assert alpha.shape == (128, 128) and ((alpha > 0) & (alpha < 1)).sum() > 50  # the silhouette's pixels
+    assert _shape(ns["premultiplied"]) == (128, 128, 1)
 
 
 def _check_triplanar(ns, d):
@@ -300,7 +278,7 @@ def _check_bake(ns, d):
 
 
 def _check_bake_torch(ns, d):
-    assert tuple(ns["baked"].shape) == (128, 128, 3) and ns["g"].resolution == (128, 128)
+    assert tuple(ns["baked"].shape) == (512, 512, 3) and ns["g"].resolution == (512, 512)
     assert ns["texture"].grad.abs().sum() > 0 and ns["tiling"].grad != 0
 
 
@@ -310,9 +288,10 @@ def _check_fit(ns, d):
 
 
 CHECKS = {
-    "Using it #1": _check_using_it,
+    "Using it #2": _check_using_it,
     "PyTorch #1": _check_torch,
     "G-buffers #1": _check_gbuffers,
+    "G-buffers #2": _check_supersampled,
     "Triplanar, biplanar and triplanar normal mapping #1": _check_triplanar,
     "Triplanar, biplanar and triplanar normal mapping #2": _check_tiling_gradient,
     "A texture per face (six-planar) #1": _check_six_planar,
@@ -327,6 +306,8 @@ CHECKS = {
 
 @pytest.mark.parametrize("block", PYTHON_BLOCKS, ids=[f"L{b.line} {b.name}" for b in PYTHON_BLOCKS])
 def test_python_block(block, workdir):
+    if "../shared/" in block.text and not SHARED.is_dir():
+        pytest.skip(f"{SHARED} not found: this README block reads the shared data")
     if "import torch" in block.text:
         pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
     by_name = {b.name: b for b in PYTHON_BLOCKS}
@@ -381,7 +362,9 @@ def _shared_paths(argv: list[str]) -> list[str]:
 def _quick(argv: list[str]) -> list[str]:
     """The README's ``warptex`` arguments with small sizes and few iterations."""
     argv = _shared_paths(argv)
-    command = argv[0] if argv and argv[0] in ("render", "demo", "fit", "bake") else "render"
+    command = argv[0] if argv and argv[0] in COMMAND_NAMES else "render"
+    if command == "assets":
+        return argv
     if _option(argv, "--device", "cpu").startswith("cuda") and wp.get_cuda_device_count() == 0:
         argv = _set_option(argv, "--device", "cpu")  # the command's other options still run
     if command == "bake":
@@ -398,6 +381,7 @@ def _quick(argv: list[str]) -> list[str]:
     return argv
 
 
+COMMAND_NAMES = ("render", "demo", "fit", "bake", "assets")
 RENDER_FILES = ("render.png", "albedo.png", "normals.png", "render.exr", "gbuffer.exr")
 DEMO_FILES = ("demo.png", "demo_trilinear.exr")
 FIT_FILES = ("target.png", "initial.png", "fitted.png", "comparison.png", "splat_fitted.png", "splat_maps.png",
@@ -406,13 +390,17 @@ FIT_SYNTHETIC_FILES = ("splat_true.png",)
 
 
 def _check_outputs(argv: list[str], folder: Path, printed: str) -> None:
-    command = argv[0] if argv[0] in ("render", "demo", "fit", "bake") else "render"
-    out = folder / _option(argv, "--out", {"fit": "out/fit", "bake": "out/asset.glb"}.get(command, "out"))
+    command = argv[0] if argv[0] in COMMAND_NAMES else "render"
+    out = folder / _option(argv, "--out", {"fit": "out/fit", "bake": "out/asset.glb", "assets": "assets"}.get(command, "out"))
     wrote = {Path(line[len("wrote ") :]).name for line in printed.splitlines() if line.startswith("wrote ")}
     if command == "bake":
         for name in (out.name, f"{out.stem}_color.png"):
             assert (out.parent / name).is_file() and name in wrote, f"README promises {name} from warptex {shlex.join(argv)}"
         assert wt.io.read_image(out.parent / f"{out.stem}_color.png").shape == (256, 256, 3)
+    elif command == "assets":
+        for name in ASSET_NAMES:
+            assert (out / name).is_file() and name in wrote, f"README promises {name} from warptex {shlex.join(argv)}"
+        assert wt.io.read_image(out / "grass.png").shape == (256, 256, 4)  # colour + height in alpha
     elif command == "render":
         for name in RENDER_FILES:
             assert (out / name).is_file() and name in wrote, f"README promises {name} from warptex {shlex.join(argv)}"

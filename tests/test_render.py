@@ -26,8 +26,19 @@ def test_default_render_writes_every_output(tmp_path):
     assert lit.shape == (48, 64, 4) and g.resolution == (48, 64)
     covered = g.mask.numpy() > 0
     assert 0.3 < covered.mean() < 1.0, "the default camera frames the terrain"
-    np.testing.assert_array_equal(lit[..., 3], covered.astype(np.float32))
     assert "uv0" in g.uv_sets and (lit[covered, :3] > 0).all()
+    # Alpha is the coverage of the pixel's 4 samples: 0, 1, and quarters on the silhouette.
+    alpha = lit[..., 3]
+    np.testing.assert_array_equal(alpha * 4, np.round(alpha * 4))
+    inside = covered.copy()
+    for axis, step in ((0, 1), (0, -1), (1, 1), (1, -1)):  # pixels whose 4 neighbours are covered too
+        inside &= np.roll(covered, step, axis=axis)
+    inside[[0, -1], :] = inside[:, [0, -1]] = False
+    assert (alpha[inside] == 1).all() and (alpha[~covered & ~np.roll(covered, 1, 0) & ~np.roll(covered, -1, 0)] < 1).all()
+    edge = (alpha > 0) & (alpha < 1)
+    assert edge.sum() > 20, "the silhouette against the sky gets fractional coverage"
+    near = covered ^ np.roll(covered, 1, 0) | covered ^ np.roll(covered, -1, 0) | covered ^ np.roll(covered, 1, 1) | covered ^ np.roll(covered, -1, 1)
+    assert near[edge].mean() > 0.9, "fractional coverage lies along the silhouette"
 
 
 def test_render_of_a_user_mesh_with_its_embedded_texture(tmp_path, shared_data):
@@ -58,7 +69,7 @@ def test_lambert_facing_the_light_is_full_albedo():
     g.mask.fill_(1.0)
     lit = lambert(g, np.full((1, 2, 3), 0.5, np.float32), light_dir=(0, 2, 0), ambient=0.2)
     np.testing.assert_allclose(lit[0], [[0.5] * 3, [0.1] * 3], rtol=1e-6)
-    with pytest.raises(ValueError, match=r"lambert\(\): light_dir must be 3 finite numbers"):
+    with pytest.raises(ValueError, match=r"lambert\(\): light direction must be 3 finite numbers"):
         lambert(g, np.zeros((1, 2, 3)), light_dir=(0, 0, 0))
 
 
@@ -134,7 +145,7 @@ def test_an_obj_materials_map_kd_is_its_texture(tmp_path):
     mesh = _quad_with_material(tmp_path, (0.8, 0.1, 0.05))
     paths = run_render(tmp_path / "out", mesh_path=mesh, resolution=(24, 32), progress=False)
     albedo = io.read_image(paths[1])
-    covered = load_gbuffer(paths[4]).mask.numpy() > 0
+    covered = io.read_image(paths[3], channels=["A"])[..., 0] == 1  # wholly covered: no sky blended in
     assert covered.mean() > 0.1
     np.testing.assert_allclose(albedo[covered].mean(axis=0), [0.8, 0.1, 0.05], atol=0.02)
 
@@ -146,3 +157,93 @@ def test_the_default_view_is_from_the_front():
     camera = default_camera(box, (64, 64))
     offset = np.asarray(camera.eye) - box.bounds.mean(axis=0)
     assert offset[2] > 0 and offset[1] > 0 and offset[0] > 0
+
+
+def test_default_framing_shows_a_models_front(shared_data):
+    """Issue 34: monkey.glb was framed from high above (35°) and to the side. Its face (towards +Z)
+    is the side that shows the most triangles (298 of 48 × 48 pixels, the back of its head 112):
+    the camera now looks at the face, from 22° above and a little to the right."""
+    from warptex.gbuffer import load_mesh
+
+    camera = default_camera(load_mesh(shared_data / "meshes" / "monkey.glb"), (64, 64))
+    assert camera.forward[2] < -0.8 and -0.45 < camera.forward[1] < 0 and camera.up[1] > 0.9, (camera.forward, camera.up)
+
+
+def test_a_z_up_model_is_framed_upright():
+    """A model stored with Blender's axes (Z up, facing -Y): its detailed side is seen along +Y,
+    so it is taken to be Z-up and framed with +Z up in the picture, from the front."""
+    rock = trimesh.creation.icosphere(subdivisions=2)
+    face = trimesh.creation.icosphere(subdivisions=5)  # much denser: the "face"
+    face.vertices = face.vertices * [0.5, 0.2, 0.5] + [0.0, -0.9, 0.0]
+    camera = default_camera(trimesh.util.concatenate([rock, face]), (64, 64))
+    assert camera.forward[1] > 0.75 and camera.up[2] > 0.9, (camera.forward, camera.up)
+
+
+# -- the preview's look (issue 34 item 9) ----------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def terrain_view():
+    import warptex as wt
+    from warptex.scenes import TERRAIN_GRID, terrain_camera
+    from warptex.scenes.terrain import terrain
+
+    mesh = terrain(resolution=TERRAIN_GRID, seed=0)
+    return mesh, wt.rasterize(mesh, terrain_camera((128, 128)))
+
+
+def test_the_preview_light_has_contrast(terrain_view):
+    """Lit ÷ albedo over the default view: Lambert with 0.2 ambient was flat (median 0.85, the
+    90th percentile 2× the 10th); the key light and sky fill spread it 3× or more."""
+    from warptex.apps.shade import sun_and_sky
+
+    _, g = terrain_view
+    albedo = np.full((*g.resolution, 3), 0.5, np.float32)
+    covered = g.mask.numpy() > 0
+    for light, at_least in ((lambda: lambert(g, albedo), None), (lambda: sun_and_sky(g, albedo), 3.0)):
+        ratio = (light() / albedo)[covered].mean(axis=-1)
+        p10, p90 = np.percentile(ratio, [10, 90])
+        if at_least is None:
+            assert p90 / p10 < 2.2  # the old look, for reference
+        else:
+            assert p90 / p10 >= at_least and p10 < 0.4 and 0.7 < np.median(ratio) < 1.1, (p10, np.median(ratio), p90)
+
+
+def test_terrain_shading_normals_have_no_sawtooth(terrain_view):
+    """Interpolated across each triangle, the raw vertex normals kink along every cell's diagonal:
+    a sawtooth on the cliffs. The preview smooths them over the grid (two [1, 2, 1] passes): their
+    pixel-to-pixel second differences on the cliffs, the sawtooth's signature, fall to under half
+    (measured 0.058 from 0.139); the geometry and coverage stay as they were."""
+    import warptex as wt
+    from warptex.apps.render import _smooth_normals
+
+    mesh, g = terrain_view
+    smooth = wt.rasterize(_smooth_normals(mesh), g.camera)
+    raw, n = g.normal.numpy(), smooth.normal.numpy()
+    covered = g.mask.numpy() > 0
+    np.testing.assert_array_equal(smooth.mask.numpy() > 0, covered)
+    np.testing.assert_array_equal(smooth.position.numpy(), g.position.numpy())
+    inner = covered[:, 1:-1] & covered[:, :-2] & covered[:, 2:]
+    steep = inner & (raw[:, 1:-1, 1] < 0.8)  # slopes past ~37°: the cliffs
+
+    def roughness(v):
+        return np.linalg.norm(v[:, 2:] - 2 * v[:, 1:-1] + v[:, :-2], axis=-1)[steep].mean()
+
+    assert steep.sum() > 200
+    assert roughness(n) < 0.5 * roughness(raw), (roughness(n), roughness(raw))
+    np.testing.assert_allclose(np.linalg.norm(n[covered], axis=-1), 1.0, atol=1e-5)
+
+
+def test_preview_splat_maps_are_finer_and_keep_the_vertex_weights():
+    """The preview's splat maps have 4 texels per grid cell, so layer borders (snow against rock)
+    step 4× finer at the default view; at the vertices they are the one-per-vertex maps."""
+    from warptex.scenes.material import terrain_splat_maps
+    from warptex.scenes.terrain import terrain
+
+    mesh = terrain(resolution=(33, 33), seed=0)
+    coarse, fine = terrain_splat_maps(mesh, (33, 33)), terrain_splat_maps(mesh, (33, 33), upsample=4)
+    assert fine.shape == (129, 129, 4)
+    np.testing.assert_allclose(fine[::4, ::4], coarse, atol=1e-6)
+    np.testing.assert_allclose(fine.sum(-1), 1.0, atol=1e-5)
+    with pytest.raises(ValueError, match=r"terrain_splat_maps\(\): upsample must be an int >= 1"):
+        terrain_splat_maps(mesh, (33, 33), upsample=0)

@@ -52,6 +52,7 @@ _import_kernels_of_a_checkout()
 from warptex import fit, io
 from warptex._compile import precompile
 from warptex._threads import get_num_threads, set_num_threads
+from warptex._warp import init_quietly
 from warptex.atlas import Atlas, export_index_maps, pack_atlas, splat_atlas
 from warptex.bake import Baked, bake, tangent_space, texture_gbuffer
 from warptex.camera import Camera, look_at, orthographic
@@ -61,6 +62,7 @@ from warptex.gltf import export_gltf
 from warptex.histogram import Histogram, prepare_histogram
 from warptex.splat import LayerProjection, splat
 from warptex.options import Address, Filter, Method, Sampler, Stochastic
+from warptex.resolve import resolve
 from warptex.sampling import sample
 from warptex.stochastic import hex_taps, stochastic
 from warptex.texture import Texture, TextureArray, mip_sizes
@@ -91,6 +93,7 @@ __all__ = [
     "fit",
     "get_num_threads",
     "hex_taps",
+    "init_quietly",
     "io",
     "load_gbuffer",
     "load_mesh",
@@ -101,6 +104,7 @@ __all__ = [
     "precompile",
     "prepare_histogram",
     "rasterize",
+    "resolve",
     "sample",
     "save_gbuffer",
     "set_num_threads",

@@ -46,11 +46,30 @@ def output_set(out_dir: str | os.PathLike) -> Iterator[Path]:
 
 
 def check_output_folder(func: str, out_dir: str | os.PathLike) -> Path:
-    """``out_dir`` as a ``Path``, or an ``OSError`` naming ``func`` when it exists as a file: called
-    before a job's work, so that a bad folder is reported before the work is done."""
+    """``out_dir`` as a ``Path``, or an ``OSError`` naming ``func`` and the folder when it exists as
+    a file, cannot be created or cannot be written: called before a job's work, so that a bad
+    folder is reported before the work is done. Folders it creates to find out are removed again."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(f"{func}(): the output folder {str(out)!r} is a file")
+    missing = []
+    for folder in (out, *out.absolute().parents):
+        if folder.exists():
+            break
+        missing.append(folder)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / f".warptex-{os.getpid()}-{secrets.token_hex(4)}.probe"
+        probe.touch()
+        probe.unlink()
+    except OSError as err:
+        raise type(err)(f"{func}(): cannot write into the output folder {str(out)!r}: {err.strerror or err}") from None
+    finally:
+        for folder in missing:  # deepest first
+            try:
+                folder.rmdir()
+            except OSError:
+                pass
     return out
 
 
@@ -65,7 +84,7 @@ def remove_stale_staging(out: Path) -> list[Path]:
     return removed
 
 
-def check_memory(func: str, what: str, needed_bytes: float, device=None) -> None:
+def check_memory(func: str, what: str, needed_bytes: float, device=None, hint: str = "use a smaller resolution") -> None:
     """Raise ``MemoryError`` naming ``what`` when a job needs more memory than this machine has
     available (Linux: ``MemAvailable``; elsewhere the allocation itself reports it), or, on a CUDA
     ``device``, more than the device has free, instead of letting the job run the machine out of
@@ -77,7 +96,7 @@ def check_memory(func: str, what: str, needed_bytes: float, device=None) -> None
     if available is not None and needed_bytes > available:
         raise MemoryError(
             f"{func}(): {what} needs about {needed_bytes / 2**30:.1f} GiB of memory, but "
-            f"{available / 2**30:.1f} GiB is {where}; use a smaller resolution"
+            f"{available / 2**30:.1f} GiB is {where}; {hint}"
         )
 
 

@@ -102,9 +102,12 @@ def stochastic_args(func: str, option: Stochastic, texture: TextureArray, sample
     return args, h
 
 
-def projection_args(func: str, *, tiling, sharpness, offsets, mirror_fix, weights, object_to_world=None, device=None) -> kp.ProjectionArgs:
+def projection_args(func: str, *, tiling, sharpness, offsets, mirror_fix, weights, object_to_world=None, origin=None, address=None, device=None) -> kp.ProjectionArgs:
     """The projection options of a triplanar technique (or of splat layers mapped triplanar),
-    checked and packed; ``object_to_world`` (a 4×4 affine matrix) projects object space."""
+    checked and packed; ``object_to_world`` (a 4×4 affine matrix) projects object space.
+    ``origin``: the G-buffer's float64 origin (its positions are relative to it), added to the
+    plane UVs in float64 (``kernels.projection.origin_uv``), folded by whole periods for the
+    ``address`` modes that repeat (wrap, mirror)."""
     proj = kp.ProjectionArgs()
     proj.tiling = param_array(func, "tiling", tiling, ((1,), (3,)), device, nonzero=True)
     proj.sharpness = param_array(func, "sharpness", sharpness, ((1,),), device, nonnegative=True)
@@ -116,7 +119,23 @@ def projection_args(func: str, *, tiling, sharpness, offsets, mirror_fix, weight
     proj.normal_to_object = wp.mat33(*normal_to_object.reshape(-1))
     proj.normal_to_world = wp.mat33(*normal_to_world.reshape(-1))
     proj.object_space = int(object_to_world is not None)
+    _pack_origin(proj, origin, to_object, address)
     return proj
+
+
+def _pack_origin(proj: kp.ProjectionArgs, origin, to_object: np.ndarray, address) -> None:
+    """The origin in the projected space, exact in float64: object space moves it by the whole
+    affine map, whose translation then leaves the float32 matrix."""
+    origin = np.zeros(3) if origin is None else np.asarray(origin, np.float64)
+    if not origin.any():
+        proj.origin_mode = kp.ORIGIN_NONE
+        return
+    projected = to_object[:3, :3] @ origin + to_object[:3, 3]
+    linear = to_object.copy()
+    linear[:3, 3] = 0.0
+    proj.world_to_object = wp.mat44(*linear.reshape(-1))
+    proj.origin = wp.vec3d(*projected)
+    proj.origin_mode = kp.ORIGIN_FOLDED if Address(address or "wrap") in (Address.WRAP, Address.MIRROR) else kp.ORIGIN_EXACT
 
 
 def _space_matrices(func: str, object_to_world):

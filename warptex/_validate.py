@@ -120,3 +120,16 @@ def as_device_array(func: str, name: str, value: wp.array, device, *, beside: st
     if not value.is_contiguous:
         raise ValueError(f"{func}(): {name} must be contiguous")
     return value
+
+
+def checked_device(who: str, device):
+    """``wp.get_device(device)``, or a ``ValueError`` starting with ``who`` (``"rasterize()"``,
+    ``"--device"``) that says which devices this machine has (Warp's own says only "Invalid device
+    identifier")."""
+    try:
+        return wp.get_device(device)
+    except (ValueError, RuntimeError):
+        pass
+    have = ", ".join(d.alias for d in wp.get_devices())
+    cuda = "" if wp.get_cuda_device_count() else "no CUDA device is available here; "
+    raise ValueError(f"{who}: device {device!r} does not exist: {cuda}the devices are {have}")

@@ -14,9 +14,9 @@ oldest Warp release warptex supports as well):
 - :func:`map_arrays`: a struct (or array) with its arrays replaced, built on the two above.
 - :func:`scalar_type`: the scalar type of a vector or matrix dtype (which arrays can carry gradients).
 
-And :func:`init_quietly`, for the command line: Warp's native library prints a warning to the
-process's stderr on every start on a machine without a CUDA driver, which a CPU user can do
-nothing about.
+And :func:`init_quietly` (public as ``warptex.init_quietly``), for the command line and the
+examples: Warp's native library prints a warning to the process's stderr on every start on a
+machine without a CUDA driver, which a CPU user can do nothing about.
 """
 
 from __future__ import annotations

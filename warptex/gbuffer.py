@@ -3,16 +3,13 @@
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
-import trimesh
 import warp as wp
 
 from warptex._validate import as_float_array
 from warptex.camera import Camera
-from warptex.kernels import raster as kr
 
 #: Per-pixel fields of a :class:`GBuffer` with their Warp dtypes (UV sets are kept apart).
 FIELDS = {
@@ -52,6 +49,14 @@ class GBuffer:
             and the tangent (``vec4``: unit xyz orthogonal to ``normal``, bitangent sign in w).
         camera: the camera that produced it (``None`` when loaded without one; a tuple of cameras
             for a batch).
+        samples: samples per image pixel (1, 4, 9, ...): a supersampled G-buffer
+            (:func:`~warptex.rasterize` with ``samples=``) holds each pixel's stratified samples in
+            an ``s × s`` block (``s² = samples``), so its arrays are ``s``-times the image's size;
+            :func:`~warptex.resolve` averages a technique's output over the blocks.
+        origin: float64 ``(3,)`` world point that ``position`` is relative to (camera-relative
+            rendering, for scenes far from the world origin): the world position is
+            ``origin + position`` (:meth:`world_position`). Techniques that project the position
+            (triplanar, world-XZ and triplanar layers) add it exactly, in float64.
     """
 
     position: wp.array
@@ -64,6 +69,21 @@ class GBuffer:
     position_dy: wp.array
     uv_sets: dict[str, dict[str, wp.array]] = field(default_factory=dict)
     camera: Camera | tuple[Camera, ...] | None = None
+    samples: int = 1
+    origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self):
+        self.origin = np.array(self.origin, np.float64).reshape(-1)
+        if self.origin.shape != (3,) or not np.isfinite(self.origin).all():
+            raise ValueError(f"GBuffer: origin must be 3 finite numbers, got {self.origin.tolist()}")
+        root = math.isqrt(self.samples) if isinstance(self.samples, (int, np.integer)) and not isinstance(self.samples, bool) and self.samples > 0 else 0
+        if root == 0 or root * root != self.samples:
+            raise ValueError(f"GBuffer: samples must be a square number (1, 4, 9, ...), got {self.samples!r}")
+
+    def world_position(self) -> np.ndarray:
+        """World-space positions as float64 NumPy, ``origin + position`` (0 where uncovered)."""
+        p = self.position.numpy().astype(np.float64)
+        return np.where(self.mask.numpy()[..., None] > 0, p + self.origin, 0.0)
 
     @property
     def resolution(self) -> tuple[int, ...]:
@@ -89,7 +109,7 @@ class GBuffer:
         arrays = {name: getattr(self, name)[int(k)] for name in FIELDS}
         sets = {s: {f: a[int(k)] for f, a in fields.items()} for s, fields in self.uv_sets.items()}
         camera = self.camera[int(k)] if isinstance(self.camera, tuple) else self.camera
-        return GBuffer(**arrays, uv_sets=sets, camera=camera)
+        return GBuffer(**arrays, uv_sets=sets, camera=camera, samples=self.samples, origin=self.origin)
 
     @property
     def device(self):
@@ -129,14 +149,14 @@ class GBuffer:
         return out
 
     @classmethod
-    def empty(cls, resolution, *, uv_sets=(), camera=None, device=None) -> "GBuffer":
+    def empty(cls, resolution, *, uv_sets=(), camera=None, samples=1, origin=(0.0, 0.0, 0.0), device=None) -> "GBuffer":
         """A G-buffer where no pixel is covered (the background values)."""
         device = wp.get_device(device)
         arrays = {name: wp.zeros(resolution, dtype=dtype, device=device) for name, dtype in FIELDS.items()}
         arrays["depth"].fill_(float("inf"))
         arrays["triangle"].fill_(-1)
         sets = {s: {k: wp.zeros(resolution, dtype=t, device=device) for k, t in UV_FIELDS.items()} for s in uv_sets}
-        return cls(**arrays, uv_sets=sets, camera=camera)
+        return cls(**arrays, uv_sets=sets, camera=camera, samples=samples, origin=origin)
 
     @classmethod
     def from_arrays(
@@ -156,6 +176,8 @@ class GBuffer:
         triangle=None,
         flip_y: bool = False,
         camera: Camera | None = None,
+        origin=(0.0, 0.0, 0.0),
+        samples: int = 1,
         device=None,
     ) -> "GBuffer":
         """A G-buffer from another renderer's per-pixel arrays (nvdiffrast, pytorch3d, Blender
@@ -186,6 +208,9 @@ class GBuffer:
             flip_y: the arrays' row 0 is the *bottom* row (OpenGL / nvdiffrast): rows are
                 reversed, and ``position_dy``/``uv_dy`` negated (their "y" pointed up).
             camera: kept on the G-buffer; gives the default depth.
+            origin: the world point ``position`` is relative to (float64; see :class:`GBuffer`).
+            samples: samples per pixel when the arrays hold ``s × s`` blocks of stratified
+                samples per image pixel (:class:`GBuffer`); 1 for one per pixel.
             device: Warp device of the arrays.
 
         Uncovered pixels get the background values (zeros, ``depth = inf``, ``triangle = -1``).
@@ -227,7 +252,7 @@ class GBuffer:
         fields["normal"] = _unit_rows(fields["normal"])
         fields["geometric_normal"] = fields["normal"] if fields["geometric_normal"] is None else _unit_rows(fields["geometric_normal"])
         if fields["depth"] is None:
-            view = (p - camera.eye) @ camera.forward if camera is not None else np.ones((h, w))
+            view = (p + origin - camera.eye) @ camera.forward if camera is not None else np.ones((h, w))
             fields["depth"] = np.asarray(view, np.float32)[..., None]
         if fields["triangle"] is None:
             fields["triangle"] = np.zeros((h, w, 1))
@@ -254,7 +279,7 @@ class GBuffer:
         fields["mask"] = covered[..., None].astype(np.float32)
         arrays = {name: to_warp(name, fields[name], dtype) for name, dtype in FIELDS.items()}
         sets = {"uv0": {k: to_warp(k, uv_fields[k], t) for k, t in UV_FIELDS.items()}} if uv_fields["uv"] is not None else {}
-        return cls(**arrays, uv_sets=sets, camera=camera)
+        return cls(**arrays, uv_sets=sets, camera=camera, samples=samples, origin=origin)
 
 
 def screen_derivatives(values: np.ndarray, covered: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -322,213 +347,6 @@ def gbuffer_device(func: str, gbuffer, device) -> wp.context.Device:
     return device
 
 
-def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
-    """Load a mesh file (OBJ, PLY, STL, GLB/GLTF, ...) as one ``trimesh.Trimesh``.
-
-    Scenes are flattened with their node transforms; materials and UVs are kept where trimesh can
-    merge them. The mesh is checked as :func:`rasterize` checks it (triangles, finite vertices,
-    face indices in range), so a bad file is reported as such, naming it.
-
-    Raises:
-        FileNotFoundError: no such file. ValueError: a folder, or a file that holds no usable mesh.
-        TypeError: ``path`` is not a path.
-    """
-    try:
-        path = os.fspath(path)
-    except TypeError:
-        raise TypeError(f"load_mesh(): path must be str or os.PathLike, got {type(path).__name__}") from None
-    if os.path.isdir(path):
-        raise ValueError(f"load_mesh(): {path!r} is a folder, not a mesh file")
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"load_mesh(): file not found: {path!r}")
-    try:
-        loaded = trimesh.load(path, force="mesh", process=False)
-    except Exception as err:  # trimesh raises many types for bad files
-        raise ValueError(f"load_mesh(): cannot read {path!r} as a mesh: {' '.join(str(err).split())}") from err
-    if not isinstance(loaded, trimesh.Trimesh):
-        raise ValueError(f"load_mesh(): {path!r} holds no triangle mesh (got {type(loaded).__name__})")
-    checked_geometry(f"load_mesh(): {path!r}:", loaded)
-    return loaded
-
-
-def mesh_uv_sets(mesh: trimesh.Trimesh) -> dict[str, np.ndarray]:
-    """The mesh's UV sets as ``{name: [V, 2] float32}``: ``"uv0"`` from its texture visuals, then
-    any 2-wide per-vertex attribute whose name starts with ``uv`` or ``texcoord``."""
-    sets = {}
-    uv = getattr(mesh.visual, "uv", None)
-    if uv is not None and len(uv) == len(mesh.vertices):
-        sets["uv0"] = np.asarray(uv, np.float32)
-    for name, values in mesh.vertex_attributes.items():
-        values = np.asarray(values)
-        if name.lower().startswith(("uv", "texcoord")) and values.shape == (len(mesh.vertices), 2):
-            sets.setdefault(name.lower(), values.astype(np.float32))
-    return sets
-
-
-def vertex_tangents(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Per-vertex tangents ``[V, 4]`` (xyz unit, w = bitangent sign), accumulated per face (Lengyel).
-
-    Vertices whose faces have degenerate UVs get a tangent perpendicular to the normal.
-    """
-    p = vertices[faces]
-    t = uv[faces].astype(np.float64)
-    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
-    d1, d2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
-    r = np.where(np.abs(det) > 1e-20, 1.0 / np.where(det == 0, 1, det), 0.0)[:, None]
-    sdir = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * r
-    tdir = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * r
-    tan, bit = np.zeros_like(vertices), np.zeros_like(vertices)
-    for corner in range(3):
-        np.add.at(tan, faces[:, corner], sdir)
-        np.add.at(bit, faces[:, corner], tdir)
-    tan -= normals * (normals * tan).sum(-1, keepdims=True)
-    length = np.linalg.norm(tan, axis=-1, keepdims=True)
-    fallback = np.cross(normals, np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
-    tan = np.where(length > 1e-12, tan / np.maximum(length, 1e-300), fallback)
-    sign = np.where((np.cross(normals, tan) * bit).sum(-1) < 0.0, -1.0, 1.0)
-    return np.concatenate([tan, sign[:, None]], axis=-1).astype(np.float32)
-
-
-def _checked_mesh(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Vertices, faces and smooth vertex normals of a valid mesh, or a ``TypeError``/``ValueError``."""
-    if not isinstance(mesh, trimesh.Trimesh):
-        raise TypeError(f"rasterize(): mesh must be a trimesh.Trimesh or a path, got {type(mesh).__name__}")
-    vertices, faces = checked_geometry("rasterize():", mesh)
-    return vertices, faces, vertex_normals(mesh)
-
-
-def checked_geometry(prefix: str, mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices ``[V, 3]`` float64 and faces ``[F, 3]`` int64 of ``mesh``, or a ``ValueError``
-    starting with ``prefix`` (e.g. ``"rasterize():"``): no triangles, a non-finite vertex, a
-    face index out of range."""
-    vertices = np.asarray(mesh.vertices, np.float64).reshape(-1, 3)
-    faces = np.asarray(mesh.faces, np.int64).reshape(-1, 3)
-    if len(faces) == 0 or len(vertices) == 0:
-        raise ValueError(f"{prefix} the mesh is empty ({len(vertices)} vertices, {len(faces)} faces)")
-    if not np.isfinite(vertices).all():
-        bad = int(np.argwhere(~np.isfinite(vertices).all(axis=1))[0, 0])
-        raise ValueError(f"{prefix} vertex {bad} is not finite: {vertices[bad].tolist()}")
-    if faces.min() < 0 or faces.max() >= len(vertices):
-        raise ValueError(f"{prefix} face indices must be in [0, {len(vertices) - 1}], got [{faces.min()}, {faces.max()}]")
-    return vertices, faces
-
-
-def vertex_normals(mesh: trimesh.Trimesh) -> np.ndarray:
-    """Unit vertex normals ``[V, 3]``: the mesh's own when it carries them, else smooth area-weighted ones.
-
-    (Computed here rather than by trimesh, whose fallback without SciPy logs a traceback.)
-    """
-    vertices = np.asarray(mesh.vertices, np.float64)
-    faces = np.asarray(mesh.faces, np.int64)
-    cache = getattr(getattr(mesh, "_cache", None), "cache", {})
-    if "vertex_normals" in cache and np.shape(cache["vertex_normals"]) == vertices.shape:
-        normals = np.asarray(cache["vertex_normals"], np.float64)
-    else:
-        p = vertices[faces]
-        face_normals = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])  # length = 2 × area
-        normals = np.zeros_like(vertices)
-        for corner in range(3):
-            np.add.at(normals, faces[:, corner], face_normals)
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    return np.where(length > 0, normals / np.maximum(length, 1e-300), 0.0)
-
-
-def _camera_view(camera: Camera) -> kr.CameraView:
-    view = kr.CameraView()
-    view.eye, view.forward, view.right, view.up = (wp.vec3(*np.asarray(v, np.float32)) for v in (camera.eye, camera.forward, camera.right, camera.up))
-    view.half_x, view.half_y = camera.half_extent
-    view.height, view.width = camera.resolution
-    view.orthographic = int(camera.orthographic)
-    return view
-
-
-def rasterize(mesh, camera, *, device=None) -> GBuffer:
-    """Rasterise ``mesh`` seen by ``camera`` into a :class:`GBuffer` (primary rays against a BVH).
-
-    Degenerate (zero-area) triangles are never hit; a camera inside the mesh sees its back faces
-    (normals flipped to face the camera); a camera that sees nothing gives an all-empty G-buffer.
-
-    Args:
-        mesh: a ``trimesh.Trimesh`` or a path that :func:`load_mesh` reads. Meshes without normals
-            get smooth (area-weighted) vertex normals.
-        camera: from :func:`warptex.camera.look_at` or :func:`warptex.camera.orthographic`; or a
-            sequence of ``V`` cameras of one resolution, rasterised in one launch against one BVH
-            into a batched G-buffer of ``(V, H, W)`` arrays, which every technique takes (its
-            outputs are ``(V, H, W, C)``).
-        device: Warp device for the BVH, the launches and the resulting arrays.
-
-    Returns:
-        The G-buffer, with one UV set per set of the mesh (see :func:`mesh_uv_sets`); its
-        ``camera`` is the camera, or the tuple of cameras of a batch.
-    """
-    func = "rasterize"
-    if isinstance(camera, Camera):
-        cameras, batch = [camera], False
-    elif isinstance(camera, (list, tuple)) and camera and all(isinstance(c, Camera) for c in camera):
-        cameras, batch = list(camera), True
-    else:
-        raise TypeError(f"{func}(): camera must be a warptex Camera or a non-empty sequence of them, got {type(camera).__name__}")
-    resolution = cameras[0].resolution
-    for k, c in enumerate(cameras):
-        if c.resolution != resolution:
-            raise ValueError(f"{func}(): the cameras of a batch must share one resolution; camera 0 has {resolution}, camera {k} {c.resolution}")
-    trimesh_mesh = load_mesh(mesh) if isinstance(mesh, (str, os.PathLike)) else mesh
-    vertices, faces, normals = _checked_mesh(trimesh_mesh)
-    uv_sets = mesh_uv_sets(trimesh_mesh)
-    device = wp.get_device(device)
-    shape = (len(cameras), *resolution)  # the kernels' (views, H, W)
-
-    # Zero-area triangles have no plane (no normal, no differentials): they are left out of the
-    # BVH, and hits report the index of the face in the full mesh.
-    area2 = np.linalg.norm(np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]]), axis=1)
-    face_ids = np.flatnonzero(area2 > 0)
-    if len(face_ids) == 0:
-        raise ValueError(f"{func}(): all {len(faces)} triangles of the mesh are degenerate (zero area)")
-    points = wp.array(vertices.astype(np.float32), dtype=wp.vec3, device=device)
-    indices = wp.array(faces.reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
-    hit_indices = wp.array(faces[face_ids].reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
-    bvh = wp.Mesh(points=points, indices=hit_indices)
-    g = GBuffer.empty(shape if batch else resolution, uv_sets=uv_sets, camera=tuple(cameras) if batch else camera, device=device)
-
-    def batched(a: wp.array) -> wp.array:
-        return a.reshape(shape)
-
-    barycentric = wp.zeros(shape, dtype=wp.vec3, device=device)
-    wp.launch(
-        kr.raster_kernel,
-        dim=shape,
-        inputs=[
-            bvh.id,
-            points,
-            hit_indices,
-            wp.array(face_ids.astype(np.int32), dtype=wp.int32, device=device),
-            wp.array(normals.astype(np.float32), dtype=wp.vec3, device=device),
-            wp.array([_camera_view(c) for c in cameras], dtype=kr.CameraView, device=device),
-        ],
-        outputs=[batched(a) for a in (g.position, g.normal, g.geometric_normal, g.depth, g.mask, g.triangle)] + [barycentric, batched(g.position_dx), batched(g.position_dy)],
-        device=device,
-        record_tape=False,
-    )
-    for name, uv in uv_sets.items():
-        out = g.uv_sets[name]
-        tangents = vertex_tangents(vertices, faces, normals, uv)
-        wp.launch(
-            kr.uv_kernel,
-            dim=shape,
-            inputs=[
-                points,
-                indices,
-                wp.array(uv, dtype=wp.vec2, device=device),
-                wp.array(tangents, dtype=wp.vec4, device=device),
-                batched(g.triangle),
-                barycentric,
-                batched(g.normal),
-                batched(g.position_dx),
-                batched(g.position_dy),
-            ],
-            outputs=[batched(out[k]) for k in ("uv", "uv_dx", "uv_dy", "tangent")],
-            device=device,
-            record_tape=False,
-        )
-    return g
+# Mesh loading and rasterising live in their own modules; their names stay importable from here.
+from warptex.mesh import checked_geometry, load_mesh, mesh_uv_sets, vertex_normals, vertex_tangents  # noqa: E402,F401
+from warptex.raster import rasterize  # noqa: E402,F401

@@ -57,6 +57,10 @@ _ALIASES = {
     "normal": [("Normal.X", "Normal.Y", "Normal.Z")],
     "depth": [("Depth.Z",), ("Depth.V",), ("Depth",)],
 }
+# Header attributes of a saved G-buffer: the float64 origin its positions are relative to, and its
+# samples per pixel (GBuffer.origin, GBuffer.samples). Files without them: the world origin, 1.
+ORIGIN_ATTRIBUTE = "warptexOrigin"
+SAMPLES_ATTRIBUTE = "warptexSamples"
 _BLENDER_UV = [("UV.U", "UV.V"), ("UV.X", "UV.Y")]
 _BLENDER_PASSES = {"Position", "Normal", "UV", "Depth", "Combined", "Image", "Alpha", "Vector", "IndexOB", "IndexMA"}
 
@@ -84,7 +88,7 @@ def save_gbuffer(path: str | os.PathLike, gbuffer: GBuffer) -> None:
         for name, suffixes in _UV_NAMES.items():
             put(f"{set_name} {name}", [f"{set_name}.{s}" for s in suffixes], arrays[name].numpy())
     with _named(func):
-        io.write_exr(path, channels)
+        io.write_exr(path, channels, attributes={ORIGIN_ATTRIBUTE: np.asarray(gbuffer.origin, np.float64), SAMPLES_ATTRIBUTE: int(gbuffer.samples)})
 
 
 def load_gbuffer(path: str | os.PathLike, *, layer: str | None = None, device=None) -> GBuffer:
@@ -151,7 +155,13 @@ def load_gbuffer(path: str | os.PathLike, *, layer: str | None = None, device=No
             k: _to_warp(found[k] if found[k] is not None else np.zeros((*resolution, _VEC[t]), np.float32), t, device)
             for k, t in UV_FIELDS.items()
         }
-    return GBuffer(**arrays, uv_sets=uv_sets)
+    with _named(func):
+        attributes = io.exr_attributes(path)
+    origin, samples = attributes.get(ORIGIN_ATTRIBUTE, np.zeros(3)), attributes.get(SAMPLES_ATTRIBUTE, 1)
+    try:
+        return GBuffer(**arrays, uv_sets=uv_sets, origin=origin, samples=int(samples))
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{func}(): '{os.fspath(path)}' has a bad {ORIGIN_ATTRIBUTE} or {SAMPLES_ATTRIBUTE}: {err}") from None
 
 
 def _channel_table(func: str, path, layer: str | None) -> dict[str, np.ndarray]:

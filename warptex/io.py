@@ -1,4 +1,4 @@
-"""Image file I/O: PNG/JPG (and other Pillow formats) and OpenEXR.
+"""Image file I/O: PNG/JPG (and other Pillow formats) here, OpenEXR in :mod:`warptex.exr` (re-exported).
 
 Conventions used throughout ``warptex``:
 
@@ -16,16 +16,11 @@ Conventions used throughout ``warptex``:
 
 from __future__ import annotations
 
-import os
-import re
-import secrets
-import time
-from collections.abc import Iterator, Mapping, Sequence
-from contextlib import contextmanager
-
 import numpy as np
-import OpenEXR
 from PIL import Image
+
+from warptex._files import _as_image, _atomic_output, _checked_input_path, _checked_output_path, _fspath, process_alive  # noqa: F401 (re-exported)
+from warptex.exr import EXR_MAGIC, _read_exr, exr_attributes, exr_channel_names, exr_layers, read_exr, write_exr
 
 __all__ = [
     "srgb_to_linear",
@@ -33,18 +28,18 @@ __all__ = [
     "read_image",
     "read_exr",
     "exr_channel_names",
+    "exr_layers",
+    "exr_attributes",
     "write_png",
     "write_exr",
 ]
 
-_EXR_MAGIC = b"\x76\x2f\x31\x01"
 _REC709_LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
 _SIXTEEN_BIT_MODES = ("I;16", "I;16L", "I;16B", "I;16N", "I")
 # Pillow modes that need converting before use; everything not listed here
 # (and not 16-bit or float) is converted to RGB (CMYK, YCbCr, LAB, HSV, RGBX...).
 _PIL_MODE_MAP = {"L": "L", "LA": "LA", "RGB": "RGB", "RGBA": "RGBA",
                  "1": "L", "La": "LA", "PA": "RGBA", "RGBa": "RGBA"}
-_DEFAULT_EXR_NAMES = {1: ("Y",), 2: ("Y", "A"), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}
 
 
 def srgb_to_linear(x: np.ndarray) -> np.ndarray:
@@ -78,7 +73,7 @@ def linear_to_srgb(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, x * 12.92, power).astype(np.float32)
 
 
-def read_image(path, *, data: bool = False, channels=None) -> np.ndarray:
+def read_image(path, *, data: bool = False, channels=None, layer: str | None = None) -> np.ndarray:
     """Read an image file as a linear float32 array.
 
     EXR files (recognised by their magic bytes, whatever the extension) are
@@ -102,6 +97,9 @@ def read_image(path, *, data: bool = False, channels=None) -> np.ndarray:
             1-4 forcing the channel count: gray is replicated to RGB, RGB
             becomes Rec.709 luminance (computed after decoding), a missing
             alpha is filled with 1 and an unwanted one dropped.
+        layer: For EXR, the layer to read (``"diffuse"`` for ``diffuse.R``,
+            ``diffuse.G``...; see :func:`read_exr`, which also says which layer
+            is read without one). Other formats have no layers.
 
     Returns:
         float32 array shaped [H, W, C].
@@ -109,14 +107,17 @@ def read_image(path, *, data: bool = False, channels=None) -> np.ndarray:
     Raises:
         FileNotFoundError: If ``path`` does not exist.
         ValueError: If ``path`` is a directory, cannot be decoded, or
-            ``channels`` is invalid.
+            ``channels`` or ``layer`` is invalid (an EXR with several layers
+            and no default one needs ``layer``).
         TypeError: If ``channels`` has the wrong type for the file format.
     """
     path = _checked_input_path(path, "read_image")
     with open(path, "rb") as f:
         head = f.read(26)
-    if head[:4] == _EXR_MAGIC:
-        return _read_exr(path, channels, "read_image")[0]
+    if head[:4] == EXR_MAGIC:
+        return _read_exr(path, channels, layer, "read_image")[0]
+    if layer is not None:
+        raise ValueError(f"read_image(): layer={layer!r} names an EXR layer, but '{path}' is not an OpenEXR file")
     if channels is not None:
         channels = _channel_count(channels)
     if _is_sixteen_bit_colour_png(head):
@@ -129,51 +130,6 @@ def read_image(path, *, data: bool = False, channels=None) -> np.ndarray:
     except Exception as exc:
         raise ValueError(f"read_image(): cannot decode '{path}' as an image: {exc}") from exc
     return image if channels is None else _convert_channels(image, has_alpha, channels)
-
-
-def read_exr(path, channels: Sequence[str] | None = None) -> tuple[np.ndarray, tuple[str, ...]]:
-    """Read channels of an OpenEXR file.
-
-    Pixels of the data window are returned (the display window is ignored);
-    half and uint channels are converted to float32 (uint values above 2**24
-    lose precision).
-
-    Args:
-        path: ``str`` or ``os.PathLike`` of the file.
-        channels: Channel names to read, in that order (any number >= 1).
-            Names may come from any part of a multi-part file whose size
-            matches the first part's; the first part wins for duplicate
-            names. If None, channels of the first part are chosen: R,G,B (+A)
-            if present, else Y (+A) if present, else all channels in sorted
-            order provided there are at most 4.
-
-    Returns:
-        ``(image, names)``: float32 array shaped [H, W, C] and the C channel
-        names in order.
-
-    Raises:
-        FileNotFoundError: If ``path`` does not exist.
-        ValueError: If the file cannot be decoded, requested channels are
-            missing or differ in size, or the default choice would exceed 4
-            channels.
-        TypeError: If ``channels`` is not a sequence of str.
-    """
-    return _read_exr(_checked_input_path(path, "read_exr"), channels, "read_exr")
-
-
-def exr_channel_names(path) -> tuple[str, ...]:
-    """Names of the channels in an EXR file's first part, read from its header only.
-
-    Raises:
-        FileNotFoundError: if the file does not exist.
-        ValueError: if it is not a readable OpenEXR file.
-    """
-    path = _checked_input_path(path, "exr_channel_names")
-    try:
-        with OpenEXR.File(path, header_only=True) as exr:
-            return tuple(channel.name for channel in exr.header()["channels"])
-    except (RuntimeError, UnicodeDecodeError) as exc:  # a corrupt header may hold a name that is not UTF-8
-        raise ValueError(f"exr_channel_names(): cannot decode '{path}' as an OpenEXR image: {exc}") from None
 
 
 def write_png(path, image, *, data: bool = False, bits: int = 8) -> None:
@@ -224,110 +180,6 @@ def write_png(path, image, *, data: bool = False, bits: int = 8) -> None:
     pil_image = Image.fromarray(codes[..., 0] if n == 1 else codes)
     with _atomic_output(path) as tmp:
         pil_image.save(tmp, format="PNG")
-
-
-def write_exr(path, image, *, channel_names: Sequence[str] | None = None, half: bool = False) -> None:
-    """Write an OpenEXR file (ZIP compression), atomically, creating missing parent directories.
-
-    Args:
-        path: ``str`` or ``os.PathLike`` of the file to write.
-        image: Array-like of real numbers shaped [H, W] or [H, W, C], or a
-            dict mapping channel names to [H, W] arrays of equal size.
-        channel_names: Names for the C channels of an array (any names, e.g.
-            ``'Position.X'``). Defaults: 1 -> Y, 2 -> Y,A, 3 -> R,G,B,
-            4 -> R,G,B,A; required for other channel counts. Not allowed
-            with a dict.
-        half: If True, store float16 (values beyond +-65504 become +-inf);
-            otherwise float32.
-
-    Raises:
-        ValueError: On a wrong rank, empty image, mismatched channel sizes,
-            or missing/duplicate/wrong-length channel names.
-        TypeError: If the pixels are not numeric or names are not str.
-    """
-    path = _checked_output_path(path, "write_exr")
-    if isinstance(image, Mapping):
-        if channel_names is not None:
-            raise ValueError("write_exr(): channel_names cannot be given with a dict image; "
-                             "the dict keys are the channel names")
-        names = _name_tuple(list(image), "write_exr", "dict keys")
-        planes = [_as_image(image[name], "write_exr") for name in names]
-        if any(p.shape[-1] != 1 for p in planes):
-            raise ValueError("write_exr(): dict values must be [H, W] arrays")
-        if len({p.shape for p in planes}) > 1:
-            sizes = ", ".join(f"{k!r}: {p.shape[:2]}" for k, p in zip(names, planes))
-            raise ValueError(f"write_exr(): all channels must have the same size, got {sizes}")
-    else:
-        pixels = _as_image(image, "write_exr")
-        n = pixels.shape[-1]
-        if channel_names is None:
-            if n not in _DEFAULT_EXR_NAMES:
-                raise ValueError(f"write_exr(): image has {n} channels; pass channel_names=")
-            channel_names = _DEFAULT_EXR_NAMES[n]
-        names = _name_tuple(channel_names, "write_exr", "channel_names")
-        if len(names) != n:
-            raise ValueError(f"write_exr(): got {len(names)} channel_names for an image with {n} channels")
-        planes = [pixels[..., i : i + 1] for i in range(n)]
-    if not names:
-        raise ValueError("write_exr(): image has no channels")
-    if len(set(names)) != len(names) or "" in names:
-        raise ValueError(f"write_exr(): channel names must be unique and non-empty, got {names}")
-    with np.errstate(over="ignore"):
-        dtype = np.float16 if half else np.float32
-        channels = {name: np.ascontiguousarray(p[..., 0], dtype=dtype) for name, p in zip(names, planes)}
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    with _atomic_output(path) as tmp:
-        OpenEXR.File(header, channels).write(tmp)
-
-
-def _read_exr(path: str, channels, fn: str) -> tuple[np.ndarray, tuple[str, ...]]:
-    if channels is not None:
-        channels = _name_tuple(channels, fn, "channels")
-        if not channels:
-            raise ValueError(f"{fn}(): channels must name at least one channel")
-    try:
-        exr = OpenEXR.File(path, separate_channels=True)
-        parts = exr.parts
-        if not parts:  # OpenEXR reports a cut-short file by reading no parts
-            raise RuntimeError("no readable image in it: truncated or corrupt")
-        first = parts[0]
-        available = dict(first.channels)
-        if channels is None:
-            channels = _default_exr_channels(available, path, fn)
-        else:
-            size = (first.height(), first.width())
-            for part in parts[1:]:
-                if (part.height(), part.width()) == size:
-                    for name, channel in part.channels.items():
-                        available.setdefault(name, channel)
-    except (RuntimeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{fn}(): cannot decode '{path}' as an OpenEXR image: {exc}") from exc
-    missing = [name for name in channels if name not in available]
-    if missing:
-        raise ValueError(f"{fn}(): channels {missing} not found in '{path}'; "
-                         f"available channels: {sorted(available)}")
-    planes = [available[name].pixels for name in channels]
-    if any(p is None or p.ndim != 2 for p in planes):
-        raise ValueError(f"{fn}(): '{path}' holds deep or non-2D channel data, which is not supported")
-    if len({p.shape for p in planes}) > 1:
-        sizes = ", ".join(f"{name!r}: {p.shape}" for name, p in zip(channels, planes))
-        raise ValueError(f"{fn}(): channels of '{path}' differ in size (subsampled?): {sizes}")
-    return np.stack([p.astype(np.float32, copy=False) for p in planes], axis=-1), channels
-
-
-def _default_exr_channels(available: Mapping, path: str, fn: str) -> tuple[str, ...]:
-    alpha = ("A",) if "A" in available else ()
-    if {"R", "G", "B"} <= available.keys():
-        return ("R", "G", "B") + alpha
-    if "Y" in available:
-        return ("Y",) + alpha
-    names = tuple(sorted(available))
-    if not names:
-        raise ValueError(f"{fn}(): '{path}' has no channels")
-    if len(names) > 4:
-        raise ValueError(f"{fn}(): '{path}' has {len(names)} channels {list(names)} and no R,G,B or Y; "
-                         "pass channels= to choose which to read")
-    return names
 
 
 def _is_sixteen_bit_colour_png(head: bytes) -> bool:
@@ -399,117 +251,3 @@ def _convert_channels(image: np.ndarray, has_alpha: bool, channels: int) -> np.n
     return np.concatenate([colour, alpha], axis=-1)
 
 
-def _as_image(image, fn: str) -> np.ndarray:
-    """Validate array-like pixels and return them as a float32 [H, W, C] array (always a new array)."""
-    try:
-        array = np.asarray(image)
-    except ValueError as exc:  # ragged nested sequences
-        raise ValueError(f"{fn}(): image must be a rectangular array of numbers: {exc}") from None
-    if not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)
-            or array.dtype == np.bool_):
-        raise TypeError(f"{fn}(): image must hold real numbers, got dtype {array.dtype}")
-    if array.ndim == 2:
-        array = array[..., None]
-    if array.ndim != 3:
-        raise ValueError(f"{fn}(): image must be shaped [H, W] or [H, W, C], got shape {array.shape}")
-    if 0 in array.shape:
-        raise ValueError(f"{fn}(): image must not be empty, got shape {array.shape}")
-    return array.astype(np.float32, copy=True)
-
-
-def _name_tuple(names, fn: str, arg: str) -> tuple[str, ...]:
-    """Return channel names as a tuple of str; a lone str is rejected as ambiguous ('RGB' vs ('RGB',))."""
-    try:
-        result = None if isinstance(names, (str, bytes)) else tuple(names)
-    except TypeError:
-        result = None
-    if result is None or not all(isinstance(name, str) for name in result):
-        raise TypeError(f"{fn}(): {arg} must be a sequence of str channel names such as ('R', 'G'), "
-                        f"got {names!r}")
-    return tuple(str(name) for name in result)
-
-
-def _fspath(path, fn: str) -> str:
-    try:
-        return os.fsdecode(path)
-    except TypeError:
-        raise TypeError(f"{fn}(): path must be str or os.PathLike, got {type(path).__name__}") from None
-
-
-def _checked_input_path(path, fn: str) -> str:
-    path = _fspath(path, fn)
-    if not os.path.exists(path):
-        raise FileNotFoundError(f"{fn}(): file not found: '{path}'")
-    if os.path.isdir(path):
-        raise ValueError(f"{fn}(): '{path}' is a directory, not an image file")
-    return path
-
-
-def _checked_output_path(path, fn: str) -> str:
-    path = _fspath(path, fn)
-    if os.path.isdir(path):
-        raise ValueError(f"{fn}(): '{path}' is a directory")
-    folder = os.path.dirname(os.path.abspath(path))
-    while not os.path.exists(folder):  # the folders to create: their first existing ancestor must be a folder
-        folder = os.path.dirname(folder)
-    if not os.path.isdir(folder):
-        raise NotADirectoryError(f"{fn}(): cannot write '{path}': '{folder}' is a file, not a folder")
-    return path
-
-
-@contextmanager
-def _atomic_output(path: str) -> Iterator[str]:
-    """Yield a temporary path next to ``path``; on success move it onto ``path``, on error remove it.
-
-    The temporary name (``.name.<pid>-<random>.tmp.png``) keeps the real extension in case an
-    encoder picks the format from it, and names the writing process: temporaries of ``path`` left
-    by a process that no longer exists (killed mid-write) are removed here. It is created with
-    ``os.open`` so the final file gets the usual umask-based permissions.
-    """
-    directory, base = os.path.split(os.path.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    _remove_stale_temporaries(directory, base)
-    tmp = os.path.join(directory, f".{base}.{os.getpid()}-{secrets.token_hex(6)}.tmp{os.path.splitext(base)[1]}")
-    os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
-    try:
-        yield tmp
-        with open(tmp, "rb+") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.remove(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-
-
-def _remove_stale_temporaries(directory: str, base: str) -> None:
-    pattern = re.compile(re.escape(f".{base}.") + r"(\d+)-[0-9a-f]{12}\.tmp" + re.escape(os.path.splitext(base)[1]) + "$")
-    for name in os.listdir(directory):
-        match = pattern.match(name)
-        if match and not process_alive(int(match.group(1)), os.path.join(directory, name)):
-            try:
-                os.remove(os.path.join(directory, name))
-            except OSError:
-                pass
-
-
-def process_alive(pid: int, path: str | os.PathLike) -> bool:
-    """Whether process ``pid``, which made ``path``, may still be writing it. POSIX: whether the
-    process exists on this machine. Windows, where probing a process can end it: whether ``path``
-    is younger than a day."""
-    if pid == os.getpid():
-        return True
-    if os.name != "nt":
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            return False
-        except OSError:
-            pass  # exists but is not ours (PermissionError), or we cannot tell: leave it
-        return True
-    try:
-        return time.time() - os.stat(path).st_mtime < 86400.0
-    except OSError:
-        return False

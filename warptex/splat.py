@@ -179,7 +179,8 @@ def splat(
 
     args = ksl.SplatArgs()
     args.layers, args.heights, args.maps, args.params = layers_read.view, height_tex.view, maps.view, params
-    args.proj = projection_args(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kp.WEIGHTS_TRIPLANAR, device=device)
+    args.proj = projection_args(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kp.WEIGHTS_TRIPLANAR,
+                                origin=gbuffer.origin, address=sampler.address, device=device)  # fmt: skip
     args.smp, args.map_smp = sampler_args(func, sampler, has_lod=True), sampler_args(func, MAP_SAMPLER, has_lod=False)
     args.stoch, args.height_stoch = stoch, height_stoch
 

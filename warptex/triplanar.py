@@ -245,7 +245,8 @@ class _Setup:
         gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask")
         textures = _textures(func, texture, textures_per_axis, textures_per_face, layer, device)
         object_to_world = _object_to_world(func, space, object_to_world)
-        proj = projection_args(func, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=weights, object_to_world=object_to_world, device=device)
+        proj = projection_args(func, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=weights, object_to_world=object_to_world,
+                               origin=gbuffer.origin, address=as_sampler(func, sampler).address, device=device)  # fmt: skip
         option, sampler = as_stochastic(func, stochastic), as_sampler(func, sampler)
         if option.histogram is not None and not all(t is textures[0] for t in textures):
             raise ValueError(f"{func}(): a stochastic histogram needs one texture for every projection (textures_per_axis or textures_per_face differ)")

@@ -1,4 +1,4 @@
-"""Command line: ``warptex [render|demo|fit|bake] [options]`` (also ``python -m warptex``); ``render`` is the default."""
+"""Command line: ``warptex [render|demo|fit|bake|assets] [options]`` (also ``python -m warptex``); ``render`` is the default."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import sys
 
 
-COMMANDS = ("render", "demo", "fit", "bake")
+COMMANDS = ("render", "demo", "fit", "bake", "assets")
 
 
 def _resolution(text: str) -> tuple[int, int]:
@@ -50,6 +50,14 @@ def _number(low: float, high: float | None):
     return parse
 
 
+def _square(text: str) -> int:
+    """An argparse type: a square number >= 1 (samples per pixel)."""
+    value = _count(1)(text)
+    if math.isqrt(value) ** 2 != value:
+        raise argparse.ArgumentTypeError(f"must be a square number of samples per pixel (1, 4, 9, 16, ...), got {value}")
+    return value
+
+
 def _vector(text: str) -> tuple[float, float, float]:
     try:
         x, y, z = (float(v) for v in text.split(","))
@@ -72,12 +80,22 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--out", default="out", help="output folder (default: %(default)s)")
     render.add_argument("--mesh", default=None, help="mesh file: OBJ, PLY, STL, GLB/GLTF... (default: procedural terrain)")
     render.add_argument("--texture", default=None, help="texture image (default: the mesh's own, else procedural ground)")
+    render.add_argument("--texture-layer", default=None, metavar="NAME", help="the layer of an EXR texture to read, e.g. diffuse for diffuse.R, diffuse.G... (default: its only or unprefixed layer)")
     render.add_argument("--resolution", type=_resolution, default=(512, 512), help="image size HxW (default: 512x512)")
     render.add_argument("--eye", type=_vector, default=None, help="camera position x,y,z (default: framing view)")
     render.add_argument("--target", type=_vector, default=None, help="camera look-at point x,y,z (default: mesh centre)")
+    render.add_argument("--up", type=_vector, default=None, help="world direction shown upward x,y,z (default: 0,1,0; 0,0,-1 when looking straight down)")
     render.add_argument("--fov", type=_number(0.0, 180.0), default=45.0, help="vertical field of view in degrees (default: 45)")
-    render.add_argument("--tiling", type=_number(0.0, None), default=None, help="texture repeats across UV0 (default: 8, or 1 for an embedded texture)")
+    render.add_argument(
+        "--tiling",
+        type=_number(0.0, None),
+        default=None,
+        help="how often the texture repeats; its unit depends on the mesh. Default terrain: layer repeats per world unit "
+        "(default 1/6, one repeat per 6 units). A mesh with UVs: repeats across UV0 (default 1 with the mesh's own "
+        "texture, else 8). A mesh without UVs (mapped triplanar): repeats across the mesh's largest extent (default 8)",
+    )
     render.add_argument("--seed", type=int, default=0, help="terrain and procedural texture seed (default: 0)")
+    render.add_argument("--samples", type=_square, default=4, help="stratified samples per pixel, 1, 4, 9, 16... (anti-aliasing; default: 4)")
     render.add_argument(
         "--filter", choices=("nearest", "bilinear", "trilinear", "anisotropic"), default="anisotropic", help="texture filter (default: %(default)s)"
     )
@@ -126,7 +144,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--filter", choices=("nearest", "bilinear", "trilinear", "anisotropic"), default="anisotropic", help="texture filter (default: %(default)s)"
     )
     bake.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0 (default: Warp's default)")
-    parser.commands = {"render": render, "demo": demo, "fit": fit, "bake": bake}  # for errors in a command's own usage
+    assets = commands.add_parser(
+        "assets",
+        help="write the sample inputs the README's snippets read (the terrain's layers and splat map)",
+        description="Write grass.png, gravel.png, rock.png and snow.png (RGBA: colour, height in alpha) and "
+        "splat.png (their weights) of the default terrain into the output folder.",
+    )
+    assets.add_argument("--out", default="assets", help="output folder (default: %(default)s)")
+    assets.add_argument("--seed", type=int, default=0, help="terrain and layer seed (default: 0)")
+    assets.add_argument("--device", default=None, help=argparse.SUPPRESS)
+    parser.commands = {"render": render, "demo": demo, "fit": fit, "bake": bake, "assets": assets}  # for errors in a command's own usage
     return parser
 
 
@@ -245,7 +272,7 @@ def version() -> str:
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; the exit status: 0, 1 on an error (one line on stderr, no files
     written), 2 on bad options (argparse), 130 on Ctrl-C."""
-    argv = list(sys.argv[1:] if argv is None else argv)
+    argv = _joined_vectors(list(sys.argv[1:] if argv is None else argv))
     if not argv or argv[0] not in COMMANDS + ("-h", "--help", "--version"):
         argv.insert(0, "render")  # the default command; its options may be given without naming it
     parser = build_parser()
@@ -276,6 +303,21 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+VECTOR_OPTIONS = ("--eye", "--target", "--up")
+
+
+def _joined_vectors(argv: list[str]) -> list[str]:
+    """``--eye -30,25,40`` as ``--eye=-30,25,40``: argparse takes a value that starts with ``-``
+    and is not one plain number for an option, and would report "expected one argument"."""
+    out = []
+    for word in argv:
+        if out and out[-1] in VECTOR_OPTIONS and word[:1] == "-" and (word[1:2].isdigit() or word[1:2] == "."):
+            out[-1] = f"{out[-1]}={word}"
+        else:
+            out.append(word)
+    return out
+
+
 def _one_line(err: BaseException) -> str:
     text = " ".join(str(err).split())  # a message spread over lines (OpenEXR's, NumPy's) on one
     return text or ("out of memory" if isinstance(err, MemoryError) else type(err).__name__)
@@ -285,6 +327,10 @@ def _run(args: argparse.Namespace) -> list:
     from warptex._warp import init_quietly
 
     init_quietly()  # no start-up banner or compile log, no "no CUDA driver" warning on a CPU machine
+    if args.device is not None:
+        from warptex._validate import checked_device
+
+        checked_device("--device", args.device)  # before any work: which devices there are
     if args.command == "fit":
         return _fit(args)
     if args.command == "bake":
@@ -293,6 +339,10 @@ def _run(args: argparse.Namespace) -> list:
         paths = {"mesh_path": args.mesh, "texture_path": args.texture, "layer_paths": args.layers, "splat_path": args.splat, "normal_map_path": args.normal_map}
         options = {k: getattr(args, k) for k in ("technique", "stochastic", "size", "padding", "gutter", "tiling", "seed", "filter", "device")}
         return run_bake(args.out, **paths, **options)
+    if args.command == "assets":
+        from warptex.apps.assets import run_assets
+
+        return run_assets(args.out, seed=args.seed)
     if args.command == "demo":
         from warptex.apps.demo import run_demo
 
@@ -303,12 +353,15 @@ def _run(args: argparse.Namespace) -> list:
         args.out,
         mesh_path=args.mesh,
         texture_path=args.texture,
+        texture_layer=args.texture_layer,
         resolution=args.resolution,
         eye=args.eye,
         target=args.target,
+        up=args.up,
         fov_y=args.fov,
         tiling=args.tiling,
         seed=args.seed,
+        samples=args.samples,
         filter=args.filter,
         device=args.device,
     )

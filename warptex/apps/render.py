@@ -3,14 +3,17 @@
 The default terrain is textured with four splat-blended layers (grass, gravel, rock, snow; see
 :mod:`warptex.scenes.material`), each mapped triplanar, height-blended. Other meshes get one
 texture: in their UV0 when they have UVs (their own embedded base-colour texture when they carry
-one), else triplanar. Everything is trilinear-filtered with the LOD from the G-buffer's
-derivatives and Lambert-lit.
+one), else triplanar. Every pixel takes several stratified samples (``samples``), each filtered
+anisotropically at its own footprint, lit by a key light and a sky fill
+(:func:`warptex.apps.shade.sun_and_sky`), and averaged with its coverage as alpha.
 """
 
 from __future__ import annotations
 
 import functools
+import math
 import os
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Callable
 
@@ -24,15 +27,16 @@ from warptex.kernels import splat as kl
 from warptex.kernels import raster as kr
 from warptex.kernels import sampling as ks
 from warptex.kernels import triplanar as kt
-from warptex.camera import Camera, checked_resolution, look_at
+from warptex.camera import checked_resolution, look_at
 from warptex.gbuffer import GBuffer, load_mesh, rasterize
 from warptex.gbuffer_io import save_gbuffer
+from warptex.resolve import resolve
 from warptex.sampling import sample
 from warptex._output import check_memory, check_output_folder, output_set
-from warptex.apps.shade import SKY, lambert, to_rgb
+from warptex.apps.shade import SKY, sun_and_sky, to_rgb
 from warptex.scenes import TERRAIN_GRID, terrain_camera
 from warptex.scenes import framing_camera as default_camera
-from warptex.scenes.terrain import terrain
+from warptex.scenes.terrain import terrain, terrain_normal_grid
 from warptex.texture import Texture, TextureArray
 from warptex.splat import splat
 from warptex.options import Filter, Sampler
@@ -40,9 +44,12 @@ from warptex.scenes.material import LAYER_NAMES, noise_texture, terrain_layers, 
 from warptex.triplanar import triplanar
 
 
-#: Peak memory of a render, measured (peak RSS, 512² to 2048²): ~200 MB plus ~260 B per pixel
+#: Peak memory of a render, measured (peak RSS, 512² to 2048²): ~200 MB plus ~260 B per sample
 #: (G-buffer, mip chains, images); with a margin.
 RENDER_BYTES = (300e6, 320.0)
+#: Samples per pixel of a render (2 × 2, stratified): anti-aliased silhouettes and texture detail
+#: with the cold start of ``warptex render`` inside 10 s on two cores.
+DEFAULT_SAMPLES = 4
 
 
 def _albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, texture: Texture, tiling: float, sampler: Sampler, device) -> np.ndarray:
@@ -61,18 +68,38 @@ def triplanar_material(mesh: trimesh.Trimesh, texture: Texture, tiling: float, s
     return functools.partial(technique, texture=texture, tiling=scale, sampler=sampler, device=device)
 
 
-def terrain_material(mesh: trimesh.Trimesh, tiling: float | None, seed: int, sampler: Sampler, device) -> Callable[[GBuffer], wp.array]:
+#: Splat-map texels per terrain grid cell in the preview: smooth layer borders at the default view.
+SPLAT_UPSAMPLE = 4
+
+
+def terrain_textures(mesh: trimesh.Trimesh, seed: int, device) -> tuple[TextureArray, TextureArray]:
+    """The default terrain's layers and (finer, :data:`SPLAT_UPSAMPLE`) splat maps, made in NumPy:
+    a render makes them on a second thread while it rasterises."""
+    maps = terrain_splat_maps(mesh, TERRAIN_GRID, upsample=SPLAT_UPSAMPLE)
+    return terrain_layers(seed=seed, device=device), TextureArray(maps[None], mipmaps=False, device=device)
+
+
+def terrain_material(mesh: trimesh.Trimesh, tiling: float | None, seed: int, sampler: Sampler, device, textures=None) -> Callable[[GBuffer], wp.array]:
     """The default terrain's splat material as a function of a G-buffer: four layers mapped
-    triplanar, height-blended, repeating ``tiling`` times per world unit (default 1/6)."""
-    maps = TextureArray(terrain_splat_maps(mesh, TERRAIN_GRID)[None], mipmaps=False, device=device)
-    layers = terrain_layers(seed=seed, device=device)
+    triplanar, height-blended, repeating ``tiling`` times per world unit (default 1/6); its
+    ``textures`` (:func:`terrain_textures`) made here unless given."""
+    layers, maps = terrain_textures(mesh, seed, device) if textures is None else textures
     tiling = 1.0 / 6.0 if tiling is None else float(tiling)
     return functools.partial(splat, layers=layers, splat_maps=maps, tiling=tiling, projection="triplanar", height_blend=0.2, sampler=sampler, device=device)
 
 
-def _terrain_albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, tiling: float | None, seed: int, sampler: Sampler, device) -> np.ndarray:
-    """The default terrain's splat material (:func:`terrain_material`) on ``gbuffer``, as RGB."""
-    return to_rgb(terrain_material(mesh, tiling, seed, sampler, device)(gbuffer))
+#: Passes of terrain_normal_grid's [1, 2, 1] filter over the preview terrain's vertex normals.
+NORMAL_SMOOTHING = 2
+
+
+def _smooth_normals(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """The terrain with its vertex normals smoothed (:func:`terrain_normal_grid`): interpolated
+    across each triangle, the raw ones kink along every cell's diagonal, a sawtooth on the
+    cliffs; smoothed, neighbouring triangles' normals differ too little to show it. The geometry
+    stays as it is."""
+    smooth = mesh.copy()
+    smooth.vertex_normals = terrain_normal_grid(mesh, TERRAIN_GRID, smoothing=NORMAL_SMOOTHING).reshape(-1, 3)
+    return smooth
 
 
 def _embedded_texture(mesh: trimesh.Trimesh) -> np.ndarray | None:
@@ -87,10 +114,10 @@ def _embedded_texture(mesh: trimesh.Trimesh) -> np.ndarray | None:
     return io.srgb_to_linear(np.asarray(image.convert("RGB"), np.float32) / 255.0)
 
 
-def _kernels(terrain_material: bool) -> list:
+def _kernels(terrain: bool) -> list:
     """The kernels a render runs: rasterisation, mip chains, and the splat or sampling ones."""
     used = [kr.raster_kernel, ks.downsample_kernel]
-    if terrain_material:
+    if terrain:
         return used + [kl.splat_kernels(capacity=kl.capacity(len(LAYER_NAMES)), stochastic=False).forward]
     return used + [ks.sample_kernels(level=False).forward, kt.triplanar_kernels(normal=False, stochastic=False, faces=False).forward]
 
@@ -100,12 +127,15 @@ def run_render(
     *,
     mesh_path=None,
     texture_path=None,
+    texture_layer: str | None = None,
     resolution=(512, 512),
     eye=None,
     target=None,
+    up=None,
     fov_y: float = 45.0,
     tiling: float | None = None,
     seed: int = 0,
+    samples: int = DEFAULT_SAMPLES,
     filter: Filter | str = Filter.ANISOTROPIC,
     progress: bool | None = None,
     device=None,
@@ -116,13 +146,21 @@ def run_render(
         out_dir: output folder (created if missing).
         mesh_path: a mesh file; ``None`` renders the procedural terrain (:func:`warptex.scenes.terrain.terrain`).
         texture_path: the texture; default: the mesh's embedded texture, else a procedural ground texture.
+        texture_layer: the layer of an EXR texture to read (:func:`warptex.io.read_image`'s ``layer``).
         resolution: ``(height, width)``.
         eye, target: camera position and look-at point (default: a three-quarter view framing the mesh).
+        up: the world direction shown upward (default: +Y, or -Z looking straight down; see
+            :func:`warptex.camera.look_at`).
         fov_y: vertical field of view, degrees.
-        tiling: texture repeats across UV0 (or, triplanar, across the mesh's largest extent without UVs);
-            default 1 with an embedded texture, else 8. For the default terrain: layer repeats per
-            world unit (default 1/6).
+        tiling: how often the texture repeats, in a unit that depends on the mesh. The default
+            terrain: layer repeats per world unit (default 1/6, one repeat per 6 units). A mesh with
+            UVs: repeats across UV0 (default 1 with its embedded texture, else 8). A mesh without
+            UVs, mapped triplanar: repeats across the mesh's largest extent (default 8).
         seed: terrain and procedural texture seed.
+        samples: stratified samples per pixel, 1, 4, 9, 16, ... (:func:`warptex.rasterize`): the
+            image is anti-aliased, silhouettes get fractional coverage (``render.exr``'s alpha),
+            and textures are filtered at one sample's footprint. ``gbuffer.exr`` holds one sample
+            per pixel (its centre), the size of the images.
         filter: the texture filter (:class:`~warptex.Filter`); default anisotropic, which keeps
             surfaces seen at grazing angles (the distant terrain) sharp where trilinear blurs them.
         progress: show a progress bar (``None``: only on a terminal).
@@ -134,54 +172,68 @@ def run_render(
     from tqdm import tqdm  # a progress bar over the stages: the first run compiles kernels for seconds
 
     check_output_folder("run_render", out_dir)
+    if texture_layer is not None and texture_path is None:
+        raise ValueError(f"run_render(): texture_layer={texture_layer!r} names a layer of the texture file, but no texture_path is given")
     sampler = Sampler(filter=filter)
     h, w = resolution = checked_resolution("run_render", resolution)
-    check_memory("run_render", f"a {h}x{w} render", RENDER_BYTES[0] + RENDER_BYTES[1] * h * w)
+    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1 or math.isqrt(int(samples)) ** 2 != samples:
+        raise ValueError(f"run_render(): samples must be a square number of samples per pixel (1, 4, 9, 16, ...), got {samples!r}")
+    check_memory("run_render", f"a {h}x{w} render of {samples} samples per pixel", RENDER_BYTES[0] + RENDER_BYTES[1] * h * w * samples, hint="use a smaller resolution or fewer samples")
     if tiling is not None and not (np.isfinite(tiling) and tiling > 0):
         raise ValueError(f"run_render(): tiling must be a finite number > 0, got {tiling!r}")
     stages = tqdm(total=5, desc="render", unit="stage", disable=False if progress else None if progress is None else True)
+    is_terrain = mesh_path is None and texture_path is None
     stages.set_postfix_str("kernels")
-    preload(_kernels(mesh_path is None and texture_path is None), device)  # a cold start compiles them side by side
+    preload(_kernels(is_terrain), device)  # a cold start compiles them side by side
     stages.set_postfix_str("mesh")
     mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
     framing = terrain_camera(resolution, fov_y) if mesh_path is None else default_camera(mesh, resolution, fov_y)
-    if eye is None and target is None:
+    if eye is None and target is None and up is None:
         camera = framing
     else:
         eye = framing.eye if eye is None else eye
         target = mesh.bounds.mean(axis=0) if target is None else target
-        camera = look_at(eye, target, fov_y=fov_y, resolution=resolution)
+        camera = look_at(eye, target, up, fov_y=fov_y, resolution=resolution)
     stages.update()
 
     stages.set_postfix_str("rasterise")
-    g = rasterize(mesh, camera, device=device)
+    with ThreadPoolExecutor(1) as pool:  # the material's NumPy beside the rasteriser's kernel (both release the GIL)
+        material = pool.submit(terrain_textures, mesh, seed, device) if is_terrain else None
+        shaded = _smooth_normals(mesh) if mesh_path is None else mesh  # the splat rules keep the terrain's own normals
+        g = rasterize(shaded, camera, samples=samples, device=device)
+        material = material.result() if material is not None else None
     stages.update()
 
     stages.set_postfix_str("texture")
-    if mesh_path is None and texture_path is None:
-        albedo = _terrain_albedo(mesh, g, tiling, seed, sampler, device)
+    if is_terrain:
+        albedo = to_rgb(terrain_material(mesh, tiling, seed, sampler, device, textures=material)(g))
     else:
         embedded = _embedded_texture(mesh) if texture_path is None else None
-        image = io.read_image(texture_path) if texture_path is not None else embedded if embedded is not None else noise_texture(seed=seed)
+        image = io.read_image(texture_path, layer=texture_layer) if texture_path is not None else embedded if embedded is not None else noise_texture(seed=seed)
         tiling = (1.0 if embedded is not None else 8.0) if tiling is None else float(tiling)
         albedo = _albedo(mesh, g, Texture(image, device=device), tiling, sampler, device)
-    covered = g.mask.numpy()[..., None] > 0
-    albedo = np.where(covered, albedo, SKY)
     stages.update()
 
     stages.set_postfix_str("shade")
-    lit = lambert(g, albedo)
+    lit = sun_and_sky(g, albedo)
+    # Premultiplied samples (0 where the mesh is missed), resolved to pixels in one launch:
+    # colours whose alpha is the pixel's coverage, so silhouettes blend with the sky.
+    covered = g.mask.numpy()[..., None]
+    normal = g.normal.numpy() * 0.5 + 0.5
+    pixels = resolve(np.concatenate([lit * covered, albedo * covered, normal * covered, covered], axis=-1), samples, device=device).numpy()
+    lit, albedo, normal, alpha = pixels[..., 0:3], pixels[..., 3:6], pixels[..., 6:9], pixels[..., 9:10]
+    centre = g if samples == 1 else rasterize(shaded, camera, device=device)  # gbuffer.exr: one sample per pixel
     stages.update()
 
     stages.set_postfix_str("write")
     names = ["render.png", "albedo.png", "normals.png", "render.exr", "gbuffer.exr"]
     with output_set(out_dir) as staging:  # all five files appear together, or none do
-        io.write_png(staging / names[0], lit)
-        io.write_png(staging / names[1], albedo)
-        io.write_png(staging / names[2], np.where(covered, g.normal.numpy() * 0.5 + 0.5, 0.0), data=True)
-        # premultiplied linear RGBA: the sky is transparent black, so it composites over anything
-        io.write_exr(staging / names[3], np.concatenate([np.where(covered, lit, 0.0), covered.astype(np.float32)], axis=-1))
-        save_gbuffer(staging / names[4], g)
+        io.write_png(staging / names[0], lit + (1.0 - alpha) * SKY)
+        io.write_png(staging / names[1], albedo + (1.0 - alpha) * SKY)
+        io.write_png(staging / names[2], normal, data=True)  # over black
+        # premultiplied linear RGBA, alpha the pixel's coverage: the sky is transparent black, so it composites over anything
+        io.write_exr(staging / names[3], np.concatenate([lit, alpha], axis=-1))
+        save_gbuffer(staging / names[4], centre)
     stages.update()
     stages.close()
     return [Path(out_dir) / name for name in names]

@@ -41,21 +41,59 @@ def lambert(gbuffer: GBuffer, albedo, *, normals=None, light_dir=(0.4, 0.8, 0.3)
     Returns:
         ``[H, W, 3]`` float32 linear RGB.
     """
-    light = np.asarray(light_dir, np.float64)
-    if light.shape != (3,) or not np.isfinite(light).all() or np.linalg.norm(light) == 0:
-        raise ValueError(f"lambert(): light_dir must be 3 finite numbers, not all zero, got {light_dir!r}")
     if not 0.0 <= ambient <= 1.0:
         raise ValueError(f"lambert(): ambient must be in [0, 1], got {ambient!r}")
-    light /= np.linalg.norm(light)
+    light, rgb, n = _inputs("lambert", gbuffer, albedo, normals, light_dir)
+    lit = rgb * (ambient + (1.0 - ambient) * np.clip(n @ light, 0.0, None)[..., None])
+    return np.where(gbuffer.mask.numpy()[..., None] > 0, lit, background).astype(np.float32)
+
+
+#: The preview's key light: the direction towards the sun (low, 32° up, from the left and behind
+#: the default terrain view, so that slopes facing away from it fall into the sky's fill), and its
+#: colour (warm, bright: sunlit ground reads near its albedo).
+SUN_DIR = (-0.7, 0.5, -0.3)
+SUN = np.array([1.35, 1.25, 1.06], np.float32)
+#: The sky's fill: light from the sky dome (bluish) above, bounced from the ground (warm, dim) below.
+SKY_FILL = np.array([0.16, 0.2, 0.28], np.float32)
+GROUND_FILL = np.array([0.07, 0.06, 0.045], np.float32)
+
+
+def sun_and_sky(gbuffer: GBuffer, albedo, *, normals=None, sun_dir=SUN_DIR, sun=SUN, sky=SKY_FILL, ground=GROUND_FILL, background=SKY) -> np.ndarray:
+    """A preview's light: a key light with real contrast and a soft sky fill,
+    ``albedo · (sun · max(0, n·l) + mix(ground, sky, (1 + n_y) / 2))``; ``background`` where the
+    mask is 0. Faces turned from the sun keep the sky's cool fill (dim on overhangs, which see the
+    ground), so relief reads as it does outdoors; no shadows are cast.
+
+    Args:
+        gbuffer: supplies the mask and, unless ``normals`` is given, the shading normals.
+        albedo: ``[H, W, C]`` linear colour (NumPy or ``wp.array``); 1-2 channels are shown as gray.
+        normals: ``[H, W, 3]`` world-space normals to light with instead.
+        sun_dir: direction towards the key light (normalised here). sun, sky, ground: linear RGB
+            of the key light, and of the fill from straight up and straight down.
+        background: linear RGB for uncovered pixels.
+
+    Returns:
+        ``[H, W, 3]`` float32 linear RGB.
+    """
+    light, rgb, n = _inputs("sun_and_sky", gbuffer, albedo, normals, sun_dir)
+    up = np.clip(0.5 + 0.5 * n[..., 1:2], 0.0, 1.0)
+    fill = np.asarray(ground, np.float32) * (1.0 - up) + np.asarray(sky, np.float32) * up
+    lit = rgb * (np.asarray(sun, np.float32) * np.clip(n @ light, 0.0, None)[..., None] + fill)
+    return np.where(gbuffer.mask.numpy()[..., None] > 0, lit, background).astype(np.float32)
+
+
+def _inputs(func: str, gbuffer: GBuffer, albedo, normals, light_dir) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The unit light direction, the ``(H, W, 3)`` albedo and the normals, checked."""
+    light = np.asarray(light_dir, np.float64)
+    if light.shape != (3,) or not np.isfinite(light).all() or np.linalg.norm(light) == 0:
+        raise ValueError(f"{func}(): light direction must be 3 finite numbers, not all zero, got {light_dir!r}")
     rgb = to_rgb(albedo)
     n = gbuffer.normal.numpy() if normals is None else _numpy(normals)
     shape = (*gbuffer.resolution, 3)
     for name, arr in (("albedo", rgb), ("normals", n)):
         if arr.shape != shape:
-            raise ValueError(f"lambert(): {name} must have shape {shape} (H, W, 3), got {arr.shape}")
-    n_dot_l = np.clip(n @ light, 0.0, None)[..., None]
-    lit = rgb * (ambient + (1.0 - ambient) * n_dot_l)
-    return np.where(gbuffer.mask.numpy()[..., None] > 0, lit, background).astype(np.float32)
+            raise ValueError(f"{func}(): {name} must have shape {shape} (H, W, 3), got {arr.shape}")
+    return (light / np.linalg.norm(light)).astype(np.float32), rgb, n
 
 
 def height_to_normal_map(height, *, strength: float = 1.0) -> np.ndarray:

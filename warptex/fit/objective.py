@@ -56,7 +56,7 @@ def subsample_gbuffer(gbuffer: GBuffer, stride: int) -> GBuffer:
 
     arrays = {name: sub(getattr(gbuffer, name)) for name in FIELDS}
     sets = {s: {k: sub(v) for k, v in arrays_.items()} for s, arrays_ in gbuffer.uv_sets.items()}
-    return GBuffer(**arrays, uv_sets=sets, camera=None)
+    return GBuffer(**arrays, uv_sets=sets, camera=None, origin=gbuffer.origin)
 
 
 @dataclass

@@ -14,19 +14,34 @@ from __future__ import annotations
 import numpy as np
 
 from warptex.camera import Camera, look_at, orthographic
+from warptex.gbuffer import rasterize
 
 #: The default terrain's vertex grid, one splat texel per vertex.
 TERRAIN_GRID = (129, 129)
 
 
 def framing_camera(mesh, resolution, fov_y: float = 45.0) -> Camera:
-    """A three-quarter view of ``mesh`` from above (from the front, +Z, glTF's convention, and the
-    right), far enough that its bounding sphere fits the view: ``warptex render``'s default camera."""
-    centre, radius = mesh.bounds.mean(axis=0), np.linalg.norm(mesh.extents) / 2
-    direction = np.array([0.55, 0.6, 0.75])
+    """A three-quarter view of the mesh's front, a little from above and the right, far enough that
+    its bounding sphere fits the view: ``warptex render``'s default camera.
+
+    Files do not say where a model's front is, and not all are +Y up as glTF's are (Blender's
+    axes, Z up and facing -Y, are common): the front is taken to be the side, of the six along
+    the axes, that shows the most triangles (a face, a head's features, a building's facade rather
+    than its roof), found by rasterising the six views small, in one launch. Seen from ±Y, the
+    model is taken to be Z-up (that view is then its front, with +Z up).
+    """
+    centre, radius = mesh.bounds.mean(axis=0), max(float(np.linalg.norm(mesh.extents)) / 2, 1e-9)
+    axes = np.concatenate([np.eye(3), -np.eye(3)])[[2, 0, 5, 3, 1, 4]]  # +Z first: glTF's front wins ties
+    ups = [(0.0, 0.0, 1.0) if abs(a[1]) > 0.5 else (0.0, 1.0, 0.0) for a in axes]
+    views = [orthographic(centre + a * 2 * radius, centre, up=u, height=2 * radius, resolution=(48, 48)) for a, u in zip(axes, ups)]
+    triangles = rasterize(mesh, views).triangle.numpy()
+    shown = [len(np.unique(t[t >= 0])) for t in triangles]
+    k = int(np.argmax(shown))
+    front, up = axes[k], np.asarray(ups[k])
+    direction = front + 0.45 * up + 0.35 * np.cross(up, front)  # lifted, and from the model's right
     half_fov = np.radians(fov_y) / 2 * min(1.0, resolution[1] / resolution[0])
     distance = 1.05 * radius / np.sin(half_fov)
-    return look_at(centre + direction / np.linalg.norm(direction) * distance, centre, fov_y=fov_y, resolution=resolution)
+    return look_at(centre + direction / np.linalg.norm(direction) * distance, centre, up, fov_y=fov_y, resolution=resolution)
 
 
 def terrain_camera(resolution, fov_y: float = 45.0) -> Camera:

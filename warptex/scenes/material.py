@@ -223,7 +223,7 @@ def noise_texture(size: int = 256, *, seed: int = 0, octaves: int = 6) -> np.nda
     return np.where(t < 0.5, dark + (mid - dark) * (2 * t), mid + (light - mid) * (2 * t - 1)).astype(np.float32)
 
 
-def terrain_splat_maps(mesh: trimesh.Trimesh, grid: tuple[int, int]) -> np.ndarray:
+def terrain_splat_maps(mesh: trimesh.Trimesh, grid: tuple[int, int], *, upsample: int = 1) -> np.ndarray:
     """RGBA splat weights ``[rows, cols, 4]`` (grass, gravel, rock, snow; sum 1) of a
     :func:`warptex.terrain` mesh with ``grid = (rows, cols)`` vertices, one texel per vertex (the
     terrain's UV0 puts vertex ``(r, c)`` at texel ``(r, c)`` of a ``rows × cols`` map, up to half a
@@ -231,11 +231,22 @@ def terrain_splat_maps(mesh: trimesh.Trimesh, grid: tuple[int, int]) -> np.ndarr
 
     Rules: rock on slopes past ~35°, snow on high, gentle ground, gravel on low, flat ground
     (valley floors) and as a band below the rock, grass elsewhere; transitions are smoothsteps.
+
+    ``upsample = k > 1`` evaluates the rules on the height and slope interpolated (bilinearly)
+    between the vertices, ``k`` texels per grid cell: a ``[(rows-1)k+1, (cols-1)k+1, 4]`` map whose
+    layer borders are ``k`` times finer, where a height blend would otherwise show the steps of a
+    bilinear lookup of one texel per vertex (the preview does this; fits keep one per vertex).
     """
     height, slope = terrain_slope_height(mesh)
     rows, cols = grid
     if height.size != rows * cols:
         raise ValueError(f"terrain_splat_maps(): the mesh has {height.size} vertices, not a {rows}x{cols} grid")
+    if isinstance(upsample, bool) or not isinstance(upsample, (int, np.integer)) or upsample < 1:
+        raise ValueError(f"terrain_splat_maps(): upsample must be an int >= 1, got {upsample!r}")
+    if upsample > 1:
+        height, slope = (_upsampled(f.reshape(rows, cols), int(upsample)) for f in (height, slope))
+        rows, cols = height.shape
+    height, slope = height.reshape(-1), slope.reshape(-1)
     rock = _smoothstep(30.0, 42.0, slope)
     snow = _smoothstep(0.68, 0.8, height) * (1 - rock)
     gravel = np.maximum(_smoothstep(0.12, 0.03, height), _smoothstep(22.0, 32.0, slope)) * (1 - rock) * (1 - snow)
@@ -243,3 +254,13 @@ def terrain_splat_maps(mesh: trimesh.Trimesh, grid: tuple[int, int]) -> np.ndarr
     weights = np.stack([grass, gravel, rock, snow], axis=-1)
     weights /= weights.sum(axis=-1, keepdims=True)
     return weights.reshape(rows, cols, 4).astype(np.float32)
+
+
+def _upsampled(field: np.ndarray, k: int) -> np.ndarray:
+    """``[rows, cols]`` values at grid vertices, interpolated bilinearly to ``k`` samples per cell:
+    ``[(rows-1)k+1, (cols-1)k+1]``, the vertices' values kept."""
+    rows, cols = field.shape
+    r = np.linspace(0.0, rows - 1.0, (rows - 1) * k + 1)
+    c = np.linspace(0.0, cols - 1.0, (cols - 1) * k + 1)
+    along_rows = np.stack([np.interp(r, np.arange(rows), field[:, j]) for j in range(cols)], axis=1)
+    return np.stack([np.interp(c, np.arange(cols), row) for row in along_rows])

@@ -34,7 +34,7 @@ import trimesh
 from warptex._validate import as_float
 from warptex.gbuffer import vertex_normals
 
-__all__ = ["terrain", "terrain_slope_height"]
+__all__ = ["terrain", "terrain_normal_grid", "terrain_slope_height"]
 
 _TABLE = 256  # lattice hash period of the gradient noise
 _MAX_OCTAVES = 16
@@ -356,3 +356,30 @@ def terrain_slope_height(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]
     height01 = _normalise(np.asarray(mesh.vertices[:, 1], dtype=np.float64))
     slope = np.degrees(np.arccos(np.clip(vertex_normals(mesh)[:, 1], -1.0, 1.0)))
     return height01, slope
+
+
+def terrain_normal_grid(mesh: trimesh.Trimesh, grid: tuple[int, int], *, smoothing: int = 1) -> np.ndarray:
+    """Smooth shading normals of a :func:`terrain` mesh as a ``[rows, cols, 3]`` grid, one per
+    vertex, for bilinear lookup in UV0 (vertex ``(r, c)`` at ``u = c / (cols-1)``,
+    ``v = 1 - r / (rows-1)``).
+
+    Interpolated across each triangle, vertex normals bend along the diagonal that splits every
+    grid cell: on a cliff, whose face spans a cell or two, that shows the triangles as a sawtooth.
+    Looked up bilinearly over the cells instead, and smoothed by ``smoothing`` passes of a
+    ``[1, 2, 1] / 4`` filter (edges repeated), they vary as smoothly as the heightfield does.
+
+    Raises:
+        ValueError: the mesh is not a ``rows × cols`` grid, or ``smoothing`` is negative.
+    """
+    rows, cols = grid
+    if len(mesh.vertices) != rows * cols:
+        raise ValueError(f"terrain_normal_grid(): the mesh has {len(mesh.vertices)} vertices, not a {rows}x{cols} grid")
+    if isinstance(smoothing, bool) or not isinstance(smoothing, (int, np.integer)) or smoothing < 0:
+        raise ValueError(f"terrain_normal_grid(): smoothing must be an int >= 0, got {smoothing!r}")
+    n = vertex_normals(mesh).reshape(rows, cols, 3)
+    for _ in range(int(smoothing)):
+        for axis in (0, 1):
+            padded = np.concatenate([n.take([0], axis), n, n.take([-1], axis)], axis=axis)
+            k = n.shape[axis]
+            n = 0.25 * padded.take(range(0, k), axis) + 0.5 * n + 0.25 * padded.take(range(2, k + 2), axis)
+    return (n / np.linalg.norm(n, axis=-1, keepdims=True)).astype(np.float32)

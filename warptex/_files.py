@@ -1,0 +1,122 @@
+"""What every file writer and reader of ``warptex`` shares: checked paths, atomic writes, and
+pixel arrays checked and converted to float32 ``[H, W, C]``.
+
+Writers are atomic: :func:`_atomic_output` yields a temporary name in the target's folder and
+renames it onto the target only once the file is complete; temporaries left by a killed writer are
+removed by the next write of that file.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import secrets
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import numpy as np
+
+
+def _as_image(image, fn: str) -> np.ndarray:
+    """Validate array-like pixels and return them as a float32 [H, W, C] array (always a new array)."""
+    try:
+        array = np.asarray(image)
+    except ValueError as exc:  # ragged nested sequences
+        raise ValueError(f"{fn}(): image must be a rectangular array of numbers: {exc}") from None
+    if not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)
+            or array.dtype == np.bool_):
+        raise TypeError(f"{fn}(): image must hold real numbers, got dtype {array.dtype}")
+    if array.ndim == 2:
+        array = array[..., None]
+    if array.ndim != 3:
+        raise ValueError(f"{fn}(): image must be shaped [H, W] or [H, W, C], got shape {array.shape}")
+    if 0 in array.shape:
+        raise ValueError(f"{fn}(): image must not be empty, got shape {array.shape}")
+    return array.astype(np.float32, copy=True)
+
+
+def _fspath(path, fn: str) -> str:
+    try:
+        return os.fsdecode(path)
+    except TypeError:
+        raise TypeError(f"{fn}(): path must be str or os.PathLike, got {type(path).__name__}") from None
+
+
+def _checked_input_path(path, fn: str) -> str:
+    path = _fspath(path, fn)
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"{fn}(): file not found: '{path}'")
+    if os.path.isdir(path):
+        raise ValueError(f"{fn}(): '{path}' is a directory, not an image file")
+    return path
+
+
+def _checked_output_path(path, fn: str) -> str:
+    path = _fspath(path, fn)
+    if os.path.isdir(path):
+        raise ValueError(f"{fn}(): '{path}' is a directory")
+    folder = os.path.dirname(os.path.abspath(path))
+    while not os.path.exists(folder):  # the folders to create: their first existing ancestor must be a folder
+        folder = os.path.dirname(folder)
+    if not os.path.isdir(folder):
+        raise NotADirectoryError(f"{fn}(): cannot write '{path}': '{folder}' is a file, not a folder")
+    return path
+
+
+@contextmanager
+def _atomic_output(path: str) -> Iterator[str]:
+    """Yield a temporary path next to ``path``; on success move it onto ``path``, on error remove it.
+
+    The temporary name (``.name.<pid>-<random>.tmp.png``) keeps the real extension in case an
+    encoder picks the format from it, and names the writing process: temporaries of ``path`` left
+    by a process that no longer exists (killed mid-write) are removed here. It is created with
+    ``os.open`` so the final file gets the usual umask-based permissions.
+    """
+    directory, base = os.path.split(os.path.abspath(path))
+    os.makedirs(directory, exist_ok=True)
+    _remove_stale_temporaries(directory, base)
+    tmp = os.path.join(directory, f".{base}.{os.getpid()}-{secrets.token_hex(6)}.tmp{os.path.splitext(base)[1]}")
+    os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+    try:
+        yield tmp
+        with open(tmp, "rb+") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.remove(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def _remove_stale_temporaries(directory: str, base: str) -> None:
+    pattern = re.compile(re.escape(f".{base}.") + r"(\d+)-[0-9a-f]{12}\.tmp" + re.escape(os.path.splitext(base)[1]) + "$")
+    for name in os.listdir(directory):
+        match = pattern.match(name)
+        if match and not process_alive(int(match.group(1)), os.path.join(directory, name)):
+            try:
+                os.remove(os.path.join(directory, name))
+            except OSError:
+                pass
+
+
+def process_alive(pid: int, path: str | os.PathLike) -> bool:
+    """Whether process ``pid``, which made ``path``, may still be writing it. POSIX: whether the
+    process exists on this machine. Windows, where probing a process can end it: whether ``path``
+    is younger than a day."""
+    if pid == os.getpid():
+        return True
+    if os.name != "nt":
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        except OSError:
+            pass  # exists but is not ours (PermissionError), or we cannot tell: leave it
+        return True
+    try:
+        return time.time() - os.stat(path).st_mtime < 86400.0
+    except OSError:
+        return False

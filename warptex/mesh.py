@@ -1,0 +1,150 @@
+"""Meshes: loading any file trimesh reads as one checked ``trimesh.Trimesh``, its UV sets, vertex
+normals and tangents, as :func:`warptex.raster.rasterize` uses them."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import trimesh
+
+
+def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
+    """Load a mesh file (OBJ, PLY, STL, GLB/GLTF, ...) as one ``trimesh.Trimesh``.
+
+    Scenes are flattened with their node transforms; materials and UVs are kept where trimesh can
+    merge them. The mesh is checked as :func:`rasterize` checks it (triangles, finite vertices and
+    UVs, face indices in range), so a bad file is reported as such, naming it, before anything
+    is rendered.
+
+    Raises:
+        FileNotFoundError: no such file. ValueError: a folder, or a file that holds no usable mesh.
+        TypeError: ``path`` is not a path.
+    """
+    try:
+        path = os.fspath(path)
+    except TypeError:
+        raise TypeError(f"load_mesh(): path must be str or os.PathLike, got {type(path).__name__}") from None
+    if os.path.isdir(path):
+        raise ValueError(f"load_mesh(): {path!r} is a folder, not a mesh file")
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"load_mesh(): file not found: {path!r}")
+    _check_signature(path)
+    try:
+        loaded = trimesh.load(path, force="mesh", process=False)
+    except Exception as err:  # trimesh raises many types for bad files
+        raise ValueError(f"load_mesh(): cannot read {path!r} as a mesh: {' '.join(str(err).split())}") from err
+    if not isinstance(loaded, trimesh.Trimesh):
+        raise ValueError(f"load_mesh(): {path!r} holds no triangle mesh (got {type(loaded).__name__})")
+    if len(loaded.faces) == 0:
+        _no_faces(path)
+    checked_geometry(f"load_mesh(): {path!r}:", loaded)
+    return loaded
+
+
+# Formats whose files start with a signature, by extension: a file that lacks it is not that format
+# (trimesh would report a failure deep inside its parser instead).
+_SIGNATURES = {".glb": b"glTF"}
+
+
+def _check_signature(path: str) -> None:
+    expected = _SIGNATURES.get(os.path.splitext(path)[1].lower())
+    if expected is None:
+        return
+    with open(path, "rb") as f:
+        head = f.read(len(expected))
+    if head != expected:
+        raise ValueError(f"load_mesh(): {path!r} is not a binary glTF (.glb) file: it starts with {head!r}, "
+                         f"a .glb file with {expected!r}")
+
+
+def _no_faces(path: str) -> None:
+    """Raise the error for a file that holds no triangles, saying what it holds instead."""
+    try:
+        whole = trimesh.load(path, process=False)  # a point cloud, a scene of lines...: count its vertices
+        count = len(getattr(whole, "vertices", ()))
+    except Exception:  # noqa: BLE001 (the face-less file is the error to report)
+        count = 0
+    holds = f"{count} vertices and no faces" if count else "no vertices and no faces"
+    raise ValueError(f"load_mesh(): {path!r} holds {holds}; warptex renders triangle meshes")
+
+
+def mesh_uv_sets(mesh: trimesh.Trimesh) -> dict[str, np.ndarray]:
+    """The mesh's UV sets as ``{name: [V, 2] float32}``: ``"uv0"`` from its texture visuals, then
+    any 2-wide per-vertex attribute whose name starts with ``uv`` or ``texcoord``."""
+    sets = {}
+    uv = getattr(mesh.visual, "uv", None)
+    if uv is not None and len(uv) == len(mesh.vertices):
+        sets["uv0"] = np.asarray(uv, np.float32)
+    for name, values in mesh.vertex_attributes.items():
+        values = np.asarray(values)
+        if name.lower().startswith(("uv", "texcoord")) and values.shape == (len(mesh.vertices), 2):
+            sets.setdefault(name.lower(), values.astype(np.float32))
+    return sets
+
+
+def vertex_tangents(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Per-vertex tangents ``[V, 4]`` (xyz unit, w = bitangent sign), accumulated per face (Lengyel).
+
+    Vertices whose faces have degenerate UVs get a tangent perpendicular to the normal.
+    """
+    p = vertices[faces]
+    t = uv[faces].astype(np.float64)
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    d1, d2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    r = np.where(np.abs(det) > 1e-20, 1.0 / np.where(det == 0, 1, det), 0.0)[:, None]
+    sdir = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * r
+    tdir = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * r
+    tan, bit = np.zeros_like(vertices), np.zeros_like(vertices)
+    for corner in range(3):
+        np.add.at(tan, faces[:, corner], sdir)
+        np.add.at(bit, faces[:, corner], tdir)
+    tan -= normals * (normals * tan).sum(-1, keepdims=True)
+    length = np.linalg.norm(tan, axis=-1, keepdims=True)
+    fallback = np.cross(normals, np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
+    tan = np.where(length > 1e-12, tan / np.maximum(length, 1e-300), fallback)
+    sign = np.where((np.cross(normals, tan) * bit).sum(-1) < 0.0, -1.0, 1.0)
+    return np.concatenate([tan, sign[:, None]], axis=-1).astype(np.float32)
+
+
+def checked_geometry(prefix: str, mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices ``[V, 3]`` float64 and faces ``[F, 3]`` int64 of ``mesh``, or a ``ValueError``
+    starting with ``prefix`` (e.g. ``"rasterize():"``): no triangles, a non-finite vertex, a
+    face index out of range, a non-finite UV (which would texture its triangles with NaN)."""
+    vertices = np.asarray(mesh.vertices, np.float64).reshape(-1, 3)
+    faces = np.asarray(mesh.faces, np.int64).reshape(-1, 3)
+    if len(faces) == 0 or len(vertices) == 0:
+        raise ValueError(f"{prefix} the mesh is empty ({len(vertices)} vertices, {len(faces)} faces)")
+    if not np.isfinite(vertices).all():
+        bad = int(np.argwhere(~np.isfinite(vertices).all(axis=1))[0, 0])
+        raise ValueError(f"{prefix} vertex {bad} is not finite: {vertices[bad].tolist()}")
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise ValueError(f"{prefix} face indices must be in [0, {len(vertices) - 1}], got [{faces.min()}, {faces.max()}]")
+    for name, uv in mesh_uv_sets(mesh).items():
+        finite = np.isfinite(uv).all(axis=1)
+        if not finite.all():
+            bad = int(np.argwhere(~finite)[0, 0])
+            raise ValueError(f"{prefix} UV set {name!r} is not finite at {int((~finite).sum())} vertices, "
+                             f"e.g. vertex {bad}: {uv[bad].tolist()}")
+    return vertices, faces
+
+
+def vertex_normals(mesh: trimesh.Trimesh) -> np.ndarray:
+    """Unit vertex normals ``[V, 3]``: the mesh's own when it carries them, else smooth area-weighted ones.
+
+    (Computed here rather than by trimesh, whose fallback without SciPy logs a traceback.)
+    """
+    vertices = np.asarray(mesh.vertices, np.float64)
+    faces = np.asarray(mesh.faces, np.int64)
+    cache = getattr(getattr(mesh, "_cache", None), "cache", {})
+    if "vertex_normals" in cache and np.shape(cache["vertex_normals"]) == vertices.shape:
+        normals = np.asarray(cache["vertex_normals"], np.float64)
+    else:
+        p = vertices[faces]
+        face_normals = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])  # length = 2 × area
+        normals = np.zeros_like(vertices)
+        for corner in range(3):
+            np.add.at(normals, faces[:, corner], face_normals)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    return np.where(length > 0, normals / np.maximum(length, 1e-300), 0.0)

@@ -1,0 +1,165 @@
+"""Rasterising a mesh into a :class:`~warptex.gbuffer.GBuffer`: primary rays against Warp's BVH."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import trimesh
+import warp as wp
+
+from warptex._validate import checked_device
+from warptex.camera import Camera
+from warptex.gbuffer import GBuffer
+from warptex.kernels import raster as kr
+from warptex.mesh import checked_geometry, load_mesh, mesh_uv_sets, vertex_normals, vertex_tangents
+
+
+def _checked_mesh(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices, faces and smooth vertex normals of a valid mesh, or a ``TypeError``/``ValueError``."""
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise TypeError(f"rasterize(): mesh must be a trimesh.Trimesh or a path, got {type(mesh).__name__}")
+    vertices, faces = checked_geometry("rasterize():", mesh)
+    return vertices, faces, vertex_normals(mesh)
+
+
+#: Scenes whose vertices and cameras lie within this distance of the world origin are rasterised
+#: in world coordinates; farther ones relative to the camera (``rasterize``'s ``origin``). float32
+#: keeps 1/4096 of a unit (a quarter of a millimetre in metres) out to here.
+ORIGIN_RANGE = 2.0**12
+
+
+def _camera_view(camera: Camera, origin: np.ndarray) -> kr.CameraView:
+    view = kr.CameraView()
+    view.eye = wp.vec3(*np.asarray(camera.eye - origin, np.float32))  # subtracted in float64
+    view.forward, view.right, view.up = (wp.vec3(*np.asarray(v, np.float32)) for v in (camera.forward, camera.right, camera.up))
+    view.half_x, view.half_y = camera.half_extent
+    view.height, view.width = camera.resolution
+    view.orthographic = int(camera.orthographic)
+    view.strata = camera.strata
+    return view
+
+
+def _origin(func: str, origin, vertices: np.ndarray, cameras: list[Camera]) -> np.ndarray:
+    """The float64 point the G-buffer's positions are relative to (see :func:`rasterize`)."""
+    if origin is None:
+        extent = max(float(np.abs(vertices).max()), max(float(np.abs(c.eye).max()) for c in cameras))
+        return np.zeros(3) if extent <= ORIGIN_RANGE else np.asarray(cameras[0].eye, np.float64).copy()
+    try:
+        point = np.asarray(origin, np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        point = np.full(1, np.nan)
+    if point.shape != (3,) or not np.isfinite(point).all():
+        raise ValueError(f"{func}(): origin must be None or 3 finite numbers, got {origin!r}")
+    return point
+
+
+def rasterize(mesh, camera, *, samples: int = 1, origin=None, device=None) -> GBuffer:
+    """Rasterise ``mesh`` seen by ``camera`` into a :class:`GBuffer` (primary rays against a BVH).
+
+    Degenerate (zero-area) triangles are never hit; a camera inside the mesh sees its back faces
+    (normals flipped to face the camera); a camera that sees nothing gives an all-empty G-buffer.
+
+    Args:
+        mesh: a ``trimesh.Trimesh`` or a path that :func:`load_mesh` reads. Meshes without normals
+            get smooth (area-weighted) vertex normals.
+        camera: from :func:`warptex.camera.look_at` or :func:`warptex.camera.orthographic`; or a
+            sequence of ``V`` cameras of one resolution, rasterised in one launch against one BVH
+            into a batched G-buffer of ``(V, H, W)`` arrays, which every technique takes (its
+            outputs are ``(V, H, W, C)``).
+        samples: stratified samples per pixel, 1, 4, 9, 16, ... (``s²``; pattern in
+            :meth:`warptex.camera.Camera.supersampled`). With ``s > 1`` the G-buffer holds every
+            sample, each pixel's as an ``s × s`` block (arrays ``(H·s, W·s)``), its derivatives
+            those of one sample's footprint, so textures are filtered at that footprint; render it
+            with any technique and average the blocks with :func:`warptex.resolve` for an
+            anti-aliased image with fractional coverage at the silhouettes (what a photo shows,
+            so fits against photos want it too).
+        origin: the world point, float64, that the G-buffer's positions are relative to
+            (camera-relative rendering): vertices and eyes are taken relative to it in float64
+            before they become float32, so a scene far from the world origin (map coordinates in
+            the millions) keeps its precision. ``None``: the world origin for scenes within
+            :data:`ORIGIN_RANGE` of it, else the (first) camera's eye. Kept as ``g.origin``.
+        device: Warp device for the BVH, the launches and the resulting arrays.
+
+    Returns:
+        The G-buffer, with one UV set per set of the mesh (see :func:`mesh_uv_sets`); its
+        ``camera`` is the camera (supersampled: :meth:`~warptex.camera.Camera.supersampled`), or
+        the tuple of cameras of a batch.
+    """
+    func = "rasterize"
+    if isinstance(camera, Camera):
+        cameras, batch = [camera], False
+    elif isinstance(camera, (list, tuple)) and camera and all(isinstance(c, Camera) for c in camera):
+        cameras, batch = list(camera), True
+    else:
+        raise TypeError(f"{func}(): camera must be a warptex Camera or a non-empty sequence of them, got {type(camera).__name__}")
+    if samples != 1:
+        try:
+            cameras = [c.supersampled(samples) for c in cameras]
+        except ValueError as err:
+            raise ValueError(f"{func}(): {str(err).split(': ', 1)[1]}") from None
+    resolution = cameras[0].resolution
+    for k, c in enumerate(cameras):
+        if c.resolution != resolution:
+            raise ValueError(f"{func}(): the cameras of a batch must share one resolution; camera 0 has {resolution}, camera {k} {c.resolution}")
+    trimesh_mesh = load_mesh(mesh) if isinstance(mesh, (str, os.PathLike)) else mesh
+    vertices, faces, normals = _checked_mesh(trimesh_mesh)
+    uv_sets = mesh_uv_sets(trimesh_mesh)
+    origin = _origin(func, origin, vertices, cameras)
+    vertices = vertices - origin  # float64, before float32
+    device = checked_device(f"{func}()", device)
+    shape = (len(cameras), *resolution)  # the kernels' (views, H, W)
+
+    # Zero-area triangles have no plane (no normal, no differentials): they are left out of the
+    # BVH, and hits report the index of the face in the full mesh.
+    area2 = np.linalg.norm(np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]]), axis=1)
+    face_ids = np.flatnonzero(area2 > 0)
+    if len(face_ids) == 0:
+        raise ValueError(f"{func}(): all {len(faces)} triangles of the mesh are degenerate (zero area)")
+    points = wp.array(vertices.astype(np.float32), dtype=wp.vec3, device=device)
+    indices = wp.array(faces.reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
+    hit_indices = wp.array(faces[face_ids].reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
+    bvh = wp.Mesh(points=points, indices=hit_indices)
+    g = GBuffer.empty(shape if batch else resolution, uv_sets=uv_sets, camera=tuple(cameras) if batch else cameras[0], samples=cameras[0].strata**2, origin=origin, device=device)
+
+    def batched(a: wp.array) -> wp.array:
+        return a.reshape(shape)
+
+    barycentric = wp.zeros(shape, dtype=wp.vec3, device=device)
+    wp.launch(
+        kr.raster_kernel,
+        dim=shape,
+        inputs=[
+            bvh.id,
+            points,
+            hit_indices,
+            wp.array(face_ids.astype(np.int32), dtype=wp.int32, device=device),
+            wp.array(normals.astype(np.float32), dtype=wp.vec3, device=device),
+            wp.array([_camera_view(c, origin) for c in cameras], dtype=kr.CameraView, device=device),
+        ],
+        outputs=[batched(a) for a in (g.position, g.normal, g.geometric_normal, g.depth, g.mask, g.triangle)] + [barycentric, batched(g.position_dx), batched(g.position_dy)],
+        device=device,
+        record_tape=False,
+    )
+    for name, uv in uv_sets.items():
+        out = g.uv_sets[name]
+        tangents = vertex_tangents(vertices, faces, normals, uv)
+        wp.launch(
+            kr.uv_kernel,
+            dim=shape,
+            inputs=[
+                points,
+                indices,
+                wp.array(uv, dtype=wp.vec2, device=device),
+                wp.array(tangents, dtype=wp.vec4, device=device),
+                batched(g.triangle),
+                barycentric,
+                batched(g.normal),
+                batched(g.position_dx),
+                batched(g.position_dy),
+            ],
+            outputs=[batched(out[k]) for k in ("uv", "uv_dx", "uv_dy", "tangent")],
+            device=device,
+            record_tape=False,
+        )
+    return g
