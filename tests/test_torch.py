@@ -7,6 +7,7 @@ from __future__ import annotations
 import gc
 
 import numpy as np
+import trimesh
 import pytest
 import warp as wp
 
@@ -15,6 +16,7 @@ torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip insta
 import warptex as wt  # noqa: E402
 import warptex.torch as wtt
 from warptex._torch_spec import op_arguments  # noqa: E402
+from warptex.gbuffer import FIELDS  # noqa: E402
 from warptex.scenes import terrain_camera  # noqa: E402
 from warptex.scenes.terrain import terrain  # noqa: E402
 from warptex._torch_op import _states  # noqa: E402
@@ -408,3 +410,18 @@ def test_bad_input_raises(call, error, match, gbuffer, rng):
     texture, uv = _t(rng, 8, 8, 3), _t(rng, 40, 2)
     with pytest.raises(error, match=match):
         call(texture, uv, wtt.gbuffer_tensors(gbuffer))
+
+
+def test_a_camera_relative_supersampled_gbuffer_keeps_its_origin_and_samples(rng):
+    """``gbuffer_tensors`` carries a G-buffer's float64 origin and its samples per pixel, so the
+    bridge folds whole texture periods out of a far scene exactly as the native call does."""
+    mesh = trimesh.creation.icosphere(subdivisions=3)
+    g = wt.rasterize(mesh, wt.look_at((0, 0, 3), (0, 0, 0), resolution=(16, 16)), samples=4, origin=(1e6 + 0.375, 2.0, -3e6 + 0.25))
+    tensors = wtt.gbuffer_tensors(g)
+    assert tensors["origin"].dtype == torch.float64 and tensors["samples"].item() == 4
+    texture = _t(rng, 16, 16, 3, grad=False)
+    got = wtt.triplanar(tensors, texture, tiling=0.5).numpy()
+    want = wt.triplanar(g, wt.Texture(texture.numpy()), tiling=0.5).numpy()
+    np.testing.assert_array_equal(got, want)
+    moved = wt.GBuffer(**{k: getattr(g, k) for k in FIELDS}, uv_sets=g.uv_sets, samples=4)  # the same arrays at the world origin
+    assert np.abs(wt.triplanar(moved, wt.Texture(texture.numpy()), tiling=0.5).numpy() - want).max() > 0.05  # the origin matters here

@@ -209,12 +209,16 @@ def _decode_tensor(role: str, i: int, tensors, want, grads, device):
 
 
 def _decode_gbuffer(fields: dict, tensors) -> GBuffer:
-    arrays, sets = {}, {}
+    arrays, sets, extra = {}, {}, {}
     for name, ref in fields.items():
         if not (isinstance(ref, dict) and "$t" in ref):
             raise TypeError(f"warptex.torch: G-buffer field {name!r} must be a tensor")
         t = tensors[ref["$t"]]
-        if "." in name:
+        if name == "origin":  # camera-relative positions: the float64 point they are relative to
+            extra["origin"] = t.detach().cpu().double().numpy()
+        elif name == "samples":
+            extra["samples"] = int(t.reshape(-1)[0])
+        elif "." in name:
             set_name, key = name.split(".", 1)
             if key not in UV_FIELDS:
                 raise ValueError(f"warptex.torch: unknown G-buffer UV field {name!r} (UV fields: {', '.join(UV_FIELDS)})")
@@ -222,11 +226,11 @@ def _decode_gbuffer(fields: dict, tensors) -> GBuffer:
         elif name in FIELDS:
             arrays[name] = _gbuffer_array(name, t, FIELDS[name])
         else:
-            raise ValueError(f"warptex.torch: unknown G-buffer field {name!r} (fields: {', '.join(FIELDS)})")
+            raise ValueError(f"warptex.torch: unknown G-buffer field {name!r} (fields: {', '.join(FIELDS)}, origin, samples)")
     missing = [name for name in FIELDS if name not in arrays]
     if missing:
         raise ValueError(f"warptex.torch: the G-buffer dict lacks {', '.join(missing)}; make it with warptex.torch.gbuffer_tensors(gbuffer)")
-    return GBuffer(**arrays, uv_sets=sets)
+    return GBuffer(**arrays, uv_sets=sets, **extra)
 
 
 def _gbuffer_array(name: str, t: torch.Tensor, dtype) -> wp.array:
