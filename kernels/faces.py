@@ -20,7 +20,7 @@ from typing import Any
 
 import warp as wp
 
-from .texels import TexelGrad, TextureView
+from .texels import TexelGrad, TextureView, pick3
 
 #: The faces in the order of every list of six (``textures_per_face``, the ``TriplanarFaces`` fields).
 FACES = ("+x", "-x", "+y", "-y", "+z", "-z")
@@ -60,12 +60,7 @@ FACE_FIELDS = ("px", "nx", "py", "ny", "pz", "nz")
 def on_axis(px: Any, py: Any, pz: Any, axis: wp.int32):
     """Projection ``axis``' value among its ``+`` faces' (a texture or its gradient: chosen, then
     used by one call; three inlined copies of the sampling code measured slower)."""
-    value = px
-    if axis == 1:
-        value = py
-    elif axis == 2:
-        value = pz
-    return value
+    return pick3(px, py, pz, axis)
 
 
 @wp.func

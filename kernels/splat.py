@@ -34,7 +34,7 @@ import warp as wp
 
 from . import ADJOINT_MODULE, inlined, specialised
 from .family import Kernels, Staged, family, forward_kernel, pixel_kernels
-from .projection import surface_frame
+from .projection import SurfacePixels, surface_frame
 from .splat_blend import blend_functions, capacity
 from .splat_layers import (
     HEIGHT_ARRAY,
@@ -59,17 +59,13 @@ from .texels import SamplerArgs, TexelGrad, TextureView, read_channels, write_ch
 
 @wp.struct
 class SplatPixels:
-    """The per-pixel G-buffer arrays a splat reads: UV0 and its derivatives, world position, its
-    derivatives, normal, and the coverage mask."""
+    """The per-pixel G-buffer arrays a splat reads: UV0 and its derivatives, and the surface (world
+    position, its derivatives, normal, coverage mask)."""
 
     uv0: wp.array(dtype=wp.vec2)
     uv0_dx: wp.array(dtype=wp.vec2)
     uv0_dy: wp.array(dtype=wp.vec2)
-    position: wp.array(dtype=wp.vec3)
-    position_dx: wp.array(dtype=wp.vec3)
-    position_dy: wp.array(dtype=wp.vec3)
-    normal: wp.array(dtype=wp.vec3)
-    mask: wp.array(dtype=float)
+    surface: SurfacePixels
 
 
 @wp.struct
@@ -129,10 +125,10 @@ def layer_point(args: SplatArgs, pixels: SplatPixels, i: wp.int32) -> LayerPoint
     pt.uv0 = pixels.uv0[i]
     pt.uv0_dx = pixels.uv0_dx[i]
     pt.uv0_dy = pixels.uv0_dy[i]
-    pt.p = pixels.position[i]
-    pt.n = pixels.normal[i]
-    pt.dpdx = pixels.position_dx[i]
-    pt.dpdy = pixels.position_dy[i]
+    pt.p = pixels.surface.position[i]
+    pt.n = pixels.surface.normal[i]
+    pt.dpdx = pixels.surface.position_dx[i]
+    pt.dpdy = pixels.surface.position_dy[i]
     pt.tri_w = surface_weights(args.params, args.proj, pt.n)
     return pt
 
@@ -175,7 +171,7 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> di
     def forward(args: SplatArgs, pixels: SplatPixels, i: wp.int32, out: wp.array2d(dtype=float)):
         """``out[i, c]``: the layers blended by the splat maps; 0 where the mask is 0."""
         colour = wp.vec4(0.0)
-        if pixels.mask[i] != 0.0:
+        if pixels.surface.mask[i] != 0.0:
             pt = layer_point(args, pixels, i)
             r, w0, total, w1 = f.splat_weights(args.maps, pt.uv0, args.map_smp, args.params)
             c, hv = read_layers(args, pt, w1)
@@ -186,7 +182,7 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> di
         """Add the gradient ``adj[i]`` of :func:`forward` (linear blends of taps) into ``grads``:
         the forward replayed (with, for the tiling, the colours' and heights' slopes), then its blend
         reversed into the transition, the tiling (plain sampling only), the splat maps and the texels."""
-        if pixels.mask[i] != 0.0:
+        if pixels.surface.mask[i] != 0.0:
             params = args.params
             pt = layer_point(args, pixels, i)
             r, w0, total, w1 = f.splat_weights(args.maps, pt.uv0, args.map_smp, params)
@@ -240,12 +236,12 @@ def samples_outlined(args: SplatArgs, pixels: SplatPixels, i: wp.int32, out: Spl
     """``out.samples[i, j]``: layer ``j`` as the splat kernels read it, for every layer with a
     positive splat value (others stay 0); ``out.height_samples[i, j]``: its separate height. The first
     step of the two-step path, with Warp's generated adjoint on out-of-line blocks (module docstring)."""
-    if pixels.mask[i] != 0.0:
+    if pixels.surface.mask[i] != 0.0:
         pt = LayerPoint()
         pt.uv0 = pixels.uv0[i]
         pt.uv0_dx = pixels.uv0_dx[i]
         pt.uv0_dy = pixels.uv0_dy[i]
-        p, n, dpdx, dpdy, tri_w = surface_frame(args.proj, pixels.position[i], pixels.normal[i], pixels.position_dx[i], pixels.position_dy[i])
+        p, n, dpdx, dpdy, tri_w = surface_frame(args.proj, pixels.surface.position[i], pixels.surface.normal[i], pixels.surface.position_dx[i], pixels.surface.position_dy[i])
         pt.p = p
         pt.n = n
         pt.dpdx = dpdx

@@ -39,7 +39,7 @@ from .hashing import STREAM_CHEAP2_NOISE, STREAM_CHEAP2_OFFSET, STREAM_HASH4_CEL
 from .hexgrid import hex_grid, hex_steps, hex_tap, hex_weights
 from .sampling import SampleArgs, SampleGrads, SamplePixels, sample_footprint_of, sample_layer
 from .scatter import scatter_footprint, scatter_lod
-from .texels import SamplerArgs, TexelGrad, TextureView, finite_uv_lod, read_channels, write_channels
+from .texels import SamplerArgs, TexelGrad, TextureView, finite_uv_lod, pick3, read_channels, write_channels
 
 METHOD_NONE = wp.constant(0)
 METHOD_HASH4 = wp.constant(1)
@@ -205,14 +205,7 @@ def stochastic_taps(uv: wp.vec2, params: StochasticArgs):
 @wp.func
 def pick_tap(k: wp.int32, t0: wp.vec2, t1: wp.vec2, t2: wp.vec2, t3: wp.vec2) -> wp.vec2:
     """Tap ``k`` of :func:`stochastic_taps` (``k`` is a constant in unrolled loops: no branch is left)."""
-    tap = t0
-    if k == 1:
-        tap = t1
-    elif k == 2:
-        tap = t2
-    elif k == 3:
-        tap = t3
-    return tap
+    return wp.where(k == 3, t3, pick3(t0, t1, t2, k))
 
 
 @wp.func

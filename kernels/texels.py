@@ -17,6 +17,8 @@ Every technique addresses and fetches texels through the ``@wp.func`` blocks her
 :mod:`.scatter`.
 """
 
+from typing import Any
+
 import warp as wp
 
 # Filter modes (mirrored by ``warptex.Filter``).
@@ -218,3 +220,15 @@ def resolve_layer(tex: TextureView, i: wp.int32, layers: wp.array(dtype=wp.int32
     if layers.shape[0] > 0:
         layer = wp.clamp(layers[i], 0, tex.num_layers - 1)
     return layer
+
+
+@wp.func
+def pick3(a: Any, b: Any, c: Any, k: wp.int32):
+    """Value ``k`` (0, 1 or 2) of three (a texture, a gradient, a tap: chosen, then used by one call;
+    ``k`` is a constant in unrolled loops, where no branch is left)."""
+    value = a
+    if k == 1:
+        value = b
+    elif k == 2:
+        value = c
+    return value

@@ -150,7 +150,8 @@ def _gradient_of(out):
 
 def _run_staged(staged: Staged, count: int, inputs: dict, result, device, covered) -> None:
     """The two steps of ``staged``: the intermediates (with the backward it replaces), then the
-    output from them (with the other backward); the second step's arguments filled by name."""
+    output from them (with the other backward); the second step's arguments filled by name (nested
+    structs' fields included)."""
     wanted = [a for p, a in differentiable(inputs) if a.requires_grad and not any(p == t or p.startswith(t + ".") for t in staged.then_only)]
     intermediates = _struct(staged.first.forward.adj.args[2].type, {})
     for name, (shape, dtype) in staged.intermediates(count, inputs["args"]).items():
@@ -158,10 +159,21 @@ def _run_staged(staged: Staged, count: int, inputs: dict, result, device, covere
     second = "adjoint" if staged.replaces == "texel_grad" else "texel_grad"
     _run_path(staged.first, staged.replaces, count, inputs, intermediates, device, covered, None)
     then_inputs = {
-        "args": _struct(staged.then.forward.adj.args[0].type, struct_fields(inputs["args"])),
-        "pixels": _struct(staged.then.forward.adj.args[1].type, {**struct_fields(inputs["pixels"]), **struct_fields(intermediates)}),
+        "args": _struct(staged.then.forward.adj.args[0].type, _by_name(inputs["args"])),
+        "pixels": _struct(staged.then.forward.adj.args[1].type, {**_by_name(inputs["pixels"]), **_by_name(intermediates)}),
     }
     _run_path(staged.then, second, count, then_inputs, result, device, covered, None)
+
+
+def _by_name(value) -> dict:
+    """A struct's fields by name, those of its nested structs included (a nested struct's own
+    fields win over its name: ``pixels.surface.mask`` is found as ``mask``)."""
+    fields = {}
+    for name, field in struct_fields(value).items():
+        fields[name] = field
+        if wp.types.is_struct(field):
+            fields.update(_by_name(field))
+    return fields
 
 
 def _struct(struct_t, fields: dict):

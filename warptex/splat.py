@@ -186,11 +186,11 @@ def splat(
 
     count = gbuffer.pixel_count
     uvs = gbuffer.uv_sets[uv_set]
-    arrays = {"uv0": uvs["uv"], "uv0_dx": uvs["uv_dx"], "uv0_dy": uvs["uv_dy"], **{name: getattr(gbuffer, name) for name in ("position", "position_dx", "position_dy", "normal", "mask")}}
-    pixels = struct_of(kl.SplatPixels, device, **{name: a.reshape((count,)) for name, a in arrays.items()})
+    surface = struct_of(kp.SurfacePixels, device, **{name: getattr(gbuffer, name).reshape((count,)) for name in ("position", "position_dx", "position_dy", "normal", "mask")})
+    pixels = struct_of(kl.SplatPixels, device, uv0=uvs["uv"].reshape((count,)), uv0_dx=uvs["uv_dx"].reshape((count,)), uv0_dy=uvs["uv_dy"].reshape((count,)), surface=surface)
     kernels = kl.splat_kernels(capacity=kl.capacity(num_layers), stochastic=stoch.method != kst.METHOD_NONE)
     linear = stoch.histogram == 0 and height_stoch.histogram == 0  # the histogram blend is not linear in the texels
-    out = run(kernels, count, args=args, pixels=pixels, out=((count, layers.channels), float), device=device, linear=linear, covered=pixels.mask)
+    out = run(kernels, count, args=args, pixels=pixels, out=((count, layers.channels), float), device=device, linear=linear, covered=surface.mask)
     return out.reshape((*gbuffer.resolution, layers.channels))
 
 
