@@ -17,13 +17,25 @@ import inspect
 
 import warp as wp
 
-# Every kernel with Warp's generated adjoint that samples textures lives in this one Warp module,
-# compiled the first time any of them runs: they share the out-of-line sampling blocks
-# (``sample_lod_call``, ``sample_stochastic_call``...), which it then compiles once. For CUDA it is
-# compiled at -O2 instead of Warp's default -O3 (the CPU default is -O2 already): sm_90 in 13 s
-# instead of 43 s.
+# The kernels with Warp's generated adjoint live in Warp modules of their own, compiled the first
+# time such a gradient is recorded: ``warptex.adjoint`` for sample, stochastic and the atlas, and one
+# module beside it for triplanar (``.triplanar``) and for splat (``.splat``). Kernels of one module
+# share the out-of-line sampling blocks (``sample_lod_outlined``, ``sample_stochastic_outlined``...),
+# which it compiles once; one module for all of them compiled for sm_90 in 27-32 s once the kernels
+# took their arguments as structs (whose adjoints are code too), past the 30 s bar, and made a
+# triplanar sharpness gradient wait for splat's adjoint. For CUDA they are compiled at -O2 instead of
+# Warp's default -O3 (the CPU default is -O2 already): sm_90 in 13 s instead of 43 s.
 ADJOINT_MODULE = "warptex.adjoint"
-wp.set_module_options({"optimization_level": 2}, module=ADJOINT_MODULE)
+
+
+def adjoint_module(technique: str | None = None) -> str:
+    """The Warp module of ``technique``'s generated-adjoint kernels (``None``: the shared one), at -O2."""
+    name = ADJOINT_MODULE if technique is None else f"{ADJOINT_MODULE}.{technique}"
+    wp.set_module_options({"optimization_level": 2}, module=name)
+    return name
+
+
+adjoint_module()
 
 # Warp 1.18 added the inline hint to @wp.func.
 _HAS_INLINE_HINT = "inline" in inspect.signature(wp.func).parameters

@@ -147,21 +147,24 @@ def _atlas_body(sample_tile, name: str):
         if pixels.mask[i] != 0.0:
             uv = pixels.uv0[i]
             if wp.isfinite(uv):
-                row = map_texel(args.indices.shape[0], 1.0 - uv[1])
-                col = map_texel(args.indices.shape[1], uv[0])
-                k = args.indices.shape[2]
+                # The fields read once, not per entry: each read is adjoint code to compile.
+                atlas, layout, indices, weights, tiling, smp = args.atlas, args.layout, args.indices, args.weights, args.tiling, args.smp
+                uv_dx, uv_dy = pixels.uv0_dx[i], pixels.uv0_dy[i]
+                row = map_texel(indices.shape[0], 1.0 - uv[1])
+                col = map_texel(indices.shape[1], uv[0])
+                k = indices.shape[2]
                 total = float(0.0)
                 for j in range(MAX_ENTRIES):
                     if j < k:
-                        total += wp.max(args.weights[row, col, j], 0.0)
+                        total += wp.max(weights[row, col, j], 0.0)
                 for j in range(MAX_ENTRIES):
                     if j < k:
-                        w = args.weights[row, col, j]
+                        w = weights[row, col, j]
                         if args.normalize != 0:
                             w = wp.max(w, 0.0) / wp.max(total, ATLAS_EPS)
-                        layer = wp.clamp(args.indices[row, col, j], 0, args.layout.num_tiles - 1)
-                        t = args.tiling[wp.min(layer, args.tiling.shape[0] - 1)]
-                        colour += w * sample_tile(args.atlas, args.layout, layer, uv * t, pixels.uv0_dx[i] * t, pixels.uv0_dy[i] * t, args.smp)
+                        layer = wp.clamp(indices[row, col, j], 0, layout.num_tiles - 1)
+                        t = tiling[wp.min(layer, tiling.shape[0] - 1)]
+                        colour += w * sample_tile(atlas, layout, layer, uv * t, uv_dx * t, uv_dy * t, smp)
             else:
                 colour = wp.vec4(wp.nan)
         write_channels(out, i, colour)

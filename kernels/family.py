@@ -18,7 +18,7 @@ from ``@wp.func`` bodies, so that a technique writes what one pixel does and not
   ``args`` is a struct of what every pixel reads (textures, options); ``pixels`` a struct of
   per-pixel arrays (first axis: one entry per pixel); ``out`` the output, a per-pixel array or a
   struct of them. Compiled without Warp's generated adjoint, and once more with it (the
-  ``adjoint`` kernel, in ``ADJOINT_MODULE``, on the out-of-line blocks of ``adjoint_body``);
+  ``adjoint`` kernel, in a generated-adjoint module, on the out-of-line blocks of ``adjoint_body``);
 - ``texel_grad(args, pixels, grads, adj)`` runs ``scatter(args, pixels, i, grads, adj)``: the
   hand-written gradient, which adds the output gradients ``adj`` (typed as ``out``) into
   ``grads``, a struct of gradient targets: one field per input it differentiates, in the order of
@@ -36,7 +36,7 @@ from typing import Any, Callable, Iterable
 
 import warp as wp
 
-from . import ADJOINT_MODULE
+from . import adjoint_module
 
 #: Gradient paths that name a per-pixel input start with this (see :attr:`Kernels.grads`).
 PIXELS = "pixels."
@@ -129,14 +129,14 @@ def registered_kernels(options: dict) -> list:
     return kernels
 
 
-def pixel_kernels(name: str, *, module: str, args, pixels, out, body, scatter=None, grads=None, adjoint_body=None, grad_module: str | None = None):
+def pixel_kernels(name: str, *, module: str, args, pixels, out, body, scatter=None, grads=None, adjoint_body=None, grad_module: str | None = None, adjoint_of: str | None = None):
     """``(forward, texel_grad, adjoint)``: the pixel kernels of one configuration (module docstring).
 
     Args:
         name: the kernels' name stem, unique among the kernels of their Warp modules.
         module: the Warp module of ``forward``; ``texel_grad`` goes into ``grad_module`` (default
             ``module + ".grad"``: a job that needs no gradient does not compile it), ``adjoint``
-            into ``ADJOINT_MODULE``.
+            into ``kernels.adjoint_module(adjoint_of)``.
         args, pixels, out: the struct types of the fixed and the per-pixel arguments, and the
             output's type (an array type or a struct of per-pixel arrays).
         body: ``@wp.func body(args, pixels, i, out)``, what pixel ``i`` computes.
@@ -144,10 +144,12 @@ def pixel_kernels(name: str, *, module: str, args, pixels, out, body, scatter=No
             ``grads`` (the struct type of its targets); ``None``: no texel-gradient kernel.
         adjoint_body: the ``body`` to compile with Warp's generated adjoint (on out-of-line blocks,
             which such a module then compiles once with their adjoints); ``None``: no adjoint kernel.
+        adjoint_of: the technique whose generated-adjoint module ``adjoint`` goes into (``None``:
+            the shared one).
     """
     forward = forward_kernel(body, args, pixels, out, module=module, name=f"{name}_forward", enable_backward=False)
     texel_grad = None if scatter is None else _texel_grad(scatter, args, pixels, grads, out, module=grad_module or module + ".grad", name=f"{name}_texel_grad")
-    adjoint = None if adjoint_body is None else forward_kernel(adjoint_body, args, pixels, out, module=ADJOINT_MODULE, name=f"{name}_adjoint", enable_backward=True)
+    adjoint = None if adjoint_body is None else forward_kernel(adjoint_body, args, pixels, out, module=adjoint_module(adjoint_of), name=f"{name}_adjoint", enable_backward=True)
     return forward, texel_grad, adjoint
 
 

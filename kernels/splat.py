@@ -32,7 +32,7 @@ import functools
 
 import warp as wp
 
-from . import ADJOINT_MODULE, inlined, specialised
+from . import adjoint_module, inlined, specialised
 from .family import Kernels, Staged, family, forward_kernel, pixel_kernels
 from .projection import SurfacePixels, surface_frame
 from .splat_blend import blend_functions, capacity
@@ -129,7 +129,7 @@ def layer_point(args: SplatArgs, pixels: SplatPixels, i: wp.int32) -> LayerPoint
     pt.n = pixels.surface.normal[i]
     pt.dpdx = pixels.surface.position_dx[i]
     pt.dpdy = pixels.surface.position_dy[i]
-    pt.tri_w = surface_weights(args.params, args.proj, pt.n)
+    pt.tri_w = surface_weights(args.reads.params, args.reads.proj, pt.n)
     return pt
 
 
@@ -143,21 +143,21 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> di
 
     def read_layers_of(args: SplatArgs, pt: LayerPoint, w1: weights_t):
         """``(c, hv)``: every weighted layer's colour and raw height."""
-        params = args.params
+        params = args.reads.params
         c = colours_t()
         hv = weights_t()
         for j in range(params.num_layers):
             if w1[j] > 0.0:
                 if wp.static(plain):
-                    value = read_layer(args.layers, j, args, pt, args.stoch)
+                    value = read_layer(args.layers, j, args.reads, pt, args.stoch)
                     c[j] = value
                     if params.height_mode == HEIGHT_CHANNEL:
                         hv[j] = value[params.height_channel]
                     elif params.height_mode == HEIGHT_ARRAY:
-                        hv[j] = read_layer(args.heights, j, args, pt, args.height_stoch)[0]
+                        hv[j] = read_layer(args.heights, j, args.reads, pt, args.height_stoch)[0]
                 else:
                     for t in range(layer_textures(params)):
-                        value = read_layer(pick(args.layers, args.heights, t), j, args, pt, pick(args.stoch, args.height_stoch, t))
+                        value = read_layer(pick(args.layers, args.heights, t), j, args.reads, pt, pick(args.stoch, args.height_stoch, t))
                         if t == 0:
                             c[j] = value
                             if params.height_mode == HEIGHT_CHANNEL:
@@ -173,9 +173,9 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> di
         colour = wp.vec4(0.0)
         if pixels.surface.mask[i] != 0.0:
             pt = layer_point(args, pixels, i)
-            r, w0, total, w1 = f.splat_weights(args.maps, pt.uv0, args.map_smp, args.params)
+            r, w0, total, w1 = f.splat_weights(args.maps, pt.uv0, args.map_smp, args.reads.params)
             c, hv = read_layers(args, pt, w1)
-            colour = f.blend(w1, c, hv, args.params)
+            colour = f.blend(w1, c, hv, args.reads.params)
         write_channels(out, i, colour)
 
     def scatter(args: SplatArgs, pixels: SplatPixels, i: wp.int32, grads: SplatGrads, adj: wp.array2d(dtype=float)):
@@ -183,7 +183,7 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> di
         the forward replayed (with, for the tiling, the colours' and heights' slopes), then its blend
         reversed into the transition, the tiling (plain sampling only), the splat maps and the texels."""
         if pixels.surface.mask[i] != 0.0:
-            params = args.params
+            params = args.reads.params
             pt = layer_point(args, pixels, i)
             r, w0, total, w1 = f.splat_weights(args.maps, pt.uv0, args.map_smp, params)
             c = colours_t()
@@ -194,11 +194,11 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> di
             if tiling_grads and wp.static(plain):  # the stochastic kernels never take the tiling's gradient by hand
                 for j in range(params.num_layers):
                     if w1[j] > 0.0:
-                        value, slope = read_layer_slope(args.layers, j, args, pt)
+                        value, slope = read_layer_slope(args.layers, j, args.reads, pt)
                         c[j] = value
                         dc[j] = slope
                         if params.height_mode == HEIGHT_ARRAY:
-                            height, height_slope = read_layer_slope(args.heights, j, args, pt)
+                            height, height_slope = read_layer_slope(args.heights, j, args.reads, pt)
                             hv[j] = height[0]
                             dhv[j] = height_slope[0]
                         elif params.height_mode == HEIGHT_CHANNEL:
@@ -217,16 +217,16 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> di
             for j in range(params.num_layers):
                 if w1[j] > 0.0:
                     if wp.static(plain):
-                        scatter_layer(args.layers, grads.layers, j, args, pt, args.stoch, gc[j])
+                        scatter_layer(args.layers, grads.layers, j, args.reads, pt, args.stoch, gc[j])
                         if params.height_mode == HEIGHT_ARRAY:
-                            scatter_layer(args.heights, grads.heights, j, args, pt, args.height_stoch, wp.vec4(ghv[j], 0.0, 0.0, 0.0))
+                            scatter_layer(args.heights, grads.heights, j, args.reads, pt, args.height_stoch, wp.vec4(ghv[j], 0.0, 0.0, 0.0))
                     else:
                         for t in range(layer_textures(params)):
                             g = gc[j]
                             if t == 1:
                                 g = wp.vec4(ghv[j], 0.0, 0.0, 0.0)
                             tex = pick(args.layers, args.heights, t)
-                            scatter_layer(tex, pick(grads.layers, grads.heights, t), j, args, pt, pick(args.stoch, args.height_stoch, t), g)
+                            scatter_layer(tex, pick(grads.layers, grads.heights, t), j, args.reads, pt, pick(args.stoch, args.height_stoch, t), g)
 
     return inlined(specialised(forward, f"splat{cap}_forward{suffix}"), module=f"warptex.splat{cap}"), inlined(specialised(scatter, f"splat{cap}_scatter{suffix}"), module=f"warptex.splat{cap}")
 
@@ -237,23 +237,25 @@ def samples_outlined(args: SplatArgs, pixels: SplatPixels, i: wp.int32, out: Spl
     positive splat value (others stay 0); ``out.height_samples[i, j]``: its separate height. The first
     step of the two-step path, with Warp's generated adjoint on out-of-line blocks (module docstring)."""
     if pixels.surface.mask[i] != 0.0:
+        reads, maps, map_smp = args.reads, args.maps, args.map_smp  # read once: each field read is adjoint code to compile
+        params = reads.params
         pt = LayerPoint()
         pt.uv0 = pixels.uv0[i]
         pt.uv0_dx = pixels.uv0_dx[i]
         pt.uv0_dy = pixels.uv0_dy[i]
-        p, n, dpdx, dpdy, tri_w = surface_frame(args.proj, pixels.surface.position[i], pixels.surface.normal[i], pixels.surface.position_dx[i], pixels.surface.position_dy[i])
+        p, n, dpdx, dpdy, tri_w = surface_frame(reads.proj, pixels.surface.position[i], pixels.surface.normal[i], pixels.surface.position_dx[i], pixels.surface.position_dy[i])
         pt.p = p
         pt.n = n
         pt.dpdx = dpdx
         pt.dpdy = dpdy
         pt.tri_w = wp.vec3(0.0)
-        if args.params.projection == PROJECT_TRIPLANAR:
+        if params.projection == PROJECT_TRIPLANAR:
             pt.tri_w = tri_w
-        for j in range(args.params.num_layers):
-            if layer_weighted(args.maps, pt.uv0, args.map_smp, j, args.params.map_channels):
-                out.samples[i, j] = read_layer_outlined(args.layers, j, args, pt, args.stoch)
-                if args.params.height_mode == HEIGHT_ARRAY:
-                    height = read_layer_outlined(args.heights, j, args, pt, args.height_stoch)
+        for j in range(params.num_layers):
+            if layer_weighted(maps, pt.uv0, map_smp, j, params.map_channels):
+                out.samples[i, j] = read_layer_outlined(args.layers, j, reads, pt, args.stoch)
+                if params.height_mode == HEIGHT_ARRAY:
+                    height = read_layer_outlined(args.heights, j, reads, pt, args.height_stoch)
                     out.height_samples[i, j] = height[0]
 
 
@@ -312,15 +314,15 @@ def _blend_bodies(cap: int):
 
 
 def _sample_shapes(count: int, args) -> dict:
-    layers = args.params.num_layers
-    separate = args.params.height_mode == HEIGHT_ARRAY  # heights read separately: one per layer, else a placeholder column
+    layers = args.reads.params.num_layers
+    separate = args.reads.params.height_mode == HEIGHT_ARRAY  # heights read separately: one per layer, else a placeholder column
     return {"samples": ((count, layers), wp.vec4), "height_samples": ((count, layers if separate else 1), float)}
 
 
 @functools.cache
 def _samples() -> Kernels:
     """The first step of the two-step path, one kernel for every capacity (forward and generated adjoint)."""
-    kernel = forward_kernel(samples_outlined, SplatArgs, SplatPixels, SplatSamples, module=ADJOINT_MODULE, name="splat_samples_adjoint", enable_backward=True)
+    kernel = forward_kernel(samples_outlined, SplatArgs, SplatPixels, SplatSamples, module=adjoint_module("splat"), name="splat_samples_adjoint", enable_backward=True)
     return Kernels(kernel, None, kernel)
 
 
@@ -332,7 +334,7 @@ def _staged(cap: int) -> Staged:
     forward, texel_grad, _ = pixel_kernels(f"splat{cap}_blend", module=module, grad_module=module, args=BlendArgs, pixels=BlendPixels, out=wp.array2d(dtype=float),
                                            body=blend, scatter=blend_grad, grads=BlendGrads)  # fmt: skip
     then = Kernels(forward, texel_grad, grads=("args.maps", "args.params.transition", "pixels.uv0", "pixels.samples", "pixels.height_samples"))
-    return Staged(replaces="adjoint", first=_samples(), then=then, intermediates=_sample_shapes, then_only=("args.maps", "args.params.transition"))
+    return Staged(replaces="adjoint", first=_samples(), then=then, intermediates=_sample_shapes, then_only=("args.maps", "args.reads.params.transition"))
 
 
 def _configurations(options: dict) -> list:
@@ -350,5 +352,5 @@ def splat_kernels(*, capacity: int, stochastic: bool) -> Kernels:
     body, scatter_body = _bodies(capacity, read, scatter, plain=not stochastic, suffix="_stochastic" if stochastic else "")
     forward, texel_grad, _ = pixel_kernels(f"splat{capacity}" + ("_stochastic" if stochastic else ""), module=module, args=SplatArgs, pixels=SplatPixels, out=wp.array2d(dtype=float),
                                            body=body, scatter=scatter_body, grads=SplatGrads)  # fmt: skip
-    grads = ("args.layers", "args.heights", "args.maps", "args.params.transition", None if stochastic else "args.params.tiling")
+    grads = ("args.layers", "args.heights", "args.maps", "args.reads.params.transition", None if stochastic else "args.reads.params.tiling")
     return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity))

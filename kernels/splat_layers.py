@@ -92,18 +92,26 @@ class SplatParams:
 
 
 @wp.struct
+class LayerReads:
+    """How every layer is read: the splat's options, its triplanar projection, the layers' sampler
+    (what the layer reads below take, rather than the whole :class:`SplatArgs`: an out-of-line read
+    with Warp's generated adjoint compiles an adjoint of every struct it is given)."""
+
+    params: SplatParams
+    proj: ProjectionArgs
+    smp: SamplerArgs
+
+
+@wp.struct
 class SplatArgs:
     """What every pixel of a splat launch reads: the colour layers, the height layers (the colour
-    layers themselves when heights come from a channel), the splat maps, the options, the triplanar
-    projection's, the layers' and the maps' samplers, and the stochastic options of the layers and
-    of the heights."""
+    layers themselves when heights come from a channel), the splat maps, how layers are read, the
+    maps' sampler, and the stochastic options of the layers and of the heights."""
 
     layers: TextureView
     heights: TextureView
     maps: TextureView
-    params: SplatParams
-    proj: ProjectionArgs
-    smp: SamplerArgs
+    reads: LayerReads
     map_smp: SamplerArgs
     stoch: StochasticArgs
     height_stoch: StochasticArgs
@@ -152,43 +160,43 @@ def face_layer(params: SplatParams, layer: wp.int32, k: wp.int32, n: wp.vec3) ->
 
 
 @wp.func
-def layer_read(tex: TextureView, layer: wp.int32, k: wp.int32, args: SplatArgs, pt: LayerPoint):
+def layer_read(tex: TextureView, layer: wp.int32, k: wp.int32, reads: LayerReads, pt: LayerPoint):
     """``(uv, footprint, weight)`` of read ``k`` of ``layer`` at the layer's tiling: UV0, the world XZ
     plane (the triplanar top projection seen from above), or projection ``k`` weighted ``tri_w[k]``."""
-    t = layer_tiling(args.params, layer)
+    t = layer_tiling(reads.params, layer)
     uv = pt.uv0 * t
     fp = wp.vec4()
     weight = 1.0
-    if args.params.projection == PROJECT_UV:
-        fp = texture_footprint(tex, pt.uv0_dx * t, pt.uv0_dy * t, args.smp)
-    elif args.params.projection == PROJECT_WORLD_XZ:
+    if reads.params.projection == PROJECT_UV:
+        fp = texture_footprint(tex, pt.uv0_dx * t, pt.uv0_dy * t, reads.smp)
+    elif reads.params.projection == PROJECT_WORLD_XZ:
         up = wp.vec3(0.0, 1.0, 0.0)
-        uv = plane_uv(args.proj, 1, pt.p, up, t)
-        fp = plane_footprint(tex, args.proj, 1, up, pt.dpdx, pt.dpdy, t, args.smp)
+        uv = plane_uv(reads.proj, 1, pt.p, up, t)
+        fp = plane_footprint(tex, reads.proj, 1, up, pt.dpdx, pt.dpdy, t, reads.smp)
     else:
-        uv = plane_uv(args.proj, k, pt.p, pt.n, t)
-        fp = plane_footprint(tex, args.proj, k, pt.n, pt.dpdx, pt.dpdy, t, args.smp)
+        uv = plane_uv(reads.proj, k, pt.p, pt.n, t)
+        fp = plane_footprint(tex, reads.proj, k, pt.n, pt.dpdx, pt.dpdy, t, reads.smp)
         weight = pt.tri_w[k]
     return uv, fp, weight
 
 
 @wp.func
-def layer_read_slopes(tex: TextureView, layer: wp.int32, k: wp.int32, args: SplatArgs, pt: LayerPoint):
+def layer_read_slopes(tex: TextureView, layer: wp.int32, k: wp.int32, reads: LayerReads, pt: LayerPoint):
     """``(d uv / d t, d lod / d t)`` of :func:`layer_read` along the layer's tiling ``t``: the UV moves
     by the (mirror-fixed) plane coordinates, the LOD by ``1 / (t ln 2)``."""
-    t = layer_tiling(args.params, layer)
+    t = layer_tiling(reads.params, layer)
     axis = k
     n = pt.n
-    if args.params.projection == PROJECT_WORLD_XZ:
+    if reads.params.projection == PROJECT_WORLD_XZ:
         axis = 1
         n = wp.vec3(0.0, 1.0, 0.0)
     uv_slope = pt.uv0
     lod_slope = 0.0
-    if args.params.projection == PROJECT_UV:
+    if reads.params.projection == PROJECT_UV:
         lod_slope = lod_scale_slope(tex, pt.uv0_dx, pt.uv0_dy, t)
     else:
-        c = slope_coords(args.proj, pt.p, axis)
-        uv_slope = wp.vec2(c[0] * u_sign(n, axis, args.proj.mirror_fix), c[1])
+        c = slope_coords(reads.proj, pt.p, axis)
+        uv_slope = wp.vec2(c[0] * u_sign(n, axis, reads.proj.mirror_fix), c[1])
         lod_slope = lod_scale_slope(tex, plane_coords(pt.dpdx, axis), plane_coords(pt.dpdy, axis), t)
     return uv_slope, lod_slope
 
@@ -254,40 +262,40 @@ def _layer_reads(sample, scatter, suffix: str, one_call: bool, decorate=wp.func)
     sampling is then compiled once); without, the loop is taken for triplanar projection only and
     UV and world-XZ layers are read by one call outside it (faster)."""
 
-    def read_projections(tex: TextureView, layer: wp.int32, args: SplatArgs, pt: LayerPoint, stoch: StochasticArgs) -> wp.vec4:
+    def read_projections(tex: TextureView, layer: wp.int32, reads: LayerReads, pt: LayerPoint, stoch: StochasticArgs) -> wp.vec4:
         value = wp.vec4(0.0)
-        for k in range(layer_reads(args.params)):
-            uv, fp, weight = layer_read(tex, layer, k, args, pt)
+        for k in range(layer_reads(reads.params)):
+            uv, fp, weight = layer_read(tex, layer, k, reads, pt)
             if weight > 0.0:
-                value += weight * sample(tex, face_layer(args.params, layer, k, pt.n), uv, fp, args.smp, stoch)
+                value += weight * sample(tex, face_layer(reads.params, layer, k, pt.n), uv, fp, reads.smp, stoch)
         return value
 
-    def read_layer(tex: TextureView, layer: wp.int32, args: SplatArgs, pt: LayerPoint, stoch: StochasticArgs) -> wp.vec4:
+    def read_layer(tex: TextureView, layer: wp.int32, reads: LayerReads, pt: LayerPoint, stoch: StochasticArgs) -> wp.vec4:
         value = wp.vec4(0.0)
         if wp.static(one_call):
-            value = loop(tex, layer, args, pt, stoch)
-        elif args.params.projection == PROJECT_TRIPLANAR:
-            value = loop(tex, layer, args, pt, stoch)
+            value = loop(tex, layer, reads, pt, stoch)
+        elif reads.params.projection == PROJECT_TRIPLANAR:
+            value = loop(tex, layer, reads, pt, stoch)
         else:
-            uv, fp, weight = layer_read(tex, layer, 0, args, pt)
-            value = sample(tex, layer, uv, fp, args.smp, stoch)
+            uv, fp, weight = layer_read(tex, layer, 0, reads, pt)
+            value = sample(tex, layer, uv, fp, reads.smp, stoch)
         return value
 
-    def scatter_projections(tex: TextureView, grad: TexelGrad, layer: wp.int32, args: SplatArgs, pt: LayerPoint, stoch: StochasticArgs, g: wp.vec4):
-        for k in range(layer_reads(args.params)):
-            uv, fp, weight = layer_read(tex, layer, k, args, pt)
+    def scatter_projections(tex: TextureView, grad: TexelGrad, layer: wp.int32, reads: LayerReads, pt: LayerPoint, stoch: StochasticArgs, g: wp.vec4):
+        for k in range(layer_reads(reads.params)):
+            uv, fp, weight = layer_read(tex, layer, k, reads, pt)
             if weight > 0.0:
-                scatter(tex, grad, face_layer(args.params, layer, k, pt.n), uv, fp, args.smp, stoch, weight * g)
+                scatter(tex, grad, face_layer(reads.params, layer, k, pt.n), uv, fp, reads.smp, stoch, weight * g)
 
-    def scatter_layer(tex: TextureView, grad: TexelGrad, layer: wp.int32, args: SplatArgs, pt: LayerPoint, stoch: StochasticArgs, g: wp.vec4):
+    def scatter_layer(tex: TextureView, grad: TexelGrad, layer: wp.int32, reads: LayerReads, pt: LayerPoint, stoch: StochasticArgs, g: wp.vec4):
         if grad.texels.shape[0] > 0:
             if wp.static(one_call):
-                add_loop(tex, grad, layer, args, pt, stoch, g)
-            elif args.params.projection == PROJECT_TRIPLANAR:
-                add_loop(tex, grad, layer, args, pt, stoch, g)
+                add_loop(tex, grad, layer, reads, pt, stoch, g)
+            elif reads.params.projection == PROJECT_TRIPLANAR:
+                add_loop(tex, grad, layer, reads, pt, stoch, g)
             else:
-                uv, fp, weight = layer_read(tex, layer, 0, args, pt)
-                scatter(tex, grad, layer, uv, fp, args.smp, stoch, g)
+                uv, fp, weight = layer_read(tex, layer, 0, reads, pt)
+                scatter(tex, grad, layer, uv, fp, reads.smp, stoch, g)
 
     loop = wp.func(specialised(read_projections, "read_projections" + suffix))
     add_loop = wp.func(specialised(scatter_projections, "scatter_projections" + suffix))
@@ -302,16 +310,16 @@ read_layer_outlined, _ = _layer_reads(sample_stochastic_outlined, scatter_stocha
 
 
 @inlined
-def read_layer_slope(tex: TextureView, layer: wp.int32, args: SplatArgs, pt: LayerPoint):
+def read_layer_slope(tex: TextureView, layer: wp.int32, reads: LayerReads, pt: LayerPoint):
     """``(value, d value / d tiling)`` of ``read_layer`` with plain sampling, as Warp's adjoint takes
     the derivative (an anisotropic footprint's steps move in proportion to the tiling)."""
     value = wp.vec4(0.0)
     slope = wp.vec4(0.0)
-    for k in range(layer_reads(args.params)):
-        uv, fp, weight = layer_read(tex, layer, k, args, pt)
+    for k in range(layer_reads(reads.params)):
+        uv, fp, weight = layer_read(tex, layer, k, reads, pt)
         if weight > 0.0:
-            uv_slope, lod_slope = layer_read_slopes(tex, layer, k, args, pt)
-            v, d_u, d_v, d_lod, d_spread = sample_footprint_derivatives(tex, face_layer(args.params, layer, k, pt.n), uv, fp, args.smp)
+            uv_slope, lod_slope = layer_read_slopes(tex, layer, k, reads, pt)
+            v, d_u, d_v, d_lod, d_spread = sample_footprint_derivatives(tex, face_layer(reads.params, layer, k, pt.n), uv, fp, reads.smp)
             value += weight * v
-            slope += weight * (d_u * uv_slope[0] + d_v * uv_slope[1] + d_lod * lod_slope + d_spread / layer_tiling(args.params, layer))
+            slope += weight * (d_u * uv_slope[0] + d_v * uv_slope[1] + d_lod * lod_slope + d_spread / layer_tiling(reads.params, layer))
     return value, slope

@@ -45,13 +45,13 @@ CASES = {
     "triplanar_normal": (lambda: wt.triplanar_normal(G, _texture(3), tiling=3.0), {"pixels.mask"}),
     "splat, triplanar": (
         lambda: wt.splat(G, _texture(layers=4), MAPS, tiling=[2.0, 3.0, 4.0, 5.0], projection="triplanar", height_blend=0.3),
-        # UV0's derivatives give a LOD to UV-mapped layers only; the layers' tiling is args.params.tiling
-        {"pixels.surface.mask", "pixels.uv0_dx", "pixels.uv0_dy", "args.proj.tiling"},
+        # UV0's derivatives give a LOD to UV-mapped layers only; the layers' tiling is args.reads.params.tiling
+        {"pixels.surface.mask", "pixels.uv0_dx", "pixels.uv0_dy", "args.reads.proj.tiling"},
     ),
     "splat, uv": (
         lambda: wt.splat(G, _texture(layers=4), MAPS, tiling=3.0, projection="uv"),
-        {"pixels.surface.mask", "pixels.surface.position", "pixels.surface.position_dx", "pixels.surface.position_dy", "pixels.surface.normal", "args.proj.tiling", "args.proj.sharpness",
-         "args.proj.offsets", "args.params.transition"},
+        {"pixels.surface.mask", "pixels.surface.position", "pixels.surface.position_dx", "pixels.surface.position_dy", "pixels.surface.normal", "args.reads.proj.tiling", "args.reads.proj.sharpness",
+         "args.reads.proj.offsets", "args.reads.params.transition"},
     ),
     "splat_atlas": (lambda: wt.splat_atlas(G, wt.pack_atlas(_texture(layers=4)), *wt.export_index_maps(MAPS, k=2), tiling=3.0), {"pixels.mask"}),
 }

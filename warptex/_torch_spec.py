@@ -189,16 +189,19 @@ def out_shape(spec: dict, tensors: list[torch.Tensor]) -> tuple[int, ...]:
 def gbuffer_tensors(gbuffer: GBuffer) -> dict[str, torch.Tensor]:
     """A :class:`~warptex.GBuffer`'s arrays as zero-copy tensors, named as :meth:`GBuffer.numpy
     <warptex.GBuffer.numpy>` names them (``"position"``, ``"uv0.uv"``...): ``(H, W, 3)`` for
-    ``vec3`` fields, ``(H, W)`` for scalars; and ``"origin"`` (float64 ``(3,)``, the world point the
-    positions are relative to) and ``"samples"`` (int64 ``(1,)``, samples per image pixel), so that
-    a camera-relative or supersampled G-buffer keeps what it is. Every function here takes this dict
-    as its G-buffer, which keeps Warp out of ``torch.compile``d code."""
+    ``vec3`` fields, ``(H, W)`` for scalars; and, where they are not the defaults, ``"origin"``
+    (float64 ``(3,)``, the world point the positions are relative to) and ``"samples"`` (int64
+    ``(1,)``, samples per image pixel), so that a camera-relative or supersampled G-buffer keeps what
+    it is. Every function here takes this dict as its G-buffer, which keeps Warp out of
+    ``torch.compile``d code."""
     if not isinstance(gbuffer, GBuffer):
         raise TypeError(f"warptex.torch.gbuffer_tensors(): gbuffer must be a GBuffer, got {type(gbuffer).__name__}")
     out = {name: wp.to_torch(getattr(gbuffer, name), requires_grad=False) for name in FIELDS}
     for set_name, arrays in gbuffer.uv_sets.items():
         out.update({f"{set_name}.{k}": wp.to_torch(v, requires_grad=False) for k, v in arrays.items()})
     device = out["mask"].device
-    out["origin"] = torch.tensor(gbuffer.origin, dtype=torch.float64, device=device)
-    out["samples"] = torch.tensor([gbuffer.samples], dtype=torch.int64, device=device)
+    if np.any(gbuffer.origin != 0.0):
+        out["origin"] = torch.tensor(gbuffer.origin, dtype=torch.float64, device=device)
+    if gbuffer.samples != 1:
+        out["samples"] = torch.tensor([gbuffer.samples], dtype=torch.int64, device=device)
     return out

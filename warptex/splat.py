@@ -177,12 +177,14 @@ def splat(
 
     params.face_layers = _face_layers(func, face_layers, num_layers, params.projection, device)
 
+    reads = ksl.LayerReads()
+    reads.params = params
+    reads.proj = projection_args(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kp.WEIGHTS_TRIPLANAR,
+                                 origin=gbuffer.origin, address=sampler.address, device=device)  # fmt: skip
+    reads.smp = sampler_args(func, sampler, has_lod=True)
     args = ksl.SplatArgs()
-    args.layers, args.heights, args.maps, args.params = layers_read.view, height_tex.view, maps.view, params
-    args.proj = projection_args(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kp.WEIGHTS_TRIPLANAR,
-                                origin=gbuffer.origin, address=sampler.address, device=device)  # fmt: skip
-    args.smp, args.map_smp = sampler_args(func, sampler, has_lod=True), sampler_args(func, MAP_SAMPLER, has_lod=False)
-    args.stoch, args.height_stoch = stoch, height_stoch
+    args.layers, args.heights, args.maps, args.reads = layers_read.view, height_tex.view, maps.view, reads
+    args.map_smp, args.stoch, args.height_stoch = sampler_args(func, MAP_SAMPLER, has_lod=False), stoch, height_stoch
 
     count = gbuffer.pixel_count
     uvs = gbuffer.uv_sets[uv_set]
