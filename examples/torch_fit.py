@@ -216,6 +216,7 @@ def main(argv=None) -> int:
         group = dist.group.WORLD
     r = fit(args.out, iters=args.iters, resolution=resolution, views=args.views, group=group)
     if group is not None:
+        dist.barrier()  # leave together: a rank that destroys its group while a peer still talks to it can abort at exit
         dist.destroy_process_group()
     if r["world_size"] == 1 or int(os.environ["RANK"]) == 0:
         print(f"PSNR {r['psnr']:.2f} dB, tiling {r['tiling']:.6f} ({100 * r['tiling_error']:.3f}% off), splat weights MAE {r['weight_mae']:.4f}")

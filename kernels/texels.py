@@ -69,8 +69,8 @@ class TexelGrad:
     that the gradient may be non-zero in tiles ``t .. t + k - 1`` (see :func:`mark_rows`); 0, that
     nothing was added from tile ``t`` on (other marks may still reach over it).
 
-    warptex's CPU threads add into private copies of a gradient, and sum into the real one only
-    the tiles a copy marked (``warptex._launch``)."""
+    On the CPU, the chunks of a backward pass past the first add into private copies of a
+    gradient, and only the tiles a copy marked are added into the real one (``warptex._accumulate``)."""
 
     texels: wp.array(dtype=wp.vec4)
     tiles: wp.array(dtype=wp.int32)

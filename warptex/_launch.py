@@ -7,9 +7,10 @@ of the per-pixel arrays: every array of ``pixels`` and ``out`` (``adj``), and th
 gradient targets of ``grads``. Every pixel is computed by the same code from the same inputs, so the
 result is bit-identical to a single launch.
 
-Under a ``wp.Tape`` the split launch is recorded as one backward step that runs the chunks' adjoint
-launches on the threads too, adding into shared gradients through private copies
-(``warptex._accumulate``).
+Under a ``wp.Tape`` a launch is recorded as one backward step that runs the adjoint launches of
+chunks fixed by the pixels alone (``warptex._threads.grad_bounds``) on the threads too, adding into
+shared gradients in chunk order through private copies (``warptex._accumulate``): the gradients are
+the same bits at any thread count.
 
 A launch's outputs are made with :func:`output` (allocated, not touched) and zeroed by
 :func:`launch` chunk by chunk, on the thread that then fills the chunk: ``wp.zeros`` of a 12.6 MB
@@ -27,8 +28,8 @@ from typing import Iterator, NamedTuple
 
 import warp as wp
 
-from warptex._accumulate import TRACK_TILES_FROM, Copy, private, run_private, with_private_grads
-from warptex._threads import Split, workers_for
+from warptex._accumulate import Copy, private, run_ordered, slot_count, with_private_grads
+from warptex._threads import Split, grad_bounds, workers_for
 from warptex._warp import active_tape, map_arrays, struct_fields, struct_like
 from warptex.kernels.texels import TexelGrad
 
@@ -105,21 +106,40 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
         tape.record_func(_on(tape, backward), arrays=recorded)
     generated = bool(recorded) and backward is GENERATED
     workers = workers_for(device, count, threads)
+    chunks = grad_bounds(count, covered, _shared_bytes(args)) if generated and device.is_cpu else [0, count]  # CUDA: one launch
     if workers == 1:
         _zero_rows(out)
-        wp.launch(kernel, dim=count, inputs=[args, pixels], outputs=[out], device=device, record_tape=generated)
-        return
-    split = Split(count, workers, covered)
+        wp.launch(kernel, dim=count, inputs=[args, pixels], outputs=[out], device=device, record_tape=generated and len(chunks) == 2)
+    else:
+        split = Split(count, workers, covered)
 
-    def forward(worker: int, k: int) -> None:
-        lo, hi = split.span(k)
-        rows = sliced(out, lo, hi)
-        _zero_rows(rows)
-        wp.launch(kernel, dim=hi - lo, inputs=[args, sliced(pixels, lo, hi)], outputs=[rows], device=device, record_tape=False)
+        def forward(worker: int, k: int) -> None:
+            lo, hi = split.span(k)
+            rows = sliced(out, lo, hi)
+            _zero_rows(rows)
+            wp.launch(kernel, dim=hi - lo, inputs=[args, sliced(pixels, lo, hi)], outputs=[rows], device=device, record_tape=False)
 
-    split.run(forward)
-    if generated:
-        tape.record_func(_on(tape, functools.partial(_backward, kernel=kernel, split=split, args=args, pixels=pixels, out=out, device=device)), arrays=recorded)
+        split.run(forward)
+    if generated and (workers > 1 or len(chunks) > 2):  # else Warp recorded the launch's own adjoint
+        backward = functools.partial(_backward, kernel=kernel, bounds=chunks, workers=workers, args=args, pixels=pixels, out=out, device=device)
+        tape.record_func(_on(tape, backward), arrays=recorded)
+
+
+def _nbytes(array: wp.array) -> int:
+    return array.size * wp.types.type_size_in_bytes(array.dtype)
+
+
+def _shared_bytes(args) -> int:
+    """The bytes of the gradients of ``args``' arrays (those all pixels share), each counted once."""
+    grads, stack = {}, [args]
+    while stack:
+        value = stack.pop()
+        if wp.types.is_array(value):
+            if value.grad is not None:
+                grads[id(value.grad)] = value.grad
+        elif wp.types.is_struct(value):
+            stack.extend(struct_fields(value).values())
+    return sum(_nbytes(g) for g in grads.values())
 
 
 def _on(tape, backward):
@@ -132,21 +152,23 @@ def _on(tape, backward):
     return lambda: backward(ref())
 
 
-def _backward(tape, *, kernel, split: Split, args, pixels, out, device) -> None:
-    """The adjoints of a split launch, run by the same workers: worker 0 accumulates into the real
-    gradients, the others into private copies of the shared ones (``args``' arrays), added in at the
-    end (summed whole: Warp's generated adjoints do not mark tiles)."""
+def _backward(tape, *, kernel, bounds: list[int], workers: int, args, pixels, out, device) -> None:
+    """The adjoints of a launch, chunk by chunk (``bounds``, see ``warptex._threads.grad_bounds``)
+    on up to ``workers`` threads: chunk 0 accumulates into the real gradients, the others into
+    private copies of the shared ones (``args``' arrays), added in chunk order (whole: Warp's
+    generated adjoints do not mark tiles)."""
     tape.get_adjoint(args)  # registers the real gradients with the tape (for tape.zero()), as a recorded launch does
     tape.get_adjoint(pixels)
-    copies: list[tuple[wp.array, Copy]] = []  # (real gradient, a worker's private one)
-    worker_args = [args] + [with_private_grads(args, copies, w) for w in range(1, split.workers)]
+    chunks = len(bounds) - 1
+    slots = [[] for _ in range(slot_count(chunks, workers))]  # each slot's (real gradient, private copy) pairs
+    slot_args = [with_private_grads(args, copies, slot) for slot, copies in enumerate(slots)]
 
-    def backward(worker: int, k: int) -> None:
-        lo, hi = split.span(k)
-        a, p, o = worker_args[worker], sliced(pixels, lo, hi), sliced(out, lo, hi)
+    def backward(k: int, slot: int | None) -> None:
+        lo, hi = bounds[k], bounds[k + 1]
+        a, p, o = args if slot is None else slot_args[slot], sliced(pixels, lo, hi), sliced(out, lo, hi)
         wp.launch(kernel, dim=hi - lo, inputs=[a, p], outputs=[o], adj_inputs=[tape.get_adjoint(a), tape.get_adjoint(p)], adj_outputs=[tape.get_adjoint(o)], device=device, adjoint=True)
 
-    run_private(split, backward, copies)
+    run_ordered(chunks, min(workers, chunks), backward, slots.__getitem__)
 
 
 class Target(NamedTuple):
@@ -162,11 +184,12 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
     """Launch a hand-written gradient ``kernel(args, pixels, grads, adj)``, which *adds* into the
     arrays of ``grads``, over ``count`` pixels, split over CPU threads as :func:`launch` splits a launch.
 
-    Warp's CPU atomics are plain read-modify-writes, so every worker but the first adds into private
-    zeroed copies of the shared targets, summed into them once all chunks are done (equal to a single
-    launch up to float rounding). A ``TexelGrad`` field's private copy marks the tiles it adds into
-    from ``TRACK_TILES_FROM`` workers on, and only those are summed (a thread's pixels often read a
-    part of a texture only). Not recorded on a tape: this is what a backward step runs.
+    Warp's CPU atomics are plain read-modify-writes, so the pixels are cut into chunks fixed by
+    their count (``warptex._threads.grad_bounds``): the first adds into the shared targets, the
+    others into private zeroed copies, added in chunk order (``warptex._accumulate``), the same
+    bits at any thread count. A ``TexelGrad`` field's private copy marks the tiles it adds into,
+    and only those are added (a chunk's pixels often read a part of a texture only). Not recorded
+    on a tape: this is what a backward step runs.
 
     Args:
         kernel: the Warp kernel; its third argument is a struct with one field per ``grads`` entry.
@@ -182,27 +205,29 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
     device = wp.get_device(device)
     _check_rows(count, pixels, adj, *[t.grad for t in grads if t.per_pixel and t.grad is not None])
     grads_t = kernel.adj.args[2].type
-    workers = workers_for(device, count, threads)
-    if workers == 1:
-        wp.launch(kernel, dim=count, inputs=[args, pixels, _grads_struct(grads_t, grads, {}, device), adj], device=device, record_tape=False)
-        return
-    split = Split(count, workers, covered)
     texel = [t.grad for (name, ftype), t in zip(grads_t.vars.items(), grads) if t.grad is not None and not t.per_pixel and ftype.type is TexelGrad]
     plain = [t.grad for (name, ftype), t in zip(grads_t.vars.items(), grads) if t.grad is not None and not t.per_pixel and ftype.type is not TexelGrad]
-    tracked = set() if workers < TRACK_TILES_FROM else {id(g) for g in texel} - {id(g) for g in plain}
     shared = list({id(g): g for g in texel + plain}.values())  # one texture may feed several fields
-    copies: list[tuple[wp.array, Copy]] = []
-    structs = [_grads_struct(grads_t, grads, {}, device)]
-    for worker in range(1, workers):
-        mine = {id(g): private(g, worker, tracked=id(g) in tracked) for g in shared}
-        copies += [(g, mine[id(g)]) for g in shared]
+    bounds = grad_bounds(count, covered, sum(_nbytes(g) for g in shared)) if device.is_cpu else [0, count]  # CUDA: one launch, atomics
+    chunks = len(bounds) - 1
+    if chunks == 1:
+        wp.launch(kernel, dim=count, inputs=[args, pixels, _grads_struct(grads_t, grads, {}, device), adj], device=device, record_tape=False)
+        return
+    workers = min(workers_for(device, count, threads), chunks)
+    tracked = {id(g) for g in texel} - {id(g) for g in plain}
+    slots: list[list[tuple[wp.array, Copy]]] = []
+    structs = []
+    for slot in range(slot_count(chunks, workers)):
+        mine = {id(g): private(g, slot, tracked=id(g) in tracked) for g in shared}
+        slots.append([(g, mine[id(g)]) for g in shared])
         structs.append(_grads_struct(grads_t, grads, mine, device))
+    real = _grads_struct(grads_t, grads, {}, device)
 
-    def run(worker: int, k: int) -> None:
-        lo, hi = split.span(k)
-        wp.launch(kernel, dim=hi - lo, inputs=[args, sliced(pixels, lo, hi), _chunk_grads(structs[worker], grads, lo, hi), sliced(adj, lo, hi)], device=device, record_tape=False)
+    def run(k: int, slot: int | None) -> None:
+        lo, hi = bounds[k], bounds[k + 1]
+        wp.launch(kernel, dim=hi - lo, inputs=[args, sliced(pixels, lo, hi), _chunk_grads(real if slot is None else structs[slot], grads, lo, hi), sliced(adj, lo, hi)], device=device, record_tape=False)
 
-    run_private(split, run, copies, entries)
+    run_ordered(chunks, workers, run, slots.__getitem__, entries)
 
 
 def _grads_struct(grads_t, grads: list[Target], copies: dict, device):

@@ -28,7 +28,18 @@ CHUNKS_PER_THREAD = 4
 UNCOVERED_COST = 0.1
 # ... counted in blocks of this many pixels.
 COVERAGE_BLOCK = 1024
-# Work on arrays smaller than this in all (summing private gradient copies, zeroing) stays on one
+# A backward pass's chunks (:func:`grad_bounds`). Every chunk but the first costs adding its private
+# gradients into the real ones, whatever the thread count: up to the whole shared gradient (a 1024²
+# texture's mip chain, 21 MB: 2 ms) where its pixels read all of it. So a chunk holds a pixel per
+# GRAD_BYTES_PER_PIXEL bytes of shared gradient, between MIN_GRAD_CHUNK_PIXELS and GRAD_CHUNK_PIXELS
+# (measured on one thread, bilinear on a sphere at 1024²: chunks of 65 536 pixels cost 1.22× the
+# time of one launch, of 131 072 1.16×, of 262 144 1.11×; triplanar and splats 1.00–1.07×), and
+# there are at most MAX_GRAD_CHUNKS.
+GRAD_CHUNK_PIXELS = 131072
+MIN_GRAD_CHUNK_PIXELS = 16384
+GRAD_BYTES_PER_PIXEL = 128
+MAX_GRAD_CHUNKS = 16
+# Zeroing arrays smaller than this in all stays on one
 # thread: handing it out costs more.
 PARALLEL_SUM_BYTES = 1 << 20
 
@@ -92,15 +103,14 @@ def workers_for(device, count: int, threads: int | None) -> int:
 
 
 class Split:
-    """``count`` pixels cut into contiguous chunks, up to :data:`CHUNKS_PER_THREAD` per worker and
-    as many for each (a worker whose chunks are cheap, e.g. sky pixels, takes more of them when they
-    are handed out as workers finish), run by ``workers`` threads taking the next chunk. With a
-    G-buffer's mask (``covered``), the chunks hold equal estimated costs (:func:`bounds`)."""
+    """``count`` pixels cut into contiguous chunks, up to :data:`CHUNKS_PER_THREAD` per worker (a
+    worker whose chunks are cheap, e.g. sky pixels, takes more of them as workers finish), run by
+    ``workers`` threads taking the next chunk. With a G-buffer's mask (``covered``), the chunks hold
+    equal estimated costs (:func:`bounds`). For a forward launch, whose pixels are independent: a
+    backward pass cuts its chunks by the pixels alone (:func:`grad_bounds`)."""
 
     def __init__(self, count: int, workers: int, covered: wp.array | None = None):
         self.count, self.workers = count, workers
-        # A whole number of chunks per worker: the backward's fixed order (see run) then gives
-        # every worker the same share (3 chunks on 2 workers left one with twice the other's work).
         chunks = workers * max(1, min(count // (MIN_PIXELS_PER_THREAD * workers), CHUNKS_PER_THREAD))
         self.bounds = bounds(count, chunks, covered)
 
@@ -112,19 +122,12 @@ class Split:
         """The pixels ``[lo, hi)`` of chunk ``k``."""
         return self.bounds[k], self.bounds[k + 1]
 
-    def run(self, work, *, fixed: bool = False) -> None:
+    def run(self, work) -> None:
         """``work(worker, chunk)`` for every chunk; worker 0 is the calling thread. Workers take the
-        next chunk as they finish one; with ``fixed``, worker ``w`` takes chunks ``w, w + workers,
-        ...`` in order instead (interleaved, so each still gets a share of cheap and costly pixels):
-        what accumulates into a worker's gradient arrays, and in what order, is then the same on
-        every run, and so are the summed gradients, bit for bit."""
+        next chunk as they finish one."""
         counter = itertools.count()
 
         def loop(worker: int) -> None:
-            if fixed:
-                for k in range(worker, self.chunks, self.workers):
-                    work(worker, k)
-                return
             while (k := next(counter)) < self.chunks:  # itertools.count is thread-safe in CPython
                 work(worker, k)
 
@@ -136,11 +139,22 @@ class Split:
                 f.result()  # waits for every worker; re-raises a worker's exception here
 
 
+def grad_bounds(count: int, covered: wp.array | None = None, shared_bytes: int | None = None) -> list[int]:
+    """The chunks of a backward pass over ``count`` pixels (see ``warptex._accumulate``): fixed by
+    the pixels and the size of the gradients they share (``shared_bytes``; ``None``: large), never
+    by the thread count, so that shared gradients are summed in the same order whatever runs them.
+    At least one pixel per :data:`GRAD_BYTES_PER_PIXEL` bytes of shared gradient each, within
+    :data:`MIN_GRAD_CHUNK_PIXELS` .. :data:`GRAD_CHUNK_PIXELS`, at most :data:`MAX_GRAD_CHUNKS`,
+    cut to equal costs where the mask ``covered`` is known (:func:`bounds`)."""
+    pixels = GRAD_CHUNK_PIXELS if shared_bytes is None else min(max(shared_bytes // GRAD_BYTES_PER_PIXEL, MIN_GRAD_CHUNK_PIXELS), GRAD_CHUNK_PIXELS)
+    return bounds(count, max(1, min(count // pixels, MAX_GRAD_CHUNKS)), covered)
+
+
 def bounds(count: int, chunks: int, covered: wp.array | None) -> list[int]:
     """The ``chunks + 1`` bounds of ``count`` pixels cut into ``chunks`` contiguous chunks: equal
     pixel counts, or, given the mask ``covered``, equal costs (a covered pixel costs 1, another
-    :data:`UNCOVERED_COST`), cut at whole blocks of :data:`COVERAGE_BLOCK` pixels. Deterministic, so
-    the backward pass's fixed order (see :meth:`Split.run`) stays reproducible.
+    :data:`UNCOVERED_COST`), cut at whole blocks of :data:`COVERAGE_BLOCK` pixels. Deterministic: a
+    function of the pixels and the mask alone.
 
     The covered pixels of a block are counted as the sum of its mask, exact for the 0/1 masks the
     rasteriser and ``GBuffer.from_arrays`` write (and 2.5× faster than counting non-zeros: 1.3 ms
