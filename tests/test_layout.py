@@ -38,3 +38,14 @@ def test_the_library_never_imports_the_applications():
     assert LIBRARY, "no library modules found"
     offenders = [str(p.relative_to(ROOT)) for p in LIBRARY if _uses_apps(p)]
     assert offenders == []
+
+
+MAX_MODULE_LINES = 400
+
+
+def test_no_module_of_the_library_is_longer_than_it_can_be_read():
+    """A module over 400 lines mixes concerns (issue 32): split it by concern rather than grow it."""
+    modules = [p for d in ("warptex", "kernels") for p in (ROOT / d).rglob("*.py")]
+    assert modules, "no modules found"
+    long = {str(p.relative_to(ROOT)): n for p in modules if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES}
+    assert long == {}
