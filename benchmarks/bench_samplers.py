@@ -240,6 +240,29 @@ def format_thread_scaling(records: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def format_peer_summary(records: list[dict]) -> str:
+    """One table of every technique and scene: warptex's forward and forward+backward times on the
+    peers' thread count, and each peer's time over warptex's in the same run (below 1: the peer
+    is faster); "" without peers."""
+    impls = sorted({r["impl"] for r in records} - {"warptex"})
+    if not impls:
+        return ""
+    peer_threads = {(r["technique"], r["scene"]): r["threads"] for r in records if r["impl"] != "warptex"}
+    time = {(r["technique"], r["scene"], r["impl"], r["pass"]): r["seconds"] for r in records if r["threads"] == peer_threads.get((r["technique"], r["scene"]), "none")}
+    lines = ["peers against warptex (peer time ÷ warptex time, same run; below 1: the peer is faster), forward / forward+backward:",
+             f"  {'technique':16s} {'scene':8s} {'warptex ms':>17s}  " + "  ".join(f"{impl:>13s}" for impl in impls)]  # fmt: skip
+    for technique, scene in peer_threads:
+        base = [time.get((technique, scene, "warptex", p)) for p in ("forward", "forward+backward")]
+        if None in base:
+            continue
+        cells = []
+        for impl in impls:
+            ratios = [time.get((technique, scene, impl, p)) for p in ("forward", "forward+backward")]
+            cells.append(" / ".join("  -  " if t is None else f"{t / b:5.2f}" for t, b in zip(ratios, base)))
+        lines.append(f"  {technique:16s} {scene:8s} {base[0] * 1e3:7.1f} / {base[1] * 1e3:7.1f}  " + "  ".join(f"{c:>13s}" for c in cells))
+    return "\n".join(lines)
+
+
 def format_rows(records: list[dict], threaded_diff: float) -> str:
     """One block per technique: each implementation's figures and its time ratio to warptex."""
     first = records[0]
@@ -333,9 +356,9 @@ def run(args) -> dict:
         result["scaling"] = scaling(args, backends, report)
         plot_scaling(args.out / "scaling.png", result["scaling"], args.threads if not wp.get_device(args.device).is_cuda else args.device)
         report(f"plot: {args.out / 'scaling.png'}")
-    summary = format_thread_scaling(records)
-    if summary:
-        report(summary)
+    for summary in (format_peer_summary(records), format_thread_scaling(records)):
+        if summary:
+            report(summary)
     return result
 
 

@@ -34,6 +34,13 @@ def test_quick_benchmark_writes_json_and_plot(tmp_path):
     assert (out / "scaling.png").stat().st_size > 1000
     assert "x" in result.stdout and "warptex time" in result.stdout
     assert "thread scaling (speed-up over 1 thread): 2 thr, 4 thr" in result.stdout
+    table = result.stdout[result.stdout.index("peers against warptex") :].splitlines()
+    for technique in ("bilinear", "triplanar", "splat4"):
+        mine = {r["pass"]: r["seconds"] for r in records if r["technique"] == technique and r["scene"] == "sphere" and r["impl"] == "warptex" and r["threads"] == 4}
+        peer = {r["pass"]: r["seconds"] for r in records if r["technique"] == technique and r["scene"] == "sphere" and r["impl"] == "numpy"}
+        row = next(line for line in table if line.split()[:2] == [technique, "sphere"])
+        want = " / ".join(f"{peer[p] / mine[p]:5.2f}" if p in peer else "  -  " for p in ("forward", "forward+backward"))
+        assert row.rstrip().endswith(want.strip()), (row, want)  # each peer's time over warptex's, same threads
 
 
 BENCH_TORCH = BENCH.parent / "bench_torch.py"
