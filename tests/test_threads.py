@@ -225,8 +225,8 @@ def test_private_accumulators_are_kept_with_their_gradient(threads, chunks):
         np.testing.assert_allclose(tex.grad(), want[k // 2], rtol=1e-5, atol=1e-6 * np.abs(want[k // 2]).max())
         kept.append(dict(_accumulate._private_arrays[real]))
         tex.zero_grad()
-    slots = range(_accumulate.slot_count(8, 4))
-    assert set(kept[0]) == set(slots) and len(slots) == min(4, _threads.cpu_count() + 1)  # at most one per core and one more
+    slots = range(_accumulate.slot_count(8, min(4, _threads.cpu_count())))  # a backward pass runs on the cores at most
+    assert set(kept[0]) == set(slots)
     assert all(kept[k][w].array is kept[0][w].array for k in range(4) for w in slots)
 
     gone = weakref.ref(kept[0][0].array)
@@ -279,13 +279,14 @@ def test_chunks_hold_equal_costs_of_covered_pixels():
 
 
 @pytest.mark.parametrize("failing_call", [1, 3, 6])  # chunk 0's launch; later chunks'
-def test_private_copies_are_left_zero_and_dropped_after_a_failure(failing_call, threads, chunks):
+def test_private_copies_are_left_zero_and_dropped_after_a_failure(failing_call, threads, chunks, monkeypatch):
     """A backward pass leaves its private gradient copies zeroed for the next (they are zeroed as
     they are added in). A pass that fails part way (threads waiting for a slot meanwhile) leaves
     them holding part of a sum: the failure is raised, they are dropped, and the next pass, with new
     ones, gives the right gradient."""
     threads(8)
     chunks(8192)
+    monkeypatch.setattr(_launch, "cpu_count", lambda: 8)  # 8 threads on this machine's slots
     g = _sphere()
     tex = _texture(requires_grad=True)
 

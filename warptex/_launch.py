@@ -29,7 +29,7 @@ from typing import Iterator, NamedTuple
 import warp as wp
 
 from warptex._accumulate import Copy, private, run_ordered, slot_count, with_private_grads
-from warptex._threads import Split, grad_bounds, workers_for
+from warptex._threads import Split, cpu_count, grad_bounds, workers_for
 from warptex._warp import active_tape, map_arrays, struct_fields, struct_like
 from warptex.kernels.texels import TexelGrad
 
@@ -168,7 +168,7 @@ def _backward(tape, *, kernel, bounds: list[int], workers: int, args, pixels, ou
         a, p, o = args if slot is None else slot_args[slot], sliced(pixels, lo, hi), sliced(out, lo, hi)
         wp.launch(kernel, dim=hi - lo, inputs=[a, p], outputs=[o], adj_inputs=[tape.get_adjoint(a), tape.get_adjoint(p)], adj_outputs=[tape.get_adjoint(o)], device=device, adjoint=True)
 
-    run_ordered(chunks, min(workers, chunks), backward, slots.__getitem__)
+    run_ordered(chunks, min(workers, chunks, cpu_count()), backward, slots.__getitem__)
 
 
 class Target(NamedTuple):
@@ -213,7 +213,7 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
     if chunks == 1:
         wp.launch(kernel, dim=count, inputs=[args, pixels, _grads_struct(grads_t, grads, {}, device), adj], device=device, record_tape=False)
         return
-    workers = min(workers_for(device, count, threads), chunks)
+    workers = min(workers_for(device, count, threads), chunks, cpu_count())  # fixed chunks: threads past the cores only take turns
     tracked = {id(g) for g in texel} - {id(g) for g in plain}
     slots: list[list[tuple[wp.array, Copy]]] = []
     structs = []
