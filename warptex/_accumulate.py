@@ -1,8 +1,9 @@
 """Gradient sums that do not depend on the thread count.
 
 Warp's CPU atomics are plain read-modify-writes, so two threads must never add into one array at
-once. A backward pass over the pixels is therefore cut into chunks fixed by the pixels alone
-(:func:`~warptex._threads.grad_bounds`), never by how many threads run them:
+once. A backward pass over the pixels is therefore cut into chunks fixed by the pixels and the size
+of the gradients they share (:func:`~warptex._threads.grad_bounds`), never by how many threads run
+them:
 
 - chunk 0 adds into the real gradients of the arrays that all pixels share (texels, tiling, ...;
   per-pixel gradients are disjoint slices already);
@@ -66,7 +67,7 @@ def private(real: wp.array, slot: int, tracked: bool = False) -> Copy:
 
 def slot_count(chunks: int, workers: int) -> int:
     """Slots a backward pass of ``chunks`` chunks on ``workers`` threads uses: one per worker that
-    can run a chunk ``k >= 1`` at once, at most one per core beyond the first (threads beyond the
+    can run a chunk ``k >= 1`` at once, at most one more than the cores (threads beyond the
     cores wait for a slot rather than each holding a copy of every shared gradient)."""
     return max(1, min(chunks - 1, workers, cpu_count() + 1))
 

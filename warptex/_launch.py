@@ -8,7 +8,8 @@ gradient targets of ``grads``. Every pixel is computed by the same code from the
 result is bit-identical to a single launch.
 
 Under a ``wp.Tape`` a launch is recorded as one backward step that runs the adjoint launches of
-chunks fixed by the pixels alone (``warptex._threads.grad_bounds``) on the threads too, adding into
+chunks fixed by the pixels and the gradients' sizes, never by the thread count
+(``warptex._threads.grad_bounds``), on the threads too, adding into
 shared gradients in chunk order through private copies (``warptex._accumulate``): the gradients are
 the same bits at any thread count.
 
@@ -160,6 +161,7 @@ def _backward(tape, *, kernel, bounds: list[int], workers: int, args, pixels, ou
     tape.get_adjoint(args)  # registers the real gradients with the tape (for tape.zero()), as a recorded launch does
     tape.get_adjoint(pixels)
     chunks = len(bounds) - 1
+    workers = min(workers, chunks, cpu_count())  # fixed chunks: threads past the cores only take turns
     slots = [[] for _ in range(slot_count(chunks, workers))]  # each slot's (real gradient, private copy) pairs
     slot_args = [with_private_grads(args, copies, slot) for slot, copies in enumerate(slots)]
 
@@ -168,7 +170,7 @@ def _backward(tape, *, kernel, bounds: list[int], workers: int, args, pixels, ou
         a, p, o = args if slot is None else slot_args[slot], sliced(pixels, lo, hi), sliced(out, lo, hi)
         wp.launch(kernel, dim=hi - lo, inputs=[a, p], outputs=[o], adj_inputs=[tape.get_adjoint(a), tape.get_adjoint(p)], adj_outputs=[tape.get_adjoint(o)], device=device, adjoint=True)
 
-    run_ordered(chunks, min(workers, chunks, cpu_count()), backward, slots.__getitem__)
+    run_ordered(chunks, workers, backward, slots.__getitem__)
 
 
 class Target(NamedTuple):
@@ -185,7 +187,7 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
     arrays of ``grads``, over ``count`` pixels, split over CPU threads as :func:`launch` splits a launch.
 
     Warp's CPU atomics are plain read-modify-writes, so the pixels are cut into chunks fixed by
-    their count (``warptex._threads.grad_bounds``): the first adds into the shared targets, the
+    their count and the shared gradients' size (``warptex._threads.grad_bounds``): the first adds into the shared targets, the
     others into private zeroed copies, added in chunk order (``warptex._accumulate``), the same
     bits at any thread count. A ``TexelGrad`` field's private copy marks the tiles it adds into,
     and only those are added (a chunk's pixels often read a part of a texture only). Not recorded
