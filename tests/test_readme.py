@@ -306,11 +306,12 @@ CHECKS = {
 
 @pytest.mark.parametrize("block", PYTHON_BLOCKS, ids=[f"L{b.line} {b.name}" for b in PYTHON_BLOCKS])
 def test_python_block(block, workdir):
-    if "../shared/" in block.text and not SHARED.is_dir():
-        pytest.skip(f"{SHARED} not found: this README block reads the shared data")
-    if "import torch" in block.text:
-        pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
     by_name = {b.name: b for b in PYTHON_BLOCKS}
+    runs = [by_name[before] for before in CONTINUES.get(block.name, [])] + [block]  # a block continues the ones before it
+    if any("../shared/" in b.text for b in runs) and not SHARED.is_dir():
+        pytest.skip(f"{SHARED} not found: this README block (or one it continues) reads the shared data")
+    if any("import torch" in b.text for b in runs):
+        pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
     namespace = {"__name__": "__readme__"}
     for before in CONTINUES.get(block.name, []):
         _run_python(by_name[before], namespace)
