@@ -134,13 +134,15 @@ def test_the_default_chunks_give_the_same_bits():
 
 
 def test_grad_chunks_depend_on_the_pixels_alone():
-    """Chunks are fixed by the pixel count and the shared gradient's size: one pixel per
-    ``GRAD_BYTES_PER_PIXEL`` bytes of it, within ``MIN_GRAD_CHUNK_PIXELS .. GRAD_CHUNK_PIXELS``
-    (adding a chunk's private copy in costs up to the whole gradient)."""
-    low, high = _threads.MIN_GRAD_CHUNK_PIXELS, _threads.GRAD_CHUNK_PIXELS
-    for shared, pixels in ((None, high), (0, low), (1 << 40, high), (3 * low * _threads.GRAD_BYTES_PER_PIXEL, 3 * low)):
+    """Chunks are fixed by the pixel count, the shared gradient's size and a pixel's bilinear
+    footprints: one footprint per ``GRAD_BYTES_PER_FOOTPRINT`` bytes of it, within
+    ``MIN_GRAD_CHUNK_PIXELS .. GRAD_CHUNK_PIXELS`` pixels (adding a chunk's private copy in costs up
+    to the whole gradient; a chunk's pixels, their footprints)."""
+    low, high, per = _threads.MIN_GRAD_CHUNK_PIXELS, _threads.GRAD_CHUNK_PIXELS, _threads.GRAD_BYTES_PER_FOOTPRINT
+    cases = ((None, 1, high), (0, 1, low), (1 << 40, 1, high), (3 * low * per, 1, 3 * low), (3 * low * per, 3, low), (12 * low * per, 6, 2 * low))
+    for shared, footprints, pixels in cases:
         for count in (1, 1000, pixels - 1, pixels * 3 + 5, 1 << 24):
-            bounds = _threads.grad_bounds(count, shared_bytes=shared)
+            bounds = _threads.grad_bounds(count, shared_bytes=shared, footprints=footprints)
             chunks = len(bounds) - 1
             assert bounds[0] == 0 and bounds[-1] == count and (np.diff(bounds) > 0).all()
             assert chunks == max(1, min(count // pixels, _threads.MAX_GRAD_CHUNKS))
@@ -212,3 +214,18 @@ def test_a_twenty_iteration_fit_is_the_same_bits_at_any_thread_count(small_chunk
     for threads in THREADS[1:]:
         for got, want in zip(results[threads], results[1]):
             np.testing.assert_array_equal(got, want, err_msg=f"{threads} threads against 1")
+
+
+def test_a_pixels_footprints_count_its_filter_taps_and_lookups():
+    from warptex._pack import footprints, sampler_args, stochastic_args
+
+    def smp(filter_, **kw):
+        return sampler_args("test", wt.Sampler(filter=filter_, **kw), has_lod=True)
+
+    tex = wt.Texture(_image(0))
+    assert footprints(smp("nearest")) == footprints(smp("bilinear")) == 1
+    assert footprints(smp("trilinear")) == 2
+    assert footprints(smp("anisotropic", max_aniso=8)) == 16  # trilinear taps along the major axis
+    for method, taps in (("hash4", 4), ("cheap2", 2), ("hex", 3)):
+        stoch, _ = stochastic_args("test", wt.Stochastic(method=method), tex, wt.Sampler())
+        assert footprints(smp("trilinear"), stoch, lookups=3) == 2 * taps * 3

@@ -77,7 +77,7 @@ def _check_rows(count: int, *values) -> None:
             raise RuntimeError(f"warptex internal error: a per-pixel array has {a.shape[0]} rows for {count} pixels")
 
 
-def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None = None, backward=None, covered: wp.array | None = None) -> None:
+def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None = None, backward=None, covered: wp.array | None = None, footprints: int = 1) -> None:
     """Launch a per-pixel ``kernel(args, pixels, out)`` over ``count`` pixels, split over CPU threads.
 
     Args:
@@ -96,6 +96,8 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
         covered: the pixels' mask (``count`` entries, non-zero where a pixel is shaded), when the
             launch is over a G-buffer: chunks are then cut to equal estimated costs, so that the
             sky's cheap pixels do not unbalance the threads.
+        footprints: the bilinear footprints a pixel reads at most: with the size of the gradients
+            all pixels share, it sizes a backward pass's chunks (``warptex._threads.grad_bounds``).
     """
     if count <= 0:
         return
@@ -107,7 +109,7 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
         tape.record_func(_on(tape, backward), arrays=recorded)
     generated = bool(recorded) and backward is GENERATED
     workers = workers_for(device, count, threads)
-    chunks = grad_bounds(count, covered, _shared_bytes(args)) if generated and device.is_cpu else [0, count]  # CUDA: one launch
+    chunks = grad_bounds(count, covered, _shared_bytes(args), footprints) if generated and device.is_cpu else [0, count]  # CUDA: one launch
     if workers == 1:
         _zero_rows(out)
         wp.launch(kernel, dim=count, inputs=[args, pixels], outputs=[out], device=device, record_tape=generated and len(chunks) == 2)
@@ -182,20 +184,20 @@ class Target(NamedTuple):
     per_pixel: bool = False
 
 
-def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, device, threads: int | None = None, covered: wp.array | None = None, entries: dict | None = None) -> None:
+def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, device, threads: int | None = None, covered: wp.array | None = None, footprints: int = 1, entries: dict | None = None) -> None:
     """Launch a hand-written gradient ``kernel(args, pixels, grads, adj)``, which *adds* into the
     arrays of ``grads``, over ``count`` pixels, split over CPU threads as :func:`launch` splits a launch.
 
     Warp's CPU atomics are plain read-modify-writes, so the pixels are cut into chunks fixed by
-    their count and the shared gradients' size (``warptex._threads.grad_bounds``): the first adds into the shared targets, the
-    others into private zeroed copies, added in chunk order (``warptex._accumulate``), the same
+    their count, cost and shared gradients' size (``warptex._threads.grad_bounds``): the first adds
+    into the shared targets, the others into private zeroed copies, added in chunk order (``warptex._accumulate``), the same
     bits at any thread count. A ``TexelGrad`` field's private copy marks the tiles it adds into,
     and only those are added (a chunk's pixels often read a part of a texture only). Not recorded
     on a tape: this is what a backward step runs.
 
     Args:
         kernel: the Warp kernel; its third argument is a struct with one field per ``grads`` entry.
-        count, args, pixels, device, threads, covered: as for :func:`launch`.
+        count, args, pixels, device, threads, covered, footprints: as for :func:`launch`.
         grads: the targets, in the order of the struct's fields.
         adj: the outputs' gradients, shaped as ``out`` (an array or a struct of them).
         entries: ``{id(target): (start, stop)}`` for shared targets the kernel adds into only there
@@ -210,7 +212,7 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
     texel = [t.grad for (name, ftype), t in zip(grads_t.vars.items(), grads) if t.grad is not None and not t.per_pixel and ftype.type is TexelGrad]
     plain = [t.grad for (name, ftype), t in zip(grads_t.vars.items(), grads) if t.grad is not None and not t.per_pixel and ftype.type is not TexelGrad]
     shared = list({id(g): g for g in texel + plain}.values())  # one texture may feed several fields
-    bounds = grad_bounds(count, covered, sum(_nbytes(g) for g in shared)) if device.is_cpu else [0, count]  # CUDA: one launch, atomics
+    bounds = grad_bounds(count, covered, sum(_nbytes(g) for g in shared), footprints) if device.is_cpu else [0, count]  # CUDA: one launch, atomics
     chunks = len(bounds) - 1
     if chunks == 1:
         wp.launch(kernel, dim=count, inputs=[args, pixels, _grads_struct(grads_t, grads, {}, device), adj], device=device, record_tape=False)

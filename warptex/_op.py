@@ -68,7 +68,7 @@ def resolve(inputs: dict, path: str) -> wp.array | None:
     return value if wp.types.is_array(value) and value.shape[0] > 0 else None
 
 
-def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linear: bool = True, covered: wp.array | None = None, touched: dict | None = None) -> wp.array:
+def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linear: bool = True, covered: wp.array | None = None, footprints: int = 1, touched: dict | None = None) -> wp.array:
     """Launch ``kernels`` over ``count`` pixels into a new output and record the backward pass a
     ``wp.Tape`` needs (module docstring).
 
@@ -81,6 +81,8 @@ def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linea
         linear: whether the blend of taps is linear in the texels (``False``: a histogram blend,
             which only the generated adjoint differentiates).
         covered: the G-buffer's mask, for a launch over a G-buffer (balances the threads' chunks).
+        footprints: the bilinear footprints a pixel reads at most (``warptex._pack.footprints``):
+            what its backward pass costs, which sizes the backward's chunks (``warptex._threads.grad_bounds``).
         touched: ``{path: (start, stop)}`` for hand-written gradient targets the kernel adds into
             only there (a constant-LOD lookup reads one or two mip levels): only those entries are
             summed from the per-thread copies.
@@ -91,10 +93,11 @@ def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linea
     inputs = {"args": args, "pixels": pixels}
     wanted = [a for _, a in differentiable(inputs) if a.requires_grad]
     result = output(*out, device=device, requires_grad=bool(wanted))
+    cut = {"covered": covered, "footprints": footprints}  # how launches are cut into chunks
     if active_tape() is None or not wanted:
-        launch(kernels.forward, count, args=args, pixels=pixels, out=result, device=device, covered=covered)
+        launch(kernels.forward, count, args=args, pixels=pixels, out=result, device=device, **cut)
     else:
-        _run_path(kernels, _backward_path(kernels, inputs, wanted, linear), count, inputs, result, device, covered, touched)
+        _run_path(kernels, _backward_path(kernels, inputs, wanted, linear), count, inputs, result, device, cut, touched)
     return result
 
 
@@ -108,20 +111,20 @@ def _backward_path(kernels: Kernels, inputs: dict, wanted: list, linear: bool) -
     return "texel_grad" if all(id(a) in served for a in wanted) else "adjoint"
 
 
-def _run_path(kernels: Kernels, path: str, count: int, inputs: dict, result, device, covered, touched) -> None:
+def _run_path(kernels: Kernels, path: str, count: int, inputs: dict, result, device, cut: dict, touched) -> None:
     """Launch ``kernels`` recording the backward ``path`` (or the staged pair that stands for it)."""
     if kernels.staged is not None and kernels.staged.replaces == path and (kernels.texel_grad if path == "texel_grad" else kernels.adjoint) is None:
-        _run_staged(kernels.staged, count, inputs, result, device, covered)
+        _run_staged(kernels.staged, count, inputs, result, device, cut)
     elif path == "texel_grad":
-        launch(kernels.forward, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, covered=covered,
-               backward=_texel_gradient(kernels, count, inputs, result, device, covered, touched))  # fmt: skip
+        launch(kernels.forward, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, **cut,
+               backward=_texel_gradient(kernels, count, inputs, result, device, cut, touched))  # fmt: skip
     elif kernels.adjoint is not None:
-        launch(kernels.adjoint, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, covered=covered, backward=GENERATED)
+        launch(kernels.adjoint, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, **cut, backward=GENERATED)
     else:
         raise RuntimeError("warptex internal error: a gradient was asked for that this technique has no kernel for")
 
 
-def _texel_gradient(kernels: Kernels, count: int, inputs: dict, result, device, covered, touched):
+def _texel_gradient(kernels: Kernels, count: int, inputs: dict, result, device, cut: dict, touched):
     """``backward(tape)``: ``kernels.texel_grad`` adds the output's gradient, through the forward
     pass, into the gradients of the inputs ``kernels.grads`` names that require them."""
 
@@ -133,7 +136,7 @@ def _texel_gradient(kernels: Kernels, count: int, inputs: dict, result, device, 
             targets.append(Target(grad, per_pixel=path is not None and path.startswith(PIXELS)))
             if grad is not None and touched and path in touched:
                 entries[id(grad)] = touched[path]
-        scatter(kernels.texel_grad, count, args=inputs["args"], pixels=inputs["pixels"], grads=targets, adj=_gradient_of(result), device=device, covered=covered, entries=entries)
+        scatter(kernels.texel_grad, count, args=inputs["args"], pixels=inputs["pixels"], grads=targets, adj=_gradient_of(result), device=device, entries=entries, **cut)
 
     return backward
 
@@ -148,7 +151,7 @@ def _gradient_of(out):
     return grads
 
 
-def _run_staged(staged: Staged, count: int, inputs: dict, result, device, covered) -> None:
+def _run_staged(staged: Staged, count: int, inputs: dict, result, device, cut: dict) -> None:
     """The two steps of ``staged``: the intermediates (with the backward it replaces), then the
     output from them (with the other backward); the second step's arguments filled by name (nested
     structs' fields included)."""
@@ -157,12 +160,12 @@ def _run_staged(staged: Staged, count: int, inputs: dict, result, device, covere
     for name, (shape, dtype) in staged.intermediates(count, inputs["args"]).items():
         setattr(intermediates, name, output(shape, dtype, device, requires_grad=bool(wanted)))
     second = "adjoint" if staged.replaces == "texel_grad" else "texel_grad"
-    _run_path(staged.first, staged.replaces, count, inputs, intermediates, device, covered, None)
+    _run_path(staged.first, staged.replaces, count, inputs, intermediates, device, cut, None)
     then_inputs = {
         "args": _struct(staged.then.forward.adj.args[0].type, _by_name(inputs["args"])),
         "pixels": _struct(staged.then.forward.adj.args[1].type, {**_by_name(inputs["pixels"]), **_by_name(intermediates)}),
     }
-    _run_path(staged.then, second, count, then_inputs, result, device, covered, None)
+    _run_path(staged.then, second, count, then_inputs, result, device, cut, None)
 
 
 def _by_name(value) -> dict:

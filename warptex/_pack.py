@@ -237,3 +237,16 @@ def struct_of(struct_t, device, **fields):
             field = wp.empty(shape=(0,) * ftype.ndim, dtype=ftype.dtype, device=device)
         setattr(value, name, field)
     return value
+
+
+# Bilinear footprints one lookup reads, by filter mode (anisotropic: per tap along the major axis).
+_FILTER_FOOTPRINTS = {int(ks.FILTER_NEAREST): 1, int(ks.FILTER_BILINEAR): 1, int(ks.FILTER_TRILINEAR): 2, int(ks.FILTER_ANISOTROPIC): 2}
+_METHOD_TAPS = {int(kst.METHOD_NONE): 1, int(kst.METHOD_HASH4): 4, int(kst.METHOD_CHEAP2): 2, int(kst.METHOD_HEX): 3}
+
+
+def footprints(smp: ks.SamplerArgs, stoch: kst.StochasticArgs | None = None, lookups: int = 1) -> int:
+    """The bilinear footprints a pixel reads at most: ``lookups`` lookups (projections, layers) of
+    ``smp``'s filter, each of ``stoch``'s taps. What a pixel's backward pass costs against the
+    gradient it shares with every other pixel (``warptex._threads.grad_bounds``)."""
+    per_lookup = _FILTER_FOOTPRINTS[int(smp.filter)] * (max(1, int(smp.max_aniso)) if int(smp.filter) == int(ks.FILTER_ANISOTROPIC) else 1)
+    return lookups * per_lookup * (1 if stoch is None else _METHOD_TAPS[int(stoch.method)])

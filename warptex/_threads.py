@@ -30,14 +30,16 @@ UNCOVERED_COST = 0.1
 COVERAGE_BLOCK = 1024
 # A backward pass's chunks (:func:`grad_bounds`). Every chunk but the first costs adding its private
 # gradients into the real ones, whatever the thread count: up to the whole shared gradient (a 1024²
-# texture's mip chain, 21 MB: 2 ms) where its pixels read all of it. So a chunk holds a pixel per
-# GRAD_BYTES_PER_PIXEL bytes of shared gradient, between MIN_GRAD_CHUNK_PIXELS and GRAD_CHUNK_PIXELS
-# (measured on one thread, bilinear on a sphere at 1024²: chunks of 65 536 pixels cost 1.22× the
-# time of one launch, of 131 072 1.16×, of 262 144 1.11×; triplanar and splats 1.00–1.07×), and
-# there are at most MAX_GRAD_CHUNKS.
-GRAD_CHUNK_PIXELS = 131072
+# texture's mip chain, 21 MB: 2 ms) where its pixels read all of it, against the pixels' own cost,
+# about their bilinear footprints. So a chunk holds one footprint per GRAD_BYTES_PER_FOOTPRINT bytes
+# of shared gradient, MIN_GRAD_CHUNK_PIXELS to GRAD_CHUNK_PIXELS pixels, and there are at most
+# MAX_GRAD_CHUNKS. (Measured on one thread, bilinear on a sphere at 1024², one footprint a pixel:
+# chunks of 65 536 pixels cost 1.22× the time of one launch, of 131 072 1.16×, of 262 144 1.11×;
+# the 330 000 these constants give, 1.05×. Triplanar's six footprints a pixel on the same texture
+# give 55 000-pixel chunks: 1.06×, and four chunks of a 512² terrain to spread over the threads.)
+GRAD_BYTES_PER_FOOTPRINT = 64
 MIN_GRAD_CHUNK_PIXELS = 16384
-GRAD_BYTES_PER_PIXEL = 128
+GRAD_CHUNK_PIXELS = 1 << 19
 MAX_GRAD_CHUNKS = 16
 # Zeroing arrays smaller than this in all stays on one
 # thread: handing it out costs more.
@@ -139,14 +141,15 @@ class Split:
                 f.result()  # waits for every worker; re-raises a worker's exception here
 
 
-def grad_bounds(count: int, covered: wp.array | None = None, shared_bytes: int | None = None) -> list[int]:
+def grad_bounds(count: int, covered: wp.array | None = None, shared_bytes: int | None = None, footprints: int = 1) -> list[int]:
     """The chunks of a backward pass over ``count`` pixels (see ``warptex._accumulate``): fixed by
-    the pixels and the size of the gradients they share (``shared_bytes``; ``None``: large), never
-    by the thread count, so that shared gradients are summed in the same order whatever runs them.
-    At least one pixel per :data:`GRAD_BYTES_PER_PIXEL` bytes of shared gradient each, within
-    :data:`MIN_GRAD_CHUNK_PIXELS` .. :data:`GRAD_CHUNK_PIXELS`, at most :data:`MAX_GRAD_CHUNKS`,
-    cut to equal costs where the mask ``covered`` is known (:func:`bounds`)."""
-    pixels = GRAD_CHUNK_PIXELS if shared_bytes is None else min(max(shared_bytes // GRAD_BYTES_PER_PIXEL, MIN_GRAD_CHUNK_PIXELS), GRAD_CHUNK_PIXELS)
+    the pixels, the size of the gradients they share (``shared_bytes``; ``None``: large) and the
+    bilinear footprints a pixel reads (``footprints``), never by the thread count, so that shared
+    gradients are summed in the same order whatever runs them. A footprint per
+    :data:`GRAD_BYTES_PER_FOOTPRINT` bytes of shared gradient each, :data:`MIN_GRAD_CHUNK_PIXELS`
+    to :data:`GRAD_CHUNK_PIXELS` pixels, at most :data:`MAX_GRAD_CHUNKS`, cut to equal costs where
+    the mask ``covered`` is known (:func:`bounds`)."""
+    pixels = GRAD_CHUNK_PIXELS if shared_bytes is None else min(max(shared_bytes // (GRAD_BYTES_PER_FOOTPRINT * max(1, footprints)), MIN_GRAD_CHUNK_PIXELS), GRAD_CHUNK_PIXELS)
     return bounds(count, max(1, min(count // pixels, MAX_GRAD_CHUNKS)), covered)
 
 

@@ -24,7 +24,7 @@ import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import sampler_args, struct_of
+from warptex._pack import footprints, sampler_args, struct_of
 from warptex._validate import as_device_array, as_float_array, as_on_device, check_layer_count, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import atlas as ka
@@ -349,5 +349,5 @@ def splat_atlas(
     uvs = gbuffer.uv_sets[uv_set]
     pixels = struct_of(ka.AtlasPixels, device, uv0=uvs["uv"].reshape((count,)), uv0_dx=uvs["uv_dx"].reshape((count,)), uv0_dy=uvs["uv_dy"].reshape((count,)), mask=gbuffer.mask.reshape((count,)))
     args = struct_of(ka.AtlasArgs, device, atlas=atlas.texture.view, layout=atlas.layout, indices=idx, weights=wts, tiling=tiling, smp=smp, normalize=int(bool(normalize)))
-    out = run(ka.atlas_kernels(), count, args=args, pixels=pixels, out=((count, atlas.channels), float), device=device, covered=pixels.mask)
+    out = run(ka.atlas_kernels(), count, args=args, pixels=pixels, out=((count, atlas.channels), float), device=device, covered=pixels.mask, footprints=footprints(smp, lookups=k))
     return out.reshape((*gbuffer.resolution, atlas.channels))

@@ -6,7 +6,7 @@ import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import lod_inputs, mip_levels, resolve_layer, sampler_args, struct_of, vec2_array
+from warptex._pack import footprints, lod_inputs, mip_levels, resolve_layer, sampler_args, struct_of, vec2_array
 from warptex._validate import resolve_device
 from warptex.kernels import sampling as ks
 from warptex.kernels import texels as kx
@@ -59,5 +59,5 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
     if level:
         args.level, args.fraction = mip_levels(constant_lod, smp, texture.num_levels)
         touched = {"args.tex": texture.level_entries(args.level, args.level + 1 if args.fraction > 0.0 else args.level)}  # trilinear reads the next level too
-    out = run(ks.sample_kernels(level=level), count, args=args, pixels=pixels, out=((count, texture.channels), float), device=device, touched=touched)
+    out = run(ks.sample_kernels(level=level), count, args=args, pixels=pixels, out=((count, texture.channels), float), device=device, footprints=footprints(smp), touched=touched)
     return out.reshape((*(() if single else shape), texture.channels))

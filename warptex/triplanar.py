@@ -21,7 +21,7 @@ import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import projection_args, sampler_args, stochastic_args, struct_of
+from warptex._pack import footprints, projection_args, sampler_args, stochastic_args, struct_of
 from warptex._validate import as_enum, as_float
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import faces as kf
@@ -272,7 +272,8 @@ class _Setup:
         if normal_map is not None:
             self.args.normal_map = normal_map
         kernels = kt.triplanar_kernels(normal=normal_map is not None, stochastic=self.stochastic, faces=self.faces)
-        out = run(kernels, self.count, args=self.args, pixels=self.pixels, out=((self.count, channels), float), device=self.device, linear=self.linear, covered=self.pixels.mask)
+        out = run(kernels, self.count, args=self.args, pixels=self.pixels, out=((self.count, channels), float), device=self.device, linear=self.linear, covered=self.pixels.mask,
+                  footprints=footprints(self.args.smp, self.args.stoch, lookups=3))
         return out.reshape((*self.gbuffer.resolution, channels))
 
 
