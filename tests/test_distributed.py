@@ -9,7 +9,8 @@ Warp thread each (``WARPTEX_NUM_THREADS=1``):
   plain fit bit for bit, and 2 or 3 ranks agree with one process to float rounding only;
 - one rank's bad input, settings that differ and diverged parameters raise on every rank;
 - a rank killed, or stopped, mid-fit ends the run with an error within 60 s and leaves the
-  previous output set as it was.
+  previous output set as it was;
+- ranks that check one new output folder at once all pass.
 
 The tests that run ranks skip without PyTorch (the distributed fit needs torch.distributed).
 """
@@ -325,3 +326,42 @@ def test_a_rank_that_stops_answering_fails_the_run_after_the_timeout(tmp_path):
     assert status != 0 and 4 < error_after < 30 and ended_after < 60, (status, error_after, ended_after)
     assert "stopped answering within the group's timeout" in said and "Timed out" in said, said
     assert {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in (tmp_path / "out").iterdir()} == before
+
+
+def test_ranks_checking_one_new_output_folder_at_once_all_pass(tmp_path, monkeypatch):
+    """Every rank checks the output folder before the fit; where it is new, each creates it to
+    probe it and removes it again. A rank whose folder another removed between its mkdir and its
+    probe (CI saw ``cannot write into the output folder 'out/fit': No such file or directory``)
+    tries again rather than failing the job."""
+    from warptex import _output
+
+    out = tmp_path / "out" / "fit"
+    real_touch = Path.touch
+    removed = []
+
+    def touch(self, *args, **kwargs):
+        if self.name.endswith(".probe") and not removed:  # the other rank's clean-up, just before our probe
+            removed.append(self.parent)
+            self.parent.rmdir()
+            self.parent.parent.rmdir()
+        return real_touch(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "touch", touch)
+    assert _output.check_output_folder("run_fit", out) == out
+    assert removed == [out] and not (tmp_path / "out").exists()  # checked, and left as found
+
+    threads = [threading.Thread(target=_output.check_output_folder, args=("run_fit", tmp_path / "again" / "fit")) for _ in range(8)]
+    errors = []
+    for t in threads:
+        t.run = (lambda run: lambda: _record(errors, run))(t.run)
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == []
+
+
+def _record(errors: list, run) -> None:
+    try:
+        run()
+    except OSError as err:
+        errors.append(err)

@@ -45,6 +45,11 @@ def output_set(out_dir: str | os.PathLike) -> Iterator[Path]:
         shutil.rmtree(staging, ignore_errors=True)
 
 
+# Tries to create and write into a new output folder: processes that check the same one at once
+# (the ranks of a distributed fit) each remove what they created, possibly under another's feet.
+_PROBE_ATTEMPTS = 5
+
+
 def check_output_folder(func: str, out_dir: str | os.PathLike) -> Path:
     """``out_dir`` as a ``Path``, or an ``OSError`` naming ``func`` and the folder when it exists as
     a file, cannot be created or cannot be written: called before a job's work, so that a bad
@@ -58,10 +63,17 @@ def check_output_folder(func: str, out_dir: str | os.PathLike) -> Path:
             break
         missing.append(folder)
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / f".warptex-{os.getpid()}-{secrets.token_hex(4)}.probe"
-        probe.touch()
-        probe.unlink()
+        for attempt in range(_PROBE_ATTEMPTS):
+            out.mkdir(parents=True, exist_ok=True)
+            probe = out / f".warptex-{os.getpid()}-{secrets.token_hex(4)}.probe"
+            try:
+                probe.touch()
+            except FileNotFoundError:  # another process checking the same new folder removed it meanwhile (ranks of one job)
+                if attempt + 1 == _PROBE_ATTEMPTS:
+                    raise
+                continue
+            probe.unlink()
+            break
     except OSError as err:
         raise type(err)(f"{func}(): cannot write into the output folder {str(out)!r}: {err.strerror or err}") from None
     finally:
