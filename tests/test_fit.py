@@ -371,6 +371,14 @@ def _untouched(params):
     return np.all(params.logits.numpy() == 0) and params.log_tiling.numpy()[0] == np.float32(np.log(0.2))
 
 
+def test_a_supersampled_gbuffer_is_refused_with_what_to_do_instead(scene):
+    """A fit compares one sample a pixel with its target; a supersampled G-buffer (whose sample
+    grid is s times the target's) is named as such, not reported as a size mismatch."""
+    g = wt.rasterize(scene["mesh"], terrain_camera((24, 32)).supersampled(4))
+    with pytest.raises(ValueError, match=r"view 0's G-buffer is supersampled \(4 samples a pixel\).*not camera.supersampled\(\)"):
+        fit_splat(FitView(g, scene["target"]), scene["layers"], SplatParameters(4, (9, 9)), stages=[Stage(1)], splat_options=OPTIONS, progress=False)
+
+
 def test_bad_input_raises_before_any_iteration(scene):
     g, layers, target = scene["g"], scene["layers"], scene["target"]
     params = SplatParameters(4, (9, 9), tiling=0.2)

@@ -149,6 +149,11 @@ def prepare_views(func: str, views, layers: TextureArray, params: SplatParameter
     for k, view in enumerate(views):
         if not isinstance(view, FitView):
             raise TypeError(f"{func}(): view {k} must be a FitView, got {type(view).__name__}")
+        if view.gbuffer.samples > 1:
+            raise ValueError(
+                f"{func}(): view {k}'s G-buffer is supersampled ({view.gbuffer.samples} samples a pixel); a fit compares one "
+                "sample a pixel with its target: rasterize the view with the camera itself, not camera.supersampled()"
+            )
         gbuffer_device(func, view.gbuffer, device)
         count = view.gbuffer.num_views
         if count is None:
