@@ -350,18 +350,18 @@ def test_ranks_checking_one_new_output_folder_at_once_all_pass(tmp_path, monkeyp
     assert _output.check_output_folder("run_fit", out) == out
     assert removed == [out] and not (tmp_path / "out").exists()  # checked, and left as found
 
-    threads = [threading.Thread(target=_output.check_output_folder, args=("run_fit", tmp_path / "again" / "fit")) for _ in range(8)]
-    errors = []
-    for t in threads:
-        t.run = (lambda run: lambda: _record(errors, run))(t.run)
-        t.start()
-    for t in threads:
-        t.join()
+    errors = []  # 8 checkers at once, 20 times (CI once caught one seeing the folder vanish between two looks)
+    for round_ in range(20):
+        threads = [threading.Thread(target=_record, args=(errors, _output.check_output_folder, "run_fit", tmp_path / f"again{round_}" / "fit")) for _ in range(8)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
     assert errors == []
 
 
-def _record(errors: list, run) -> None:
+def _record(errors: list, run, *args) -> None:
     try:
-        run()
+        run(*args)
     except OSError as err:
         errors.append(err)

@@ -15,6 +15,7 @@ import os
 import re
 import secrets
 import shutil
+import stat
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
@@ -47,7 +48,7 @@ def output_set(out_dir: str | os.PathLike) -> Iterator[Path]:
 
 # Tries to create and write into a new output folder: processes that check the same one at once
 # (the ranks of a distributed fit) each remove what they created, possibly under another's feet.
-_PROBE_ATTEMPTS = 5
+_PROBE_ATTEMPTS = 20
 
 
 def check_output_folder(func: str, out_dir: str | os.PathLike) -> Path:
@@ -55,7 +56,11 @@ def check_output_folder(func: str, out_dir: str | os.PathLike) -> Path:
     a file, cannot be created or cannot be written: called before a job's work, so that a bad
     folder is reported before the work is done. Folders it creates to find out are removed again."""
     out = Path(out_dir)
-    if out.exists() and not out.is_dir():
+    try:
+        kind = out.stat().st_mode  # one look: another process may be removing the folder meanwhile
+    except (FileNotFoundError, NotADirectoryError):
+        kind = None
+    if kind is not None and not stat.S_ISDIR(kind):
         raise NotADirectoryError(f"{func}(): the output folder {str(out)!r} is a file")
     missing = []
     for folder in (out, *out.absolute().parents):
@@ -64,11 +69,11 @@ def check_output_folder(func: str, out_dir: str | os.PathLike) -> Path:
         missing.append(folder)
     try:
         for attempt in range(_PROBE_ATTEMPTS):
-            out.mkdir(parents=True, exist_ok=True)
             probe = out / f".warptex-{os.getpid()}-{secrets.token_hex(4)}.probe"
             try:
+                out.mkdir(parents=True, exist_ok=True)
                 probe.touch()
-            except FileNotFoundError:  # another process checking the same new folder removed it meanwhile (ranks of one job)
+            except (FileNotFoundError, FileExistsError):  # another process checking the same new folder removed it meanwhile (ranks of one job)
                 if attempt + 1 == _PROBE_ATTEMPTS:
                     raise
                 continue
