@@ -37,6 +37,7 @@ from typing import Any, Callable, Iterable
 import warp as wp
 
 from . import adjoint_module
+from .lanes import LANES
 
 #: Gradient paths that name a per-pixel input start with this (see :attr:`Kernels.grads`).
 PIXELS = "pixels."
@@ -79,6 +80,8 @@ class Kernels:
             configuration differentiates nothing there. Every other differentiable input is left to
             ``adjoint``.
         staged: a two-step alternative to a backward path, or ``None``.
+        lanes: ``forward`` for CPU launches, a lane of pixels per launch index
+            (:func:`lane_kernel`), or ``None``: the same bits, faster.
     """
 
     forward: Any
@@ -86,10 +89,11 @@ class Kernels:
     adjoint: Any = None
     grads: tuple = ()
     staged: Staged | None = None
+    lanes: Any = None
 
     def all(self) -> list:
         """Every Warp kernel of this configuration, the staged steps' included."""
-        kernels = [k for k in (self.forward, self.texel_grad, self.adjoint) if k is not None]
+        kernels = [k for k in (self.forward, self.texel_grad, self.adjoint, self.lanes) if k is not None]
         if self.staged is not None:
             kernels += self.staged.first.all() + self.staged.then.all()
         return kernels
@@ -161,6 +165,19 @@ def forward_kernel(body, args_t, pixels_t, out_t, *, module: str, name: str, ena
         body(args, pixels, wp.tid(), out)
 
     return forward
+
+
+def lane_kernel(lane_body, args_t, pixels_t, out_t, *, module: str, name: str):
+    """The CPU ``forward(args, pixels, out)`` kernel of ``lane_body(args, pixels, base, out)``, which
+    computes what ``body`` computes for pixels ``base .. base + LANES - 1`` (:mod:`.lanes`; fewer in
+    the last lane: the pixel count is the first axis of the per-pixel arrays). Launched over
+    ``ceil(count / LANES)`` indices (``warptex._launch``); never on CUDA, which runs ``forward``."""
+
+    @wp.kernel(enable_backward=False, module=module, name=name)
+    def lanes(args: args_t, pixels: pixels_t, out: out_t):
+        lane_body(args, pixels, wp.tid() * LANES, out)
+
+    return lanes
 
 
 def _texel_grad(scatter, args_t, pixels_t, grads_t, adj_t, *, module: str, name: str):

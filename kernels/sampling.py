@@ -7,7 +7,8 @@ addressing and channel I/O in :mod:`.texels`, levels of detail and footprints in
 
 import warp as wp
 
-from .family import Kernels, family, pixel_kernels
+from .family import Kernels, family, lane_kernel, pixel_kernels
+from .lanes import sample_levels_lane
 from . import inlined, specialised
 from .filters import sample_footprint, sample_footprint_outlined, sample_levels
 from .footprint import point_footprint, texture_footprint
@@ -110,6 +111,20 @@ def scatter_sample_level(args: SampleArgs, pixels: SamplePixels, i: wp.int32, gr
         scatter_levels(args.tex, grads.tex, sample_layer(args, pixels, i), pixels.uv[i], args.level, args.fraction, args.smp, read_channels(adj, i))
 
 
+@inlined
+def sample_level_lane(args: SampleArgs, pixels: SamplePixels, base: wp.int32, out: wp.array2d(dtype=float)):
+    """:func:`sample_level_pixel` for the lane of pixels from ``base`` (:mod:`.lanes`), on the CPU."""
+    tex = args.tex
+    level = args.level
+    coarse = level
+    if args.fraction > 0.0:  # trilinear: the next level exists (mip_levels)
+        coarse = level + 1
+    sample_levels_lane(tex.texels, pixels.uv, pixels.layers, out, base,
+                       tex.level_offset[level], tex.level_width[level], tex.level_height[level],
+                       tex.level_offset[coarse], tex.level_width[coarse], tex.level_height[coarse],
+                       args.fraction, args.constant_layer, tex.num_layers, args.smp.filter, args.smp.address, args.smp.border)  # fmt: skip
+
+
 sample_pixel = _footprint_bodies(sample_footprint, "sample_pixel")
 sample_pixel_outlined = _footprint_bodies(sample_footprint_outlined, "sample_pixel_outlined")
 
@@ -117,11 +132,14 @@ sample_pixel_outlined = _footprint_bodies(sample_footprint_outlined, "sample_pix
 @family(configurations=[{"level": False}, {"level": True}])
 def sample_kernels(*, level: bool) -> Kernels:
     """The ``sample`` kernels: with ``level``, for one LOD shared by every sample, its levels
-    resolved on the host; else each sample's LOD from ``args.lod_source``. The hand-written
+    resolved on the host (and a lane kernel for the CPU); else each sample's LOD from
+    ``args.lod_source``. The hand-written
     gradient reaches the texels; UVs, LODs and derivatives take the generated adjoint."""
     if level:
         kernels = pixel_kernels("sample_level", module=MODULE, args=SampleArgs, pixels=SamplePixels, out=wp.array2d(dtype=float),
                                 body=sample_level_pixel, scatter=scatter_sample_level, grads=SampleGrads, adjoint_body=sample_level_pixel)  # fmt: skip
+        lanes = lane_kernel(sample_level_lane, SampleArgs, SamplePixels, wp.array2d(dtype=float), module=MODULE, name="sample_level_lanes")
+        return Kernels(*kernels, grads=("args.tex",), lanes=lanes)
     else:
         kernels = pixel_kernels("sample", module=MODULE, args=SampleArgs, pixels=SamplePixels, out=wp.array2d(dtype=float),
                                 body=sample_pixel, scatter=scatter_sample, grads=SampleGrads, adjoint_body=sample_pixel_outlined)  # fmt: skip

@@ -32,6 +32,7 @@ import warp as wp
 from warptex._accumulate import Copy, private, run_ordered, slot_count, with_private_grads
 from warptex._threads import Split, cpu_count, grad_bounds, workers_for
 from warptex._warp import active_tape, map_arrays, struct_fields, struct_like
+from warptex.kernels.lanes import LANES
 from warptex.kernels.texels import TexelGrad
 
 GENERATED = "generated"
@@ -77,7 +78,7 @@ def _check_rows(count: int, *values) -> None:
             raise RuntimeError(f"warptex internal error: a per-pixel array has {a.shape[0]} rows for {count} pixels")
 
 
-def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None = None, backward=None, covered: wp.array | None = None, footprints: int = 1) -> None:
+def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None = None, backward=None, covered: wp.array | None = None, footprints: int = 1, lanes=None) -> None:
     """Launch a per-pixel ``kernel(args, pixels, out)`` over ``count`` pixels, split over CPU threads.
 
     Args:
@@ -98,6 +99,9 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
             sky's cheap pixels do not unbalance the threads.
         footprints: the bilinear footprints a pixel reads at most: with the size of the gradients
             all pixels share, it sizes a backward pass's chunks (``warptex._threads.grad_bounds``).
+        lanes: ``kernel``'s lane kernel (``warptex.kernels.family.lane_kernel``: the same outputs),
+            which a CPU launch runs instead, over a lane of pixels per launch index, when it records
+            no generated adjoint.
     """
     if count <= 0:
         return
@@ -110,9 +114,13 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
     generated = bool(recorded) and backward is GENERATED
     workers = workers_for(device, count, threads)
     chunks = grad_bounds(count, covered, _shared_bytes(args), footprints) if generated and device.is_cpu else [0, count]  # CUDA: one launch
+    if lanes is not None and device.is_cpu and not generated:
+        kernel, per_index = lanes, LANES
+    else:
+        per_index = 1
     if workers == 1:
         _zero_rows(out)
-        wp.launch(kernel, dim=count, inputs=[args, pixels], outputs=[out], device=device, record_tape=generated and len(chunks) == 2)
+        wp.launch(kernel, dim=-(-count // per_index), inputs=[args, pixels], outputs=[out], device=device, record_tape=generated and len(chunks) == 2)
     else:
         split = Split(count, workers, covered)
 
@@ -120,7 +128,7 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
             lo, hi = split.span(k)
             rows = sliced(out, lo, hi)
             _zero_rows(rows)
-            wp.launch(kernel, dim=hi - lo, inputs=[args, sliced(pixels, lo, hi)], outputs=[rows], device=device, record_tape=False)
+            wp.launch(kernel, dim=-(-(hi - lo) // per_index), inputs=[args, sliced(pixels, lo, hi)], outputs=[rows], device=device, record_tape=False)
 
         split.run(forward)
     if generated and (workers > 1 or len(chunks) > 2):  # else Warp recorded the launch's own adjoint

@@ -30,6 +30,7 @@ from warptex.kernels.family import PIXELS, Kernels, Staged
 from warptex.kernels.texels import TextureView
 
 _forced = threading.local()
+_one_pixel = threading.local()
 
 # Scalar types of the arrays that can carry gradients.
 _FLOATS = (wp.float16, wp.float32, wp.float64)
@@ -45,6 +46,22 @@ def force_generated_adjoint(enabled: bool = True):
         yield
     finally:
         _forced.value = previous
+
+
+@contextlib.contextmanager
+def one_pixel_kernels(enabled: bool = True):
+    """Within this block (on this thread), CPU launches run the one-pixel-per-index kernels, never
+    their lane kernels (``Kernels.lanes``): for tests and benchmarks that compare the two."""
+    previous = getattr(_one_pixel, "value", False)
+    _one_pixel.value = enabled
+    try:
+        yield
+    finally:
+        _one_pixel.value = previous
+
+
+def _lanes(kernels: Kernels):
+    return None if getattr(_one_pixel, "value", False) else kernels.lanes
 
 
 def differentiable(value, path: str = ""):
@@ -95,7 +112,7 @@ def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linea
     result = output(*out, device=device, requires_grad=bool(wanted))
     cut = {"covered": covered, "footprints": footprints}  # how launches are cut into chunks
     if active_tape() is None or not wanted:
-        launch(kernels.forward, count, args=args, pixels=pixels, out=result, device=device, **cut)
+        launch(kernels.forward, count, args=args, pixels=pixels, out=result, device=device, lanes=_lanes(kernels), **cut)
     else:
         _run_path(kernels, _backward_path(kernels, inputs, wanted, linear), count, inputs, result, device, cut, touched)
     return result
@@ -116,7 +133,7 @@ def _run_path(kernels: Kernels, path: str, count: int, inputs: dict, result, dev
     if kernels.staged is not None and kernels.staged.replaces == path and (kernels.texel_grad if path == "texel_grad" else kernels.adjoint) is None:
         _run_staged(kernels.staged, count, inputs, result, device, cut)
     elif path == "texel_grad":
-        launch(kernels.forward, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, **cut,
+        launch(kernels.forward, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, lanes=_lanes(kernels), **cut,
                backward=_texel_gradient(kernels, count, inputs, result, device, cut, touched))  # fmt: skip
     elif kernels.adjoint is not None:
         launch(kernels.adjoint, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, **cut, backward=GENERATED)

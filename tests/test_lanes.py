@@ -1,0 +1,140 @@
+"""CPU lane kernels (``warptex.kernels.lanes``): the same bits as the one-pixel kernels they stand for.
+
+A lane kernel computes ``LANES`` pixels per launch index with a native helper that restates the
+scalar ``@wp.func`` blocks; every case here compares its output with the one-pixel kernel's, bit for
+bit (NaN payloads aside), over every filter, address mode, level, layer and channel case, and over
+launches whose pixel count is not a multiple of the lane width.
+"""
+
+import numpy as np
+import pytest
+import trimesh
+import warp as wp
+
+import warptex as wt
+from warptex import _launch
+from warptex._op import one_pixel_kernels
+from warptex.kernels.lanes import LANES
+
+
+def _same_bits(a: np.ndarray, b: np.ndarray) -> None:
+    """``a`` and ``b`` are the same floats bit for bit, NaN wherever either is (any payload)."""
+    assert a.shape == b.shape
+    nan = np.isnan(a)
+    np.testing.assert_array_equal(nan, np.isnan(b))
+    np.testing.assert_array_equal(a[~nan].view(np.uint32), b[~nan].view(np.uint32))
+
+
+def _both(call):
+    """``call()`` through the lane kernels, and through the one-pixel kernels, as NumPy arrays."""
+    lanes = call().numpy()
+    with one_pixel_kernels():
+        scalar = call().numpy()
+    return lanes, scalar
+
+
+@pytest.fixture
+def launched(monkeypatch):
+    """The names of the kernels ``warptex._launch`` launches, with their launch sizes."""
+    seen = []
+    launch = wp.launch
+
+    def spy(kernel, dim, *args, **kwargs):
+        seen.append((kernel.key, dim))
+        return launch(kernel, dim, *args, **kwargs)
+
+    monkeypatch.setattr(_launch.wp, "launch", spy)
+    return seen
+
+
+def _uvs(rng, n):
+    """UVs over several periods, with the cases the scalar blocks treat apart: non-finite UVs (NaN
+    out), huge ones (a period folded out exactly), a tiny negative one (reduced to 1.0 by wrap) and
+    texel centres and edges of a 48 × 64 level (the floors' edges)."""
+    uv = rng.uniform(-3.0, 3.0, (n, 2)).astype(np.float32)
+    special = [(np.nan, 0.5), (0.5, np.inf), (-np.inf, np.nan), (1e30, -1e30), (-1e-10, -1e-10), (0.5 / 48, 1 - 0.5 / 64), (1.0, 0.0), (0.0, 1.0), (2.0, -1.0)]
+    uv[: len(special)] = special
+    return uv
+
+
+@pytest.mark.parametrize("address", ["wrap", "clamp", "mirror", "border"])
+@pytest.mark.parametrize("filter,lod", [("bilinear", None), ("nearest", None), ("nearest", 1.6), ("trilinear", 1.3), ("trilinear", 0.0), ("trilinear", 40.0), ("trilinear", -2.0)])
+def test_sample_lanes_give_the_one_pixel_bits(rng, launched, filter, lod, address):
+    tex = wt.TextureArray(rng.random((3, 64, 48, 4), dtype=np.float32))
+    n = 1037  # not a multiple of LANES
+    uv = _uvs(rng, n)
+    per_sample = rng.integers(-2, 5, n).astype(np.int32)  # out-of-range layers clamp
+    smp = wt.Sampler(filter=filter, address=address, border=(0.1, 0.2, 0.3, 0.4))
+    for layer in (2, per_sample):
+        lanes, scalar = _both(lambda: wt.sample(tex, uv, layer=layer, lod=lod, sampler=smp))
+        _same_bits(lanes, scalar)
+        assert np.isnan(lanes[:3]).all() and np.isfinite(lanes[3:]).all()
+    names = [name for name, _ in launched]
+    assert names.count("sample_level_lanes") == 2 and names.count("sample_level_forward") == 2
+    assert (("sample_level_lanes", -(-n // LANES)) in launched) and (("sample_level_forward", n) in launched)
+
+
+@pytest.mark.parametrize("channels", [1, 2, 3, 4])
+@pytest.mark.parametrize("n", [1, LANES - 1, LANES, LANES + 1, 3 * LANES + 5])
+def test_sample_lanes_write_only_their_pixels_and_channels(rng, channels, n):
+    tex = wt.Texture(rng.random((20, 36, channels), dtype=np.float32))
+    uv = rng.uniform(-1.0, 2.0, (n, 2)).astype(np.float32)
+    lanes, scalar = _both(lambda: wt.sample(tex, uv))
+    assert lanes.shape == (n, channels)
+    _same_bits(lanes, scalar)
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_sample_lanes_over_threads(rng, threads):
+    """Chunks of a threaded launch end anywhere, so each has its own last, short lane."""
+    tex = wt.Texture(rng.random((256, 256, 4), dtype=np.float32))
+    uv = rng.uniform(0.0, 4.0, (100_003, 2)).astype(np.float32)
+    previous = wt.get_num_threads()
+    wt.set_num_threads(threads)
+    try:
+        lanes, scalar = _both(lambda: wt.sample(tex, uv, lod=0.7))
+    finally:
+        wt.set_num_threads(previous)
+    _same_bits(lanes, scalar)
+
+
+def test_sample_lanes_read_a_view_of_uvs_and_layers(rng):
+    """UVs and layers given as ``wp.array`` views of larger arrays (their strides as given)."""
+    tex = wt.TextureArray(rng.random((2, 32, 32, 4), dtype=np.float32))
+    grid = wp.array(rng.uniform(0.0, 1.0, (4, 600, 2)).astype(np.float32), dtype=wp.vec2)
+    layers = wp.array(rng.integers(0, 2, (4, 600)).astype(np.int32))
+    lanes, scalar = _both(lambda: wt.sample(tex, grid[1], layer=layers[2]))
+    _same_bits(lanes, scalar)
+
+
+def test_sample_gradients_still_reach_the_texels_under_lanes(rng):
+    """A recorded bilinear lookup runs its forward pass through the lane kernel; the hand-written
+    texel gradient is unchanged (its values are checked against finite differences elsewhere)."""
+    uv = rng.uniform(0.0, 3.0, (777, 2)).astype(np.float32)
+    texels = rng.random((16, 16, 4), dtype=np.float32)
+    weights = rng.random((777, 4), dtype=np.float32)
+    grads = []
+    for one_pixel in (False, True):
+        tex = wt.Texture(texels, requires_grad=True)
+        with one_pixel_kernels(one_pixel):
+            tape = wp.Tape()
+            with tape:
+                out = wt.sample(tex, uv)
+            out.grad.assign(weights)
+            tape.backward()
+        grads.append(tex.grad())
+    np.testing.assert_array_equal(grads[0], grads[1])
+    assert np.abs(grads[0]).sum() > 0
+
+
+def test_sample_lanes_on_a_real_texture_and_mesh(shared_data):
+    """brick.png sampled at the Duck's own UVs (as loaded, repeated and mirrored), every address mode."""
+    tex = wt.Texture.from_file(shared_data / "textures" / "brick.png")
+    mesh = trimesh.load(shared_data / "meshes" / "Duck.glb", force="mesh")
+    uv = np.asarray(mesh.visual.uv, np.float32)
+    uv = np.concatenate([uv, uv * 3.0 - 1.0]).astype(np.float32)
+    for address in ("wrap", "clamp", "mirror", "border"):
+        for lod in (None, 2.4):
+            smp = wt.Sampler(address=address)
+            lanes, scalar = _both(lambda: wt.sample(tex, uv, lod=lod, sampler=smp))
+            _same_bits(lanes, scalar)
