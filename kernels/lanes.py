@@ -4,42 +4,51 @@ Warp compiles a CPU launch as a scalar loop, one launch index at a time, and LLV
 vectorise across indices (Warp issues #1309, #1358, #1954): rewriting a scalar body as an unrolled
 loop over 16 pixels inside one Warp launch index measured no faster here. A ``wp.func_native``
 helper written for a lane, in phases, is: its UV arithmetic runs 16 lanes wide in SIMD registers,
-and all 64 texel addresses of a lane are known before the first load, so the loads overlap.
+and all the texel addresses of a lane are known before the first load, so the loads overlap.
 
 Each helper computes *exactly* what the scalar ``@wp.func`` blocks it stands for compute, operation
-for operation and in the same order (no contraction into fused multiply-adds: ``fp contract(off)``),
-so a lane's outputs are the scalar kernel's bits; ``tests/test_lanes.py`` checks that in every
-filter, address mode and layer case. Only the CPU compiles a body: on CUDA the helpers are empty and
-never launched (one pixel per thread there, from the scalar kernel).
+for operation and in the same order (no contraction into fused multiply-adds: ``fp contract(off)``;
+Warp's own ``wp::floor`` and ``wp::clamp``), so a lane's outputs are the scalar kernel's bits;
+``tests/test_lanes.py`` checks that in every filter, address mode, level and layer case. Only the
+CPU compiles a body: on CUDA the helpers are empty and never launched (one pixel per thread there,
+from the scalar kernels).
 
-The lane kernels themselves are made by :func:`warptex.kernels.family.lane_kernel`.
+The lane kernels themselves are made by :func:`warptex.kernels.family.lane_kernel`; a technique's
+lane body (a ``@wp.func``) reads its pixels, calls these helpers and writes its outputs.
 """
 
 import warp as wp
+
+from .texels import SamplerArgs, TextureView
 
 #: Pixels per lane: one launch index of a lane kernel computes pixels ``LANES·t .. LANES·t + LANES - 1``
 #: (fewer in a launch's last lane). 16 float32 lanes fill an AVX-512 register.
 LANES = 16
 
-# Shared by the helpers: the address modes and the scalar formulas of ``texels.reduce_coord`` and
-# ``texels.address_near`` (same constants as ``texels.ADDRESS_*``), on one pixel.
-_PRELUDE = r"""
+#: A lane of floats (one per pixel), and a lane of RGBA values (a row per pixel).
+lane_floats = wp.types.vector(length=LANES, dtype=wp.float32)
+lane_colours = wp.types.matrix(shape=(LANES, 4), dtype=wp.float32)
+
+# What every helper shares: the scalar formulas of texels.reduce_coord, texels.address_near,
+# footprint.mip_levels and filters.sample_levels, written for the lane (same ADDRESS_* and FILTER_*
+# constants as texels.py).
+_CORE = r"""
 #pragma clang fp contract(off)
 typedef float wt_f4 __attribute__((ext_vector_type(4)));
-enum { WT_L = %(lanes)d, WT_WRAP = 0, WT_CLAMP = 1, WT_MIRROR = 2, WT_BORDER = 3 };
+enum { WT_L = %(lanes)d, WT_WRAP = 0, WT_CLAMP = 1, WT_MIRROR = 2, WT_BORDER = 3, WT_NEAREST = 0, WT_TRILINEAR = 2 };
 const float wt_float_max = 3.4028234663852886e38f;
-auto wt_reduce = [](float x, const int address) __attribute__((always_inline)) -> float {
-    if (address == WT_WRAP) return x - __builtin_floorf(x);
-    if (address == WT_MIRROR) return x - 2.0f * __builtin_floorf(0.5f * x);
-    return x < -1.0f ? -1.0f : (x > 2.0f ? 2.0f : x);
+auto wt_reduce = [](float x, const int address) __attribute__((always_inline)) -> float {  // texels.reduce_coord
+    if (address == WT_WRAP) return x - wp::floor(x);
+    if (address == WT_MIRROR) return x - 2.0f * wp::floor(0.5f * x);
+    return wp::clamp(x, -1.0f, 2.0f);
 };
-auto wt_address = [](int i, int n, const int address) __attribute__((always_inline)) -> int {
+auto wt_address = [](int i, int n, const int address) __attribute__((always_inline)) -> int {  // texels.address_near
     int r = i;
     if (address == WT_WRAP) {
         if (r < 0) r += n;
         else if (r >= n) r -= n;
     } else if (address == WT_CLAMP) {
-        r = i < 0 ? 0 : (i > n - 1 ? n - 1 : i);
+        r = wp::clamp(i, 0, n - 1);
     } else if (address == WT_MIRROR) {
         if (r < 0) r = -1 - r;
         else if (r >= 2 * n) r -= 2 * n;
@@ -49,102 +58,113 @@ auto wt_address = [](int i, int n, const int address) __attribute__((always_inli
     }
     return r;
 };
-""" % {"lanes": LANES}
-
-_SAMPLE_LEVELS = _PRELUDE + r"""
-// Pixels base .. base + count - 1 of the launch (the lane's tail repeats pixel base, not stored).
-const int n = uv.shape[0];
-const int count = n - base < WT_L ? n - base : WT_L;
-const wt_f4 border4 = {border.c[0], border.c[1], border.c[2], border.c[3]};
-const char* tb = (const char*)texels.data;
-const long long ts = texels.strides[0];
-float u[WT_L], v[WT_L];
-int layer[WT_L];
-bool finite[WT_L];
-// Phase 1: UVs (non-finite ones replaced, their outputs NaN: texels.finite_uv_lod) and layers
-// (texels.resolve_layer).
-for (int l = 0; l < WT_L; ++l) {
-    const float* p = (const float*)((const char*)uv.data + (long long)(base + (l < count ? l : 0)) * uv.strides[0]);
-    finite[l] = __builtin_fabsf(p[0]) <= wt_float_max && __builtin_fabsf(p[1]) <= wt_float_max;
-    u[l] = finite[l] ? p[0] : 0.0f;
-    v[l] = finite[l] ? p[1] : 0.0f;
-    layer[l] = constant_layer;
-}
-if (layers.shape[0] > 0) {
-    for (int l = 0; l < WT_L; ++l) {
-        const int k = *(const int*)((const char*)layers.data + (long long)(base + (l < count ? l : 0)) * layers.strides[0]);
-        layer[l] = k < 0 ? 0 : (k > num_layers - 1 ? num_layers - 1 : k);
-    }
-}
-auto load = [&](int index, bool inside) __attribute__((always_inline)) -> wt_f4 {  // texels.texel
-    wt_f4 t;
-    __builtin_memcpy(&t, tb + (inside ? (long long)index : 0) * ts, 16);
-    return inside ? t : border4;
+auto wt_int = [](const wp::array_t<int>& a, int k) __attribute__((always_inline)) -> int {
+    return *(const int*)((const char*)a.data + (long long)k * a.strides[0]);
 };
-// Phase 2, one level (filters.sample_nearest, filters.bilinear_taps and sample_bilinear): every
-// lane's addresses and weights first, then the loads, so that they are in flight together.
-auto filter_level = [&](const int address, int start, int w, int h, wt_f4* res) __attribute__((always_inline)) {
+// res[l] = filters.sample_levels(tex, layer[l], (u[l], v[l]), level[l], fraction[l], smp) for every
+// lane. Each level read is cut in two: every lane's addresses and weights, then every lane's loads,
+// so that the loads are in flight together. Compiled once per address mode (below).
+auto wt_sample_levels = [&](const int address, const auto& tex, const auto& smp, const float* u, const float* v, const int* level, const float* fraction, const int* layer, wt_f4* res) __attribute__((always_inline)) {
+    const char* tb = (const char*)tex.texels.data;
+    const long long ts = tex.texels.strides[0];
+    const wt_f4 border = {smp.border.c[0], smp.border.c[1], smp.border.c[2], smp.border.c[3]};
+    auto load = [&](int index, bool inside) __attribute__((always_inline)) -> wt_f4 {  // texels.texel
+        wt_f4 t;
+        __builtin_memcpy(&t, tb + (inside ? (long long)index : 0) * ts, 16);
+        return inside ? t : border;
+    };
     float ru[WT_L], rv[WT_L];
-    for (int l = 0; l < WT_L; ++l) {  // texels.reduce_coord
+    bool blend = false;  // a lane reads two levels (trilinear)
+    for (int l = 0; l < WT_L; ++l) {
         ru[l] = wt_reduce(u[l], address);
         rv[l] = wt_reduce(v[l], address);
+        blend |= fraction[l] > 0.0f;
     }
     int index[4][WT_L];
     bool inside[4][WT_L];
-    if (filter == 0) {  // FILTER_NEAREST
+    if (smp.filter == WT_NEAREST) {  // filters.sample_nearest
         for (int l = 0; l < WT_L; ++l) {
-            const int x = wt_address((int)__builtin_floorf(ru[l] * (float)w), w, address);
-            const int y = wt_address((int)__builtin_floorf((1.0f - rv[l]) * (float)h), h, address);
-            index[0][l] = start + layer[l] * h * w + y * w + x;
+            const int w = wt_int(tex.level_width, level[l]), h = wt_int(tex.level_height, level[l]);
+            const int x = wt_address((int)wp::floor(ru[l] * (float)w), w, address);
+            const int y = wt_address((int)wp::floor((1.0f - rv[l]) * (float)h), h, address);
+            index[0][l] = wt_int(tex.level_offset, level[l]) + layer[l] * h * w + y * w + x;
             inside[0][l] = address != WT_BORDER || (x >= 0 && y >= 0);  // only the border mode reads outside
         }
         for (int l = 0; l < WT_L; ++l) res[l] = load(index[0][l], inside[0][l]);
         return;
     }
     float fx[WT_L], fy[WT_L];
-    for (int l = 0; l < WT_L; ++l) {
-        const int s = start + layer[l] * h * w;
-        const float x = ru[l] * (float)w - 0.5f;
-        const float y = (1.0f - rv[l]) * (float)h - 0.5f;
-        const float x0 = __builtin_floorf(x);
-        const float y0 = __builtin_floorf(y);
-        const int i0 = wt_address((int)x0, w, address), i1 = wt_address((int)x0 + 1, w, address);
-        const int j0 = wt_address((int)y0, h, address), j1 = wt_address((int)y0 + 1, h, address);
-        index[0][l] = s + j0 * w + i0;
-        index[1][l] = s + j0 * w + i1;
-        index[2][l] = s + j1 * w + i0;
-        index[3][l] = s + j1 * w + i1;
-        inside[0][l] = address != WT_BORDER || (i0 >= 0 && j0 >= 0);
-        inside[1][l] = address != WT_BORDER || (i1 >= 0 && j0 >= 0);
-        inside[2][l] = address != WT_BORDER || (i0 >= 0 && j1 >= 0);
-        inside[3][l] = address != WT_BORDER || (i1 >= 0 && j1 >= 0);
-        fx[l] = x - x0;
-        fy[l] = y - y0;
-    }
-    for (int l = 0; l < WT_L; ++l) {
-        const wt_f4 top = load(index[0][l], inside[0][l]) * (1.0f - fx[l]) + load(index[1][l], inside[1][l]) * fx[l];
-        const wt_f4 bottom = load(index[2][l], inside[2][l]) * (1.0f - fx[l]) + load(index[3][l], inside[3][l]) * fx[l];
-        res[l] = top * (1.0f - fy[l]) + bottom * fy[l];
-    }
-};
-// filters.sample_levels, compiled once per address mode (a mode tested per texel measured slower).
-wt_f4 result[WT_L];
-auto sample_levels = [&](const int address) __attribute__((always_inline)) {
-    filter_level(address, start0, w0, h0, result);
-    if (filter != 0 && fraction > 0.0f) {  // trilinear: blended with the next level
-        wt_f4 coarse[WT_L];
-        filter_level(address, start1, w1, h1, coarse);
-        for (int l = 0; l < WT_L; ++l) result[l] = result[l] * (1.0f - fraction) + coarse[l] * fraction;
+    for (int pass = 0; pass < (blend ? 2 : 1); ++pass) {  // the level, then (trilinear) the next one
+        for (int l = 0; l < WT_L; ++l) {  // filters.bilinear_taps
+            const int k = pass == 0 || fraction[l] <= 0.0f ? level[l] : level[l] + 1;
+            const int w = wt_int(tex.level_width, k), h = wt_int(tex.level_height, k);
+            const int s = wt_int(tex.level_offset, k) + layer[l] * h * w;
+            const float x = ru[l] * (float)w - 0.5f;
+            const float y = (1.0f - rv[l]) * (float)h - 0.5f;
+            const float x0 = wp::floor(x);
+            const float y0 = wp::floor(y);
+            const int i0 = wt_address((int)x0, w, address), i1 = wt_address((int)x0 + 1, w, address);
+            const int j0 = wt_address((int)y0, h, address), j1 = wt_address((int)y0 + 1, h, address);
+            index[0][l] = s + j0 * w + i0;
+            index[1][l] = s + j0 * w + i1;
+            index[2][l] = s + j1 * w + i0;
+            index[3][l] = s + j1 * w + i1;
+            inside[0][l] = address != WT_BORDER || (i0 >= 0 && j0 >= 0);
+            inside[1][l] = address != WT_BORDER || (i1 >= 0 && j0 >= 0);
+            inside[2][l] = address != WT_BORDER || (i0 >= 0 && j1 >= 0);
+            inside[3][l] = address != WT_BORDER || (i1 >= 0 && j1 >= 0);
+            fx[l] = x - x0;
+            fy[l] = y - y0;
+        }
+        for (int l = 0; l < WT_L; ++l) {  // filters.sample_bilinear, and the blend of filters.sample_levels
+            const wt_f4 top = load(index[0][l], inside[0][l]) * (1.0f - fx[l]) + load(index[1][l], inside[1][l]) * fx[l];
+            const wt_f4 bottom = load(index[2][l], inside[2][l]) * (1.0f - fx[l]) + load(index[3][l], inside[3][l]) * fx[l];
+            const wt_f4 value = top * (1.0f - fy[l]) + bottom * fy[l];
+            if (pass == 0) res[l] = value;
+            else if (fraction[l] > 0.0f) res[l] = res[l] * (1.0f - fraction[l]) + value * fraction[l];
+        }
     }
 };
-switch (address) {
-    case WT_WRAP: sample_levels(WT_WRAP); break;
-    case WT_CLAMP: sample_levels(WT_CLAMP); break;
-    case WT_MIRROR: sample_levels(WT_MIRROR); break;
-    default: sample_levels(WT_BORDER); break;
+// wt_sample_levels with the address mode a constant, once per mode (a mode tested per texel
+// measured slower).
+auto wt_sample_levels_any = [&](const auto& tex, const auto& smp, const float* u, const float* v, const int* level, const float* fraction, const int* layer, wt_f4* res) __attribute__((always_inline)) {
+    switch (smp.address) {
+        case WT_WRAP: wt_sample_levels(WT_WRAP, tex, smp, u, v, level, fraction, layer, res); break;
+        case WT_CLAMP: wt_sample_levels(WT_CLAMP, tex, smp, u, v, level, fraction, layer, res); break;
+        case WT_MIRROR: wt_sample_levels(WT_MIRROR, tex, smp, u, v, level, fraction, layer, res); break;
+        default: wt_sample_levels(WT_BORDER, tex, smp, u, v, level, fraction, layer, res); break;
+    }
+};
+""" % {"lanes": LANES}
+
+
+def _cpu_only(body: str, cuda: str = "") -> str:
+    """A helper's snippet: ``body`` on the CPU, ``cuda`` (never run) on CUDA."""
+    return "#if !defined(__CUDA_ARCH__)\n" + _CORE + body + "#else\n" + cuda + "#endif\n"
+
+
+_SAMPLE_LEVELS = r"""
+// Pixels base .. base + count - 1 of the launch (the lane's tail repeats pixel base, not stored).
+const int n = uv.shape[0];
+const int count = n - base < WT_L ? n - base : WT_L;
+float u[WT_L], v[WT_L], fractions[WT_L];
+int levels[WT_L], layer[WT_L];
+bool finite[WT_L];
+for (int l = 0; l < WT_L; ++l) {  // texels.finite_uv_lod: a non-finite UV reads (0, 0), its output NaN
+    const float* p = (const float*)((const char*)uv.data + (long long)(base + (l < count ? l : 0)) * uv.strides[0]);
+    finite[l] = __builtin_fabsf(p[0]) <= wt_float_max && __builtin_fabsf(p[1]) <= wt_float_max;
+    u[l] = finite[l] ? p[0] : 0.0f;
+    v[l] = finite[l] ? p[1] : 0.0f;
+    levels[l] = level;
+    fractions[l] = fraction;
+    layer[l] = constant_layer;
 }
-// Phase 3: texels.write_channels.
-char* ob = (char*)out.data;
+if (layers.shape[0] > 0) {  // texels.resolve_layer
+    for (int l = 0; l < WT_L; ++l) layer[l] = wp::clamp(wt_int(layers, base + (l < count ? l : 0)), 0, tex.num_layers - 1);
+}
+wt_f4 result[WT_L];
+wt_sample_levels_any(tex, smp, u, v, levels, fractions, layer, result);
+char* ob = (char*)out.data;  // texels.write_channels
 const wt_f4 nan4 = __builtin_nanf("");
 const int channels = out.shape[1];
 if (channels == 4 && out.strides[1] == 4) {
@@ -162,28 +182,50 @@ if (channels == 4 && out.strides[1] == 4) {
 """
 
 
-@wp.func_native("#if !defined(__CUDA_ARCH__)\n" + _SAMPLE_LEVELS + "#endif\n")
-def sample_levels_lane(
-    texels: wp.array(dtype=wp.vec4),
-    uv: wp.array(dtype=wp.vec2),
-    layers: wp.array(dtype=wp.int32),
-    out: wp.array2d(dtype=float),
-    base: wp.int32,
-    start0: wp.int32,
-    w0: wp.int32,
-    h0: wp.int32,
-    start1: wp.int32,
-    w1: wp.int32,
-    h1: wp.int32,
-    fraction: float,
-    constant_layer: wp.int32,
-    num_layers: wp.int32,
-    filter: wp.int32,
-    address: wp.int32,
-    border: wp.vec4,
-):
-    """``out[i] =`` :func:`~warptex.kernels.filters.sample_levels` at ``uv[i]`` for the lane's
-    pixels ``i = base ..`` (NaN where ``uv[i]`` is not finite): the level at ``start0`` (``w0 × h0``;
-    layer ``layers[i]`` clamped, or ``constant_layer`` where ``layers`` is empty), blended by
-    ``fraction`` with the next (``start1``, ``w1 × h1``) when it is positive."""
+@wp.func_native(_cpu_only(_SAMPLE_LEVELS))
+def sample_levels_lane(tex: TextureView, smp: SamplerArgs, uv: wp.array(dtype=wp.vec2), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32,
+                       level: wp.int32, fraction: float, out: wp.array2d(dtype=float), base: wp.int32):  # fmt: skip
+    """``out[i] =`` :func:`~warptex.kernels.filters.sample_levels` at ``uv[i]`` (NaN where it is not
+    finite) on ``level``, blended by ``fraction`` with the next, for the lane's pixels ``i = base ..``:
+    layer ``layers[i]`` clamped to the array, or ``constant_layer`` where ``layers`` is empty."""
+    ...
+
+
+_ACCUMULATE_LOD = r"""
+float us[WT_L], vs[WT_L], fractions[WT_L];
+int levels[WT_L], layer[WT_L];
+bool read[WT_L], finite[WT_L];
+const float top = (float)(tex.num_levels - 1);
+for (int l = 0; l < WT_L; ++l) {
+    read[l] = weight.c[l] > 0.0f;
+    // texels.finite_uv_lod; a lane that is not read, or reads NaN, reads (0, 0) at level 0.
+    finite[l] = __builtin_fabsf(u.c[l]) <= wt_float_max && __builtin_fabsf(v.c[l]) <= wt_float_max && __builtin_fabsf(lod.c[l]) <= wt_float_max;
+    const bool ok = read[l] && finite[l];
+    us[l] = ok ? u.c[l] : 0.0f;
+    vs[l] = ok ? v.c[l] : 0.0f;
+    const float c = wp::clamp(wp::clamp((ok ? lod.c[l] : 0.0f) + smp.lod_bias, smp.min_lod, smp.max_lod), 0.0f, top);  // footprint.mip_levels
+    const bool trilinear = smp.filter >= WT_TRILINEAR;
+    levels[l] = (int)(trilinear ? wp::floor(c) : wp::floor(c + 0.5f));
+    fractions[l] = trilinear ? c - wp::floor(c) : 0.0f;
+    layer[l] = layer_index;
+}
+wt_f4 result[WT_L];
+wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layer, result);
+const wt_f4 nan4 = __builtin_nanf("");
+wp::mat_t<WT_L, 4, float> total = acc;
+for (int l = 0; l < WT_L; ++l) {
+    if (!read[l]) continue;
+    const wt_f4 r = finite[l] ? result[l] : nan4;
+    for (int c = 0; c < 4; ++c) total.data[l][c] = acc.data[l][c] + weight.c[l] * r[c];
+}
+return total;
+"""
+
+
+@wp.func_native(_cpu_only(_ACCUMULATE_LOD, "return acc;\n"))
+def accumulate_lod_lane(tex: TextureView, smp: SamplerArgs, layer_index: wp.int32, u: lane_floats, v: lane_floats, lod: lane_floats, weight: lane_floats, acc: lane_colours) -> lane_colours:
+    """``acc`` plus, in every lane ``l`` whose ``weight[l] > 0``, ``weight[l] ·``
+    :func:`~warptex.kernels.filters.sample_lod` of layer ``layer_index`` at ``(u[l], v[l])`` and
+    ``lod[l]`` (NaN where those are not finite): the accumulation of the one-tap footprints of a
+    blend of projections or layers (``value += w · sample``), lane by lane."""
     ...

@@ -114,15 +114,7 @@ def scatter_sample_level(args: SampleArgs, pixels: SamplePixels, i: wp.int32, gr
 @inlined
 def sample_level_lane(args: SampleArgs, pixels: SamplePixels, base: wp.int32, out: wp.array2d(dtype=float)):
     """:func:`sample_level_pixel` for the lane of pixels from ``base`` (:mod:`.lanes`), on the CPU."""
-    tex = args.tex
-    level = args.level
-    coarse = level
-    if args.fraction > 0.0:  # trilinear: the next level exists (mip_levels)
-        coarse = level + 1
-    sample_levels_lane(tex.texels, pixels.uv, pixels.layers, out, base,
-                       tex.level_offset[level], tex.level_width[level], tex.level_height[level],
-                       tex.level_offset[coarse], tex.level_width[coarse], tex.level_height[coarse],
-                       args.fraction, args.constant_layer, tex.num_layers, args.smp.filter, args.smp.address, args.smp.border)  # fmt: skip
+    sample_levels_lane(args.tex, args.smp, pixels.uv, pixels.layers, args.constant_layer, args.level, args.fraction, out, base)
 
 
 sample_pixel = _footprint_bodies(sample_footprint, "sample_pixel")

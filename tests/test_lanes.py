@@ -138,3 +138,66 @@ def test_sample_lanes_on_a_real_texture_and_mesh(shared_data):
             smp = wt.Sampler(address=address)
             lanes, scalar = _both(lambda: wt.sample(tex, uv, lod=lod, sampler=smp))
             _same_bits(lanes, scalar)
+
+
+# -- triplanar and biplanar colour --------------------------------------------------------------------
+
+
+def _hand_gbuffer(rng, count=1000):
+    """A ``(1, count)`` G-buffer of random surface points, with the cases the scalar body treats
+    apart: uncovered pixels, zero, axis-aligned and non-finite normals, NaN and huge positions, zero
+    and huge derivatives."""
+    normals = rng.normal(size=(count, 3)).astype(np.float32)
+    normals[:6] = [(0, 0, 0), (1, 0, 0), (0, -1, 0), (0, 0, 1), (np.nan, 0, 1), (np.inf, 0, 0)]
+    positions = rng.uniform(-3.0, 3.0, (count, 3)).astype(np.float32)
+    positions[6:9] = [(np.nan, 0, 0), (1e30, 0, 0), (0, -np.inf, 0)]
+    scale = np.exp(rng.uniform(-6.0, 1.0, (count, 1))).astype(np.float32)
+    dpdx = rng.normal(size=(count, 3)).astype(np.float32) * scale
+    dpdy = rng.normal(size=(count, 3)).astype(np.float32) * scale
+    dpdx[9], dpdy[9] = 0.0, 0.0
+    dpdx[10], dpdy[10] = 1e20, 1e20
+    mask = (rng.random(count) > 0.2).astype(np.float32)
+    g = wt.GBuffer.empty((1, count))
+    for name, value in (("normal", normals), ("position", positions), ("position_dx", dpdx), ("position_dy", dpdy)):
+        getattr(g, name).assign(value.reshape(1, count, 3))
+    g.mask.assign(mask.reshape(1, count))
+    return g
+
+
+@pytest.mark.parametrize("address", ["wrap", "clamp", "mirror", "border"])
+@pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
+def test_triplanar_lanes_give_the_one_pixel_bits(rng, launched, filter, address):
+    g = _hand_gbuffer(rng)
+    tex = wt.TextureArray(rng.random((2, 64, 32, 4), dtype=np.float32))
+    smp = wt.Sampler(filter=filter, address=address, border=(0.5, 0.25, 0.125, 1.0), lod_bias=0.3, max_aniso=4)
+    for func, kw in ((wt.triplanar, {"tiling": (1.5, 2.0, 0.75), "sharpness": 3.0, "layer": 1}), (wt.biplanar, {"sharpness": 8.0}), (wt.triplanar, {"sharpness": 0.0, "mirror_fix": False, "offsets": [(0.3, 0.1), (0.0, 0.5), (0.25, 0.25)]})):
+        lanes, scalar = _both(lambda: func(g, tex, sampler=smp, **kw))
+        _same_bits(lanes, scalar)
+    assert ("triplanar_lanes", -(-1000 // LANES)) in launched
+
+
+def test_triplanar_lanes_with_a_texture_per_axis_in_object_space(rng):
+    g = _hand_gbuffer(rng, 777)
+    textures = [wt.Texture(rng.random((16 << a, 32, 3), dtype=np.float32)) for a in range(3)]
+    m = np.eye(4, dtype=np.float32)
+    m[:3, :3] = np.linalg.qr(rng.normal(size=(3, 3)))[0] * 1.7
+    m[:3, 3] = (0.5, -2.0, 3.0)
+    lanes, scalar = _both(lambda: wt.triplanar(g, textures_per_axis=textures, space="object", object_to_world=m, sampler=wt.Sampler(filter="trilinear")))
+    _same_bits(lanes, scalar)
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_triplanar_lanes_on_a_real_mesh(shared_data, threads):
+    """The bunny rasterised from a view, brick.png projected on it: the image a user renders."""
+    mesh = trimesh.load(shared_data / "meshes" / "bunny.ply", force="mesh")
+    centre = mesh.bounds.mean(0)
+    g = wt.rasterize(mesh, wt.look_at(centre + (0.0, 0.05, 0.25), centre, fov_y=35.0, resolution=(160, 200)))
+    tex = wt.Texture.from_file(shared_data / "textures" / "brick.png")
+    previous = wt.get_num_threads()
+    wt.set_num_threads(threads)
+    try:
+        lanes, scalar = _both(lambda: wt.triplanar(g, tex, tiling=20.0))
+    finally:
+        wt.set_num_threads(previous)
+    _same_bits(lanes, scalar)
+    assert (lanes[..., :3] > 0).mean() > 0.3  # the bunny covers the view
