@@ -25,8 +25,9 @@ from .texels import SamplerArgs, TextureView
 #: (fewer in a launch's last lane). 16 float32 lanes fill an AVX-512 register.
 LANES = 16
 
-#: A lane of floats (one per pixel), and a lane of RGBA values (a row per pixel).
+#: A lane of floats or ints (one per pixel), and a lane of RGBA values (a row per pixel).
 lane_floats = wp.types.vector(length=LANES, dtype=wp.float32)
+lane_ints = wp.types.vector(length=LANES, dtype=wp.int32)
 lane_colours = wp.types.matrix(shape=(LANES, 4), dtype=wp.float32)
 
 # What every helper shares: the scalar formulas of texels.reduce_coord, texels.address_near,
@@ -207,7 +208,7 @@ for (int l = 0; l < WT_L; ++l) {
     const bool trilinear = smp.filter >= WT_TRILINEAR;
     levels[l] = (int)(trilinear ? wp::floor(c) : wp::floor(c + 0.5f));
     fractions[l] = trilinear ? c - wp::floor(c) : 0.0f;
-    layer[l] = layer_index;
+    layer[l] = read[l] ? wp::clamp(layers.c[l], 0, tex.num_layers - 1) : 0;  // valid (the API checks), clamped all the same
 }
 wt_f4 result[WT_L];
 wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layer, result);
@@ -216,16 +217,17 @@ wp::mat_t<WT_L, 4, float> total = acc;
 for (int l = 0; l < WT_L; ++l) {
     if (!read[l]) continue;
     const wt_f4 r = finite[l] ? result[l] : nan4;
-    for (int c = 0; c < 4; ++c) total.data[l][c] = acc.data[l][c] + weight.c[l] * r[c];
+    for (int c = 0; c < 4; ++c) total.data[l][c] = add ? acc.data[l][c] + weight.c[l] * r[c] : r[c];
 }
 return total;
 """
 
 
 @wp.func_native(_cpu_only(_ACCUMULATE_LOD, "return acc;\n"))
-def accumulate_lod_lane(tex: TextureView, smp: SamplerArgs, layer_index: wp.int32, u: lane_floats, v: lane_floats, lod: lane_floats, weight: lane_floats, acc: lane_colours) -> lane_colours:
-    """``acc`` plus, in every lane ``l`` whose ``weight[l] > 0``, ``weight[l] ·``
-    :func:`~warptex.kernels.filters.sample_lod` of layer ``layer_index`` at ``(u[l], v[l])`` and
-    ``lod[l]`` (NaN where those are not finite): the accumulation of the one-tap footprints of a
-    blend of projections or layers (``value += w · sample``), lane by lane."""
+def accumulate_lod_lane(tex: TextureView, smp: SamplerArgs, layers: lane_ints, u: lane_floats, v: lane_floats, lod: lane_floats, weight: lane_floats, add: wp.int32, acc: lane_colours) -> lane_colours:
+    """``acc`` with, in every lane ``l`` whose ``weight[l] > 0``, ``s =``
+    :func:`~warptex.kernels.filters.sample_lod` of layer ``layers[l]`` (a valid layer) at
+    ``(u[l], v[l])`` and ``lod[l]`` (NaN where those are not finite) added as ``acc[l] + weight[l]
+    · s`` (``add``: a blend of projections' one-tap footprints, ``value += w · sample``), or put in
+    its place (not ``add``: ``value = sample``); the other lanes' rows as they are."""
     ...

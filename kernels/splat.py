@@ -33,9 +33,10 @@ import functools
 import warp as wp
 
 from . import adjoint_module, inlined, specialised
-from .family import Kernels, Staged, family, forward_kernel, pixel_kernels
+from .family import Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
 from .projection import SurfacePixels, surface_frame
 from .splat_blend import blend_functions, capacity
+from .splat_lanes import lane_body
 from .splat_layers import (
     HEIGHT_ARRAY,
     HEIGHT_CHANNEL,
@@ -353,4 +354,5 @@ def splat_kernels(*, capacity: int, stochastic: bool) -> Kernels:
     forward, texel_grad, _ = pixel_kernels(f"splat{capacity}" + ("_stochastic" if stochastic else ""), module=module, args=SplatArgs, pixels=SplatPixels, out=wp.array2d(dtype=float),
                                            body=body, scatter=scatter_body, grads=SplatGrads)  # fmt: skip
     grads = ("args.layers", "args.heights", "args.maps", "args.reads.params.transition", None if stochastic else "args.reads.params.tiling")
-    return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity))
+    lanes = None if stochastic else lane_kernel(lane_body(capacity, body, SplatPixels), SplatArgs, SplatPixels, wp.array2d(dtype=float), module=module, name=f"splat{capacity}_lanes")
+    return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity), lanes=lanes)

@@ -24,7 +24,7 @@ import warp as wp
 from . import adjoint_module, inlined, specialised
 from .faces import FACE_FIELDS, FaceGrads, FaceTextures, on_axis, on_axis_face, on_face
 from .family import Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
-from .lanes import LANES, accumulate_lod_lane, lane_colours
+from .lanes import LANES, accumulate_lod_lane, lane_colours, lane_ints
 from .normals import blend_projected, decode_normal, direction, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
@@ -309,10 +309,11 @@ def colour_lane(args: TriplanarArgs, pixels: SurfacePixels, base: wp.int32, out:
                         v[axis, l] = uv[1]
                         lod[axis, l] = fp[0]  # one tap: every filter but the anisotropic one
                         weight[axis, l] = w[axis]
+        layers = lane_ints(args.layer)
         value = lane_colours()
-        value = accumulate_lod_lane(faces.px, args.smp, args.layer, u[0], v[0], lod[0], weight[0], value)
-        value = accumulate_lod_lane(faces.py, args.smp, args.layer, u[1], v[1], lod[1], weight[1], value)
-        value = accumulate_lod_lane(faces.pz, args.smp, args.layer, u[2], v[2], lod[2], weight[2], value)
+        value = accumulate_lod_lane(faces.px, args.smp, layers, u[0], v[0], lod[0], weight[0], 1, value)
+        value = accumulate_lod_lane(faces.py, args.smp, layers, u[1], v[1], lod[1], weight[1], 1, value)
+        value = accumulate_lod_lane(faces.pz, args.smp, layers, u[2], v[2], lod[2], weight[2], 1, value)
         for l in range(count):
             write_channels(out, base + l, value[l])
 

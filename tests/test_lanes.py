@@ -143,7 +143,7 @@ def test_sample_lanes_on_a_real_texture_and_mesh(shared_data):
 # -- triplanar and biplanar colour --------------------------------------------------------------------
 
 
-def _hand_gbuffer(rng, count=1000):
+def _hand_gbuffer(rng, count=1000, uv_sets=()):
     """A ``(1, count)`` G-buffer of random surface points, with the cases the scalar body treats
     apart: uncovered pixels, zero, axis-aligned and non-finite normals, NaN and huge positions, zero
     and huge derivatives."""
@@ -157,7 +157,7 @@ def _hand_gbuffer(rng, count=1000):
     dpdx[9], dpdy[9] = 0.0, 0.0
     dpdx[10], dpdy[10] = 1e20, 1e20
     mask = (rng.random(count) > 0.2).astype(np.float32)
-    g = wt.GBuffer.empty((1, count))
+    g = wt.GBuffer.empty((1, count), uv_sets=uv_sets)
     for name, value in (("normal", normals), ("position", positions), ("position_dx", dpdx), ("position_dy", dpdy)):
         getattr(g, name).assign(value.reshape(1, count, 3))
     g.mask.assign(mask.reshape(1, count))
@@ -173,6 +173,7 @@ def test_triplanar_lanes_give_the_one_pixel_bits(rng, launched, filter, address)
     for func, kw in ((wt.triplanar, {"tiling": (1.5, 2.0, 0.75), "sharpness": 3.0, "layer": 1}), (wt.biplanar, {"sharpness": 8.0}), (wt.triplanar, {"sharpness": 0.0, "mirror_fix": False, "offsets": [(0.3, 0.1), (0.0, 0.5), (0.25, 0.25)]})):
         lanes, scalar = _both(lambda: func(g, tex, sampler=smp, **kw))
         _same_bits(lanes, scalar)
+        assert (np.nan_to_num(lanes) > 0).any(-1).mean() > 0.5
     assert ("triplanar_lanes", -(-1000 // LANES)) in launched
 
 
@@ -201,3 +202,62 @@ def test_triplanar_lanes_on_a_real_mesh(shared_data, threads):
         wt.set_num_threads(previous)
     _same_bits(lanes, scalar)
     assert (lanes[..., :3] > 0).mean() > 0.3  # the bunny covers the view
+
+
+# -- splat layers --------------------------------------------------------------------------------------
+
+
+def _splat_gbuffer(rng, count=1000):
+    """:func:`_hand_gbuffer` with UV0 and its derivatives (NaN, huge and zero ones among them)."""
+    g = _hand_gbuffer(rng, count, uv_sets=("uv0",))
+    uv = rng.uniform(-2.0, 3.0, (count, 2)).astype(np.float32)
+    uv[11:14] = [(np.nan, 0.0), (1e30, 0.5), (0.25, -np.inf)]
+    dx = rng.normal(size=(count, 2)).astype(np.float32) * 0.01
+    dy = rng.normal(size=(count, 2)).astype(np.float32) * 0.01
+    dx[14], dy[14] = 0.0, 0.0
+    for name, value in (("uv", uv), ("uv_dx", dx), ("uv_dy", dy)):
+        g.uv_sets["uv0"][name].assign(value.reshape(1, count, 2))
+    return g
+
+
+SPLAT_CASES = {
+    "uv": {},
+    "uv, height channel": {"height_blend": 0.2},
+    "uv, not normalized, tiling per layer": {"normalize": False, "tiling": [1.0, 2.5, 0.5, 3.0, 1.5]},
+    "world xz, height array": {"projection": "world_xz", "height_blend": 0.3, "heights": True},
+    "triplanar": {"projection": "triplanar", "sharpness": 3.0, "height_blend": 0.1},
+    "triplanar, face layers": {"projection": "triplanar", "face_layers": [None, (1, 2, 3, 4, 0, 1), None, (0, 0, 4, 4, 2, 2), None], "offsets": [(0.1, 0.2), (0.0, 0.3), (0.5, 0.5)]},
+}
+
+
+@pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
+@pytest.mark.parametrize("case", list(SPLAT_CASES))
+def test_splat_lanes_give_the_one_pixel_bits(rng, launched, case, filter):
+    g = _splat_gbuffer(rng)
+    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32))
+    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False)
+    kw = dict(SPLAT_CASES[case])
+    if kw.pop("heights", False):
+        kw["heights"] = wt.TextureArray(rng.random((5, 48, 24, 1), dtype=np.float32))
+    smp = wt.Sampler(filter=filter, address="mirror", lod_bias=-0.4, max_aniso=3)
+    lanes, scalar = _both(lambda: wt.splat(g, layers, maps, sampler=smp, **kw))
+    _same_bits(lanes, scalar)
+    assert (np.nan_to_num(lanes) > 0).any(-1).mean() > 0.5  # most pixels blend something
+    assert ("splat8_lanes", -(-1000 // LANES)) in launched
+
+
+@pytest.mark.parametrize("projection", ["uv", "triplanar"])
+def test_splat_lanes_on_the_default_terrain(projection):
+    """The terrain ``warptex render`` draws: its height/slope splat map, its four generated layers,
+    height blending, seen from its camera (sky pixels included)."""
+    from warptex.scenes import TERRAIN_GRID, terrain_camera
+    from warptex.scenes.material import terrain_layers, terrain_splat_maps
+    from warptex.scenes.terrain import terrain
+
+    mesh = terrain(resolution=TERRAIN_GRID, seed=0)
+    g = wt.rasterize(mesh, terrain_camera((96, 128)))
+    maps = wt.TextureArray(terrain_splat_maps(mesh, TERRAIN_GRID)[None], mipmaps=False)
+    layers = terrain_layers(size=64)
+    lanes, scalar = _both(lambda: wt.splat(g, layers, maps, tiling=[4.0, 6.0, 3.0, 5.0], projection=projection, height_blend=0.2))
+    _same_bits(lanes, scalar)
+    assert 0.2 < (g.mask.numpy() > 0).mean() < 1.0
