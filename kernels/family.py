@@ -82,6 +82,7 @@ class Kernels:
         staged: a two-step alternative to a backward path, or ``None``.
         lanes: ``forward`` for CPU launches, a lane of pixels per launch index
             (:func:`lane_kernel`), or ``None``: the same bits, faster.
+        texel_grad_lanes: ``texel_grad`` for CPU launches, likewise, or ``None``.
     """
 
     forward: Any
@@ -90,10 +91,11 @@ class Kernels:
     grads: tuple = ()
     staged: Staged | None = None
     lanes: Any = None
+    texel_grad_lanes: Any = None
 
     def all(self) -> list:
         """Every Warp kernel of this configuration, the staged steps' included."""
-        kernels = [k for k in (self.forward, self.texel_grad, self.adjoint, self.lanes) if k is not None]
+        kernels = [k for k in (self.forward, self.texel_grad, self.adjoint, self.lanes, self.texel_grad_lanes) if k is not None]
         if self.staged is not None:
             kernels += self.staged.first.all() + self.staged.then.all()
         return kernels
@@ -167,17 +169,26 @@ def forward_kernel(body, args_t, pixels_t, out_t, *, module: str, name: str, ena
     return forward
 
 
-def lane_kernel(lane_body, args_t, pixels_t, out_t, *, module: str, name: str):
-    """The CPU ``forward(args, pixels, out)`` kernel of ``lane_body(args, pixels, base, out)``, which
-    computes what ``body`` computes for pixels ``base .. base + LANES - 1`` (:mod:`.lanes`; fewer in
-    the last lane: the pixel count is the first axis of the per-pixel arrays). Launched over
-    ``ceil(count / LANES)`` indices (``warptex._launch``); never on CUDA, which runs ``forward``."""
+def lane_kernel(lane_body, args_t, pixels_t, out_t, *, module: str, name: str, grads_t=None):
+    """A CPU pixel kernel of ``lane_body``, which computes what a pixel body computes for pixels
+    ``base .. base + LANES - 1`` (:mod:`.lanes`; fewer in the last lane: the pixel count is the first
+    axis of the per-pixel arrays): ``forward(args, pixels, out)`` running ``lane_body(args, pixels,
+    base, out)``, or, with ``grads_t``, ``texel_grad(args, pixels, grads, adj)`` running
+    ``lane_body(args, pixels, base, grads, adj)``. Launched over ``ceil(count / LANES)`` indices
+    (``warptex._launch``); never on CUDA, which runs the one-pixel kernels."""
+    if grads_t is None:
+
+        @wp.kernel(enable_backward=False, module=module, name=name)
+        def lanes(args: args_t, pixels: pixels_t, out: out_t):
+            lane_body(args, pixels, wp.tid() * LANES, out)
+
+        return lanes
 
     @wp.kernel(enable_backward=False, module=module, name=name)
-    def lanes(args: args_t, pixels: pixels_t, out: out_t):
-        lane_body(args, pixels, wp.tid() * LANES, out)
+    def grad_lanes(args: args_t, pixels: pixels_t, grads: grads_t, adj: out_t):
+        lane_body(args, pixels, wp.tid() * LANES, grads, adj)
 
-    return lanes
+    return grad_lanes
 
 
 def _texel_grad(scatter, args_t, pixels_t, grads_t, adj_t, *, module: str, name: str):

@@ -8,6 +8,7 @@ addressing and channel I/O in :mod:`.texels`, levels of detail and footprints in
 import warp as wp
 
 from .family import Kernels, family, lane_kernel, pixel_kernels
+from .lane_scatter import scatter_levels_lane
 from .lanes import sample_levels_lane
 from . import inlined, specialised
 from .filters import sample_footprint, sample_footprint_outlined, sample_levels
@@ -117,6 +118,12 @@ def sample_level_lane(args: SampleArgs, pixels: SamplePixels, base: wp.int32, ou
     sample_levels_lane(args.tex, args.smp, pixels.uv, pixels.layers, args.constant_layer, args.level, args.fraction, out, base)
 
 
+@inlined
+def scatter_sample_level_lane(args: SampleArgs, pixels: SamplePixels, base: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):
+    """:func:`scatter_sample_level` for the lane of pixels from ``base`` (:mod:`.lanes`), on the CPU."""
+    scatter_levels_lane(args.tex, grads.tex, args.smp, pixels.uv, pixels.layers, args.constant_layer, args.level, args.fraction, adj, base)
+
+
 sample_pixel = _footprint_bodies(sample_footprint, "sample_pixel")
 sample_pixel_outlined = _footprint_bodies(sample_footprint_outlined, "sample_pixel_outlined")
 
@@ -131,7 +138,8 @@ def sample_kernels(*, level: bool) -> Kernels:
         kernels = pixel_kernels("sample_level", module=MODULE, args=SampleArgs, pixels=SamplePixels, out=wp.array2d(dtype=float),
                                 body=sample_level_pixel, scatter=scatter_sample_level, grads=SampleGrads, adjoint_body=sample_level_pixel)  # fmt: skip
         lanes = lane_kernel(sample_level_lane, SampleArgs, SamplePixels, wp.array2d(dtype=float), module=MODULE, name="sample_level_lanes")
-        return Kernels(*kernels, grads=("args.tex",), lanes=lanes)
+        grad_lanes = lane_kernel(scatter_sample_level_lane, SampleArgs, SamplePixels, wp.array2d(dtype=float), grads_t=SampleGrads, module=MODULE + ".grad", name="sample_level_texel_grad_lanes")
+        return Kernels(*kernels, grads=("args.tex",), lanes=lanes, texel_grad_lanes=grad_lanes)
     else:
         kernels = pixel_kernels("sample", module=MODULE, args=SampleArgs, pixels=SamplePixels, out=wp.array2d(dtype=float),
                                 body=sample_pixel, scatter=scatter_sample, grads=SampleGrads, adjoint_body=sample_pixel_outlined)  # fmt: skip

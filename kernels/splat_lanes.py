@@ -14,7 +14,7 @@ import functools
 import warp as wp
 
 from . import inlined, specialised
-from .lanes import LANES, accumulate_lod_lane, lane_colours, lane_ints
+from .lanes import LANES, accumulate_lod_lane, lane_colours
 from .splat_blend import blend_functions
 from .splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, PROJECT_TRIPLANAR, LayerPoint, LayerReads, SplatArgs, face_layer, layer_read, layer_reads, surface_weights
 from .texels import FILTER_ANISOTROPIC, TextureView, write_channels

@@ -22,13 +22,13 @@ import functools
 import warp as wp
 
 from . import adjoint_module, inlined, specialised
-from .faces import FACE_FIELDS, FaceGrads, FaceTextures, on_axis, on_axis_face, on_face
+from .faces import FACE_FIELDS, FaceGrads, FaceTextures, on_axis_face, on_face
 from .family import Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
-from .lanes import LANES, accumulate_lod_lane, lane_colours, lane_ints
 from .normals import blend_projected, decode_normal, direction, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
-from .texels import FILTER_ANISOTROPIC, SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
+from .texels import SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
+from .triplanar_lanes import lane_bodies
 
 MODULE = "warptex.triplanar"
 GRAD_MODULE = MODULE + ".grad"
@@ -274,50 +274,6 @@ _BODIES = {
     for stochastic in (False, True)
     for faces in (False, True)
 }
-_plain_colour = _BODIES[False, False]["colour"]
-# Per projection (row) and lane pixel (column): what the pixel reads from the projection.
-_lane_values = wp.types.matrix(shape=(3, LANES), dtype=float)
-
-
-@inlined
-def colour_lane(args: TriplanarArgs, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
-    """The plain colour body, one texture per axis, for the lane of pixels from ``base``, on the CPU
-    (:mod:`.lanes`): each pixel's surface, weights, UVs and footprints by the scalar blocks, then the
-    lane's reads by :func:`~.lanes.accumulate_lod_lane`, projection by projection, in the order
-    the scalar body adds them. The anisotropic filter's footprints of several taps go pixel by pixel
-    through the scalar body."""
-    count = wp.min(out.shape[0] - base, LANES)
-    if args.smp.filter == FILTER_ANISOTROPIC:
-        for l in range(count):
-            _plain_colour(args, pixels, base + l, out)
-    else:
-        faces = args.faces
-        u = _lane_values()
-        v = _lane_values()
-        lod = _lane_values()
-        weight = _lane_values()  # 0: not read (zero weight, or an uncovered pixel)
-        for l in range(count):
-            i = base + l
-            if pixels.mask[i] != 0.0:
-                p, n, dpdx, dpdy = surface(args.proj, pixels, i)
-                w = projection_weights(args.proj, n)
-                for axis in range(3):
-                    if w[axis] > 0.0:
-                        uv = projection_uv(args.proj, axis, p, n)
-                        fp = projection_footprint(on_axis(faces.px, faces.py, faces.pz, axis), args.proj, axis, n, dpdx, dpdy, args.smp)
-                        u[axis, l] = uv[0]
-                        v[axis, l] = uv[1]
-                        lod[axis, l] = fp[0]  # one tap: every filter but the anisotropic one
-                        weight[axis, l] = w[axis]
-        layers = lane_ints(args.layer)
-        value = lane_colours()
-        value = accumulate_lod_lane(faces.px, args.smp, layers, u[0], v[0], lod[0], weight[0], 1, value)
-        value = accumulate_lod_lane(faces.py, args.smp, layers, u[1], v[1], lod[1], weight[1], 1, value)
-        value = accumulate_lod_lane(faces.pz, args.smp, layers, u[2], v[2], lod[2], weight[2], 1, value)
-        for l in range(count):
-            write_channels(out, base + l, value[l])
-
-
 #: The texel gradients' input paths (``FaceGrads`` fields), the face textures in :data:`~.faces.FACES` order.
 FACE_GRADS = tuple(f"args.faces.{f}" for f in FACE_FIELDS)
 _CONFIGURATIONS = [{"normal": normal, "stochastic": stochastic, "faces": faces} for normal in (False, True) for stochastic in (False, True) for faces in (False, True)]
@@ -354,8 +310,12 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
     if not normal:
         forward, texel_grad, _ = pixel_kernels(name, module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["colour"],
                                                scatter=bodies["colour_grad"], grads=FaceGrads)  # fmt: skip
-        lanes = None if stochastic or faces else lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes")
-        return Kernels(forward, texel_grad, _adjoint(False), grads=FACE_GRADS, lanes=lanes)
+        lanes = grad_lanes = None
+        if not stochastic and not faces:
+            colour_lane, colour_grad_lane = lane_bodies(bodies["colour"], bodies["colour_grad"], TriplanarArgs)
+            lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes")
+            grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes")
+        return Kernels(forward, texel_grad, _adjoint(False), grads=FACE_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes)
     forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
     first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,
                           body=bodies["samples"], scatter=bodies["samples_grad"], grads=FaceGrads)  # fmt: skip

@@ -107,26 +107,6 @@ def test_sample_lanes_read_a_view_of_uvs_and_layers(rng):
     _same_bits(lanes, scalar)
 
 
-def test_sample_gradients_still_reach_the_texels_under_lanes(rng):
-    """A recorded bilinear lookup runs its forward pass through the lane kernel; the hand-written
-    texel gradient is unchanged (its values are checked against finite differences elsewhere)."""
-    uv = rng.uniform(0.0, 3.0, (777, 2)).astype(np.float32)
-    texels = rng.random((16, 16, 4), dtype=np.float32)
-    weights = rng.random((777, 4), dtype=np.float32)
-    grads = []
-    for one_pixel in (False, True):
-        tex = wt.Texture(texels, requires_grad=True)
-        with one_pixel_kernels(one_pixel):
-            tape = wp.Tape()
-            with tape:
-                out = wt.sample(tex, uv)
-            out.grad.assign(weights)
-            tape.backward()
-        grads.append(tex.grad())
-    np.testing.assert_array_equal(grads[0], grads[1])
-    assert np.abs(grads[0]).sum() > 0
-
-
 def test_sample_lanes_on_a_real_texture_and_mesh(shared_data):
     """brick.png sampled at the Duck's own UVs (as loaded, repeated and mirrored), every address mode."""
     tex = wt.Texture.from_file(shared_data / "textures" / "brick.png")
@@ -261,3 +241,70 @@ def test_splat_lanes_on_the_default_terrain(projection):
     lanes, scalar = _both(lambda: wt.splat(g, layers, maps, tiling=[4.0, 6.0, 3.0, 5.0], projection=projection, height_blend=0.2))
     _same_bits(lanes, scalar)
     assert 0.2 < (g.mask.numpy() > 0).mean() < 1.0
+
+
+# -- texel gradients ----------------------------------------------------------------------------------
+
+
+def _texel_grads(call, textures, weights, one_pixel: bool) -> list:
+    """Every level's texel gradient of ``textures`` after ``call()``'s output, weighted by ``weights``,
+    is taken backwards, through the lane kernels or the one-pixel ones."""
+    for t in textures:
+        t.zero_grad()
+    with one_pixel_kernels(one_pixel):
+        tape = wp.Tape()
+        with tape:
+            out = call()
+        out.grad.assign(weights.reshape(out.shape))
+        tape.backward()
+    return [t.grad(level) for t in textures for level in range(t.num_levels)]
+
+
+def _same_grads(call, textures, rng, channels, count):
+    weights = rng.normal(size=(count, channels)).astype(np.float32)
+    lanes = _texel_grads(call, textures, weights, False)
+    scalar = _texel_grads(call, textures, weights, True)
+    for a, b in zip(lanes, scalar):
+        _same_bits(a, b)
+    assert sum(np.abs(g).sum() for g in lanes) > 0
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+@pytest.mark.parametrize("address", ["wrap", "clamp", "mirror", "border"])
+@pytest.mark.parametrize("filter,lod", [("bilinear", None), ("nearest", 1.6), ("trilinear", 1.3), ("trilinear", 40.0)])
+def test_sample_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, lod, address, threads):
+    """The same sums in the same order: the texel gradients are the same bits, on 3 threads too (where
+    private copies mark the tiles they add into)."""
+    tex = wt.TextureArray(rng.random((3, 64, 48, 4), dtype=np.float32), requires_grad=True)
+    n = 40_003
+    uv = _uvs(rng, n)
+    layers = rng.integers(-2, 5, n).astype(np.int32)
+    smp = wt.Sampler(filter=filter, address=address, border=(0.1, 0.2, 0.3, 0.4))
+    previous = wt.get_num_threads()
+    wt.set_num_threads(threads)
+    try:
+        for layer in (1, layers):
+            _same_grads(lambda: wt.sample(tex, uv, layer=layer, lod=lod, sampler=smp), [tex], rng, 4, n)
+    finally:
+        wt.set_num_threads(previous)
+    assert any(name == "sample_level_texel_grad_lanes" for name, _ in launched)
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+@pytest.mark.parametrize("address", ["wrap", "mirror", "border"])
+@pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
+def test_triplanar_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, address, threads):
+    """One texture for the three projections (their adds interleave in the texels), and a texture
+    per axis of which one needs no gradient."""
+    g = _hand_gbuffer(rng, 30_000)
+    shared = wt.TextureArray(rng.random((2, 64, 32, 4), dtype=np.float32), requires_grad=True)
+    per_axis = [wt.Texture(rng.random((16 << a, 32, 3), dtype=np.float32), requires_grad=a != 1) for a in range(3)]
+    smp = wt.Sampler(filter=filter, address=address, lod_bias=0.3, max_aniso=4)
+    previous = wt.get_num_threads()
+    wt.set_num_threads(threads)
+    try:
+        _same_grads(lambda: wt.triplanar(g, shared, tiling=(1.5, 2.0, 0.75), sharpness=3.0, layer=1, sampler=smp), [shared], rng, 4, 30_000)
+        _same_grads(lambda: wt.biplanar(g, textures_per_axis=per_axis, sampler=smp), [per_axis[0], per_axis[2]], rng, 3, 30_000)
+    finally:
+        wt.set_num_threads(previous)
+    assert any(name == "triplanar_texel_grad_lanes" for name, _ in launched)

@@ -192,7 +192,7 @@ class Target(NamedTuple):
     per_pixel: bool = False
 
 
-def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, device, threads: int | None = None, covered: wp.array | None = None, footprints: int = 1, entries: dict | None = None) -> None:
+def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, device, threads: int | None = None, covered: wp.array | None = None, footprints: int = 1, entries: dict | None = None, lanes=None) -> None:
     """Launch a hand-written gradient ``kernel(args, pixels, grads, adj)``, which *adds* into the
     arrays of ``grads``, over ``count`` pixels, split over CPU threads as :func:`launch` splits a launch.
 
@@ -211,19 +211,25 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
         entries: ``{id(target): (start, stop)}`` for shared targets the kernel adds into only there
             (the mip levels a constant-LOD lookup reads): only the tiles of those entries are summed
             from the private copies, tracked or not (the rest stays zero).
+        lanes: ``kernel``'s lane kernel (the same sums in the same order), which CPU launches run
+            instead, a lane of pixels per launch index.
     """
     if count <= 0:
         return
     device = wp.get_device(device)
     _check_rows(count, pixels, adj, *[t.grad for t in grads if t.per_pixel and t.grad is not None])
     grads_t = kernel.adj.args[2].type
+    if lanes is not None and device.is_cpu:
+        kernel, per_index = lanes, LANES
+    else:
+        per_index = 1
     texel = [t.grad for (name, ftype), t in zip(grads_t.vars.items(), grads) if t.grad is not None and not t.per_pixel and ftype.type is TexelGrad]
     plain = [t.grad for (name, ftype), t in zip(grads_t.vars.items(), grads) if t.grad is not None and not t.per_pixel and ftype.type is not TexelGrad]
     shared = list({id(g): g for g in texel + plain}.values())  # one texture may feed several fields
     bounds = grad_bounds(count, covered, sum(_nbytes(g) for g in shared), footprints) if device.is_cpu else [0, count]  # CUDA: one launch, atomics
     chunks = len(bounds) - 1
     if chunks == 1:
-        wp.launch(kernel, dim=count, inputs=[args, pixels, _grads_struct(grads_t, grads, {}, device), adj], device=device, record_tape=False)
+        wp.launch(kernel, dim=-(-count // per_index), inputs=[args, pixels, _grads_struct(grads_t, grads, {}, device), adj], device=device, record_tape=False)
         return
     workers = min(workers_for(device, count, threads), chunks, cpu_count())  # fixed chunks: threads past the cores only take turns
     tracked = {id(g) for g in texel} - {id(g) for g in plain}
@@ -237,7 +243,7 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
 
     def run(k: int, slot: int | None) -> None:
         lo, hi = bounds[k], bounds[k + 1]
-        wp.launch(kernel, dim=hi - lo, inputs=[args, sliced(pixels, lo, hi), _chunk_grads(real if slot is None else structs[slot], grads, lo, hi), sliced(adj, lo, hi)], device=device, record_tape=False)
+        wp.launch(kernel, dim=-(-(hi - lo) // per_index), inputs=[args, sliced(pixels, lo, hi), _chunk_grads(real if slot is None else structs[slot], grads, lo, hi), sliced(adj, lo, hi)], device=device, record_tape=False)
 
     run_ordered(chunks, workers, run, slots.__getitem__, entries)
 

@@ -60,8 +60,9 @@ def one_pixel_kernels(enabled: bool = True):
         _one_pixel.value = previous
 
 
-def _lanes(kernels: Kernels):
-    return None if getattr(_one_pixel, "value", False) else kernels.lanes
+def _lanes(kernels: Kernels, grad: bool = False):
+    """``kernels``' lane kernel (of the texel gradient with ``grad``), unless turned off on this thread."""
+    return None if getattr(_one_pixel, "value", False) else kernels.texel_grad_lanes if grad else kernels.lanes
 
 
 def differentiable(value, path: str = ""):
@@ -145,6 +146,8 @@ def _texel_gradient(kernels: Kernels, count: int, inputs: dict, result, device, 
     """``backward(tape)``: ``kernels.texel_grad`` adds the output's gradient, through the forward
     pass, into the gradients of the inputs ``kernels.grads`` names that require them."""
 
+    lanes = _lanes(kernels, grad=True)  # decided where the pass is recorded
+
     def backward(tape) -> None:
         targets, entries = [], {}
         for path in kernels.grads:
@@ -153,7 +156,7 @@ def _texel_gradient(kernels: Kernels, count: int, inputs: dict, result, device, 
             targets.append(Target(grad, per_pixel=path is not None and path.startswith(PIXELS)))
             if grad is not None and touched and path in touched:
                 entries[id(grad)] = touched[path]
-        scatter(kernels.texel_grad, count, args=inputs["args"], pixels=inputs["pixels"], grads=targets, adj=_gradient_of(result), device=device, entries=entries, **cut)
+        scatter(kernels.texel_grad, count, args=inputs["args"], pixels=inputs["pixels"], grads=targets, adj=_gradient_of(result), device=device, entries=entries, lanes=lanes, **cut)
 
     return backward
 

@@ -1,0 +1,186 @@
+"""CPU lanes, part 2: texel gradients for a lane of pixels (the ``scatter_*`` twins of :mod:`.lanes`,
+as :mod:`.scatter` is of :mod:`.filters`).
+
+A lane's taps and weights are computed for every pixel first, then added pixel by pixel and read by
+read, in the order the scalar kernels add them: the same texels get the same sums in the same order,
+so the gradients are the same bits, and the same tile marks (``scatter.mark_rows``) are made.
+"""
+
+import warp as wp
+
+from .lanes import LANES, _cpu_only, lane_colours, lane_ints
+from .texels import TILE_SHIFT, SamplerArgs, TexelGrad, TextureView
+
+#: Per read (row, up to 3: a pixel's projections) and lane pixel (column).
+lane_reads = wp.types.matrix(shape=(3, LANES), dtype=wp.float32)
+
+# scatter.scatter_levels for the lane: reads r = 0 .. reads - 1 of every lane pixel, read r from
+# tex[r] into grad[r], the levels and fractions given (module docstring).
+_SCATTER_CORE = r"""
+enum { WT_TILE_SHIFT = %(tile_shift)d };
+struct wt_taps { int start, w, i0, i1, j0, j1; float fx, fy; };
+typedef float wt_lane_f[WT_L];
+typedef int wt_lane_i[WT_L];
+typedef bool wt_lane_b[WT_L];
+typedef wt_f4 wt_lane_f4[WT_L];
+auto wt_scatter_levels = [&](const int address, const int reads, const auto* const* tex, const auto* const* grad, const auto& smp, const wt_lane_f* u, const wt_lane_f* v,
+                             const wt_lane_i* level, const wt_lane_f* fraction, const wt_lane_i* layer, const wt_lane_b* active, const wt_lane_f4* g) __attribute__((always_inline)) {
+    wt_taps taps[3][2][WT_L];  // [read][fine, coarse][lane]
+    for (int r = 0; r < reads; ++r) {
+        for (int pass = 0; pass < 2; ++pass) {
+            for (int l = 0; l < WT_L; ++l) {  // filters.nearest_tap / bilinear_taps
+                const float ru = wt_reduce(u[r][l], address), rv = wt_reduce(v[r][l], address);
+                const int k = pass == 0 || fraction[r][l] <= 0.0f ? level[r][l] : level[r][l] + 1;
+                wt_taps& t = taps[r][pass][l];
+                t.w = wt_int(tex[r]->level_width, k);
+                const int h = wt_int(tex[r]->level_height, k);
+                t.start = wt_int(tex[r]->level_offset, k) + layer[r][l] * h * t.w;
+                if (smp.filter == WT_NEAREST) {
+                    t.i0 = wt_address((int)wp::floor(ru * (float)t.w), t.w, address);
+                    t.j0 = wt_address((int)wp::floor((1.0f - rv) * (float)h), h, address);
+                } else {
+                    const float x = ru * (float)t.w - 0.5f;
+                    const float y = (1.0f - rv) * (float)h - 0.5f;
+                    const float x0 = wp::floor(x);
+                    const float y0 = wp::floor(y);
+                    t.i0 = wt_address((int)x0, t.w, address);
+                    t.i1 = wt_address((int)x0 + 1, t.w, address);
+                    t.j0 = wt_address((int)y0, h, address);
+                    t.j1 = wt_address((int)y0 + 1, h, address);
+                    t.fx = x - x0;
+                    t.fy = y - y0;
+                }
+            }
+        }
+    }
+    auto add = [&](const auto& gr, const wt_taps& t, int x, int y, const wt_f4 value) __attribute__((always_inline)) {  // scatter.scatter_texel
+        if (x >= 0 && y >= 0) {
+            float* p = (float*)((char*)gr.texels.data + (long long)(t.start + y * t.w + x) * gr.texels.strides[0]);
+            for (int c = 0; c < 4; ++c) p[c] = p[c] + value[c];
+        }
+    };
+    auto mark = [&](const auto& gr, const wt_taps& t, int j) __attribute__((always_inline)) {  // scatter.mark_rows
+        const int row = t.start + j * t.w;
+        int* tile = (int*)((char*)gr.tiles.data + (long long)(row >> WT_TILE_SHIFT) * gr.tiles.strides[0]);
+        const int reach = (((row & ((1 << WT_TILE_SHIFT) - 1)) + 2 * t.w - 1) >> WT_TILE_SHIFT) + 1;
+        if (*tile < reach) *tile = reach;
+    };
+    auto bilinear = [&](const auto& gr, const wt_taps& t, const wt_f4 value) __attribute__((always_inline)) {  // scatter.scatter_bilinear
+        const wt_f4 top = value * (1.0f - t.fy);
+        const wt_f4 bottom = value * t.fy;
+        add(gr, t, t.i0, t.j0, top * (1.0f - t.fx));
+        add(gr, t, t.i1, t.j0, top * t.fx);
+        add(gr, t, t.i0, t.j1, bottom * (1.0f - t.fx));
+        add(gr, t, t.i1, t.j1, bottom * t.fx);
+        if (gr.tiles.shape[0] > 0) {
+            if (t.j0 >= 0) mark(gr, t, t.j0);
+            if (t.j1 >= 0 && (t.j0 < 0 || t.j1 < t.j0 || t.j1 > t.j0 + 1)) mark(gr, t, t.j1);
+        }
+    };
+    for (int l = 0; l < WT_L; ++l) {
+        for (int r = 0; r < reads; ++r) {
+            if (!active[r][l]) continue;
+            const auto& gr = *grad[r];
+            if (smp.filter == WT_NEAREST) {
+                const wt_taps& t = taps[r][0][l];
+                add(gr, t, t.i0, t.j0, g[r][l]);
+                if (gr.tiles.shape[0] > 0 && t.j0 >= 0) mark(gr, t, t.j0);
+            } else {  // scatter.scatter_levels: the coarser level first
+                wt_f4 finer = g[r][l];
+                if (fraction[r][l] > 0.0f) {
+                    finer = g[r][l] * (1.0f - fraction[r][l]);
+                    bilinear(gr, taps[r][1][l], g[r][l] * fraction[r][l]);
+                }
+                bilinear(gr, taps[r][0][l], finer);
+            }
+        }
+    }
+};
+auto wt_scatter_levels_any = [&](const int reads, const auto* const* tex, const auto* const* grad, const auto& smp, const wt_lane_f* u, const wt_lane_f* v,
+                                 const wt_lane_i* level, const wt_lane_f* fraction, const wt_lane_i* layer, const wt_lane_b* active, const wt_lane_f4* g) __attribute__((always_inline)) {
+    switch (smp.address) {
+        case WT_WRAP: wt_scatter_levels(WT_WRAP, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
+        case WT_CLAMP: wt_scatter_levels(WT_CLAMP, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
+        case WT_MIRROR: wt_scatter_levels(WT_MIRROR, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
+        default: wt_scatter_levels(WT_BORDER, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
+    }
+};
+""" % {"tile_shift": TILE_SHIFT}
+
+_SCATTER_LEVELS = _SCATTER_CORE + r"""
+// scatter_sample_level's reads: pixel base + l (finite UVs only), its layer, one level for all.
+const int n = uv.shape[0];
+const int count = n - base < WT_L ? n - base : WT_L;
+float u[1][WT_L], v[1][WT_L], fractions[1][WT_L];
+int levels[1][WT_L], layer[1][WT_L];
+bool active[1][WT_L];
+wt_f4 g[1][WT_L];
+for (int l = 0; l < WT_L; ++l) {
+    const int k = base + (l < count ? l : 0);
+    const float* p = (const float*)((const char*)uv.data + (long long)k * uv.strides[0]);
+    const bool finite = __builtin_fabsf(p[0]) <= wt_float_max && __builtin_fabsf(p[1]) <= wt_float_max;
+    active[0][l] = l < count && finite;
+    u[0][l] = active[0][l] ? p[0] : 0.0f;
+    v[0][l] = active[0][l] ? p[1] : 0.0f;
+    levels[0][l] = level;
+    fractions[0][l] = fraction;
+    layer[0][l] = layers.shape[0] > 0 ? wp::clamp(wt_int(layers, k), 0, tex.num_layers - 1) : constant_layer;  // texels.resolve_layer
+    wt_f4 a = {0.0f, 0.0f, 0.0f, 0.0f};  // texels.read_channels
+    const char* row = (const char*)adj.data + (long long)k * adj.strides[0];
+    for (int c = 0; c < adj.shape[1] && c < 4; ++c) a[c] = *(const float*)(row + (long long)c * adj.strides[1]);
+    g[0][l] = a;
+}
+const decltype(tex)* texs[1] = {&tex};
+const decltype(grad)* grads[1] = {&grad};
+wt_scatter_levels_any(1, texs, grads, smp, u, v, levels, fractions, layer, active, g);
+"""
+
+
+@wp.func_native(_cpu_only(_SCATTER_LEVELS))
+def scatter_levels_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, uv: wp.array(dtype=wp.vec2), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32,
+                        level: wp.int32, fraction: float, adj: wp.array2d(dtype=float), base: wp.int32):  # fmt: skip
+    """:func:`~warptex.kernels.scatter.scatter_levels` of the gradient ``adj[i]`` for the lane's
+    pixels ``i = base ..`` whose ``uv[i]`` is finite (:func:`sample_levels_lane`'s reads)."""
+    ...
+
+
+_SCATTER_LOD = _SCATTER_CORE + r"""
+// Up to three reads per lane pixel (a pixel's projections), read r from tex[r] into grad[r]; a read
+// adds where its weight is positive and its UV and LOD are finite (scatter.scatter_lod), and only
+// into a gradient that is needed.
+const decltype(tex0)* texs[3] = {&tex0, &tex1, &tex2};
+const decltype(grad0)* grads[3] = {&grad0, &grad1, &grad2};
+float us[3][WT_L], vs[3][WT_L], fractions[3][WT_L];
+int levels[3][WT_L], layer[3][WT_L];
+bool active[3][WT_L];
+wt_f4 g[3][WT_L];
+const bool trilinear = smp.filter >= WT_TRILINEAR;
+for (int r = 0; r < reads; ++r) {
+    const float top = (float)(texs[r]->num_levels - 1);
+    const bool needed = grads[r]->texels.shape[0] > 0;
+    const wp::mat_t<WT_L, 4, float>& gr = r == 0 ? g0 : (r == 1 ? g1 : g2);
+    for (int l = 0; l < WT_L; ++l) {
+        const bool finite = __builtin_fabsf(u.data[r][l]) <= wt_float_max && __builtin_fabsf(v.data[r][l]) <= wt_float_max && __builtin_fabsf(lod.data[r][l]) <= wt_float_max;
+        active[r][l] = needed && weight.data[r][l] > 0.0f && finite;
+        us[r][l] = active[r][l] ? u.data[r][l] : 0.0f;
+        vs[r][l] = active[r][l] ? v.data[r][l] : 0.0f;
+        const float c = wp::clamp(wp::clamp((active[r][l] ? lod.data[r][l] : 0.0f) + smp.lod_bias, smp.min_lod, smp.max_lod), 0.0f, top);  // footprint.mip_levels
+        levels[r][l] = (int)(trilinear ? wp::floor(c) : wp::floor(c + 0.5f));
+        fractions[r][l] = trilinear ? c - wp::floor(c) : 0.0f;
+        layer[r][l] = active[r][l] ? wp::clamp(layers.c[l], 0, texs[r]->num_layers - 1) : 0;
+        g[r][l] = (wt_f4){gr.data[l][0], gr.data[l][1], gr.data[l][2], gr.data[l][3]};
+    }
+}
+wt_scatter_levels_any(reads, texs, grads, smp, us, vs, levels, fractions, layer, active, g);
+"""
+
+
+@wp.func_native(_cpu_only(_SCATTER_LOD))
+def scatter_lod_lanes(tex0: TextureView, tex1: TextureView, tex2: TextureView, grad0: TexelGrad, grad1: TexelGrad, grad2: TexelGrad, smp: SamplerArgs, reads: wp.int32,
+                      layers: lane_ints, u: lane_reads, v: lane_reads, lod: lane_reads, weight: lane_reads, g0: lane_colours, g1: lane_colours, g2: lane_colours):  # fmt: skip
+    """:func:`~warptex.kernels.scatter.scatter_lod` of the gradients ``g_r[l]`` of reads ``r = 0 ..
+    reads - 1`` of every lane pixel ``l``: read ``r`` of ``tex_r`` (layer ``layers[l]``) at
+    ``(u[r, l], v[r, l])`` and ``lod[r, l]``, into ``grad_r`` (nothing where it is empty), where
+    ``weight[r, l] > 0`` (:func:`accumulate_lod_lane`'s reads), pixel by pixel and read by read as
+    the scalar kernels add them."""
+    ...
