@@ -112,7 +112,7 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
     if recorded and backward is not GENERATED:
         tape.record_func(_on(tape, backward), arrays=recorded)
     generated = bool(recorded) and backward is GENERATED
-    workers = workers_for(device, count, threads)
+    workers = min(workers_for(device, count, threads), cpu_count())  # threads past the cores would only take turns
     chunks = grad_bounds(count, covered, _shared_bytes(args), footprints) if generated and device.is_cpu else [0, count]  # CUDA: one launch
     if lanes is not None and device.is_cpu and not generated:
         kernel, per_index = lanes, LANES
