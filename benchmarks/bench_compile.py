@@ -12,7 +12,10 @@ measures that cold start, every measurement in a fresh process with a fresh temp
   compiler start-up in the process, reported on its own row) and its ahead-of-time compile time for
   an sm_90 GPU (``wp.compile_aot_module``; NVRTC runs without a GPU or driver, in one thread, so
   this machine's figure is what a GPU user waits for);
-- each job's totals: the sum of its modules' CPU and sm_90 compile times.
+- each job's totals: the sum of its modules' CPU and sm_90 compile times. The CPU's lane kernels
+  live in CPU-only modules (``warptex.splat8.lanes``...); where a CPU job compiles one, the same job
+  on a GPU compiles the one-pixel module it stands for (``warptex.splat8``), and its sm_90 figures
+  are that module's.
 
     python benchmarks/bench_compile.py                     # everything (a few minutes)
     python benchmarks/bench_compile.py --json compile.json --jobs render "triplanar fwd"
@@ -29,6 +32,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from warptex.kernels.family import LANES_SUFFIX
 
 # Small inputs: the jobs measure compiling, not running.
 _SETUP = """
@@ -174,17 +179,28 @@ def measure_module(name: str, target: str) -> dict:
 # -- report ---------------------------------------------------------------------------------------------
 
 
+def _on_gpu(module: str) -> str:
+    """The module a GPU compiles where the CPU compiles ``module`` (a lane module: its one-pixel kernels')."""
+    return module.removesuffix(LANES_SUFFIX)
+
+
 def run(args, report=print) -> dict:
     jobs = {}
     for name in args.jobs:
         jobs[name] = run_job(name, JOBS[name])
         report(f"job {name:32s} cold {jobs[name]['cold_wall_s']:6.1f} s  modules: {', '.join(jobs[name]['modules'])}")
-    modules = sorted({m for j in jobs.values() for m in j["modules"]})
     targets = ["cpu"] + ([str(a) for a in args.arch] if not args.no_cuda else [])
+    # A job compiles its CPU modules; the same job on a GPU compiles, for each CPU-only lane module,
+    # the module of the one-pixel kernels it stands for.
+    wanted = {}
+    for j in jobs.values():
+        for m in j["modules"]:
+            wanted.setdefault(m, set()).add("cpu")
+            wanted.setdefault(_on_gpu(m), set()).update(targets[1:])
     table, start_up = {}, {}
-    for name in modules:
+    for name in sorted(wanted):
         table[name] = {}
-        for target in list(targets):
+        for target in [t for t in list(targets) if t in wanted[name]]:
             try:
                 r = measure_module(name, target)
             except RuntimeError as err:
@@ -195,9 +211,9 @@ def run(args, report=print) -> dict:
                 continue
             table[name][target] = r["seconds"]
             start_up.setdefault(target, []).append(r["start_up"])
-        report(f"module {name:32s} " + "  ".join(f"{'CPU' if t == 'cpu' else 'sm_' + t} {table[name][t]:6.1f} s" for t in targets))
+        report(f"module {name:32s} " + "  ".join(f"{'CPU' if t == 'cpu' else 'sm_' + t} " + (f"{table[name][t]:6.1f} s" if t in table[name] else "     -  ") for t in targets))
     start = {t: min(v) for t, v in start_up.items()}
-    totals = {name: {t: sum(table[m][t] for m in j["modules"]) for t in targets} for name, j in jobs.items()}
+    totals = {name: {t: sum(table[m if t == "cpu" else _on_gpu(m)][t] for m in j["modules"]) for t in targets} for name, j in jobs.items()}
     return {"jobs": jobs, "modules": table, "start_up": start, "totals": totals, "targets": targets}
 
 
@@ -209,7 +225,7 @@ def markdown(result: dict) -> str:
     start = result["start_up"]
     lines.append("| *Warp's compiler start-up, once per process* | " + " | ".join(f"{start[t]:.1f}" for t in targets) + " |")
     for name, row in result["modules"].items():
-        lines.append(f"| `{name}` | " + " | ".join(f"{row[t]:.1f}" for t in targets) + " |")
+        lines.append(f"| `{name}` | " + " | ".join(f"{row[t]:.1f}" if t in row else "—" for t in targets) + " |")
     lines += ["", "| job | cold wall (s) | modules | " + " | ".join(f"{h} total (s)" for h in head) + " |", "|---|---:|---|" + "---:|" * len(targets)]
     for name, job in result["jobs"].items():
         mods = ", ".join(m.removeprefix("warptex.") for m in job["modules"])

@@ -42,6 +42,10 @@ from .lanes import LANES
 #: Gradient paths that name a per-pixel input start with this (see :attr:`Kernels.grads`).
 PIXELS = "pixels."
 
+#: The Warp modules of lane kernels are their technique's module's name with this suffix: the CPU
+#: compiles them instead of the one-pixel kernels, CUDA never (:func:`cpu_only`).
+LANES_SUFFIX = ".lanes"
+
 
 @dataclasses.dataclass(frozen=True)
 class Staged:
@@ -92,6 +96,13 @@ class Kernels:
     staged: Staged | None = None
     lanes: Any = None
     texel_grad_lanes: Any = None
+
+    def launched(self, device, grad: bool = False):
+        """The kernel a forward launch (``grad``: a hand-written gradient) runs on ``device``: its
+        lane kernel on the CPU where there is one, else the one-pixel kernel (for :func:`preload`)."""
+        lanes = self.texel_grad_lanes if grad else self.lanes
+        one = self.texel_grad if grad else self.forward
+        return lanes if lanes is not None and wp.get_device(device).is_cpu else one
 
     def all(self) -> list:
         """Every Warp kernel of this configuration, the staged steps' included."""
@@ -175,7 +186,10 @@ def lane_kernel(lane_body, args_t, pixels_t, out_t, *, module: str, name: str, g
     axis of the per-pixel arrays): ``forward(args, pixels, out)`` running ``lane_body(args, pixels,
     base, out)``, or, with ``grads_t``, ``texel_grad(args, pixels, grads, adj)`` running
     ``lane_body(args, pixels, base, grads, adj)``. Launched over ``ceil(count / LANES)`` indices
-    (``warptex._launch``); never on CUDA, which runs the one-pixel kernels."""
+    (``warptex._launch``); never on CUDA, which runs the one-pixel kernels. It goes into the CPU-only
+    Warp module ``module + LANES_SUFFIX``, so that a CPU job compiles no one-pixel kernel it does not
+    run, nor a GPU job a lane kernel."""
+    module += LANES_SUFFIX
     if grads_t is None:
 
         @wp.kernel(enable_backward=False, module=module, name=name)
@@ -189,6 +203,11 @@ def lane_kernel(lane_body, args_t, pixels_t, out_t, *, module: str, name: str, g
         lane_body(args, pixels, wp.tid() * LANES, grads, adj)
 
     return grad_lanes
+
+
+def cpu_only(kernel) -> bool:
+    """Whether ``kernel`` runs on the CPU only (a lane kernel)."""
+    return kernel.module.name.endswith(LANES_SUFFIX)
 
 
 def _texel_grad(scatter, args_t, pixels_t, grads_t, adj_t, *, module: str, name: str):

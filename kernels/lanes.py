@@ -14,7 +14,8 @@ CPU compiles a body: on CUDA the helpers are empty and never launched (one pixel
 from the scalar kernels).
 
 The lane kernels themselves are made by :func:`warptex.kernels.family.lane_kernel`; a technique's
-lane body (a ``@wp.func``) reads its pixels, calls these helpers and writes its outputs.
+lane body (a ``@wp.func``) reads its pixels, calls these helpers and writes its outputs. The
+texel-gradient twins of these helpers are in :mod:`.lane_scatter`.
 """
 
 import warp as wp

@@ -8,9 +8,9 @@ addressing and channel I/O in :mod:`.texels`, levels of detail and footprints in
 import warp as wp
 
 from .family import Kernels, family, lane_kernel, pixel_kernels
+from . import inlined, specialised
 from .lane_scatter import scatter_levels_lane
 from .lanes import sample_levels_lane
-from . import inlined, specialised
 from .filters import sample_footprint, sample_footprint_outlined, sample_levels
 from .footprint import point_footprint, texture_footprint
 from .scatter import scatter_footprint, scatter_levels
@@ -131,9 +131,9 @@ sample_pixel_outlined = _footprint_bodies(sample_footprint_outlined, "sample_pix
 @family(configurations=[{"level": False}, {"level": True}])
 def sample_kernels(*, level: bool) -> Kernels:
     """The ``sample`` kernels: with ``level``, for one LOD shared by every sample, its levels
-    resolved on the host (and a lane kernel for the CPU); else each sample's LOD from
-    ``args.lod_source``. The hand-written
-    gradient reaches the texels; UVs, LODs and derivatives take the generated adjoint."""
+    resolved on the host (and lane kernels for the CPU, forward and texel gradient); else each
+    sample's LOD from ``args.lod_source``. The hand-written gradient reaches the texels; UVs, LODs
+    and derivatives take the generated adjoint."""
     if level:
         kernels = pixel_kernels("sample_level", module=MODULE, args=SampleArgs, pixels=SamplePixels, out=wp.array2d(dtype=float),
                                 body=sample_level_pixel, scatter=scatter_sample_level, grads=SampleGrads, adjoint_body=sample_level_pixel)  # fmt: skip

@@ -308,3 +308,25 @@ def test_triplanar_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, 
     finally:
         wt.set_num_threads(previous)
     assert any(name == "triplanar_texel_grad_lanes" for name, _ in launched)
+
+
+def test_lane_kernels_live_in_cpu_only_modules():
+    """A CPU job compiles the lane kernels instead of the one-pixel ones, a GPU job never: every lane
+    kernel is in its one-pixel kernel's module + ``.lanes``, and ``launched`` picks it on the CPU."""
+    from warptex.kernels import all_kernels
+    from warptex.kernels.family import LANES_SUFFIX, cpu_only, registered_kernels
+    from warptex.kernels.sampling import sample_kernels
+    from warptex.kernels.splat import splat_kernels
+    from warptex.kernels.triplanar import triplanar_kernels
+
+    families = [sample_kernels(level=True), triplanar_kernels(normal=False, stochastic=False, faces=False), splat_kernels(capacity=8, stochastic=False)]
+    for k in families:
+        assert k.lanes is not None and cpu_only(k.lanes) and not cpu_only(k.forward)
+        assert k.lanes.module.name == k.forward.module.name + LANES_SUFFIX
+        assert k.launched("cpu") is k.lanes
+        if k.texel_grad_lanes is not None:
+            assert k.texel_grad_lanes.module.name == k.texel_grad.module.name + LANES_SUFFIX
+            assert k.launched("cpu", grad=True) is k.texel_grad_lanes
+    lanes = [k for k in all_kernels((4,)) if cpu_only(k)]
+    assert len(lanes) >= 5 and all(k in registered_kernels({"layer_counts": (4,)}) for k in lanes)
+    assert not any(cpu_only(k) for k in (sample_kernels(level=False).forward, triplanar_kernels(normal=False, stochastic=True, faces=False).forward))

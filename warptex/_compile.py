@@ -15,14 +15,18 @@ def preload(kernels, device=None) -> None:
     that knows which kernels it will run calls this first, so that a cold start compiles them in
     parallel (each compile is single-threaded, on the CPU and with NVRTC alike).
     """
-    modules = list({id(k.module): k.module for k in kernels}.values())
+    from warptex.kernels.family import cpu_only
+
+    device = wp.get_device(device)
+    modules = list({id(k.module): k.module for k in kernels if device.is_cpu or not cpu_only(k)}.values())
     if modules:
-        wp.force_load(device=wp.get_device(device), modules=modules, max_workers=min(len(modules), cpu_count()))
+        wp.force_load(device=device, modules=modules, max_workers=min(len(modules), cpu_count()))
 
 
 def precompile(device=None, *, layer_counts=(4,)) -> None:
     """Compile every warptex kernel for ``device`` now, side by side on every core, into Warp's
-    kernel cache (the first run of each kernel then starts at once).
+    kernel cache (the first run of each kernel then starts at once; on a GPU, every kernel but the
+    CPU's lane kernels).
 
     Args:
         device: Warp device (``None``: Warp's default).

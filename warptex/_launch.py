@@ -114,10 +114,7 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
     generated = bool(recorded) and backward is GENERATED
     workers = min(workers_for(device, count, threads), cpu_count())  # threads past the cores would only take turns
     chunks = grad_bounds(count, covered, _shared_bytes(args), footprints) if generated and device.is_cpu else [0, count]  # CUDA: one launch
-    if lanes is not None and device.is_cpu and not generated:
-        kernel, per_index = lanes, LANES
-    else:
-        per_index = 1
+    kernel, per_index = _with_lanes(kernel, None if generated else lanes, device)
     if workers == 1:
         _zero_rows(out)
         wp.launch(kernel, dim=-(-count // per_index), inputs=[args, pixels], outputs=[out], device=device, record_tape=generated and len(chunks) == 2)
@@ -134,6 +131,12 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
     if generated and (workers > 1 or len(chunks) > 2):  # else Warp recorded the launch's own adjoint
         backward = functools.partial(_backward, kernel=kernel, bounds=chunks, workers=workers, args=args, pixels=pixels, out=out, device=device)
         tape.record_func(_on(tape, backward), arrays=recorded)
+
+
+def _with_lanes(kernel, lanes, device) -> tuple:
+    """``(kernel to launch, pixels per launch index)``: ``lanes`` and its lane width on the CPU where
+    there is one, else ``kernel`` and 1 (launched over ``ceil(pixels / width)`` indices)."""
+    return (lanes, LANES) if lanes is not None and device.is_cpu else (kernel, 1)
 
 
 def _nbytes(array: wp.array) -> int:
@@ -219,10 +222,7 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
     device = wp.get_device(device)
     _check_rows(count, pixels, adj, *[t.grad for t in grads if t.per_pixel and t.grad is not None])
     grads_t = kernel.adj.args[2].type
-    if lanes is not None and device.is_cpu:
-        kernel, per_index = lanes, LANES
-    else:
-        per_index = 1
+    kernel, per_index = _with_lanes(kernel, lanes, device)
     texel = [t.grad for (name, ftype), t in zip(grads_t.vars.items(), grads) if t.grad is not None and not t.per_pixel and ftype.type is TexelGrad]
     plain = [t.grad for (name, ftype), t in zip(grads_t.vars.items(), grads) if t.grad is not None and not t.per_pixel and ftype.type is not TexelGrad]
     shared = list({id(g): g for g in texel + plain}.values())  # one texture may feed several fields

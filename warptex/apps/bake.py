@@ -60,14 +60,14 @@ def _choose_technique(func: str, technique, mesh_path, texture_path, layer_paths
     return technique
 
 
-def _kernels(technique: str, stochastic, normal_mapped: bool, num_layers: int) -> list:
-    """The kernels a bake runs: the texture-space G-buffer's, mip chains, and the technique's."""
+def _kernels(technique: str, stochastic, normal_mapped: bool, num_layers: int, device) -> list:
+    """The kernels a bake runs on ``device``: the texture-space G-buffer's, mip chains, and the technique's."""
     used = [kb.chart_kernel, kr.uv_kernel, ks.downsample_kernel]
     if technique == "splat":
-        return used + [kl.splat_kernels(capacity=kl.capacity(num_layers), stochastic=stochastic is not None).forward]
-    used.append(kt.triplanar_kernels(normal=False, stochastic=stochastic is not None, faces=False).forward)
+        return used + [kl.splat_kernels(capacity=kl.capacity(num_layers), stochastic=stochastic is not None).launched(device)]
+    used.append(kt.triplanar_kernels(normal=False, stochastic=stochastic is not None, faces=False).launched(device))
     if normal_mapped:
-        used.append(kt.triplanar_kernels(normal=True, stochastic=stochastic is not None, faces=False).forward)
+        used.append(kt.triplanar_kernels(normal=True, stochastic=stochastic is not None, faces=False).launched(device))
     return used
 
 
@@ -121,7 +121,7 @@ def run_bake(
     if tiling is not None and not (np.isfinite(tiling) and tiling > 0):
         raise ValueError(f"{func}(): tiling must be a finite number > 0, got {tiling!r}")
     sampler = Sampler(filter=filter)
-    preload(_kernels(technique, stochastic, normal_map_path is not None, len(layer_paths or ()) or 4), device)  # compiled side by side on a cold start
+    preload(_kernels(technique, stochastic, normal_map_path is not None, len(layer_paths or ()) or 4, device), device)  # compiled side by side on a cold start
 
     mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
     normal = None

@@ -114,12 +114,12 @@ def _embedded_texture(mesh: trimesh.Trimesh) -> np.ndarray | None:
     return io.srgb_to_linear(np.asarray(image.convert("RGB"), np.float32) / 255.0)
 
 
-def _kernels(terrain: bool) -> list:
-    """The kernels a render runs: rasterisation, mip chains, and the splat or sampling ones."""
+def _kernels(terrain: bool, device) -> list:
+    """The kernels a render runs on ``device``: rasterisation, mip chains, and the splat or sampling ones."""
     used = [kr.raster_kernel, ks.downsample_kernel]
     if terrain:
-        return used + [kl.splat_kernels(capacity=kl.capacity(len(LAYER_NAMES)), stochastic=False).forward]
-    return used + [ks.sample_kernels(level=False).forward, kt.triplanar_kernels(normal=False, stochastic=False, faces=False).forward]
+        return used + [kl.splat_kernels(capacity=kl.capacity(len(LAYER_NAMES)), stochastic=False).launched(device)]
+    return used + [ks.sample_kernels(level=False).launched(device), kt.triplanar_kernels(normal=False, stochastic=False, faces=False).launched(device)]
 
 
 def run_render(
@@ -184,7 +184,7 @@ def run_render(
     stages = tqdm(total=5, desc="render", unit="stage", disable=False if progress else None if progress is None else True)
     is_terrain = mesh_path is None and texture_path is None
     stages.set_postfix_str("kernels")
-    preload(_kernels(is_terrain), device)  # a cold start compiles them side by side
+    preload(_kernels(is_terrain, device), device)  # a cold start compiles them side by side
     stages.set_postfix_str("mesh")
     mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
     framing = terrain_camera(resolution, fov_y) if mesh_path is None else default_camera(mesh, resolution, fov_y)
