@@ -193,42 +193,66 @@ def sample_levels_lane(tex: TextureView, smp: SamplerArgs, uv: wp.array(dtype=wp
     ...
 
 
-_ACCUMULATE_LOD = r"""
+_ACCUMULATE_FOOTPRINT = r"""
+// filters.sample_footprint of each read lane (weight > 0): one tap reads (u, v) itself; a footprint
+// of several taps (the anisotropic filter's) the mean of its taps at footprint.footprint_uv, summed
+// in tap order, times 1 / taps. Lanes past their taps, not read, or not finite read (0, 0) at level 0.
 float us[WT_L], vs[WT_L], fractions[WT_L];
 int levels[WT_L], layer[WT_L];
 bool read[WT_L], finite[WT_L];
+int most = 0;  // the most taps of a read lane
 const float top = (float)(tex.num_levels - 1);
+const bool trilinear = smp.filter >= WT_TRILINEAR;
 for (int l = 0; l < WT_L; ++l) {
     read[l] = weight.c[l] > 0.0f;
-    // texels.finite_uv_lod; a lane that is not read, or reads NaN, reads (0, 0) at level 0.
-    finite[l] = __builtin_fabsf(u.c[l]) <= wt_float_max && __builtin_fabsf(v.c[l]) <= wt_float_max && __builtin_fabsf(lod.c[l]) <= wt_float_max;
-    const bool ok = read[l] && finite[l];
-    us[l] = ok ? u.c[l] : 0.0f;
-    vs[l] = ok ? v.c[l] : 0.0f;
-    const float c = wp::clamp(wp::clamp((ok ? lod.c[l] : 0.0f) + smp.lod_bias, smp.min_lod, smp.max_lod), 0.0f, top);  // footprint.mip_levels
-    const bool trilinear = smp.filter >= WT_TRILINEAR;
+    layer[l] = read[l] ? wp::clamp(layers.c[l], 0, tex.num_layers - 1) : 0;  // valid (the API checks), clamped all the same
+    const float c = wp::clamp(wp::clamp((read[l] ? lod.c[l] : 0.0f) + smp.lod_bias, smp.min_lod, smp.max_lod), 0.0f, top);  // footprint.mip_levels
     levels[l] = (int)(trilinear ? wp::floor(c) : wp::floor(c + 0.5f));
     fractions[l] = trilinear ? c - wp::floor(c) : 0.0f;
-    layer[l] = read[l] ? wp::clamp(layers.c[l], 0, tex.num_layers - 1) : 0;  // valid (the API checks), clamped all the same
+    const int n = read[l] ? (int)taps.c[l] : 0;  // footprint.footprint_taps
+    most = n > most ? n : most;
 }
-wt_f4 result[WT_L];
-wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layer, result);
-const wt_f4 nan4 = __builtin_nanf("");
-wp::mat_t<WT_L, 4, float> total = acc;
+wt_f4 total[WT_L], single[WT_L];  // the taps' sum; a one-tap footprint's sample itself
+for (int l = 0; l < WT_L; ++l) total[l] = (wt_f4){0.0f, 0.0f, 0.0f, 0.0f};
+for (int k = 0; k < most; ++k) {
+    bool tap[WT_L];
+    for (int l = 0; l < WT_L; ++l) {
+        const bool one = taps.c[l] == 1.0f;
+        const float s = (float)k + 0.5f - 0.5f * taps.c[l];
+        const float tu = one ? u.c[l] : u.c[l] + du.c[l] * s;  // footprint.footprint_uv
+        const float tv = one ? v.c[l] : v.c[l] + dv.c[l] * s;
+        tap[l] = read[l] && k < (int)taps.c[l];
+        finite[l] = __builtin_fabsf(tu) <= wt_float_max && __builtin_fabsf(tv) <= wt_float_max && __builtin_fabsf(lod.c[l]) <= wt_float_max;  // texels.finite_uv_lod
+        const bool ok = tap[l] && finite[l];
+        us[l] = ok ? tu : 0.0f;
+        vs[l] = ok ? tv : 0.0f;
+    }
+    wt_f4 result[WT_L];
+    wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layer, result);
+    const wt_f4 nan4 = __builtin_nanf("");
+    for (int l = 0; l < WT_L; ++l) {
+        const wt_f4 r = finite[l] ? result[l] : nan4;
+        if (k == 0) single[l] = r;
+        if (tap[l]) total[l] = total[l] + r;
+    }
+}
+wp::mat_t<WT_L, 4, float> out = acc;
 for (int l = 0; l < WT_L; ++l) {
     if (!read[l]) continue;
-    const wt_f4 r = finite[l] ? result[l] : nan4;
-    for (int c = 0; c < 4; ++c) total.data[l][c] = add ? acc.data[l][c] + weight.c[l] * r[c] : r[c];
+    const wt_f4 r = taps.c[l] == 1.0f ? single[l] : total[l] * (1.0f / taps.c[l]);
+    for (int c = 0; c < 4; ++c) out.data[l][c] = add ? acc.data[l][c] + weight.c[l] * r[c] : r[c];
 }
-return total;
+return out;
 """
 
 
-@wp.func_native(_cpu_only(_ACCUMULATE_LOD, "return acc;\n"))
-def accumulate_lod_lane(tex: TextureView, smp: SamplerArgs, layers: lane_ints, u: lane_floats, v: lane_floats, lod: lane_floats, weight: lane_floats, add: wp.int32, acc: lane_colours) -> lane_colours:
+@wp.func_native(_cpu_only(_ACCUMULATE_FOOTPRINT, "return acc;\n"))
+def accumulate_footprint_lane(tex: TextureView, smp: SamplerArgs, layers: lane_ints, u: lane_floats, v: lane_floats,
+                              lod: lane_floats, du: lane_floats, dv: lane_floats, taps: lane_floats, weight: lane_floats, add: wp.int32, acc: lane_colours) -> lane_colours:  # fmt: skip
     """``acc`` with, in every lane ``l`` whose ``weight[l] > 0``, ``s =``
-    :func:`~warptex.kernels.filters.sample_lod` of layer ``layers[l]`` (a valid layer) at
-    ``(u[l], v[l])`` and ``lod[l]`` (NaN where those are not finite) added as ``acc[l] + weight[l]
-    · s`` (``add``: a blend of projections' one-tap footprints, ``value += w · sample``), or put in
-    its place (not ``add``: ``value = sample``); the other lanes' rows as they are."""
+    :func:`~warptex.kernels.filters.sample_footprint` of layer ``layers[l]`` (a valid layer) at
+    ``(u[l], v[l])`` over the footprint ``(lod, du, dv, taps)[l]`` (NaN where a tap's UV or the LOD
+    is not finite) added as ``acc[l] + weight[l] · s`` (``add``: a blend of projections or layers,
+    ``value += w · sample``), or put in its place (not ``add``: ``value = sample``); the other
+    lanes' rows as they are."""
     ...

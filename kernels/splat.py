@@ -354,5 +354,5 @@ def splat_kernels(*, capacity: int, stochastic: bool) -> Kernels:
     forward, texel_grad, _ = pixel_kernels(f"splat{capacity}" + ("_stochastic" if stochastic else ""), module=module, args=SplatArgs, pixels=SplatPixels, out=wp.array2d(dtype=float),
                                            body=body, scatter=scatter_body, grads=SplatGrads)  # fmt: skip
     grads = ("args.layers", "args.heights", "args.maps", "args.reads.params.transition", None if stochastic else "args.reads.params.tiling")
-    lanes = None if stochastic else lane_kernel(lane_body(capacity, body, SplatPixels), SplatArgs, SplatPixels, wp.array2d(dtype=float), module=module, name=f"splat{capacity}_lanes")
+    lanes = None if stochastic else lane_kernel(lane_body(capacity, SplatPixels), SplatArgs, SplatPixels, wp.array2d(dtype=float), module=module, name=f"splat{capacity}_lanes")
     return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity), lanes=lanes)

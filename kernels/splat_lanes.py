@@ -4,9 +4,8 @@ The lane body (:func:`lane_body`) computes what :mod:`.splat`'s forward body com
 :data:`~.lanes.LANES` pixels, in three passes: each pixel's splat weights and reading point by the
 scalar blocks; then layer by layer, each pixel's reads (UV, footprint, weight and array layer, by
 ``layer_read`` and ``face_layer``) and the lane's texture reads by
-:func:`~.lanes.accumulate_lod_lane`, projection by projection in the order ``read_layer`` adds them;
-then each pixel's blend. The anisotropic filter, whose footprints may take several taps, goes pixel
-by pixel through the scalar forward body.
+:func:`~.lanes.accumulate_footprint_lane`, projection by projection in the order ``read_layer``
+adds them; then each pixel's blend.
 """
 
 import functools
@@ -14,10 +13,10 @@ import functools
 import warp as wp
 
 from . import inlined, specialised
-from .lanes import LANES, accumulate_lod_lane, lane_colours
+from .lanes import LANES, accumulate_footprint_lane, lane_colours
 from .splat_blend import blend_functions
 from .splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, PROJECT_TRIPLANAR, LayerPoint, LayerReads, SplatArgs, face_layer, layer_read, layer_reads, surface_weights
-from .texels import FILTER_ANISOTROPIC, TextureView, write_channels
+from .texels import TextureView, write_channels
 
 # Per lane pixel (row): a reading point's vectors, and (per read, row; per pixel, column) what a read
 # of a layer samples.
@@ -45,7 +44,10 @@ def read_lane_layer(tex: TextureView, j: wp.int32, reads: LayerReads, count: wp.
     params = reads.params
     u = _reads_f()
     v = _reads_f()
-    lod = _reads_f()
+    lod = _reads_f()  # the footprint: LOD, step and taps (footprint.py)
+    du = _reads_f()
+    dv = _reads_f()
+    taps = _reads_f()
     weight = _reads_f()
     layer = _reads_i()
     for l in range(count):
@@ -63,22 +65,24 @@ def read_lane_layer(tex: TextureView, j: wp.int32, reads: LayerReads, count: wp.
                 uv, fp, w = layer_read(tex, j, k, reads, pt)
                 u[k, l] = uv[0]
                 v[k, l] = uv[1]
-                lod[k, l] = fp[0]  # one tap: every filter but the anisotropic one
+                lod[k, l] = fp[0]
+                du[k, l] = fp[1]
+                dv[k, l] = fp[2]
+                taps[k, l] = fp[3]
                 weight[k, l] = w
                 layer[k, l] = face_layer(params, j, k, pt.n)
     value = lane_colours()
     if params.projection == PROJECT_TRIPLANAR:  # read_projections: value += w · sample, w > 0
         for k in range(3):
-            value = accumulate_lod_lane(tex, reads.smp, layer[k], u[k], v[k], lod[k], weight[k], 1, value)
+            value = accumulate_footprint_lane(tex, reads.smp, layer[k], u[k], v[k], lod[k], du[k], dv[k], taps[k], weight[k], 1, value)
     else:  # one read of weight 1: value = sample
-        value = accumulate_lod_lane(tex, reads.smp, layer[0], u[0], v[0], lod[0], weight[0], 0, value)
+        value = accumulate_footprint_lane(tex, reads.smp, layer[0], u[0], v[0], lod[0], du[0], dv[0], taps[0], weight[0], 0, value)
     return value
 
 
 @functools.cache
-def lane_body(cap: int, forward, pixels_t):
-    """The lane body of the plain splat of ``cap`` layers whose one-pixel body is ``forward``
-    (``pixels_t``: :class:`~.splat.SplatPixels`)."""
+def lane_body(cap: int, pixels_t):
+    """The lane body of the plain splat of ``cap`` layers (``pixels_t``: :class:`~.splat.SplatPixels`)."""
     f = blend_functions(cap)
     weights_t, colours_t = f.weights_t, f.colours_t
     lane_weights_t = wp.types.matrix(shape=(LANES, cap), dtype=float)
@@ -87,67 +91,63 @@ def lane_body(cap: int, forward, pixels_t):
     def lane(args: SplatArgs, pixels: pixels_t, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
         params = args.reads.params
-        if args.reads.smp.filter == FILTER_ANISOTROPIC:
+        w1s = lane_weights_t()
+        uv0 = _lane_vec2()
+        uv0_dx = _lane_vec2()
+        uv0_dy = _lane_vec2()
+        p = _lane_vec3()
+        n = _lane_vec3()
+        dpdx = _lane_vec3()
+        dpdy = _lane_vec3()
+        tri_w = _lane_vec3()
+        for l in range(count):  # each covered pixel's weights and reading point (layer_point)
+            i = base + l
+            if pixels.surface.mask[i] != 0.0:
+                pt_uv0 = pixels.uv0[i]
+                r, w0, total, w1 = f.splat_weights(args.maps, pt_uv0, args.map_smp, params)
+                for j in range(params.num_layers):
+                    w1s[l, j] = w1[j]
+                pn = pixels.surface.normal[i]
+                tw = surface_weights(params, args.reads.proj, pn)
+                for e in range(2):
+                    uv0[l, e] = pt_uv0[e]
+                    uv0_dx[l, e] = pixels.uv0_dx[i][e]
+                    uv0_dy[l, e] = pixels.uv0_dy[i][e]
+                for e in range(3):
+                    p[l, e] = pixels.surface.position[i][e]
+                    n[l, e] = pn[e]
+                    dpdx[l, e] = pixels.surface.position_dx[i][e]
+                    dpdy[l, e] = pixels.surface.position_dy[i][e]
+                    tri_w[l, e] = tw[e]
+        colours = lane_layers_t()
+        heights = lane_weights_t()
+        for j in range(params.num_layers):  # read_layers: every weighted layer, lane by lane
+            weighted = _lane_vec3()
             for l in range(count):
-                forward(args, pixels, base + l, out)
-        else:
-            w1s = lane_weights_t()
-            uv0 = _lane_vec2()
-            uv0_dx = _lane_vec2()
-            uv0_dy = _lane_vec2()
-            p = _lane_vec3()
-            n = _lane_vec3()
-            dpdx = _lane_vec3()
-            dpdy = _lane_vec3()
-            tri_w = _lane_vec3()
-            for l in range(count):  # each covered pixel's weights and reading point (layer_point)
-                i = base + l
-                if pixels.surface.mask[i] != 0.0:
-                    pt_uv0 = pixels.uv0[i]
-                    r, w0, total, w1 = f.splat_weights(args.maps, pt_uv0, args.map_smp, params)
-                    for j in range(params.num_layers):
-                        w1s[l, j] = w1[j]
-                    pn = pixels.surface.normal[i]
-                    tw = surface_weights(params, args.reads.proj, pn)
-                    for e in range(2):
-                        uv0[l, e] = pt_uv0[e]
-                        uv0_dx[l, e] = pixels.uv0_dx[i][e]
-                        uv0_dy[l, e] = pixels.uv0_dy[i][e]
-                    for e in range(3):
-                        p[l, e] = pixels.surface.position[i][e]
-                        n[l, e] = pn[e]
-                        dpdx[l, e] = pixels.surface.position_dx[i][e]
-                        dpdy[l, e] = pixels.surface.position_dy[i][e]
-                        tri_w[l, e] = tw[e]
-            colours = lane_layers_t()
-            heights = lane_weights_t()
-            for j in range(params.num_layers):  # read_layers: every weighted layer, lane by lane
-                weighted = _lane_vec3()
-                for l in range(count):
-                    weighted[l, 0] = w1s[l, j]
-                value = read_lane_layer(args.layers, j, args.reads, count, weighted, uv0, uv0_dx, uv0_dy, p, n, dpdx, dpdy, tri_w)
-                height = lane_colours()
-                if params.height_mode == HEIGHT_ARRAY:
-                    height = read_lane_layer(args.heights, j, args.reads, count, weighted, uv0, uv0_dx, uv0_dy, p, n, dpdx, dpdy, tri_w)
-                for l in range(count):
-                    if w1s[l, j] > 0.0:
-                        colours[l * cap + j] = value[l]
-                        if params.height_mode == HEIGHT_CHANNEL:
-                            heights[l, j] = value[l, params.height_channel]
-                        elif params.height_mode == HEIGHT_ARRAY:
-                            heights[l, j] = height[l, 0]
-            for l in range(count):  # each pixel's blend
-                colour = wp.vec4(0.0)
-                if pixels.surface.mask[base + l] != 0.0:
-                    w1 = weights_t()
-                    c = colours_t()
-                    hv = weights_t()
-                    for j in range(params.num_layers):
-                        w1[j] = w1s[l, j]
-                        if w1[j] > 0.0:
-                            c[j] = colours[l * cap + j]
-                            hv[j] = heights[l, j]
-                    colour = f.blend(w1, c, hv, params)
-                write_channels(out, base + l, colour)
+                weighted[l, 0] = w1s[l, j]
+            value = read_lane_layer(args.layers, j, args.reads, count, weighted, uv0, uv0_dx, uv0_dy, p, n, dpdx, dpdy, tri_w)
+            height = lane_colours()
+            if params.height_mode == HEIGHT_ARRAY:
+                height = read_lane_layer(args.heights, j, args.reads, count, weighted, uv0, uv0_dx, uv0_dy, p, n, dpdx, dpdy, tri_w)
+            for l in range(count):
+                if w1s[l, j] > 0.0:
+                    colours[l * cap + j] = value[l]
+                    if params.height_mode == HEIGHT_CHANNEL:
+                        heights[l, j] = value[l, params.height_channel]
+                    elif params.height_mode == HEIGHT_ARRAY:
+                        heights[l, j] = height[l, 0]
+        for l in range(count):  # each pixel's blend
+            colour = wp.vec4(0.0)
+            if pixels.surface.mask[base + l] != 0.0:
+                w1 = weights_t()
+                c = colours_t()
+                hv = weights_t()
+                for j in range(params.num_layers):
+                    w1[j] = w1s[l, j]
+                    if w1[j] > 0.0:
+                        c[j] = colours[l * cap + j]
+                        hv[j] = heights[l, j]
+                colour = f.blend(w1, c, hv, params)
+            write_channels(out, base + l, colour)
 
     return inlined(specialised(lane, f"splat{cap}_lane"), module=f"warptex.splat{cap}")

@@ -2,10 +2,10 @@
 gradient, one texture per axis, plain sampling.
 
 Each pixel's surface, projection weights, UVs and footprints come from the scalar blocks; the lane's
-texture reads from :func:`~.lanes.accumulate_lod_lane` and its texel-gradient adds from
+texture reads from :func:`~.lanes.accumulate_footprint_lane` and its texel-gradient adds from
 :func:`~.lane_scatter.scatter_lod_lanes`, both in the order the scalar bodies take them, so the
-outputs and the gradients are the scalar kernels' bits. The anisotropic filter, whose footprints
-may take several taps, goes pixel by pixel through the scalar bodies.
+outputs and the gradients are the scalar kernels' bits. The gradient of the anisotropic filter,
+whose footprints may take several taps, goes pixel by pixel through the scalar body.
 """
 
 import functools
@@ -15,7 +15,7 @@ import warp as wp
 from . import inlined, specialised
 from .faces import FaceGrads, on_axis
 from .lane_scatter import scatter_lod_lanes
-from .lanes import LANES, accumulate_lod_lane, lane_colours, lane_ints
+from .lanes import LANES, accumulate_footprint_lane, lane_colours, lane_ints
 from .projection import SurfacePixels, projection_footprint, projection_uv, projection_weights, surface
 from .texels import FILTER_ANISOTROPIC, read_channels, write_channels
 
@@ -31,35 +31,37 @@ def lane_bodies(colour, colour_grad, args_t):
 
     def colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
-        if args.smp.filter == FILTER_ANISOTROPIC:
-            for l in range(count):
-                colour(args, pixels, base + l, out)
-        else:
-            faces = args.faces
-            u = _lane_values()
-            v = _lane_values()
-            lod = _lane_values()
-            weight = _lane_values()  # 0: not read (zero weight, or an uncovered pixel)
-            for l in range(count):
-                i = base + l
-                if pixels.mask[i] != 0.0:
-                    p, n, dpdx, dpdy = surface(args.proj, pixels, i)
-                    w = projection_weights(args.proj, n)
-                    for axis in range(3):
-                        if w[axis] > 0.0:
-                            uv = projection_uv(args.proj, axis, p, n)
-                            fp = projection_footprint(on_axis(faces.px, faces.py, faces.pz, axis), args.proj, axis, n, dpdx, dpdy, args.smp)
-                            u[axis, l] = uv[0]
-                            v[axis, l] = uv[1]
-                            lod[axis, l] = fp[0]  # one tap: every filter but the anisotropic one
-                            weight[axis, l] = w[axis]
-            layers = lane_ints(args.layer)
-            value = lane_colours()
-            value = accumulate_lod_lane(faces.px, args.smp, layers, u[0], v[0], lod[0], weight[0], 1, value)
-            value = accumulate_lod_lane(faces.py, args.smp, layers, u[1], v[1], lod[1], weight[1], 1, value)
-            value = accumulate_lod_lane(faces.pz, args.smp, layers, u[2], v[2], lod[2], weight[2], 1, value)
-            for l in range(count):
-                write_channels(out, base + l, value[l])
+        faces = args.faces
+        u = _lane_values()
+        v = _lane_values()
+        lod = _lane_values()  # the footprint: LOD, step and taps (footprint.py)
+        du = _lane_values()
+        dv = _lane_values()
+        taps = _lane_values()
+        weight = _lane_values()  # 0: not read (zero weight, or an uncovered pixel)
+        for l in range(count):
+            i = base + l
+            if pixels.mask[i] != 0.0:
+                p, n, dpdx, dpdy = surface(args.proj, pixels, i)
+                w = projection_weights(args.proj, n)
+                for axis in range(3):
+                    if w[axis] > 0.0:
+                        uv = projection_uv(args.proj, axis, p, n)
+                        fp = projection_footprint(on_axis(faces.px, faces.py, faces.pz, axis), args.proj, axis, n, dpdx, dpdy, args.smp)
+                        u[axis, l] = uv[0]
+                        v[axis, l] = uv[1]
+                        lod[axis, l] = fp[0]
+                        du[axis, l] = fp[1]
+                        dv[axis, l] = fp[2]
+                        taps[axis, l] = fp[3]
+                        weight[axis, l] = w[axis]
+        layers = lane_ints(args.layer)
+        value = lane_colours()
+        value = accumulate_footprint_lane(faces.px, args.smp, layers, u[0], v[0], lod[0], du[0], dv[0], taps[0], weight[0], 1, value)
+        value = accumulate_footprint_lane(faces.py, args.smp, layers, u[1], v[1], lod[1], du[1], dv[1], taps[1], weight[1], 1, value)
+        value = accumulate_footprint_lane(faces.pz, args.smp, layers, u[2], v[2], lod[2], du[2], dv[2], taps[2], weight[2], 1, value)
+        for l in range(count):
+            write_channels(out, base + l, value[l])
 
     def colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)

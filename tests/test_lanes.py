@@ -330,3 +330,26 @@ def test_lane_kernels_live_in_cpu_only_modules():
     lanes = [k for k in all_kernels((4,)) if cpu_only(k)]
     assert len(lanes) >= 5 and all(k in registered_kernels({"layer_counts": (4,)}) for k in lanes)
     assert not any(cpu_only(k) for k in (sample_kernels(level=False).forward, triplanar_kernels(normal=False, stochastic=True, faces=False).forward))
+
+
+@pytest.mark.parametrize("address", ["wrap", "border"])
+def test_anisotropic_lanes_read_every_tap(rng, address):
+    """Footprints stretched 100:1 along a random direction take ``max_aniso`` taps (others one, or
+    a few), each lane its own count: the lanes' means of taps are the one-pixel kernel's bits."""
+    count = 999
+    g = _hand_gbuffer(rng, count)
+    angle = rng.uniform(0.0, np.pi, count)
+    major = np.stack([np.cos(angle), np.sin(angle), np.zeros(count)], -1).astype(np.float32)
+    minor = np.stack([-np.sin(angle), np.cos(angle), np.zeros(count)], -1).astype(np.float32)
+    stretch = rng.choice([1.0, 3.0, 100.0], count).astype(np.float32)[:, None]
+    g.normal.assign(np.tile(np.float32([0.1, 0.2, 1.0]), (1, count, 1)))
+    g.position.assign(rng.uniform(0.05, 0.45, (1, count, 3)).astype(np.float32))  # inside the texture, for the border mode
+    g.position_dx.assign((major * 0.01 * stretch).reshape(1, count, 3))
+    g.position_dy.assign((minor * 0.01).reshape(1, count, 3))
+    tex = wt.Texture(rng.random((128, 128, 4), dtype=np.float32))
+    smp = wt.Sampler(filter="anisotropic", address=address, max_aniso=8)
+    lanes, scalar = _both(lambda: wt.triplanar(g, tex, tiling=2.0, sampler=smp))
+    _same_bits(lanes, scalar)
+    trilinear = wt.triplanar(g, tex, tiling=2.0, sampler=wt.Sampler(filter="trilinear", address=address)).numpy()
+    stretched = (stretch[:, 0] == 100.0) & (g.mask.numpy()[0] > 0)
+    assert (np.abs(lanes - trilinear)[0][stretched].max(-1) > 1e-3).mean() > 0.5  # those pixels read several taps
