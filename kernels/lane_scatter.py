@@ -23,18 +23,26 @@ typedef float wt_lane_f[WT_L];
 typedef int wt_lane_i[WT_L];
 typedef bool wt_lane_b[WT_L];
 typedef wt_f4 wt_lane_f4[WT_L];
-auto wt_scatter_levels = [&](const int address, const int reads, const auto* const* tex, const auto* const* grad, const auto& smp, const wt_lane_f* u, const wt_lane_f* v,
+auto wt_scatter_levels = [&](const int address, const bool same, const int reads, const auto* const* tex, const auto* const* grad, const auto& smp, const wt_lane_f* u, const wt_lane_f* v,
                              const wt_lane_i* level, const wt_lane_f* fraction, const wt_lane_i* layer, const wt_lane_b* active, const wt_lane_f4* g) __attribute__((always_inline)) {
+    // With same, every lane of a read has one level and fraction: their sizes are read once.
     wt_taps taps[3][2][WT_L];  // [read][fine, coarse][lane]
+    bool blend = false;  // a lane reads two levels (trilinear)
+    for (int r = 0; r < reads; ++r)
+        for (int l = 0; l < WT_L; ++l) blend |= smp.filter != WT_NEAREST && active[r][l] && fraction[r][l] > 0.0f;
     for (int r = 0; r < reads; ++r) {
-        for (int pass = 0; pass < 2; ++pass) {
+        for (int pass = 0; pass < (blend ? 2 : 1); ++pass) {
+            auto level_of = [&](int l) __attribute__((always_inline)) { return pass == 0 || fraction[r][l] <= 0.0f ? level[r][l] : level[r][l] + 1; };
+            const int same_w = same ? wt_int(tex[r]->level_width, level_of(0)) : 0;
+            const int same_h = same ? wt_int(tex[r]->level_height, level_of(0)) : 0;
+            const int same_start = same ? wt_int(tex[r]->level_offset, level_of(0)) : 0;
             for (int l = 0; l < WT_L; ++l) {  // filters.nearest_tap / bilinear_taps
                 const float ru = wt_reduce(u[r][l], address), rv = wt_reduce(v[r][l], address);
-                const int k = pass == 0 || fraction[r][l] <= 0.0f ? level[r][l] : level[r][l] + 1;
+                const int k = level_of(l);
                 wt_taps& t = taps[r][pass][l];
-                t.w = wt_int(tex[r]->level_width, k);
-                const int h = wt_int(tex[r]->level_height, k);
-                t.start = wt_int(tex[r]->level_offset, k) + layer[r][l] * h * t.w;
+                t.w = same ? same_w : wt_int(tex[r]->level_width, k);
+                const int h = same ? same_h : wt_int(tex[r]->level_height, k);
+                t.start = (same ? same_start : wt_int(tex[r]->level_offset, k)) + layer[r][l] * h * t.w;
                 if (smp.filter == WT_NEAREST) {
                     t.i0 = wt_address((int)wp::floor(ru * (float)t.w), t.w, address);
                     t.j0 = wt_address((int)wp::floor((1.0f - rv) * (float)h), h, address);
@@ -96,13 +104,13 @@ auto wt_scatter_levels = [&](const int address, const int reads, const auto* con
         }
     }
 };
-auto wt_scatter_levels_any = [&](const int reads, const auto* const* tex, const auto* const* grad, const auto& smp, const wt_lane_f* u, const wt_lane_f* v,
+auto wt_scatter_levels_any = [&](const bool same, const int reads, const auto* const* tex, const auto* const* grad, const auto& smp, const wt_lane_f* u, const wt_lane_f* v,
                                  const wt_lane_i* level, const wt_lane_f* fraction, const wt_lane_i* layer, const wt_lane_b* active, const wt_lane_f4* g) __attribute__((always_inline)) {
     switch (smp.address) {
-        case WT_WRAP: wt_scatter_levels(WT_WRAP, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
-        case WT_CLAMP: wt_scatter_levels(WT_CLAMP, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
-        case WT_MIRROR: wt_scatter_levels(WT_MIRROR, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
-        default: wt_scatter_levels(WT_BORDER, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
+        case WT_WRAP: wt_scatter_levels(WT_WRAP, same, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
+        case WT_CLAMP: wt_scatter_levels(WT_CLAMP, same, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
+        case WT_MIRROR: wt_scatter_levels(WT_MIRROR, same, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
+        default: wt_scatter_levels(WT_BORDER, same, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
     }
 };
 """ % {"tile_shift": TILE_SHIFT}
@@ -132,7 +140,7 @@ for (int l = 0; l < WT_L; ++l) {
 }
 const decltype(tex)* texs[1] = {&tex};
 const decltype(grad)* grads[1] = {&grad};
-wt_scatter_levels_any(1, texs, grads, smp, u, v, levels, fractions, layer, active, g);
+wt_scatter_levels_any(true, 1, texs, grads, smp, u, v, levels, fractions, layer, active, g);
 """
 
 
@@ -171,7 +179,7 @@ for (int r = 0; r < reads; ++r) {
         g[r][l] = (wt_f4){gr.data[l][0], gr.data[l][1], gr.data[l][2], gr.data[l][3]};
     }
 }
-wt_scatter_levels_any(reads, texs, grads, smp, us, vs, levels, fractions, layer, active, g);
+wt_scatter_levels_any(false, reads, texs, grads, smp, us, vs, levels, fractions, layer, active, g);
 """
 
 

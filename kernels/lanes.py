@@ -65,8 +65,19 @@ auto wt_int = [](const wp::array_t<int>& a, int k) __attribute__((always_inline)
 };
 // res[l] = filters.sample_levels(tex, layer[l], (u[l], v[l]), level[l], fraction[l], smp) for every
 // lane. Each level read is cut in two: every lane's addresses and weights, then every lane's loads,
-// so that the loads are in flight together. Compiled once per address mode (below).
-auto wt_sample_levels = [&](const int address, const auto& tex, const auto& smp, const float* u, const float* v, const int* level, const float* fraction, const int* layer, wt_f4* res) __attribute__((always_inline)) {
+// so that the loads are in flight together. Compiled once per address mode (below), and apart for
+// one level and fraction in every lane (same: the level's size and offset read once).
+auto wt_sample_levels = [&](const int address, const bool same, const auto& tex, const auto& smp, const float* u, const float* v, const int* level, const float* fraction, const int* layer, wt_f4* res) __attribute__((always_inline)) {
+    auto size = [&](int k, int& w, int& h, int& start) __attribute__((always_inline)) {
+        w = wt_int(tex.level_width, k);
+        h = wt_int(tex.level_height, k);
+        start = wt_int(tex.level_offset, k);
+    };
+    int same_w[2], same_h[2], same_start[2];  // with same: each pass's level
+    if (same) {
+        size(level[0], same_w[0], same_h[0], same_start[0]);
+        size(fraction[0] > 0.0f ? level[0] + 1 : level[0], same_w[1], same_h[1], same_start[1]);
+    }
     const char* tb = (const char*)tex.texels.data;
     const long long ts = tex.texels.strides[0];
     const wt_f4 border = {smp.border.c[0], smp.border.c[1], smp.border.c[2], smp.border.c[3]};
@@ -86,10 +97,11 @@ auto wt_sample_levels = [&](const int address, const auto& tex, const auto& smp,
     bool inside[4][WT_L];
     if (smp.filter == WT_NEAREST) {  // filters.sample_nearest
         for (int l = 0; l < WT_L; ++l) {
-            const int w = wt_int(tex.level_width, level[l]), h = wt_int(tex.level_height, level[l]);
+            int w = same_w[0], h = same_h[0], start = same_start[0];
+            if (!same) size(level[l], w, h, start);
             const int x = wt_address((int)wp::floor(ru[l] * (float)w), w, address);
             const int y = wt_address((int)wp::floor((1.0f - rv[l]) * (float)h), h, address);
-            index[0][l] = wt_int(tex.level_offset, level[l]) + layer[l] * h * w + y * w + x;
+            index[0][l] = start + layer[l] * h * w + y * w + x;
             inside[0][l] = address != WT_BORDER || (x >= 0 && y >= 0);  // only the border mode reads outside
         }
         for (int l = 0; l < WT_L; ++l) res[l] = load(index[0][l], inside[0][l]);
@@ -98,9 +110,9 @@ auto wt_sample_levels = [&](const int address, const auto& tex, const auto& smp,
     float fx[WT_L], fy[WT_L];
     for (int pass = 0; pass < (blend ? 2 : 1); ++pass) {  // the level, then (trilinear) the next one
         for (int l = 0; l < WT_L; ++l) {  // filters.bilinear_taps
-            const int k = pass == 0 || fraction[l] <= 0.0f ? level[l] : level[l] + 1;
-            const int w = wt_int(tex.level_width, k), h = wt_int(tex.level_height, k);
-            const int s = wt_int(tex.level_offset, k) + layer[l] * h * w;
+            int w = same_w[pass], h = same_h[pass], start = same_start[pass];
+            if (!same) size(pass == 0 || fraction[l] <= 0.0f ? level[l] : level[l] + 1, w, h, start);
+            const int s = start + layer[l] * h * w;
             const float x = ru[l] * (float)w - 0.5f;
             const float y = (1.0f - rv[l]) * (float)h - 0.5f;
             const float x0 = wp::floor(x);
@@ -129,12 +141,12 @@ auto wt_sample_levels = [&](const int address, const auto& tex, const auto& smp,
 };
 // wt_sample_levels with the address mode a constant, once per mode (a mode tested per texel
 // measured slower).
-auto wt_sample_levels_any = [&](const auto& tex, const auto& smp, const float* u, const float* v, const int* level, const float* fraction, const int* layer, wt_f4* res) __attribute__((always_inline)) {
+auto wt_sample_levels_any = [&](const bool same, const auto& tex, const auto& smp, const float* u, const float* v, const int* level, const float* fraction, const int* layer, wt_f4* res) __attribute__((always_inline)) {
     switch (smp.address) {
-        case WT_WRAP: wt_sample_levels(WT_WRAP, tex, smp, u, v, level, fraction, layer, res); break;
-        case WT_CLAMP: wt_sample_levels(WT_CLAMP, tex, smp, u, v, level, fraction, layer, res); break;
-        case WT_MIRROR: wt_sample_levels(WT_MIRROR, tex, smp, u, v, level, fraction, layer, res); break;
-        default: wt_sample_levels(WT_BORDER, tex, smp, u, v, level, fraction, layer, res); break;
+        case WT_WRAP: wt_sample_levels(WT_WRAP, same, tex, smp, u, v, level, fraction, layer, res); break;
+        case WT_CLAMP: wt_sample_levels(WT_CLAMP, same, tex, smp, u, v, level, fraction, layer, res); break;
+        case WT_MIRROR: wt_sample_levels(WT_MIRROR, same, tex, smp, u, v, level, fraction, layer, res); break;
+        default: wt_sample_levels(WT_BORDER, same, tex, smp, u, v, level, fraction, layer, res); break;
     }
 };
 """ % {"lanes": LANES}
@@ -165,7 +177,7 @@ if (layers.shape[0] > 0) {  // texels.resolve_layer
     for (int l = 0; l < WT_L; ++l) layer[l] = wp::clamp(wt_int(layers, base + (l < count ? l : 0)), 0, tex.num_layers - 1);
 }
 wt_f4 result[WT_L];
-wt_sample_levels_any(tex, smp, u, v, levels, fractions, layer, result);
+wt_sample_levels_any(true, tex, smp, u, v, levels, fractions, layer, result);
 char* ob = (char*)out.data;  // texels.write_channels
 const wt_f4 nan4 = __builtin_nanf("");
 const int channels = out.shape[1];
@@ -228,7 +240,7 @@ for (int k = 0; k < most; ++k) {
         vs[l] = ok ? tv : 0.0f;
     }
     wt_f4 result[WT_L];
-    wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layer, result);
+    wt_sample_levels_any(false, tex, smp, us, vs, levels, fractions, layer, result);
     const wt_f4 nan4 = __builtin_nanf("");
     for (int l = 0; l < WT_L; ++l) {
         const wt_f4 r = finite[l] ? result[l] : nan4;
