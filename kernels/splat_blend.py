@@ -30,7 +30,7 @@ def capacity(num_layers: int) -> int:
 @functools.cache
 def blend_functions(cap: int) -> types.SimpleNamespace:
     """The blend's ``@wp.func``\\ s for up to ``cap`` layers, in the Warp module ``warptex.splat{cap}``:
-    ``splat_weights``, ``blend``, ``blend_backward``, ``weights_backward``, ``map_gradient``,
+    ``splat_weights`` (``map_values`` and ``weights_of`` its two steps), ``blend``, ``blend_backward``, ``weights_backward``, ``map_gradient``,
     ``scatter_maps``, ``maps_uv_gradient``, and the types ``weights_t`` (``cap`` floats) and
     ``colours_t`` (``cap × 4``)."""
     weights_t = wp.types.vector(length=cap, dtype=float)
@@ -38,16 +38,18 @@ def blend_functions(cap: int) -> types.SimpleNamespace:
     module = f"warptex.splat{cap}"
 
     @wp.func(module=module)
-    def splat_weights(maps: TextureView, uv: wp.vec2, map_smp: SamplerArgs, params: SplatParams):
-        """``(r, w0, total, w1)``: the raw splat values, clamped at 0, their sum, and the weights
-        (normalised when ``params.normalize``); one bilinear read per map."""
-        r = weights_t()
-        for m in range(map_count(params)):
-            texel = sample_lod(maps, m, uv, 0.0, map_smp)
-            for c in range(4):
-                j = m * params.map_channels + c
-                if c < params.map_channels and j < params.num_layers:
-                    r[j] = texel[c]
+    def map_values(r: weights_t, m: wp.int32, texel: wp.vec4, params: SplatParams) -> weights_t:
+        """``r`` with map ``m``'s ``texel`` (its read at a pixel) in the raw splat values of its layers."""
+        values = r
+        for c in range(4):
+            j = m * params.map_channels + c
+            if c < params.map_channels and j < params.num_layers:
+                values[j] = texel[c]
+        return values
+
+    @wp.func(module=module)
+    def weights_of(r: weights_t, params: SplatParams):
+        """``(r, w0, total, w1)`` of :func:`splat_weights` from the raw splat values ``r``."""
         w0 = weights_t()
         for j in range(params.num_layers):
             w0[j] = wp.max(r[j], 0.0)
@@ -56,6 +58,15 @@ def blend_functions(cap: int) -> types.SimpleNamespace:
         if params.normalize != 0:
             w1 = w0 / wp.max(total, SPLAT_EPS)
         return r, w0, total, w1
+
+    @wp.func(module=module)
+    def splat_weights(maps: TextureView, uv: wp.vec2, map_smp: SamplerArgs, params: SplatParams):
+        """``(r, w0, total, w1)``: the raw splat values, clamped at 0, their sum, and the weights
+        (normalised when ``params.normalize``); one bilinear read per map."""
+        r = weights_t()
+        for m in range(map_count(params)):
+            r = map_values(r, m, sample_lod(maps, m, uv, 0.0, map_smp), params)
+        return weights_of(r, params)
 
     @wp.func(module=module)
     def blend(w1: weights_t, c: colours_t, hv: weights_t, params: SplatParams) -> wp.vec4:
@@ -176,5 +187,5 @@ def blend_functions(cap: int) -> types.SimpleNamespace:
             g_uv += wp.vec2(wp.dot(gm, d_u), wp.dot(gm, d_v))
         return g_uv
 
-    return types.SimpleNamespace(weights_t=weights_t, colours_t=colours_t, splat_weights=splat_weights, blend=blend, blend_backward=blend_backward,
+    return types.SimpleNamespace(weights_t=weights_t, colours_t=colours_t, splat_weights=splat_weights, map_values=map_values, weights_of=weights_of, blend=blend, blend_backward=blend_backward,
                                  weights_backward=weights_backward, map_gradient=map_gradient, scatter_maps=scatter_maps, maps_uv_gradient=maps_uv_gradient)  # fmt: skip

@@ -13,9 +13,9 @@ import functools
 import warp as wp
 
 from . import inlined, specialised
-from .lanes import LANES, accumulate_footprint_lane, lane_colours
+from .lanes import LANES, accumulate_footprint_lane, lane_colours, lane_floats, lane_ints
 from .splat_blend import blend_functions
-from .splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, PROJECT_TRIPLANAR, LayerPoint, LayerReads, SplatArgs, face_layer, layer_read, layer_reads, surface_weights
+from .splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, PROJECT_TRIPLANAR, LayerPoint, LayerReads, SplatArgs, face_layer, layer_read, layer_reads, map_count, surface_weights
 from .texels import TextureView, write_channels
 
 # Per lane pixel (row): a reading point's vectors, and (per read, row; per pixel, column) what a read
@@ -100,11 +100,26 @@ def lane_body(cap: int, pixels_t):
         dpdx = _lane_vec3()
         dpdy = _lane_vec3()
         tri_w = _lane_vec3()
+        covered = lane_floats()  # the splat maps' reads (splat_weights), lane by lane
+        map_u = lane_floats()
+        map_v = lane_floats()
+        for l in range(count):
+            if pixels.surface.mask[base + l] != 0.0:
+                covered[l] = 1.0
+                map_u[l] = pixels.uv0[base + l][0]
+                map_v[l] = pixels.uv0[base + l][1]
+        rs = lane_weights_t()
+        zero = lane_floats()
+        for m in range(map_count(params)):
+            texels = accumulate_footprint_lane(args.maps, args.map_smp, lane_ints(m), map_u, map_v, zero, zero, zero, lane_floats(1.0), covered, 0, lane_colours())
+            for l in range(count):
+                if covered[l] > 0.0:
+                    rs[l] = f.map_values(rs[l], m, texels[l], params)
         for l in range(count):  # each covered pixel's weights and reading point (layer_point)
             i = base + l
             if pixels.surface.mask[i] != 0.0:
                 pt_uv0 = pixels.uv0[i]
-                r, w0, total, w1 = f.splat_weights(args.maps, pt_uv0, args.map_smp, params)
+                r, w0, total, w1 = f.weights_of(rs[l], params)
                 for j in range(params.num_layers):
                     w1s[l, j] = w1[j]
                 pn = pixels.surface.normal[i]
