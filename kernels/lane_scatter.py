@@ -8,7 +8,7 @@ so the gradients are the same bits, and the same tile marks (``scatter.mark_rows
 
 import warp as wp
 
-from .lanes import LANES, _cpu_only, lane_colours, lane_ints
+from .lanes import LANES, cpu_snippet, lane_colours, lane_ints
 from .texels import TILE_SHIFT, SamplerArgs, TexelGrad, TextureView
 
 #: Per read (row, up to 3: a pixel's projections) and lane pixel (column).
@@ -144,7 +144,7 @@ wt_scatter_levels_any(true, 1, texs, grads, smp, u, v, levels, fractions, layer,
 """
 
 
-@wp.func_native(_cpu_only(_SCATTER_LEVELS))
+@wp.func_native(cpu_snippet(_SCATTER_LEVELS))
 def scatter_levels_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, uv: wp.array(dtype=wp.vec2), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32,
                         level: wp.int32, fraction: float, adj: wp.array2d(dtype=float), base: wp.int32):  # fmt: skip
     """:func:`~warptex.kernels.scatter.scatter_levels` of the gradient ``adj[i]`` for the lane's
@@ -183,7 +183,7 @@ wt_scatter_levels_any(false, reads, texs, grads, smp, us, vs, levels, fractions,
 """
 
 
-@wp.func_native(_cpu_only(_SCATTER_LOD))
+@wp.func_native(cpu_snippet(_SCATTER_LOD))
 def scatter_lod_lanes(tex0: TextureView, tex1: TextureView, tex2: TextureView, grad0: TexelGrad, grad1: TexelGrad, grad2: TexelGrad, smp: SamplerArgs, reads: wp.int32,
                       layers: lane_ints, u: lane_reads, v: lane_reads, lod: lane_reads, weight: lane_reads, g0: lane_colours, g1: lane_colours, g2: lane_colours):  # fmt: skip
     """:func:`~warptex.kernels.scatter.scatter_lod` of the gradients ``g_r[l]`` of reads ``r = 0 ..

@@ -152,8 +152,9 @@ auto wt_sample_levels_any = [&](const bool same, const auto& tex, const auto& sm
 """ % {"lanes": LANES}
 
 
-def _cpu_only(body: str, cuda: str = "") -> str:
-    """A helper's snippet: ``body`` on the CPU, ``cuda`` (never run) on CUDA."""
+def cpu_snippet(body: str, cuda: str = "") -> str:
+    """A native helper's snippet: the shared core and ``body`` on the CPU, ``cuda`` (never run: lane
+    kernels are CPU-only) when NVRTC compiles it."""
     return "#if !defined(__CUDA_ARCH__)\n" + _CORE + body + "#else\n" + cuda + "#endif\n"
 
 
@@ -196,7 +197,7 @@ if (channels == 4 && out.strides[1] == 4) {
 """
 
 
-@wp.func_native(_cpu_only(_SAMPLE_LEVELS))
+@wp.func_native(cpu_snippet(_SAMPLE_LEVELS))
 def sample_levels_lane(tex: TextureView, smp: SamplerArgs, uv: wp.array(dtype=wp.vec2), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32,
                        level: wp.int32, fraction: float, out: wp.array2d(dtype=float), base: wp.int32):  # fmt: skip
     """``out[i] =`` :func:`~warptex.kernels.filters.sample_levels` at ``uv[i]`` (NaN where it is not
@@ -258,7 +259,7 @@ return out;
 """
 
 
-@wp.func_native(_cpu_only(_ACCUMULATE_FOOTPRINT, "return acc;\n"))
+@wp.func_native(cpu_snippet(_ACCUMULATE_FOOTPRINT, "return acc;\n"))
 def accumulate_footprint_lane(tex: TextureView, smp: SamplerArgs, layers: lane_ints, u: lane_floats, v: lane_floats,
                               lod: lane_floats, du: lane_floats, dv: lane_floats, taps: lane_floats, weight: lane_floats, add: wp.int32, acc: lane_colours) -> lane_colours:  # fmt: skip
     """``acc`` with, in every lane ``l`` whose ``weight[l] > 0``, ``s =``

@@ -1,8 +1,8 @@
 """Splat-map terrain texturing, part 4: the plain splat forward for a lane of pixels on the CPU.
 
 The lane body (:func:`lane_body`) computes what :mod:`.splat`'s forward body computes for
-:data:`~.lanes.LANES` pixels, in three passes: each pixel's splat weights and reading point by the
-scalar blocks; then layer by layer, each pixel's reads (UV, footprint, weight and array layer, by
+:data:`~.lanes.LANES` pixels, in three passes: the splat maps read for the whole lane, then each
+pixel's splat weights and reading point by the scalar blocks; then layer by layer, each pixel's reads (UV, footprint, weight and array layer, by
 ``layer_read`` and ``face_layer``) and the lane's texture reads by
 :func:`~.lanes.accumulate_footprint_lane`, projection by projection in the order ``read_layer``
 adds them; then each pixel's blend.
