@@ -162,9 +162,7 @@ float us[3][WT_L], vs[3][WT_L], fractions[3][WT_L];
 int levels[3][WT_L], layer[3][WT_L];
 bool active[3][WT_L];
 wt_f4 g[3][WT_L];
-const bool trilinear = smp.filter >= WT_TRILINEAR;
 for (int r = 0; r < reads; ++r) {
-    const float top = (float)(texs[r]->num_levels - 1);
     const bool needed = grads[r]->texels.shape[0] > 0;
     const wp::mat_t<WT_L, 4, float>& gr = r == 0 ? g0 : (r == 1 ? g1 : g2);
     for (int l = 0; l < WT_L; ++l) {
@@ -172,9 +170,7 @@ for (int r = 0; r < reads; ++r) {
         active[r][l] = needed && weight.data[r][l] > 0.0f && finite;
         us[r][l] = active[r][l] ? u.data[r][l] : 0.0f;
         vs[r][l] = active[r][l] ? v.data[r][l] : 0.0f;
-        const float c = wp::clamp(wp::clamp((active[r][l] ? lod.data[r][l] : 0.0f) + smp.lod_bias, smp.min_lod, smp.max_lod), 0.0f, top);  // footprint.mip_levels
-        levels[r][l] = (int)(trilinear ? wp::floor(c) : wp::floor(c + 0.5f));
-        fractions[r][l] = trilinear ? c - wp::floor(c) : 0.0f;
+        wt_mip_levels(*texs[r], smp, active[r][l] ? lod.data[r][l] : 0.0f, levels[r][l], fractions[r][l]);
         layer[r][l] = active[r][l] ? wp::clamp(layers.c[l], 0, texs[r]->num_layers - 1) : 0;
         g[r][l] = (wt_f4){gr.data[l][0], gr.data[l][1], gr.data[l][2], gr.data[l][3]};
     }

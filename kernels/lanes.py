@@ -60,6 +60,12 @@ auto wt_address = [](int i, int n, const int address) __attribute__((always_inli
     }
     return r;
 };
+auto wt_mip_levels = [](const auto& tex, const auto& smp, float lod, int& level, float& fraction) __attribute__((always_inline)) {  // footprint.mip_levels
+    const float c = wp::clamp(wp::clamp(lod + smp.lod_bias, smp.min_lod, smp.max_lod), 0.0f, (float)(tex.num_levels - 1));
+    const bool trilinear = smp.filter >= WT_TRILINEAR;
+    level = (int)(trilinear ? wp::floor(c) : wp::floor(c + 0.5f));
+    fraction = trilinear ? c - wp::floor(c) : 0.0f;
+};
 auto wt_int = [](const wp::array_t<int>& a, int k) __attribute__((always_inline)) -> int {
     return *(const int*)((const char*)a.data + (long long)k * a.strides[0]);
 };
@@ -214,14 +220,10 @@ float us[WT_L], vs[WT_L], fractions[WT_L];
 int levels[WT_L], layer[WT_L];
 bool read[WT_L], finite[WT_L];
 int most = 0;  // the most taps of a read lane
-const float top = (float)(tex.num_levels - 1);
-const bool trilinear = smp.filter >= WT_TRILINEAR;
 for (int l = 0; l < WT_L; ++l) {
     read[l] = weight.c[l] > 0.0f;
     layer[l] = read[l] ? wp::clamp(layers.c[l], 0, tex.num_layers - 1) : 0;  // valid (the API checks), clamped all the same
-    const float c = wp::clamp(wp::clamp((read[l] ? lod.c[l] : 0.0f) + smp.lod_bias, smp.min_lod, smp.max_lod), 0.0f, top);  // footprint.mip_levels
-    levels[l] = (int)(trilinear ? wp::floor(c) : wp::floor(c + 0.5f));
-    fractions[l] = trilinear ? c - wp::floor(c) : 0.0f;
+    wt_mip_levels(tex, smp, read[l] ? lod.c[l] : 0.0f, levels[l], fractions[l]);
     const int n = read[l] ? (int)taps.c[l] : 0;  // footprint.footprint_taps
     most = n > most ? n : most;
 }

@@ -29,16 +29,18 @@ def lane_bodies(colour, colour_grad, args_t):
     texel gradient ``colour_grad`` (one texture per axis), whose arguments are ``args_t``
     (:class:`~.triplanar.TriplanarArgs`)."""
 
-    def colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
-        count = wp.min(out.shape[0] - base, LANES)
+    def projection_reads(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
+        """``(u, v, lod, du, dv, taps, weight)``: what each lane pixel (column) reads from each
+        projection (row), its UV and footprint (LOD, step, taps: footprint.py), and its weight (0:
+        not read: a zero weight, or an uncovered pixel)."""
         faces = args.faces
         u = _lane_values()
         v = _lane_values()
-        lod = _lane_values()  # the footprint: LOD, step and taps (footprint.py)
+        lod = _lane_values()
         du = _lane_values()
         dv = _lane_values()
         taps = _lane_values()
-        weight = _lane_values()  # 0: not read (zero weight, or an uncovered pixel)
+        weight = _lane_values()
         for l in range(count):
             i = base + l
             if pixels.mask[i] != 0.0:
@@ -55,6 +57,14 @@ def lane_bodies(colour, colour_grad, args_t):
                         dv[axis, l] = fp[2]
                         taps[axis, l] = fp[3]
                         weight[axis, l] = w[axis]
+        return u, v, lod, du, dv, taps, weight
+
+    projection_reads = inlined(specialised(projection_reads, "triplanar_projection_reads"))
+
+    def colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
+        count = wp.min(out.shape[0] - base, LANES)
+        faces = args.faces
+        u, v, lod, du, dv, taps, weight = projection_reads(args, pixels, base, count)
         layers = lane_ints(args.layer)
         value = lane_colours()
         value = accumulate_footprint_lane(faces.px, args.smp, layers, u[0], v[0], lod[0], du[0], dv[0], taps[0], weight[0], 1, value)
@@ -70,30 +80,15 @@ def lane_bodies(colour, colour_grad, args_t):
                 colour_grad(args, pixels, base + l, grads, adj)
         else:
             faces = args.faces
-            u = _lane_values()
-            v = _lane_values()
-            lod = _lane_values()
-            weight = _lane_values()
-            g0 = lane_colours()  # each projection's share w · g of the pixel's output gradient
+            u, v, lod, du, dv, taps, weight = projection_reads(args, pixels, base, count)
+            g0 = lane_colours()  # each projection's share w · g of the pixel's output gradient (read where w > 0)
             g1 = lane_colours()
             g2 = lane_colours()
             for l in range(count):
-                i = base + l
-                if pixels.mask[i] != 0.0:
-                    p, n, dpdx, dpdy = surface(args.proj, pixels, i)
-                    w = projection_weights(args.proj, n)
-                    g = read_channels(adj, i)
-                    for axis in range(3):
-                        if w[axis] > 0.0:
-                            uv = projection_uv(args.proj, axis, p, n)
-                            fp = projection_footprint(on_axis(faces.px, faces.py, faces.pz, axis), args.proj, axis, n, dpdx, dpdy, args.smp)
-                            u[axis, l] = uv[0]
-                            v[axis, l] = uv[1]
-                            lod[axis, l] = fp[0]
-                            weight[axis, l] = w[axis]
-                    g0[l] = w[0] * g
-                    g1[l] = w[1] * g
-                    g2[l] = w[2] * g
+                g = read_channels(adj, base + l)
+                g0[l] = weight[0, l] * g
+                g1[l] = weight[1, l] * g
+                g2[l] = weight[2, l] * g
             scatter_lod_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, 3, lane_ints(args.layer), u, v, lod, weight, g0, g1, g2)
 
     return inlined(specialised(colour_lane, "triplanar_colour_lane")), inlined(specialised(colour_grad_lane, "triplanar_colour_grad_lane"))

@@ -37,27 +37,26 @@ _FLOATS = (wp.float16, wp.float32, wp.float64)
 
 
 @contextlib.contextmanager
+def _thread_flag(flag: threading.local, enabled: bool):
+    """``flag.value`` set to ``enabled`` within the block, on this thread."""
+    previous = getattr(flag, "value", False)
+    flag.value = enabled
+    try:
+        yield
+    finally:
+        flag.value = previous
+
+
 def force_generated_adjoint(enabled: bool = True):
     """Within this block (on this thread), every recorded backward pass is Warp's generated adjoint,
     never a hand-written gradient: for tests that compare the two."""
-    previous = getattr(_forced, "value", False)
-    _forced.value = enabled
-    try:
-        yield
-    finally:
-        _forced.value = previous
+    return _thread_flag(_forced, enabled)
 
 
-@contextlib.contextmanager
 def one_pixel_kernels(enabled: bool = True):
     """Within this block (on this thread), CPU launches run the one-pixel-per-index kernels, never
     their lane kernels (``Kernels.lanes``): for tests and benchmarks that compare the two."""
-    previous = getattr(_one_pixel, "value", False)
-    _one_pixel.value = enabled
-    try:
-        yield
-    finally:
-        _one_pixel.value = previous
+    return _thread_flag(_one_pixel, enabled)
 
 
 def _lanes(kernels: Kernels, grad: bool = False):
