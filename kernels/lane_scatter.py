@@ -8,11 +8,8 @@ so the gradients are the same bits, and the same tile marks (``scatter.mark_rows
 
 import warp as wp
 
-from .lanes import LANES, cpu_snippet, lane_colours, lane_ints
+from .lanes import cpu_snippet, lane_colours, lane_ints, lane_reads
 from .texels import TILE_SHIFT, SamplerArgs, TexelGrad, TextureView
-
-#: Per read (row, up to 3: a pixel's projections) and lane pixel (column).
-lane_reads = wp.types.matrix(shape=(3, LANES), dtype=wp.float32)
 
 # scatter.scatter_levels for the lane: reads r = 0 .. reads - 1 of every lane pixel, read r from
 # tex[r] into grad[r], the levels and fractions given (module docstring).
@@ -162,29 +159,28 @@ float us[3][WT_L], vs[3][WT_L], fractions[3][WT_L];
 int levels[3][WT_L], layer[3][WT_L];
 bool active[3][WT_L];
 wt_f4 g[3][WT_L];
-for (int r = 0; r < reads; ++r) {
+for (int r = 0; r < count; ++r) {
     const bool needed = grads[r]->texels.shape[0] > 0;
     const wp::mat_t<WT_L, 4, float>& gr = r == 0 ? g0 : (r == 1 ? g1 : g2);
     for (int l = 0; l < WT_L; ++l) {
-        const bool finite = __builtin_fabsf(u.data[r][l]) <= wt_float_max && __builtin_fabsf(v.data[r][l]) <= wt_float_max && __builtin_fabsf(lod.data[r][l]) <= wt_float_max;
-        active[r][l] = needed && weight.data[r][l] > 0.0f && finite;
-        us[r][l] = active[r][l] ? u.data[r][l] : 0.0f;
-        vs[r][l] = active[r][l] ? v.data[r][l] : 0.0f;
-        wt_mip_levels(*texs[r], smp, active[r][l] ? lod.data[r][l] : 0.0f, levels[r][l], fractions[r][l]);
+        const bool finite = __builtin_fabsf(reads.data[r][l]) <= wt_float_max && __builtin_fabsf(reads.data[3 + r][l]) <= wt_float_max && __builtin_fabsf(reads.data[6 + r][l]) <= wt_float_max;
+        active[r][l] = needed && reads.data[9 + r][l] > 0.0f && finite;
+        us[r][l] = active[r][l] ? reads.data[r][l] : 0.0f;
+        vs[r][l] = active[r][l] ? reads.data[3 + r][l] : 0.0f;
+        wt_mip_levels(*texs[r], smp, active[r][l] ? reads.data[6 + r][l] : 0.0f, levels[r][l], fractions[r][l]);
         layer[r][l] = active[r][l] ? wp::clamp(layers.c[l], 0, texs[r]->num_layers - 1) : 0;
         g[r][l] = (wt_f4){gr.data[l][0], gr.data[l][1], gr.data[l][2], gr.data[l][3]};
     }
 }
-wt_scatter_levels_any(false, reads, texs, grads, smp, us, vs, levels, fractions, layer, active, g);
+wt_scatter_levels_any(false, count, texs, grads, smp, us, vs, levels, fractions, layer, active, g);
 """
 
 
 @wp.func_native(cpu_snippet(_SCATTER_LOD))
-def scatter_lod_lanes(tex0: TextureView, tex1: TextureView, tex2: TextureView, grad0: TexelGrad, grad1: TexelGrad, grad2: TexelGrad, smp: SamplerArgs, reads: wp.int32,
-                      layers: lane_ints, u: lane_reads, v: lane_reads, lod: lane_reads, weight: lane_reads, g0: lane_colours, g1: lane_colours, g2: lane_colours):  # fmt: skip
+def scatter_lod_lanes(tex0: TextureView, tex1: TextureView, tex2: TextureView, grad0: TexelGrad, grad1: TexelGrad, grad2: TexelGrad, smp: SamplerArgs, count: wp.int32,
+                      layers: lane_ints, reads: lane_reads, g0: lane_colours, g1: lane_colours, g2: lane_colours):  # fmt: skip
     """:func:`~warptex.kernels.scatter.scatter_lod` of the gradients ``g_r[l]`` of reads ``r = 0 ..
-    reads - 1`` of every lane pixel ``l``: read ``r`` of ``tex_r`` (layer ``layers[l]``) at
-    ``(u[r, l], v[r, l])`` and ``lod[r, l]``, into ``grad_r`` (nothing where it is empty), where
-    ``weight[r, l] > 0`` (:func:`accumulate_lod_lane`'s reads), pixel by pixel and read by read as
-    the scalar kernels add them."""
+    count - 1`` of every lane pixel ``l``: read ``r`` of ``tex_r`` (layer ``layers[l]``) at its UV
+    and LOD in ``reads`` (:data:`~.lanes.lane_reads`), into ``grad_r`` (nothing where it is empty),
+    where its weight is positive, pixel by pixel and read by read as the scalar kernels add them."""
     ...

@@ -30,6 +30,12 @@ LANES = 16
 lane_floats = wp.types.vector(length=LANES, dtype=wp.float32)
 lane_ints = wp.types.vector(length=LANES, dtype=wp.int32)
 lane_colours = wp.types.matrix(shape=(LANES, 4), dtype=wp.float32)
+#: Per read (up to 3 per pixel: a triplanar pixel's projections) and lane pixel (column), what is read
+#: one tap at a time: rows ``3 q + r`` of read ``r``'s UV ``u`` (``q = 0``) and ``v`` (1), its LOD (2)
+#: and its weight (3; 0: not read).
+lane_reads = wp.types.matrix(shape=(12, LANES), dtype=wp.float32)
+#: Per read (row) and lane pixel (column): one value of a footprint (``footprint.py``'s step, taps).
+lane_steps = wp.types.matrix(shape=(3, LANES), dtype=wp.float32)
 
 # What every helper shares: the scalar formulas of texels.reduce_coord, texels.address_near,
 # footprint.mip_levels and filters.sample_levels, written for the lane (same ADDRESS_* and FILTER_*

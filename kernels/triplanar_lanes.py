@@ -1,8 +1,10 @@
 """Triplanar and biplanar colour for a lane of pixels on the CPU (:mod:`.lanes`), forward and texel
 gradient, one texture per axis, plain sampling.
 
-Each pixel's surface, projection weights, UVs and footprints come from the scalar blocks; the lane's
-texture reads from :func:`~.lanes.accumulate_footprint_lane` and its texel-gradient adds from
+What each pixel reads from each projection (its UV, footprint and weight) comes, with triplanar
+weights and a one-tap filter, from :func:`~.projection_lanes.triplanar_reads_lane` for the whole
+lane, and otherwise from the scalar blocks pixel by pixel; the lane's texture reads from
+:func:`~.lanes.accumulate_footprint_lane` and its texel-gradient adds from
 :func:`~.lane_scatter.scatter_lod_lanes`, both in the order the scalar bodies take them, so the
 outputs and the gradients are the scalar kernels' bits. The gradient of the anisotropic filter,
 whose footprints may take several taps, goes pixel by pixel through the scalar body.
@@ -15,12 +17,24 @@ import warp as wp
 from . import inlined, specialised
 from .faces import FaceGrads, on_axis
 from .lane_scatter import scatter_lod_lanes
-from .lanes import LANES, accumulate_footprint_lane, lane_colours, lane_ints
-from .projection import SurfacePixels, projection_footprint, projection_uv, projection_weights, surface
+from .lanes import (
+    LANES,
+    accumulate_footprint_lane,
+    lane_colours,
+    lane_ints,
+    lane_reads,
+    lane_steps,
+)
+from .projection import (
+    WEIGHTS_TRIPLANAR,
+    SurfacePixels,
+    projection_footprint,
+    projection_uv,
+    projection_weights,
+    surface,
+)
+from .projection_lanes import triplanar_reads_lane
 from .texels import FILTER_ANISOTROPIC, read_channels, write_channels
-
-# Per projection (row) and lane pixel (column): what the pixel reads from the projection.
-_lane_values = wp.types.matrix(shape=(3, LANES), dtype=float)
 
 
 @functools.cache
@@ -29,18 +43,21 @@ def lane_bodies(colour, colour_grad, args_t):
     texel gradient ``colour_grad`` (one texture per axis), whose arguments are ``args_t``
     (:class:`~.triplanar.TriplanarArgs`)."""
 
+    def whole_lane(args: args_t):
+        """Whether :func:`~.projection_lanes.triplanar_reads_lane` computes the lane's reads: triplanar
+        weights, one tap per read."""
+        return args.smp.filter != FILTER_ANISOTROPIC and args.proj.weights == WEIGHTS_TRIPLANAR
+
     def projection_reads(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
-        """``(u, v, lod, du, dv, taps, weight)``: what each lane pixel (column) reads from each
-        projection (row), its UV and footprint (LOD, step, taps: footprint.py), and its weight (0:
-        not read: a zero weight, or an uncovered pixel)."""
+        """``(reads, du, dv, taps)``: what each lane pixel (column) reads from each projection (row),
+        pixel by pixel: its UV, LOD and weight (:data:`~.lanes.lane_reads`; all 0 where the
+        projection is not read: a zero weight, or an uncovered pixel), and its footprint's step and
+        taps (footprint.py)."""
         faces = args.faces
-        u = _lane_values()
-        v = _lane_values()
-        lod = _lane_values()
-        du = _lane_values()
-        dv = _lane_values()
-        taps = _lane_values()
-        weight = _lane_values()
+        reads = lane_reads()
+        du = lane_steps()
+        dv = lane_steps()
+        taps = lane_steps()
         for l in range(count):
             i = base + l
             if pixels.mask[i] != 0.0:
@@ -50,45 +67,64 @@ def lane_bodies(colour, colour_grad, args_t):
                     if w[axis] > 0.0:
                         uv = projection_uv(args.proj, axis, p, n)
                         fp = projection_footprint(on_axis(faces.px, faces.py, faces.pz, axis), args.proj, axis, n, dpdx, dpdy, args.smp)
-                        u[axis, l] = uv[0]
-                        v[axis, l] = uv[1]
-                        lod[axis, l] = fp[0]
+                        reads[axis, l] = uv[0]
+                        reads[3 + axis, l] = uv[1]
+                        reads[6 + axis, l] = fp[0]
+                        reads[9 + axis, l] = w[axis]
                         du[axis, l] = fp[1]
                         dv[axis, l] = fp[2]
                         taps[axis, l] = fp[3]
-                        weight[axis, l] = w[axis]
-        return u, v, lod, du, dv, taps, weight
+        return reads, du, dv, taps
 
-    projection_reads = inlined(specialised(projection_reads, "triplanar_projection_reads"))
-
-    def colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
-        count = wp.min(out.shape[0] - base, LANES)
+    def write_colours(args: args_t, reads: lane_reads, du: lane_steps, dv: lane_steps, taps: lane_steps, base: wp.int32, count: wp.int32, out: wp.array2d(dtype=float)):
+        """The lane's colours, the projections' samples blended by their weights, into ``out``."""
         faces = args.faces
-        u, v, lod, du, dv, taps, weight = projection_reads(args, pixels, base, count)
         layers = lane_ints(args.layer)
         value = lane_colours()
-        value = accumulate_footprint_lane(faces.px, args.smp, layers, u[0], v[0], lod[0], du[0], dv[0], taps[0], weight[0], 1, value)
-        value = accumulate_footprint_lane(faces.py, args.smp, layers, u[1], v[1], lod[1], du[1], dv[1], taps[1], weight[1], 1, value)
-        value = accumulate_footprint_lane(faces.pz, args.smp, layers, u[2], v[2], lod[2], du[2], dv[2], taps[2], weight[2], 1, value)
+        value = accumulate_footprint_lane(faces.px, args.smp, layers, reads[0], reads[3], reads[6], du[0], dv[0], taps[0], reads[9], 1, value)
+        value = accumulate_footprint_lane(faces.py, args.smp, layers, reads[1], reads[4], reads[7], du[1], dv[1], taps[1], reads[10], 1, value)
+        value = accumulate_footprint_lane(faces.pz, args.smp, layers, reads[2], reads[5], reads[8], du[2], dv[2], taps[2], reads[11], 1, value)
         for l in range(count):
             write_channels(out, base + l, value[l])
+
+    def scatter_colours(args: args_t, reads: lane_reads, base: wp.int32, count: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
+        """The texel gradients of the lane's one-tap reads: each projection's share ``w · g`` of the
+        pixel's output gradient ``g``."""
+        faces = args.faces
+        g0 = lane_colours()
+        g1 = lane_colours()
+        g2 = lane_colours()
+        for l in range(count):
+            g = read_channels(adj, base + l)
+            g0[l] = reads[9, l] * g
+            g1[l] = reads[10, l] * g
+            g2[l] = reads[11, l] * g
+        scatter_lod_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, 3, lane_ints(args.layer), reads, g0, g1, g2)
+
+    whole_lane = inlined(specialised(whole_lane, "triplanar_whole_lane"))
+    projection_reads = inlined(specialised(projection_reads, "triplanar_projection_reads"))
+    write_colours = inlined(specialised(write_colours, "triplanar_write_colours"))
+    scatter_colours = inlined(specialised(scatter_colours, "triplanar_scatter_colours"))
+
+    # Each branch below reads and uses its own values: values assigned in both branches of an `if`
+    # would be merged after it, matrix by matrix.
+    def colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
+        count = wp.min(out.shape[0] - base, LANES)
+        if whole_lane(args):
+            write_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count), lane_steps(), lane_steps(), lane_steps(1.0), base, count, out)
+        else:
+            reads, du, dv, taps = projection_reads(args, pixels, base, count)
+            write_colours(args, reads, du, dv, taps, base, count, out)
 
     def colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
         if args.smp.filter == FILTER_ANISOTROPIC:
             for l in range(count):
                 colour_grad(args, pixels, base + l, grads, adj)
+        elif whole_lane(args):
+            scatter_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count), base, count, grads, adj)
         else:
-            faces = args.faces
-            u, v, lod, du, dv, taps, weight = projection_reads(args, pixels, base, count)
-            g0 = lane_colours()  # each projection's share w · g of the pixel's output gradient (read where w > 0)
-            g1 = lane_colours()
-            g2 = lane_colours()
-            for l in range(count):
-                g = read_channels(adj, base + l)
-                g0[l] = weight[0, l] * g
-                g1[l] = weight[1, l] * g
-                g2[l] = weight[2, l] * g
-            scatter_lod_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, 3, lane_ints(args.layer), u, v, lod, weight, g0, g1, g2)
+            reads, du, dv, taps = projection_reads(args, pixels, base, count)
+            scatter_colours(args, reads, base, count, grads, adj)
 
     return inlined(specialised(colour_lane, "triplanar_colour_lane")), inlined(specialised(colour_grad_lane, "triplanar_colour_grad_lane"))

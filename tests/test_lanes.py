@@ -157,6 +157,20 @@ def test_triplanar_lanes_give_the_one_pixel_bits(rng, launched, filter, address)
     assert ("triplanar_lanes", -(-1000 // LANES)) in launched
 
 
+@pytest.mark.parametrize("address", ["wrap", "clamp"])  # the origin folded by whole periods, or added exactly
+@pytest.mark.parametrize("sharpness", [2.5, 1.0, 31.0, 40.0])  # exp and log, and the integer exponents' edges
+def test_triplanar_lanes_far_from_the_origin(rng, address, sharpness):
+    """Sharpness raised by ``exp`` and ``log`` as well as by squares, and a G-buffer whose positions are
+    relative to a float64 origin far from the world's, which the plane UVs add in float64."""
+    g = _hand_gbuffer(rng, 500)
+    g.origin = np.array([1.0e5 + 0.3, -3.0e4, 2.5e6 + 0.7])
+    tex = wt.Texture(rng.random((32, 64, 4), dtype=np.float32))
+    smp = wt.Sampler(filter="trilinear", address=address)
+    lanes, scalar = _both(lambda: wt.triplanar(g, tex, tiling=(0.75, 1.25, 2.0), sharpness=sharpness, sampler=smp))
+    _same_bits(lanes, scalar)
+    assert (np.nan_to_num(lanes) > 0).any(-1).mean() > 0.5
+
+
 def test_triplanar_lanes_with_a_texture_per_axis_in_object_space(rng):
     g = _hand_gbuffer(rng, 777)
     textures = [wt.Texture(rng.random((16 << a, 32, 3), dtype=np.float32)) for a in range(3)]
