@@ -20,6 +20,7 @@ texel-gradient twins of these helpers are in :mod:`.lane_scatter`.
 
 import warp as wp
 
+from .footprint import LOG2_CPP
 from .texels import SamplerArgs, TextureView
 
 #: Pixels per lane: one launch index of a lane kernel computes pixels ``LANES·t .. LANES·t + LANES - 1``
@@ -161,7 +162,7 @@ auto wt_sample_levels_any = [&](const bool same, const auto& tex, const auto& sm
         default: wt_sample_levels(WT_BORDER, same, tex, smp, u, v, level, fraction, layer, res); break;
     }
 };
-""" % {"lanes": LANES}
+""" % {"lanes": LANES} + LOG2_CPP
 
 
 def cpu_snippet(body: str, cuda: str = "") -> str:

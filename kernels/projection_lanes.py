@@ -7,10 +7,9 @@ took 59% of the time (timed with the TSC inside the kernel), the texture reads t
 :func:`triplanar_reads_lane` restates them in C++, operation for operation (Warp's own ``wp::``
 functions, no contraction), in loops over the lane that the compiler vectorises (the weights' exponent
 and the other launch-wide choices are tested once, outside the loops), so the reads are the scalar
-blocks' bits. Only the LODs' ``log2`` stays a call per pixel: a vector ``log2`` with glibc's bits does
-not exist. It covers the common case, triplanar weights and a one-tap filter (every filter but the
-anisotropic one); :mod:`.triplanar_lanes` takes every other case pixel by pixel through the scalar
-blocks.
+blocks' bits; the LODs' ``log2`` is :func:`~.footprint.lod_log2`'s, 16 at a time. It covers the
+common case, triplanar weights and a one-tap filter (every filter but the anisotropic one);
+:mod:`.triplanar_lanes` takes every other case pixel by pixel through the scalar blocks.
 """
 
 import warp as wp
@@ -115,7 +114,7 @@ for (int axis = 0; axis < 3; ++axis) {
     }
     for (int l = 0; l < WT_L; ++l) {
         const bool read = W[axis][l] > 0.0f;
-        const float lod = read ? 0.5f * wp::log2(lod_of[l]) : 0.0f;
+        const float lod = 0.5f * wt_log2(lod_of[l]);  // footprint.lod_log2
         reads.data[axis][l] = read ? u[l] : 0.0f;
         reads.data[3 + axis][l] = read ? v[l] : 0.0f;
         reads.data[6 + axis][l] = read ? (finite[l] ? lod : __builtin_nanf("")) : 0.0f;
