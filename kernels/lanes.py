@@ -122,9 +122,25 @@ auto wt_sample_levels = [&](const int address, const bool same, const auto& tex,
     }
     float fx[WT_L], fy[WT_L];
     for (int pass = 0; pass < (blend ? 2 : 1); ++pass) {  // the level, then (trilinear) the next one
+        int lw[WT_L], lh[WT_L], ls[WT_L];  // each lane's level's size and offset
+        if (!same) {
+            int read[WT_L];
+            bool one = true;  // neighbouring pixels mostly read one level: its size is read once
+            for (int l = 0; l < WT_L; ++l) {
+                read[l] = pass == 0 || fraction[l] <= 0.0f ? level[l] : level[l] + 1;
+                one &= read[l] == read[0];
+            }
+            if (one) {
+                int w, h, start;
+                size(read[0], w, h, start);
+                for (int l = 0; l < WT_L; ++l) lw[l] = w, lh[l] = h, ls[l] = start;
+            } else {
+                for (int l = 0; l < WT_L; ++l) size(read[l], lw[l], lh[l], ls[l]);
+            }
+        }
         for (int l = 0; l < WT_L; ++l) {  // filters.bilinear_taps
             int w = same_w[pass], h = same_h[pass], start = same_start[pass];
-            if (!same) size(pass == 0 || fraction[l] <= 0.0f ? level[l] : level[l] + 1, w, h, start);
+            if (!same) w = lw[l], h = lh[l], start = ls[l];
             const int s = start + layer[l] * h * w;
             const float x = ru[l] * (float)w - 0.5f;
             const float y = (1.0f - rv[l]) * (float)h - 0.5f;
