@@ -5,8 +5,9 @@ The scalar blocks of :mod:`.projection` and :mod:`.footprint` run one pixel at a
 code, with a branch per projection and per test; in a triplanar lane on the benchmark's sphere they
 took 59% of the time (timed with the TSC inside the kernel), the texture reads the rest.
 :func:`triplanar_reads_lane` restates them in C++, operation for operation (Warp's own ``wp::``
-functions, no contraction), in loops over the lane that the compiler vectorises (the weights' exponent
-and the other launch-wide choices are tested once, outside the loops), so the reads are the scalar
+functions or their exact vector twins, no contraction), on clang vectors of a value per lane pixel
+(the weights' exponent and the other launch-wide choices are tested once, outside them; loops over
+lanes that the compiler was left to vectorise did not all vectorise), so the reads are the scalar
 blocks' bits; the LODs' ``log2`` is :func:`~.footprint.lod_log2`'s, 16 at a time. It covers the
 common case, triplanar weights and a one-tap filter (every filter but the anisotropic one);
 :mod:`.triplanar_lanes` takes every other case pixel by pixel through the scalar blocks.
@@ -21,15 +22,22 @@ from .texels import SamplerArgs
 
 _TRIPLANAR_READS = r"""
 typedef wp::vec_t<3, float> wt_v3;
+typedef float wt_vf __attribute__((ext_vector_type(WT_L)));  // a value per lane pixel
+typedef int wt_vi __attribute__((ext_vector_type(WT_L)));  // a comparison's mask (-1 or 0) per lane pixel
+auto sel = [](wt_vi mask, wt_vf a, wt_vf b) __attribute__((always_inline)) -> wt_vf { return (wt_vf)(((wt_vi)a & mask) | ((wt_vi)b & ~mask)); };
+auto vmax = [&](wt_vf a, wt_vf b) __attribute__((always_inline)) -> wt_vf { return sel(a >= b, a, sel(b == b, b, a)); };  // wp::max
+auto vmin = [&](wt_vf a, wt_vf b) __attribute__((always_inline)) -> wt_vf { return sel(a <= b, a, sel(b == b, b, a)); };  // wp::min
+auto vabs = [](wt_vf a) __attribute__((always_inline)) -> wt_vf { return (wt_vf)((wt_vi)a & 0x7fffffff); };  // wp::abs
+auto finite = [](wt_vf a) __attribute__((always_inline)) -> wt_vi { return a - a == 0.0f; };  // wp::isfinite
 auto row = [](const auto& a, int i) __attribute__((always_inline)) -> const char* { return (const char*)a.data + (long long)i * a.strides[0]; };
 auto f32 = [&](const auto& a, int i) __attribute__((always_inline)) -> float { return *(const float*)row(a, i); };
 auto v3 = [&](const auto& a, int i) __attribute__((always_inline)) -> wt_v3 { wt_v3 r; __builtin_memcpy(&r, row(a, i), 12); return r; };
 // projection.surface: the lane's pixels (the tail repeats pixel base, not read), in the projected space.
-float P[3][WT_L], N[3][WT_L], DX[3][WT_L], DY[3][WT_L];
-bool covered[WT_L];
+float p_[3][WT_L], n_[3][WT_L], dx_[3][WT_L], dy_[3][WT_L];  // gathered into arrays, then read as vectors
+int covered_[WT_L];
 for (int l = 0; l < WT_L; ++l) {
     const int i = base + (l < count ? l : 0);
-    covered[l] = l < count && f32(pixels.mask, i) != 0.0f;
+    covered_[l] = l < count && f32(pixels.mask, i) != 0.0f ? -1 : 0;
     wt_v3 p = v3(pixels.position, i), n = v3(pixels.normal, i), dx = v3(pixels.position_dx, i), dy = v3(pixels.position_dy, i);
     if (proj.object_space != 0) {  // projection.object_space
         p = wp::transform_point(proj.world_to_object, p);
@@ -38,45 +46,47 @@ for (int l = 0; l < WT_L; ++l) {
         dy = wp::transform_vector(proj.world_to_object, dy);
     }
     for (int e = 0; e < 3; ++e) {
-        P[e][l] = p.c[e];
-        N[e][l] = n.c[e];
-        DX[e][l] = dx.c[e];
-        DY[e][l] = dy.c[e];
+        p_[e][l] = p.c[e];
+        n_[e][l] = n.c[e];
+        dx_[e][l] = dx.c[e];
+        dy_[e][l] = dy.c[e];
     }
 }
+wt_vf P[3], N[3], DX[3], DY[3];
+wt_vi covered;
+__builtin_memcpy(&covered, covered_, sizeof(covered));
+for (int e = 0; e < 3; ++e) {
+    __builtin_memcpy(&P[e], p_[e], sizeof(wt_vf));
+    __builtin_memcpy(&N[e], n_[e], sizeof(wt_vf));
+    __builtin_memcpy(&DX[e], dx_[e], sizeof(wt_vf));
+    __builtin_memcpy(&DY[e], dy_[e], sizeof(wt_vf));
+}
+const wt_vf zero = 0.0f, one = 1.0f;
 // projection.triplanar_weights, with power_weight's integer exponents by multiplication.
 const float sharpness = f32(proj.sharpness, 0);
 const int k = (int)sharpness;
 const bool by_squares = (float)k == sharpness && k > 0 && k < 32;
-float W[3][WT_L];
-bool weighed[WT_L];
-float R[3][WT_L];  // |n| / max |n|
-for (int l = 0; l < WT_L; ++l) {
-    const float a0 = wp::abs(N[0][l]), a1 = wp::abs(N[1][l]), a2 = wp::abs(N[2][l]);
-    const float m = wp::max(wp::max(a0, a1), a2);
-    weighed[l] = covered[l] && wp::isfinite(N[0][l]) && wp::isfinite(N[1][l]) && wp::isfinite(N[2][l]) && m > 0.0f;
-    R[0][l] = a0 / m;
-    R[1][l] = a1 / m;
-    R[2][l] = a2 / m;
-}
+const wt_vf a0 = vabs(N[0]), a1 = vabs(N[1]), a2 = vabs(N[2]);
+const wt_vf m = vmax(vmax(a0, a1), a2);
+const wt_vi weighed = covered & finite(N[0]) & finite(N[1]) & finite(N[2]) & (m > 0.0f);
+const wt_vf R[3] = {a0 / m, a1 / m, a2 / m};  // |n| / max |n|
+wt_vf W[3];
 for (int e = 0; e < 3; ++e) {  // power_weight, its exponent the same in every lane
+    const wt_vf r = R[e];
     if (sharpness == 0.0f) {
-        for (int l = 0; l < WT_L; ++l) W[e][l] = 1.0f;
+        W[e] = one;
     } else if (by_squares) {
-        const bool b1 = (k & 1) != 0, b2 = (k & 2) != 0, b4 = (k & 4) != 0, b8 = (k & 8) != 0, b16 = (k & 16) != 0;
-        for (int l = 0; l < WT_L; ++l) {
-            const float r = R[e][l], r2 = r * r, r4 = r2 * r2, r8 = r4 * r4;
-            const float power = ((b1 ? r : 1.0f) * (b2 ? r2 : 1.0f) * (b4 ? r4 : 1.0f)) * (b8 ? r8 : 1.0f) * (b16 ? r8 * r8 : 1.0f);
-            W[e][l] = r > 0.0f ? power : 0.0f;
-        }
+        const wt_vf r2 = r * r, r4 = r2 * r2, r8 = r4 * r4;
+        const wt_vf power = (((k & 1) != 0 ? r : one) * ((k & 2) != 0 ? r2 : one) * ((k & 4) != 0 ? r4 : one)) * ((k & 8) != 0 ? r8 : one) * ((k & 16) != 0 ? r8 * r8 : one);
+        W[e] = sel(r > 0.0f, power, zero);
     } else {
-        for (int l = 0; l < WT_L; ++l) W[e][l] = weighed[l] && R[e][l] > 0.0f ? wp::exp(sharpness * wp::log(R[e][l])) : 0.0f;
+        float w[WT_L];
+        for (int l = 0; l < WT_L; ++l) w[l] = weighed[l] && r[l] > 0.0f ? wp::exp(sharpness * wp::log(r[l])) : 0.0f;
+        __builtin_memcpy(&W[e], w, sizeof(wt_vf));
     }
 }
-for (int l = 0; l < WT_L; ++l) {
-    const float total = wp::max(W[0][l] + W[1][l] + W[2][l], 1.0e-20f);  // WEIGHT_EPS
-    for (int e = 0; e < 3; ++e) W[e][l] = weighed[l] ? W[e][l] / total : 0.0f;
-}
+const wt_vf total = vmax(W[0] + W[1] + W[2], 1.0e-20f);  // WEIGHT_EPS
+for (int e = 0; e < 3; ++e) W[e] = sel(weighed, W[e] / total, zero);
 // Per projection: projection.plane_uv and footprint.uv_footprint's one tap, where its weight is > 0.
 wp::mat_t<12, WT_L, float> reads;  // rows 3 q + axis: u (q = 0), v, lod, weight
 for (int axis = 0; axis < 3; ++axis) {
@@ -99,27 +109,22 @@ for (int axis = 0; axis < 3; ++axis) {
     const auto& tex = axis == 0 ? faces.px : (axis == 1 ? faces.py : faces.pz);  // faces.on_axis
     const float width = (float)wt_int(tex.level_width, 0), height = (float)wt_int(tex.level_height, 0);
     const int c0 = axis == 0 ? 2 : 0, c1 = axis == 1 ? 2 : 1;  // projection.plane_coords
-    float u[WT_L], v[WT_L], lod_of[WT_L];
-    bool finite[WT_L];
-    for (int l = 0; l < WT_L; ++l) {
-        float s = 1.0f;  // projection.u_sign
-        if (proj.mirror_fix != 0) s = axis == 2 ? (N[2][l] < 0.0f ? -1.0f : 1.0f) : -(N[axis][l] < 0.0f ? -1.0f : 1.0f);
-        u[l] = (P[c0][l] * t + o0) * s + off0;
-        v[l] = (P[c1][l] * t + o1) + off1;
-        const float ax = (DX[c0][l] * t) * s * width, ay = (DX[c1][l] * t) * height;  // plane_derivative × level-0 size
-        const float bx = (DY[c0][l] * t) * s * width, by = (DY[c1][l] * t) * height;
-        const float aa = ax * ax + ay * ay, bb = bx * bx + by * by;
-        lod_of[l] = wp::min(wp::max(wp::max(aa, bb), 1.0e-30f), wt_float_max);
-        finite[l] = aa + bb == aa + bb;
-    }
-    for (int l = 0; l < WT_L; ++l) {
-        const bool read = W[axis][l] > 0.0f;
-        const float lod = 0.5f * wt_log2(lod_of[l]);  // footprint.lod_log2
-        reads.data[axis][l] = read ? u[l] : 0.0f;
-        reads.data[3 + axis][l] = read ? v[l] : 0.0f;
-        reads.data[6 + axis][l] = read ? (finite[l] ? lod : __builtin_nanf("")) : 0.0f;
-        reads.data[9 + axis][l] = W[axis][l];
-    }
+    wt_vf s = one;  // projection.u_sign: sign_or_one(n.z) for Z, -sign_or_one(n[axis]) for X and Y
+    if (proj.mirror_fix != 0) s = axis == 2 ? sel(N[2] < 0.0f, -one, one) : -sel(N[axis] < 0.0f, -one, one);
+    const wt_vf u = (P[c0] * t + o0) * s + off0, v = (P[c1] * t + o1) + off1;
+    const wt_vf ax = ((DX[c0] * t) * s) * width, ay = (DX[c1] * t) * height;  // plane_derivative × level-0 size
+    const wt_vf bx = ((DY[c0] * t) * s) * width, by = (DY[c1] * t) * height;
+    const wt_vf aa = ax * ax + ay * ay, bb = bx * bx + by * by;
+    const wt_vf extent2 = vmin(vmax(vmax(aa, bb), 1.0e-30f), wt_float_max);
+    float e2[WT_L], lods[WT_L];
+    __builtin_memcpy(e2, &extent2, sizeof(e2));
+    for (int l = 0; l < WT_L; ++l) lods[l] = 0.5f * wt_log2(e2[l]);  // footprint.lod_log2
+    wt_vf lod;
+    __builtin_memcpy(&lod, lods, sizeof(lod));
+    lod = sel(aa + bb == aa + bb, lod, __builtin_nanf(""));
+    const wt_vi read = W[axis] > 0.0f;
+    const wt_vf rows[4] = {sel(read, u, zero), sel(read, v, zero), sel(read, lod, zero), W[axis]};
+    for (int q = 0; q < 4; ++q) __builtin_memcpy(reads.data[3 * q + axis], &rows[q], sizeof(wt_vf));
 }
 return reads;
 """
