@@ -15,7 +15,8 @@ from .texels import TILE_SHIFT, SamplerArgs, TexelGrad, TextureView
 # tex[r] into grad[r], the levels and fractions given (module docstring).
 _SCATTER_CORE = r"""
 enum { WT_TILE_SHIFT = %(tile_shift)d };
-struct wt_taps { int start, w, i0, i1, j0, j1; float fx, fy; };
+struct wt_taps { int start, w, i0, i1, j0, j1; float fx, fy; };  // a lane pixel's taps of one level
+struct wt_lane_taps { int start[WT_L], w[WT_L], i0[WT_L], i1[WT_L], j0[WT_L], j1[WT_L]; float fx[WT_L], fy[WT_L]; };  // the lane's, a row per field
 typedef float wt_lane_f[WT_L];
 typedef int wt_lane_i[WT_L];
 typedef bool wt_lane_b[WT_L];
@@ -23,41 +24,52 @@ typedef wt_f4 wt_lane_f4[WT_L];
 auto wt_scatter_levels = [&](const int address, const bool same, const int reads, const auto* const* tex, const auto* const* grad, const auto& smp, const wt_lane_f* u, const wt_lane_f* v,
                              const wt_lane_i* level, const wt_lane_f* fraction, const wt_lane_i* layer, const wt_lane_b* active, const wt_lane_f4* g) __attribute__((always_inline)) {
     // With same, every lane of a read has one level and fraction: their sizes are read once.
-    wt_taps taps[3][2][WT_L];  // [read][fine, coarse][lane]
+    wt_lane_taps taps[3][2];  // [read][fine, coarse], field by field, so that the loop below vectorises
     bool blend = false;  // a lane reads two levels (trilinear)
     for (int r = 0; r < reads; ++r)
         for (int l = 0; l < WT_L; ++l) blend |= smp.filter != WT_NEAREST && active[r][l] && fraction[r][l] > 0.0f;
     for (int r = 0; r < reads; ++r) {
         for (int pass = 0; pass < (blend ? 2 : 1); ++pass) {
-            auto level_of = [&](int l) __attribute__((always_inline)) { return pass == 0 || fraction[r][l] <= 0.0f ? level[r][l] : level[r][l] + 1; };
-            const int same_w = same ? wt_int(tex[r]->level_width, level_of(0)) : 0;
-            const int same_h = same ? wt_int(tex[r]->level_height, level_of(0)) : 0;
-            const int same_start = same ? wt_int(tex[r]->level_offset, level_of(0)) : 0;
+            int k[WT_L], lw[WT_L], lh[WT_L], ls[WT_L];  // each lane's level, its size and offset
+            bool one = true;  // neighbouring pixels mostly read one level: its size is read once
+            for (int l = 0; l < WT_L; ++l) {
+                k[l] = pass == 0 || fraction[r][l] <= 0.0f ? level[r][l] : level[r][l] + 1;
+                one &= k[l] == k[0];
+            }
+            if (same || one) {
+                const int w = wt_int(tex[r]->level_width, k[0]), h = wt_int(tex[r]->level_height, k[0]), start = wt_int(tex[r]->level_offset, k[0]);
+                for (int l = 0; l < WT_L; ++l) lw[l] = w, lh[l] = h, ls[l] = start;
+            } else {
+                for (int l = 0; l < WT_L; ++l) lw[l] = wt_int(tex[r]->level_width, k[l]), lh[l] = wt_int(tex[r]->level_height, k[l]), ls[l] = wt_int(tex[r]->level_offset, k[l]);
+            }
+            wt_lane_taps& t = taps[r][pass];
             for (int l = 0; l < WT_L; ++l) {  // filters.nearest_tap / bilinear_taps
                 const float ru = wt_reduce(u[r][l], address), rv = wt_reduce(v[r][l], address);
-                const int k = level_of(l);
-                wt_taps& t = taps[r][pass][l];
-                t.w = same ? same_w : wt_int(tex[r]->level_width, k);
-                const int h = same ? same_h : wt_int(tex[r]->level_height, k);
-                t.start = (same ? same_start : wt_int(tex[r]->level_offset, k)) + layer[r][l] * h * t.w;
+                const int w = lw[l], h = lh[l];
+                t.w[l] = w;
+                t.start[l] = ls[l] + layer[r][l] * h * w;
                 if (smp.filter == WT_NEAREST) {
-                    t.i0 = wt_address((int)wp::floor(ru * (float)t.w), t.w, address);
-                    t.j0 = wt_address((int)wp::floor((1.0f - rv) * (float)h), h, address);
+                    t.i0[l] = wt_address((int)wp::floor(ru * (float)w), w, address);
+                    t.j0[l] = wt_address((int)wp::floor((1.0f - rv) * (float)h), h, address);
                 } else {
-                    const float x = ru * (float)t.w - 0.5f;
+                    const float x = ru * (float)w - 0.5f;
                     const float y = (1.0f - rv) * (float)h - 0.5f;
                     const float x0 = wp::floor(x);
                     const float y0 = wp::floor(y);
-                    t.i0 = wt_address((int)x0, t.w, address);
-                    t.i1 = wt_address((int)x0 + 1, t.w, address);
-                    t.j0 = wt_address((int)y0, h, address);
-                    t.j1 = wt_address((int)y0 + 1, h, address);
-                    t.fx = x - x0;
-                    t.fy = y - y0;
+                    t.i0[l] = wt_address((int)x0, w, address);
+                    t.i1[l] = wt_address((int)x0 + 1, w, address);
+                    t.j0[l] = wt_address((int)y0, h, address);
+                    t.j1[l] = wt_address((int)y0 + 1, h, address);
+                    t.fx[l] = x - x0;
+                    t.fy[l] = y - y0;
                 }
             }
         }
     }
+    auto tap = [&](int r, int pass, int l) __attribute__((always_inline)) -> wt_taps {
+        const wt_lane_taps& t = taps[r][pass];
+        return {t.start[l], t.w[l], t.i0[l], t.i1[l], t.j0[l], t.j1[l], t.fx[l], t.fy[l]};
+    };
     auto add = [&](const auto& gr, const wt_taps& t, int x, int y, const wt_f4 value) __attribute__((always_inline)) {  // scatter.scatter_texel
         if (x >= 0 && y >= 0) {
             float* p = (float*)((char*)gr.texels.data + (long long)(t.start + y * t.w + x) * gr.texels.strides[0]);
@@ -87,16 +99,16 @@ auto wt_scatter_levels = [&](const int address, const bool same, const int reads
             if (!active[r][l]) continue;
             const auto& gr = *grad[r];
             if (smp.filter == WT_NEAREST) {
-                const wt_taps& t = taps[r][0][l];
+                const wt_taps t = tap(r, 0, l);
                 add(gr, t, t.i0, t.j0, g[r][l]);
                 if (gr.tiles.shape[0] > 0 && t.j0 >= 0) mark(gr, t, t.j0);
             } else {  // scatter.scatter_levels: the coarser level first
                 wt_f4 finer = g[r][l];
                 if (fraction[r][l] > 0.0f) {
                     finer = g[r][l] * (1.0f - fraction[r][l]);
-                    bilinear(gr, taps[r][1][l], g[r][l] * fraction[r][l]);
+                    bilinear(gr, tap(r, 1, l), g[r][l] * fraction[r][l]);
                 }
-                bilinear(gr, taps[r][0][l], finer);
+                bilinear(gr, tap(r, 0, l), finer);
             }
         }
     }
