@@ -73,6 +73,15 @@ auto wt_mip_levels = [](const auto& tex, const auto& smp, float lod, int& level,
     level = (int)(trilinear ? wp::floor(c) : wp::floor(c + 0.5f));
     fraction = trilinear ? c - wp::floor(c) : 0.0f;
 };
+// A value per lane pixel as a clang vector, and Warp's wp::max, wp::min, wp::abs, wp::isfinite on it,
+// exactly (selects and bit operations; a comparison gives a mask, -1 or 0, per lane pixel).
+typedef float wt_vf __attribute__((ext_vector_type(WT_L)));
+typedef int wt_vi __attribute__((ext_vector_type(WT_L)));
+auto wt_sel = [](wt_vi mask, wt_vf a, wt_vf b) __attribute__((always_inline)) -> wt_vf { return (wt_vf)(((wt_vi)a & mask) | ((wt_vi)b & ~mask)); };
+auto wt_vmax = [&](wt_vf a, wt_vf b) __attribute__((always_inline)) -> wt_vf { return wt_sel(a >= b, a, wt_sel(b == b, b, a)); };
+auto wt_vmin = [&](wt_vf a, wt_vf b) __attribute__((always_inline)) -> wt_vf { return wt_sel(a <= b, a, wt_sel(b == b, b, a)); };
+auto wt_vabs = [](wt_vf a) __attribute__((always_inline)) -> wt_vf { return (wt_vf)((wt_vi)a & 0x7fffffff); };
+auto wt_finite = [](wt_vf a) __attribute__((always_inline)) -> wt_vi { return a - a == 0.0f; };
 auto wt_int = [](const wp::array_t<int>& a, int k) __attribute__((always_inline)) -> int {
     return *(const int*)((const char*)a.data + (long long)k * a.strides[0]);
 };

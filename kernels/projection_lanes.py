@@ -20,15 +20,52 @@ from .lanes import cpu_snippet, lane_reads
 from .projection import ProjectionArgs, SurfacePixels
 from .texels import SamplerArgs
 
-_TRIPLANAR_READS = r"""
+# One projection's reads at a tiling for the lane, projection.plane_uv and footprint.uv_footprint's one
+# tap (plane_footprint), given the lane's surface as vectors: also what a splat layer mapped triplanar
+# reads (.splat_lanes).
+PLANE_CPP = r"""
+// footprint.uv_footprint's one tap from the UV derivatives (a, b) in level-0 texels, 16 LODs at once.
+auto wt_lod_of = [&](wt_vf ax, wt_vf ay, wt_vf bx, wt_vf by) __attribute__((always_inline)) -> wt_vf {
+    const wt_vf aa = ax * ax + ay * ay, bb = bx * bx + by * by;
+    const wt_vf extent2 = wt_vmin(wt_vmax(wt_vmax(aa, bb), 1.0e-30f), wt_float_max);
+    float e2[WT_L], lods[WT_L];
+    __builtin_memcpy(e2, &extent2, sizeof(e2));
+    for (int l = 0; l < WT_L; ++l) lods[l] = 0.5f * wt_log2(e2[l]);  // footprint.lod_log2
+    wt_vf lod;
+    __builtin_memcpy(&lod, lods, sizeof(lod));
+    return wt_sel(aa + bb == aa + bb, lod, __builtin_nanf(""));
+};
+// (u, v, lod) of projection `axis` at tiling t of `tex` (its level 0) on the lane's surface P, N, DX, DY.
+auto wt_plane_reads = [&](const auto& proj, int axis, float t, const auto& tex, const wt_vf* P, const wt_vf* N, const wt_vf* DX, const wt_vf* DY,
+                          wt_vf& u, wt_vf& v, wt_vf& lod) __attribute__((always_inline)) {
+    float o0 = 0.0f, o1 = 0.0f;  // projection.origin_uv, in float64
+    if (proj.origin_mode != 0) {
+        const double a = axis == 0 ? proj.origin.c[2] : proj.origin.c[0];
+        const double b = axis == 1 ? proj.origin.c[2] : proj.origin.c[1];
+        const double td = (double)t;
+        double ou = a * td, ov = b * td;
+        if (proj.origin_mode == 1) {  // ORIGIN_FOLDED
+            ou = ou - wp::floor(ou * 0.5) * 2.0;
+            ov = ov - wp::floor(ov * 0.5) * 2.0;
+        }
+        o0 = (float)ou;
+        o1 = (float)ov;
+    }
+    const char* offset = (const char*)proj.offsets.data + (long long)axis * proj.offsets.strides[0];
+    const float off0 = *(const float*)offset, off1 = *(const float*)(offset + proj.offsets.strides[1]);
+    const float width = (float)wt_int(tex.level_width, 0), height = (float)wt_int(tex.level_height, 0);
+    const int c0 = axis == 0 ? 2 : 0, c1 = axis == 1 ? 2 : 1;  // projection.plane_coords
+    const wt_vf one = 1.0f;
+    wt_vf s = one;  // projection.u_sign: sign_or_one(n.z) for Z, -sign_or_one(n[axis]) for X and Y
+    if (proj.mirror_fix != 0) s = axis == 2 ? wt_sel(N[2] < 0.0f, -one, one) : -wt_sel(N[axis] < 0.0f, -one, one);
+    u = (P[c0] * t + o0) * s + off0;
+    v = (P[c1] * t + o1) + off1;
+    lod = wt_lod_of(((DX[c0] * t) * s) * width, (DX[c1] * t) * height, ((DY[c0] * t) * s) * width, (DY[c1] * t) * height);  // plane_derivative × level-0 size
+};
+"""
+
+_TRIPLANAR_READS = PLANE_CPP + r"""
 typedef wp::vec_t<3, float> wt_v3;
-typedef float wt_vf __attribute__((ext_vector_type(WT_L)));  // a value per lane pixel
-typedef int wt_vi __attribute__((ext_vector_type(WT_L)));  // a comparison's mask (-1 or 0) per lane pixel
-auto sel = [](wt_vi mask, wt_vf a, wt_vf b) __attribute__((always_inline)) -> wt_vf { return (wt_vf)(((wt_vi)a & mask) | ((wt_vi)b & ~mask)); };
-auto vmax = [&](wt_vf a, wt_vf b) __attribute__((always_inline)) -> wt_vf { return sel(a >= b, a, sel(b == b, b, a)); };  // wp::max
-auto vmin = [&](wt_vf a, wt_vf b) __attribute__((always_inline)) -> wt_vf { return sel(a <= b, a, sel(b == b, b, a)); };  // wp::min
-auto vabs = [](wt_vf a) __attribute__((always_inline)) -> wt_vf { return (wt_vf)((wt_vi)a & 0x7fffffff); };  // wp::abs
-auto finite = [](wt_vf a) __attribute__((always_inline)) -> wt_vi { return a - a == 0.0f; };  // wp::isfinite
 auto row = [](const auto& a, int i) __attribute__((always_inline)) -> const char* { return (const char*)a.data + (long long)i * a.strides[0]; };
 auto f32 = [&](const auto& a, int i) __attribute__((always_inline)) -> float { return *(const float*)row(a, i); };
 auto v3 = [&](const auto& a, int i) __attribute__((always_inline)) -> wt_v3 { wt_v3 r; __builtin_memcpy(&r, row(a, i), 12); return r; };
@@ -66,9 +103,9 @@ const wt_vf zero = 0.0f, one = 1.0f;
 const float sharpness = f32(proj.sharpness, 0);
 const int k = (int)sharpness;
 const bool by_squares = (float)k == sharpness && k > 0 && k < 32;
-const wt_vf a0 = vabs(N[0]), a1 = vabs(N[1]), a2 = vabs(N[2]);
-const wt_vf m = vmax(vmax(a0, a1), a2);
-const wt_vi weighed = covered & finite(N[0]) & finite(N[1]) & finite(N[2]) & (m > 0.0f);
+const wt_vf a0 = wt_vabs(N[0]), a1 = wt_vabs(N[1]), a2 = wt_vabs(N[2]);
+const wt_vf m = wt_vmax(wt_vmax(a0, a1), a2);
+const wt_vi weighed = covered & wt_finite(N[0]) & wt_finite(N[1]) & wt_finite(N[2]) & (m > 0.0f);
 const wt_vf R[3] = {a0 / m, a1 / m, a2 / m};  // |n| / max |n|
 wt_vf W[3];
 for (int e = 0; e < 3; ++e) {  // power_weight, its exponent the same in every lane
@@ -78,52 +115,24 @@ for (int e = 0; e < 3; ++e) {  // power_weight, its exponent the same in every l
     } else if (by_squares) {
         const wt_vf r2 = r * r, r4 = r2 * r2, r8 = r4 * r4;
         const wt_vf power = (((k & 1) != 0 ? r : one) * ((k & 2) != 0 ? r2 : one) * ((k & 4) != 0 ? r4 : one)) * ((k & 8) != 0 ? r8 : one) * ((k & 16) != 0 ? r8 * r8 : one);
-        W[e] = sel(r > 0.0f, power, zero);
+        W[e] = wt_sel(r > 0.0f, power, zero);
     } else {
         float w[WT_L];
         for (int l = 0; l < WT_L; ++l) w[l] = weighed[l] && r[l] > 0.0f ? wp::exp(sharpness * wp::log(r[l])) : 0.0f;
         __builtin_memcpy(&W[e], w, sizeof(wt_vf));
     }
 }
-const wt_vf total = vmax(W[0] + W[1] + W[2], 1.0e-20f);  // WEIGHT_EPS
-for (int e = 0; e < 3; ++e) W[e] = sel(weighed, W[e] / total, zero);
+const wt_vf total = wt_vmax(W[0] + W[1] + W[2], 1.0e-20f);  // WEIGHT_EPS
+for (int e = 0; e < 3; ++e) W[e] = wt_sel(weighed, W[e] / total, zero);
 // Per projection: projection.plane_uv and footprint.uv_footprint's one tap, where its weight is > 0.
 wp::mat_t<12, WT_L, float> reads;  // rows 3 q + axis: u (q = 0), v, lod, weight
 for (int axis = 0; axis < 3; ++axis) {
     const float t = f32(proj.tiling, wp::min(axis, proj.tiling.shape[0] - 1));  // projection_tiling
-    float o0 = 0.0f, o1 = 0.0f;  // projection.origin_uv, in float64
-    if (proj.origin_mode != 0) {
-        const double a = axis == 0 ? proj.origin.c[2] : proj.origin.c[0];
-        const double b = axis == 1 ? proj.origin.c[2] : proj.origin.c[1];
-        const double td = (double)t;
-        double ou = a * td, ov = b * td;
-        if (proj.origin_mode == 1) {  // ORIGIN_FOLDED
-            ou = ou - wp::floor(ou * 0.5) * 2.0;
-            ov = ov - wp::floor(ov * 0.5) * 2.0;
-        }
-        o0 = (float)ou;
-        o1 = (float)ov;
-    }
-    const char* offset = (const char*)proj.offsets.data + (long long)axis * proj.offsets.strides[0];
-    const float off0 = *(const float*)offset, off1 = *(const float*)(offset + proj.offsets.strides[1]);
     const auto& tex = axis == 0 ? faces.px : (axis == 1 ? faces.py : faces.pz);  // faces.on_axis
-    const float width = (float)wt_int(tex.level_width, 0), height = (float)wt_int(tex.level_height, 0);
-    const int c0 = axis == 0 ? 2 : 0, c1 = axis == 1 ? 2 : 1;  // projection.plane_coords
-    wt_vf s = one;  // projection.u_sign: sign_or_one(n.z) for Z, -sign_or_one(n[axis]) for X and Y
-    if (proj.mirror_fix != 0) s = axis == 2 ? sel(N[2] < 0.0f, -one, one) : -sel(N[axis] < 0.0f, -one, one);
-    const wt_vf u = (P[c0] * t + o0) * s + off0, v = (P[c1] * t + o1) + off1;
-    const wt_vf ax = ((DX[c0] * t) * s) * width, ay = (DX[c1] * t) * height;  // plane_derivative × level-0 size
-    const wt_vf bx = ((DY[c0] * t) * s) * width, by = (DY[c1] * t) * height;
-    const wt_vf aa = ax * ax + ay * ay, bb = bx * bx + by * by;
-    const wt_vf extent2 = vmin(vmax(vmax(aa, bb), 1.0e-30f), wt_float_max);
-    float e2[WT_L], lods[WT_L];
-    __builtin_memcpy(e2, &extent2, sizeof(e2));
-    for (int l = 0; l < WT_L; ++l) lods[l] = 0.5f * wt_log2(e2[l]);  // footprint.lod_log2
-    wt_vf lod;
-    __builtin_memcpy(&lod, lods, sizeof(lod));
-    lod = sel(aa + bb == aa + bb, lod, __builtin_nanf(""));
+    wt_vf u, v, lod;
+    wt_plane_reads(proj, axis, t, tex, P, N, DX, DY, u, v, lod);
     const wt_vi read = W[axis] > 0.0f;
-    const wt_vf rows[4] = {sel(read, u, zero), sel(read, v, zero), sel(read, lod, zero), W[axis]};
+    const wt_vf rows[4] = {wt_sel(read, u, zero), wt_sel(read, v, zero), wt_sel(read, lod, zero), W[axis]};
     for (int q = 0; q < 4; ++q) __builtin_memcpy(reads.data[3 * q + axis], &rows[q], sizeof(wt_vf));
 }
 return reads;

@@ -13,10 +13,12 @@ import functools
 import warp as wp
 
 from . import inlined, specialised
-from .lanes import LANES, accumulate_footprint_lane, lane_colours, lane_floats, lane_ints
+from .lanes import LANES, accumulate_footprint_lane, cpu_snippet, lane_colours, lane_floats, lane_ints, lane_reads
+from .projection import SurfacePixels
+from .projection_lanes import PLANE_CPP
 from .splat_blend import blend_functions
 from .splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, PROJECT_TRIPLANAR, LayerPoint, LayerReads, SplatArgs, face_layer, layer_read, layer_reads, map_count, surface_weights
-from .texels import TextureView, write_channels
+from .texels import FILTER_ANISOTROPIC, TextureView, write_channels
 
 # Per lane pixel (row): a reading point's vectors, and (per read, row; per pixel, column) what a read
 # of a layer samples.
@@ -36,11 +38,99 @@ def _vec3(m: _lane_vec3, l: wp.int32) -> wp.vec3:
     return wp.vec3(m[l, 0], m[l, 1], m[l, 2])
 
 
+_LAYER_READS = PLANE_CPP + r"""
+// The lane's reading points (layer_point), pixel by pixel into rows, then as vectors (the tail repeats
+// pixel base, not read).
+auto rows_of = [&](const auto& a, int dims, wt_vf* out) __attribute__((always_inline)) {
+    float rows[3][WT_L];
+    for (int l = 0; l < WT_L; ++l) {
+        const float* e = (const float*)((const char*)a.data + (long long)(base + (l < count ? l : 0)) * a.strides[0]);
+        for (int d = 0; d < dims; ++d) rows[d][l] = e[d];
+    }
+    for (int d = 0; d < dims; ++d) __builtin_memcpy(&out[d], rows[d], sizeof(wt_vf));
+};
+const auto& params = reads.params;
+const float t = *(const float*)((const char*)params.tiling.data + (long long)wp::min(j, params.tiling.shape[0] - 1) * params.tiling.strides[0]);  // layer_tiling
+wt_vf w;
+__builtin_memcpy(&w, weighted.c, sizeof(w));
+const wt_vi read = w > 0.0f;
+const wt_vf zero = 0.0f, one = 1.0f;
+wp::mat_t<12, WT_L, float> out;
+auto put = [&](int k, wt_vf u, wt_vf v, wt_vf lod, wt_vf weight) __attribute__((always_inline)) {
+    const wt_vf rows[4] = {wt_sel(read, u, zero), wt_sel(read, v, zero), wt_sel(read, lod, zero), wt_sel(read, weight, zero)};
+    for (int q = 0; q < 4; ++q) __builtin_memcpy(out.data[3 * q + k], &rows[q], sizeof(wt_vf));
+};
+if (params.projection == 0) {  // PROJECT_UV: UV0 × tiling, its footprint from UV0's derivatives × tiling
+    wt_vf uv[2], dx[2], dy[2];
+    rows_of(uv0, 2, uv);
+    rows_of(uv0_dx, 2, dx);
+    rows_of(uv0_dy, 2, dy);
+    const float width = (float)wt_int(tex.level_width, 0), height = (float)wt_int(tex.level_height, 0);
+    put(0, uv[0] * t, uv[1] * t, wt_lod_of((dx[0] * t) * width, (dx[1] * t) * height, (dy[0] * t) * width, (dy[1] * t) * height), one);
+} else {
+    wt_vf P[3], DX[3], DY[3], u, v, lod;
+    rows_of(surface.position, 3, P);
+    rows_of(surface.position_dx, 3, DX);
+    rows_of(surface.position_dy, 3, DY);
+    if (params.projection == 1) {  // PROJECT_WORLD_XZ: the Y projection seen from above
+        const wt_vf up[3] = {zero, one, zero};
+        wt_plane_reads(reads.proj, 1, t, tex, P, up, DX, DY, u, v, lod);
+        put(0, u, v, lod, one);
+    } else {  // PROJECT_TRIPLANAR: the three projections, weighted by tri_w
+        wt_vf N[3];
+        rows_of(surface.normal, 3, N);
+        for (int k = 0; k < 3; ++k) {
+            float weight[WT_L];
+            for (int l = 0; l < WT_L; ++l) weight[l] = tri_w.data[l][k];
+            wt_vf wk;
+            __builtin_memcpy(&wk, weight, sizeof(wk));
+            wt_plane_reads(reads.proj, k, t, tex, P, N, DX, DY, u, v, lod);
+            put(k, u, v, lod, wk);
+        }
+    }
+}
+return out;
+"""
+
+
+@wp.func_native(cpu_snippet(_LAYER_READS, "return {};\n"))
+def layer_reads_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
+                     uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3) -> lane_reads:  # fmt: skip
+    """What each lane pixel ``l`` (pixel ``base + l`` of the launch) with ``weighted[l] > 0`` reads of
+    layer ``j`` of ``tex`` with a one-tap filter and no face layers: ``splat_layers.layer_read``'s UV,
+    LOD and weight of each read ``k`` at the pixel's point (its UV0 and their derivatives, or its
+    surface; ``tri_w``: its triplanar weights), as :data:`~.lanes.lane_reads` (all 0 for the other
+    pixels), 16 pixels at a time."""
+    ...
+
+
 @inlined
-def read_lane_layer(tex: TextureView, j: wp.int32, reads: LayerReads, count: wp.int32, weighted: _lane_vec3,
+def whole_lane_reads(reads: LayerReads) -> bool:
+    """Whether :func:`layer_reads_lane` computes a layer's reads: a one-tap filter, no face layers."""
+    return reads.smp.filter != FILTER_ANISOTROPIC and (reads.params.face_layers.shape[0] == 0 or reads.params.projection != PROJECT_TRIPLANAR)
+
+
+@inlined
+def sample_lane_reads(tex: TextureView, j: wp.int32, reads: LayerReads, at: lane_reads) -> lane_colours:
+    """Row ``l``: layer ``j`` of ``tex`` read one tap at a time as ``at`` says (``read_layer``)."""
+    layer = lane_ints(j)
+    zero = lane_floats()
+    one = lane_floats(1.0)
+    value = lane_colours()
+    if reads.params.projection == PROJECT_TRIPLANAR:  # read_projections: value += w · sample, w > 0
+        value = accumulate_footprint_lane(tex, reads.smp, layer, at[0], at[3], at[6], zero, zero, one, at[9], 1, value)
+        value = accumulate_footprint_lane(tex, reads.smp, layer, at[1], at[4], at[7], zero, zero, one, at[10], 1, value)
+        value = accumulate_footprint_lane(tex, reads.smp, layer, at[2], at[5], at[8], zero, zero, one, at[11], 1, value)
+    else:  # one read of weight 1: value = sample
+        value = accumulate_footprint_lane(tex, reads.smp, layer, at[0], at[3], at[6], zero, zero, one, at[9], 0, value)
+    return value
+
+
+@inlined
+def read_lane_layer(tex: TextureView, j: wp.int32, reads: LayerReads, count: wp.int32, weighted: lane_floats,
                     uv0: _lane_vec2, uv0_dx: _lane_vec2, uv0_dy: _lane_vec2, p: _lane_vec3, n: _lane_vec3, dpdx: _lane_vec3, dpdy: _lane_vec3, tri_w: _lane_vec3) -> lane_colours:  # fmt: skip
     """Row ``l``: layer ``j`` of ``tex`` as ``read_layer`` reads it at pixel ``l``'s point, where
-    ``weighted[l, 0] > 0`` (others: 0)."""
+    ``weighted[l] > 0`` (others: 0), pixel by pixel through the scalar blocks."""
     params = reads.params
     u = _reads_f()
     v = _reads_f()
@@ -51,7 +141,7 @@ def read_lane_layer(tex: TextureView, j: wp.int32, reads: LayerReads, count: wp.
     weight = _reads_f()
     layer = _reads_i()
     for l in range(count):
-        if weighted[l, 0] > 0.0:
+        if weighted[l] > 0.0:
             pt = LayerPoint()
             pt.uv0 = _vec2(uv0, l)
             pt.uv0_dx = _vec2(uv0_dx, l)
@@ -115,35 +205,44 @@ def lane_body(cap: int, pixels_t):
             for l in range(count):
                 if covered[l] > 0.0:
                     rs[l] = f.map_values(rs[l], m, texels[l], params)
-        for l in range(count):  # each covered pixel's weights and reading point (layer_point)
+        whole = whole_lane_reads(args.reads)
+        for l in range(count):  # each covered pixel's weights, and (read pixel by pixel) its reading point (layer_point)
             i = base + l
             if pixels.surface.mask[i] != 0.0:
-                pt_uv0 = pixels.uv0[i]
                 r, w0, total, w1 = f.weights_of(rs[l], params)
                 for j in range(params.num_layers):
                     w1s[l, j] = w1[j]
                 pn = pixels.surface.normal[i]
                 tw = surface_weights(params, args.reads.proj, pn)
-                for e in range(2):
-                    uv0[l, e] = pt_uv0[e]
-                    uv0_dx[l, e] = pixels.uv0_dx[i][e]
-                    uv0_dy[l, e] = pixels.uv0_dy[i][e]
                 for e in range(3):
-                    p[l, e] = pixels.surface.position[i][e]
-                    n[l, e] = pn[e]
-                    dpdx[l, e] = pixels.surface.position_dx[i][e]
-                    dpdy[l, e] = pixels.surface.position_dy[i][e]
                     tri_w[l, e] = tw[e]
+                if not whole:
+                    pt_uv0 = pixels.uv0[i]
+                    for e in range(2):
+                        uv0[l, e] = pt_uv0[e]
+                        uv0_dx[l, e] = pixels.uv0_dx[i][e]
+                        uv0_dy[l, e] = pixels.uv0_dy[i][e]
+                    for e in range(3):
+                        p[l, e] = pixels.surface.position[i][e]
+                        n[l, e] = pn[e]
+                        dpdx[l, e] = pixels.surface.position_dx[i][e]
+                        dpdy[l, e] = pixels.surface.position_dy[i][e]
         colours = lane_layers_t()
         heights = lane_weights_t()
         for j in range(params.num_layers):  # read_layers: every weighted layer, lane by lane
-            weighted = _lane_vec3()
+            weighted = lane_floats()
             for l in range(count):
-                weighted[l, 0] = w1s[l, j]
-            value = read_lane_layer(args.layers, j, args.reads, count, weighted, uv0, uv0_dx, uv0_dy, p, n, dpdx, dpdy, tri_w)
+                weighted[l] = w1s[l, j]
+            value = lane_colours()
             height = lane_colours()
-            if params.height_mode == HEIGHT_ARRAY:
-                height = read_lane_layer(args.heights, j, args.reads, count, weighted, uv0, uv0_dx, uv0_dy, p, n, dpdx, dpdy, tri_w)
+            if whole:
+                value = sample_lane_reads(args.layers, j, args.reads, layer_reads_lane(args.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w))
+                if params.height_mode == HEIGHT_ARRAY:
+                    height = sample_lane_reads(args.heights, j, args.reads, layer_reads_lane(args.heights, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w))
+            else:
+                value = read_lane_layer(args.layers, j, args.reads, count, weighted, uv0, uv0_dx, uv0_dy, p, n, dpdx, dpdy, tri_w)
+                if params.height_mode == HEIGHT_ARRAY:
+                    height = read_lane_layer(args.heights, j, args.reads, count, weighted, uv0, uv0_dx, uv0_dy, p, n, dpdx, dpdy, tri_w)
             for l in range(count):
                 if w1s[l, j] > 0.0:
                     colours[l * cap + j] = value[l]
