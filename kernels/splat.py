@@ -36,7 +36,7 @@ from . import adjoint_module, inlined, specialised
 from .family import Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
 from .projection import SurfacePixels, surface_frame
 from .splat_blend import blend_functions, capacity
-from .splat_lanes import lane_body
+from .splat_lanes import grad_lanes_apply, lane_bodies  # noqa: F401 (grad_lanes_apply: for warptex.splat)
 from .splat_layers import (
     HEIGHT_ARRAY,
     HEIGHT_CHANNEL,
@@ -354,5 +354,9 @@ def splat_kernels(*, capacity: int, stochastic: bool) -> Kernels:
     forward, texel_grad, _ = pixel_kernels(f"splat{capacity}" + ("_stochastic" if stochastic else ""), module=module, args=SplatArgs, pixels=SplatPixels, out=wp.array2d(dtype=float),
                                            body=body, scatter=scatter_body, grads=SplatGrads)  # fmt: skip
     grads = ("args.layers", "args.heights", "args.maps", "args.reads.params.transition", None if stochastic else "args.reads.params.tiling")
-    lanes = None if stochastic else lane_kernel(lane_body(capacity, SplatPixels), SplatArgs, SplatPixels, wp.array2d(dtype=float), module=module, name=f"splat{capacity}_lanes")
-    return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity), lanes=lanes)
+    lanes = grad_lanes = None
+    if not stochastic:
+        lane, grad_lane = lane_bodies(capacity, SplatPixels, SplatGrads)
+        lanes = lane_kernel(lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), module=module, name=f"splat{capacity}_lanes")
+        grad_lanes = lane_kernel(grad_lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), grads_t=SplatGrads, module=module + ".grad", name=f"splat{capacity}_texel_grad_lanes")
+    return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity), lanes=lanes, texel_grad_lanes=grad_lanes)

@@ -13,12 +13,13 @@ import functools
 import warp as wp
 
 from . import inlined, specialised
+from .lane_scatter import scatter_lod_lanes
 from .lanes import LANES, accumulate_footprint_lane, cpu_snippet, lane_colours, lane_floats, lane_ints, lane_reads
 from .projection import SurfacePixels
 from .projection_lanes import PLANE_CPP
 from .splat_blend import blend_functions
-from .splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, PROJECT_TRIPLANAR, LayerPoint, LayerReads, SplatArgs, face_layer, layer_read, layer_reads, map_count, surface_weights
-from .texels import FILTER_ANISOTROPIC, TextureView, write_channels
+from .splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerPoint, LayerReads, SplatArgs, SplatParams, face_layer, layer_read, layer_reads, map_count, surface_weights
+from .texels import FILTER_ANISOTROPIC, TexelGrad, TextureView, read_channels, write_channels
 
 # Per lane pixel (row): a reading point's vectors, and (per read, row; per pixel, column) what a read
 # of a layer samples.
@@ -104,6 +105,16 @@ def layer_reads_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted:
     ...
 
 
+def grad_lanes_apply(args: SplatArgs) -> bool:
+    """Whether the texel-gradient lane body takes a launch with ``args``: a one-tap filter, no face
+    layers, no height layers (which may be the colour layers themselves) and no tiling gradient (which
+    takes each read's slope). Its layers then add into texels of their own, so it adds layer by layer
+    and every texel still gets the one-pixel body's sums in its order."""
+    params = args.reads.params
+    face_layers = params.face_layers.shape[0] > 0 and params.projection == PROJECT_TRIPLANAR
+    return args.reads.smp.filter != FILTER_ANISOTROPIC and not face_layers and params.height_mode != HEIGHT_ARRAY and not params.tiling.requires_grad
+
+
 @inlined
 def whole_lane_reads(reads: LayerReads) -> bool:
     """Whether :func:`layer_reads_lane` computes a layer's reads: a one-tap filter, no face layers."""
@@ -124,6 +135,24 @@ def sample_lane_reads(tex: TextureView, j: wp.int32, reads: LayerReads, at: lane
     else:  # one read of weight 1: value = sample
         value = accumulate_footprint_lane(tex, reads.smp, layer, at[0], at[3], at[6], zero, zero, one, at[9], 0, value)
     return value
+
+
+@inlined
+def scatter_lane_reads(tex: TextureView, grad: TexelGrad, j: wp.int32, reads: LayerReads, count: wp.int32, at: lane_reads, g: lane_colours):
+    """``scatter_layer`` of the gradients ``g[l]`` of layer ``j``'s reads ``at`` of ``tex`` into
+    ``grad``, pixel by pixel and read by read: ``w · g`` per projection where triplanar, ``g``
+    itself for the one read of the other projections."""
+    g0 = g
+    g1 = lane_colours()
+    g2 = lane_colours()
+    count_reads = 1
+    if reads.params.projection == PROJECT_TRIPLANAR:  # scatter_projections
+        count_reads = 3
+        for l in range(count):
+            g0[l] = at[9, l] * g[l]
+            g1[l] = at[10, l] * g[l]
+            g2[l] = at[11, l] * g[l]
+    scatter_lod_lanes(tex, tex, tex, grad, grad, grad, reads.smp, count_reads, lane_ints(j), at, g0, g1, g2)
 
 
 @inlined
@@ -171,26 +200,20 @@ def read_lane_layer(tex: TextureView, j: wp.int32, reads: LayerReads, count: wp.
 
 
 @functools.cache
-def lane_body(cap: int, pixels_t):
-    """The lane body of the plain splat of ``cap`` layers (``pixels_t``: :class:`~.splat.SplatPixels`)."""
+def lane_bodies(cap: int, pixels_t, grads_t):
+    """``(lane, grad_lane)``: the lane bodies of the plain splat of ``cap`` layers, forward and texel
+    gradient (``pixels_t``, ``grads_t``: :class:`~.splat.SplatPixels`, :class:`~.splat.SplatGrads`)."""
     f = blend_functions(cap)
     weights_t, colours_t = f.weights_t, f.colours_t
     lane_weights_t = wp.types.matrix(shape=(LANES, cap), dtype=float)
     lane_layers_t = wp.types.matrix(shape=(LANES * cap, 4), dtype=float)  # row l * cap + j
+    module = f"warptex.splat{cap}"
 
-    def lane(args: SplatArgs, pixels: pixels_t, base: wp.int32, out: wp.array2d(dtype=float)):
-        count = wp.min(out.shape[0] - base, LANES)
+    def lane_weights(args: SplatArgs, pixels: pixels_t, base: wp.int32, count: wp.int32):
+        """``(rs, w1s, tri_w)``: each covered lane pixel's raw splat values and weights (splat_weights,
+        the maps read for the whole lane) and its projections' triplanar weights (surface_weights)."""
         params = args.reads.params
-        w1s = lane_weights_t()
-        uv0 = _lane_vec2()
-        uv0_dx = _lane_vec2()
-        uv0_dy = _lane_vec2()
-        p = _lane_vec3()
-        n = _lane_vec3()
-        dpdx = _lane_vec3()
-        dpdy = _lane_vec3()
-        tri_w = _lane_vec3()
-        covered = lane_floats()  # the splat maps' reads (splat_weights), lane by lane
+        covered = lane_floats()
         map_u = lane_floats()
         map_v = lane_floats()
         for l in range(count):
@@ -205,26 +228,41 @@ def lane_body(cap: int, pixels_t):
             for l in range(count):
                 if covered[l] > 0.0:
                     rs[l] = f.map_values(rs[l], m, texels[l], params)
-        whole = whole_lane_reads(args.reads)
-        for l in range(count):  # each covered pixel's weights, and (read pixel by pixel) its reading point (layer_point)
-            i = base + l
-            if pixels.surface.mask[i] != 0.0:
+        w1s = lane_weights_t()
+        tri_w = _lane_vec3()
+        for l in range(count):
+            if covered[l] > 0.0:
                 r, w0, total, w1 = f.weights_of(rs[l], params)
                 for j in range(params.num_layers):
                     w1s[l, j] = w1[j]
-                pn = pixels.surface.normal[i]
-                tw = surface_weights(params, args.reads.proj, pn)
+                tw = surface_weights(params, args.reads.proj, pixels.surface.normal[base + l])
                 for e in range(3):
                     tri_w[l, e] = tw[e]
-                if not whole:
-                    pt_uv0 = pixels.uv0[i]
+        return rs, w1s, tri_w
+
+    def lane_layers(args: SplatArgs, pixels: pixels_t, base: wp.int32, count: wp.int32, w1s: lane_weights_t, tri_w: _lane_vec3):
+        """``(colours, heights)``: read_layers for each lane pixel, layer by layer, each layer's reads
+        for the whole lane (:func:`layer_reads_lane`) or, where it cannot, pixel by pixel."""
+        params = args.reads.params
+        whole = whole_lane_reads(args.reads)
+        uv0 = _lane_vec2()  # the reading points (layer_point), read pixel by pixel
+        uv0_dx = _lane_vec2()
+        uv0_dy = _lane_vec2()
+        p = _lane_vec3()
+        n = _lane_vec3()
+        dpdx = _lane_vec3()
+        dpdy = _lane_vec3()
+        if not whole:
+            for l in range(count):
+                i = base + l
+                if pixels.surface.mask[i] != 0.0:
                     for e in range(2):
-                        uv0[l, e] = pt_uv0[e]
+                        uv0[l, e] = pixels.uv0[i][e]
                         uv0_dx[l, e] = pixels.uv0_dx[i][e]
                         uv0_dy[l, e] = pixels.uv0_dy[i][e]
                     for e in range(3):
                         p[l, e] = pixels.surface.position[i][e]
-                        n[l, e] = pn[e]
+                        n[l, e] = pixels.surface.normal[i][e]
                         dpdx[l, e] = pixels.surface.position_dx[i][e]
                         dpdy[l, e] = pixels.surface.position_dy[i][e]
         colours = lane_layers_t()
@@ -250,18 +288,62 @@ def lane_body(cap: int, pixels_t):
                         heights[l, j] = value[l, params.height_channel]
                     elif params.height_mode == HEIGHT_ARRAY:
                         heights[l, j] = height[l, 0]
+        return colours, heights
+
+    def pixel_layers(w1s: lane_weights_t, colours: lane_layers_t, heights: lane_weights_t, l: wp.int32, params: SplatParams):
+        """``(w1, c, hv)``: lane pixel ``l``'s weights, colours and heights, as the one-pixel body holds them."""
+        w1 = weights_t()
+        c = colours_t()
+        hv = weights_t()
+        for j in range(params.num_layers):
+            w1[j] = w1s[l, j]
+            if w1[j] > 0.0:
+                c[j] = colours[l * cap + j]
+                hv[j] = heights[l, j]
+        return w1, c, hv
+
+    lane_weights = inlined(specialised(lane_weights, f"splat{cap}_lane_weights"), module=module)
+    lane_layers = inlined(specialised(lane_layers, f"splat{cap}_lane_layers"), module=module)
+    pixel_layers = inlined(specialised(pixel_layers, f"splat{cap}_pixel_layers"), module=module)
+
+    def lane(args: SplatArgs, pixels: pixels_t, base: wp.int32, out: wp.array2d(dtype=float)):
+        count = wp.min(out.shape[0] - base, LANES)
+        params = args.reads.params
+        rs, w1s, tri_w = lane_weights(args, pixels, base, count)
+        colours, heights = lane_layers(args, pixels, base, count, w1s, tri_w)
         for l in range(count):  # each pixel's blend
             colour = wp.vec4(0.0)
             if pixels.surface.mask[base + l] != 0.0:
-                w1 = weights_t()
-                c = colours_t()
-                hv = weights_t()
-                for j in range(params.num_layers):
-                    w1[j] = w1s[l, j]
-                    if w1[j] > 0.0:
-                        c[j] = colours[l * cap + j]
-                        hv[j] = heights[l, j]
+                w1, c, hv = pixel_layers(w1s, colours, heights, l, params)
                 colour = f.blend(w1, c, hv, params)
             write_channels(out, base + l, colour)
 
-    return inlined(specialised(lane, f"splat{cap}_lane"), module=f"warptex.splat{cap}")
+    def grad_lane(args: SplatArgs, pixels: pixels_t, base: wp.int32, grads: grads_t, adj: wp.array2d(dtype=float)):
+        """Launched only where :func:`grad_lanes_apply` holds (the one-pixel kernel runs the rest)."""
+        count = wp.min(adj.shape[0] - base, LANES)
+        params = args.reads.params
+        rs, w1s, tri_w = lane_weights(args, pixels, base, count)
+        colours, heights = lane_layers(args, pixels, base, count, w1s, tri_w)
+        gcs = lane_layers_t()
+        for l in range(count):  # each pixel's blend and weights backwards, and its splat maps' adds, in pixel order
+            i = base + l
+            if pixels.surface.mask[i] != 0.0:
+                w1, c, hv = pixel_layers(w1s, colours, heights, l, params)
+                gw1, gc, ghv, g_t = f.blend_backward(w1, c, hv, params, read_channels(adj, i))
+                if grads.transition.shape[0] > 0 and params.height_mode != HEIGHT_NONE:
+                    wp.atomic_add(grads.transition, 0, g_t)
+                r, w0, total, w1_ = f.weights_of(rs[l], params)
+                f.scatter_maps(args.maps, grads.maps, pixels.uv0[i], args.map_smp, f.weights_backward(r, w0, total, gw1, params), params)
+                for j in range(params.num_layers):
+                    gcs[l * cap + j] = gc[j]
+        if grads.layers.texels.shape[0] > 0:
+            for j in range(params.num_layers):  # each layer's adds: without face layers, layers add into texels of their own
+                weighted = lane_floats()
+                g = lane_colours()
+                for l in range(count):
+                    weighted[l] = w1s[l, j]
+                    g[l] = gcs[l * cap + j]
+                at = layer_reads_lane(args.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w)
+                scatter_lane_reads(args.layers, grads.layers, j, args.reads, count, at, g)
+
+    return inlined(specialised(lane, f"splat{cap}_lane"), module=module), inlined(specialised(grad_lane, f"splat{cap}_grad_lane"), module=module)
