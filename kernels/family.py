@@ -87,6 +87,9 @@ class Kernels:
         lanes: ``forward`` for CPU launches, a lane of pixels per launch index
             (:func:`lane_kernel`), or ``None``: the same bits, faster.
         texel_grad_lanes: ``texel_grad`` for CPU launches, likewise, or ``None``.
+        lanes_take, grad_lanes_take: ``take(args) -> bool``, whether ``lanes`` (``texel_grad_lanes``)
+            take a launch with the kernels' ``args`` struct (tested where the launch, or the backward
+            pass, is recorded), or ``None``: always. The one-pixel kernel takes the rest.
     """
 
     forward: Any
@@ -96,6 +99,8 @@ class Kernels:
     staged: Staged | None = None
     lanes: Any = None
     texel_grad_lanes: Any = None
+    lanes_take: Callable[[Any], bool] | None = None
+    grad_lanes_take: Callable[[Any], bool] | None = None
 
     def launched(self, device, grad: bool = False):
         """The kernel a forward launch (``grad``: a hand-written gradient) runs on ``device``: its

@@ -31,12 +31,10 @@ LANES = 16
 lane_floats = wp.types.vector(length=LANES, dtype=wp.float32)
 lane_ints = wp.types.vector(length=LANES, dtype=wp.int32)
 lane_colours = wp.types.matrix(shape=(LANES, 4), dtype=wp.float32)
-#: Per read (up to 3 per pixel: a triplanar pixel's projections) and lane pixel (column), what is read
-#: one tap at a time: rows ``3 q + r`` of read ``r``'s UV ``u`` (``q = 0``) and ``v`` (1), its LOD (2)
-#: and its weight (3; 0: not read).
-lane_reads = wp.types.matrix(shape=(12, LANES), dtype=wp.float32)
-#: Per read (row) and lane pixel (column): one value of a footprint (``footprint.py``'s step, taps).
-lane_steps = wp.types.matrix(shape=(3, LANES), dtype=wp.float32)
+#: Per read (up to 3 per pixel: a triplanar pixel's projections) and lane pixel (column), what is read:
+#: rows ``3 q + r`` of read ``r``'s UV ``u`` (``q = 0``) and ``v`` (1), its LOD (2), its weight (3; 0:
+#: not read) and the rest of its footprint (footprint.py): step ``u`` (4), step ``v`` (5), taps (6).
+lane_reads = wp.types.matrix(shape=(21, LANES), dtype=wp.float32)
 
 # What every helper shares: the scalar formulas of texels.reduce_coord, texels.address_near,
 # footprint.mip_levels and filters.sample_levels, written for the lane (same ADDRESS_* and FILTER_*
@@ -44,7 +42,7 @@ lane_steps = wp.types.matrix(shape=(3, LANES), dtype=wp.float32)
 _CORE = r"""
 #pragma clang fp contract(off)
 typedef float wt_f4 __attribute__((ext_vector_type(4)));
-enum { WT_L = %(lanes)d, WT_WRAP = 0, WT_CLAMP = 1, WT_MIRROR = 2, WT_BORDER = 3, WT_NEAREST = 0, WT_TRILINEAR = 2 };
+enum { WT_L = %(lanes)d, WT_WRAP = 0, WT_CLAMP = 1, WT_MIRROR = 2, WT_BORDER = 3, WT_NEAREST = 0, WT_TRILINEAR = 2, WT_ANISOTROPIC = 3 };
 const float wt_float_max = 3.4028234663852886e38f;
 auto wt_reduce = [](float x, const int address) __attribute__((always_inline)) -> float {  // texels.reduce_coord
     if (address == WT_WRAP) return x - wp::floor(x);

@@ -36,7 +36,7 @@ from . import adjoint_module, inlined, specialised
 from .family import Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
 from .projection import SurfacePixels, surface_frame
 from .splat_blend import blend_functions, capacity
-from .splat_lanes import grad_lanes_apply, lane_bodies  # noqa: F401 (grad_lanes_apply: for warptex.splat)
+from .splat_lanes import grad_lanes_take, lane_bodies, lanes_take
 from .splat_layers import (
     HEIGHT_ARRAY,
     HEIGHT_CHANNEL,
@@ -359,4 +359,4 @@ def splat_kernels(*, capacity: int, stochastic: bool) -> Kernels:
         lane, grad_lane = lane_bodies(capacity, SplatPixels, SplatGrads)
         lanes = lane_kernel(lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), module=module, name=f"splat{capacity}_lanes")
         grad_lanes = lane_kernel(grad_lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), grads_t=SplatGrads, module=module + ".grad", name=f"splat{capacity}_texel_grad_lanes")
-    return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity), lanes=lanes, texel_grad_lanes=grad_lanes)
+    return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity), lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=lanes_take, grad_lanes_take=grad_lanes_take)

@@ -1,11 +1,17 @@
-"""Splat-map terrain texturing, part 4: the plain splat forward for a lane of pixels on the CPU.
+"""Splat-map terrain texturing, part 4: the plain splat for a lane of pixels on the CPU, forward and
+texel gradient (:mod:`.lanes`).
 
-The lane body (:func:`lane_body`) computes what :mod:`.splat`'s forward body computes for
-:data:`~.lanes.LANES` pixels, in three passes: the splat maps read for the whole lane, then each
-pixel's splat weights and reading point by the scalar blocks; then layer by layer, each pixel's reads (UV, footprint, weight and array layer, by
-``layer_read`` and ``face_layer``) and the lane's texture reads by
-:func:`~.lanes.accumulate_footprint_lane`, projection by projection in the order ``read_layer``
-adds them; then each pixel's blend.
+The forward lane body computes what :mod:`.splat`'s forward body computes for
+:data:`~.lanes.LANES` pixels: the splat maps read for the whole lane and each pixel's splat
+weights; then layer by layer, the lane's reads of the layer (UV, footprint, weight:
+:func:`layer_reads_lane`, native code that restates ``layer_read``) and its texels' reads by
+:func:`~.lanes.accumulate_footprint_lane`, projection by projection in the order ``read_layer`` adds
+them; then each pixel's blend. The gradient's lane body replays that, takes each pixel's blend and
+weights backwards and adds into its splat maps in pixel order, then adds each layer's gradient into
+its texels by :func:`~.lane_scatter.scatter_lod_lanes`, layer by layer: a layer's reads touch texels
+of its own array layer only, so every texel gets the one-pixel body's sums in its order, and the
+outputs and gradients are the one-pixel kernels' bits. Face layers, and for the gradient the cases
+:func:`grad_lanes_take` names, run the one-pixel kernels (``Kernels.lanes_take``).
 """
 
 import functools
@@ -18,25 +24,11 @@ from .lanes import LANES, accumulate_footprint_lane, cpu_snippet, lane_colours, 
 from .projection import SurfacePixels
 from .projection_lanes import PLANE_CPP
 from .splat_blend import blend_functions
-from .splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerPoint, LayerReads, SplatArgs, SplatParams, face_layer, layer_read, layer_reads, map_count, surface_weights
+from .splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerReads, SplatArgs, SplatParams, layer_textures, map_count, pick, surface_weights
 from .texels import FILTER_ANISOTROPIC, TexelGrad, TextureView, read_channels, write_channels
 
-# Per lane pixel (row): a reading point's vectors, and (per read, row; per pixel, column) what a read
-# of a layer samples.
-_lane_vec2 = wp.types.matrix(shape=(LANES, 2), dtype=float)
+# Per lane pixel (row): its projections' triplanar weights.
 _lane_vec3 = wp.types.matrix(shape=(LANES, 3), dtype=float)
-_reads_f = wp.types.matrix(shape=(3, LANES), dtype=float)
-_reads_i = wp.types.matrix(shape=(3, LANES), dtype=wp.int32)
-
-
-@wp.func
-def _vec2(m: _lane_vec2, l: wp.int32) -> wp.vec2:
-    return wp.vec2(m[l, 0], m[l, 1])
-
-
-@wp.func
-def _vec3(m: _lane_vec3, l: wp.int32) -> wp.vec3:
-    return wp.vec3(m[l, 0], m[l, 1], m[l, 2])
 
 
 _LAYER_READS = PLANE_CPP + r"""
@@ -56,27 +48,24 @@ wt_vf w;
 __builtin_memcpy(&w, weighted.c, sizeof(w));
 const wt_vi read = w > 0.0f;
 const wt_vf zero = 0.0f, one = 1.0f;
-wp::mat_t<12, WT_L, float> out;
-auto put = [&](int k, wt_vf u, wt_vf v, wt_vf lod, wt_vf weight) __attribute__((always_inline)) {
-    const wt_vf rows[4] = {wt_sel(read, u, zero), wt_sel(read, v, zero), wt_sel(read, lod, zero), wt_sel(read, weight, zero)};
-    for (int q = 0; q < 4; ++q) __builtin_memcpy(out.data[3 * q + k], &rows[q], sizeof(wt_vf));
-};
+wp::mat_t<21, WT_L, float> out;
+wt_footprint_lanes fp;
 if (params.projection == 0) {  // PROJECT_UV: UV0 × tiling, its footprint from UV0's derivatives × tiling
     wt_vf uv[2], dx[2], dy[2];
     rows_of(uv0, 2, uv);
     rows_of(uv0_dx, 2, dx);
     rows_of(uv0_dy, 2, dy);
-    const float width = (float)wt_int(tex.level_width, 0), height = (float)wt_int(tex.level_height, 0);
-    put(0, uv[0] * t, uv[1] * t, wt_lod_of((dx[0] * t) * width, (dx[1] * t) * height, (dy[0] * t) * width, (dy[1] * t) * height), one);
+    fp = wt_footprint(reads.smp, dx[0] * t, dx[1] * t, dy[0] * t, dy[1] * t, (float)wt_int(tex.level_width, 0), (float)wt_int(tex.level_height, 0));
+    wt_put_read(out, 0, read, uv[0] * t, uv[1] * t, fp, one);
 } else {
-    wt_vf P[3], DX[3], DY[3], u, v, lod;
+    wt_vf P[3], DX[3], DY[3], u, v;
     rows_of(surface.position, 3, P);
     rows_of(surface.position_dx, 3, DX);
     rows_of(surface.position_dy, 3, DY);
     if (params.projection == 1) {  // PROJECT_WORLD_XZ: the Y projection seen from above
         const wt_vf up[3] = {zero, one, zero};
-        wt_plane_reads(reads.proj, 1, t, tex, P, up, DX, DY, u, v, lod);
-        put(0, u, v, lod, one);
+        wt_plane_reads(reads.proj, reads.smp, 1, t, tex, P, up, DX, DY, u, v, fp);
+        wt_put_read(out, 0, read, u, v, fp, one);
     } else {  // PROJECT_TRIPLANAR: the three projections, weighted by tri_w
         wt_vf N[3];
         rows_of(surface.normal, 3, N);
@@ -85,8 +74,8 @@ if (params.projection == 0) {  // PROJECT_UV: UV0 × tiling, its footprint from 
             for (int l = 0; l < WT_L; ++l) weight[l] = tri_w.data[l][k];
             wt_vf wk;
             __builtin_memcpy(&wk, weight, sizeof(wk));
-            wt_plane_reads(reads.proj, k, t, tex, P, N, DX, DY, u, v, lod);
-            put(k, u, v, lod, wk);
+            wt_plane_reads(reads.proj, reads.smp, k, t, tex, P, N, DX, DY, u, v, fp);
+            wt_put_read(out, k, read, u, v, fp, wk);
         }
     }
 }
@@ -98,42 +87,40 @@ return out;
 def layer_reads_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
                      uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3) -> lane_reads:  # fmt: skip
     """What each lane pixel ``l`` (pixel ``base + l`` of the launch) with ``weighted[l] > 0`` reads of
-    layer ``j`` of ``tex`` with a one-tap filter and no face layers: ``splat_layers.layer_read``'s UV,
-    LOD and weight of each read ``k`` at the pixel's point (its UV0 and their derivatives, or its
-    surface; ``tri_w``: its triplanar weights), as :data:`~.lanes.lane_reads` (all 0 for the other
-    pixels), 16 pixels at a time."""
+    layer ``j`` of ``tex`` (no face layers): ``splat_layers.layer_read``'s UV, footprint and weight of
+    each read ``k`` at the pixel's point (its UV0 and their derivatives, or its surface; ``tri_w``:
+    its triplanar weights), as :data:`~.lanes.lane_reads` (all 0 for the other pixels), 16 pixels at
+    a time."""
     ...
 
 
-def grad_lanes_apply(args: SplatArgs) -> bool:
-    """Whether the texel-gradient lane body takes a launch with ``args``: a one-tap filter, no face
-    layers, no height layers (which may be the colour layers themselves) and no tiling gradient (which
-    takes each read's slope). Its layers then add into texels of their own, so it adds layer by layer
-    and every texel still gets the one-pixel body's sums in its order."""
+def lanes_take(args: SplatArgs) -> bool:
+    """Whether the lane bodies take a launch with ``args`` at all (``Kernels.lanes_take``): no face
+    layers (which make a read's array layer depend on the pixel's normal)."""
     params = args.reads.params
-    face_layers = params.face_layers.shape[0] > 0 and params.projection == PROJECT_TRIPLANAR
-    return args.reads.smp.filter != FILTER_ANISOTROPIC and not face_layers and params.height_mode != HEIGHT_ARRAY and not params.tiling.requires_grad
+    return not (params.face_layers.shape[0] > 0 and params.projection == PROJECT_TRIPLANAR)
 
 
-@inlined
-def whole_lane_reads(reads: LayerReads) -> bool:
-    """Whether :func:`layer_reads_lane` computes a layer's reads: a one-tap filter, no face layers."""
-    return reads.smp.filter != FILTER_ANISOTROPIC and (reads.params.face_layers.shape[0] == 0 or reads.params.projection != PROJECT_TRIPLANAR)
+def grad_lanes_take(args: SplatArgs) -> bool:
+    """Whether the texel-gradient lane body takes a launch with ``args`` (``Kernels.grad_lanes_take``):
+    :func:`lanes_take`, a one-tap filter, no height layers (which may be the colour layers themselves)
+    and no tiling gradient (which takes each read's slope). Its layers then add into texels of their
+    own, so it adds layer by layer and every texel still gets the one-pixel body's sums in its order."""
+    params = args.reads.params
+    return lanes_take(args) and args.reads.smp.filter != FILTER_ANISOTROPIC and params.height_mode != HEIGHT_ARRAY and not params.tiling.requires_grad
 
 
 @inlined
 def sample_lane_reads(tex: TextureView, j: wp.int32, reads: LayerReads, at: lane_reads) -> lane_colours:
-    """Row ``l``: layer ``j`` of ``tex`` read one tap at a time as ``at`` says (``read_layer``)."""
+    """Row ``l``: layer ``j`` of ``tex`` read over each read's footprint as ``at`` says (``read_layer``)."""
     layer = lane_ints(j)
-    zero = lane_floats()
-    one = lane_floats(1.0)
     value = lane_colours()
     if reads.params.projection == PROJECT_TRIPLANAR:  # read_projections: value += w · sample, w > 0
-        value = accumulate_footprint_lane(tex, reads.smp, layer, at[0], at[3], at[6], zero, zero, one, at[9], 1, value)
-        value = accumulate_footprint_lane(tex, reads.smp, layer, at[1], at[4], at[7], zero, zero, one, at[10], 1, value)
-        value = accumulate_footprint_lane(tex, reads.smp, layer, at[2], at[5], at[8], zero, zero, one, at[11], 1, value)
+        value = accumulate_footprint_lane(tex, reads.smp, layer, at[0], at[3], at[6], at[12], at[15], at[18], at[9], 1, value)
+        value = accumulate_footprint_lane(tex, reads.smp, layer, at[1], at[4], at[7], at[13], at[16], at[19], at[10], 1, value)
+        value = accumulate_footprint_lane(tex, reads.smp, layer, at[2], at[5], at[8], at[14], at[17], at[20], at[11], 1, value)
     else:  # one read of weight 1: value = sample
-        value = accumulate_footprint_lane(tex, reads.smp, layer, at[0], at[3], at[6], zero, zero, one, at[9], 0, value)
+        value = accumulate_footprint_lane(tex, reads.smp, layer, at[0], at[3], at[6], at[12], at[15], at[18], at[9], 0, value)
     return value
 
 
@@ -153,50 +140,6 @@ def scatter_lane_reads(tex: TextureView, grad: TexelGrad, j: wp.int32, reads: La
             g1[l] = at[10, l] * g[l]
             g2[l] = at[11, l] * g[l]
     scatter_lod_lanes(tex, tex, tex, grad, grad, grad, reads.smp, count_reads, lane_ints(j), at, g0, g1, g2)
-
-
-@inlined
-def read_lane_layer(tex: TextureView, j: wp.int32, reads: LayerReads, count: wp.int32, weighted: lane_floats,
-                    uv0: _lane_vec2, uv0_dx: _lane_vec2, uv0_dy: _lane_vec2, p: _lane_vec3, n: _lane_vec3, dpdx: _lane_vec3, dpdy: _lane_vec3, tri_w: _lane_vec3) -> lane_colours:  # fmt: skip
-    """Row ``l``: layer ``j`` of ``tex`` as ``read_layer`` reads it at pixel ``l``'s point, where
-    ``weighted[l] > 0`` (others: 0), pixel by pixel through the scalar blocks."""
-    params = reads.params
-    u = _reads_f()
-    v = _reads_f()
-    lod = _reads_f()  # the footprint: LOD, step and taps (footprint.py)
-    du = _reads_f()
-    dv = _reads_f()
-    taps = _reads_f()
-    weight = _reads_f()
-    layer = _reads_i()
-    for l in range(count):
-        if weighted[l] > 0.0:
-            pt = LayerPoint()
-            pt.uv0 = _vec2(uv0, l)
-            pt.uv0_dx = _vec2(uv0_dx, l)
-            pt.uv0_dy = _vec2(uv0_dy, l)
-            pt.p = _vec3(p, l)
-            pt.n = _vec3(n, l)
-            pt.dpdx = _vec3(dpdx, l)
-            pt.dpdy = _vec3(dpdy, l)
-            pt.tri_w = _vec3(tri_w, l)
-            for k in range(layer_reads(params)):
-                uv, fp, w = layer_read(tex, j, k, reads, pt)
-                u[k, l] = uv[0]
-                v[k, l] = uv[1]
-                lod[k, l] = fp[0]
-                du[k, l] = fp[1]
-                dv[k, l] = fp[2]
-                taps[k, l] = fp[3]
-                weight[k, l] = w
-                layer[k, l] = face_layer(params, j, k, pt.n)
-    value = lane_colours()
-    if params.projection == PROJECT_TRIPLANAR:  # read_projections: value += w · sample, w > 0
-        for k in range(3):
-            value = accumulate_footprint_lane(tex, reads.smp, layer[k], u[k], v[k], lod[k], du[k], dv[k], taps[k], weight[k], 1, value)
-    else:  # one read of weight 1: value = sample
-        value = accumulate_footprint_lane(tex, reads.smp, layer[0], u[0], v[0], lod[0], du[0], dv[0], taps[0], weight[0], 0, value)
-    return value
 
 
 @functools.cache
@@ -242,52 +185,26 @@ def lane_bodies(cap: int, pixels_t, grads_t):
 
     def lane_layers(args: SplatArgs, pixels: pixels_t, base: wp.int32, count: wp.int32, w1s: lane_weights_t, tri_w: _lane_vec3):
         """``(colours, heights)``: read_layers for each lane pixel, layer by layer, each layer's reads
-        for the whole lane (:func:`layer_reads_lane`) or, where it cannot, pixel by pixel."""
+        for the whole lane (:func:`layer_reads_lane`) and its texels' by the lane; for each texture a
+        layer reads (its colour, and its separate height: ``pick``) one call, compiled once."""
         params = args.reads.params
-        whole = whole_lane_reads(args.reads)
-        uv0 = _lane_vec2()  # the reading points (layer_point), read pixel by pixel
-        uv0_dx = _lane_vec2()
-        uv0_dy = _lane_vec2()
-        p = _lane_vec3()
-        n = _lane_vec3()
-        dpdx = _lane_vec3()
-        dpdy = _lane_vec3()
-        if not whole:
-            for l in range(count):
-                i = base + l
-                if pixels.surface.mask[i] != 0.0:
-                    for e in range(2):
-                        uv0[l, e] = pixels.uv0[i][e]
-                        uv0_dx[l, e] = pixels.uv0_dx[i][e]
-                        uv0_dy[l, e] = pixels.uv0_dy[i][e]
-                    for e in range(3):
-                        p[l, e] = pixels.surface.position[i][e]
-                        n[l, e] = pixels.surface.normal[i][e]
-                        dpdx[l, e] = pixels.surface.position_dx[i][e]
-                        dpdy[l, e] = pixels.surface.position_dy[i][e]
         colours = lane_layers_t()
         heights = lane_weights_t()
         for j in range(params.num_layers):  # read_layers: every weighted layer, lane by lane
             weighted = lane_floats()
             for l in range(count):
                 weighted[l] = w1s[l, j]
-            value = lane_colours()
-            height = lane_colours()
-            if whole:
-                value = sample_lane_reads(args.layers, j, args.reads, layer_reads_lane(args.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w))
-                if params.height_mode == HEIGHT_ARRAY:
-                    height = sample_lane_reads(args.heights, j, args.reads, layer_reads_lane(args.heights, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w))
-            else:
-                value = read_lane_layer(args.layers, j, args.reads, count, weighted, uv0, uv0_dx, uv0_dy, p, n, dpdx, dpdy, tri_w)
-                if params.height_mode == HEIGHT_ARRAY:
-                    height = read_lane_layer(args.heights, j, args.reads, count, weighted, uv0, uv0_dx, uv0_dy, p, n, dpdx, dpdy, tri_w)
-            for l in range(count):
-                if w1s[l, j] > 0.0:
-                    colours[l * cap + j] = value[l]
-                    if params.height_mode == HEIGHT_CHANNEL:
-                        heights[l, j] = value[l, params.height_channel]
-                    elif params.height_mode == HEIGHT_ARRAY:
-                        heights[l, j] = height[l, 0]
+            for t in range(layer_textures(params)):
+                tex = pick(args.layers, args.heights, t)
+                value = sample_lane_reads(tex, j, args.reads, layer_reads_lane(tex, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w))
+                for l in range(count):
+                    if w1s[l, j] > 0.0:
+                        if t == 0:
+                            colours[l * cap + j] = value[l]
+                            if params.height_mode == HEIGHT_CHANNEL:
+                                heights[l, j] = value[l, params.height_channel]
+                        else:
+                            heights[l, j] = value[l, 0]
         return colours, heights
 
     def pixel_layers(w1s: lane_weights_t, colours: lane_layers_t, heights: lane_weights_t, l: wp.int32, params: SplatParams):
@@ -319,7 +236,7 @@ def lane_bodies(cap: int, pixels_t, grads_t):
             write_channels(out, base + l, colour)
 
     def grad_lane(args: SplatArgs, pixels: pixels_t, base: wp.int32, grads: grads_t, adj: wp.array2d(dtype=float)):
-        """Launched only where :func:`grad_lanes_apply` holds (the one-pixel kernel runs the rest)."""
+        """Launched only where :func:`grad_lanes_take` holds (the one-pixel kernel runs the rest)."""
         count = wp.min(adj.shape[0] - base, LANES)
         params = args.reads.params
         rs, w1s, tri_w = lane_weights(args, pixels, base, count)

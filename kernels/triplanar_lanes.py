@@ -2,8 +2,8 @@
 gradient, one texture per axis, plain sampling.
 
 What each pixel reads from each projection (its UV, footprint and weight) comes, with triplanar
-weights and a one-tap filter, from :func:`~.projection_lanes.triplanar_reads_lane` for the whole
-lane, and otherwise from the scalar blocks pixel by pixel; the lane's texture reads from
+weights, from :func:`~.projection_lanes.triplanar_reads_lane` for the whole lane, and otherwise
+(biplanar) from the scalar blocks pixel by pixel; the lane's texture reads from
 :func:`~.lanes.accumulate_footprint_lane` and its texel-gradient adds from
 :func:`~.lane_scatter.scatter_lod_lanes`, both in the order the scalar bodies take them, so the
 outputs and the gradients are the scalar kernels' bits. The gradient of the anisotropic filter,
@@ -17,22 +17,8 @@ import warp as wp
 from . import inlined, specialised
 from .faces import FaceGrads, on_axis
 from .lane_scatter import scatter_lod_lanes
-from .lanes import (
-    LANES,
-    accumulate_footprint_lane,
-    lane_colours,
-    lane_ints,
-    lane_reads,
-    lane_steps,
-)
-from .projection import (
-    WEIGHTS_TRIPLANAR,
-    SurfacePixels,
-    projection_footprint,
-    projection_uv,
-    projection_weights,
-    surface,
-)
+from .lanes import LANES, accumulate_footprint_lane, lane_colours, lane_ints, lane_reads
+from .projection import WEIGHTS_TRIPLANAR, SurfacePixels, projection_footprint, projection_uv, projection_weights, surface
 from .projection_lanes import triplanar_reads_lane
 from .texels import FILTER_ANISOTROPIC, read_channels, write_channels
 
@@ -44,20 +30,16 @@ def lane_bodies(colour, colour_grad, args_t):
     (:class:`~.triplanar.TriplanarArgs`)."""
 
     def whole_lane(args: args_t):
-        """Whether :func:`~.projection_lanes.triplanar_reads_lane` computes the lane's reads: triplanar
-        weights, one tap per read."""
-        return args.smp.filter != FILTER_ANISOTROPIC and args.proj.weights == WEIGHTS_TRIPLANAR
+        """Whether :func:`~.projection_lanes.triplanar_reads_lane` computes the lane's reads:
+        triplanar weights."""
+        return args.proj.weights == WEIGHTS_TRIPLANAR
 
-    def projection_reads(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
-        """``(reads, du, dv, taps)``: what each lane pixel (column) reads from each projection (row),
-        pixel by pixel: its UV, LOD and weight (:data:`~.lanes.lane_reads`; all 0 where the
-        projection is not read: a zero weight, or an uncovered pixel), and its footprint's step and
-        taps (footprint.py)."""
+    def projection_reads(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32) -> lane_reads:
+        """What each lane pixel (column) reads from each projection, pixel by pixel: its UV,
+        footprint and weight (:data:`~.lanes.lane_reads`; all 0 where the projection is not read: a
+        zero weight, or an uncovered pixel)."""
         faces = args.faces
         reads = lane_reads()
-        du = lane_steps()
-        dv = lane_steps()
-        taps = lane_steps()
         for l in range(count):
             i = base + l
             if pixels.mask[i] != 0.0:
@@ -71,19 +53,19 @@ def lane_bodies(colour, colour_grad, args_t):
                         reads[3 + axis, l] = uv[1]
                         reads[6 + axis, l] = fp[0]
                         reads[9 + axis, l] = w[axis]
-                        du[axis, l] = fp[1]
-                        dv[axis, l] = fp[2]
-                        taps[axis, l] = fp[3]
-        return reads, du, dv, taps
+                        reads[12 + axis, l] = fp[1]
+                        reads[15 + axis, l] = fp[2]
+                        reads[18 + axis, l] = fp[3]
+        return reads
 
-    def write_colours(args: args_t, reads: lane_reads, du: lane_steps, dv: lane_steps, taps: lane_steps, base: wp.int32, count: wp.int32, out: wp.array2d(dtype=float)):
+    def write_colours(args: args_t, reads: lane_reads, base: wp.int32, count: wp.int32, out: wp.array2d(dtype=float)):
         """The lane's colours, the projections' samples blended by their weights, into ``out``."""
         faces = args.faces
         layers = lane_ints(args.layer)
         value = lane_colours()
-        value = accumulate_footprint_lane(faces.px, args.smp, layers, reads[0], reads[3], reads[6], du[0], dv[0], taps[0], reads[9], 1, value)
-        value = accumulate_footprint_lane(faces.py, args.smp, layers, reads[1], reads[4], reads[7], du[1], dv[1], taps[1], reads[10], 1, value)
-        value = accumulate_footprint_lane(faces.pz, args.smp, layers, reads[2], reads[5], reads[8], du[2], dv[2], taps[2], reads[11], 1, value)
+        value = accumulate_footprint_lane(faces.px, args.smp, layers, reads[0], reads[3], reads[6], reads[12], reads[15], reads[18], reads[9], 1, value)
+        value = accumulate_footprint_lane(faces.py, args.smp, layers, reads[1], reads[4], reads[7], reads[13], reads[16], reads[19], reads[10], 1, value)
+        value = accumulate_footprint_lane(faces.pz, args.smp, layers, reads[2], reads[5], reads[8], reads[14], reads[17], reads[20], reads[11], 1, value)
         for l in range(count):
             write_channels(out, base + l, value[l])
 
@@ -111,10 +93,9 @@ def lane_bodies(colour, colour_grad, args_t):
     def colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
         if whole_lane(args):
-            write_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count), lane_steps(), lane_steps(), lane_steps(1.0), base, count, out)
+            write_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count), base, count, out)
         else:
-            reads, du, dv, taps = projection_reads(args, pixels, base, count)
-            write_colours(args, reads, du, dv, taps, base, count, out)
+            write_colours(args, projection_reads(args, pixels, base, count), base, count, out)
 
     def colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
@@ -124,7 +105,6 @@ def lane_bodies(colour, colour_grad, args_t):
         elif whole_lane(args):
             scatter_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count), base, count, grads, adj)
         else:
-            reads, du, dv, taps = projection_reads(args, pixels, base, count)
-            scatter_colours(args, reads, base, count, grads, adj)
+            scatter_colours(args, projection_reads(args, pixels, base, count), base, count, grads, adj)
 
     return inlined(specialised(colour_lane, "triplanar_colour_lane")), inlined(specialised(colour_grad_lane, "triplanar_colour_grad_lane"))

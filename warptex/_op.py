@@ -59,9 +59,13 @@ def one_pixel_kernels(enabled: bool = True):
     return _thread_flag(_one_pixel, enabled)
 
 
-def _lanes(kernels: Kernels, grad: bool = False):
-    """``kernels``' lane kernel (of the texel gradient with ``grad``), unless turned off on this thread."""
-    return None if getattr(_one_pixel, "value", False) else kernels.texel_grad_lanes if grad else kernels.lanes
+def _lanes(kernels: Kernels, args, grad: bool = False):
+    """``kernels``' lane kernel (of the texel gradient with ``grad``), where it takes a launch with
+    ``args``, unless turned off on this thread."""
+    lanes, take = (kernels.texel_grad_lanes, kernels.grad_lanes_take) if grad else (kernels.lanes, kernels.lanes_take)
+    if getattr(_one_pixel, "value", False) or (lanes is not None and take is not None and not take(args)):
+        return None
+    return lanes
 
 
 def differentiable(value, path: str = ""):
@@ -112,7 +116,7 @@ def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linea
     result = output(*out, device=device, requires_grad=bool(wanted))
     cut = {"covered": covered, "footprints": footprints}  # how launches are cut into chunks
     if active_tape() is None or not wanted:
-        launch(kernels.forward, count, args=args, pixels=pixels, out=result, device=device, lanes=_lanes(kernels), **cut)
+        launch(kernels.forward, count, args=args, pixels=pixels, out=result, device=device, lanes=_lanes(kernels, args), **cut)
     else:
         _run_path(kernels, _backward_path(kernels, inputs, wanted, linear), count, inputs, result, device, cut, touched)
     return result
@@ -133,7 +137,7 @@ def _run_path(kernels: Kernels, path: str, count: int, inputs: dict, result, dev
     if kernels.staged is not None and kernels.staged.replaces == path and (kernels.texel_grad if path == "texel_grad" else kernels.adjoint) is None:
         _run_staged(kernels.staged, count, inputs, result, device, cut)
     elif path == "texel_grad":
-        launch(kernels.forward, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, lanes=_lanes(kernels), **cut,
+        launch(kernels.forward, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, lanes=_lanes(kernels, inputs["args"]), **cut,
                backward=_texel_gradient(kernels, count, inputs, result, device, cut, touched))  # fmt: skip
     elif kernels.adjoint is not None:
         launch(kernels.adjoint, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, **cut, backward=GENERATED)
@@ -145,7 +149,7 @@ def _texel_gradient(kernels: Kernels, count: int, inputs: dict, result, device, 
     """``backward(tape)``: ``kernels.texel_grad`` adds the output's gradient, through the forward
     pass, into the gradients of the inputs ``kernels.grads`` names that require them."""
 
-    lanes = _lanes(kernels, grad=True)  # decided where the pass is recorded
+    lanes = _lanes(kernels, inputs["args"], grad=True)  # decided where the pass is recorded
 
     def backward(tape) -> None:
         targets, entries = [], {}

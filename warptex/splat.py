@@ -5,7 +5,6 @@ Formulas: :mod:`warptex.kernels.splat_layers` and :mod:`warptex.kernels.splat`. 
 
 from __future__ import annotations
 
-import dataclasses
 
 import enum
 from typing import Sequence
@@ -193,8 +192,6 @@ def splat(
     surface = struct_of(kp.SurfacePixels, device, **{name: getattr(gbuffer, name).reshape((count,)) for name in ("position", "position_dx", "position_dy", "normal", "mask")})
     pixels = struct_of(kl.SplatPixels, device, uv0=uvs["uv"].reshape((count,)), uv0_dx=uvs["uv_dx"].reshape((count,)), uv0_dy=uvs["uv_dy"].reshape((count,)), surface=surface)
     kernels = kl.splat_kernels(capacity=kl.capacity(num_layers), stochastic=stoch.method != kst.METHOD_NONE)
-    if kernels.texel_grad_lanes is not None and not kl.grad_lanes_apply(args):
-        kernels = dataclasses.replace(kernels, texel_grad_lanes=None)  # the one-pixel gradient kernel takes the rest
     linear = stoch.histogram == 0 and height_stoch.histogram == 0  # the histogram blend is not linear in the texels
     # A layer's lookup costs about two footprints: its share of the blend (weights, heights,
     # normalising) as much as its filtering (44 ns a footprint in a splat's backward against 20 for bilinear).
