@@ -142,6 +142,73 @@ def scatter_lane_reads(tex: TextureView, grad: TexelGrad, j: wp.int32, reads: La
     scatter_lod_lanes(tex, tex, tex, grad, grad, grad, reads.smp, count_reads, lane_ints(j), at, g0, g1, g2)
 
 
+# splat_blend.blend for a lane: each covered pixel's weights (row l of w1s), colours (rows l cap + j)
+# and heights (row l), 0 where a layer is not weighted, blended as the scalar block does, in its
+# order: the heights' top and weights over the layers, their sum over all `cap` entries from 0.
+_BLEND = r"""
+constexpr int cap = sizeof(w1s.data[0]) / sizeof(float);
+const int n = params.num_layers;
+const float transition = params.height_mode != 0 ? *(const float*)params.transition.data : 0.0f;
+wp::mat_t<WT_L, 4, float> out;
+for (int l = 0; l < count; ++l) {
+    float colour[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+    if (*(const float*)((const char*)surface.mask.data + (long long)(base + l) * surface.mask.strides[0]) != 0.0f) {
+        float w[cap];
+        for (int j = 0; j < cap; ++j) w[j] = w1s.data[l][j];
+        if (params.height_mode != 0) {  // height blending (HEIGHT_CHANNEL, HEIGHT_ARRAY)
+            float h[cap], top = -1.0e30f, sum = 0.0f;
+            for (int j = 0; j < cap; ++j) h[j] = heights.data[l][j] * w[j];
+            for (int j = 0; j < n; ++j) if (w[j] > 0.0f) top = wp::max(top, h[j]);
+            for (int j = 0; j < cap; ++j) {
+                const float wh = j < n ? wp::max(h[j] + transition - top, 0.0f) : 0.0f;
+                w[j] = wh * w[j];
+                sum += w[j] * 1.0f;
+            }
+            const float total = wp::max(sum, 1.0e-20f);  // SPLAT_EPS
+            for (int j = 0; j < cap; ++j) w[j] = w[j] / total;
+        }
+        for (int j = 0; j < n; ++j)
+            for (int c = 0; c < 4; ++c) colour[c] = colour[c] + w[j] * colours.data[l * cap + j][c];
+    }
+    for (int c = 0; c < 4; ++c) out.data[l][c] = colour[c];
+}
+return out;
+"""
+
+
+# splat_blend.weights_of for a lane: each covered pixel's weights from its raw splat values (row l),
+# clamped at 0, summed over all 8 entries from 0, normalised by the sum (SPLAT_EPS at least).
+_WEIGHTS = r"""
+const int n = params.num_layers;
+wp::mat_t<WT_L, 8, float> out;
+for (int l = 0; l < WT_L; ++l) {
+    if (!(covered.c[l] > 0.0f)) continue;
+    float w0[8], sum = 0.0f;
+    for (int j = 0; j < 8; ++j) w0[j] = j < n ? wp::max(rs.data[l][j], 0.0f) : 0.0f;
+    for (int j = 0; j < 8; ++j) sum += w0[j] * 1.0f;
+    const float total = wp::max(sum, 1.0e-20f);  // SPLAT_EPS
+    for (int j = 0; j < n; ++j) out.data[l][j] = params.normalize != 0 ? w0[j] / total : w0[j];
+}
+return out;
+"""
+
+
+@wp.func_native(cpu_snippet(_WEIGHTS, "return {};\n"))
+def weights_lane8(params: SplatParams, rs: wp.types.matrix(shape=(LANES, 8), dtype=float), covered: lane_floats) -> wp.types.matrix(shape=(LANES, 8), dtype=float):
+    """Row ``l``: ``splat_blend.weights_of``'s ``w1`` of lane pixel ``l``'s raw splat values (row ``l``
+    of ``rs``), for the kernels of up to 8 layers; 0 where ``covered[l]`` is not positive."""
+    ...
+
+
+@wp.func_native(cpu_snippet(_BLEND, "return {};\n"))
+def blend_lane8(params: SplatParams, surface: SurfacePixels, base: wp.int32, count: wp.int32, w1s: wp.types.matrix(shape=(LANES, 8), dtype=float),
+                colours: wp.types.matrix(shape=(LANES * 8, 4), dtype=float), heights: wp.types.matrix(shape=(LANES, 8), dtype=float)) -> lane_colours:  # fmt: skip
+    """Row ``l``: ``splat_blend.blend`` of lane pixel ``l``'s weights (row ``l`` of ``w1s``), colours
+    (rows ``8 l + j``) and heights (row ``l``), for the kernels of up to 8 layers; 0 where the pixel is
+    not covered."""
+    ...
+
+
 @functools.cache
 def lane_bodies(cap: int, pixels_t, grads_t):
     """``(lane, grad_lane)``: the lane bodies of the plain splat of ``cap`` layers, forward and texel
@@ -172,15 +239,21 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                 if covered[l] > 0.0:
                     rs[l] = f.map_values(rs[l], m, texels[l], params)
         w1s = lane_weights_t()
+        if wp.static(cap == 8):
+            w1s = weights_lane8(params, rs, covered)
+        else:
+            for l in range(count):
+                if covered[l] > 0.0:
+                    r, w0, total, w1 = f.weights_of(rs[l], params)
+                    for j in range(params.num_layers):
+                        w1s[l, j] = w1[j]
         tri_w = _lane_vec3()
-        for l in range(count):
-            if covered[l] > 0.0:
-                r, w0, total, w1 = f.weights_of(rs[l], params)
-                for j in range(params.num_layers):
-                    w1s[l, j] = w1[j]
-                tw = surface_weights(params, args.reads.proj, pixels.surface.normal[base + l])
-                for e in range(3):
-                    tri_w[l, e] = tw[e]
+        if params.projection == PROJECT_TRIPLANAR:
+            for l in range(count):
+                if covered[l] > 0.0:
+                    tw = surface_weights(params, args.reads.proj, pixels.surface.normal[base + l])
+                    for e in range(3):
+                        tri_w[l, e] = tw[e]
         return rs, w1s, tri_w
 
     def lane_layers(args: SplatArgs, pixels: pixels_t, base: wp.int32, count: wp.int32, w1s: lane_weights_t, tri_w: _lane_vec3):
@@ -228,12 +301,17 @@ def lane_bodies(cap: int, pixels_t, grads_t):
         params = args.reads.params
         rs, w1s, tri_w = lane_weights(args, pixels, base, count)
         colours, heights = lane_layers(args, pixels, base, count, w1s, tri_w)
-        for l in range(count):  # each pixel's blend
-            colour = wp.vec4(0.0)
-            if pixels.surface.mask[base + l] != 0.0:
-                w1, c, hv = pixel_layers(w1s, colours, heights, l, params)
-                colour = f.blend(w1, c, hv, params)
-            write_channels(out, base + l, colour)
+        if wp.static(cap == 8):  # the blend for the whole lane
+            colour = blend_lane8(params, pixels.surface, base, count, w1s, colours, heights)
+            for l in range(count):
+                write_channels(out, base + l, colour[l])
+        else:
+            for l in range(count):  # each pixel's blend
+                colour = wp.vec4(0.0)
+                if pixels.surface.mask[base + l] != 0.0:
+                    w1, c, hv = pixel_layers(w1s, colours, heights, l, params)
+                    colour = f.blend(w1, c, hv, params)
+                write_channels(out, base + l, colour)
 
     def grad_lane(args: SplatArgs, pixels: pixels_t, base: wp.int32, grads: grads_t, adj: wp.array2d(dtype=float)):
         """Launched only where :func:`grad_lanes_take` holds (the one-pixel kernel runs the rest)."""

@@ -240,6 +240,18 @@ def test_splat_lanes_give_the_one_pixel_bits(rng, launched, case, filter):
     assert (("splat8_lanes", -(-1000 // LANES)) in launched) == (case != "triplanar, face layers")  # splat_lanes.lanes_take
 
 
+@pytest.mark.parametrize("height_blend", [None, 0.25])
+def test_splat_lanes_of_more_than_eight_layers(rng, launched, height_blend):
+    """Ten layers take the kernels of 16, whose lanes weigh and blend each pixel through the scalar
+    blocks (those of up to 8 do it for the whole lane in native code)."""
+    g = _splat_gbuffer(rng, 700)
+    layers = wt.TextureArray(rng.random((10, 16, 32, 4), dtype=np.float32))
+    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (3, 8, 8, 4)).astype(np.float32), mipmaps=False)
+    lanes, scalar = _both(lambda: wt.splat(g, layers, maps, height_blend=height_blend))
+    _same_bits(lanes, scalar)
+    assert ("splat16_lanes", -(-700 // LANES)) in launched
+
+
 @pytest.mark.parametrize("projection", ["uv", "triplanar"])
 def test_splat_lanes_on_the_default_terrain(projection):
     """The terrain ``warptex render`` draws: its height/slope splat map, its four generated layers,
