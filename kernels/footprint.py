@@ -18,9 +18,9 @@ from .texels import FILTER_ANISOTROPIC, FILTER_TRILINEAR, FLOAT_MAX, SamplerArgs
 # be 1), log2 x = k + log2 c + log2(1 + r), r = z / c - 1, |r| < 0.024, the last by its series to
 # r^5 in float64 (error under 4e-11): within one ulp of log2(x), the nearest float for 99.97% of
 # [0.5, 2) and 99.998% of all floats (glibc's log2f: 99.0% and 99.98%; tests/test_sampling.py), exact
-# at powers of two. For positive normal floats, which every LOD's argument is (the
-# footprints below keep it there); NaN for any other. Branch-free, so a loop over
-# lanes vectorises; no contraction, so a vector and a scalar copy agree. Throughput equals log2f's.
+# at powers of two. For positive normal floats, which every LOD's argument is (the footprints below
+# keep it there); NaN for any other. Branch-free, so a loop over lanes vectorises; no contraction, so
+# a vector and a scalar copy agree. Its throughput in a kernel equals log2f's, its latency is higher.
 LOG2_CPP = r"""
 auto wt_log2 = [](float x) __attribute__((always_inline)) -> float {
     // Subinterval i holds the z whose bits are 0x3f330000 + (i << 19) .. + ((i + 1) << 19); c its centre

@@ -2,11 +2,12 @@
 texel gradient (:mod:`.lanes`).
 
 The forward lane body computes what :mod:`.splat`'s forward body computes for
-:data:`~.lanes.LANES` pixels: the splat maps read for the whole lane and each pixel's splat
-weights; then layer by layer, the lane's reads of the layer (UV, footprint, weight:
-:func:`layer_reads_lane`, native code that restates ``layer_read``) and its texels' reads by
+:data:`~.lanes.LANES` pixels: the splat maps read for the whole lane and the pixels' splat weights;
+then layer by layer, the lane's reads of the layer (UV, footprint, weight: :func:`layer_reads_lane`,
+native code that restates ``layer_read``) and its texels' reads by
 :func:`~.lanes.accumulate_footprint_lane`, projection by projection in the order ``read_layer`` adds
-them; then each pixel's blend. The gradient's lane body replays that, takes each pixel's blend and
+them; then the blend. The weights and the blend are native code too (:func:`weights_lane8`,
+:func:`blend_lane8`) in the kernels of up to 8 layers, the scalar blocks pixel by pixel beyond. The gradient's lane body replays that, takes each pixel's blend and
 weights backwards and adds into its splat maps in pixel order, then adds each layer's gradient into
 its texels by :func:`~.lane_scatter.scatter_lod_lanes`, layer by layer: a layer's reads touch texels
 of its own array layer only, so every texel gets the one-pixel body's sums in its order, and the

@@ -5,7 +5,6 @@ Formulas: :mod:`warptex.kernels.splat_layers` and :mod:`warptex.kernels.splat`. 
 
 from __future__ import annotations
 
-
 import enum
 from typing import Sequence
 
