@@ -13,7 +13,7 @@ import warp as wp
 
 from .filters import sample_lod, sample_lod_derivatives
 from .scatter import scatter_lod
-from .splat_layers import HEIGHT_CHANNEL, HEIGHT_NONE, SPLAT_EPS, SplatParams, map_count
+from .splat_layers import HEIGHT_CHANNEL, HEIGHT_NONE, SPLAT_EPS, SplatParams, map_count, map_layer
 from .texels import SamplerArgs, TexelGrad, TextureView
 
 
@@ -42,8 +42,8 @@ def blend_functions(cap: int) -> types.SimpleNamespace:
         """``r`` with map ``m``'s ``texel`` (its read at a pixel) in the raw splat values of its layers."""
         values = r
         for c in range(4):
-            j = m * params.map_channels + c
-            if c < params.map_channels and j < params.num_layers:
+            j = map_layer(params, m, c)
+            if j >= 0:
                 values[j] = texel[c]
         return values
 
@@ -164,8 +164,8 @@ def blend_functions(cap: int) -> types.SimpleNamespace:
         """Map ``m``'s share of ``gr``, the gradient of the raw splat values: one channel per layer."""
         gm = wp.vec4(0.0)
         for c in range(4):
-            j = m * params.map_channels + c
-            if c < params.map_channels and j < params.num_layers:
+            j = map_layer(params, m, c)
+            if j >= 0:
                 gm[c] = gr[j]
         return gm
 

@@ -217,6 +217,16 @@ def splat_value(maps: TextureView, uv: wp.vec2, map_smp: SamplerArgs, layer: wp.
 
 
 @wp.func
+def map_layer(params: SplatParams, m: wp.int32, c: wp.int32) -> wp.int32:
+    """The layer whose splat value channel ``c`` of map ``m`` holds (``m C + c``), or -1: a channel
+    the maps do not have, or one past the last layer."""
+    j = m * params.map_channels + c
+    if c >= params.map_channels or j >= params.num_layers:
+        j = -1
+    return j
+
+
+@wp.func
 def map_count(params: SplatParams) -> wp.int32:
     """Splat maps holding the layers' weights, ``ceil(L / C)``."""
     return (params.num_layers + params.map_channels - 1) // params.map_channels
