@@ -21,9 +21,8 @@ typedef float wt_lane_f[WT_L];
 typedef int wt_lane_i[WT_L];
 typedef bool wt_lane_b[WT_L];
 typedef wt_f4 wt_lane_f4[WT_L];
-auto wt_scatter_levels = [&](const int address, const bool same, const int reads, const auto* const* tex, const auto* const* grad, const auto& smp, const wt_lane_f* u, const wt_lane_f* v,
+auto wt_scatter_levels = [&](const int address, const int reads, const auto* const* tex, const auto* const* grad, const auto& smp, const wt_lane_f* u, const wt_lane_f* v,
                              const wt_lane_i* level, const wt_lane_f* fraction, const wt_lane_i* layer, const wt_lane_b* active, const wt_lane_f4* g) __attribute__((always_inline)) {
-    // With same, every lane of a read has one level and fraction: their sizes are read once.
     wt_lane_taps taps[3][2];  // [read][fine, coarse], field by field, so that the loop below vectorises
     bool blend = false;  // a lane reads two levels (trilinear)
     for (int r = 0; r < reads; ++r)
@@ -31,17 +30,8 @@ auto wt_scatter_levels = [&](const int address, const bool same, const int reads
     for (int r = 0; r < reads; ++r) {
         for (int pass = 0; pass < (blend ? 2 : 1); ++pass) {
             int k[WT_L], lw[WT_L], lh[WT_L], ls[WT_L];  // each lane's level, its size and offset
-            bool one = true;  // neighbouring pixels mostly read one level: its size is read once
-            for (int l = 0; l < WT_L; ++l) {
-                k[l] = pass == 0 || fraction[r][l] <= 0.0f ? level[r][l] : level[r][l] + 1;
-                one &= k[l] == k[0];
-            }
-            if (same || one) {
-                const int w = wt_int(tex[r]->level_width, k[0]), h = wt_int(tex[r]->level_height, k[0]), start = wt_int(tex[r]->level_offset, k[0]);
-                for (int l = 0; l < WT_L; ++l) lw[l] = w, lh[l] = h, ls[l] = start;
-            } else {
-                for (int l = 0; l < WT_L; ++l) lw[l] = wt_int(tex[r]->level_width, k[l]), lh[l] = wt_int(tex[r]->level_height, k[l]), ls[l] = wt_int(tex[r]->level_offset, k[l]);
-            }
+            for (int l = 0; l < WT_L; ++l) k[l] = pass == 0 || fraction[r][l] <= 0.0f ? level[r][l] : level[r][l] + 1;
+            wt_level_sizes(*tex[r], k, lw, lh, ls);
             wt_lane_taps& t = taps[r][pass];
             for (int l = 0; l < WT_L; ++l) {  // filters.nearest_tap / bilinear_taps
                 const float ru = wt_reduce(u[r][l], address), rv = wt_reduce(v[r][l], address);
@@ -113,13 +103,13 @@ auto wt_scatter_levels = [&](const int address, const bool same, const int reads
         }
     }
 };
-auto wt_scatter_levels_any = [&](const bool same, const int reads, const auto* const* tex, const auto* const* grad, const auto& smp, const wt_lane_f* u, const wt_lane_f* v,
+auto wt_scatter_levels_any = [&](const int reads, const auto* const* tex, const auto* const* grad, const auto& smp, const wt_lane_f* u, const wt_lane_f* v,
                                  const wt_lane_i* level, const wt_lane_f* fraction, const wt_lane_i* layer, const wt_lane_b* active, const wt_lane_f4* g) __attribute__((always_inline)) {
     switch (smp.address) {
-        case WT_WRAP: wt_scatter_levels(WT_WRAP, same, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
-        case WT_CLAMP: wt_scatter_levels(WT_CLAMP, same, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
-        case WT_MIRROR: wt_scatter_levels(WT_MIRROR, same, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
-        default: wt_scatter_levels(WT_BORDER, same, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
+        case WT_WRAP: wt_scatter_levels(WT_WRAP, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
+        case WT_CLAMP: wt_scatter_levels(WT_CLAMP, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
+        case WT_MIRROR: wt_scatter_levels(WT_MIRROR, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
+        default: wt_scatter_levels(WT_BORDER, reads, tex, grad, smp, u, v, level, fraction, layer, active, g); break;
     }
 };
 """ % {"tile_shift": TILE_SHIFT}
@@ -149,7 +139,7 @@ for (int l = 0; l < WT_L; ++l) {
 }
 const decltype(tex)* texs[1] = {&tex};
 const decltype(grad)* grads[1] = {&grad};
-wt_scatter_levels_any(true, 1, texs, grads, smp, u, v, levels, fractions, layer, active, g);
+wt_scatter_levels_any(1, texs, grads, smp, u, v, levels, fractions, layer, active, g);
 """
 
 
@@ -184,7 +174,7 @@ for (int r = 0; r < count; ++r) {
         g[r][l] = (wt_f4){gr.data[l][0], gr.data[l][1], gr.data[l][2], gr.data[l][3]};
     }
 }
-wt_scatter_levels_any(false, count, texs, grads, smp, us, vs, levels, fractions, layer, active, g);
+wt_scatter_levels_any(count, texs, grads, smp, us, vs, levels, fractions, layer, active, g);
 """
 
 

@@ -83,21 +83,22 @@ auto wt_finite = [](wt_vf a) __attribute__((always_inline)) -> wt_vi { return a 
 auto wt_int = [](const wp::array_t<int>& a, int k) __attribute__((always_inline)) -> int {
     return *(const int*)((const char*)a.data + (long long)k * a.strides[0]);
 };
+// The size (w, h) and offset of each lane's level k[l] of tex; read once where every lane reads one
+// level, as neighbouring pixels mostly do (per lane, the reads are AVX-512 gathers).
+auto wt_level_sizes = [&](const auto& tex, const int* k, int* w, int* h, int* start) __attribute__((always_inline)) {
+    bool one = true;
+    for (int l = 0; l < WT_L; ++l) one &= k[l] == k[0];
+    if (one) {
+        const int w0 = wt_int(tex.level_width, k[0]), h0 = wt_int(tex.level_height, k[0]), start0 = wt_int(tex.level_offset, k[0]);
+        for (int l = 0; l < WT_L; ++l) w[l] = w0, h[l] = h0, start[l] = start0;
+    } else {
+        for (int l = 0; l < WT_L; ++l) w[l] = wt_int(tex.level_width, k[l]), h[l] = wt_int(tex.level_height, k[l]), start[l] = wt_int(tex.level_offset, k[l]);
+    }
+};
 // res[l] = filters.sample_levels(tex, layer[l], (u[l], v[l]), level[l], fraction[l], smp) for every
 // lane. Each level read is cut in two: every lane's addresses and weights, then every lane's loads,
-// so that the loads are in flight together. Compiled once per address mode (below), and apart for
-// one level and fraction in every lane (same: the level's size and offset read once).
-auto wt_sample_levels = [&](const int address, const bool same, const auto& tex, const auto& smp, const float* u, const float* v, const int* level, const float* fraction, const int* layer, wt_f4* res) __attribute__((always_inline)) {
-    auto size = [&](int k, int& w, int& h, int& start) __attribute__((always_inline)) {
-        w = wt_int(tex.level_width, k);
-        h = wt_int(tex.level_height, k);
-        start = wt_int(tex.level_offset, k);
-    };
-    int same_w[2], same_h[2], same_start[2];  // with same: each pass's level
-    if (same) {
-        size(level[0], same_w[0], same_h[0], same_start[0]);
-        size(fraction[0] > 0.0f ? level[0] + 1 : level[0], same_w[1], same_h[1], same_start[1]);
-    }
+// so that the loads are in flight together. Compiled once per address mode (below).
+auto wt_sample_levels = [&](const int address, const auto& tex, const auto& smp, const float* u, const float* v, const int* level, const float* fraction, const int* layer, wt_f4* res) __attribute__((always_inline)) {
     const char* tb = (const char*)tex.texels.data;
     const long long ts = tex.texels.strides[0];
     const wt_f4 border = {smp.border.c[0], smp.border.c[1], smp.border.c[2], smp.border.c[3]};
@@ -115,10 +116,11 @@ auto wt_sample_levels = [&](const int address, const bool same, const auto& tex,
     }
     int index[4][WT_L];
     bool inside[4][WT_L];
+    int lw[WT_L], lh[WT_L], ls[WT_L];  // each lane's level's size and offset
     if (smp.filter == WT_NEAREST) {  // filters.sample_nearest
+        wt_level_sizes(tex, level, lw, lh, ls);
         for (int l = 0; l < WT_L; ++l) {
-            int w = same_w[0], h = same_h[0], start = same_start[0];
-            if (!same) size(level[l], w, h, start);
+            const int w = lw[l], h = lh[l], start = ls[l];
             const int x = wt_address((int)wp::floor(ru[l] * (float)w), w, address);
             const int y = wt_address((int)wp::floor((1.0f - rv[l]) * (float)h), h, address);
             index[0][l] = start + layer[l] * h * w + y * w + x;
@@ -129,25 +131,11 @@ auto wt_sample_levels = [&](const int address, const bool same, const auto& tex,
     }
     float fx[WT_L], fy[WT_L];
     for (int pass = 0; pass < (blend ? 2 : 1); ++pass) {  // the level, then (trilinear) the next one
-        int lw[WT_L], lh[WT_L], ls[WT_L];  // each lane's level's size and offset
-        if (!same) {
-            int read[WT_L];
-            bool one = true;  // neighbouring pixels mostly read one level: its size is read once
-            for (int l = 0; l < WT_L; ++l) {
-                read[l] = pass == 0 || fraction[l] <= 0.0f ? level[l] : level[l] + 1;
-                one &= read[l] == read[0];
-            }
-            if (one) {
-                int w, h, start;
-                size(read[0], w, h, start);
-                for (int l = 0; l < WT_L; ++l) lw[l] = w, lh[l] = h, ls[l] = start;
-            } else {
-                for (int l = 0; l < WT_L; ++l) size(read[l], lw[l], lh[l], ls[l]);
-            }
-        }
+        int read[WT_L];
+        for (int l = 0; l < WT_L; ++l) read[l] = pass == 0 || fraction[l] <= 0.0f ? level[l] : level[l] + 1;
+        wt_level_sizes(tex, read, lw, lh, ls);
         for (int l = 0; l < WT_L; ++l) {  // filters.bilinear_taps
-            int w = same_w[pass], h = same_h[pass], start = same_start[pass];
-            if (!same) w = lw[l], h = lh[l], start = ls[l];
+            const int w = lw[l], h = lh[l], start = ls[l];
             const int s = start + layer[l] * h * w;
             const float x = ru[l] * (float)w - 0.5f;
             const float y = (1.0f - rv[l]) * (float)h - 0.5f;
@@ -177,12 +165,12 @@ auto wt_sample_levels = [&](const int address, const bool same, const auto& tex,
 };
 // wt_sample_levels with the address mode a constant, once per mode (a mode tested per texel
 // measured slower).
-auto wt_sample_levels_any = [&](const bool same, const auto& tex, const auto& smp, const float* u, const float* v, const int* level, const float* fraction, const int* layer, wt_f4* res) __attribute__((always_inline)) {
+auto wt_sample_levels_any = [&](const auto& tex, const auto& smp, const float* u, const float* v, const int* level, const float* fraction, const int* layer, wt_f4* res) __attribute__((always_inline)) {
     switch (smp.address) {
-        case WT_WRAP: wt_sample_levels(WT_WRAP, same, tex, smp, u, v, level, fraction, layer, res); break;
-        case WT_CLAMP: wt_sample_levels(WT_CLAMP, same, tex, smp, u, v, level, fraction, layer, res); break;
-        case WT_MIRROR: wt_sample_levels(WT_MIRROR, same, tex, smp, u, v, level, fraction, layer, res); break;
-        default: wt_sample_levels(WT_BORDER, same, tex, smp, u, v, level, fraction, layer, res); break;
+        case WT_WRAP: wt_sample_levels(WT_WRAP, tex, smp, u, v, level, fraction, layer, res); break;
+        case WT_CLAMP: wt_sample_levels(WT_CLAMP, tex, smp, u, v, level, fraction, layer, res); break;
+        case WT_MIRROR: wt_sample_levels(WT_MIRROR, tex, smp, u, v, level, fraction, layer, res); break;
+        default: wt_sample_levels(WT_BORDER, tex, smp, u, v, level, fraction, layer, res); break;
     }
 };
 """ % {"lanes": LANES} + LOG2_CPP
@@ -214,7 +202,7 @@ if (layers.shape[0] > 0) {  // texels.resolve_layer
     for (int l = 0; l < WT_L; ++l) layer[l] = wp::clamp(wt_int(layers, base + (l < count ? l : 0)), 0, tex.num_layers - 1);
 }
 wt_f4 result[WT_L];
-wt_sample_levels_any(true, tex, smp, u, v, levels, fractions, layer, result);
+wt_sample_levels_any(tex, smp, u, v, levels, fractions, layer, result);
 char* ob = (char*)out.data;  // texels.write_channels
 const wt_f4 nan4 = __builtin_nanf("");
 const int channels = out.shape[1];
@@ -273,7 +261,7 @@ for (int k = 0; k < most; ++k) {
         vs[l] = ok ? tv : 0.0f;
     }
     wt_f4 result[WT_L];
-    wt_sample_levels_any(false, tex, smp, us, vs, levels, fractions, layer, result);
+    wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layer, result);
     const wt_f4 nan4 = __builtin_nanf("");
     for (int l = 0; l < WT_L; ++l) {
         const wt_f4 r = finite[l] ? result[l] : nan4;
