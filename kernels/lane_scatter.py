@@ -122,13 +122,14 @@ float u[1][WT_L], v[1][WT_L], fractions[1][WT_L];
 int levels[1][WT_L], layer[1][WT_L];
 bool active[1][WT_L];
 wt_f4 g[1][WT_L];
+float p[2][WT_L];
+wt_rows(uv, base, count, 2, p);
 for (int l = 0; l < WT_L; ++l) {
     const int k = base + (l < count ? l : 0);
-    const float* p = (const float*)((const char*)uv.data + (long long)k * uv.strides[0]);
-    const bool finite = __builtin_fabsf(p[0]) <= wt_float_max && __builtin_fabsf(p[1]) <= wt_float_max;
+    const bool finite = __builtin_fabsf(p[0][l]) <= wt_float_max && __builtin_fabsf(p[1][l]) <= wt_float_max;
     active[0][l] = l < count && finite;
-    u[0][l] = active[0][l] ? p[0] : 0.0f;
-    v[0][l] = active[0][l] ? p[1] : 0.0f;
+    u[0][l] = active[0][l] ? p[0][l] : 0.0f;
+    v[0][l] = active[0][l] ? p[1][l] : 0.0f;
     levels[0][l] = level;
     fractions[0][l] = fraction;
     layer[0][l] = layers.shape[0] > 0 ? wp::clamp(wt_int(layers, k), 0, tex.num_layers - 1) : constant_layer;  // texels.resolve_layer

@@ -83,6 +83,29 @@ auto wt_finite = [](wt_vf a) __attribute__((always_inline)) -> wt_vi { return a 
 auto wt_int = [](const wp::array_t<int>& a, int k) __attribute__((always_inline)) -> int {
     return *(const int*)((const char*)a.data + (long long)k * a.strides[0]);
 };
+// Rows base .. base + WT_L - 1 of an array of `dims` floats a row (dims <= 3; the rows past count
+// repeat row base) as `dims` arrays of a value per lane pixel. Where the rows are packed (as the API's
+// contiguous inputs are) one load, not the gathers LLVM makes of strided rows, and a prefetch of the
+// rows 4 lanes on: random texel reads keep the miss buffers full, and the hardware's own prefetch of
+// the row stream then falls behind. Together they took a bilinear lookup of 1M random UVs (1 thread)
+// from 19 to 7 ms and of the benchmark sphere from 5.3 to 3.7 ms.
+typedef float wt_row[WT_L];
+auto wt_rows = [](const auto& a, int base, int count, const int dims, wt_row* out) __attribute__((always_inline)) {
+    const char* data = (const char*)a.data;
+    const long long stride = a.strides[0];
+    if (count == WT_L && stride == 4 * dims) {
+        for (int b = 0; b < 4 * dims * WT_L; b += 64) __builtin_prefetch(data + (base + 4 * WT_L) * stride + b);
+        float packed[3 * WT_L];
+        __builtin_memcpy(packed, data + base * stride, 4 * dims * WT_L);
+        for (int l = 0; l < WT_L; ++l)
+            for (int e = 0; e < dims; ++e) out[e][l] = packed[dims * l + e];
+    } else {
+        for (int l = 0; l < WT_L; ++l) {
+            const float* row = (const float*)(data + (base + (l < count ? l : 0)) * stride);
+            for (int e = 0; e < dims; ++e) out[e][l] = row[e];
+        }
+    }
+};
 // The size (w, h) and offset of each lane's level k[l] of tex; read once where every lane reads one
 // level, as neighbouring pixels mostly do (per lane, the reads are AVX-512 gathers).
 auto wt_level_sizes = [&](const auto& tex, const int* k, int* w, int* h, int* start) __attribute__((always_inline)) {
@@ -189,11 +212,12 @@ const int count = n - base < WT_L ? n - base : WT_L;
 float u[WT_L], v[WT_L], fractions[WT_L];
 int levels[WT_L], layer[WT_L];
 bool finite[WT_L];
+float raw[2][WT_L];
+wt_rows(uv, base, count, 2, raw);
 for (int l = 0; l < WT_L; ++l) {  // texels.finite_uv_lod: a non-finite UV reads (0, 0), its output NaN
-    const float* p = (const float*)((const char*)uv.data + (long long)(base + (l < count ? l : 0)) * uv.strides[0]);
-    finite[l] = __builtin_fabsf(p[0]) <= wt_float_max && __builtin_fabsf(p[1]) <= wt_float_max;
-    u[l] = finite[l] ? p[0] : 0.0f;
-    v[l] = finite[l] ? p[1] : 0.0f;
+    finite[l] = __builtin_fabsf(raw[0][l]) <= wt_float_max && __builtin_fabsf(raw[1][l]) <= wt_float_max;
+    u[l] = finite[l] ? raw[0][l] : 0.0f;
+    v[l] = finite[l] ? raw[1][l] : 0.0f;
     levels[l] = level;
     fractions[l] = fraction;
     layer[l] = constant_layer;

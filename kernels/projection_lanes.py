@@ -107,25 +107,24 @@ _TRIPLANAR_READS = PLANE_CPP + r"""
 typedef wp::vec_t<3, float> wt_v3;
 auto row = [](const auto& a, int i) __attribute__((always_inline)) -> const char* { return (const char*)a.data + (long long)i * a.strides[0]; };
 auto f32 = [&](const auto& a, int i) __attribute__((always_inline)) -> float { return *(const float*)row(a, i); };
-auto v3 = [&](const auto& a, int i) __attribute__((always_inline)) -> wt_v3 { wt_v3 r; __builtin_memcpy(&r, row(a, i), 12); return r; };
 // projection.surface: the lane's pixels (the tail repeats pixel base, not read), in the projected space.
-float p_[3][WT_L], n_[3][WT_L], dx_[3][WT_L], dy_[3][WT_L];  // gathered into arrays, then read as vectors
+float p_[3][WT_L], n_[3][WT_L], dx_[3][WT_L], dy_[3][WT_L], mask_[1][WT_L];  // read into arrays, then as vectors
+wt_rows(pixels.position, base, count, 3, p_);
+wt_rows(pixels.normal, base, count, 3, n_);
+wt_rows(pixels.position_dx, base, count, 3, dx_);
+wt_rows(pixels.position_dy, base, count, 3, dy_);
+wt_rows(pixels.mask, base, count, 1, mask_);
 int covered_[WT_L];
-for (int l = 0; l < WT_L; ++l) {
-    const int i = base + (l < count ? l : 0);
-    covered_[l] = l < count && f32(pixels.mask, i) != 0.0f ? -1 : 0;
-    wt_v3 p = v3(pixels.position, i), n = v3(pixels.normal, i), dx = v3(pixels.position_dx, i), dy = v3(pixels.position_dy, i);
-    if (proj.object_space != 0) {  // projection.object_space
+for (int l = 0; l < WT_L; ++l) covered_[l] = l < count && mask_[0][l] != 0.0f ? -1 : 0;
+if (proj.object_space != 0) {  // projection.object_space
+    for (int l = 0; l < WT_L; ++l) {
+        wt_v3 p, n, dx, dy;
+        for (int e = 0; e < 3; ++e) p.c[e] = p_[e][l], n.c[e] = n_[e][l], dx.c[e] = dx_[e][l], dy.c[e] = dy_[e][l];
         p = wp::transform_point(proj.world_to_object, p);
         n = wp::mul(proj.normal_to_object, n);
         dx = wp::transform_vector(proj.world_to_object, dx);
         dy = wp::transform_vector(proj.world_to_object, dy);
-    }
-    for (int e = 0; e < 3; ++e) {
-        p_[e][l] = p.c[e];
-        n_[e][l] = n.c[e];
-        dx_[e][l] = dx.c[e];
-        dy_[e][l] = dy.c[e];
+        for (int e = 0; e < 3; ++e) p_[e][l] = p.c[e], n_[e][l] = n.c[e], dx_[e][l] = dx.c[e], dy_[e][l] = dy.c[e];
     }
 }
 wt_vf P[3], N[3], DX[3], DY[3];

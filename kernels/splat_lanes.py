@@ -35,12 +35,9 @@ _lane_vec3 = wp.types.matrix(shape=(LANES, 3), dtype=float)
 _LAYER_READS = PLANE_CPP + r"""
 // The lane's reading points (layer_point), pixel by pixel into rows, then as vectors (the tail repeats
 // pixel base, not read).
-auto rows_of = [&](const auto& a, int dims, wt_vf* out) __attribute__((always_inline)) {
+auto rows_of = [&](const auto& a, const int dims, wt_vf* out) __attribute__((always_inline)) {
     float rows[3][WT_L];
-    for (int l = 0; l < WT_L; ++l) {
-        const float* e = (const float*)((const char*)a.data + (long long)(base + (l < count ? l : 0)) * a.strides[0]);
-        for (int d = 0; d < dims; ++d) rows[d][l] = e[d];
-    }
+    wt_rows(a, base, count, dims, rows);
     for (int d = 0; d < dims; ++d) __builtin_memcpy(&out[d], rows[d], sizeof(wt_vf));
 };
 const auto& params = reads.params;
