@@ -191,7 +191,9 @@ def lane_kernel(lane_body, args_t, pixels_t, out_t, *, module: str, name: str, g
     axis of the per-pixel arrays): ``forward(args, pixels, out)`` running ``lane_body(args, pixels,
     base, out)``, or, with ``grads_t``, ``texel_grad(args, pixels, grads, adj)`` running
     ``lane_body(args, pixels, base, grads, adj)``. Launched over ``ceil(count / LANES)`` indices
-    (``warptex._launch``); never on CUDA, which runs the one-pixel kernels. It goes into the CPU-only
+    (``warptex._launch``); never on CUDA, which runs the one-pixel kernels. A forward lane body
+    writes every entry of ``out`` (every channel of each of its rows, uncovered pixels included):
+    ``warptex._launch`` does not zero a lane kernel's output first. It goes into the CPU-only
     Warp module ``module + LANES_SUFFIX``, so that a CPU job compiles no one-pixel kernel it does not
     run, nor a GPU job a lane kernel."""
     module += LANES_SUFFIX

@@ -33,6 +33,22 @@ def _both(call):
     return lanes, scalar
 
 
+@pytest.fixture(autouse=True)
+def nan_outputs(monkeypatch):
+    """Every new output holds NaN until written: ``warptex._launch`` zeroes a one-pixel kernel's
+    outputs but not a lane kernel's (a lane body writes every entry), so a lane output that left an
+    entry alone shows NaN where the one-pixel kernel's shows 0, and the bits differ."""
+    output = _launch.output
+
+    def nan_filled(*args, **kwargs):
+        out = output(*args, **kwargs)
+        out.fill_(np.nan)
+        return out
+
+    monkeypatch.setattr(_launch, "output", nan_filled)
+    monkeypatch.setattr("warptex._op.output", nan_filled)
+
+
 @pytest.fixture
 def launched(monkeypatch):
     """The names of the kernels ``warptex._launch`` launches, with their launch sizes."""

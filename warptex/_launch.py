@@ -16,7 +16,9 @@ the same bits at any thread count.
 A launch's outputs are made with :func:`output` (allocated, not touched) and zeroed by
 :func:`launch` chunk by chunk, on the thread that then fills the chunk: ``wp.zeros`` of a 12.6 MB
 output and its gradient measured up to 8 ms on the calling thread where the memory came fresh from
-the system (page faults), a third of a one-thread bilinear lookup of as many pixels.
+the system (page faults), a third of a one-thread bilinear lookup of as many pixels. A lane kernel
+writes every entry of its outputs, so only their gradients are zeroed: on the benchmark sphere,
+a bilinear lookup is then memory-bound, and the zeroing was another pass over its 13 MB.
 
 CUDA launches are never split: one launch fills the device.
 """
@@ -64,10 +66,12 @@ def sliced(value, lo: int, hi: int):
     return map_arrays(value, lambda a: a if a.shape[0] == 0 else a[lo:hi])
 
 
-def _zero_rows(out) -> None:
-    """Zero ``out`` (a chunk's rows of per-pixel outputs) and its gradients."""
+def _zero_rows(out, filled: bool = False) -> None:
+    """Zero ``out`` (a chunk's rows of per-pixel outputs) and its gradients; the outputs themselves
+    only where the kernel does not write every entry (``filled``: a lane kernel, which does)."""
     for a in arrays(out):
-        a.zero_()
+        if not filled:
+            a.zero_()
         if a.grad is not None:
             a.grad.zero_()
 
@@ -87,7 +91,8 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
         count: pixels to launch.
         args, pixels: the kernel's fixed and per-pixel arguments (structs).
         out: the output, a per-pixel array or a struct of them, new from :func:`output`: it and its
-            gradients are zeroed here, each chunk's rows before the kernel runs on them.
+            gradients are zeroed here, each chunk's rows before the kernel runs on them (only the
+            gradients where ``lanes`` runs: a lane kernel writes every entry).
         device: the Warp device.
         threads: threads to use (default ``get_num_threads()``); CUDA always uses one launch.
         backward: what an active ``wp.Tape`` records for the backward pass (when an output requires
@@ -115,8 +120,9 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
     workers = min(workers_for(device, count, threads), cpu_count())  # threads past the cores would only take turns
     chunks = grad_bounds(count, covered, _shared_bytes(args), footprints) if generated and device.is_cpu else [0, count]  # CUDA: one launch
     kernel, per_index = _with_lanes(kernel, None if generated else lanes, device)
+    fills = per_index > 1  # a lane kernel writes every entry of its outputs (family.lane_kernel)
     if workers == 1:
-        _zero_rows(out)
+        _zero_rows(out, fills)
         wp.launch(kernel, dim=-(-count // per_index), inputs=[args, pixels], outputs=[out], device=device, record_tape=generated and len(chunks) == 2)
     else:
         split = Split(count, workers, covered)
@@ -124,7 +130,7 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
         def forward(worker: int, k: int) -> None:
             lo, hi = split.span(k)
             rows = sliced(out, lo, hi)
-            _zero_rows(rows)
+            _zero_rows(rows, fills)
             wp.launch(kernel, dim=-(-(hi - lo) // per_index), inputs=[args, sliced(pixels, lo, hi)], outputs=[rows], device=device, record_tape=False)
 
         split.run(forward)
