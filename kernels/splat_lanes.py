@@ -6,13 +6,14 @@ The forward lane body computes what :mod:`.splat`'s forward body computes for
 then layer by layer, the lane's reads of the layer (UV, footprint, weight: :func:`layer_reads_lane`,
 native code that restates ``layer_read``) and its texels' reads by
 :func:`~.lanes.accumulate_footprint_lane`, projection by projection in the order ``read_layer`` adds
-them; then the blend. The weights and the blend are native code too (:func:`weights_lane8`,
-:func:`blend_lane8`) in the kernels of up to 8 layers, the scalar blocks pixel by pixel beyond. The gradient's lane body replays that, takes each pixel's blend and
-weights backwards and adds into its splat maps in pixel order, then adds each layer's gradient into
+them; then the blend. The gradient's lane body replays that, takes each pixel's blend and weights
+backwards and adds into its splat maps in pixel order, then adds each layer's gradient into
 its texels by :func:`~.lane_scatter.scatter_lod_lanes`, layer by layer: a layer's reads touch texels
 of its own array layer only, so every texel gets the one-pixel body's sums in its order, and the
 outputs and gradients are the one-pixel kernels' bits. Face layers, and for the gradient the cases
-:func:`grad_lanes_take` names, run the one-pixel kernels (``Kernels.lanes_take``).
+:func:`grad_lanes_take` names, run the one-pixel kernels (``Kernels.lanes_take``). In the kernels
+of up to 8 layers the weights, the blend and the blend and weights backwards are native code for
+the whole lane (:mod:`.splat_blend_lanes`); beyond, the scalar blocks run pixel by pixel.
 """
 
 import functools
@@ -25,6 +26,7 @@ from .lanes import LANES, accumulate_footprint_lane, cpu_snippet, lane_colours, 
 from .projection import SurfacePixels
 from .projection_lanes import PLANE_CPP
 from .splat_blend import blend_functions
+from .splat_blend_lanes import GRAD_RAW, GRAD_TRANSITION, blend_backward_lane8, blend_lane8, weights_lane8
 from .splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerReads, SplatArgs, SplatParams, layer_textures, map_count, pick, surface_weights
 from .texels import FILTER_ANISOTROPIC, TexelGrad, TextureView, read_channels, write_channels
 
@@ -140,73 +142,6 @@ def scatter_lane_reads(tex: TextureView, grad: TexelGrad, j: wp.int32, reads: La
     scatter_lod_lanes(tex, tex, tex, grad, grad, grad, reads.smp, count_reads, lane_ints(j), at, g0, g1, g2)
 
 
-# splat_blend.blend for a lane: each covered pixel's weights (row l of w1s), colours (rows l cap + j)
-# and heights (row l), 0 where a layer is not weighted, blended as the scalar block does, in its
-# order: the heights' top and weights over the layers, their sum over all `cap` entries from 0.
-_BLEND = r"""
-constexpr int cap = sizeof(w1s.data[0]) / sizeof(float);
-const int n = params.num_layers;
-const float transition = params.height_mode != 0 ? *(const float*)params.transition.data : 0.0f;
-wp::mat_t<WT_L, 4, float> out;
-for (int l = 0; l < count; ++l) {
-    float colour[4] = {0.0f, 0.0f, 0.0f, 0.0f};
-    if (*(const float*)((const char*)surface.mask.data + (long long)(base + l) * surface.mask.strides[0]) != 0.0f) {
-        float w[cap];
-        for (int j = 0; j < cap; ++j) w[j] = w1s.data[l][j];
-        if (params.height_mode != 0) {  // height blending (HEIGHT_CHANNEL, HEIGHT_ARRAY)
-            float h[cap], top = -1.0e30f, sum = 0.0f;
-            for (int j = 0; j < cap; ++j) h[j] = heights.data[l][j] * w[j];
-            for (int j = 0; j < n; ++j) if (w[j] > 0.0f) top = wp::max(top, h[j]);
-            for (int j = 0; j < cap; ++j) {
-                const float wh = j < n ? wp::max(h[j] + transition - top, 0.0f) : 0.0f;
-                w[j] = wh * w[j];
-                sum += w[j] * 1.0f;
-            }
-            const float total = wp::max(sum, 1.0e-20f);  // SPLAT_EPS
-            for (int j = 0; j < cap; ++j) w[j] = w[j] / total;
-        }
-        for (int j = 0; j < n; ++j)
-            for (int c = 0; c < 4; ++c) colour[c] = colour[c] + w[j] * colours.data[l * cap + j][c];
-    }
-    for (int c = 0; c < 4; ++c) out.data[l][c] = colour[c];
-}
-return out;
-"""
-
-
-# splat_blend.weights_of for a lane: each covered pixel's weights from its raw splat values (row l),
-# clamped at 0, summed over all 8 entries from 0, normalised by the sum (SPLAT_EPS at least).
-_WEIGHTS = r"""
-const int n = params.num_layers;
-wp::mat_t<WT_L, 8, float> out;
-for (int l = 0; l < WT_L; ++l) {
-    if (!(covered.c[l] > 0.0f)) continue;
-    float w0[8], sum = 0.0f;
-    for (int j = 0; j < 8; ++j) w0[j] = j < n ? wp::max(rs.data[l][j], 0.0f) : 0.0f;
-    for (int j = 0; j < 8; ++j) sum += w0[j] * 1.0f;
-    const float total = wp::max(sum, 1.0e-20f);  // SPLAT_EPS
-    for (int j = 0; j < n; ++j) out.data[l][j] = params.normalize != 0 ? w0[j] / total : w0[j];
-}
-return out;
-"""
-
-
-@wp.func_native(cpu_snippet(_WEIGHTS, "return {};\n"))
-def weights_lane8(params: SplatParams, rs: wp.types.matrix(shape=(LANES, 8), dtype=float), covered: lane_floats) -> wp.types.matrix(shape=(LANES, 8), dtype=float):
-    """Row ``l``: ``splat_blend.weights_of``'s ``w1`` of lane pixel ``l``'s raw splat values (row ``l``
-    of ``rs``), for the kernels of up to 8 layers; 0 where ``covered[l]`` is not positive."""
-    ...
-
-
-@wp.func_native(cpu_snippet(_BLEND, "return {};\n"))
-def blend_lane8(params: SplatParams, surface: SurfacePixels, base: wp.int32, count: wp.int32, w1s: wp.types.matrix(shape=(LANES, 8), dtype=float),
-                colours: wp.types.matrix(shape=(LANES * 8, 4), dtype=float), heights: wp.types.matrix(shape=(LANES, 8), dtype=float)) -> lane_colours:  # fmt: skip
-    """Row ``l``: ``splat_blend.blend`` of lane pixel ``l``'s weights (row ``l`` of ``w1s``), colours
-    (rows ``8 l + j``) and heights (row ``l``), for the kernels of up to 8 layers; 0 where the pixel is
-    not covered."""
-    ...
-
-
 @functools.cache
 def lane_bodies(cap: int, pixels_t, grads_t):
     """``(lane, grad_lane)``: the lane bodies of the plain splat of ``cap`` layers, forward and texel
@@ -317,18 +252,31 @@ def lane_bodies(cap: int, pixels_t, grads_t):
         params = args.reads.params
         rs, w1s, tri_w = lane_weights(args, pixels, base, count)
         colours, heights = lane_layers(args, pixels, base, count, w1s, tri_w)
-        gcs = lane_layers_t()
-        for l in range(count):  # each pixel's blend and weights backwards, and its splat maps' adds, in pixel order
-            i = base + l
-            if pixels.surface.mask[i] != 0.0:
-                w1, c, hv = pixel_layers(w1s, colours, heights, l, params)
-                gw1, gc, ghv, g_t = f.blend_backward(w1, c, hv, params, read_channels(adj, i))
-                if grads.transition.shape[0] > 0 and params.height_mode != HEIGHT_NONE:
-                    wp.atomic_add(grads.transition, 0, g_t)
-                r, w0, total, w1_ = f.weights_of(rs[l], params)
-                f.scatter_maps(args.maps, grads.maps, pixels.uv0[i], args.map_smp, f.weights_backward(r, w0, total, gw1, params), params)
-                for j in range(params.num_layers):
-                    gcs[l * cap + j] = gc[j]
+        if wp.static(cap == 8):  # the blend and weights backwards for the whole lane, then each pixel's splat maps' adds
+            back = blend_backward_lane8(params, pixels.surface, base, count, w1s, colours, heights, rs, adj)
+            gcs = back
+            for l in range(count):
+                i = base + l
+                if pixels.surface.mask[i] != 0.0:
+                    if grads.transition.shape[0] > 0 and params.height_mode != HEIGHT_NONE:
+                        wp.atomic_add(grads.transition, 0, back[GRAD_TRANSITION + l // 4, l % 4])
+                    gr = weights_t()
+                    for j in range(8):
+                        gr[j] = back[GRAD_RAW + 2 * l + j // 4, j % 4]
+                    f.scatter_maps(args.maps, grads.maps, pixels.uv0[i], args.map_smp, gr, params)
+        else:
+            gcs = lane_layers_t()
+            for l in range(count):  # each pixel's blend and weights backwards, and its splat maps' adds, in pixel order
+                i = base + l
+                if pixels.surface.mask[i] != 0.0:
+                    w1, c, hv = pixel_layers(w1s, colours, heights, l, params)
+                    gw1, gc, ghv, g_t = f.blend_backward(w1, c, hv, params, read_channels(adj, i))
+                    if grads.transition.shape[0] > 0 and params.height_mode != HEIGHT_NONE:
+                        wp.atomic_add(grads.transition, 0, g_t)
+                    r, w0, total, w1_ = f.weights_of(rs[l], params)
+                    f.scatter_maps(args.maps, grads.maps, pixels.uv0[i], args.map_smp, f.weights_backward(r, w0, total, gw1, params), params)
+                    for j in range(params.num_layers):
+                        gcs[l * cap + j] = gc[j]
         if grads.layers.texels.shape[0] > 0:
             for j in range(params.num_layers):  # each layer's adds: without face layers, layers add into texels of their own
                 weighted = lane_floats()

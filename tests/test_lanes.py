@@ -378,6 +378,33 @@ def test_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter
     assert threads > 1 or (("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched) == takes
 
 
+@pytest.mark.parametrize("threads", [1, 3])
+@pytest.mark.parametrize("case", ["uv, height channel", "uv, not normalized, tiling per layer", "triplanar"])
+def test_splat_gradient_lanes_add_the_transition_gradient(rng, launched, case, threads):
+    """A height blend's transition given as a ``wp.array`` that takes gradients: its gradient too is
+    the one-pixel kernel's bits (each pixel adds its share in pixel order), beside the texels'."""
+    g = _splat_gbuffer(rng, 3000)
+    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True)
+    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False, requires_grad=True)
+    transition = wp.array([0.15], dtype=float, requires_grad=True)
+    kw = dict(SPLAT_CASES[case], height_blend=transition)
+    weights = rng.normal(size=(3000, 4)).astype(np.float32)
+    previous = wt.get_num_threads()
+    wt.set_num_threads(threads)
+    try:
+        grads = []
+        for one_pixel in (False, True):
+            transition.grad.zero_()
+            texels = _texel_grads(lambda: wt.splat(g, layers, maps, **kw), [layers, maps], weights, one_pixel)
+            grads.append([*texels, transition.grad.numpy().copy()])
+    finally:
+        wt.set_num_threads(previous)
+    for a, b in zip(*grads):
+        _same_bits(a, b)
+    assert grads[0][-1][0] != 0.0
+    assert threads > 1 or ("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched
+
+
 def test_lane_kernels_live_in_cpu_only_modules():
     """A CPU job compiles the lane kernels instead of the one-pixel ones, a GPU job never: every lane
     kernel is in its one-pixel kernel's module + ``.lanes``, and ``launched`` picks it on the CPU."""

@@ -1,0 +1,188 @@
+"""Splat-map terrain texturing, part 5: the splat weights, the blend and the blend's gradient for a
+lane of pixels on the CPU, in native code (:mod:`.lanes`), for the kernels of up to 8 layers.
+
+Each restates a block of :mod:`.splat_blend` pixel by pixel, in its order and with Warp's own
+functions where the block calls them (``wp::dot``, ``wp::div``...), so that the lane bodies of
+:mod:`.splat_lanes` give the one-pixel kernels' bits (``tests/test_lanes.py``); the scalar blocks
+copy each pixel's weights, colours and heights in and out of Warp's local matrices, which cost more
+than the arithmetic. Kernels of 16 layers or more run the scalar blocks pixel by pixel.
+"""
+
+import warp as wp
+
+from .lanes import LANES, cpu_snippet, lane_colours, lane_floats
+from .projection import SurfacePixels
+from .splat_layers import SplatParams
+
+# splat_blend.blend for a lane: each covered pixel's weights (row l of w1s), colours (rows l cap + j)
+# and heights (row l), 0 where a layer is not weighted, blended as the scalar block does, in its
+# order: the heights' top and weights over the layers, their sum over all `cap` entries from 0.
+_BLEND = r"""
+constexpr int cap = sizeof(w1s.data[0]) / sizeof(float);
+const int n = params.num_layers;
+const float transition = params.height_mode != 0 ? *(const float*)params.transition.data : 0.0f;
+wp::mat_t<WT_L, 4, float> out;
+for (int l = 0; l < count; ++l) {
+    float colour[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+    if (*(const float*)((const char*)surface.mask.data + (long long)(base + l) * surface.mask.strides[0]) != 0.0f) {
+        float w[cap];
+        for (int j = 0; j < cap; ++j) w[j] = w1s.data[l][j];
+        if (params.height_mode != 0) {  // height blending (HEIGHT_CHANNEL, HEIGHT_ARRAY)
+            float h[cap], top = -1.0e30f, sum = 0.0f;
+            for (int j = 0; j < cap; ++j) h[j] = heights.data[l][j] * w[j];
+            for (int j = 0; j < n; ++j) if (w[j] > 0.0f) top = wp::max(top, h[j]);
+            for (int j = 0; j < cap; ++j) {
+                const float wh = j < n ? wp::max(h[j] + transition - top, 0.0f) : 0.0f;
+                w[j] = wh * w[j];
+                sum += w[j] * 1.0f;
+            }
+            const float total = wp::max(sum, 1.0e-20f);  // SPLAT_EPS
+            for (int j = 0; j < cap; ++j) w[j] = w[j] / total;
+        }
+        for (int j = 0; j < n; ++j)
+            for (int c = 0; c < 4; ++c) colour[c] = colour[c] + w[j] * colours.data[l * cap + j][c];
+    }
+    for (int c = 0; c < 4; ++c) out.data[l][c] = colour[c];
+}
+return out;
+"""
+
+
+# splat_blend.weights_of for a lane: each covered pixel's weights from its raw splat values (row l),
+# clamped at 0, summed over all 8 entries from 0, normalised by the sum (SPLAT_EPS at least).
+_WEIGHTS = r"""
+const int n = params.num_layers;
+wp::mat_t<WT_L, 8, float> out;
+for (int l = 0; l < WT_L; ++l) {
+    if (!(covered.c[l] > 0.0f)) continue;
+    float w0[8], sum = 0.0f;
+    for (int j = 0; j < 8; ++j) w0[j] = j < n ? wp::max(rs.data[l][j], 0.0f) : 0.0f;
+    for (int j = 0; j < 8; ++j) sum += w0[j] * 1.0f;
+    const float total = wp::max(sum, 1.0e-20f);  // SPLAT_EPS
+    for (int j = 0; j < n; ++j) out.data[l][j] = params.normalize != 0 ? w0[j] / total : w0[j];
+}
+return out;
+"""
+
+
+@wp.func_native(cpu_snippet(_WEIGHTS, "return {};\n"))
+def weights_lane8(params: SplatParams, rs: wp.types.matrix(shape=(LANES, 8), dtype=float), covered: lane_floats) -> wp.types.matrix(shape=(LANES, 8), dtype=float):
+    """Row ``l``: ``splat_blend.weights_of``'s ``w1`` of lane pixel ``l``'s raw splat values (row ``l``
+    of ``rs``), for the kernels of up to 8 layers; 0 where ``covered[l]`` is not positive."""
+    ...
+
+
+@wp.func_native(cpu_snippet(_BLEND, "return {};\n"))
+def blend_lane8(params: SplatParams, surface: SurfacePixels, base: wp.int32, count: wp.int32, w1s: wp.types.matrix(shape=(LANES, 8), dtype=float),
+                colours: wp.types.matrix(shape=(LANES * 8, 4), dtype=float), heights: wp.types.matrix(shape=(LANES, 8), dtype=float)) -> lane_colours:  # fmt: skip
+    """Row ``l``: ``splat_blend.blend`` of lane pixel ``l``'s weights (row ``l`` of ``w1s``), colours
+    (rows ``8 l + j``) and heights (row ``l``), for the kernels of up to 8 layers; 0 where the pixel is
+    not covered."""
+    ...
+
+
+# splat_blend.blend_backward (colours' gradients, weights' gradient, transition's) then weights_of and
+# weights_backward (the raw splat values' gradient) of each covered pixel, as lane_grads holds them.
+_BLEND_BACKWARD = r"""
+typedef wp::vec_t<8, float> wt_v8;
+typedef wp::vec_t<4, float> wt_v4;
+const int n = params.num_layers;
+const float eps = 1.0e-20f;  // SPLAT_EPS
+const float t = params.height_mode != 0 ? *(const float*)params.transition.data : 0.0f;
+wp::mat_t<WT_L * 10 + WT_L / 4, 4, float> out;
+for (int l = 0; l < count; ++l) {
+    const int i = base + l;
+    if (*(const float*)((const char*)surface.mask.data + (long long)i * surface.mask.strides[0]) == 0.0f) continue;
+    wt_v4 g(0.0f);  // texels.read_channels
+    const char* row = (const char*)adj.data + (long long)i * adj.strides[0];
+    for (int c = 0; c < adj.shape[1] && c < 4; ++c) g.c[c] = *(const float*)(row + (long long)c * adj.strides[1]);
+    wt_v8 w1(0.0f), hv(0.0f);  // pixel_layers: colours and heights where weighted
+    wt_v4 c[8];
+    for (int j = 0; j < 8; ++j) {
+        w1.c[j] = w1s.data[l][j];
+        c[j] = wt_v4(0.0f);
+        if (j < n && w1.c[j] > 0.0f) {
+            hv.c[j] = heights.data[l][j];
+            for (int k = 0; k < 4; ++k) c[j].c[k] = colours.data[l * 8 + j][k];
+        }
+    }
+    wt_v8 gw1(0.0f);  // blend_backward
+    wt_v4 gc[8];
+    for (int j = 0; j < 8; ++j) gc[j] = wt_v4(0.0f);
+    float g_t = 0.0f;
+    if (params.height_mode == 0) {
+        for (int j = 0; j < n; ++j) {
+            gc[j] = wp::mul(w1.c[j], g);
+            gw1.c[j] = wp::dot(g, c[j]);
+        }
+    } else {
+        const wt_v8 h = wp::cw_mul(hv, w1);
+        float top = -1.0e30f;
+        int arg = -1;
+        for (int j = 0; j < n; ++j) {
+            if (w1.c[j] > 0.0f && h.c[j] >= top) top = h.c[j], arg = j;
+        }
+        wt_v8 wh(0.0f), gv(0.0f), gh(0.0f);
+        for (int j = 0; j < n; ++j) wh.c[j] = wp::max(h.c[j] + t - top, 0.0f);
+        const wt_v8 v = wp::cw_mul(wh, w1);
+        const float v_total = wp::dot(v, wt_v8(1.0f));
+        const float d = wp::max(v_total, eps);
+        for (int j = 0; j < n; ++j) {
+            gc[j] = wp::mul(v.c[j] / d, g);
+            gv.c[j] = wp::dot(g, c[j]) / d;
+        }
+        if (v_total > eps) gv = wp::sub(gv, wt_v8(wp::dot(gv, v) / d));
+        float g_top = 0.0f;
+        for (int j = 0; j < n; ++j) {
+            gw1.c[j] = gv.c[j] * wh.c[j];
+            if (h.c[j] + t - top > 0.0f) {
+                const float ge = gv.c[j] * w1.c[j];
+                gh.c[j] = ge;
+                g_t = g_t + ge;
+                g_top = g_top - ge;
+            }
+        }
+        if (arg >= 0) gh.c[arg] = gh.c[arg] + g_top;
+        for (int j = 0; j < n; ++j) {
+            gw1.c[j] = gw1.c[j] + gh.c[j] * hv.c[j];
+            const float ghv = gh.c[j] * w1.c[j];
+            if (params.height_mode == 1) gc[j].c[params.height_channel] = gc[j].c[params.height_channel] + ghv;  // HEIGHT_CHANNEL
+        }
+    }
+    wt_v8 r, w0(0.0f);  // weights_of's r, w0 and total
+    for (int j = 0; j < 8; ++j) r.c[j] = rs.data[l][j];
+    for (int j = 0; j < n; ++j) w0.c[j] = wp::max(r.c[j], 0.0f);
+    const float total = wp::dot(w0, wt_v8(1.0f));
+    wt_v8 gw0 = gw1;  // weights_backward
+    if (params.normalize != 0) {
+        const float s = wp::max(total, eps);
+        gw0 = wp::div(gw1, s);
+        if (total > eps) gw0 = wp::sub(gw0, wt_v8(wp::dot(gw1, w0) / (s * s)));
+    }
+    for (int j = 0; j < 8; ++j) {
+        for (int k = 0; k < 4; ++k) out.data[l * 8 + j][k] = gc[j].c[k];
+        out.data[WT_L * 8 + 2 * l + j / 4][j % 4] = j < n && r.c[j] > 0.0f ? gw0.c[j] : 0.0f;
+    }
+    out.data[WT_L * 10 + l / 4][l % 4] = g_t;
+}
+return out;
+"""
+
+#: What :func:`blend_backward_lane8` gives: rows ``8 l + j``, the gradient of layer ``j``'s colour at
+#: lane pixel ``l``; rows ``GRAD_RAW + 2 l`` and ``+ 1``, its raw splat values' gradient (entries 0-3,
+#: 4-7); entry ``l % 4`` of row ``GRAD_TRANSITION + l // 4``, its transition's.
+lane_grads = wp.types.matrix(shape=(LANES * 10 + LANES // 4, 4), dtype=float)
+GRAD_RAW = wp.constant(LANES * 8)
+GRAD_TRANSITION = wp.constant(LANES * 10)
+
+
+@wp.func_native(cpu_snippet(_BLEND_BACKWARD, "return {};\n"))
+def blend_backward_lane8(params: SplatParams, surface: SurfacePixels, base: wp.int32, count: wp.int32, w1s: wp.types.matrix(shape=(LANES, 8), dtype=float),
+                         colours: wp.types.matrix(shape=(LANES * 8, 4), dtype=float), heights: wp.types.matrix(shape=(LANES, 8), dtype=float),
+                         rs: wp.types.matrix(shape=(LANES, 8), dtype=float), adj: wp.array2d(dtype=float)) -> lane_grads:  # fmt: skip
+    """For each covered lane pixel ``l`` (pixel ``base + l``), with its weights, colours, heights and
+    raw splat values as :func:`blend_lane8` and ``weights_lane8`` take them and its output gradient
+    ``adj[base + l]``: ``splat_blend.blend_backward``'s colours' and transition's gradients (the
+    heights' added into the colours' height channel) and ``weights_backward``'s raw values'
+    gradient, laid out as :data:`lane_grads` says (0 for the other pixels)."""
+    ...
