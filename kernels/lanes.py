@@ -106,6 +106,43 @@ auto wt_rows = [](const auto& a, int base, int count, const int dims, wt_row* ou
         }
     }
 };
+// Sixteen RGBA rows (a lane's texels) as four vectors of a channel per lane pixel, and back: the
+// blends then run 16 pixels wide, not a pixel's 4 channels at a time (two-source permutes).
+typedef float wt_f8 __attribute__((ext_vector_type(8)));
+static_assert(WT_L == 16, "the transposes below are written for lanes of 16");
+auto wt_channels = [](const wt_f4* t, wt_vf* ch) __attribute__((always_inline)) {
+    wt_vf q[4];  // pixels 4k .. 4k + 3, RGBA each
+    for (int k = 0; k < 4; ++k) {
+        const wt_f8 lo = __builtin_shufflevector(t[4 * k], t[4 * k + 1], 0, 1, 2, 3, 4, 5, 6, 7);
+        const wt_f8 hi = __builtin_shufflevector(t[4 * k + 2], t[4 * k + 3], 0, 1, 2, 3, 4, 5, 6, 7);
+        q[k] = __builtin_shufflevector(lo, hi, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    }
+    const wt_vf rg0 = __builtin_shufflevector(q[0], q[1], 0, 4, 8, 12, 16, 20, 24, 28, 1, 5, 9, 13, 17, 21, 25, 29);
+    const wt_vf ba0 = __builtin_shufflevector(q[0], q[1], 2, 6, 10, 14, 18, 22, 26, 30, 3, 7, 11, 15, 19, 23, 27, 31);
+    const wt_vf rg1 = __builtin_shufflevector(q[2], q[3], 0, 4, 8, 12, 16, 20, 24, 28, 1, 5, 9, 13, 17, 21, 25, 29);
+    const wt_vf ba1 = __builtin_shufflevector(q[2], q[3], 2, 6, 10, 14, 18, 22, 26, 30, 3, 7, 11, 15, 19, 23, 27, 31);
+    ch[0] = __builtin_shufflevector(rg0, rg1, 0, 1, 2, 3, 4, 5, 6, 7, 16, 17, 18, 19, 20, 21, 22, 23);
+    ch[1] = __builtin_shufflevector(rg0, rg1, 8, 9, 10, 11, 12, 13, 14, 15, 24, 25, 26, 27, 28, 29, 30, 31);
+    ch[2] = __builtin_shufflevector(ba0, ba1, 0, 1, 2, 3, 4, 5, 6, 7, 16, 17, 18, 19, 20, 21, 22, 23);
+    ch[3] = __builtin_shufflevector(ba0, ba1, 8, 9, 10, 11, 12, 13, 14, 15, 24, 25, 26, 27, 28, 29, 30, 31);
+};
+auto wt_rows_of_channels = [](const wt_vf* ch, wt_f4* t) __attribute__((always_inline)) {
+    const wt_vf rg0 = __builtin_shufflevector(ch[0], ch[1], 0, 1, 2, 3, 4, 5, 6, 7, 16, 17, 18, 19, 20, 21, 22, 23);  // r, g of pixels 0 .. 7
+    const wt_vf rg1 = __builtin_shufflevector(ch[0], ch[1], 8, 9, 10, 11, 12, 13, 14, 15, 24, 25, 26, 27, 28, 29, 30, 31);
+    const wt_vf ba0 = __builtin_shufflevector(ch[2], ch[3], 0, 1, 2, 3, 4, 5, 6, 7, 16, 17, 18, 19, 20, 21, 22, 23);
+    const wt_vf ba1 = __builtin_shufflevector(ch[2], ch[3], 8, 9, 10, 11, 12, 13, 14, 15, 24, 25, 26, 27, 28, 29, 30, 31);
+    wt_vf q[4];
+    q[0] = __builtin_shufflevector(rg0, ba0, 0, 8, 16, 24, 1, 9, 17, 25, 2, 10, 18, 26, 3, 11, 19, 27);
+    q[1] = __builtin_shufflevector(rg0, ba0, 4, 12, 20, 28, 5, 13, 21, 29, 6, 14, 22, 30, 7, 15, 23, 31);
+    q[2] = __builtin_shufflevector(rg1, ba1, 0, 8, 16, 24, 1, 9, 17, 25, 2, 10, 18, 26, 3, 11, 19, 27);
+    q[3] = __builtin_shufflevector(rg1, ba1, 4, 12, 20, 28, 5, 13, 21, 29, 6, 14, 22, 30, 7, 15, 23, 31);
+    for (int k = 0; k < 4; ++k) {
+        t[4 * k] = __builtin_shufflevector(q[k], q[k], 0, 1, 2, 3);
+        t[4 * k + 1] = __builtin_shufflevector(q[k], q[k], 4, 5, 6, 7);
+        t[4 * k + 2] = __builtin_shufflevector(q[k], q[k], 8, 9, 10, 11);
+        t[4 * k + 3] = __builtin_shufflevector(q[k], q[k], 12, 13, 14, 15);
+    }
+};
 // The size (w, h) and offset of each lane's level k[l] of tex; read once where every lane reads one
 // level, as neighbouring pixels mostly do (per lane, the reads are AVX-512 gathers).
 auto wt_level_sizes = [&](const auto& tex, const int* k, int* w, int* h, int* start) __attribute__((always_inline)) {
@@ -127,6 +164,10 @@ auto wt_sample_levels = [&](const int address, const auto& tex, const auto& smp,
     const wt_f4 border = {smp.border.c[0], smp.border.c[1], smp.border.c[2], smp.border.c[3]};
     auto load = [&](int index, bool inside) __attribute__((always_inline)) -> wt_f4 {  // texels.texel
         wt_f4 t;
+        if (address != WT_BORDER) {  // only the border mode reads outside
+            __builtin_memcpy(&t, tb + (long long)index * ts, 16);
+            return t;
+        }
         __builtin_memcpy(&t, tb + (inside ? (long long)index : 0) * ts, 16);
         return inside ? t : border;
     };
@@ -153,6 +194,7 @@ auto wt_sample_levels = [&](const int address, const auto& tex, const auto& smp,
         return;
     }
     float fx[WT_L], fy[WT_L];
+    wt_vf R[4];  // the result's channels
     for (int pass = 0; pass < (blend ? 2 : 1); ++pass) {  // the level, then (trilinear) the next one
         int read[WT_L];
         for (int l = 0; l < WT_L; ++l) read[l] = pass == 0 || fraction[l] <= 0.0f ? level[l] : level[l] + 1;
@@ -177,14 +219,30 @@ auto wt_sample_levels = [&](const int address, const auto& tex, const auto& smp,
             fx[l] = x - x0;
             fy[l] = y - y0;
         }
-        for (int l = 0; l < WT_L; ++l) {  // filters.sample_bilinear, and the blend of filters.sample_levels
-            const wt_f4 top = load(index[0][l], inside[0][l]) * (1.0f - fx[l]) + load(index[1][l], inside[1][l]) * fx[l];
-            const wt_f4 bottom = load(index[2][l], inside[2][l]) * (1.0f - fx[l]) + load(index[3][l], inside[3][l]) * fx[l];
-            const wt_f4 value = top * (1.0f - fy[l]) + bottom * fy[l];
-            if (pass == 0) res[l] = value;
-            else if (fraction[l] > 0.0f) res[l] = res[l] * (1.0f - fraction[l]) + value * fraction[l];
+        // filters.sample_bilinear, and the blend of filters.sample_levels, a channel of 16 pixels at a time
+        wt_vf taps[4][4], FX, FY;
+        for (int k = 0; k < 4; ++k) {
+            wt_f4 t[WT_L];
+            _Pragma("clang loop unroll(full)") for (int l = 0; l < WT_L; ++l) t[l] = load(index[k][l], inside[k][l]);
+            wt_channels(t, taps[k]);
+        }
+        __builtin_memcpy(&FX, fx, sizeof(FX));
+        __builtin_memcpy(&FY, fy, sizeof(FY));
+        const wt_vf GX = 1.0f - FX, GY = 1.0f - FY;
+        for (int c = 0; c < 4; ++c) {
+            const wt_vf top = taps[0][c] * GX + taps[1][c] * FX;
+            const wt_vf bottom = taps[2][c] * GX + taps[3][c] * FX;
+            const wt_vf value = top * GY + bottom * FY;
+            if (pass == 0) {
+                R[c] = value;
+            } else {
+                wt_vf F;
+                __builtin_memcpy(&F, fraction, sizeof(F));
+                R[c] = wt_sel(F > 0.0f, R[c] * (1.0f - F) + value * F, R[c]);
+            }
         }
     }
+    wt_rows_of_channels(R, res);
 };
 // wt_sample_levels with the address mode a constant, once per mode (a mode tested per texel
 // measured slower).
