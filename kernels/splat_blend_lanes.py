@@ -48,6 +48,28 @@ return out;
 """
 
 
+# splat_blend.map_values for a lane: map m's texels (row l: covered pixel l's read) as the raw splat
+# values of the layers whose weights its channels hold.
+_MAP_VALUES = r"""
+wp::mat_t<WT_L, 8, float> out = rs;
+for (int l = 0; l < WT_L; ++l) {
+    if (!(covered.c[l] > 0.0f)) continue;
+    for (int c = 0; c < 4; ++c) {
+        const int j = m * params.map_channels + c;  // splat_layers.map_layer
+        if (c < params.map_channels && j < params.num_layers) out.data[l][j] = texels.data[l][c];
+    }
+}
+return out;
+"""
+
+
+@wp.func_native(cpu_snippet(_MAP_VALUES, "return {};\n"))
+def map_values_lane8(params: SplatParams, m: wp.int32, texels: lane_colours, covered: lane_floats, rs: wp.types.matrix(shape=(LANES, 8), dtype=float)) -> wp.types.matrix(shape=(LANES, 8), dtype=float):  # fmt: skip
+    """``rs`` with, in the rows of the lane pixels ``l`` where ``covered[l] > 0``,
+    ``splat_blend.map_values`` of map ``m``'s ``texels[l]``, for the kernels of up to 8 layers."""
+    ...
+
+
 # splat_blend.weights_of for a lane: each covered pixel's weights from its raw splat values (row l),
 # clamped at 0, summed over all 8 entries from 0, normalised by the sum (SPLAT_EPS at least).
 _WEIGHTS = r"""

@@ -26,7 +26,7 @@ from .lanes import LANES, accumulate_footprint_lane, cpu_snippet, lane_colours, 
 from .projection import SurfacePixels
 from .projection_lanes import PLANE_CPP
 from .splat_blend import blend_functions
-from .splat_blend_lanes import GRAD_RAW, GRAD_TRANSITION, blend_backward_lane8, blend_lane8, weights_lane8
+from .splat_blend_lanes import GRAD_RAW, GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, weights_lane8
 from .splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerReads, SplatArgs, SplatParams, layer_textures, map_count, pick, surface_weights
 from .texels import FILTER_ANISOTROPIC, TexelGrad, TextureView, read_channels, write_channels
 
@@ -168,9 +168,12 @@ def lane_bodies(cap: int, pixels_t, grads_t):
         zero = lane_floats()
         for m in range(map_count(params)):
             texels = accumulate_footprint_lane(args.maps, args.map_smp, lane_ints(m), map_u, map_v, zero, zero, zero, lane_floats(1.0), covered, 0, lane_colours())
-            for l in range(count):
-                if covered[l] > 0.0:
-                    rs[l] = f.map_values(rs[l], m, texels[l], params)
+            if wp.static(cap == 8):
+                rs = map_values_lane8(params, m, texels, covered, rs)
+            else:
+                for l in range(count):
+                    if covered[l] > 0.0:
+                        rs[l] = f.map_values(rs[l], m, texels[l], params)
         w1s = lane_weights_t()
         if wp.static(cap == 8):
             w1s = weights_lane8(params, rs, covered)

@@ -268,6 +268,21 @@ def test_splat_lanes_of_more_than_eight_layers(rng, launched, height_blend):
     assert ("splat16_lanes", -(-700 // LANES)) in launched
 
 
+@pytest.mark.parametrize("channels", [1, 2, 3])
+def test_splat_lanes_with_maps_of_fewer_channels(rng, launched, channels):
+    """Splat maps of 1-3 channels: map ``m``'s channel ``c`` holds layer ``m C + c``, forward and in
+    the texel gradients (``map_values_lane8``, ``blend_backward_lane8``)."""
+    g = _splat_gbuffer(rng, 600)
+    layers = wt.TextureArray(rng.random((5, 16, 32, 4), dtype=np.float32), requires_grad=True)
+    count = -(-5 // channels)
+    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (count, 8, 8, channels)).astype(np.float32), mipmaps=False, requires_grad=True)
+    lanes, scalar = _both(lambda: wt.splat(g, layers, maps, height_blend=0.2))
+    _same_bits(lanes, scalar)
+    assert ("splat8_lanes", -(-600 // LANES)) in launched
+    _same_grads(lambda: wt.splat(g, layers, maps, height_blend=0.2), [layers, maps], rng, 4, 600)
+    assert ("splat8_texel_grad_lanes", -(-600 // LANES)) in launched
+
+
 @pytest.mark.parametrize("projection", ["uv", "triplanar"])
 def test_splat_lanes_on_the_default_terrain(projection):
     """The terrain ``warptex render`` draws: its height/slope splat map, its four generated layers,
