@@ -87,8 +87,8 @@ auto wt_int = [](const wp::array_t<int>& a, int k) __attribute__((always_inline)
 // repeat row base) as `dims` arrays of a value per lane pixel. Where the rows are packed (as the API's
 // contiguous inputs are) one load, not the gathers LLVM makes of strided rows, and a prefetch of the
 // rows 4 lanes on: random texel reads keep the miss buffers full, and the hardware's own prefetch of
-// the row stream then falls behind. Together they took a bilinear lookup of 1M random UVs (1 thread)
-// from 19 to 7 ms and of the benchmark sphere from 5.3 to 3.7 ms.
+// the row stream then falls behind. Together they took a bilinear lookup of 1M random UVs (1 thread,
+// interleaved runs) from 16-19 to 7-10 ms and of the benchmark sphere from 5.3 to 3.7 ms.
 typedef float wt_row[WT_L];
 auto wt_rows = [](const auto& a, int base, int count, const int dims, wt_row* out) __attribute__((always_inline)) {
     const char* data = (const char*)a.data;

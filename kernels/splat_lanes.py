@@ -35,8 +35,8 @@ _lane_vec3 = wp.types.matrix(shape=(LANES, 3), dtype=float)
 
 
 _LAYER_READS = PLANE_CPP + r"""
-// The lane's reading points (layer_point), pixel by pixel into rows, then as vectors (the tail repeats
-// pixel base, not read).
+// The lane's reading points (layer_point) as rows (wt_rows), then as vectors (the tail repeats pixel
+// base, not read).
 auto rows_of = [&](const auto& a, const int dims, wt_vf* out) __attribute__((always_inline)) {
     float rows[3][WT_L];
     wt_rows(a, base, count, dims, rows);
