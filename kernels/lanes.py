@@ -254,6 +254,54 @@ auto wt_sample_levels_any = [&](const auto& tex, const auto& smp, const float* u
         default: wt_sample_levels(WT_BORDER, tex, smp, u, v, level, fraction, layer, res); break;
     }
 };
+// filters.sample_footprint of each read lane (weight > 0): one tap reads (u, v) itself; a footprint
+// of several taps (the anisotropic filter's) the mean of its taps at footprint.footprint_uv, summed
+// in tap order, times 1 / taps. Lanes past their taps, not read, or not finite read (0, 0) at level 0.
+// Into out: out[l] + weight[l] · sample where add (a blend of reads), the sample itself where not; the
+// other lanes' rows as they are.
+auto wt_accumulate_footprint = [&](const auto& tex, const auto& smp, const int* layers, const float* u, const float* v, const float* lod, const float* du, const float* dv,
+                                   const float* taps, const float* weight, int add, wp::mat_t<WT_L, 4, float>& out) __attribute__((always_inline)) {
+    float us[WT_L], vs[WT_L], fractions[WT_L];
+    int levels[WT_L], layer[WT_L];
+    bool read[WT_L], finite[WT_L];
+    int most = 0;  // the most taps of a read lane
+    for (int l = 0; l < WT_L; ++l) {
+        read[l] = weight[l] > 0.0f;
+        layer[l] = read[l] ? wp::clamp(layers[l], 0, tex.num_layers - 1) : 0;  // valid (the API checks), clamped all the same
+        wt_mip_levels(tex, smp, read[l] ? lod[l] : 0.0f, levels[l], fractions[l]);
+        const int n = read[l] ? (int)taps[l] : 0;  // footprint.footprint_taps
+        most = n > most ? n : most;
+    }
+    wt_f4 total[WT_L], single[WT_L];  // the taps' sum; a one-tap footprint's sample itself
+    for (int l = 0; l < WT_L; ++l) total[l] = (wt_f4){0.0f, 0.0f, 0.0f, 0.0f};
+    for (int k = 0; k < most; ++k) {
+        bool tap[WT_L];
+        for (int l = 0; l < WT_L; ++l) {
+            const bool one = taps[l] == 1.0f;
+            const float s = (float)k + 0.5f - 0.5f * taps[l];
+            const float tu = one ? u[l] : u[l] + du[l] * s;  // footprint.footprint_uv
+            const float tv = one ? v[l] : v[l] + dv[l] * s;
+            tap[l] = read[l] && k < (int)taps[l];
+            finite[l] = __builtin_fabsf(tu) <= wt_float_max && __builtin_fabsf(tv) <= wt_float_max && __builtin_fabsf(lod[l]) <= wt_float_max;  // texels.finite_uv_lod
+            const bool ok = tap[l] && finite[l];
+            us[l] = ok ? tu : 0.0f;
+            vs[l] = ok ? tv : 0.0f;
+        }
+        wt_f4 result[WT_L];
+        wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layer, result);
+        const wt_f4 nan4 = __builtin_nanf("");
+        for (int l = 0; l < WT_L; ++l) {
+            const wt_f4 r = finite[l] ? result[l] : nan4;
+            if (k == 0) single[l] = r;
+            if (tap[l]) total[l] = total[l] + r;
+        }
+    }
+    for (int l = 0; l < WT_L; ++l) {
+        if (!read[l]) continue;
+        const wt_f4 r = taps[l] == 1.0f ? single[l] : total[l] * (1.0f / taps[l]);
+        for (int c = 0; c < 4; ++c) out.data[l][c] = add ? out.data[l][c] + weight[l] * r[c] : r[c];
+    }
+};
 """ % {"lanes": LANES} + LOG2_CPP
 
 
@@ -313,50 +361,8 @@ def sample_levels_lane(tex: TextureView, smp: SamplerArgs, uv: wp.array(dtype=wp
 
 
 _ACCUMULATE_FOOTPRINT = r"""
-// filters.sample_footprint of each read lane (weight > 0): one tap reads (u, v) itself; a footprint
-// of several taps (the anisotropic filter's) the mean of its taps at footprint.footprint_uv, summed
-// in tap order, times 1 / taps. Lanes past their taps, not read, or not finite read (0, 0) at level 0.
-float us[WT_L], vs[WT_L], fractions[WT_L];
-int levels[WT_L], layer[WT_L];
-bool read[WT_L], finite[WT_L];
-int most = 0;  // the most taps of a read lane
-for (int l = 0; l < WT_L; ++l) {
-    read[l] = weight.c[l] > 0.0f;
-    layer[l] = read[l] ? wp::clamp(layers.c[l], 0, tex.num_layers - 1) : 0;  // valid (the API checks), clamped all the same
-    wt_mip_levels(tex, smp, read[l] ? lod.c[l] : 0.0f, levels[l], fractions[l]);
-    const int n = read[l] ? (int)taps.c[l] : 0;  // footprint.footprint_taps
-    most = n > most ? n : most;
-}
-wt_f4 total[WT_L], single[WT_L];  // the taps' sum; a one-tap footprint's sample itself
-for (int l = 0; l < WT_L; ++l) total[l] = (wt_f4){0.0f, 0.0f, 0.0f, 0.0f};
-for (int k = 0; k < most; ++k) {
-    bool tap[WT_L];
-    for (int l = 0; l < WT_L; ++l) {
-        const bool one = taps.c[l] == 1.0f;
-        const float s = (float)k + 0.5f - 0.5f * taps.c[l];
-        const float tu = one ? u.c[l] : u.c[l] + du.c[l] * s;  // footprint.footprint_uv
-        const float tv = one ? v.c[l] : v.c[l] + dv.c[l] * s;
-        tap[l] = read[l] && k < (int)taps.c[l];
-        finite[l] = __builtin_fabsf(tu) <= wt_float_max && __builtin_fabsf(tv) <= wt_float_max && __builtin_fabsf(lod.c[l]) <= wt_float_max;  // texels.finite_uv_lod
-        const bool ok = tap[l] && finite[l];
-        us[l] = ok ? tu : 0.0f;
-        vs[l] = ok ? tv : 0.0f;
-    }
-    wt_f4 result[WT_L];
-    wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layer, result);
-    const wt_f4 nan4 = __builtin_nanf("");
-    for (int l = 0; l < WT_L; ++l) {
-        const wt_f4 r = finite[l] ? result[l] : nan4;
-        if (k == 0) single[l] = r;
-        if (tap[l]) total[l] = total[l] + r;
-    }
-}
 wp::mat_t<WT_L, 4, float> out = acc;
-for (int l = 0; l < WT_L; ++l) {
-    if (!read[l]) continue;
-    const wt_f4 r = taps.c[l] == 1.0f ? single[l] : total[l] * (1.0f / taps.c[l]);
-    for (int c = 0; c < 4; ++c) out.data[l][c] = add ? acc.data[l][c] + weight.c[l] * r[c] : r[c];
-}
+wt_accumulate_footprint(tex, smp, layers.c, u.c, v.c, lod.c, du.c, dv.c, taps.c, weight.c, add, out);
 return out;
 """
 

@@ -3,10 +3,10 @@ texel gradient (:mod:`.lanes`).
 
 The forward lane body computes what :mod:`.splat`'s forward body computes for
 :data:`~.lanes.LANES` pixels: the splat maps read for the whole lane and the pixels' splat weights;
-then layer by layer, the lane's reads of the layer (UV, footprint, weight: :func:`layer_reads_lane`,
-native code that restates ``layer_read``) and its texels' reads by
-:func:`~.lanes.accumulate_footprint_lane`, projection by projection in the order ``read_layer`` adds
-them; then the blend. The gradient's lane body replays that, takes each pixel's blend and weights
+then layer by layer, in one native call (:func:`layer_values_lane`), the lane's reads of the layer
+(UV, footprint, weight: ``layer_read`` restated, as :func:`layer_reads_lane` gives them) and its
+texels' reads over their footprints (``lanes.wt_accumulate_footprint``), projection by projection in
+the order ``read_layer`` adds them; then the blend. The gradient's lane body replays that, takes each pixel's blend and weights
 backwards and adds into its splat maps in pixel order, then adds each layer's gradient into
 its texels by :func:`~.lane_scatter.scatter_lod_lanes`, layer by layer: a layer's reads touch texels
 of its own array layer only, so every texel gets the one-pixel body's sums in its order, and the
@@ -42,48 +42,51 @@ auto rows_of = [&](const auto& a, const int dims, wt_vf* out) __attribute__((alw
     wt_rows(a, base, count, dims, rows);
     for (int d = 0; d < dims; ++d) __builtin_memcpy(&out[d], rows[d], sizeof(wt_vf));
 };
-const auto& params = reads.params;
-const float t = *(const float*)((const char*)params.tiling.data + (long long)wp::min(j, params.tiling.shape[0] - 1) * params.tiling.strides[0]);  // layer_tiling
-wt_vf w;
-__builtin_memcpy(&w, weighted.c, sizeof(w));
-const wt_vi read = w > 0.0f;
-const wt_vf zero = 0.0f, one = 1.0f;
-wp::mat_t<21, WT_L, float> out;
-wt_footprint_lanes fp;
-if (params.projection == 0) {  // PROJECT_UV: UV0 × tiling, its footprint from UV0's derivatives × tiling
-    wt_vf uv[2], dx[2], dy[2];
-    rows_of(uv0, 2, uv);
-    rows_of(uv0_dx, 2, dx);
-    rows_of(uv0_dy, 2, dy);
-    fp = wt_footprint(reads.smp, dx[0] * t, dx[1] * t, dy[0] * t, dy[1] * t, (float)wt_int(tex.level_width, 0), (float)wt_int(tex.level_height, 0));
-    wt_put_read(out, 0, read, uv[0] * t, uv[1] * t, fp, one);
-} else {
-    wt_vf P[3], DX[3], DY[3], u, v;
-    rows_of(surface.position, 3, P);
-    rows_of(surface.position_dx, 3, DX);
-    rows_of(surface.position_dy, 3, DY);
-    if (params.projection == 1) {  // PROJECT_WORLD_XZ: the Y projection seen from above
-        const wt_vf up[3] = {zero, one, zero};
-        wt_plane_reads(reads.proj, reads.smp, 1, t, tex, P, up, DX, DY, u, v, fp);
-        wt_put_read(out, 0, read, u, v, fp, one);
-    } else {  // PROJECT_TRIPLANAR: the three projections, weighted by tri_w
-        wt_vf N[3];
-        rows_of(surface.normal, 3, N);
-        for (int k = 0; k < 3; ++k) {
-            float weight[WT_L];
-            for (int l = 0; l < WT_L; ++l) weight[l] = tri_w.data[l][k];
-            wt_vf wk;
-            __builtin_memcpy(&wk, weight, sizeof(wk));
-            wt_plane_reads(reads.proj, reads.smp, k, t, tex, P, N, DX, DY, u, v, fp);
-            wt_put_read(out, k, read, u, v, fp, wk);
+// layer_reads_lane's reads of layer j of tex, for the lane pixels with weighted[l] > 0.
+auto wt_layer_reads = [&](const float* weighted) __attribute__((always_inline)) -> wp::mat_t<21, WT_L, float> {
+    const auto& params = reads.params;
+    const float t = *(const float*)((const char*)params.tiling.data + (long long)wp::min(j, params.tiling.shape[0] - 1) * params.tiling.strides[0]);  // layer_tiling
+    wt_vf w;
+    __builtin_memcpy(&w, weighted, sizeof(w));
+    const wt_vi read = w > 0.0f;
+    const wt_vf zero = 0.0f, one = 1.0f;
+    wp::mat_t<21, WT_L, float> out;
+    wt_footprint_lanes fp;
+    if (params.projection == 0) {  // PROJECT_UV: UV0 × tiling, its footprint from UV0's derivatives × tiling
+        wt_vf uv[2], dx[2], dy[2];
+        rows_of(uv0, 2, uv);
+        rows_of(uv0_dx, 2, dx);
+        rows_of(uv0_dy, 2, dy);
+        fp = wt_footprint(reads.smp, dx[0] * t, dx[1] * t, dy[0] * t, dy[1] * t, (float)wt_int(tex.level_width, 0), (float)wt_int(tex.level_height, 0));
+        wt_put_read(out, 0, read, uv[0] * t, uv[1] * t, fp, one);
+    } else {
+        wt_vf P[3], DX[3], DY[3], u, v;
+        rows_of(surface.position, 3, P);
+        rows_of(surface.position_dx, 3, DX);
+        rows_of(surface.position_dy, 3, DY);
+        if (params.projection == 1) {  // PROJECT_WORLD_XZ: the Y projection seen from above
+            const wt_vf up[3] = {zero, one, zero};
+            wt_plane_reads(reads.proj, reads.smp, 1, t, tex, P, up, DX, DY, u, v, fp);
+            wt_put_read(out, 0, read, u, v, fp, one);
+        } else {  // PROJECT_TRIPLANAR: the three projections, weighted by tri_w
+            wt_vf N[3];
+            rows_of(surface.normal, 3, N);
+            for (int k = 0; k < 3; ++k) {
+                float weight[WT_L];
+                for (int l = 0; l < WT_L; ++l) weight[l] = tri_w.data[l][k];
+                wt_vf wk;
+                __builtin_memcpy(&wk, weight, sizeof(wk));
+                wt_plane_reads(reads.proj, reads.smp, k, t, tex, P, N, DX, DY, u, v, fp);
+                wt_put_read(out, k, read, u, v, fp, wk);
+            }
         }
     }
-}
-return out;
+    return out;
+};
 """
 
 
-@wp.func_native(cpu_snippet(_LAYER_READS, "return {};\n"))
+@wp.func_native(cpu_snippet(_LAYER_READS + "return wt_layer_reads(weighted.c);\n", "return {};\n"))
 def layer_reads_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
                      uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3) -> lane_reads:  # fmt: skip
     """What each lane pixel ``l`` (pixel ``base + l`` of the launch) with ``weighted[l] > 0`` reads of
@@ -91,6 +94,29 @@ def layer_reads_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted:
     each read ``k`` at the pixel's point (its UV0 and their derivatives, or its surface; ``tri_w``:
     its triplanar weights), as :data:`~.lanes.lane_reads` (all 0 for the other pixels), 16 pixels at
     a time."""
+    ...
+
+
+# Layer j's texels read over layer_reads_lane's reads (read_layer: per projection value += w · sample
+# where triplanar, value = sample for the one read of the other projections), in one native call.
+_LAYER_VALUES = _LAYER_READS + r"""
+int layer[WT_L];
+for (int l = 0; l < WT_L; ++l) layer[l] = j;
+const wp::mat_t<21, WT_L, float> at = wt_layer_reads(weighted.c);
+const int count_reads = reads.params.projection == 2 ? 3 : 1;  // PROJECT_TRIPLANAR: value += w · sample, else value = sample
+wp::mat_t<WT_L, 4, float> value;
+for (int r = 0; r < count_reads; ++r)
+    wt_accumulate_footprint(tex, reads.smp, layer, at.data[r], at.data[3 + r], at.data[6 + r], at.data[12 + r], at.data[15 + r], at.data[18 + r], at.data[9 + r], count_reads == 3, value);
+return value;
+"""
+
+
+@wp.func_native(cpu_snippet(_LAYER_VALUES, "return {};\n"))
+def layer_values_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
+                      uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3) -> lane_colours:  # fmt: skip
+    """Row ``l``: layer ``j`` of ``tex`` read at lane pixel ``l`` over the footprints of
+    :func:`layer_reads_lane`'s reads (the same arguments) as ``read_layer`` reads it (0 where
+    ``weighted[l]`` is not positive); one native call rather than a read per projection."""
     ...
 
 
@@ -108,20 +134,6 @@ def grad_lanes_take(args: SplatArgs) -> bool:
     own, so it adds layer by layer and every texel still gets the one-pixel body's sums in its order."""
     params = args.reads.params
     return lanes_take(args) and args.reads.smp.filter != FILTER_ANISOTROPIC and params.height_mode != HEIGHT_ARRAY and not params.tiling.requires_grad
-
-
-@inlined
-def sample_lane_reads(tex: TextureView, j: wp.int32, reads: LayerReads, at: lane_reads) -> lane_colours:
-    """Row ``l``: layer ``j`` of ``tex`` read over each read's footprint as ``at`` says (``read_layer``)."""
-    layer = lane_ints(j)
-    value = lane_colours()
-    if reads.params.projection == PROJECT_TRIPLANAR:  # read_projections: value += w · sample, w > 0
-        value = accumulate_footprint_lane(tex, reads.smp, layer, at[0], at[3], at[6], at[12], at[15], at[18], at[9], 1, value)
-        value = accumulate_footprint_lane(tex, reads.smp, layer, at[1], at[4], at[7], at[13], at[16], at[19], at[10], 1, value)
-        value = accumulate_footprint_lane(tex, reads.smp, layer, at[2], at[5], at[8], at[14], at[17], at[20], at[11], 1, value)
-    else:  # one read of weight 1: value = sample
-        value = accumulate_footprint_lane(tex, reads.smp, layer, at[0], at[3], at[6], at[12], at[15], at[18], at[9], 0, value)
-    return value
 
 
 @inlined
@@ -205,7 +217,7 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                 weighted[l] = w1s[l, j]
             for t in range(layer_textures(params)):
                 tex = pick(args.layers, args.heights, t)
-                value = sample_lane_reads(tex, j, args.reads, layer_reads_lane(tex, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w))
+                value = layer_values_lane(tex, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w)
                 for l in range(count):
                     if w1s[l, j] > 0.0:
                         if t == 0:
