@@ -1,5 +1,6 @@
-"""Splat-map terrain texturing, part 5: the splat weights, the blend and the blend's gradient for a
-lane of pixels on the CPU, in native code (:mod:`.lanes`), for the kernels of up to 8 layers.
+"""Splat-map terrain texturing, part 5: the splat maps' raw values, the splat weights, the blend and
+the blend's gradient for a lane of pixels on the CPU, in native code (:mod:`.lanes`), for the kernels
+of up to 8 layers.
 
 Each restates a block of :mod:`.splat_blend` pixel by pixel, in its order and with Warp's own
 functions where the block calls them (``wp::dot``, ``wp::div``...), so that the lane bodies of

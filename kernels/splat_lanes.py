@@ -206,8 +206,8 @@ def lane_bodies(cap: int, pixels_t, grads_t):
 
     def lane_layers(args: SplatArgs, pixels: pixels_t, base: wp.int32, count: wp.int32, w1s: lane_weights_t, tri_w: _lane_vec3):
         """``(colours, heights)``: read_layers for each lane pixel, layer by layer, each layer's reads
-        for the whole lane (:func:`layer_reads_lane`) and its texels' by the lane; for each texture a
-        layer reads (its colour, and its separate height: ``pick``) one call, compiled once."""
+        and its texels' for the whole lane (:func:`layer_values_lane`); for each texture a layer reads
+        (its colour, and its separate height: ``pick``) one call, compiled once."""
         params = args.reads.params
         colours = lane_layers_t()
         heights = lane_weights_t()
