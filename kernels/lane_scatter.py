@@ -155,16 +155,16 @@ def scatter_levels_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, uv:
 _SCATTER_LOD = _SCATTER_CORE + r"""
 // Up to three reads per lane pixel (a pixel's projections), read r from tex[r] into grad[r]; a read
 // adds where its weight is positive and its UV and LOD are finite (scatter.scatter_lod), and only
-// into a gradient that is needed.
+// into a gradient that is needed. It adds its share of the pixel's gradient: w · g where weigh (a
+// blend of projections), g itself where not.
 const decltype(tex0)* texs[3] = {&tex0, &tex1, &tex2};
 const decltype(grad0)* grads[3] = {&grad0, &grad1, &grad2};
 float us[3][WT_L], vs[3][WT_L], fractions[3][WT_L];
 int levels[3][WT_L], layer[3][WT_L];
 bool active[3][WT_L];
-wt_f4 g[3][WT_L];
+wt_f4 gs[3][WT_L];
 for (int r = 0; r < count; ++r) {
     const bool needed = grads[r]->texels.shape[0] > 0;
-    const wp::mat_t<WT_L, 4, float>& gr = r == 0 ? g0 : (r == 1 ? g1 : g2);
     for (int l = 0; l < WT_L; ++l) {
         const bool finite = __builtin_fabsf(reads.data[r][l]) <= wt_float_max && __builtin_fabsf(reads.data[3 + r][l]) <= wt_float_max && __builtin_fabsf(reads.data[6 + r][l]) <= wt_float_max;
         active[r][l] = needed && reads.data[9 + r][l] > 0.0f && finite;
@@ -172,18 +172,20 @@ for (int r = 0; r < count; ++r) {
         vs[r][l] = active[r][l] ? reads.data[3 + r][l] : 0.0f;
         wt_mip_levels(*texs[r], smp, active[r][l] ? reads.data[6 + r][l] : 0.0f, levels[r][l], fractions[r][l]);
         layer[r][l] = active[r][l] ? wp::clamp(layers.c[l], 0, texs[r]->num_layers - 1) : 0;
-        g[r][l] = (wt_f4){gr.data[l][0], gr.data[l][1], gr.data[l][2], gr.data[l][3]};
+        const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
+        gs[r][l] = weigh ? reads.data[9 + r][l] * gl : gl;
     }
 }
-wt_scatter_levels_any(count, texs, grads, smp, us, vs, levels, fractions, layer, active, g);
+wt_scatter_levels_any(count, texs, grads, smp, us, vs, levels, fractions, layer, active, gs);
 """
 
 
 @wp.func_native(cpu_snippet(_SCATTER_LOD))
 def scatter_lod_lanes(tex0: TextureView, tex1: TextureView, tex2: TextureView, grad0: TexelGrad, grad1: TexelGrad, grad2: TexelGrad, smp: SamplerArgs, count: wp.int32,
-                      layers: lane_ints, reads: lane_reads, g0: lane_colours, g1: lane_colours, g2: lane_colours):  # fmt: skip
-    """:func:`~warptex.kernels.scatter.scatter_lod` of the gradients ``g_r[l]`` of reads ``r = 0 ..
-    count - 1`` of every lane pixel ``l``: read ``r`` of ``tex_r`` (layer ``layers[l]``) at its UV
-    and LOD in ``reads`` (:data:`~.lanes.lane_reads`), into ``grad_r`` (nothing where it is empty),
-    where its weight is positive, pixel by pixel and read by read as the scalar kernels add them."""
+                      layers: lane_ints, reads: lane_reads, weigh: wp.int32, g: lane_colours):  # fmt: skip
+    """:func:`~warptex.kernels.scatter.scatter_lod` of each read ``r = 0 .. count - 1`` of every lane
+    pixel ``l``'s share of its gradient ``g[l]`` (``w · g[l]``, ``w`` the read's weight, where
+    ``weigh``; ``g[l]`` where not): read ``r`` of ``tex_r`` (layer ``layers[l]``) at its UV and LOD
+    in ``reads`` (:data:`~.lanes.lane_reads`), into ``grad_r`` (nothing where it is empty), where its
+    weight is positive, pixel by pixel and read by read as the scalar kernels add them."""
     ...

@@ -16,9 +16,9 @@ common case, triplanar weights, with every filter (the anisotropic footprint's b
 import warp as wp
 
 from .faces import FaceTextures
-from .lanes import cpu_snippet, lane_reads
+from .lanes import cpu_snippet, lane_colours, lane_ints, lane_reads
 from .projection import ProjectionArgs, SurfacePixels
-from .texels import SamplerArgs
+from .texels import SamplerArgs, TextureView
 
 # One projection's reads at a tiling for the lane, projection.plane_uv and footprint.uv_footprint's one
 # tap (plane_footprint), given the lane's surface as vectors: also what a splat layer mapped triplanar
@@ -101,7 +101,31 @@ auto wt_put_read = [&](wp::mat_t<21, WT_L, float>& out, int r, wt_vi read, wt_vf
     const wt_vf rows[7] = {wt_sel(read, u, zero), wt_sel(read, v, zero), wt_sel(read, fp.lod, zero), wt_sel(read, weight, zero), wt_sel(read, fp.du, zero), wt_sel(read, fp.dv, zero), wt_sel(read, fp.taps, zero)};
     for (int q = 0; q < 7; ++q) __builtin_memcpy(out.data[3 * q + r], &rows[q], sizeof(wt_vf));
 };
+// Reads r = 0 .. count - 1 of a lane_reads matrix, read r of *texs[r] (lane pixel l's layer layers[l])
+// over its footprint, into value in read order (wt_accumulate_footprint: value += w · sample where
+// add, value = sample where not).
+auto wt_accumulate_reads = [&](const auto* const* texs, const auto& smp, const int* layers, int count, int add, const wp::mat_t<21, WT_L, float>& at, wp::mat_t<WT_L, 4, float>& value) __attribute__((always_inline)) {
+    for (int r = 0; r < count; ++r)
+        wt_accumulate_footprint(*texs[r], smp, layers, at.data[r], at.data[3 + r], at.data[6 + r], at.data[12 + r], at.data[15 + r], at.data[18 + r], at.data[9 + r], add, value);
+};
 """
+
+_ACCUMULATE_READS = PLANE_CPP + r"""
+const decltype(tex0)* texs[3] = {&tex0, &tex1, &tex2};
+wp::mat_t<WT_L, 4, float> value;
+wt_accumulate_reads(texs, smp, layers.c, count, add, reads, value);
+return value;
+"""
+
+
+@wp.func_native(cpu_snippet(_ACCUMULATE_READS, "return {};\n"))
+def accumulate_reads_lane(tex0: TextureView, tex1: TextureView, tex2: TextureView, smp: SamplerArgs, layers: lane_ints, count: wp.int32, add: wp.int32, reads: lane_reads) -> lane_colours:  # fmt: skip
+    """Row ``l``: lane pixel ``l``'s reads ``r = 0 .. count - 1`` in ``reads``
+    (:data:`~.lanes.lane_reads`), read ``r`` of ``tex_r`` (layer ``layers[l]``) over its footprint,
+    blended in read order by their weights where ``add`` (``value += w · sample``: a pixel's
+    projections), the one read's sample where not; 0 where the pixel reads nothing."""
+    ...
+
 
 _TRIPLANAR_READS = PLANE_CPP + r"""
 typedef wp::vec_t<3, float> wt_v3;

@@ -102,11 +102,10 @@ def layer_reads_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted:
 _LAYER_VALUES = _LAYER_READS + r"""
 int layer[WT_L];
 for (int l = 0; l < WT_L; ++l) layer[l] = j;
-const wp::mat_t<21, WT_L, float> at = wt_layer_reads(weighted.c);
-const int count_reads = reads.params.projection == 2 ? 3 : 1;  // PROJECT_TRIPLANAR: value += w · sample, else value = sample
+const decltype(tex)* texs[3] = {&tex, &tex, &tex};
+const int triplanar = reads.params.projection == 2;  // PROJECT_TRIPLANAR: value += w · sample, else value = sample
 wp::mat_t<WT_L, 4, float> value;
-for (int r = 0; r < count_reads; ++r)
-    wt_accumulate_footprint(tex, reads.smp, layer, at.data[r], at.data[3 + r], at.data[6 + r], at.data[12 + r], at.data[15 + r], at.data[18 + r], at.data[9 + r], count_reads == 3, value);
+wt_accumulate_reads(texs, reads.smp, layer, triplanar ? 3 : 1, triplanar, wt_layer_reads(weighted.c), value);
 return value;
 """
 
@@ -137,21 +136,12 @@ def grad_lanes_take(args: SplatArgs) -> bool:
 
 
 @inlined
-def scatter_lane_reads(tex: TextureView, grad: TexelGrad, j: wp.int32, reads: LayerReads, count: wp.int32, at: lane_reads, g: lane_colours):
+def scatter_lane_reads(tex: TextureView, grad: TexelGrad, j: wp.int32, reads: LayerReads, at: lane_reads, g: lane_colours):
     """``scatter_layer`` of the gradients ``g[l]`` of layer ``j``'s reads ``at`` of ``tex`` into
-    ``grad``, pixel by pixel and read by read: ``w · g`` per projection where triplanar, ``g``
-    itself for the one read of the other projections."""
-    g0 = g
-    g1 = lane_colours()
-    g2 = lane_colours()
-    count_reads = 1
-    if reads.params.projection == PROJECT_TRIPLANAR:  # scatter_projections
-        count_reads = 3
-        for l in range(count):
-            g0[l] = at[9, l] * g[l]
-            g1[l] = at[10, l] * g[l]
-            g2[l] = at[11, l] * g[l]
-    scatter_lod_lanes(tex, tex, tex, grad, grad, grad, reads.smp, count_reads, lane_ints(j), at, g0, g1, g2)
+    ``grad``, pixel by pixel and read by read: ``w · g`` per projection where triplanar
+    (``scatter_projections``), ``g`` itself for the one read of the other projections."""
+    triplanar = wp.where(reads.params.projection == PROJECT_TRIPLANAR, 1, 0)
+    scatter_lod_lanes(tex, tex, tex, grad, grad, grad, reads.smp, 1 + 2 * triplanar, lane_ints(j), at, triplanar, g)
 
 
 @functools.cache
@@ -300,6 +290,6 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                     weighted[l] = w1s[l, j]
                     g[l] = gcs[l * cap + j]
                 at = layer_reads_lane(args.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w)
-                scatter_lane_reads(args.layers, grads.layers, j, args.reads, count, at, g)
+                scatter_lane_reads(args.layers, grads.layers, j, args.reads, at, g)
 
     return inlined(specialised(lane, f"splat{cap}_lane"), module=module), inlined(specialised(grad_lane, f"splat{cap}_grad_lane"), module=module)

@@ -4,7 +4,7 @@ gradient, one texture per axis, plain sampling.
 What each pixel reads from each projection (its UV, footprint and weight) comes, with triplanar
 weights, from :func:`~.projection_lanes.triplanar_reads_lane` for the whole lane, and otherwise
 (biplanar) from the scalar blocks pixel by pixel; the lane's texture reads from
-:func:`~.lanes.accumulate_footprint_lane` and its texel-gradient adds from
+:func:`~.projection_lanes.accumulate_reads_lane` and its texel-gradient adds from
 :func:`~.lane_scatter.scatter_lod_lanes`, both in the order the scalar bodies take them, so the
 outputs and the gradients are the scalar kernels' bits. The gradient of the anisotropic filter,
 whose footprints may take several taps, goes pixel by pixel through the scalar body.
@@ -17,9 +17,9 @@ import warp as wp
 from . import inlined, specialised
 from .faces import FaceGrads, on_axis
 from .lane_scatter import scatter_lod_lanes
-from .lanes import LANES, accumulate_footprint_lane, lane_colours, lane_ints, lane_reads
+from .lanes import LANES, lane_colours, lane_ints, lane_reads
 from .projection import WEIGHTS_TRIPLANAR, SurfacePixels, projection_footprint, projection_uv, projection_weights, surface
-from .projection_lanes import triplanar_reads_lane
+from .projection_lanes import accumulate_reads_lane, triplanar_reads_lane
 from .texels import FILTER_ANISOTROPIC, read_channels, write_channels
 
 
@@ -61,11 +61,7 @@ def lane_bodies(colour, colour_grad, args_t):
     def write_colours(args: args_t, reads: lane_reads, base: wp.int32, count: wp.int32, out: wp.array2d(dtype=float)):
         """The lane's colours, the projections' samples blended by their weights, into ``out``."""
         faces = args.faces
-        layers = lane_ints(args.layer)
-        value = lane_colours()
-        value = accumulate_footprint_lane(faces.px, args.smp, layers, reads[0], reads[3], reads[6], reads[12], reads[15], reads[18], reads[9], 1, value)
-        value = accumulate_footprint_lane(faces.py, args.smp, layers, reads[1], reads[4], reads[7], reads[13], reads[16], reads[19], reads[10], 1, value)
-        value = accumulate_footprint_lane(faces.pz, args.smp, layers, reads[2], reads[5], reads[8], reads[14], reads[17], reads[20], reads[11], 1, value)
+        value = accumulate_reads_lane(faces.px, faces.py, faces.pz, args.smp, lane_ints(args.layer), 3, 1, reads)
         for l in range(count):
             write_channels(out, base + l, value[l])
 
@@ -73,15 +69,10 @@ def lane_bodies(colour, colour_grad, args_t):
         """The texel gradients of the lane's one-tap reads: each projection's share ``w · g`` of the
         pixel's output gradient ``g``."""
         faces = args.faces
-        g0 = lane_colours()
-        g1 = lane_colours()
-        g2 = lane_colours()
+        g = lane_colours()
         for l in range(count):
-            g = read_channels(adj, base + l)
-            g0[l] = reads[9, l] * g
-            g1[l] = reads[10, l] * g
-            g2[l] = reads[11, l] * g
-        scatter_lod_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, 3, lane_ints(args.layer), reads, g0, g1, g2)
+            g[l] = read_channels(adj, base + l)
+        scatter_lod_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, 3, lane_ints(args.layer), reads, 1, g)
 
     whole_lane = inlined(specialised(whole_lane, "triplanar_whole_lane"))
     projection_reads = inlined(specialised(projection_reads, "triplanar_projection_reads"))
