@@ -434,3 +434,10 @@ def test_from_arrays_takes_tensors_and_wp_arrays_and_checks_its_input():
     nan_outside = a["position"].copy()
     nan_outside[a["mask"] == 0] = np.nan  # uncovered pixels may hold anything
     assert GBuffer.from_arrays(nan_outside, a["normal"], a["mask"]).numpy()["mask"].sum() == a["mask"].sum()
+
+
+def test_to_its_own_device_is_itself_and_an_unknown_device_says_which_there_are():
+    g = rasterize(trimesh.creation.box(), look_at((0, 0, 5), (0, 0, 0), resolution=(8, 8)), device="cpu")
+    assert g.to("cpu") is g and g.to(g.device) is g
+    with pytest.raises(ValueError, match=r"GBuffer\.to\(\): device 'cuda:7' does not exist: .*the devices are cpu"):
+        g.to("cuda:7")

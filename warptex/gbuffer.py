@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from warptex._validate import as_float_array
+from warptex._validate import as_float_array, checked_device
 from warptex.camera import Camera
 
 #: Per-pixel fields of a :class:`GBuffer` with their Warp dtypes (UV sets are kept apart).
@@ -114,6 +114,17 @@ class GBuffer:
     @property
     def device(self):
         return self.mask.device
+
+    def to(self, device) -> "GBuffer":
+        """This G-buffer on ``device`` (e.g. ``"cuda:0"``): a copy of every array there, or
+        ``self`` when it is there already. Rasterise once and texture on either device with the
+        same pixels: the CPU and CUDA rasterisers agree only to float rounding."""
+        device = checked_device("GBuffer.to()", device)
+        if device == self.device:
+            return self
+        arrays = {name: wp.clone(getattr(self, name), device=device) for name in FIELDS}
+        sets = {s: {f: wp.clone(a, device=device) for f, a in fields.items()} for s, fields in self.uv_sets.items()}
+        return GBuffer(**arrays, uv_sets=sets, camera=self.camera, samples=self.samples, origin=self.origin)
 
     def uv(self, name: str = "uv0") -> dict[str, wp.array]:
         """The arrays of UV set ``name`` (``uv``, ``uv_dx``, ``uv_dy``, ``tangent``)."""
