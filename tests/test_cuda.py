@@ -2,7 +2,9 @@
 
 The kernels are the same source on both devices; these tests check that they compute the same
 thing there: outputs to float rounding, gradients to the rounding of atomics summed in another
-order. Skipped, with the reason, on a machine without a CUDA device. ``WARPTEX_TEST_DEVICE=cpu``
+order. The techniques get one G-buffer, rasterised on the CPU and copied (``GBuffer.to``): the two
+rasterisers agree only to rounding (checked on its own here), and on an H100 that rounding, in a
+normal or a derivative, moved blend weights and mip levels past these tolerances. Skipped, with the reason, on a machine without a CUDA device. ``WARPTEX_TEST_DEVICE=cpu``
 runs them against the CPU itself (a check of the tests, where no GPU is at hand).
 """
 
@@ -15,6 +17,7 @@ import numpy as np
 import pytest
 import warp as wp
 
+import reference_triplanar as rt
 import warptex as wt
 from warptex.scenes.terrain import terrain
 from warptex.scenes import terrain_camera
@@ -29,9 +32,11 @@ DEVICES = ("cpu", OTHER)
 def scene():
     """Seeded inputs, as NumPy: a terrain G-buffer's mesh and camera, textures, splat maps, UVs."""
     rng = np.random.default_rng(5)
+    mesh, camera = terrain(resolution=(65, 65)), terrain_camera((96, 128))
     return {
-        "mesh": terrain(resolution=(65, 65)),
-        "camera": terrain_camera((96, 128)),
+        "mesh": mesh,
+        "camera": camera,
+        "gbuffer": wt.rasterize(mesh, camera, device="cpu"),  # the techniques get the same pixels on both devices
         "image": rng.random((48, 40, 4)).astype(np.float32),
         "layers": rng.random((4, 32, 32, 4)).astype(np.float32),
         "maps": rng.random((1, 9, 9, 4)).astype(np.float32) - 0.1,
@@ -46,16 +51,31 @@ def _on_both(run):
     return [run(device) for device in DEVICES]
 
 
+#: Gradients of one parameter that every pixel adds to: tens of thousands of float32 atomic adds
+#: into one number, in an order that changes from run to run on CUDA. On an H100 the biplanar
+#: tiling gradient (-8.55, from 37k terms of either sign) came out 1.2e-4 relative off the CPU's in
+#: one run of two.
+SCALARS, SCALAR_RTOL = {"tiling", "transition", "sharpness", "tiling.grad"}, 1e-3
+
+
 def _compare(cpu: dict, cuda: dict, *, rtol=1e-4, atol=1e-5):
     assert cpu.keys() == cuda.keys()
     for name in cpu:
         a, b = np.asarray(cpu[name], np.float64), np.asarray(cuda[name], np.float64)
         scale = max(float(np.nanmax(np.abs(a))) if a.size else 0.0, 1.0)
-        np.testing.assert_allclose(b, a, rtol=rtol, atol=atol * scale, err_msg=name)
+        np.testing.assert_allclose(b, a, rtol=max(rtol, SCALAR_RTOL if name in SCALARS else 0.0), atol=atol * scale, err_msg=name)
 
 
 def _backward(out: wp.array, weights: np.ndarray):
     out.grad.assign(weights[..., : out.shape[-1]].reshape(out.shape))
+
+
+def test_gbuffer_to_copies_every_array(scene):
+    g = scene["gbuffer"]
+    there = g.to(OTHER)
+    assert str(there.device) == OTHER and there.to(OTHER) is there
+    for name, a in g.numpy().items():
+        np.testing.assert_array_equal(there.numpy()[name], a, err_msg=name)
 
 
 def test_rasterize_matches_the_cpu(scene):
@@ -83,9 +103,9 @@ def test_sample_and_stochastic_match_the_cpu(scene, case):
     """Output and the gradients to the texels and the UVs (the generated adjoint runs then)."""
     method, options, fields, lod = SAMPLE_CASES[case]
 
-    def run(device):
+    def run(device, uvs=scene["uv"], weights=scene["weights"].reshape(-1, 4)[: len(scene["uv"])]):
         tex = wt.Texture(scene["image"], requires_grad=True, device=device)
-        uv = wp.array(scene["uv"], dtype=wp.vec2, device=device, requires_grad=True)
+        uv = wp.array(uvs, dtype=wp.vec2, device=device, requires_grad=True)
         kw = {"sampler": wt.Sampler(**fields), "lod": wp.array(scene["lod"], dtype=float, device=device) if lod == "array" else lod}
         read = tex
         tape = wp.Tape()
@@ -99,11 +119,24 @@ def test_sample_and_stochastic_match_the_cpu(scene, case):
                 else:
                     options_here = options
                 out = wt.stochastic(tex, uv, wt.Stochastic(method, **options_here), **kw)
-        out.grad.assign(scene["weights"].reshape(-1, 4)[: len(scene["uv"]), : out.shape[1]])
+        out.grad.assign(weights[:, : out.shape[1]])
         tape.backward()
         return {"out": out.numpy(), "uv": uv.grad.numpy(), **{f"texels {k}": read.grad(k) for k in range(read.num_levels)}}
 
-    _compare(*_on_both(run))
+    # A UV within float rounding of a kink (a texel edge, a hex cell's edge, a knot of the
+    # histogram's lookup table) may take either side's gradient, to its UV and to its texels: on an
+    # H100, one of 5000 hex-histogram samples did. Such a UV's gradient jumps when it moves 4 ulps
+    # on the CPU (a second difference past the tolerance); those samples get no output gradient.
+    uvs, here = scene["uv"], run("cpu")["uv"]
+    stable, atol = np.ones(len(uvs), bool), 1e-5 * max(float(np.abs(here).max()), 1.0)
+    for axis in (0, 1):
+        step = np.zeros_like(uvs)
+        step[:, axis] = 4 * np.spacing(np.abs(uvs[:, axis]))
+        both_sides = run("cpu", uvs + step)["uv"] + run("cpu", uvs - step)["uv"]
+        stable &= np.isclose(both_sides, 2 * here, rtol=1e-4, atol=atol).all(1)
+    assert stable.mean() > 0.95, f"{(~stable).sum()} of {stable.size} UV gradients jump within 4 ulps"
+    weights = scene["weights"].reshape(-1, 4)[: len(uvs)] * stable[:, None]
+    _compare(*_on_both(lambda device: run(device, weights=weights)))
 
 
 PLANAR_CASES = {
@@ -122,7 +155,7 @@ def test_planar_techniques_match_the_cpu(scene, case, grads):
     technique, opts = PLANAR_CASES[case]
 
     def run(device):
-        g = wt.rasterize(scene["mesh"], scene["camera"], device=device)
+        g = scene["gbuffer"].to(device)
         tex = wt.Texture(scene["image"][..., :3], requires_grad=True, device=device)
         tiling = wp.array([0.4], dtype=float, device=device, requires_grad=grads != "texels")
         tape = wp.Tape()
@@ -135,7 +168,16 @@ def test_planar_techniques_match_the_cpu(scene, case, grads):
             result["tiling"] = tiling.grad.numpy()
         return result
 
-    _compare(*_on_both(run))
+    cpu, cuda = _on_both(run)
+    precision = 1e-5
+    if technique is wt.triplanar_normal:
+        # Mips of a random normal map average towards (0.5, 0.5, 0.5), which decodes to a short
+        # vector, and normalising that magnifies rounding: the CPU's own float32 error here is
+        # 7e-5 (against the float64 reference). Allow each device that error, and as much relative
+        # to each gradient's scale.
+        exact = rt.triplanar_normal(scene["gbuffer"].numpy(), [scene["image"][..., :3]] * 3, tiling=0.4, blend_kind="rnm", strength=0.7)
+        precision = max(precision, float(np.abs(cpu["out"] - exact).max()))
+    _compare(cpu, cuda, atol=2 * precision)
 
 
 @pytest.mark.parametrize("projection", ["uv", "world_xz", "triplanar"])
@@ -145,7 +187,7 @@ def test_splat_matches_the_cpu(scene, projection, grads):
     hand, then (a sharpness needing gradients) through the generated adjoint."""
 
     def run(device):
-        g = wt.rasterize(scene["mesh"], scene["camera"], device=device)
+        g = scene["gbuffer"].to(device)
         layers = wt.TextureArray(scene["layers"], requires_grad=True, device=device)
         maps = wt.TextureArray(scene["maps"], mipmaps=False, requires_grad=True, device=device)
         tiling = wp.array([8.0, 6.0, 4.0, 5.0] if projection == "uv" else [0.3, 0.25, 0.2, 0.35], dtype=float, device=device, requires_grad=True)
@@ -167,7 +209,7 @@ def test_splat_matches_the_cpu(scene, projection, grads):
 
 def test_splat_atlas_matches_the_cpu(scene):
     def run(device):
-        g = wt.rasterize(scene["mesh"], scene["camera"], device=device)
+        g = scene["gbuffer"].to(device)
         atlas = wt.pack_atlas(wt.TextureArray(scene["layers"], device=device), gutter=4, requires_grad=True)
         idx, w = wt.export_index_maps(scene["maps"][0], k=2)
         tape = wp.Tape()
@@ -207,10 +249,11 @@ def test_torch_bridge_on_cuda(scene):
     if OTHER.startswith("cuda") and not torch.cuda.is_available():
         pytest.skip("this PyTorch build has no CUDA")
     cameras = [scene["camera"], wt.look_at((30.0, 34.0, -40.0), (-2.0, 2.0, 4.0), resolution=(96, 128))]  # a batch of two views
+    views = wt.rasterize(scene["mesh"], cameras, device="cpu")
 
     def run(device):
         tdev = wp.device_to_torch(device)
-        g = wt.rasterize(scene["mesh"], cameras, device=device)
+        g = views.to(device)
         texture = torch.tensor(scene["image"], device=tdev, requires_grad=True)
         layers = torch.tensor(scene["layers"], device=tdev, requires_grad=True)
         maps = torch.tensor(scene["maps"][0], device=tdev, requires_grad=True)
