@@ -90,6 +90,9 @@ class Kernels:
         lanes_take, grad_lanes_take: ``take(args) -> bool``, whether ``lanes`` (``texel_grad_lanes``)
             take a launch with the kernels' ``args`` struct (tested where the launch, or the backward
             pass, is recorded), or ``None``: always. The one-pixel kernel takes the rest.
+        lane_saved: ``saved(args) -> int``, the floats per pixel that ``lanes`` keeps in
+            ``pixels.saved`` for ``texel_grad_lanes`` to read instead of recomputing them, where the
+            two lane kernels run one launch and its backward pass; or ``None``: nothing is kept.
     """
 
     forward: Any
@@ -101,6 +104,7 @@ class Kernels:
     texel_grad_lanes: Any = None
     lanes_take: Callable[[Any], bool] | None = None
     grad_lanes_take: Callable[[Any], bool] | None = None
+    lane_saved: Callable[[Any], int] | None = None
 
     def launched(self, device, grad: bool = False):
         """The kernel a forward launch (``grad``: a hand-written gradient) runs on ``device``: its

@@ -36,7 +36,7 @@ from . import adjoint_module, inlined, specialised
 from .family import Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
 from .projection import SurfacePixels, surface_frame
 from .splat_blend import blend_functions, capacity
-from .splat_lanes import grad_lanes_take, lane_bodies, lanes_take
+from .splat_lanes import grad_lanes_take, lane_bodies, lane_saved, lanes_take
 from .splat_layers import (
     HEIGHT_ARRAY,
     HEIGHT_CHANNEL,
@@ -61,12 +61,15 @@ from .texels import SamplerArgs, TexelGrad, TextureView, read_channels, write_ch
 @wp.struct
 class SplatPixels:
     """The per-pixel G-buffer arrays a splat reads: UV0 and its derivatives, and the surface (world
-    position, its derivatives, normal, coverage mask)."""
+    position, its derivatives, normal, coverage mask); and ``saved``, each pixel's layer colours
+    (4 floats a layer), which the CPU's lane forward keeps for the texel-gradient lane to read
+    instead of sampling the layers again (``Kernels.lane_saved``; empty: not kept)."""
 
     uv0: wp.array(dtype=wp.vec2)
     uv0_dx: wp.array(dtype=wp.vec2)
     uv0_dy: wp.array(dtype=wp.vec2)
     surface: SurfacePixels
+    saved: wp.array2d(dtype=float)
 
 
 @wp.struct
@@ -359,4 +362,5 @@ def splat_kernels(*, capacity: int, stochastic: bool) -> Kernels:
         lane, grad_lane = lane_bodies(capacity, SplatPixels, SplatGrads)
         lanes = lane_kernel(lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), module=module, name=f"splat{capacity}_lanes")
         grad_lanes = lane_kernel(grad_lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), grads_t=SplatGrads, module=module + ".grad", name=f"splat{capacity}_texel_grad_lanes")
-    return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity), lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=lanes_take, grad_lanes_take=grad_lanes_take)
+    return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity), lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=lanes_take, grad_lanes_take=grad_lanes_take,
+                   lane_saved=None if stochastic else lane_saved)  # fmt: skip

@@ -121,12 +121,18 @@ for (int l = 0; l < count; ++l) {
     for (int c = 0; c < adj.shape[1] && c < 4; ++c) g.c[c] = *(const float*)(row + (long long)c * adj.strides[1]);
     wt_v8 w1(0.0f), hv(0.0f);  // pixel_layers: colours and heights where weighted
     wt_v4 c[8];
+    const char* kept = saved.shape[0] > 0 ? (const char*)saved.data + (long long)i * saved.strides[0] : nullptr;
     for (int j = 0; j < 8; ++j) {
         w1.c[j] = w1s.data[l][j];
         c[j] = wt_v4(0.0f);
         if (j < n && w1.c[j] > 0.0f) {
-            hv.c[j] = heights.data[l][j];
-            for (int k = 0; k < 4; ++k) c[j].c[k] = colours.data[l * 8 + j][k];
+            if (kept) {  // the colours the forward lane kept; heights from a channel of them (the lanes take no height layers)
+                for (int k = 0; k < 4; ++k) c[j].c[k] = *(const float*)(kept + (long long)(4 * j + k) * saved.strides[1]);
+                hv.c[j] = params.height_mode == 1 ? c[j].c[params.height_channel] : 0.0f;  // HEIGHT_CHANNEL
+            } else {
+                hv.c[j] = heights.data[l][j];
+                for (int k = 0; k < 4; ++k) c[j].c[k] = colours.data[l * 8 + j][k];
+            }
         }
     }
     wt_v8 gw1(0.0f);  // blend_backward
@@ -202,10 +208,12 @@ GRAD_TRANSITION = wp.constant(LANES * 10)
 @wp.func_native(cpu_snippet(_BLEND_BACKWARD, "return {};\n"))
 def blend_backward_lane8(params: SplatParams, surface: SurfacePixels, base: wp.int32, count: wp.int32, w1s: wp.types.matrix(shape=(LANES, 8), dtype=float),
                          colours: wp.types.matrix(shape=(LANES * 8, 4), dtype=float), heights: wp.types.matrix(shape=(LANES, 8), dtype=float),
-                         rs: wp.types.matrix(shape=(LANES, 8), dtype=float), adj: wp.array2d(dtype=float)) -> lane_grads:  # fmt: skip
+                         rs: wp.types.matrix(shape=(LANES, 8), dtype=float), adj: wp.array2d(dtype=float), saved: wp.array2d(dtype=float)) -> lane_grads:  # fmt: skip
     """For each covered lane pixel ``l`` (pixel ``base + l``), with its weights, colours, heights and
     raw splat values as :func:`blend_lane8` and ``weights_lane8`` take them and its output gradient
     ``adj[base + l]``: ``splat_blend.blend_backward``'s colours' and transition's gradients (the
     heights' added into the colours' height channel) and ``weights_backward``'s raw values'
-    gradient, laid out as :data:`lane_grads` says (0 for the other pixels)."""
+    gradient, laid out as :data:`lane_grads` says (0 for the other pixels). Where ``saved`` is not
+    empty, the colours are its row ``base + l`` (``SplatPixels.saved``) and ``colours`` and
+    ``heights`` are not read."""
     ...

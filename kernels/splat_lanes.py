@@ -6,7 +6,9 @@ The forward lane body computes what :mod:`.splat`'s forward body computes for
 then layer by layer, in one native call (:func:`layer_values_lane`), the lane's reads of the layer
 (UV, footprint, weight: ``layer_read`` restated, as :func:`layer_reads_lane` gives them) and its
 texels' reads over their footprints (``lanes.wt_accumulate_footprint``), projection by projection in
-the order ``read_layer`` adds them; then the blend. The gradient's lane body replays that, takes each pixel's blend and weights
+the order ``read_layer`` adds them; then the blend. Where the forward ran on a tape, its lane keeps each pixel's layer colours
+(``SplatPixels.saved``, ``Kernels.lane_saved``) and the gradient's lane body reads them; else it
+replays the forward. It takes each pixel's blend and weights
 backwards and adds into its splat maps in pixel order, then adds each layer's gradient into
 its texels by :func:`~.lane_scatter.scatter_lod_lanes`, layer by layer: a layer's reads touch texels
 of its own array layer only, so every texel gets the one-pixel body's sums in its order, and the
@@ -106,16 +108,25 @@ const decltype(tex)* texs[3] = {&tex, &tex, &tex};
 const int triplanar = reads.params.projection == 2;  // PROJECT_TRIPLANAR: value += w · sample, else value = sample
 wp::mat_t<WT_L, 4, float> value;
 wt_accumulate_reads(texs, reads.smp, layer, triplanar ? 3 : 1, triplanar, wt_layer_reads(weighted.c), value);
+if (keep && saved.shape[0] > 0) {  // SplatPixels.saved: row base + l, the layer's 4 floats
+    for (int l = 0; l < count; ++l) {
+        float* row = (float*)((char*)saved.data + (long long)(base + l) * saved.strides[0]);
+        for (int c = 0; c < 4; ++c) *(float*)((char*)row + (long long)(4 * j + c) * saved.strides[1]) = value.data[l][c];
+    }
+}
 return value;
 """
 
 
 @wp.func_native(cpu_snippet(_LAYER_VALUES, "return {};\n"))
 def layer_values_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
-                      uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3) -> lane_colours:  # fmt: skip
+                      uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3, keep: wp.int32,
+                      saved: wp.array2d(dtype=float)) -> lane_colours:  # fmt: skip
     """Row ``l``: layer ``j`` of ``tex`` read at lane pixel ``l`` over the footprints of
     :func:`layer_reads_lane`'s reads (the same arguments) as ``read_layer`` reads it (0 where
-    ``weighted[l]`` is not positive); one native call rather than a read per projection."""
+    ``weighted[l]`` is not positive); one native call rather than a read per projection. Where
+    ``keep`` and ``saved`` is not empty, also stored in ``saved``'s row ``base + l``, columns
+    ``4 j .. 4 j + 3`` (``SplatPixels.saved``)."""
     ...
 
 
@@ -133,6 +144,12 @@ def grad_lanes_take(args: SplatArgs) -> bool:
     own, so it adds layer by layer and every texel still gets the one-pixel body's sums in its order."""
     params = args.reads.params
     return lanes_take(args) and args.reads.smp.filter != FILTER_ANISOTROPIC and params.height_mode != HEIGHT_ARRAY and not params.tiling.requires_grad
+
+
+def lane_saved(args: SplatArgs) -> int:
+    """Floats a pixel keeps for the texel-gradient lane (``Kernels.lane_saved``): its layers'
+    colours, 4 a layer. Sampling the layers again was a fifth of a splat's forward and backward."""
+    return 4 * args.reads.params.num_layers
 
 
 @inlined
@@ -207,7 +224,7 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                 weighted[l] = w1s[l, j]
             for t in range(layer_textures(params)):
                 tex = pick(args.layers, args.heights, t)
-                value = layer_values_lane(tex, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w)
+                value = layer_values_lane(tex, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, wp.where(t == 0, 1, 0), pixels.saved)
                 for l in range(count):
                     if w1s[l, j] > 0.0:
                         if t == 0:
@@ -256,9 +273,19 @@ def lane_bodies(cap: int, pixels_t, grads_t):
         count = wp.min(adj.shape[0] - base, LANES)
         params = args.reads.params
         rs, w1s, tri_w = lane_weights(args, pixels, base, count)
-        colours, heights = lane_layers(args, pixels, base, count, w1s, tri_w)
+        colours = lane_layers_t()
+        heights = lane_weights_t()
+        if pixels.saved.shape[0] > 0:  # the colours the forward lane kept (zero where a layer has no weight, as read_layers leaves them)
+            if wp.static(cap != 8):  # (blend_backward_lane8 reads them itself)
+                for l in range(count):
+                    for j in range(params.num_layers):
+                        colours[l * cap + j] = wp.vec4(pixels.saved[base + l, 4 * j], pixels.saved[base + l, 4 * j + 1], pixels.saved[base + l, 4 * j + 2], pixels.saved[base + l, 4 * j + 3])
+                        if params.height_mode == HEIGHT_CHANNEL:
+                            heights[l, j] = colours[l * cap + j][params.height_channel]
+        else:
+            colours, heights = lane_layers(args, pixels, base, count, w1s, tri_w)
         if wp.static(cap == 8):  # the blend and weights backwards for the whole lane, then each pixel's splat maps' adds
-            back = blend_backward_lane8(params, pixels.surface, base, count, w1s, colours, heights, rs, adj)
+            back = blend_backward_lane8(params, pixels.surface, base, count, w1s, colours, heights, rs, adj, pixels.saved)
             gcs = back
             for l in range(count):
                 i = base + l

@@ -12,7 +12,7 @@ import trimesh
 import warp as wp
 
 import warptex as wt
-from warptex import _launch
+from warptex import _launch, _op
 from warptex._op import one_pixel_kernels
 from warptex.kernels.lanes import LANES
 
@@ -266,6 +266,9 @@ def test_splat_lanes_of_more_than_eight_layers(rng, launched, height_blend):
     lanes, scalar = _both(lambda: wt.splat(g, layers, maps, height_blend=height_blend))
     _same_bits(lanes, scalar)
     assert ("splat16_lanes", -(-700 // LANES)) in launched
+    layers, maps = (wt.TextureArray(t.numpy(0), mipmaps=t.num_levels > 1, requires_grad=True) for t in (layers, maps))
+    _same_grads(lambda: wt.splat(g, layers, maps, height_blend=height_blend), [layers, maps], rng, 4, 700)  # the kept colours, through Warp's matrices
+    assert ("splat16_texel_grad_lanes", -(-700 // LANES)) in launched
 
 
 @pytest.mark.parametrize("channels", [1, 2, 3])
@@ -391,6 +394,35 @@ def test_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter
         wt.set_num_threads(previous)
     takes = filter != "anisotropic" and case not in ("world xz, height array", "triplanar, face layers")  # splat_lanes.grad_lanes_take
     assert threads > 1 or (("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched) == takes
+
+
+def test_splat_gradient_lanes_read_the_colours_their_own_forward_kept(rng, launched):
+    """A splat recorded with gradients keeps its layers' colours for its backward lane
+    (``SplatPixels.saved``): two of one size on one tape each read their own, and one recorded after
+    that tape is gone takes a spare array still holding their colours, and overwrites every entry."""
+    g = _splat_gbuffer(rng, 3000)
+    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True)
+    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False, requires_grad=True)
+    weights = rng.normal(size=(3000, 4)).astype(np.float32)
+
+    def grads(one_pixel: bool, tilings) -> list:
+        layers.zero_grad()
+        maps.zero_grad()
+        with one_pixel_kernels(one_pixel):
+            tape = wp.Tape()
+            with tape:
+                outs = [wt.splat(g, layers, maps, tiling=t, height_blend=0.2) for t in tilings]
+            for k, out in enumerate(outs):
+                out.grad.assign(weights * (k + 1))
+            tape.backward()
+        return [layers.grad(k) for k in range(layers.num_levels)] + [maps.grad(0)]
+
+    for a, b in zip(grads(False, (1.0, 2.5)), grads(True, (1.0, 2.5))):
+        _same_bits(a, b)
+    assert any(spare.shape == (3000, 20) for spare in _op._spares)  # the first tape's, now spare
+    for a, b in zip(grads(False, (0.7,)), grads(True, (0.7,))):
+        _same_bits(a, b)
+    assert sum(1 for name, _ in launched if name == "splat8_texel_grad_lanes") == 3
 
 
 @pytest.mark.parametrize("threads", [1, 3])

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import threading
+import weakref
 
 import warp as wp
 
@@ -137,19 +138,51 @@ def _run_path(kernels: Kernels, path: str, count: int, inputs: dict, result, dev
     if kernels.staged is not None and kernels.staged.replaces == path and (kernels.texel_grad if path == "texel_grad" else kernels.adjoint) is None:
         _run_staged(kernels.staged, count, inputs, result, device, cut)
     elif path == "texel_grad":
-        launch(kernels.forward, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, lanes=_lanes(kernels, inputs["args"]), **cut,
-               backward=_texel_gradient(kernels, count, inputs, result, device, cut, touched))  # fmt: skip
+        lanes, grad_lanes = _lanes(kernels, inputs["args"]), _lanes(kernels, inputs["args"], grad=True)
+        if kernels.lane_saved is not None and lanes is not None and grad_lanes is not None and wp.get_device(device).is_cpu:  # what the forward lanes keep for the backward's
+            inputs["pixels"].saved = _kept((count, kernels.lane_saved(inputs["args"])), device, owner=inputs["pixels"])
+        launch(kernels.forward, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, lanes=lanes, **cut,
+               backward=_texel_gradient(kernels, count, inputs, result, device, cut, touched, grad_lanes))  # fmt: skip
     elif kernels.adjoint is not None:
         launch(kernels.adjoint, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, **cut, backward=GENERATED)
     else:
         raise RuntimeError("warptex internal error: a gradient was asked for that this technique has no kernel for")
 
 
-def _texel_gradient(kernels: Kernels, count: int, inputs: dict, result, device, cut: dict, touched):
-    """``backward(tape)``: ``kernels.texel_grad`` adds the output's gradient, through the forward
-    pass, into the gradients of the inputs ``kernels.grads`` names that require them."""
+# Arrays a lane forward kept values in for a backward pass that is gone, for the next of the same
+# shape (_kept): the first writes into a new 50 MB array cost ~25 ms of page faults here, more than
+# keeping the values saves.
+_spares: list = []
+_spares_lock = threading.Lock()
+SPARES = 2
 
-    lanes = _lanes(kernels, inputs["args"], grad=True)  # decided where the pass is recorded
+
+def _kept(shape: tuple, device, owner) -> wp.array:
+    """An uninitialised float array of ``shape`` on ``device`` for a lane forward to keep values in
+    (``Kernels.lane_saved``), a spare one where there is one; a spare again once ``owner`` (what the
+    recorded backward pass holds, and nothing else) is collected."""
+    array = None
+    with _spares_lock:
+        for k, spare in enumerate(_spares):
+            if spare.shape == shape and spare.device == device:
+                array = _spares.pop(k)
+                break
+    if array is None:
+        array = wp.empty(shape, dtype=float, device=device)
+    weakref.finalize(owner, _spare, array)
+    return array
+
+
+def _spare(array: wp.array) -> None:
+    with _spares_lock:
+        _spares.append(array)
+        del _spares[:-SPARES]  # the latest few
+
+
+def _texel_gradient(kernels: Kernels, count: int, inputs: dict, result, device, cut: dict, touched, lanes):
+    """``backward(tape)``: ``kernels.texel_grad`` adds the output's gradient, through the forward
+    pass, into the gradients of the inputs ``kernels.grads`` names that require them (on the CPU by
+    ``lanes``, its lane kernel, where not ``None``: decided where the pass is recorded)."""
 
     def backward(tape) -> None:
         targets, entries = [], {}

@@ -189,7 +189,7 @@ def splat(
     count = gbuffer.pixel_count
     uvs = gbuffer.uv_sets[uv_set]
     surface = struct_of(kp.SurfacePixels, device, **{name: getattr(gbuffer, name).reshape((count,)) for name in ("position", "position_dx", "position_dy", "normal", "mask")})
-    pixels = struct_of(kl.SplatPixels, device, uv0=uvs["uv"].reshape((count,)), uv0_dx=uvs["uv_dx"].reshape((count,)), uv0_dy=uvs["uv_dy"].reshape((count,)), surface=surface)
+    pixels = struct_of(kl.SplatPixels, device, uv0=uvs["uv"].reshape((count,)), uv0_dx=uvs["uv_dx"].reshape((count,)), uv0_dy=uvs["uv_dy"].reshape((count,)), surface=surface, saved=None)
     kernels = kl.splat_kernels(capacity=kl.capacity(num_layers), stochastic=stoch.method != kst.METHOD_NONE)
     linear = stoch.histogram == 0 and height_stoch.histogram == 0  # the histogram blend is not linear in the texels
     # A layer's lookup costs about two footprints: its share of the blend (weights, heights,
