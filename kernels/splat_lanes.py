@@ -6,7 +6,8 @@ The forward lane body computes what :mod:`.splat`'s forward body computes for
 then layer by layer, in one native call (:func:`layer_values_lane`), the lane's reads of the layer
 (UV, footprint, weight: ``layer_read`` restated, as :func:`layer_reads_lane` gives them) and its
 texels' reads over their footprints (``lanes.wt_accumulate_footprint``), projection by projection in
-the order ``read_layer`` adds them; then the blend. Where the forward ran on a tape, its lane keeps each pixel's layer colours
+the order ``read_layer`` adds them; then the blend. Without height blending the blend is a weighted
+sum in the layers' order, added a layer at a time inside that call (:func:`layer_blend_lane`). Where the forward ran on a tape, its lane keeps each pixel's layer colours
 (``SplatPixels.saved``, ``Kernels.lane_saved``) and the gradient's lane body reads them; else it
 replays the forward. It takes each pixel's blend and weights
 backwards and adds into its splat maps in pixel order, then adds each layer's gradient into
@@ -114,11 +115,10 @@ if (keep && saved.shape[0] > 0) {  // SplatPixels.saved: row base + l, the layer
         for (int c = 0; c < 4; ++c) *(float*)((char*)row + (long long)(4 * j + c) * saved.strides[1]) = value.data[l][c];
     }
 }
-return value;
 """
 
 
-@wp.func_native(cpu_snippet(_LAYER_VALUES, "return {};\n"))
+@wp.func_native(cpu_snippet(_LAYER_VALUES + "return value;\n", "return {};\n"))
 def layer_values_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
                       uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3, keep: wp.int32,
                       saved: wp.array2d(dtype=float)) -> lane_colours:  # fmt: skip
@@ -150,6 +150,24 @@ def lane_saved(args: SplatArgs) -> int:
     """Floats a pixel keeps for the texel-gradient lane (``Kernels.lane_saved``): its layers'
     colours, 4 a layer. Sampling the layers again was a fifth of a splat's forward and backward."""
     return 4 * args.reads.params.num_layers
+
+
+# splat_blend.blend without heights, a layer at a time: colour += w · c in the layers' order.
+_LAYER_BLEND = _LAYER_VALUES + r"""
+for (int l = 0; l < WT_L; ++l)
+    for (int c = 0; c < 4; ++c) colour.data[l][c] = colour.data[l][c] + weighted.c[l] * value.data[l][c];
+return colour;
+"""
+
+
+@wp.func_native(cpu_snippet(_LAYER_BLEND, "return {};\n"))
+def layer_blend_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
+                     uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3, keep: wp.int32,
+                     saved: wp.array2d(dtype=float), colour: lane_colours) -> lane_colours:  # fmt: skip
+    """``colour`` plus layer ``j`` (:func:`layer_values_lane`, the same arguments) weighted by
+    ``weighted``, row by row: ``splat_blend.blend``'s sum without height blending, a layer at a
+    time, so that the lane's colours are never held for all layers at once."""
+    ...
 
 
 @inlined
@@ -255,6 +273,16 @@ def lane_bodies(cap: int, pixels_t, grads_t):
         count = wp.min(out.shape[0] - base, LANES)
         params = args.reads.params
         rs, w1s, tri_w = lane_weights(args, pixels, base, count)
+        if params.height_mode == HEIGHT_NONE:  # the blend a layer at a time
+            blended = lane_colours()
+            for j in range(params.num_layers):
+                weighted = lane_floats()
+                for l in range(count):
+                    weighted[l] = w1s[l, j]
+                blended = layer_blend_lane(args.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, 1, pixels.saved, blended)
+            for l in range(count):
+                write_channels(out, base + l, wp.where(pixels.surface.mask[base + l] != 0.0, blended[l], wp.vec4(0.0)))
+            return
         colours, heights = lane_layers(args, pixels, base, count, w1s, tri_w)
         if wp.static(cap == 8):  # the blend for the whole lane
             colour = blend_lane8(params, pixels.surface, base, count, w1s, colours, heights)
