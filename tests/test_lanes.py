@@ -426,6 +426,17 @@ def test_splat_gradient_lanes_read_the_colours_their_own_forward_kept(rng, launc
     assert sum(1 for name, _ in launched if name == "splat8_texel_grad_lanes") == 3
 
 
+def test_spare_arrays_are_the_latest_within_their_byte_budget(monkeypatch):
+    monkeypatch.setattr(_op, "SPARE_BYTES", 1000)
+    monkeypatch.setattr(_op, "_spares", [])
+    small = [wp.empty((10, 10), dtype=float) for _ in range(3)]  # 400 bytes each
+    for a in small:
+        _op._spare(a)
+    assert [id(a) for a in _op._spares] == [id(a) for a in small[1:]]  # the oldest went
+    _op._spare(wp.empty((100, 10), dtype=float))  # 4000 bytes: more than the budget alone
+    assert _op._spares == []
+
+
 @pytest.mark.parametrize("threads", [1, 3])
 @pytest.mark.parametrize("case", ["uv, height channel", "uv, not normalized, tiling per layer", "triplanar"])
 def test_splat_gradient_lanes_add_the_transition_gradient(rng, launched, case, threads):

@@ -151,10 +151,10 @@ def _run_path(kernels: Kernels, path: str, count: int, inputs: dict, result, dev
 
 # Arrays a lane forward kept values in for a backward pass that is gone, for the next of the same
 # shape (_kept): the first writes into a new 50 MB array cost ~25 ms of page faults here, more than
-# keeping the values saves.
+# keeping the values saves. The latest, up to SPARE_BYTES together; a larger one is freed.
 _spares: list = []
 _spares_lock = threading.Lock()
-SPARES = 2
+SPARE_BYTES = 256 << 20
 
 
 def _kept(shape: tuple, device, owner) -> wp.array:
@@ -176,7 +176,8 @@ def _kept(shape: tuple, device, owner) -> wp.array:
 def _spare(array: wp.array) -> None:
     with _spares_lock:
         _spares.append(array)
-        del _spares[:-SPARES]  # the latest few
+        while sum(a.capacity for a in _spares) > SPARE_BYTES:
+            del _spares[0]
 
 
 def _texel_gradient(kernels: Kernels, count: int, inputs: dict, result, device, cut: dict, touched, lanes):
