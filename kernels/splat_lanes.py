@@ -7,16 +7,17 @@ then layer by layer, in one native call (:func:`layer_values_lane`), the lane's 
 (UV, footprint, weight: ``layer_read`` restated, as :func:`layer_reads_lane` gives them) and its
 texels' reads over their footprints (``lanes.wt_accumulate_footprint``), projection by projection in
 the order ``read_layer`` adds them; then the blend. Without height blending the blend is a weighted
-sum in the layers' order, added a layer at a time inside that call (:func:`layer_blend_lane`). Where the forward ran on a tape, its lane keeps each pixel's layer colours
-(``SplatPixels.saved``, ``Kernels.lane_saved``) and the gradient's lane body reads them; else it
-replays the forward. It takes each pixel's blend and weights
-backwards and adds into its splat maps in pixel order, then adds each layer's gradient into
-its texels by :func:`~.lane_scatter.scatter_lod_lanes`, layer by layer: a layer's reads touch texels
-of its own array layer only, so every texel gets the one-pixel body's sums in its order, and the
-outputs and gradients are the one-pixel kernels' bits. Face layers, and for the gradient the cases
-:func:`grad_lanes_take` names, run the one-pixel kernels (``Kernels.lanes_take``). In the kernels
-of up to 8 layers the weights, the blend and the blend and weights backwards are native code for
-the whole lane (:mod:`.splat_blend_lanes`); beyond, the scalar blocks run pixel by pixel.
+sum in the layers' order, added a layer at a time inside that call (:func:`layer_blend_lane`).
+Where the forward ran on a tape, its lane keeps each pixel's layer colours (``SplatPixels.saved``,
+``Kernels.lane_saved``) and the gradient's lane body reads them; else it replays the forward. It
+takes each pixel's blend and weights backwards and adds into its splat maps in pixel order, then
+adds each layer's gradient into its texels by :func:`~.lane_scatter.scatter_lod_lanes`, layer by
+layer: a layer's reads touch texels of its own array layer only, so every texel gets the one-pixel
+body's sums in its order, and the outputs and gradients are the one-pixel kernels' bits. Face
+layers, and for the gradient the cases :func:`grad_lanes_take` names, run the one-pixel kernels
+(``Kernels.lanes_take``). In the kernels of up to 8 layers the weights, the blend and the blend
+and weights backwards are native code for the whole lane (:mod:`.splat_blend_lanes`); beyond, the
+scalar blocks run pixel by pixel.
 """
 
 import functools

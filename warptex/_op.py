@@ -14,7 +14,10 @@ A technique hands :func:`run` its :class:`~warptex.kernels.family.Kernels`, its 
   weight times the output gradient into the texels it read, at about the cost of one forward pass;
   Warp's generated adjoint, which replays every function's forward inside its reverse pass, cost
   five. Where a path is a :class:`~warptex.kernels.family.Staged` pair of steps, :func:`run`
-  composes it: the first step's intermediates, then the second step with its own backward.
+  composes it: the first step's intermediates, then the second step with its own backward;
+- **what the forward keeps for the backward**: where the CPU's lane kernels run both the launch and
+  its hand-written backward, the values ``Kernels.lane_saved`` names, in an array the recorded pass
+  holds (a spare one where there is one, :func:`_kept`).
 """
 
 from __future__ import annotations
