@@ -152,31 +152,38 @@ def scatter_levels_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, uv:
     ...
 
 
-_SCATTER_LOD = _SCATTER_CORE + r"""
-// Up to three reads per lane pixel (a pixel's projections), read r from tex[r] into grad[r]; a read
-// adds where its weight is positive and its UV and LOD are finite (scatter.scatter_lod), and only
-// into a gradient that is needed. It adds its share of the pixel's gradient: w · g where weigh (a
-// blend of projections), g itself where not.
+# Up to three reads per lane pixel (a pixel's projections, rows of a lane_reads matrix `at`), read r
+# from tex[r] into grad[r]; a read adds where its weight is positive and its UV and LOD are finite
+# (scatter.scatter_lod), and only into a gradient that is needed. It adds its share of the pixel's
+# gradient g[l]: w · g where weigh (a blend of projections), g itself where not.
+_SCATTER_LOD_CORE = _SCATTER_CORE + r"""
+auto wt_scatter_lod = [&](const auto* const* texs, const auto* const* grads, const auto& smp, const int nreads, const int* layers, const wp::mat_t<21, WT_L, float>& at,
+                          const int weigh, const wp::mat_t<WT_L, 4, float>& g) __attribute__((always_inline)) {
+    float us[3][WT_L], vs[3][WT_L], fractions[3][WT_L];
+    int levels[3][WT_L], layer[3][WT_L];
+    bool active[3][WT_L];
+    wt_f4 gs[3][WT_L];
+    for (int r = 0; r < nreads; ++r) {
+        const bool needed = grads[r]->texels.shape[0] > 0;
+        for (int l = 0; l < WT_L; ++l) {
+            const bool finite = __builtin_fabsf(at.data[r][l]) <= wt_float_max && __builtin_fabsf(at.data[3 + r][l]) <= wt_float_max && __builtin_fabsf(at.data[6 + r][l]) <= wt_float_max;
+            active[r][l] = needed && at.data[9 + r][l] > 0.0f && finite;
+            us[r][l] = active[r][l] ? at.data[r][l] : 0.0f;
+            vs[r][l] = active[r][l] ? at.data[3 + r][l] : 0.0f;
+            wt_mip_levels(*texs[r], smp, active[r][l] ? at.data[6 + r][l] : 0.0f, levels[r][l], fractions[r][l]);
+            layer[r][l] = active[r][l] ? wp::clamp(layers[l], 0, texs[r]->num_layers - 1) : 0;
+            const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
+            gs[r][l] = weigh ? at.data[9 + r][l] * gl : gl;
+        }
+    }
+    wt_scatter_levels_any(nreads, texs, grads, smp, us, vs, levels, fractions, layer, active, gs);
+};
+"""
+
+_SCATTER_LOD = _SCATTER_LOD_CORE + r"""
 const decltype(tex0)* texs[3] = {&tex0, &tex1, &tex2};
 const decltype(grad0)* grads[3] = {&grad0, &grad1, &grad2};
-float us[3][WT_L], vs[3][WT_L], fractions[3][WT_L];
-int levels[3][WT_L], layer[3][WT_L];
-bool active[3][WT_L];
-wt_f4 gs[3][WT_L];
-for (int r = 0; r < count; ++r) {
-    const bool needed = grads[r]->texels.shape[0] > 0;
-    for (int l = 0; l < WT_L; ++l) {
-        const bool finite = __builtin_fabsf(reads.data[r][l]) <= wt_float_max && __builtin_fabsf(reads.data[3 + r][l]) <= wt_float_max && __builtin_fabsf(reads.data[6 + r][l]) <= wt_float_max;
-        active[r][l] = needed && reads.data[9 + r][l] > 0.0f && finite;
-        us[r][l] = active[r][l] ? reads.data[r][l] : 0.0f;
-        vs[r][l] = active[r][l] ? reads.data[3 + r][l] : 0.0f;
-        wt_mip_levels(*texs[r], smp, active[r][l] ? reads.data[6 + r][l] : 0.0f, levels[r][l], fractions[r][l]);
-        layer[r][l] = active[r][l] ? wp::clamp(layers.c[l], 0, texs[r]->num_layers - 1) : 0;
-        const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
-        gs[r][l] = weigh ? reads.data[9 + r][l] * gl : gl;
-    }
-}
-wt_scatter_levels_any(count, texs, grads, smp, us, vs, levels, fractions, layer, active, gs);
+wt_scatter_lod(texs, grads, smp, count, layers.c, reads, weigh, g);
 """
 
 

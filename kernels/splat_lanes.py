@@ -4,17 +4,17 @@ texel gradient (:mod:`.lanes`).
 The forward lane body computes what :mod:`.splat`'s forward body computes for
 :data:`~.lanes.LANES` pixels: the splat maps read for the whole lane and the pixels' splat weights;
 then layer by layer, in one native call (:func:`layer_values_lane`), the lane's reads of the layer
-(UV, footprint, weight: ``layer_read`` restated, as :func:`layer_reads_lane` gives them) and its
-texels' reads over their footprints (``lanes.wt_accumulate_footprint``), projection by projection in
-the order ``read_layer`` adds them; then the blend. Without height blending the blend is a weighted
-sum in the layers' order, added a layer at a time inside that call (:func:`layer_blend_lane`).
-Where the forward ran on a tape, its lane keeps each pixel's layer colours (``SplatPixels.saved``,
+(UV, footprint, weight: ``layer_read`` restated, ``wt_layer_reads``) and its texels' reads over
+their footprints (``lanes.wt_accumulate_footprint``), projection by projection in the order
+``read_layer`` adds them; then the blend. Without height blending the blend is a weighted sum in
+the layers' order, added a layer at a time inside that call (:func:`layer_blend_lane`). Where the
+forward ran on a tape, its lane keeps each pixel's layer colours (``SplatPixels.saved``,
 ``Kernels.lane_saved``) and the gradient's lane body reads them; else it replays the forward. It
 takes each pixel's blend and weights backwards and adds into its splat maps in pixel order, then
-adds each layer's gradient into its texels by :func:`~.lane_scatter.scatter_lod_lanes`, layer by
-layer: a layer's reads touch texels of its own array layer only, so every texel gets the one-pixel
-body's sums in its order, and the outputs and gradients are the one-pixel kernels' bits. Face
-layers, and for the gradient the cases :func:`grad_lanes_take` names, run the one-pixel kernels
+adds each layer's gradient into its texels by :func:`scatter_layer_lane`, layer by layer: a
+layer's reads touch texels of its own array layer only, so every texel gets the one-pixel body's
+sums in its order, and the outputs and gradients are the one-pixel kernels' bits. Face layers,
+and for the gradient the cases :func:`grad_lanes_take` names, run the one-pixel kernels
 (``Kernels.lanes_take``). In the kernels of up to 8 layers the weights, the blend and the blend
 and weights backwards are native code for the whole lane (:mod:`.splat_blend_lanes`); beyond, the
 scalar blocks run pixel by pixel.
@@ -25,8 +25,8 @@ import functools
 import warp as wp
 
 from . import inlined, specialised
-from .lane_scatter import scatter_lod_lanes
-from .lanes import LANES, accumulate_footprint_lane, cpu_snippet, lane_colours, lane_floats, lane_ints, lane_reads
+from .lane_scatter import _SCATTER_LOD_CORE
+from .lanes import LANES, accumulate_footprint_lane, cpu_snippet, lane_colours, lane_floats, lane_ints
 from .projection import SurfacePixels
 from .projection_lanes import PLANE_CPP
 from .splat_blend import blend_functions
@@ -46,7 +46,10 @@ auto rows_of = [&](const auto& a, const int dims, wt_vf* out) __attribute__((alw
     wt_rows(a, base, count, dims, rows);
     for (int d = 0; d < dims; ++d) __builtin_memcpy(&out[d], rows[d], sizeof(wt_vf));
 };
-// layer_reads_lane's reads of layer j of tex, for the lane pixels with weighted[l] > 0.
+// What each lane pixel l (pixel base + l of the launch) with weighted[l] > 0 reads of layer j of tex
+// (no face layers): splat_layers.layer_read's UV, footprint and weight of each read k at the pixel's
+// point (its UV0 and their derivatives, or its surface; tri_w: its triplanar weights), as a
+// lane_reads matrix (all 0 for the other pixels), 16 pixels at a time.
 auto wt_layer_reads = [&](const float* weighted) __attribute__((always_inline)) -> wp::mat_t<21, WT_L, float> {
     const auto& params = reads.params;
     const float t = *(const float*)((const char*)params.tiling.data + (long long)wp::min(j, params.tiling.shape[0] - 1) * params.tiling.strides[0]);  // layer_tiling
@@ -90,18 +93,7 @@ auto wt_layer_reads = [&](const float* weighted) __attribute__((always_inline)) 
 """
 
 
-@wp.func_native(cpu_snippet(_LAYER_READS + "return wt_layer_reads(weighted.c);\n", "return {};\n"))
-def layer_reads_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
-                     uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3) -> lane_reads:  # fmt: skip
-    """What each lane pixel ``l`` (pixel ``base + l`` of the launch) with ``weighted[l] > 0`` reads of
-    layer ``j`` of ``tex`` (no face layers): ``splat_layers.layer_read``'s UV, footprint and weight of
-    each read ``k`` at the pixel's point (its UV0 and their derivatives, or its surface; ``tri_w``:
-    its triplanar weights), as :data:`~.lanes.lane_reads` (all 0 for the other pixels), 16 pixels at
-    a time."""
-    ...
-
-
-# Layer j's texels read over layer_reads_lane's reads (read_layer: per projection value += w · sample
+# Layer j's texels read over wt_layer_reads's reads (read_layer: per projection value += w · sample
 # where triplanar, value = sample for the one read of the other projections), in one native call.
 _LAYER_VALUES = _LAYER_READS + r"""
 int layer[WT_L];
@@ -124,7 +116,7 @@ def layer_values_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted
                       uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3, keep: wp.int32,
                       saved: wp.array2d(dtype=float)) -> lane_colours:  # fmt: skip
     """Row ``l``: layer ``j`` of ``tex`` read at lane pixel ``l`` over the footprints of
-    :func:`layer_reads_lane`'s reads (the same arguments) as ``read_layer`` reads it (0 where
+    ``wt_layer_reads``' reads as ``read_layer`` reads it (0 where
     ``weighted[l]`` is not positive); one native call rather than a read per projection. Where
     ``keep`` and ``saved`` is not empty, also stored in ``saved``'s row ``base + l``, columns
     ``4 j .. 4 j + 3`` (``SplatPixels.saved``)."""
@@ -171,13 +163,27 @@ def layer_blend_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted:
     ...
 
 
-@inlined
-def scatter_lane_reads(tex: TextureView, grad: TexelGrad, j: wp.int32, reads: LayerReads, at: lane_reads, g: lane_colours):
-    """``scatter_layer`` of the gradients ``g[l]`` of layer ``j``'s reads ``at`` of ``tex`` into
-    ``grad``, pixel by pixel and read by read: ``w · g`` per projection where triplanar
-    (``scatter_projections``), ``g`` itself for the one read of the other projections."""
-    triplanar = wp.where(reads.params.projection == PROJECT_TRIPLANAR, 1, 0)
-    scatter_lod_lanes(tex, tex, tex, grad, grad, grad, reads.smp, 1 + 2 * triplanar, lane_ints(j), at, triplanar, g)
+# scatter_layer for the lane: layer j's reads (wt_layer_reads) and each read's share of the pixel's
+# gradient added into its texels (lane_scatter's wt_scatter_lod), in one native call.
+_LAYER_SCATTER = _LAYER_READS + _SCATTER_LOD_CORE + r"""
+int layer[WT_L];
+for (int l = 0; l < WT_L; ++l) layer[l] = j;
+const decltype(tex)* texs[3] = {&tex, &tex, &tex};
+const decltype(grad)* grads[3] = {&grad, &grad, &grad};
+const int triplanar = reads.params.projection == 2;  // PROJECT_TRIPLANAR: w · g per projection, else g for the one read
+wt_scatter_lod(texs, grads, reads.smp, triplanar ? 3 : 1, layer, wt_layer_reads(weighted.c), triplanar, g);
+"""
+
+
+@wp.func_native(cpu_snippet(_LAYER_SCATTER))
+def scatter_layer_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2),
+                       uv0_dx: wp.array(dtype=wp.vec2), uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32,
+                       tri_w: _lane_vec3, g: lane_colours):  # fmt: skip
+    """``scatter_layer`` of the gradients ``g[l]`` of layer ``j``'s reads of ``tex`` (``wt_layer_reads``,
+    as :func:`layer_values_lane` reads them) into ``grad``, pixel by pixel and read by read:
+    ``w · g`` per projection where triplanar (``scatter_projections``), ``g`` itself for the one
+    read of the other projections (``lane_scatter.scatter_lod_lanes``)."""
+    ...
 
 
 @functools.cache
@@ -345,7 +351,6 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                 for l in range(count):
                     weighted[l] = w1s[l, j]
                     g[l] = gcs[l * cap + j]
-                at = layer_reads_lane(args.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w)
-                scatter_lane_reads(args.layers, grads.layers, j, args.reads, at, g)
+                scatter_layer_lane(args.layers, grads.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, g)
 
     return inlined(specialised(lane, f"splat{cap}_lane"), module=module), inlined(specialised(grad_lane, f"splat{cap}_grad_lane"), module=module)
