@@ -11,9 +11,11 @@ than the arithmetic. Kernels of 16 layers or more run the scalar blocks pixel by
 
 import warp as wp
 
+from .lane_scatter import _SCATTER_CORE
 from .lanes import LANES, cpu_snippet, lane_colours, lane_floats
 from .projection import SurfacePixels
 from .splat_layers import SplatParams
+from .texels import SamplerArgs, TexelGrad, TextureView
 
 # splat_blend.blend for a lane: each covered pixel's weights (row l of w1s), colours (rows l cap + j)
 # and heights (row l), 0 where a layer is not weighted, blended as the scalar block does, in its
@@ -216,4 +218,57 @@ def blend_backward_lane8(params: SplatParams, surface: SurfacePixels, base: wp.i
     gradient, laid out as :data:`lane_grads` says (0 for the other pixels). Where ``saved`` is not
     empty, the colours are its row ``base + l`` (``SplatPixels.saved``) and ``colours`` and
     ``heights`` are not read."""
+    ...
+
+
+# splat_blend.scatter_maps for the lane: each covered pixel's raw values' gradient (rows GRAD_RAW + 2 l
+# and + 1 of blend_backward_lane8's matrix) added into the splat maps at its UV0 (level 0, every map
+# m of the pixel before the next pixel's), three maps at a time: each map is its own array layer, so
+# every texel still gets its adds in pixel order.
+_SCATTER_MAPS = _SCATTER_CORE + r"""
+if (grad_maps.texels.shape[0] > 0) {
+    const int n = params.num_layers, channels = params.map_channels;
+    const int maps_n = (n + channels - 1) / channels;  // map_count
+    float p[2][WT_L];
+    wt_rows(uv0, base, count, 2, p);
+    bool covered[WT_L];
+    for (int l = 0; l < WT_L; ++l) {
+        const bool finite = __builtin_fabsf(p[0][l]) <= wt_float_max && __builtin_fabsf(p[1][l]) <= wt_float_max;
+        covered[l] = l < count && finite && *(const float*)((const char*)surface.mask.data + (long long)(base + l) * surface.mask.strides[0]) != 0.0f;
+    }
+    const decltype(maps)* texs[3] = {&maps, &maps, &maps};
+    const decltype(grad_maps)* grads[3] = {&grad_maps, &grad_maps, &grad_maps};
+    for (int m0 = 0; m0 < maps_n; m0 += 3) {
+        const int reads = maps_n - m0 < 3 ? maps_n - m0 : 3;
+        float us[3][WT_L], vs[3][WT_L], fractions[3][WT_L];
+        int levels[3][WT_L], layer[3][WT_L];
+        bool active[3][WT_L];
+        wt_f4 gs[3][WT_L];
+        for (int r = 0; r < reads; ++r) {
+            for (int l = 0; l < WT_L; ++l) {
+                active[r][l] = covered[l];
+                us[r][l] = covered[l] ? p[0][l] : 0.0f;
+                vs[r][l] = covered[l] ? p[1][l] : 0.0f;
+                wt_mip_levels(maps, map_smp, 0.0f, levels[r][l], fractions[r][l]);
+                layer[r][l] = m0 + r;
+                wt_f4 g = {0.0f, 0.0f, 0.0f, 0.0f};  // map_gradient
+                for (int c = 0; c < 4; ++c) {
+                    const int j = (m0 + r) * channels + c;  // map_layer
+                    if (c < channels && j < n) g[c] = back.data[WT_L * 8 + 2 * l + j / 4][j % 4];
+                }
+                gs[r][l] = g;
+            }
+        }
+        wt_scatter_levels_any(reads, texs, grads, map_smp, us, vs, levels, fractions, layer, active, gs);
+    }
+}
+"""
+
+
+@wp.func_native(cpu_snippet(_SCATTER_MAPS))
+def scatter_maps_lane8(maps: TextureView, grad_maps: TexelGrad, map_smp: SamplerArgs, params: SplatParams, uv0: wp.array(dtype=wp.vec2), surface: SurfacePixels,
+                       base: wp.int32, count: wp.int32, back: lane_grads):  # fmt: skip
+    """``splat_blend.scatter_maps`` for each covered lane pixel ``l`` (pixel ``base + l``) with a
+    finite UV0: its raw splat values' gradient, as :func:`blend_backward_lane8` gives it in ``back``,
+    added into the splat maps' texels (``grad_maps``; nothing when it is empty) in pixel order."""
     ...

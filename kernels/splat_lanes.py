@@ -30,7 +30,7 @@ from .lanes import LANES, accumulate_footprint_lane, cpu_snippet, lane_colours, 
 from .projection import SurfacePixels
 from .projection_lanes import PLANE_CPP
 from .splat_blend import blend_functions
-from .splat_blend_lanes import GRAD_RAW, GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, weights_lane8
+from .splat_blend_lanes import GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, scatter_maps_lane8, weights_lane8
 from .splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerReads, SplatArgs, SplatParams, layer_textures, map_count, pick, surface_weights
 from .texels import FILTER_ANISOTROPIC, TexelGrad, TextureView, read_channels, write_channels
 
@@ -322,15 +322,11 @@ def lane_bodies(cap: int, pixels_t, grads_t):
         if wp.static(cap == 8):  # the blend and weights backwards for the whole lane, then each pixel's splat maps' adds
             back = blend_backward_lane8(params, pixels.surface, base, count, w1s, colours, heights, rs, adj, pixels.saved)
             gcs = back
-            for l in range(count):
-                i = base + l
-                if pixels.surface.mask[i] != 0.0:
-                    if grads.transition.shape[0] > 0 and params.height_mode != HEIGHT_NONE:
+            if grads.transition.shape[0] > 0 and params.height_mode != HEIGHT_NONE:
+                for l in range(count):
+                    if pixels.surface.mask[base + l] != 0.0:
                         wp.atomic_add(grads.transition, 0, back[GRAD_TRANSITION + l // 4, l % 4])
-                    gr = weights_t()
-                    for j in range(8):
-                        gr[j] = back[GRAD_RAW + 2 * l + j // 4, j % 4]
-                    f.scatter_maps(args.maps, grads.maps, pixels.uv0[i], args.map_smp, gr, params)
+            scatter_maps_lane8(args.maps, grads.maps, args.map_smp, params, pixels.uv0, pixels.surface, base, count, back)
         else:
             gcs = lane_layers_t()
             for l in range(count):  # each pixel's blend and weights backwards, and its splat maps' adds, in pixel order

@@ -227,6 +227,9 @@ def _splat_gbuffer(rng, count=1000):
     dx[14], dy[14] = 0.0, 0.0
     for name, value in (("uv", uv), ("uv_dx", dx), ("uv_dy", dy)):
         g.uv_sets["uv0"][name].assign(value.reshape(1, count, 2))
+    mask = g.mask.numpy()
+    mask[0, 11:15] = 1.0  # those UVs and derivatives on covered pixels
+    g.mask.assign(mask)
     return g
 
 
