@@ -4,8 +4,10 @@ The kernels are the same source on both devices; these tests check that they com
 thing there: outputs to float rounding, gradients to the rounding of atomics summed in another
 order. The techniques get one G-buffer, rasterised on the CPU and copied (``GBuffer.to``): the two
 rasterisers agree only to rounding (checked on its own here), and on an H100 that rounding, in a
-normal or a derivative, moved blend weights and mip levels past these tolerances. Skipped, with the reason, on a machine without a CUDA device. ``WARPTEX_TEST_DEVICE=cpu``
-runs them against the CPU itself (a check of the tests, where no GPU is at hand).
+normal or a derivative, moved blend weights and mip levels past these tolerances. Skipped, with
+the reason, on a machine without a CUDA device. ``WARPTEX_TEST_DEVICE=cpu`` runs them against the
+CPU itself (a check of the tests, where no GPU is at hand). They last ran on an H100, all passing,
+on 2026-11-26.
 """
 
 import json
