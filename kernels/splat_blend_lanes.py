@@ -236,6 +236,9 @@ if (grad_maps.texels.shape[0] > 0) {
         const bool finite = __builtin_fabsf(p[0][l]) <= wt_float_max && __builtin_fabsf(p[1][l]) <= wt_float_max;
         covered[l] = l < count && finite && *(const float*)((const char*)surface.mask.data + (long long)(base + l) * surface.mask.strides[0]) != 0.0f;
     }
+    int level;  // scatter_lod at LOD 0: the same level and fraction for every read
+    float fraction;
+    wt_mip_levels(maps, map_smp, 0.0f, level, fraction);
     const decltype(maps)* texs[3] = {&maps, &maps, &maps};
     const decltype(grad_maps)* grads[3] = {&grad_maps, &grad_maps, &grad_maps};
     for (int m0 = 0; m0 < maps_n; m0 += 3) {
@@ -249,7 +252,8 @@ if (grad_maps.texels.shape[0] > 0) {
                 active[r][l] = covered[l];
                 us[r][l] = covered[l] ? p[0][l] : 0.0f;
                 vs[r][l] = covered[l] ? p[1][l] : 0.0f;
-                wt_mip_levels(maps, map_smp, 0.0f, levels[r][l], fractions[r][l]);
+                levels[r][l] = level;
+                fractions[r][l] = fraction;
                 layer[r][l] = m0 + r;
                 wt_f4 g = {0.0f, 0.0f, 0.0f, 0.0f};  // map_gradient
                 for (int c = 0; c < 4; ++c) {
