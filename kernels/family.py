@@ -91,8 +91,9 @@ class Kernels:
             take a launch with the kernels' ``args`` struct (tested where the launch, or the backward
             pass, is recorded), or ``None``: always. The one-pixel kernel takes the rest.
         lane_saved: ``saved(args) -> int``, the floats per pixel that ``lanes`` keeps in
-            ``pixels.saved`` for ``texel_grad_lanes`` to read instead of recomputing them, where the
-            two lane kernels run one launch and its backward pass; or ``None``: nothing is kept.
+            ``pixels.saved`` for ``texel_grad_lanes`` to read instead of recomputing them; where it
+            is set, ``texel_grad_lanes`` runs only after ``lanes`` ran the launch and kept them.
+            ``None``: nothing is kept.
     """
 
     forward: Any

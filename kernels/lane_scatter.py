@@ -163,17 +163,34 @@ auto wt_scatter_lod = [&](const auto* const* texs, const auto* const* grads, con
     int levels[3][WT_L], layer[3][WT_L];
     bool active[3][WT_L];
     wt_f4 gs[3][WT_L];
-    for (int r = 0; r < nreads; ++r) {
-        const bool needed = grads[r]->texels.shape[0] > 0;
+    wt_vi lane_layers;
+    __builtin_memcpy(&lane_layers, layers, sizeof(lane_layers));
+    for (int r = 0; r < nreads; ++r) {  // a lane of reads at a time (vector selects, the same values as the scalar formulas)
+        wt_vf u, v, lod, w;
+        __builtin_memcpy(&u, at.data[r], sizeof(u));
+        __builtin_memcpy(&v, at.data[3 + r], sizeof(v));
+        __builtin_memcpy(&lod, at.data[6 + r], sizeof(lod));
+        __builtin_memcpy(&w, at.data[9 + r], sizeof(w));
+        const wt_vi needed = grads[r]->texels.shape[0] > 0 ? -1 : 0;
+        const wt_vi ok = needed & (w > 0.0f) & (wt_vabs(u) <= wt_float_max) & (wt_vabs(v) <= wt_float_max) & (wt_vabs(lod) <= wt_float_max);
+        const wt_vf zero = 0.0f;
+        const wt_vf ur = wt_sel(ok, u, zero), vr = wt_sel(ok, v, zero);
+        wt_vi level;
+        wt_vf fraction;
+        wt_mip_levels_lane(*texs[r], smp, wt_sel(ok, lod, zero), level, fraction);
+        const int top = texs[r]->num_layers - 1;  // wp::clamp(layer, 0, top)
+        wt_vi lr = lane_layers & ~(lane_layers < 0);
+        const wt_vi over = lr > top;
+        lr = ((lr & ~over) | (top & over)) & ok;
+        __builtin_memcpy(us[r], &ur, sizeof(ur));
+        __builtin_memcpy(vs[r], &vr, sizeof(vr));
+        __builtin_memcpy(levels[r], &level, sizeof(level));
+        __builtin_memcpy(fractions[r], &fraction, sizeof(fraction));
+        __builtin_memcpy(layer[r], &lr, sizeof(lr));
         for (int l = 0; l < WT_L; ++l) {
-            const bool finite = __builtin_fabsf(at.data[r][l]) <= wt_float_max && __builtin_fabsf(at.data[3 + r][l]) <= wt_float_max && __builtin_fabsf(at.data[6 + r][l]) <= wt_float_max;
-            active[r][l] = needed && at.data[9 + r][l] > 0.0f && finite;
-            us[r][l] = active[r][l] ? at.data[r][l] : 0.0f;
-            vs[r][l] = active[r][l] ? at.data[3 + r][l] : 0.0f;
-            wt_mip_levels(*texs[r], smp, active[r][l] ? at.data[6 + r][l] : 0.0f, levels[r][l], fractions[r][l]);
-            layer[r][l] = active[r][l] ? wp::clamp(layers[l], 0, texs[r]->num_layers - 1) : 0;
+            active[r][l] = ok[l] != 0;
             const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
-            gs[r][l] = weigh ? at.data[9 + r][l] * gl : gl;
+            gs[r][l] = weigh ? w[l] * gl : gl;
         }
     }
     wt_scatter_levels_any(nreads, texs, grads, smp, us, vs, levels, fractions, layer, active, gs);

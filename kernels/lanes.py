@@ -80,6 +80,18 @@ auto wt_vmax = [&](wt_vf a, wt_vf b) __attribute__((always_inline)) -> wt_vf { r
 auto wt_vmin = [&](wt_vf a, wt_vf b) __attribute__((always_inline)) -> wt_vf { return wt_sel(a <= b, a, wt_sel(b == b, b, a)); };
 auto wt_vabs = [](wt_vf a) __attribute__((always_inline)) -> wt_vf { return (wt_vf)((wt_vi)a & 0x7fffffff); };
 auto wt_finite = [](wt_vf a) __attribute__((always_inline)) -> wt_vi { return a - a == 0.0f; };
+auto wt_mip_levels_lane = [&](const auto& tex, const auto& smp, wt_vf lod, wt_vi& level, wt_vf& fraction) __attribute__((always_inline)) {  // wt_mip_levels, lane by lane
+    const wt_vf clamped = wt_vmin(wt_vmax((wt_vf)smp.min_lod, lod + smp.lod_bias), (wt_vf)smp.max_lod);  // wp::clamp(x, a, b) = fmin(fmax(a, x), b)
+    const wt_vf c = wt_vmin(wt_vmax((wt_vf)0.0f, clamped), (wt_vf)(float)(tex.num_levels - 1));
+    // c >= 0 (fmax(0, NaN) is 0), so truncation is wp::floor
+    if (smp.filter >= WT_TRILINEAR) {
+        level = __builtin_convertvector(c, wt_vi);
+        fraction = c - __builtin_convertvector(level, wt_vf);
+    } else {
+        level = __builtin_convertvector(c + 0.5f, wt_vi);
+        fraction = 0.0f;
+    }
+};
 auto wt_int = [](const wp::array_t<int>& a, int k) __attribute__((always_inline)) -> int {
     return *(const int*)((const char*)a.data + (long long)k * a.strides[0]);
 };

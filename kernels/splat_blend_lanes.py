@@ -123,18 +123,13 @@ for (int l = 0; l < count; ++l) {
     for (int c = 0; c < adj.shape[1] && c < 4; ++c) g.c[c] = *(const float*)(row + (long long)c * adj.strides[1]);
     wt_v8 w1(0.0f), hv(0.0f);  // pixel_layers: colours and heights where weighted
     wt_v4 c[8];
-    const char* kept = saved.shape[0] > 0 ? (const char*)saved.data + (long long)i * saved.strides[0] : nullptr;
+    const char* kept = (const char*)saved.data + (long long)i * saved.strides[0];
     for (int j = 0; j < 8; ++j) {
         w1.c[j] = w1s.data[l][j];
         c[j] = wt_v4(0.0f);
-        if (j < n && w1.c[j] > 0.0f) {
-            if (kept) {  // the colours the forward lane kept; heights from a channel of them (the lanes take no height layers)
-                for (int k = 0; k < 4; ++k) c[j].c[k] = *(const float*)(kept + (long long)(4 * j + k) * saved.strides[1]);
-                hv.c[j] = params.height_mode == 1 ? c[j].c[params.height_channel] : 0.0f;  // HEIGHT_CHANNEL
-            } else {
-                hv.c[j] = heights.data[l][j];
-                for (int k = 0; k < 4; ++k) c[j].c[k] = colours.data[l * 8 + j][k];
-            }
+        if (j < n && w1.c[j] > 0.0f) {  // the colours the forward lane kept; heights from a channel of them (the lanes take no height layers)
+            for (int k = 0; k < 4; ++k) c[j].c[k] = *(const float*)(kept + (long long)(4 * j + k) * saved.strides[1]);
+            hv.c[j] = params.height_mode == 1 ? c[j].c[params.height_channel] : 0.0f;  // HEIGHT_CHANNEL
         }
     }
     wt_v8 gw1(0.0f);  // blend_backward
@@ -196,7 +191,6 @@ for (int l = 0; l < count; ++l) {
     }
     out.data[WT_L * 10 + l / 4][l % 4] = g_t;
 }
-return out;
 """
 
 #: What :func:`blend_backward_lane8` gives: rows ``8 l + j``, the gradient of layer ``j``'s colour at
@@ -207,25 +201,12 @@ GRAD_RAW = wp.constant(LANES * 8)
 GRAD_TRANSITION = wp.constant(LANES * 10)
 
 
-@wp.func_native(cpu_snippet(_BLEND_BACKWARD, "return {};\n"))
-def blend_backward_lane8(params: SplatParams, surface: SurfacePixels, base: wp.int32, count: wp.int32, w1s: wp.types.matrix(shape=(LANES, 8), dtype=float),
-                         colours: wp.types.matrix(shape=(LANES * 8, 4), dtype=float), heights: wp.types.matrix(shape=(LANES, 8), dtype=float),
-                         rs: wp.types.matrix(shape=(LANES, 8), dtype=float), adj: wp.array2d(dtype=float), saved: wp.array2d(dtype=float)) -> lane_grads:  # fmt: skip
-    """For each covered lane pixel ``l`` (pixel ``base + l``), with its weights, colours, heights and
-    raw splat values as :func:`blend_lane8` and ``weights_lane8`` take them and its output gradient
-    ``adj[base + l]``: ``splat_blend.blend_backward``'s colours' and transition's gradients (the
-    heights' added into the colours' height channel) and ``weights_backward``'s raw values'
-    gradient, laid out as :data:`lane_grads` says (0 for the other pixels). Where ``saved`` is not
-    empty, the colours are its row ``base + l`` (``SplatPixels.saved``) and ``colours`` and
-    ``heights`` are not read."""
-    ...
-
-
 # splat_blend.scatter_maps for the lane: each covered pixel's raw values' gradient (rows GRAD_RAW + 2 l
-# and + 1 of blend_backward_lane8's matrix) added into the splat maps at its UV0 (level 0, every map
-# m of the pixel before the next pixel's), three maps at a time: each map is its own array layer, so
-# every texel still gets its adds in pixel order.
-_SCATTER_MAPS = _SCATTER_CORE + r"""
+# and + 1 of _BLEND_BACKWARD's `out`) added into the splat maps at its UV0 (level 0, every map m of
+# the pixel before the next pixel's), three maps at a time: each map is its own array layer, so every
+# texel still gets its adds in pixel order.
+_SCATTER_MAPS = r"""
+const auto& back = out;
 if (grad_maps.texels.shape[0] > 0) {
     const int n = params.num_layers, channels = params.map_channels;
     const int maps_n = (n + channels - 1) / channels;  // map_count
@@ -269,10 +250,17 @@ if (grad_maps.texels.shape[0] > 0) {
 """
 
 
-@wp.func_native(cpu_snippet(_SCATTER_MAPS))
-def scatter_maps_lane8(maps: TextureView, grad_maps: TexelGrad, map_smp: SamplerArgs, params: SplatParams, uv0: wp.array(dtype=wp.vec2), surface: SurfacePixels,
-                       base: wp.int32, count: wp.int32, back: lane_grads):  # fmt: skip
-    """``splat_blend.scatter_maps`` for each covered lane pixel ``l`` (pixel ``base + l``) with a
-    finite UV0: its raw splat values' gradient, as :func:`blend_backward_lane8` gives it in ``back``,
-    added into the splat maps' texels (``grad_maps``; nothing when it is empty) in pixel order."""
+@wp.func_native(cpu_snippet(_SCATTER_CORE + _BLEND_BACKWARD + _SCATTER_MAPS + "return out;\n", "return {};\n"))
+def blend_backward_lane8(params: SplatParams, surface: SurfacePixels, base: wp.int32, count: wp.int32, w1s: wp.types.matrix(shape=(LANES, 8), dtype=float),
+                         rs: wp.types.matrix(shape=(LANES, 8), dtype=float), adj: wp.array2d(dtype=float), saved: wp.array2d(dtype=float), maps: TextureView,
+                         grad_maps: TexelGrad, map_smp: SamplerArgs, uv0: wp.array(dtype=wp.vec2)) -> lane_grads:  # fmt: skip
+    """For each covered lane pixel ``l`` (pixel ``base + l``), with its weights and raw splat values
+    as :func:`blend_lane8` and ``weights_lane8`` take them, the colours its forward lane kept (row
+    ``base + l`` of ``saved``, ``SplatPixels.saved``; heights from their height channel) and its
+    output gradient ``adj[base + l]``: ``splat_blend.blend_backward``'s colours' and transition's
+    gradients (the heights' added into the colours' height channel) and ``weights_backward``'s raw
+    values' gradient, laid out as :data:`lane_grads` says (0 for the other pixels). The raw values'
+    gradient is also added into the splat maps' texels (``grad_maps``; nothing when it is empty) at
+    the pixel's UV0 where it is finite, in pixel order (``splat_blend.scatter_maps``), in the same
+    call, so that the lane's gradients are not copied into another."""
     ...

@@ -9,8 +9,8 @@ their footprints (``lanes.wt_accumulate_footprint``), projection by projection i
 ``read_layer`` adds them; then the blend. Without height blending the blend is a weighted sum in
 the layers' order, added a layer at a time inside that call (:func:`layer_blend_lane`). Where the
 forward ran on a tape, its lane keeps each pixel's layer colours (``SplatPixels.saved``,
-``Kernels.lane_saved``) and the gradient's lane body reads them; else it replays the forward. It
-takes each pixel's blend and weights backwards and adds into its splat maps in pixel order, then
+``Kernels.lane_saved``), and the gradient's lane body, which runs only after such a forward, reads
+them. It takes each pixel's blend and weights backwards and adds into its splat maps in pixel order, then
 adds each layer's gradient into its texels by :func:`scatter_layer_lane`, layer by layer: a
 layer's reads touch texels of its own array layer only, so every texel gets the one-pixel body's
 sums in its order, and the outputs and gradients are the one-pixel kernels' bits. Face layers,
@@ -30,7 +30,7 @@ from .lanes import LANES, accumulate_footprint_lane, cpu_snippet, lane_colours, 
 from .projection import SurfacePixels
 from .projection_lanes import PLANE_CPP
 from .splat_blend import blend_functions
-from .splat_blend_lanes import GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, scatter_maps_lane8, weights_lane8
+from .splat_blend_lanes import GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, weights_lane8
 from .splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerReads, SplatArgs, SplatParams, layer_textures, map_count, pick, surface_weights
 from .texels import FILTER_ANISOTROPIC, TexelGrad, TextureView, read_channels, write_channels
 
@@ -284,7 +284,7 @@ def lane_bodies(cap: int, pixels_t, grads_t):
             blended = lane_colours()
             for j in range(params.num_layers):
                 weighted = lane_floats()
-                for l in range(count):
+                for l in range(LANES):  # unrolled (w1s is 0 past count)
                     weighted[l] = w1s[l, j]
                 blended = layer_blend_lane(args.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, 1, pixels.saved, blended)
             for l in range(count):
@@ -304,49 +304,45 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                 write_channels(out, base + l, colour)
 
     def grad_lane(args: SplatArgs, pixels: pixels_t, base: wp.int32, grads: grads_t, adj: wp.array2d(dtype=float)):
-        """Launched only where :func:`grad_lanes_take` holds (the one-pixel kernel runs the rest)."""
+        """Launched only where :func:`grad_lanes_take` holds (the one-pixel kernel runs the rest), after
+        a forward lane that kept each pixel's layer colours in ``pixels.saved`` (``_op`` sees to both)."""
         count = wp.min(adj.shape[0] - base, LANES)
         params = args.reads.params
         rs, w1s, tri_w = lane_weights(args, pixels, base, count)
-        colours = lane_layers_t()
-        heights = lane_weights_t()
-        if pixels.saved.shape[0] > 0:  # the colours the forward lane kept (zero where a layer has no weight, as read_layers leaves them)
-            if wp.static(cap != 8):  # (blend_backward_lane8 reads them itself)
-                for l in range(count):
-                    for j in range(params.num_layers):
-                        colours[l * cap + j] = wp.vec4(pixels.saved[base + l, 4 * j], pixels.saved[base + l, 4 * j + 1], pixels.saved[base + l, 4 * j + 2], pixels.saved[base + l, 4 * j + 3])
-                        if params.height_mode == HEIGHT_CHANNEL:
-                            heights[l, j] = colours[l * cap + j][params.height_channel]
-        else:
-            colours, heights = lane_layers(args, pixels, base, count, w1s, tri_w)
-        if wp.static(cap == 8):  # the blend and weights backwards for the whole lane, then each pixel's splat maps' adds
-            back = blend_backward_lane8(params, pixels.surface, base, count, w1s, colours, heights, rs, adj, pixels.saved)
-            gcs = back
+        if wp.static(cap == 8):  # the blend and weights backwards for the whole lane, and each pixel's splat maps' adds
+            back = blend_backward_lane8(params, pixels.surface, base, count, w1s, rs, adj, pixels.saved, args.maps, grads.maps, args.map_smp, pixels.uv0)
             if grads.transition.shape[0] > 0 and params.height_mode != HEIGHT_NONE:
                 for l in range(count):
                     if pixels.surface.mask[base + l] != 0.0:
                         wp.atomic_add(grads.transition, 0, back[GRAD_TRANSITION + l // 4, l % 4])
-            scatter_maps_lane8(args.maps, grads.maps, args.map_smp, params, pixels.uv0, pixels.surface, base, count, back)
         else:
-            gcs = lane_layers_t()
+            back = lane_layers_t()  # rows l * cap + j: the gradient of layer j's colour at pixel l
             for l in range(count):  # each pixel's blend and weights backwards, and its splat maps' adds, in pixel order
                 i = base + l
                 if pixels.surface.mask[i] != 0.0:
-                    w1, c, hv = pixel_layers(w1s, colours, heights, l, params)
+                    w1 = weights_t()  # pixel_layers, from the kept colours (zero where a layer has no weight, as read_layers leaves them)
+                    c = colours_t()
+                    hv = weights_t()
+                    for j in range(params.num_layers):
+                        w1[j] = w1s[l, j]
+                        if w1[j] > 0.0:
+                            c[j] = wp.vec4(pixels.saved[i, 4 * j], pixels.saved[i, 4 * j + 1], pixels.saved[i, 4 * j + 2], pixels.saved[i, 4 * j + 3])
+                            if params.height_mode == HEIGHT_CHANNEL:
+                                hv[j] = c[j][params.height_channel]
                     gw1, gc, ghv, g_t = f.blend_backward(w1, c, hv, params, read_channels(adj, i))
                     if grads.transition.shape[0] > 0 and params.height_mode != HEIGHT_NONE:
                         wp.atomic_add(grads.transition, 0, g_t)
                     r, w0, total, w1_ = f.weights_of(rs[l], params)
                     f.scatter_maps(args.maps, grads.maps, pixels.uv0[i], args.map_smp, f.weights_backward(r, w0, total, gw1, params), params)
                     for j in range(params.num_layers):
-                        gcs[l * cap + j] = gc[j]
+                        back[l * cap + j] = gc[j]
         if grads.layers.texels.shape[0] > 0:
             for j in range(params.num_layers):  # each layer's adds: without face layers, layers add into texels of their own
                 weighted = lane_floats()
                 g = lane_colours()
-                for l in range(count):
+                for l in range(LANES):  # unrolled (w1s and back are 0 past count)
                     weighted[l] = w1s[l, j]
-                    g[l] = gcs[l * cap + j]
+                    g[l] = back[l * cap + j]
                 scatter_layer_lane(args.layers, grads.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, g)
 
     return inlined(specialised(lane, f"splat{cap}_lane"), module=module), inlined(specialised(grad_lane, f"splat{cap}_grad_lane"), module=module)

@@ -142,8 +142,11 @@ def _run_path(kernels: Kernels, path: str, count: int, inputs: dict, result, dev
         _run_staged(kernels.staged, count, inputs, result, device, cut)
     elif path == "texel_grad":
         lanes, grad_lanes = _lanes(kernels, inputs["args"]), _lanes(kernels, inputs["args"], grad=True)
-        if kernels.lane_saved is not None and lanes is not None and grad_lanes is not None and wp.get_device(device).is_cpu:  # what the forward lanes keep for the backward's
-            inputs["pixels"].saved = _kept((count, kernels.lane_saved(inputs["args"])), device, owner=inputs["pixels"])
+        if kernels.lane_saved is not None and grad_lanes is not None:  # a gradient lane that reads what the forward lane keeps
+            if lanes is None or not wp.get_device(device).is_cpu:
+                grad_lanes = None  # (none kept: the one-pixel gradient)
+            else:
+                inputs["pixels"].saved = _kept((count, kernels.lane_saved(inputs["args"])), device, owner=inputs["pixels"])
         launch(kernels.forward, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, lanes=lanes, **cut,
                backward=_texel_gradient(kernels, count, inputs, result, device, cut, touched, grad_lanes))  # fmt: skip
     elif kernels.adjoint is not None:
