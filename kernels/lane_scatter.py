@@ -60,26 +60,32 @@ auto wt_scatter_levels = [&](const int address, const int reads, const auto* con
         const wt_lane_taps& t = taps[r][pass];
         return {t.start[l], t.w[l], t.i0[l], t.i1[l], t.j0[l], t.j1[l], t.fx[l], t.fy[l]};
     };
-    auto add = [&](const auto& gr, const wt_taps& t, int x, int y, const wt_f4 value) __attribute__((always_inline)) {  // scatter.scatter_texel
-        if (x >= 0 && y >= 0) {
-            float* p = (float*)((char*)gr.texels.data + (long long)(t.start + y * t.w + x) * gr.texels.strides[0]);
+    // Each read's gradient array as a pointer and strides, taken once: the adds' stores could alias
+    // the array structs, which the compiler would then read again after every add.
+    struct wt_target { char* texels; long long stride; char* tiles; long long tile_stride; bool marks; };
+    wt_target targets[3];
+    for (int r = 0; r < reads; ++r)
+        targets[r] = {(char*)grad[r]->texels.data, (long long)grad[r]->texels.strides[0], (char*)grad[r]->tiles.data, (long long)grad[r]->tiles.strides[0], grad[r]->tiles.shape[0] > 0};
+    auto add = [&](const wt_target& gr, const wt_taps& t, int x, int y, const wt_f4 value) __attribute__((always_inline)) {  // scatter.scatter_texel
+        if (address != WT_BORDER || (x >= 0 && y >= 0)) {  // only the border mode has taps outside
+            float* p = (float*)(gr.texels + (long long)(t.start + y * t.w + x) * gr.stride);
             for (int c = 0; c < 4; ++c) p[c] = p[c] + value[c];
         }
     };
-    auto mark = [&](const auto& gr, const wt_taps& t, int j) __attribute__((always_inline)) {  // scatter.mark_rows
+    auto mark = [&](const wt_target& gr, const wt_taps& t, int j) __attribute__((always_inline)) {  // scatter.mark_rows
         const int row = t.start + j * t.w;
-        int* tile = (int*)((char*)gr.tiles.data + (long long)(row >> WT_TILE_SHIFT) * gr.tiles.strides[0]);
+        int* tile = (int*)(gr.tiles + (long long)(row >> WT_TILE_SHIFT) * gr.tile_stride);
         const int reach = (((row & ((1 << WT_TILE_SHIFT) - 1)) + 2 * t.w - 1) >> WT_TILE_SHIFT) + 1;
         if (*tile < reach) *tile = reach;
     };
-    auto bilinear = [&](const auto& gr, const wt_taps& t, const wt_f4 value) __attribute__((always_inline)) {  // scatter.scatter_bilinear
+    auto bilinear = [&](const wt_target& gr, const wt_taps& t, const wt_f4 value) __attribute__((always_inline)) {  // scatter.scatter_bilinear
         const wt_f4 top = value * (1.0f - t.fy);
         const wt_f4 bottom = value * t.fy;
         add(gr, t, t.i0, t.j0, top * (1.0f - t.fx));
         add(gr, t, t.i1, t.j0, top * t.fx);
         add(gr, t, t.i0, t.j1, bottom * (1.0f - t.fx));
         add(gr, t, t.i1, t.j1, bottom * t.fx);
-        if (gr.tiles.shape[0] > 0) {
+        if (gr.marks) {
             if (t.j0 >= 0) mark(gr, t, t.j0);
             if (t.j1 >= 0 && (t.j0 < 0 || t.j1 < t.j0 || t.j1 > t.j0 + 1)) mark(gr, t, t.j1);
         }
@@ -87,11 +93,11 @@ auto wt_scatter_levels = [&](const int address, const int reads, const auto* con
     for (int l = 0; l < WT_L; ++l) {
         for (int r = 0; r < reads; ++r) {
             if (!active[r][l]) continue;
-            const auto& gr = *grad[r];
+            const wt_target& gr = targets[r];
             if (smp.filter == WT_NEAREST) {
                 const wt_taps t = tap(r, 0, l);
                 add(gr, t, t.i0, t.j0, g[r][l]);
-                if (gr.tiles.shape[0] > 0 && t.j0 >= 0) mark(gr, t, t.j0);
+                if (gr.marks && t.j0 >= 0) mark(gr, t, t.j0);
             } else {  // scatter.scatter_levels: the coarser level first
                 wt_f4 finer = g[r][l];
                 if (fraction[r][l] > 0.0f) {
