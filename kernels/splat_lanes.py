@@ -10,8 +10,8 @@ their footprints (``lanes.wt_accumulate_footprint``), projection by projection i
 the layers' order, added a layer at a time inside that call (:func:`layer_blend_lane`). Where the
 forward ran on a tape, its lane keeps each pixel's layer colours (``SplatPixels.saved``,
 ``Kernels.lane_saved``), and the gradient's lane body, which runs only after such a forward, reads
-them. It takes each pixel's blend and weights backwards and adds into its splat maps in pixel order, then
-adds each layer's gradient into its texels by :func:`scatter_layer_lane`, layer by layer: a
+them. It takes each pixel's blend and weights backwards and adds into its splat maps in pixel
+order, then adds each layer's gradient into its texels by :func:`scatter_layer_lane`, layer by layer: a
 layer's reads touch texels of its own array layer only, so every texel gets the one-pixel body's
 sums in its order, and the outputs and gradients are the one-pixel kernels' bits. Face layers,
 and for the gradient the cases :func:`grad_lanes_take` names, run the one-pixel kernels
