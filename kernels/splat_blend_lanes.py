@@ -107,14 +107,16 @@ def blend_lane8(params: SplatParams, surface: SurfacePixels, base: wp.int32, cou
 
 
 # splat_blend.blend_backward (colours' gradients, weights' gradient, transition's) then weights_of and
-# weights_backward (the raw splat values' gradient) of each covered pixel, as lane_grads holds them.
+# weights_backward (the raw splat values' gradient, in `raw`) of each covered pixel, the colours' and
+# the transition's as lane_grads holds them.
 _BLEND_BACKWARD = r"""
 typedef wp::vec_t<8, float> wt_v8;
 typedef wp::vec_t<4, float> wt_v4;
 const int n = params.num_layers;
 const float eps = 1.0e-20f;  // SPLAT_EPS
 const float t = params.height_mode != 0 ? *(const float*)params.transition.data : 0.0f;
-wp::mat_t<WT_L * 10 + WT_L / 4, 4, float> out;
+wp::mat_t<WT_L * 8 + WT_L / 4, 4, float> out;
+float raw[WT_L][8] = {};  // each pixel's raw splat values' gradient, for _SCATTER_MAPS
 for (int l = 0; l < count; ++l) {
     const int i = base + l;
     if (*(const float*)((const char*)surface.mask.data + (long long)i * surface.mask.strides[0]) == 0.0f) continue;
@@ -187,26 +189,23 @@ for (int l = 0; l < count; ++l) {
     }
     for (int j = 0; j < 8; ++j) {
         for (int k = 0; k < 4; ++k) out.data[l * 8 + j][k] = gc[j].c[k];
-        out.data[WT_L * 8 + 2 * l + j / 4][j % 4] = j < n && r.c[j] > 0.0f ? gw0.c[j] : 0.0f;
+        raw[l][j] = j < n && r.c[j] > 0.0f ? gw0.c[j] : 0.0f;
     }
-    out.data[WT_L * 10 + l / 4][l % 4] = g_t;
+    out.data[WT_L * 8 + l / 4][l % 4] = g_t;
 }
 """
 
 #: What :func:`blend_backward_lane8` gives: rows ``8 l + j``, the gradient of layer ``j``'s colour at
-#: lane pixel ``l``; rows ``GRAD_RAW + 2 l`` and ``+ 1``, its raw splat values' gradient (entries 0-3,
-#: 4-7); entry ``l % 4`` of row ``GRAD_TRANSITION + l // 4``, its transition's.
-lane_grads = wp.types.matrix(shape=(LANES * 10 + LANES // 4, 4), dtype=float)
-GRAD_RAW = wp.constant(LANES * 8)
-GRAD_TRANSITION = wp.constant(LANES * 10)
+#: lane pixel ``l``; entry ``l % 4`` of row ``GRAD_TRANSITION + l // 4``, its transition's.
+lane_grads = wp.types.matrix(shape=(LANES * 8 + LANES // 4, 4), dtype=float)
+GRAD_TRANSITION = wp.constant(LANES * 8)
 
 
-# splat_blend.scatter_maps for the lane: each covered pixel's raw values' gradient (rows GRAD_RAW + 2 l
-# and + 1 of _BLEND_BACKWARD's `out`) added into the splat maps at its UV0 (level 0, every map m of
-# the pixel before the next pixel's), three maps at a time: each map is its own array layer, so every
-# texel still gets its adds in pixel order.
+# splat_blend.scatter_maps for the lane: each covered pixel's raw values' gradient (row l of
+# _BLEND_BACKWARD's `raw`) added into the splat maps at its UV0 (level 0, every map m of the pixel
+# before the next pixel's), three maps at a time: each map is its own array layer, so every texel
+# still gets its adds in pixel order.
 _SCATTER_MAPS = r"""
-const auto& back = out;
 if (grad_maps.texels.shape[0] > 0) {
     const int n = params.num_layers, channels = params.map_channels;
     const int maps_n = (n + channels - 1) / channels;  // map_count
@@ -239,7 +238,7 @@ if (grad_maps.texels.shape[0] > 0) {
                 wt_f4 g = {0.0f, 0.0f, 0.0f, 0.0f};  // map_gradient
                 for (int c = 0; c < 4; ++c) {
                     const int j = (m0 + r) * channels + c;  // map_layer
-                    if (c < channels && j < n) g[c] = back.data[WT_L * 8 + 2 * l + j / 4][j % 4];
+                    if (c < channels && j < n) g[c] = raw[l][j];
                 }
                 gs[r][l] = g;
             }
@@ -259,8 +258,8 @@ def blend_backward_lane8(params: SplatParams, surface: SurfacePixels, base: wp.i
     ``base + l`` of ``saved``, ``SplatPixels.saved``; heights from their height channel) and its
     output gradient ``adj[base + l]``: ``splat_blend.blend_backward``'s colours' and transition's
     gradients (the heights' added into the colours' height channel) and ``weights_backward``'s raw
-    values' gradient, laid out as :data:`lane_grads` says (0 for the other pixels). The raw values'
-    gradient is also added into the splat maps' texels (``grad_maps``; nothing when it is empty) at
-    the pixel's UV0 where it is finite, in pixel order (``splat_blend.scatter_maps``), in the same
-    call, so that the lane's gradients are not copied into another."""
+    values' gradient; the colours' and transition's laid out as :data:`lane_grads` says (0 for the
+    other pixels), the raw values' added into the splat maps' texels (``grad_maps``; nothing when it
+    is empty) at the pixel's UV0 where it is finite, in pixel order (``splat_blend.scatter_maps``),
+    in the same call, so that they never leave it."""
     ...
