@@ -14,19 +14,23 @@ A factory returns :class:`Kernels`; ``warptex._op.run`` launches them and picks 
 **Pixel kernels.** Every per-pixel kernel has one of two signatures, made by :func:`pixel_kernels`
 from ``@wp.func`` bodies, so that a technique writes what one pixel does and nothing else:
 
-- ``forward(args, pixels, out)`` runs ``body(args, pixels, i, out)`` for pixel ``i = wp.tid()``.
+- ``forward(args, pixels, first, out)`` runs ``body(args, pixels, i, out)`` for pixel ``i = first +
+  wp.tid()``: a launch computes the pixels from ``first`` on.
   ``args`` is a struct of what every pixel reads (textures, options); ``pixels`` a struct of
   per-pixel arrays (first axis: one entry per pixel); ``out`` the output, a per-pixel array or a
   struct of them. Compiled without Warp's generated adjoint, and once more with it (the
   ``adjoint`` kernel, in a generated-adjoint module, on the out-of-line blocks of ``adjoint_body``);
-- ``texel_grad(args, pixels, grads, adj)`` runs ``scatter(args, pixels, i, grads, adj)``: the
+- ``texel_grad(args, pixels, first, grads, adj)`` runs ``scatter(args, pixels, i, grads, adj)``: the
   hand-written gradient, which adds the output gradients ``adj`` (typed as ``out``) into
   ``grads``, a struct of gradient targets: one field per input it differentiates, in the order of
   :attr:`Kernels.grads`, a :class:`~warptex.kernels.texels.TexelGrad` for a texture's texels or an
   array for anything else (empty: not needed, nothing is added).
 
-``warptex._launch`` cuts a launch into chunks along the pixels: it slices every array of ``pixels``,
-``out`` and ``adj``, and the ``grads`` fields of per-pixel inputs (paths ``pixels.*``).
+``warptex._launch`` cuts a launch into chunks along the pixels: each chunk is a launch of the same
+arguments over its pixels, from its ``first`` (a multiple of :data:`~.lanes.LANES`, so that a lane
+kernel's lanes never straddle two chunks). The arguments are not sliced per chunk: the Python
+that made sliced arrays and structs cost a bilinear lookup of the benchmark sphere 5% on 2 threads,
+forward and forward+backward alike (interleaved runs).
 """
 
 
@@ -75,8 +79,8 @@ class Kernels:
     """One configuration of a kernel family (module docstring).
 
     Attributes:
-        forward: ``forward(args, pixels, out)``, without Warp's generated adjoint.
-        texel_grad: ``texel_grad(args, pixels, grads, adj)``, the hand-written gradient, or ``None``.
+        forward: ``forward(args, pixels, first, out)``, without Warp's generated adjoint.
+        texel_grad: ``texel_grad(args, pixels, first, grads, adj)``, the hand-written gradient, or ``None``.
         adjoint: ``forward`` with Warp's generated adjoint, or ``None``.
         grads: for each field of ``texel_grad``'s ``grads`` struct, the input it differentiates: a
             dotted path into the kernel's arguments (``"args.layers"``: a ``TextureView``'s texels;
@@ -181,11 +185,11 @@ def pixel_kernels(name: str, *, module: str, args, pixels, out, body, scatter=No
 
 
 def forward_kernel(body, args_t, pixels_t, out_t, *, module: str, name: str, enable_backward: bool):
-    """The ``forward(args, pixels, out)`` kernel of ``body`` alone (see :func:`pixel_kernels`)."""
+    """The ``forward(args, pixels, first, out)`` kernel of ``body`` alone (see :func:`pixel_kernels`)."""
 
     @wp.kernel(enable_backward=enable_backward, module=module, name=name)
-    def forward(args: args_t, pixels: pixels_t, out: out_t):
-        body(args, pixels, wp.tid(), out)
+    def forward(args: args_t, pixels: pixels_t, first: wp.int32, out: out_t):
+        body(args, pixels, first + wp.tid(), out)
 
     return forward
 
@@ -193,10 +197,11 @@ def forward_kernel(body, args_t, pixels_t, out_t, *, module: str, name: str, ena
 def lane_kernel(lane_body, args_t, pixels_t, out_t, *, module: str, name: str, grads_t=None):
     """A CPU pixel kernel of ``lane_body``, which computes what a pixel body computes for pixels
     ``base .. base + LANES - 1`` (:mod:`.lanes`; fewer in the last lane: the pixel count is the first
-    axis of the per-pixel arrays): ``forward(args, pixels, out)`` running ``lane_body(args, pixels,
-    base, out)``, or, with ``grads_t``, ``texel_grad(args, pixels, grads, adj)`` running
-    ``lane_body(args, pixels, base, grads, adj)``. Launched over ``ceil(count / LANES)`` indices
-    (``warptex._launch``); never on CUDA, which runs the one-pixel kernels. A forward lane body
+    axis of the per-pixel arrays): ``forward(args, pixels, first, out)`` running ``lane_body(args,
+    pixels, base, out)`` for ``base = first + LANES · wp.tid()``, or, with ``grads_t``,
+    ``texel_grad(args, pixels, first, grads, adj)`` running ``lane_body(args, pixels, base, grads,
+    adj)``. Launched over ``ceil(pixels / LANES)`` indices from a ``first`` that is a multiple of
+    ``LANES`` (``warptex._launch``); never on CUDA, which runs the one-pixel kernels. A forward lane body
     writes every entry of ``out`` (every channel of each of its rows, uncovered pixels included):
     ``warptex._launch`` does not zero a lane kernel's output first. It goes into the CPU-only
     Warp module ``module + LANES_SUFFIX``, so that a CPU job compiles no one-pixel kernel it does not
@@ -205,14 +210,14 @@ def lane_kernel(lane_body, args_t, pixels_t, out_t, *, module: str, name: str, g
     if grads_t is None:
 
         @wp.kernel(enable_backward=False, module=module, name=name)
-        def lanes(args: args_t, pixels: pixels_t, out: out_t):
-            lane_body(args, pixels, wp.tid() * LANES, out)
+        def lanes(args: args_t, pixels: pixels_t, first: wp.int32, out: out_t):
+            lane_body(args, pixels, first + wp.tid() * LANES, out)
 
         return lanes
 
     @wp.kernel(enable_backward=False, module=module, name=name)
-    def grad_lanes(args: args_t, pixels: pixels_t, grads: grads_t, adj: out_t):
-        lane_body(args, pixels, wp.tid() * LANES, grads, adj)
+    def grad_lanes(args: args_t, pixels: pixels_t, first: wp.int32, grads: grads_t, adj: out_t):
+        lane_body(args, pixels, first + wp.tid() * LANES, grads, adj)
 
     return grad_lanes
 
@@ -224,7 +229,7 @@ def cpu_only(kernel) -> bool:
 
 def _texel_grad(scatter, args_t, pixels_t, grads_t, adj_t, *, module: str, name: str):
     @wp.kernel(enable_backward=False, module=module, name=name)
-    def texel_grad(args: args_t, pixels: pixels_t, grads: grads_t, adj: adj_t):
-        scatter(args, pixels, wp.tid(), grads, adj)
+    def texel_grad(args: args_t, pixels: pixels_t, first: wp.int32, grads: grads_t, adj: adj_t):
+        scatter(args, pixels, first + wp.tid(), grads, adj)
 
     return texel_grad

@@ -104,8 +104,8 @@ def _values(x: wp.array):
 
 
 @wp.kernel
-def _add_one(args: _Nothing, pixels: _Values, y: wp.array2d(dtype=float)):
-    i = wp.tid()
+def _add_one(args: _Nothing, pixels: _Values, first: wp.int32, y: wp.array2d(dtype=float)):
+    i = first + wp.tid()
     y[i, 0] = pixels.x[i] + 1.0
 
 
@@ -236,8 +236,8 @@ def test_private_accumulators_are_kept_with_their_gradient(threads, chunks):
 
 
 @wp.kernel
-def _first_column_only(args: _Nothing, pixels: _Values, out: wp.array2d(dtype=float)):
-    out[wp.tid(), 0] = 1.0
+def _first_column_only(args: _Nothing, pixels: _Values, first: wp.int32, out: wp.array2d(dtype=float)):
+    out[first + wp.tid(), 0] = 1.0
 
 
 @pytest.mark.parametrize("n", [1, 4])

@@ -1,11 +1,11 @@
 """Per-pixel kernel launches, split over CPU threads.
 
-Every per-pixel kernel takes ``(args, pixels, out)`` or, for a hand-written gradient, ``(args,
-pixels, grads, adj)`` (``warptex.kernels.family``). :func:`launch` cuts the pixels into contiguous
-chunks (``warptex._threads.Split``) and launches them from the thread pool, each on views (slices)
-of the per-pixel arrays: every array of ``pixels`` and ``out`` (``adj``), and the per-pixel
-gradient targets of ``grads``. Every pixel is computed by the same code from the same inputs, so the
-result is bit-identical to a single launch.
+Every per-pixel kernel takes ``(args, pixels, first, out)`` or, for a hand-written gradient,
+``(args, pixels, first, grads, adj)`` (``warptex.kernels.family``), and computes the pixels from
+``first`` on. :func:`launch` cuts the pixels into contiguous chunks (``warptex._threads.Split``) and
+launches them from the thread pool, each with the same arguments and its own ``first``. Every pixel
+is computed by the same code from the same inputs, so the result is bit-identical to a single
+launch.
 
 Under a ``wp.Tape`` a launch is recorded as one backward step that runs the adjoint launches of
 chunks fixed by the pixels and the gradients' sizes, never by the thread count
@@ -33,7 +33,7 @@ import warp as wp
 
 from warptex._accumulate import Copy, private, run_ordered, slot_count, with_private_grads
 from warptex._threads import Split, cpu_count, grad_bounds, workers_for
-from warptex._warp import active_tape, map_arrays, struct_fields, struct_like
+from warptex._warp import active_tape, struct_fields
 from warptex.kernels.lanes import LANES
 from warptex.kernels.texels import TexelGrad
 
@@ -60,20 +60,19 @@ def arrays(value) -> Iterator[wp.array]:
             yield from arrays(field)
 
 
-def sliced(value, lo: int, hi: int):
-    """Rows ``lo .. hi`` of a per-pixel argument: an array sliced (an empty one, an unused optional
-    input, as it is), or a struct with every array field sliced."""
-    return map_arrays(value, lambda a: a if a.shape[0] == 0 else a[lo:hi])
-
-
-def _zero_rows(out, filled: bool = False) -> None:
-    """Zero ``out`` (a chunk's rows of per-pixel outputs) and its gradients; the outputs themselves
-    only where the kernel does not write every entry (``filled``: a lane kernel, which does)."""
+def _zero_rows(out, lo: int, hi: int, filled: bool = False) -> None:
+    """Zero rows ``lo .. hi`` of ``out`` (per-pixel outputs) and of their gradients; the outputs
+    themselves only where the kernel does not write every entry (``filled``: a lane kernel, which
+    does). Slices only what it zeroes (slicing costs Python time on the launching thread)."""
+    whole = lo == 0 and hi == out_rows(out)
     for a in arrays(out):
-        if not filled:
-            a.zero_()
-        if a.grad is not None:
-            a.grad.zero_()
+        for b in ([] if filled else [a]) + ([a.grad] if a.grad is not None else []):
+            (b if whole else b[lo:hi]).zero_()
+
+
+def out_rows(out) -> int:
+    """The rows (pixels) of a per-pixel output, an array or a struct of them."""
+    return next(arrays(out)).shape[0]
 
 
 def _check_rows(count: int, *values) -> None:
@@ -83,11 +82,11 @@ def _check_rows(count: int, *values) -> None:
 
 
 def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None = None, backward=None, covered: wp.array | None = None, footprints: int = 1, lanes=None) -> None:
-    """Launch a per-pixel ``kernel(args, pixels, out)`` over ``count`` pixels, split over CPU threads.
+    """Launch a per-pixel ``kernel(args, pixels, first, out)`` over ``count`` pixels, split over CPU threads.
 
     Args:
-        kernel: a Warp kernel whose thread ``i`` reads and writes only entry ``i`` of the arrays of
-            ``pixels`` and ``out`` (and reads anything else).
+        kernel: a Warp kernel whose thread ``t`` reads and writes only entry ``i = first + t`` of the
+            arrays of ``pixels`` and ``out`` (and reads anything else).
         count: pixels to launch.
         args, pixels: the kernel's fixed and per-pixel arguments (structs).
         out: the output, a per-pixel array or a struct of them, new from :func:`output`: it and its
@@ -122,16 +121,15 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
     kernel, per_index = _with_lanes(kernel, None if generated else lanes, device)
     fills = per_index > 1  # a lane kernel writes every entry of its outputs (family.lane_kernel)
     if workers == 1:
-        _zero_rows(out, fills)
-        wp.launch(kernel, dim=-(-count // per_index), inputs=[args, pixels], outputs=[out], device=device, record_tape=generated and len(chunks) == 2)
+        _zero_rows(out, 0, count, fills)
+        wp.launch(kernel, dim=-(-count // per_index), inputs=[args, pixels, 0], outputs=[out], device=device, record_tape=generated and len(chunks) == 2)
     else:
         split = Split(count, workers, covered)
 
         def forward(worker: int, k: int) -> None:
             lo, hi = split.span(k)
-            rows = sliced(out, lo, hi)
-            _zero_rows(rows, fills)
-            wp.launch(kernel, dim=-(-(hi - lo) // per_index), inputs=[args, sliced(pixels, lo, hi)], outputs=[rows], device=device, record_tape=False)
+            _zero_rows(out, lo, hi, fills)
+            wp.launch(kernel, dim=-(-(hi - lo) // per_index), inputs=[args, pixels, lo], outputs=[out], device=device, record_tape=False)
 
         split.run(forward)
     if generated and (workers > 1 or len(chunks) > 2):  # else Warp recorded the launch's own adjoint
@@ -186,23 +184,23 @@ def _backward(tape, *, kernel, bounds: list[int], workers: int, args, pixels, ou
 
     def backward(k: int, slot: int | None) -> None:
         lo, hi = bounds[k], bounds[k + 1]
-        a, p, o = args if slot is None else slot_args[slot], sliced(pixels, lo, hi), sliced(out, lo, hi)
-        wp.launch(kernel, dim=hi - lo, inputs=[a, p], outputs=[o], adj_inputs=[tape.get_adjoint(a), tape.get_adjoint(p)], adj_outputs=[tape.get_adjoint(o)], device=device, adjoint=True)
+        a = args if slot is None else slot_args[slot]
+        wp.launch(kernel, dim=hi - lo, inputs=[a, pixels, lo], outputs=[out], adj_inputs=[tape.get_adjoint(a), tape.get_adjoint(pixels), 0], adj_outputs=[tape.get_adjoint(out)], device=device, adjoint=True)
 
     run_ordered(chunks, workers, backward, slots.__getitem__)
 
 
 class Target(NamedTuple):
     """A field of a hand-written gradient's ``grads`` struct: the gradient array it adds into
-    (``None``: not needed, passed empty), and whether it is per-pixel (sliced per chunk) rather than
-    shared by every pixel (added into through per-worker private copies)."""
+    (``None``: not needed, passed empty), and whether it is per-pixel (each chunk adds into its own
+    rows) rather than shared by every pixel (added into through per-worker private copies)."""
 
     grad: wp.array | None
     per_pixel: bool = False
 
 
 def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, device, threads: int | None = None, covered: wp.array | None = None, footprints: int = 1, entries: dict | None = None, lanes=None) -> None:
-    """Launch a hand-written gradient ``kernel(args, pixels, grads, adj)``, which *adds* into the
+    """Launch a hand-written gradient ``kernel(args, pixels, first, grads, adj)``, which *adds* into the
     arrays of ``grads``, over ``count`` pixels, split over CPU threads as :func:`launch` splits a launch.
 
     Warp's CPU atomics are plain read-modify-writes, so the pixels are cut into chunks fixed by
@@ -213,7 +211,7 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
     on a tape: this is what a backward step runs.
 
     Args:
-        kernel: the Warp kernel; its third argument is a struct with one field per ``grads`` entry.
+        kernel: the Warp kernel; its ``grads`` argument is a struct with one field per ``grads`` entry.
         count, args, pixels, device, threads, covered, footprints: as for :func:`launch`.
         grads: the targets, in the order of the struct's fields.
         adj: the outputs' gradients, shaped as ``out`` (an array or a struct of them).
@@ -227,7 +225,7 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
         return
     device = wp.get_device(device)
     _check_rows(count, pixels, adj, *[t.grad for t in grads if t.per_pixel and t.grad is not None])
-    grads_t = kernel.adj.args[2].type
+    grads_t = next(a.type for a in kernel.adj.args if a.label == "grads")
     kernel, per_index = _with_lanes(kernel, lanes, device)
     texel = [t.grad for (name, ftype), t in zip(grads_t.vars.items(), grads) if t.grad is not None and not t.per_pixel and ftype.type is TexelGrad]
     plain = [t.grad for (name, ftype), t in zip(grads_t.vars.items(), grads) if t.grad is not None and not t.per_pixel and ftype.type is not TexelGrad]
@@ -235,7 +233,7 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
     bounds = grad_bounds(count, covered, sum(_nbytes(g) for g in shared), footprints) if device.is_cpu else [0, count]  # CUDA: one launch, atomics
     chunks = len(bounds) - 1
     if chunks == 1:
-        wp.launch(kernel, dim=-(-count // per_index), inputs=[args, pixels, _grads_struct(grads_t, grads, {}, device), adj], device=device, record_tape=False)
+        wp.launch(kernel, dim=-(-count // per_index), inputs=[args, pixels, 0, _grads_struct(grads_t, grads, {}, device), adj], device=device, record_tape=False)
         return
     workers = min(workers_for(device, count, threads), chunks, cpu_count())  # fixed chunks: threads past the cores only take turns
     tracked = {id(g) for g in texel} - {id(g) for g in plain}
@@ -249,7 +247,7 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
 
     def run(k: int, slot: int | None) -> None:
         lo, hi = bounds[k], bounds[k + 1]
-        wp.launch(kernel, dim=-(-(hi - lo) // per_index), inputs=[args, sliced(pixels, lo, hi), _chunk_grads(real if slot is None else structs[slot], grads, lo, hi), sliced(adj, lo, hi)], device=device, record_tape=False)
+        wp.launch(kernel, dim=-(-(hi - lo) // per_index), inputs=[args, pixels, lo, real if slot is None else structs[slot], adj], device=device, record_tape=False)
 
     run_ordered(chunks, workers, run, slots.__getitem__, entries)
 
@@ -257,7 +255,8 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
 def _grads_struct(grads_t, grads: list[Target], copies: dict, device):
     """A ``grads_t`` struct of ``grads``: each shared target replaced by its copy in ``copies`` (by
     id) where it has one; ``TexelGrad`` fields with the copy's tiles (the real gradient untracked);
-    empty arrays where a target is not needed. Per-pixel targets stay whole (see :func:`_chunk_grads`)."""
+    empty arrays where a target is not needed. Per-pixel targets are whole: a chunk's pixels add
+    into their own rows only."""
     value = grads_t()
     for (name, field), target in zip(grads_t.vars.items(), grads):
         ftype = field.type
@@ -271,13 +270,3 @@ def _grads_struct(grads_t, grads: list[Target], copies: dict, device):
             copy = copies.get(id(target.grad)) if target.grad is not None else None
             setattr(value, name, copy.array if copy is not None else target.grad if target.grad is not None else wp.empty(shape=(0,) * ftype.ndim, dtype=ftype.dtype, device=device))
     return value
-
-
-def _chunk_grads(value, grads: list[Target], lo: int, hi: int):
-    """The ``grads`` struct ``value`` of one chunk: its per-pixel targets sliced, the shared ones as they are."""
-    if not any(t.per_pixel for t in grads):
-        return value
-    chunk = struct_like(value)
-    for (name, field), target in zip(struct_fields(value).items(), grads):
-        setattr(chunk, name, sliced(field, lo, hi) if target.per_pixel else field)
-    return chunk

@@ -219,7 +219,7 @@ def _run_staged(staged: Staged, count: int, inputs: dict, result, device, cut: d
     output from them (with the other backward); the second step's arguments filled by name (nested
     structs' fields included)."""
     wanted = [a for p, a in differentiable(inputs) if a.requires_grad and not any(p == t or p.startswith(t + ".") for t in staged.then_only)]
-    intermediates = _struct(staged.first.forward.adj.args[2].type, {})
+    intermediates = _struct(next(a.type for a in staged.first.forward.adj.args if a.label == "out"), {})
     for name, (shape, dtype) in staged.intermediates(count, inputs["args"]).items():
         setattr(intermediates, name, output(shape, dtype, device, requires_grad=bool(wanted)))
     second = "adjoint" if staged.replaces == "texel_grad" else "texel_grad"

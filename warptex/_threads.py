@@ -16,6 +16,8 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import warp as wp
 
+from warptex.kernels.lanes import LANES
+
 # Below this many pixels per thread, handing work to a thread costs more than it saves.
 MIN_PIXELS_PER_THREAD = 16384
 # Chunks per thread (when the pixels allow): costs vary across an image (sky, terrain), so
@@ -26,7 +28,7 @@ CHUNKS_PER_THREAD = 4
 # equal pixel counts: a pixel it does not cover costs about this much of a covered one (the sky of
 # the terrain view with triplanar mapping: 0.13) ...
 UNCOVERED_COST = 0.1
-# ... counted in blocks of this many pixels.
+# ... counted in blocks of this many pixels (a multiple of LANES: see bounds()).
 COVERAGE_BLOCK = 1024
 # A backward pass's chunks (:func:`grad_bounds`). Every chunk but the first costs adding its private
 # gradients into the real ones, whatever the thread count: up to the whole shared gradient (a 1024²
@@ -154,16 +156,18 @@ def grad_bounds(count: int, covered: wp.array | None = None, shared_bytes: int |
 
 
 def bounds(count: int, chunks: int, covered: wp.array | None) -> list[int]:
-    """The ``chunks + 1`` bounds of ``count`` pixels cut into ``chunks`` contiguous chunks: equal
-    pixel counts, or, given the mask ``covered``, equal costs (a covered pixel costs 1, another
-    :data:`UNCOVERED_COST`), cut at whole blocks of :data:`COVERAGE_BLOCK` pixels. Deterministic: a
-    function of the pixels and the mask alone.
+    """The bounds of ``count`` pixels cut into ``chunks`` contiguous chunks: equal pixel counts, or,
+    given the mask ``covered``, equal costs (a covered pixel costs 1, another
+    :data:`UNCOVERED_COST`), cut at whole blocks of :data:`COVERAGE_BLOCK` pixels. Every cut is a
+    multiple of :data:`~warptex.kernels.lanes.LANES`, so that a lane kernel's lanes never straddle
+    two chunks (fewer chunks where ``count`` is too small for that). Deterministic: a function of
+    the pixels and the mask alone.
 
     The covered pixels of a block are counted as the sum of its mask, exact for the 0/1 masks the
     rasteriser and ``GBuffer.from_arrays`` write (and 2.5× faster than counting non-zeros: 1.3 ms
     for 4M pixels); other values only skew the estimate, never the result."""
     if covered is None or count < 2 * COVERAGE_BLOCK * chunks:
-        return [count * k // chunks for k in range(chunks + 1)]
+        return sorted({0, count, *(count * k // chunks // LANES * LANES for k in range(1, chunks))})
     mask = covered.numpy().reshape(-1)
     full = count // COVERAGE_BLOCK * COVERAGE_BLOCK
     shaded = mask[:full].reshape(-1, COVERAGE_BLOCK).sum(axis=1)
