@@ -38,6 +38,13 @@ def test_struct_fields_and_a_new_struct_of_the_same_kind():
     proj.tiling = wp.array([2.0], dtype=float, requires_grad=True)
     assert _warp.struct_fields(proj)["tiling"] is proj.tiling  # arrays come back as they were set
 
+    args = ks.SampleArgs()  # a struct nested in a struct, scalars, a vector (SamplerArgs.border)
+    args.tex = wt.Texture(np.ones((4, 4, 4), np.float32)).view
+    holders = _warp.array_fields(args)
+    assert list(holders) == ["tex", "smp"] and holders["tex"].texels is args.tex.texels
+    assert list(_warp.array_fields(args.smp)) == []  # no arrays, no structs
+    assert list(_warp.array_fields(args.tex)) == [n for n, v in _warp.struct_fields(args.tex).items() if isinstance(v, wp.array)]
+
 
 def test_threaded_generated_adjoint_accumulates_struct_array_gradients(rng):
     """The private accumulators that a split backward pass puts into struct fields (through the

@@ -32,8 +32,9 @@ from typing import Iterator, NamedTuple
 import warp as wp
 
 from warptex._accumulate import Copy, private, run_ordered, slot_count, with_private_grads
+from warptex._pack import empty_array
 from warptex._threads import Split, cpu_count, grad_bounds, workers_for
-from warptex._warp import active_tape, struct_fields
+from warptex._warp import active_tape, array_fields
 from warptex.kernels.lanes import LANES
 from warptex.kernels.texels import TexelGrad
 
@@ -56,7 +57,7 @@ def arrays(value) -> Iterator[wp.array]:
     if wp.types.is_array(value):
         yield value
     elif wp.types.is_struct(value):
-        for field in struct_fields(value).values():
+        for field in array_fields(value).values():
             yield from arrays(field)
 
 
@@ -156,7 +157,7 @@ def _shared_bytes(args) -> int:
             if value.grad is not None:
                 grads[id(value.grad)] = value.grad
         elif wp.types.is_struct(value):
-            stack.extend(struct_fields(value).values())
+            stack.extend(array_fields(value).values())
     return sum(_nbytes(g) for g in grads.values())
 
 
@@ -263,10 +264,10 @@ def _grads_struct(grads_t, grads: list[Target], copies: dict, device):
         if ftype is TexelGrad:
             g = TexelGrad()
             copy = copies.get(id(target.grad)) if target.grad is not None else None
-            g.texels = copy.array if copy is not None else target.grad if target.grad is not None else wp.empty(0, dtype=wp.vec4, device=device)
-            g.tiles = copy.tiles if copy is not None and copy.tiles is not None else wp.empty(0, dtype=wp.int32, device=device)
+            g.texels = copy.array if copy is not None else target.grad if target.grad is not None else empty_array(wp.vec4, 1, device)
+            g.tiles = copy.tiles if copy is not None and copy.tiles is not None else empty_array(wp.int32, 1, device)
             setattr(value, name, g)
         else:
             copy = copies.get(id(target.grad)) if target.grad is not None else None
-            setattr(value, name, copy.array if copy is not None else target.grad if target.grad is not None else wp.empty(shape=(0,) * ftype.ndim, dtype=ftype.dtype, device=device))
+            setattr(value, name, copy.array if copy is not None else target.grad if target.grad is not None else empty_array(ftype.dtype, ftype.ndim, device))
     return value

@@ -29,7 +29,7 @@ import weakref
 import warp as wp
 
 from warptex._launch import GENERATED, Target, launch, output, scatter
-from warptex._warp import active_tape, scalar_type, struct_fields, struct_like
+from warptex._warp import active_tape, array_fields, scalar_type, struct_fields, struct_like
 from warptex.kernels.family import PIXELS, Kernels, Staged
 from warptex.kernels.texels import TextureView
 
@@ -79,7 +79,7 @@ def differentiable(value, path: str = ""):
         if scalar_type(value.dtype) in _FLOATS:
             yield path, value
     elif wp.types.is_struct(value) or isinstance(value, dict):
-        for name, field in (value if isinstance(value, dict) else struct_fields(value)).items():
+        for name, field in (value if isinstance(value, dict) else array_fields(value)).items():
             yield from differentiable(field, f"{path}.{name}" if path else name)
 
 

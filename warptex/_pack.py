@@ -83,9 +83,9 @@ def stochastic_args(func: str, option: Stochastic, texture: TextureArray, sample
     args.lut_lo, args.lut_hi = LUT_RANGE
     args.channels = texture.channels
     # Unused arrays are empty rather than null: wp.Tape walks every array field of a struct.
-    args.lut = wp.empty(0, dtype=float, device=texture.device)
-    args.basis = wp.empty(0, dtype=wp.mat33, device=texture.device)
-    args.centre = wp.empty(0, dtype=wp.vec3, device=texture.device)
+    args.lut = empty_array(float, 1, texture.device)
+    args.basis = empty_array(wp.mat33, 1, texture.device)
+    args.centre = empty_array(wp.vec3, 1, texture.device)
     histogram = option.histogram
     if histogram is None:
         return args, texture
@@ -234,9 +234,24 @@ def struct_of(struct_t, device, **fields):
     for name, field in fields.items():
         if field is None:
             ftype = struct_t.vars[name].type
-            field = wp.empty(shape=(0,) * ftype.ndim, dtype=ftype.dtype, device=device)
+            field = empty_array(ftype.dtype, ftype.ndim, device)
         setattr(value, name, field)
     return value
+
+
+_empties: dict = {}
+
+
+def empty_array(dtype, ndim: int, device) -> wp.array:
+    """An empty ``ndim``-dimensional array of ``dtype`` on ``device``, where a kernel's argument is
+    unused (kernels test ``shape[0] > 0``). One per kind, shared: it holds nothing to write, and
+    making a new one cost every call a few microseconds (an API call made four)."""
+    device = wp.get_device(device)
+    key = (dtype, ndim, device.alias)
+    array = _empties.get(key)
+    if array is None:
+        array = _empties[key] = wp.empty(shape=(0,) * ndim, dtype=dtype, device=device)
+    return array
 
 
 # Bilinear footprints one lookup reads, by filter mode (anisotropic: per tap along the major axis).

@@ -8,8 +8,8 @@ oldest Warp release warptex supports as well):
 - :func:`active_tape`: the ``wp.Tape`` being recorded. Warp records its own launches on it but does
   not say which it is; warptex records its threaded launches and hand-written gradients there too.
   :func:`paused_tape` stops recording for a block (a bake's argument check on an empty G-buffer).
-- :func:`struct_fields` and :func:`struct_like`: the fields of a ``@wp.struct`` instance, and a new
-  instance of the same struct. A threaded backward pass gives each worker copies of the kernel's
+- :func:`struct_fields` and :func:`struct_like`: the fields of a ``@wp.struct`` instance (or those
+  that can hold arrays: :func:`array_fields`), and a new instance of the same struct. A threaded backward pass gives each worker copies of the kernel's
   struct arguments whose arrays accumulate their gradients privately.
 - :func:`map_arrays`: a struct (or array) with its arrays replaced, built on the two above.
 - :func:`scalar_type`: the scalar type of a vector or matrix dtype (which arrays can carry gradients).
@@ -22,6 +22,7 @@ machine without a CUDA driver, which a CPU user can do nothing about.
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import sys
 import tempfile
@@ -57,6 +58,16 @@ def paused_tape():
 def struct_fields(value) -> dict[str, Any]:
     """``{name: value}`` of every field of the ``@wp.struct`` instance ``value``, in declaration order."""
     return {name: getattr(value, name) for name in value._cls.vars}
+
+
+def array_fields(value) -> dict[str, Any]:
+    """:func:`struct_fields` of the fields declared as arrays or structs (what can hold an array)."""
+    return {name: getattr(value, name) for name in _holders(value._cls)}
+
+
+@functools.lru_cache(maxsize=None)
+def _holders(struct_t) -> tuple[str, ...]:
+    return tuple(name for name, var in struct_t.vars.items() if wp.types.is_array(var.type) or isinstance(var.type, type(struct_t)))
 
 
 def map_arrays(value, f):

@@ -58,6 +58,9 @@ class Address(str, enum.Enum):
     BORDER = "border"
 
 
+_NO_BORDER = (0.0, 0.0, 0.0, 0.0)  # Sampler's default border
+
+
 @dataclasses.dataclass(frozen=True)
 class Sampler:
     """How textures are filtered and addressed. Checked when made: a bad value raises at once.
@@ -76,7 +79,7 @@ class Sampler:
 
     filter: Filter | str = Filter.AUTO
     address: Address | str = Address.WRAP
-    border: tuple = (0.0, 0.0, 0.0, 0.0)
+    border: tuple = _NO_BORDER
     lod_bias: float = 0.0
     min_lod: float = 0.0
     max_lod: float = math.inf
@@ -84,13 +87,10 @@ class Sampler:
 
     def __post_init__(self):
         func = "Sampler"
-        colour = as_float_array(func, "border", self.border).reshape(-1)
-        if not 1 <= colour.size <= 4 or not np.isfinite(colour).all():
-            raise ValueError(f"{func}(): border must be 1 to 4 finite numbers, got {self.border!r}")
         values = {
             "filter": as_enum(func, "filter", self.filter, Filter),
             "address": as_enum(func, "address", self.address, Address),
-            "border": tuple(float(c) for c in np.pad(colour, (0, 4 - colour.size))),
+            "border": _border(func, self.border),
             "lod_bias": as_float(func, "lod_bias", self.lod_bias),
             "min_lod": as_float(func, "min_lod", self.min_lod, finite=False),
             "max_lod": as_float(func, "max_lod", self.max_lod, finite=False),
@@ -108,10 +108,23 @@ class Sampler:
         return dataclasses.replace(self, **changes)
 
 
+def _border(func: str, border) -> tuple:
+    """``Sampler.border`` as 4 Python floats (float32 values; missing channels 0)."""
+    if border is _NO_BORDER:  # the default, without NumPy (a Sampler per call is common)
+        return border
+    colour = as_float_array(func, "border", border).reshape(-1)
+    if not 1 <= colour.size <= 4 or not np.isfinite(colour).all():
+        raise ValueError(f"{func}(): border must be 1 to 4 finite numbers, got {border!r}")
+    return tuple(float(c) for c in np.pad(colour, (0, 4 - colour.size)))
+
+
+_DEFAULTS = Sampler()
+
+
 def as_sampler(func: str, sampler) -> Sampler:
     """``sampler=`` of a technique: a :class:`Sampler`, or ``None`` for the defaults."""
     if sampler is None:
-        return Sampler()
+        return _DEFAULTS
     if not isinstance(sampler, Sampler):
         raise TypeError(f"{func}(): sampler must be a warptex.Sampler or None, got {type(sampler).__name__}")
     return sampler

@@ -12,7 +12,7 @@ import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import MAP_SAMPLER, footprints, projection_args, sampler_args, stochastic_args, struct_of
+from warptex._pack import MAP_SAMPLER, footprints, empty_array, projection_args, sampler_args, stochastic_args, struct_of
 from warptex._validate import as_enum, as_on_device, check_layer_count, param_array
 from warptex.gbuffer import GBuffer, gbuffer_device
 from warptex.kernels import projection as kp
@@ -206,7 +206,7 @@ FACE_NAMES = ("+x", "-x", "+y", "-y", "+z", "-z")
 def _face_layers(func: str, face_layers, num_layers: int, projection: int, device) -> wp.array:
     """``face_layers`` checked, as the kernels' int32 array of ``6 L`` indices (``SplatArgs``);
     empty when not given or when every layer reads itself on every face (the default path)."""
-    empty = wp.empty(0, dtype=wp.int32, device=device)
+    empty = empty_array(wp.int32, 1, device)
     if face_layers is None:
         return empty
     if projection != ksl.PROJECT_TRIPLANAR:
