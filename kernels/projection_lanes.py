@@ -16,6 +16,7 @@ common case, triplanar weights, with every filter (the anisotropic footprint's b
 import warp as wp
 
 from .faces import FaceTextures
+from .family import lane_covered
 from .lanes import cpu_snippet, lane_colours, lane_ints, lane_reads
 from .projection import ProjectionArgs, SurfacePixels
 from .texels import SamplerArgs, TextureView
@@ -208,3 +209,9 @@ def triplanar_reads_lane(faces: FaceTextures, proj: ProjectionArgs, smp: Sampler
     :data:`~.lanes.lane_reads` (all 0 where a projection is not read: a zero weight, or an uncovered
     pixel)."""
     ...
+
+
+@wp.func
+def surface_covered(pixels: SurfacePixels, base: wp.int32, count: wp.int32) -> bool:
+    """Whether the G-buffer covers any of the lane's pixels (``covered`` of ``family.lane_kernel``)."""
+    return lane_covered(pixels.mask, base, count)

@@ -33,7 +33,7 @@ import functools
 import warp as wp
 
 from . import adjoint_module, inlined, specialised
-from .family import Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
+from .family import Kernels, Staged, family, forward_kernel, lane_covered, lane_kernel, pixel_kernels
 from .projection import SurfacePixels, surface_frame
 from .splat_blend import blend_functions, capacity
 from .splat_lanes import grad_lanes_take, lane_bodies, lane_saved, lanes_take
@@ -70,6 +70,12 @@ class SplatPixels:
     uv0_dy: wp.array(dtype=wp.vec2)
     surface: SurfacePixels
     saved: wp.array2d(dtype=float)
+
+
+@wp.func
+def splat_covered(pixels: SplatPixels, base: wp.int32, count: wp.int32) -> bool:
+    """Whether the G-buffer covers any of the lane's pixels (``covered`` of ``family.lane_kernel``)."""
+    return lane_covered(pixels.surface.mask, base, count)
 
 
 @wp.struct
@@ -360,7 +366,7 @@ def splat_kernels(*, capacity: int, stochastic: bool) -> Kernels:
     lanes = grad_lanes = None
     if not stochastic:
         lane, grad_lane = lane_bodies(capacity, SplatPixels, SplatGrads)
-        lanes = lane_kernel(lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), module=module, name=f"splat{capacity}_lanes")
-        grad_lanes = lane_kernel(grad_lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), grads_t=SplatGrads, module=module + ".grad", name=f"splat{capacity}_texel_grad_lanes")
+        lanes = lane_kernel(lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), module=module, name=f"splat{capacity}_lanes", covered=splat_covered)
+        grad_lanes = lane_kernel(grad_lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), grads_t=SplatGrads, module=module + ".grad", name=f"splat{capacity}_texel_grad_lanes", covered=splat_covered)
     return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity), lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=lanes_take, grad_lanes_take=grad_lanes_take,
                    lane_saved=None if stochastic else lane_saved)  # fmt: skip

@@ -28,6 +28,7 @@ from .normals import blend_projected, decode_normal, direction, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
 from .texels import SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
+from .projection_lanes import surface_covered
 from .triplanar_lanes import lane_bodies
 
 MODULE = "warptex.triplanar"
@@ -313,8 +314,8 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
         lanes = grad_lanes = None
         if not stochastic and not faces:
             colour_lane, colour_grad_lane = lane_bodies(bodies["colour"], bodies["colour_grad"], TriplanarArgs)
-            lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes")
-            grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes")
+            lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
+            grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
         return Kernels(forward, texel_grad, _adjoint(False), grads=FACE_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes)
     forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
     first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,

@@ -141,7 +141,7 @@ def test_sample_lanes_on_a_real_texture_and_mesh(shared_data):
 
 def _hand_gbuffer(rng, count=1000, uv_sets=()):
     """A ``(1, count)`` G-buffer of random surface points, with the cases the scalar body treats
-    apart: uncovered pixels, zero, axis-aligned and non-finite normals, NaN and huge positions, zero
+    apart: uncovered pixels (and whole lanes of them), zero, axis-aligned and non-finite normals, NaN and huge positions, zero
     and huge derivatives."""
     normals = rng.normal(size=(count, 3)).astype(np.float32)
     normals[:6] = [(0, 0, 0), (1, 0, 0), (0, -1, 0), (0, 0, 1), (np.nan, 0, 1), (np.inf, 0, 0)]
@@ -153,6 +153,9 @@ def _hand_gbuffer(rng, count=1000, uv_sets=()):
     dpdx[9], dpdy[9] = 0.0, 0.0
     dpdx[10], dpdy[10] = 1e20, 1e20
     mask = (rng.random(count) > 0.2).astype(np.float32)
+    mask[3 * LANES : 6 * LANES] = 0.0  # whole lanes uncovered (a lane kernel skips them: family.lane_kernel's covered) ...
+    mask[7 * LANES : 8 * LANES] = 0.0
+    mask[7 * LANES + 5] = 1.0  # ... and a lane of one covered pixel
     g = wt.GBuffer.empty((1, count), uv_sets=uv_sets)
     for name, value in (("normal", normals), ("position", positions), ("position_dx", dpdx), ("position_dy", dpdy)):
         getattr(g, name).assign(value.reshape(1, count, 3))
