@@ -21,12 +21,15 @@ from warptex.kernels.lanes import LANES
 # Below this many pixels per thread, handing work to a thread costs more than it saves.
 MIN_PIXELS_PER_THREAD = 16384
 # Chunks per thread (when the pixels allow): costs vary across an image (sky, terrain), so
-# threads take chunks from a queue rather than one fixed share each. More, smaller chunks measured
-# slower (each launch costs ~0.1 ms of Python, partly under the GIL).
-CHUNKS_PER_THREAD = 4
+# threads take chunks from a queue rather than one fixed share each. Each launch costs ~20 us of
+# Python, partly under the GIL; with the chunks cut to equal costs (below), 2 a thread measured 2-4%
+# faster than 4 on 2 threads (bilinear on the benchmark sphere, triplanar on its terrain) and no
+# slower on the rest; 1 a thread no faster.
+CHUNKS_PER_THREAD = 2
 # Where a G-buffer's mask is known (``covered``), chunks are cut to equal estimated cost rather than
-# equal pixel counts: a pixel it does not cover costs about this much of a covered one (the sky of
-# the terrain view with triplanar mapping: 0.13) ...
+# equal pixel counts: a pixel it does not cover costs about this much of a covered one (the lane
+# kernels, which skip lanes of sky: 0.10-0.11 for triplanar and splat4 on the benchmark's sphere and
+# terrain) ...
 UNCOVERED_COST = 0.1
 # ... counted in blocks of this many pixels (a multiple of LANES: see bounds()).
 COVERAGE_BLOCK = 1024
