@@ -34,7 +34,7 @@ import warp as wp
 from warptex._accumulate import Copy, private, run_ordered, slot_count, with_private_grads
 from warptex._pack import empty_array
 from warptex._threads import Split, cpu_count, grad_bounds, workers_for
-from warptex._warp import active_tape, array_fields
+from warptex._warp import active_tape, array_paths
 from warptex.kernels.lanes import LANES
 from warptex.kernels.texels import TexelGrad
 
@@ -57,8 +57,11 @@ def arrays(value) -> Iterator[wp.array]:
     if wp.types.is_array(value):
         yield value
     elif wp.types.is_struct(value):
-        for field in array_fields(value).values():
-            yield from arrays(field)
+        for _, names in array_paths(value):
+            array = value
+            for name in names:
+                array = getattr(array, name)
+            yield array
 
 
 def _zero_rows(out, lo: int, hi: int, filled: bool = False) -> None:
@@ -150,14 +153,7 @@ def _nbytes(array: wp.array) -> int:
 
 def _shared_bytes(args) -> int:
     """The bytes of the gradients of ``args``' arrays (those all pixels share), each counted once."""
-    grads, stack = {}, [args]
-    while stack:
-        value = stack.pop()
-        if wp.types.is_array(value):
-            if value.grad is not None:
-                grads[id(value.grad)] = value.grad
-        elif wp.types.is_struct(value):
-            stack.extend(array_fields(value).values())
+    grads = {id(a.grad): a.grad for a in arrays(args) if a.grad is not None}
     return sum(_nbytes(g) for g in grads.values())
 
 

@@ -29,7 +29,7 @@ import weakref
 import warp as wp
 
 from warptex._launch import GENERATED, Target, launch, output, scatter
-from warptex._warp import active_tape, array_fields, scalar_type, struct_fields, struct_like
+from warptex._warp import active_tape, array_paths, scalar_type, struct_fields, struct_like
 from warptex.kernels.family import PIXELS, Kernels, Staged
 from warptex.kernels.texels import TextureView
 
@@ -78,9 +78,16 @@ def differentiable(value, path: str = ""):
     if wp.types.is_array(value):
         if scalar_type(value.dtype) in _FLOATS:
             yield path, value
-    elif wp.types.is_struct(value) or isinstance(value, dict):
-        for name, field in (value if isinstance(value, dict) else array_fields(value)).items():
+    elif isinstance(value, dict):
+        for name, field in value.items():
             yield from differentiable(field, f"{path}.{name}" if path else name)
+    elif wp.types.is_struct(value):
+        for dotted, names in array_paths(value):
+            array = value
+            for name in names:
+                array = getattr(array, name)
+            if scalar_type(array.dtype) in _FLOATS:
+                yield (f"{path}.{dotted}" if path else dotted), array
 
 
 def resolve(inputs: dict, path: str) -> wp.array | None:

@@ -18,6 +18,7 @@ import numpy as np
 import warp as wp
 
 from warptex._validate import as_device_array, as_float, as_float_array, param_array
+from warptex._warp import field_type
 from warptex.histogram import GAUSSIAN_MEAN, LUT_RANGE
 from warptex.kernels import projection as kp
 from warptex.kernels import stochastic as kst
@@ -228,12 +229,14 @@ def resolve_layer(func: str, texture: TextureArray, layer, shape, device):
 
 
 def struct_of(struct_t, device, **fields):
-    """A ``struct_t`` instance with ``fields`` set; an array field given as ``None`` (an unused
-    optional input) gets an empty array of its type, which kernels test with ``shape[0] > 0``."""
-    value = struct_t()
+    """A ``struct_t`` instance with ``fields`` set (or ``struct_t`` itself, an instance, filled in
+    place: a struct nested in another, which assigning would copy field by field); an array field
+    given as ``None`` (an unused optional input) gets an empty array of its type, which kernels test
+    with ``shape[0] > 0``."""
+    value = struct_t if wp.types.is_struct(struct_t) else struct_t()
     for name, field in fields.items():
         if field is None:
-            ftype = struct_t.vars[name].type
+            ftype = field_type(value, name)
             field = empty_array(ftype.dtype, ftype.ndim, device)
         setattr(value, name, field)
     return value

@@ -60,7 +60,7 @@ def resolve_device(func: str, device, default) -> wp.context.Device:
 
 def param_array(func, name, value, shapes, device, *, nonzero=False, nonnegative=False) -> wp.array:
     """A float32 parameter array of one of ``shapes``: the caller's ``wp.array`` (gradients flow
-    into it) or a new array from numbers."""
+    into it) or an array of the numbers (shared by the calls that give the same numbers)."""
     if isinstance(value, wp.array):
         if value.dtype != wp.float32 or value.shape not in shapes:
             want = " or ".join(str(s) for s in shapes)
@@ -87,7 +87,23 @@ def param_array(func, name, value, shapes, device, *, nonzero=False, nonnegative
     if nonnegative and (values < 0).any():
         raise ValueError(f"{func}(): {name} must be >= 0, got {values.tolist()}")
     if arr is None:
-        arr = wp.array(np.ascontiguousarray(values, np.float32), dtype=float, device=device)
+        arr = _constant(np.ascontiguousarray(values, np.float32), device)
+    return arr
+
+
+_constants: dict = {}
+_MAX_CONSTANTS = 256
+
+
+def _constant(values: np.ndarray, device) -> wp.array:
+    """A float32 array of ``values`` on ``device``, one per distinct value and shared: kernels only
+    read a parameter given as numbers, and making three new arrays cost a triplanar call ~50 us."""
+    key = (values.shape, values.tobytes(), wp.get_device(device).alias)
+    arr = _constants.get(key)
+    if arr is None:
+        if len(_constants) >= _MAX_CONSTANTS:  # a fit sweeping a parameter through many values
+            _constants.clear()
+        arr = _constants[key] = wp.array(values, dtype=float, device=device)
     return arr
 
 

@@ -8,9 +8,11 @@ oldest Warp release warptex supports as well):
 - :func:`active_tape`: the ``wp.Tape`` being recorded. Warp records its own launches on it but does
   not say which it is; warptex records its threaded launches and hand-written gradients there too.
   :func:`paused_tape` stops recording for a block (a bake's argument check on an empty G-buffer).
-- :func:`struct_fields` and :func:`struct_like`: the fields of a ``@wp.struct`` instance (or those
-  that can hold arrays: :func:`array_fields`), and a new instance of the same struct. A threaded backward pass gives each worker copies of the kernel's
-  struct arguments whose arrays accumulate their gradients privately.
+- :func:`struct_fields` and :func:`struct_like`: the fields of a ``@wp.struct`` instance, and a new
+  instance of the same struct. A threaded backward pass gives each worker copies of the kernel's
+  struct arguments whose arrays accumulate their gradients privately. :func:`array_paths`: the
+  paths of its arrays, nested structs' included (walked on every call, so cached per struct type);
+  :func:`field_type`: a field's declared type.
 - :func:`map_arrays`: a struct (or array) with its arrays replaced, built on the two above.
 - :func:`scalar_type`: the scalar type of a vector or matrix dtype (which arrays can carry gradients).
 
@@ -60,14 +62,26 @@ def struct_fields(value) -> dict[str, Any]:
     return {name: getattr(value, name) for name in value._cls.vars}
 
 
-def array_fields(value) -> dict[str, Any]:
-    """:func:`struct_fields` of the fields declared as arrays or structs (what can hold an array)."""
-    return {name: getattr(value, name) for name in _holders(value._cls)}
+def field_type(value, name: str):
+    """The declared type of field ``name`` of the ``@wp.struct`` instance ``value``."""
+    return value._cls.vars[name].type
+
+
+def array_paths(value) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """``(dotted path, attribute names)`` of every array field of the ``@wp.struct`` instance
+    ``value``, those of its nested structs included, in declaration order (cached per struct type)."""
+    return _paths(value._cls)
 
 
 @functools.lru_cache(maxsize=None)
-def _holders(struct_t) -> tuple[str, ...]:
-    return tuple(name for name, var in struct_t.vars.items() if wp.types.is_array(var.type) or isinstance(var.type, type(struct_t)))
+def _paths(struct_t) -> tuple:
+    paths = []
+    for name, var in struct_t.vars.items():
+        if wp.types.is_array(var.type):
+            paths.append((name, (name,)))
+        elif isinstance(var.type, type(struct_t)):
+            paths += [(f"{name}.{dotted}", (name, *names)) for dotted, names in _paths(var.type)]
+    return tuple(paths)
 
 
 def map_arrays(value, f):

@@ -135,7 +135,9 @@ def splat(
     check_layer_count(func, num_layers, maps)
     gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask", f"{uv_set}.uv", f"{uv_set}.uv_dx", f"{uv_set}.uv_dy")
 
-    params = ksl.SplatParams()
+    args = ksl.SplatArgs()
+    reads = args.reads  # filled in place: assigning a struct copies it field by field (Python time per call)
+    params = reads.params
     params.num_layers, params.map_channels = num_layers, maps.channels
     params.tiling = param_array(func, "tiling", tiling, ((1,), (num_layers,)), device, nonzero=True)
     params.projection = _PROJECTION_IDS[as_enum(func, "projection", projection, LayerProjection)]
@@ -146,7 +148,7 @@ def splat(
         if heights is not None:
             raise ValueError(f"{func}(): heights are only used with height_blend=<transition>")
         params.height_mode = ksl.HEIGHT_NONE
-        params.transition = wp.zeros(1, dtype=float, device=device)
+        params.transition = param_array(func, "height_blend", 0.0, ((1,),), device)  # not read
     else:
         params.transition = param_array(func, "height_blend", height_blend, ((1,),), device)
         if float(params.transition.numpy()[0]) <= 0:
@@ -177,19 +179,16 @@ def splat(
 
     params.face_layers = _face_layers(func, face_layers, num_layers, params.projection, device)
 
-    reads = ksl.LayerReads()
-    reads.params = params
     reads.proj = projection_args(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kp.WEIGHTS_TRIPLANAR,
                                  origin=gbuffer.origin, address=sampler.address, device=device)  # fmt: skip
     reads.smp = sampler_args(func, sampler, has_lod=True)
-    args = ksl.SplatArgs()
-    args.layers, args.heights, args.maps, args.reads = layers_read.view, height_tex.view, maps.view, reads
+    args.layers, args.heights, args.maps = layers_read.view, height_tex.view, maps.view
     args.map_smp, args.stoch, args.height_stoch = sampler_args(func, MAP_SAMPLER, has_lod=False), stoch, height_stoch
 
     count = gbuffer.pixel_count
     uvs = gbuffer.uv_sets[uv_set]
-    surface = struct_of(kp.SurfacePixels, device, **{name: getattr(gbuffer, name).reshape((count,)) for name in ("position", "position_dx", "position_dy", "normal", "mask")})
-    pixels = struct_of(kl.SplatPixels, device, uv0=uvs["uv"].reshape((count,)), uv0_dx=uvs["uv_dx"].reshape((count,)), uv0_dy=uvs["uv_dy"].reshape((count,)), surface=surface, saved=None)
+    pixels = struct_of(kl.SplatPixels, device, uv0=uvs["uv"].reshape((count,)), uv0_dx=uvs["uv_dx"].reshape((count,)), uv0_dy=uvs["uv_dy"].reshape((count,)), saved=None)
+    surface = struct_of(pixels.surface, device, **{name: getattr(gbuffer, name).reshape((count,)) for name in ("position", "position_dx", "position_dy", "normal", "mask")})
     kernels = kl.splat_kernels(capacity=kl.capacity(num_layers), stochastic=stoch.method != kst.METHOD_NONE)
     linear = stoch.histogram == 0 and height_stoch.histogram == 0  # the histogram blend is not linear in the texels
     # A layer's lookup costs about two footprints: its share of the blend (weights, heights,

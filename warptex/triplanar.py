@@ -254,12 +254,10 @@ class _Setup:
         if sampled is not textures[0]:  # a histogram: every projection reads its Gaussianised texture
             textures = [sampled] * len(textures)
 
-        faces = kf.FaceTextures()
-        for name, t in zip(kf.FACE_FIELDS, textures):
-            setattr(faces, name, t.view)
         self.args = kt.TriplanarArgs()
-        self.args.faces, self.args.layer, self.args.proj, self.args.smp, self.args.stoch = faces, layer, proj, sampler_args(func, sampler, has_lod=True), stoch
-        self.args.normal_map = kt.NormalMapArgs()
+        for name, t in zip(kf.FACE_FIELDS, textures):  # into the struct's own faces (assigning a struct copies it field by field)
+            setattr(self.args.faces, name, t.view)
+        self.args.layer, self.args.proj, self.args.smp, self.args.stoch = layer, proj, sampler_args(func, sampler, has_lod=True), stoch
         self.gbuffer, self.device, self.channels = gbuffer, device, textures[0].channels
         self.stochastic = stoch.method != METHOD_NONE
         self.faces = any(textures[2 * a] is not textures[2 * a + 1] for a in range(3))  # a face of some axis differs from its opposite
