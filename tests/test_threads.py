@@ -13,6 +13,7 @@ import warp as wp
 
 import warptex as wt
 from warptex import _accumulate, _launch, _threads
+from warptex.kernels.lanes import LANES
 from warptex.kernels.texels import TILE_SHIFT
 
 
@@ -351,6 +352,20 @@ def test_every_worker_gets_as_many_chunks(workers):
         split = _threads.Split(count, workers)
         assert split.chunks % workers == 0 and workers <= split.chunks <= workers * _threads.CHUNKS_PER_THREAD
         assert min(np.diff(split.bounds)) >= _threads.MIN_PIXELS_PER_THREAD
+
+
+def test_chunk_cuts_fall_between_lanes(rng):
+    """Every cut between two chunks is a multiple of ``LANES``: a lane kernel computes pixels
+    ``first .. first + LANES - 1`` per launch index, so a lane straddling a cut would be computed
+    (and its gradient added) by two chunks. Equal counts, equal costs over a mask, and counts too
+    small for as many chunks (fewer, never empty)."""
+    mask = (rng.random(300_001) > 0.3).astype(np.float32)
+    mask[:90_000] = 0.0  # sky
+    for count, chunks, covered in ((1 << 20, 8, None), (300_001, 7, wp.array(mask)), (300_001, 7, None), (4 * LANES + 3, 16, None), (50, 3, None)):
+        bounds = _threads.bounds(count, chunks, covered)
+        assert bounds[0] == 0 and bounds[-1] == count and (np.diff(bounds) > 0).all() and len(bounds) <= chunks + 1
+        assert all(b % LANES == 0 for b in bounds[:-1]), bounds
+    assert len(_threads.bounds(4 * LANES + 3, 16, None)) == 5  # one chunk a lane (the last one with the tail)
 
 
 def _watch_sums(monkeypatch) -> tuple[list, list]:
