@@ -141,8 +141,8 @@ def test_sample_lanes_on_a_real_texture_and_mesh(shared_data):
 
 def _hand_gbuffer(rng, count=1000, uv_sets=()):
     """A ``(1, count)`` G-buffer of random surface points, with the cases the scalar body treats
-    apart: uncovered pixels (and whole lanes of them), zero, axis-aligned and non-finite normals, NaN and huge positions, zero
-    and huge derivatives."""
+    apart: uncovered pixels (and whole lanes of them), zero, axis-aligned and non-finite normals,
+    NaN and huge positions, zero and huge derivatives."""
     normals = rng.normal(size=(count, 3)).astype(np.float32)
     normals[:6] = [(0, 0, 0), (1, 0, 0), (0, -1, 0), (0, 0, 1), (np.nan, 0, 1), (np.inf, 0, 0)]
     positions = rng.uniform(-3.0, 3.0, (count, 3)).astype(np.float32)
