@@ -40,10 +40,10 @@ def test_struct_fields_and_a_new_struct_of_the_same_kind():
 
     args = ks.SampleArgs()  # a struct nested in a struct, scalars, a vector (SamplerArgs.border)
     args.tex = wt.Texture(np.ones((4, 4, 4), np.float32)).view
-    paths = _warp.array_paths(args)
-    assert [p for p, _ in paths] == [f"tex.{n}" for n, v in _warp.struct_fields(args.tex).items() if isinstance(v, wp.array)]
-    assert all(names == tuple(p.split(".")) for p, names in paths)
-    assert _warp.array_paths(args.smp) == ()  # no arrays (a vector, scalars)
+    found = list(_warp.struct_arrays(args))
+    assert [p for p, _ in found] == [f"tex.{n}" for n, v in _warp.struct_fields(args.tex).items() if isinstance(v, wp.array)]
+    assert all(a is getattr(args.tex, p.split(".")[1]) for p, a in found)
+    assert list(_warp.struct_arrays(args.smp)) == []  # no arrays (a vector, scalars)
     assert _warp.field_type(args, "tex") is ks.TextureView and _warp.field_type(args.tex, "num_levels") is wp.int32
 
 

@@ -34,7 +34,7 @@ import warp as wp
 from warptex._accumulate import Copy, private, run_ordered, slot_count, with_private_grads
 from warptex._pack import empty_array
 from warptex._threads import Split, cpu_count, grad_bounds, workers_for
-from warptex._warp import active_tape, array_paths
+from warptex._warp import active_tape, struct_arrays
 from warptex.kernels.lanes import LANES
 from warptex.kernels.texels import TexelGrad
 
@@ -57,10 +57,7 @@ def arrays(value) -> Iterator[wp.array]:
     if wp.types.is_array(value):
         yield value
     elif wp.types.is_struct(value):
-        for _, names in array_paths(value):
-            array = value
-            for name in names:
-                array = getattr(array, name)
+        for _, array in struct_arrays(value):
             yield array
 
 
@@ -68,15 +65,9 @@ def _zero_rows(out, lo: int, hi: int, filled: bool = False) -> None:
     """Zero rows ``lo .. hi`` of ``out`` (per-pixel outputs) and of their gradients; the outputs
     themselves only where the kernel does not write every entry (``filled``: a lane kernel, which
     does). Slices only what it zeroes (slicing costs Python time on the launching thread)."""
-    whole = lo == 0 and hi == out_rows(out)
     for a in arrays(out):
         for b in ([] if filled else [a]) + ([a.grad] if a.grad is not None else []):
-            (b if whole else b[lo:hi]).zero_()
-
-
-def out_rows(out) -> int:
-    """The rows (pixels) of a per-pixel output, an array or a struct of them."""
-    return next(arrays(out)).shape[0]
+            (b if lo == 0 and hi == b.shape[0] else b[lo:hi]).zero_()
 
 
 def _check_rows(count: int, *values) -> None:

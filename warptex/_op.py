@@ -29,7 +29,7 @@ import weakref
 import warp as wp
 
 from warptex._launch import GENERATED, Target, launch, output, scatter
-from warptex._warp import active_tape, array_paths, scalar_type, struct_fields, struct_like
+from warptex._warp import active_tape, scalar_type, struct_arrays, struct_fields, struct_like
 from warptex.kernels.family import PIXELS, Kernels, Staged
 from warptex.kernels.texels import TextureView
 
@@ -82,10 +82,7 @@ def differentiable(value, path: str = ""):
         for name, field in value.items():
             yield from differentiable(field, f"{path}.{name}" if path else name)
     elif wp.types.is_struct(value):
-        for dotted, names in array_paths(value):
-            array = value
-            for name in names:
-                array = getattr(array, name)
+        for dotted, array in struct_arrays(value):
             if scalar_type(array.dtype) in _FLOATS:
                 yield (f"{path}.{dotted}" if path else dotted), array
 

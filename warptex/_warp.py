@@ -10,8 +10,9 @@ oldest Warp release warptex supports as well):
   :func:`paused_tape` stops recording for a block (a bake's argument check on an empty G-buffer).
 - :func:`struct_fields` and :func:`struct_like`: the fields of a ``@wp.struct`` instance, and a new
   instance of the same struct. A threaded backward pass gives each worker copies of the kernel's
-  struct arguments whose arrays accumulate their gradients privately. :func:`array_paths`: the
-  paths of its arrays, nested structs' included (walked on every call, so cached per struct type);
+  struct arguments whose arrays accumulate their gradients privately. :func:`struct_arrays`: its
+  arrays and their paths, nested structs' included (walked on every call, so the paths are cached
+  per struct type);
   :func:`field_type`: a field's declared type.
 - :func:`map_arrays`: a struct (or array) with its arrays replaced, built on the two above.
 - :func:`scalar_type`: the scalar type of a vector or matrix dtype (which arrays can carry gradients).
@@ -28,7 +29,7 @@ import functools
 import os
 import sys
 import tempfile
-from typing import Any
+from typing import Any, Iterator
 
 import warp as wp
 
@@ -67,10 +68,14 @@ def field_type(value, name: str):
     return value._cls.vars[name].type
 
 
-def array_paths(value) -> tuple[tuple[str, tuple[str, ...]], ...]:
-    """``(dotted path, attribute names)`` of every array field of the ``@wp.struct`` instance
-    ``value``, those of its nested structs included, in declaration order (cached per struct type)."""
-    return _paths(value._cls)
+def struct_arrays(value) -> Iterator[tuple[str, Any]]:
+    """``(dotted path, array)`` of every array field of the ``@wp.struct`` instance ``value``,
+    those of its nested structs included, in declaration order (the paths cached per struct type)."""
+    for dotted, names in _paths(value._cls):
+        array = value
+        for name in names:
+            array = getattr(array, name)
+        yield dotted, array
 
 
 @functools.lru_cache(maxsize=None)
