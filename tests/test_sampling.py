@@ -1,5 +1,7 @@
 """Forward sampling: texel-centre exactness, NumPy-reference agreement, LOD rules, bad input."""
 
+import gc
+
 import numpy as np
 import pytest
 import warp as wp
@@ -203,6 +205,41 @@ def test_one_lod_for_all_reads_as_per_sample_lods(rng, filt):
     no_lod = _sample(tex, uv, filter="bilinear" if filt == "trilinear" else filt)
     np.testing.assert_array_equal(no_lod, _sample(tex, uv, lod=np.zeros(len(uv), np.float32), filter="bilinear" if filt == "trilinear" else filt))
 
+
+
+def test_options_on_one_texture_each_read_their_own(rng):
+    # sample() packs a texture's arguments once per set of options (warptex._pack.packed): calls on
+    # one texture that alternate sampler, LOD and layer must each read what a fresh texture reads.
+    layers = rng.random((2, 16, 16, 4), dtype=np.float32)
+    shared = wt.TextureArray(layers)
+    uv = rng.uniform(-1, 2, (300, 2)).astype(np.float32)
+    cases = [
+        {"layer": 0}, {"layer": 1}, {"layer": 1, "lod": 1.25}, {"layer": 1, "lod": 2.0}, {"layer": 0, "lod": 1.25},
+        {"layer": 1, "lod": 1.25, "filter": "bilinear"}, {"layer": 1, "address": "clamp"}, {"layer": 1, "address": "border", "border": BORDER},
+        {"layer": 1, "lod": 1.25, "lod_bias": 0.5}, {"layer": 0, "filter": "nearest"},
+    ]
+    for rounds in range(2):
+        for kw in cases:
+            fresh = _sample(wt.TextureArray(layers), uv, **kw)
+            np.testing.assert_array_equal(_sample(shared, uv, **kw), fresh, err_msg=f"round {rounds}: {kw}")
+
+
+def test_packed_arguments_are_shared_bounded_and_dropped_with_their_texture(rng):
+    from warptex import _pack
+
+    tex = wt.Texture(_image(rng, 8, 8))
+    uv = rng.random((10, 2)).astype(np.float32)
+    wt.sample(tex, uv)
+    (first,) = _pack._packed[tex].values()
+    wt.sample(tex, uv)
+    assert _pack._packed[tex] == {next(iter(_pack._packed[tex])): first}  # the same arguments, not a new set
+    for k in range(3 * _pack.MAX_PACKED_PER_OWNER):  # a sweep through many LODs keeps the newest few
+        wt.sample(tex, uv, lod=k / 8)
+    assert len(_pack._packed[tex]) == _pack.MAX_PACKED_PER_OWNER
+    owners = len(_pack._packed)
+    del tex
+    gc.collect()
+    assert len(_pack._packed) == owners - 1
 
 
 def test_output_keeps_the_uv_shape(rng):
