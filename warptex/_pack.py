@@ -4,7 +4,8 @@
 - :func:`stochastic_args`: a :class:`~warptex.Stochastic` as ``StochasticArgs``, with the texture
   the kernels must read (a histogram's Gaussianised copy, or the texture itself);
 - :func:`projection_args`: triplanar projection options as ``ProjectionArgs``;
-- per-UV inputs: :func:`vec2_array`, :func:`lod_inputs`, :func:`resolve_layer`, :func:`mip_levels`;
+- per-UV inputs: :func:`vec2_array`, :func:`lod_inputs`, :func:`resolve_layer`, :func:`mip_levels`,
+  :func:`reshaped`;
 - kernel argument structs: :func:`struct_of` (empty arrays for unused optional ones), and
   :func:`packed`, those a technique makes once per texture and options.
 
@@ -208,11 +209,11 @@ def lod_inputs(func: str, lod, uv_dx, uv_dy, shape, device):
         for name, d in (("uv_dx", dx), ("uv_dy", dy)):
             if d.shape != shape:
                 raise ValueError(f"{func}(): {name} must have the shape of uv {shape}, got {d.shape}")
-        return ks.LOD_DERIVATIVES, 0.0, None, dx.reshape((count,)), dy.reshape((count,))
+        return ks.LOD_DERIVATIVES, 0.0, None, reshaped(dx, (count,)), reshaped(dy, (count,))
     if isinstance(lod, (int, float, np.integer, np.floating)) and not isinstance(lod, bool):
         return ks.LOD_CONSTANT, as_float(func, "lod", lod), None, None, None
     if lod is not None:
-        lods = _per_sample(func, "lod", lod, shape, wp.float32, device).reshape((count,))
+        lods = reshaped(_per_sample(func, "lod", lod, shape, wp.float32, device), (count,))
         return ks.LOD_PER_SAMPLE, 0.0, lods, None, None
     return ks.LOD_NONE, 0.0, None, None, None
 
@@ -228,7 +229,13 @@ def resolve_layer(func: str, texture: TextureArray, layer, shape, device):
         if not 0 <= layer < texture.num_layers:
             raise ValueError(f"{func}(): layer must be in [0, {texture.num_layers - 1}], got {layer}")
         return int(layer), None
-    return 0, _per_sample(func, "layer", layer, shape, wp.int32, device).reshape((math.prod(shape),))
+    return 0, reshaped(_per_sample(func, "layer", layer, shape, wp.int32, device), (math.prod(shape),))
+
+
+def reshaped(array: wp.array, shape: tuple) -> wp.array:
+    """``array`` with ``shape``: itself where it has it already (a new view costs a call ~30 us of
+    Python on cold caches, as the one a lookup's 1-D UVs and output made)."""
+    return array if array.shape == shape else array.reshape(shape)
 
 
 def struct_of(struct_t, device, **fields):

@@ -8,7 +8,7 @@ import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import footprints, lod_inputs, mip_levels, packed, resolve_layer, sampler_args, struct_of, vec2_array
+from warptex._pack import footprints, lod_inputs, mip_levels, packed, reshaped, resolve_layer, sampler_args, struct_of, vec2_array
 from warptex._validate import resolve_device
 from warptex.kernels import sampling as ks
 from warptex.kernels import texels as kx
@@ -55,9 +55,9 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
     constant_layer, layers = resolve_layer(func, texture, layer, shape, device)
     key = ("sample", sampler, has_lod, has_derivatives, lod_source, constant_lod, constant_layer)
     setup = packed(texture, key, lambda: _setup(func, texture, sampler, has_lod, has_derivatives, lod_source, constant_lod, constant_layer))
-    pixels = struct_of(ks.SamplePixels, device, uv=uv if uv.ndim == 1 else uv.reshape((count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
+    pixels = struct_of(ks.SamplePixels, device, uv=reshaped(uv, (count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
     out = run(setup.kernels, count, args=setup.args, pixels=pixels, out=((count, texture.channels), float), device=device, footprints=setup.footprints, touched=setup.touched)
-    return out.reshape((*(() if single else shape), texture.channels))
+    return reshaped(out, (*(() if single else shape), texture.channels))
 
 
 class _Setup(NamedTuple):

@@ -13,7 +13,7 @@ import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import footprints, lod_inputs, resolve_layer, sampler_args, stochastic_args, struct_of, vec2_array
+from warptex._pack import footprints, lod_inputs, reshaped, resolve_layer, sampler_args, stochastic_args, struct_of, vec2_array
 from warptex._validate import resolve_device
 from warptex.kernels import sampling as ks
 from warptex.kernels import stochastic as kst
@@ -82,9 +82,9 @@ def stochastic(
     plain.tex, plain.smp, plain.lod_source, plain.constant_lod, plain.constant_layer, plain.level, plain.fraction = sampled.view, smp, lod_source, constant_lod, constant_layer, 0, 0.0
     args = kst.StochasticSampleArgs()
     args.sample, args.params = plain, params  # nested structs are set whole: Warp copies their values in
-    pixels = struct_of(ks.SamplePixels, device, uv=uv.reshape((count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
+    pixels = struct_of(ks.SamplePixels, device, uv=reshaped(uv, (count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
     out = run(kst.stochastic_kernels(), count, args=args, pixels=pixels, out=((count, texture.channels), float), device=device, linear=params.histogram == 0, footprints=footprints(smp, params))
-    return out.reshape((*(() if single else shape), texture.channels))
+    return reshaped(out, (*(() if single else shape), texture.channels))
 
 
 def hex_taps(uv, *, seed: int = 0, contrast: float = 1.0, rotation: float = 0.0, device=None):
