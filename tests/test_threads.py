@@ -4,6 +4,9 @@ accumulators added tile by tile, validation. That gradients are the same bits at
 
 import functools
 import gc
+import multiprocessing
+import os
+import threading
 import weakref
 
 import numpy as np
@@ -528,3 +531,38 @@ def test_add_copies_adds_only_the_entries_given():
     np.testing.assert_array_equal(real.numpy()[inside], values[inside])
     assert not real.numpy()[~inside].any() and not copy.array.numpy()[inside].any()
     np.testing.assert_array_equal(copy.array.numpy()[~inside], values[~inside])
+
+
+def test_side_by_side_runs_every_part_waits_for_all_and_re_raises():
+    """Parts 1.. run on pool threads, part 0 here; a failing part does not stop the others, and its
+    error is raised on this thread once all are done."""
+    ran, main = [], threading.get_ident()
+
+    def work(part):
+        ran.append((part, threading.get_ident() == main))
+        if part == 2:
+            raise KeyError("part 2")
+
+    with pytest.raises(KeyError, match="part 2"):
+        _threads.side_by_side(work, 4)
+    assert sorted(ran) == [(0, True), (1, False), (2, False), (3, False)]
+    ran.clear()
+    _threads.side_by_side(lambda part: ran.append(part), 3)  # the pool goes on after a failure
+    assert sorted(ran) == [0, 1, 2]
+
+
+def _threaded_sum_in_child() -> float:
+    tex = wt.Texture(np.ones((64, 64, 4), np.float32))
+    wt.set_num_threads(2)
+    uv = np.random.default_rng(0).random((4 * _threads.MIN_PIXELS_PER_THREAD, 2)).astype(np.float32)
+    return float(wt.sample(tex, uv).numpy().sum())
+
+
+@pytest.mark.skipif(not hasattr(os, "register_at_fork"), reason="no fork on this platform")
+def test_a_forked_child_starts_its_own_pool_threads(threads):
+    """A child forked after the pool started (a fork-based DataLoader) has none of its threads: it
+    must start its own rather than wait for parts nobody takes."""
+    threads(2)
+    _threads.side_by_side(lambda part: None, 2)  # the parent's pool is running
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        assert pool.apply_async(_threaded_sum_in_child).get(timeout=120) == 4.0 * 4 * _threads.MIN_PIXELS_PER_THREAD

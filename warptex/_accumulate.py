@@ -30,7 +30,7 @@ from typing import NamedTuple
 import numpy as np
 import warp as wp
 
-from warptex._threads import cpu_count, executor
+from warptex._threads import cpu_count, side_by_side
 from warptex._warp import map_arrays
 from warptex.kernels.texels import TILE_SHIFT
 
@@ -197,12 +197,7 @@ def run_ordered(chunks: int, workers: int, work, copies_of, entries: dict | None
             raise
 
     try:
-        futures = [executor(workers - 1).submit(loop, w) for w in range(1, workers)]
-        try:
-            loop(0)
-        finally:
-            for f in futures:
-                f.result()  # waits for every worker; re-raises a worker's exception here
+        side_by_side(loop, workers)  # waits for every worker; re-raises a failure here
     except BaseException:
         for slot in range(slot_count(chunks, workers)):
             for real, _ in copies_of(slot):

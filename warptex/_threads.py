@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import itertools
 import os
+import queue
 import threading
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import warp as wp
@@ -50,9 +50,13 @@ MAX_GRAD_CHUNKS = 16
 # thread: handing it out costs more.
 PARALLEL_SUM_BYTES = 1 << 20
 
+# The pool: threads that take (work, part, done, failures) from _tasks (side_by_side). A plain
+# queue and a lock per part, not concurrent.futures: handing out a part and waiting for it took
+# ~100 us of Python on cold caches with an executor's futures, ~75 with these (the rest is the
+# system waking a thread).
 _lock = threading.Lock()
-_pool: ThreadPoolExecutor | None = None
-_pool_size = 0
+_tasks: queue.SimpleQueue = queue.SimpleQueue()
+_started = 0
 _num_threads: int | None = None
 
 
@@ -93,14 +97,35 @@ def get_num_threads() -> int:
     return cpu_count()
 
 
-def executor(size: int) -> ThreadPoolExecutor:
-    global _pool, _pool_size
+def _worker() -> None:
+    while True:
+        _run_task(*_tasks.get())  # a function call: nothing of a task outlives it (its arrays)
+
+
+def _run_task(work, part: int, done: threading.Lock, failures: list) -> None:
+    try:
+        work(part)
+    except BaseException as error:  # re-raised by side_by_side() on the thread that handed it out
+        failures.append(error)
+    finally:
+        done.release()
+
+
+def _start_workers(count: int) -> None:
+    """At least ``count`` pool threads (daemons: they only run work a caller waits for)."""
+    global _started
     with _lock:
-        if _pool is None or _pool_size < size:
-            if _pool is not None:
-                _pool.shutdown(wait=False)
-            _pool, _pool_size = ThreadPoolExecutor(max_workers=size, thread_name_prefix="warptex"), size
-        return _pool
+        while _started < count:
+            threading.Thread(target=_worker, name=f"warptex-{_started + 1}", daemon=True).start()
+            _started += 1
+
+
+def _after_fork() -> None:  # a forked child has none of the parent's threads
+    global _lock, _tasks, _started
+    _lock, _tasks, _started = threading.Lock(), queue.SimpleQueue(), 0
+
+
+os.register_at_fork(after_in_child=_after_fork)
 
 
 def workers_for(device, count: int, threads: int | None) -> int:
@@ -138,12 +163,7 @@ class Split:
             while (k := next(counter)) < self.chunks:  # itertools.count is thread-safe in CPython
                 work(worker, k)
 
-        futures = [executor(self.workers - 1).submit(loop, w) for w in range(1, self.workers)]
-        try:
-            loop(0)
-        finally:
-            for f in futures:
-                f.result()  # waits for every worker; re-raises a worker's exception here
+        side_by_side(loop, self.workers)
 
 
 def grad_bounds(count: int, covered: wp.array | None = None, shared_bytes: int | None = None, footprints: int = 1) -> list[int]:
@@ -186,13 +206,23 @@ def bounds(count: int, chunks: int, covered: wp.array | None) -> list[int]:
 
 def side_by_side(work, parts: int) -> None:
     """``work(part)`` for ``part`` in ``0 .. parts - 1``, part 0 on this thread, the others on the
-    pool; returns when all are done (re-raising the first failure)."""
-    futures = [executor(parts - 1).submit(work, part) for part in range(1, parts)]
+    pool; returns when all are done, re-raising a failure (this thread's first)."""
+    if parts > 1:
+        _start_workers(parts - 1)
+    failures: list = []
+    waits = []
+    for part in range(1, parts):
+        done = threading.Lock()
+        done.acquire()
+        _tasks.put((work, part, done, failures))
+        waits.append(done)
     try:
         work(0)
     finally:
-        for f in futures:
-            f.result()
+        for done in waits:
+            done.acquire()
+    if failures:
+        raise failures[0]
 
 
 def zero(array: wp.array) -> None:
