@@ -17,6 +17,7 @@ import warptex as wt
 from backward_paths import assert_same_gradients, texel_gradients_both_ways
 from conftest import with_sampler
 from warptex import Method, Sampler, Stochastic, hex_taps, prepare_histogram
+from warptex import _pack
 from warptex._pack import stochastic_args
 
 STOCHASTIC_FIELDS = tuple(f.name for f in dataclasses.fields(Stochastic))
@@ -128,6 +129,31 @@ def test_method_none_is_plain_sampling(rng):
     uv = rng.uniform(-3, 3, (500, 2)).astype(np.float32)
     for kw in ({}, {"lod": 1.2}, {"filter": "nearest"}):
         np.testing.assert_array_equal(stochastic(tex, uv, method="none", **kw).numpy(), wt.sample(tex, uv, **with_sampler(kw)).numpy())
+
+
+def test_options_on_one_texture_each_read_their_own(rng):
+    # stochastic() packs a texture's arguments once per set of options (warptex._pack.packed):
+    # calls on one texture that alternate method, seed, blend, LOD and sampler must each compute
+    # what a fresh texture does, and a histogram (never kept) what its own texture does.
+    image = rng.random((32, 32, 4), dtype=np.float32)
+    shared = wt.Texture(image)
+    uv = rng.uniform(-2, 6, (400, 2)).astype(np.float32)
+    cases = [
+        (Stochastic("hash4"), {}), (Stochastic("hash4"), {"lod": 1.5}), (Stochastic("hash4"), {"lod": 2.5}), (Stochastic("hash4"), {"address": "mirror"}),
+        (Stochastic("hash4", seed=3), {}), (Stochastic("hash4", seed=3, mirror=True), {"lod": 1.5}),
+        (Stochastic("cheap2"), {"lod": 1.5}), (Stochastic("hex", contrast=2.0), {}), (Stochastic("hex", rotation=0.5), {"address": "mirror"}),
+        (Stochastic("hash4", blend=(0.3, 0.7)), {"filter": "nearest"}), (Stochastic("cheap2", noise_frequency=0.25), {}),
+    ]
+    for rounds in range(2):
+        for option, kw in cases:
+            fresh = wt.stochastic(wt.Texture(image), uv, option, **with_sampler(kw)).numpy()
+            np.testing.assert_array_equal(wt.stochastic(shared, uv, option, **with_sampler(kw)).numpy(), fresh, err_msg=f"round {rounds}: {option} {kw}")
+    fresh = wt.Texture(image)
+    want = wt.stochastic(fresh, uv, Stochastic("hex", histogram=prepare_histogram(fresh))).numpy()
+    kept = len(_pack._packed[shared])
+    for k in range(2):
+        np.testing.assert_array_equal(wt.stochastic(shared, uv, Stochastic("hex", histogram=prepare_histogram(shared))).numpy(), want)
+    assert len(_pack._packed[shared]) == kept  # a histogram's option is not kept
 
 
 def test_lod_comes_from_the_unperturbed_derivatives(rng):

@@ -9,11 +9,13 @@ stochastically.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import footprints, lod_inputs, reshaped, resolve_layer, sampler_args, stochastic_args, struct_of, vec2_array
+from warptex._pack import footprints, lod_inputs, packed, reshaped, resolve_layer, sampler_args, stochastic_args, struct_of, vec2_array
 from warptex._validate import resolve_device
 from warptex.kernels import sampling as ks
 from warptex.kernels import stochastic as kst
@@ -70,21 +72,41 @@ def stochastic(
     device = resolve_device(func, device, texture.device)
     option = as_stochastic(func, method)
     sampler = as_sampler(func, sampler)
-    params, sampled = stochastic_args(func, option, texture, sampler)
     uv, given = vec2_array(func, "uv", uv, device), uv
     single = not isinstance(given, wp.array) and np.ndim(given) == 1  # one UV, shape (2,): a result of shape (C,)
     shape, count = uv.shape, uv.size
-    smp = sampler_args(func, sampler, has_lod=lod is not None or uv_dx is not None or uv_dy is not None, has_derivatives=uv_dx is not None or uv_dy is not None)
+    has_lod, has_derivatives = lod is not None or uv_dx is not None or uv_dy is not None, uv_dx is not None or uv_dy is not None
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
     constant_layer, layers = resolve_layer(func, texture, layer, shape, device)
 
+    def build() -> _Setup:
+        return _setup(func, texture, option, sampler, has_lod, has_derivatives, lod_source, constant_lod, constant_layer)
+
+    # Packed once per texture and options, but not with a histogram: the key would keep it, and a
+    # histogram's Gaussianised texture is as large as the texture.
+    setup = build() if option.histogram is not None else packed(texture, ("stochastic", option, sampler, has_lod, has_derivatives, lod_source, constant_lod, constant_layer), build)
+    pixels = struct_of(ks.SamplePixels, device, uv=reshaped(uv, (count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
+    out = run(kst.stochastic_kernels(), count, args=setup.args, pixels=pixels, out=((count, texture.channels), float), device=device, linear=setup.linear, footprints=setup.footprints)
+    return reshaped(out, (*(() if single else shape), texture.channels))
+
+
+class _Setup(NamedTuple):
+    """What a :func:`stochastic` call on a texture needs beside its per-UV inputs (:func:`_setup`)."""
+
+    args: kst.StochasticSampleArgs
+    footprints: int
+    linear: bool  # the histogram blend is not linear in the texels
+
+
+def _setup(func: str, texture: TextureArray, option: Stochastic, sampler: Sampler, has_lod: bool, has_derivatives: bool, lod_source: int, constant_lod: float, constant_layer: int) -> _Setup:
+    """The packed arguments of :func:`stochastic` on ``texture`` for these options, checked."""
+    params, sampled = stochastic_args(func, option, texture, sampler)
+    smp = sampler_args(func, sampler, has_lod=has_lod, has_derivatives=has_derivatives)
     plain = ks.SampleArgs()
     plain.tex, plain.smp, plain.lod_source, plain.constant_lod, plain.constant_layer, plain.level, plain.fraction = sampled.view, smp, lod_source, constant_lod, constant_layer, 0, 0.0
     args = kst.StochasticSampleArgs()
     args.sample, args.params = plain, params  # nested structs are set whole: Warp copies their values in
-    pixels = struct_of(ks.SamplePixels, device, uv=reshaped(uv, (count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
-    out = run(kst.stochastic_kernels(), count, args=args, pixels=pixels, out=((count, texture.channels), float), device=device, linear=params.histogram == 0, footprints=footprints(smp, params))
-    return reshaped(out, (*(() if single else shape), texture.channels))
+    return _Setup(args, footprints(smp, params), params.histogram == 0)
 
 
 def hex_taps(uv, *, seed: int = 0, contrast: float = 1.0, rotation: float = 0.0, device=None):
