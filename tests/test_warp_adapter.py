@@ -44,6 +44,8 @@ def test_struct_fields_and_a_new_struct_of_the_same_kind():
     assert [p for p, _ in found] == [f"tex.{n}" for n, v in _warp.struct_fields(args.tex).items() if isinstance(v, wp.array)]
     assert all(a is getattr(args.tex, p.split(".")[1]) for p, a in found)
     assert list(_warp.struct_arrays(args.smp)) == []  # no arrays (a vector, scalars)
+    assert [p for p, _ in _warp.struct_arrays(args, (wp.float32,))] == ["tex.texels"]  # vec4: float; the level tables: int32
+    assert [p for p, _ in _warp.struct_arrays(args, (wp.int32,))] == [p for p, _ in found if p != "tex.texels"]
     assert _warp.field_type(args, "tex") is ks.TextureView and _warp.field_type(args.tex, "num_levels") is wp.int32
 
 

@@ -82,9 +82,8 @@ def differentiable(value, path: str = ""):
         for name, field in value.items():
             yield from differentiable(field, f"{path}.{name}" if path else name)
     elif wp.types.is_struct(value):
-        for dotted, array in struct_arrays(value):
-            if scalar_type(array.dtype) in _FLOATS:
-                yield (f"{path}.{dotted}" if path else dotted), array
+        for dotted, array in struct_arrays(value, _FLOATS):
+            yield (f"{path}.{dotted}" if path else dotted), array
 
 
 def resolve(inputs: dict, path: str) -> wp.array | None:

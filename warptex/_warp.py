@@ -68,10 +68,12 @@ def field_type(value, name: str):
     return value._cls.vars[name].type
 
 
-def struct_arrays(value) -> Iterator[tuple[str, Any]]:
+def struct_arrays(value, scalars: tuple | None = None) -> Iterator[tuple[str, Any]]:
     """``(dotted path, array)`` of every array field of the ``@wp.struct`` instance ``value``,
-    those of its nested structs included, in declaration order (the paths cached per struct type)."""
-    for dotted, names in _paths(value._cls):
+    those of its nested structs included, in declaration order (the paths cached per struct type);
+    with ``scalars``, only the fields declared with one of those scalar types (e.g. the float
+    arrays, which can carry gradients: Warp refuses an array of another dtype)."""
+    for dotted, names in _paths(value._cls, scalars):
         array = value
         for name in names:
             array = getattr(array, name)
@@ -79,13 +81,14 @@ def struct_arrays(value) -> Iterator[tuple[str, Any]]:
 
 
 @functools.lru_cache(maxsize=None)
-def _paths(struct_t) -> tuple:
+def _paths(struct_t, scalars: tuple | None) -> tuple:
     paths = []
     for name, var in struct_t.vars.items():
         if wp.types.is_array(var.type):
-            paths.append((name, (name,)))
+            if scalars is None or scalar_type(var.type.dtype) in scalars:
+                paths.append((name, (name,)))
         elif isinstance(var.type, type(struct_t)):
-            paths += [(f"{name}.{dotted}", (name, *names)) for dotted, names in _paths(var.type)]
+            paths += [(f"{name}.{dotted}", (name, *names)) for dotted, names in _paths(var.type, scalars)]
     return tuple(paths)
 
 
