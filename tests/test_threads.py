@@ -566,3 +566,21 @@ def test_a_forked_child_starts_its_own_pool_threads(threads):
     _threads.side_by_side(lambda part: None, 2)  # the parent's pool is running
     with multiprocessing.get_context("fork").Pool(1) as pool:
         assert pool.apply_async(_threaded_sum_in_child).get(timeout=120) == 4.0 * 4 * _threads.MIN_PIXELS_PER_THREAD
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity") or _threads._getcpu is None or _threads.cpu_count() < 2, reason="needs Linux's sched_getcpu and 2 CPUs")
+def test_pool_threads_keep_off_the_callers_cpu():
+    """A hand-out keeps the pool threads off the CPU the caller runs on (Linux would otherwise wake
+    a worker that slept a while onto the caller's core, and both share it for the whole call)."""
+    seen = {}
+
+    def work(part):
+        if part:
+            seen[part] = (os.sched_getaffinity(0), _threads._getcpu())
+
+    for _ in range(3):
+        _threads.side_by_side(work, 3)
+        caller = _threads._kept_off
+        assert caller in os.sched_getaffinity(0)
+        for affinity, cpu in seen.values():
+            assert affinity == os.sched_getaffinity(0) - {caller} and cpu != caller
