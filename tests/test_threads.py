@@ -576,11 +576,12 @@ def test_pool_threads_keep_off_the_callers_cpu():
 
     def work(part):
         if part:
-            seen[part] = (os.sched_getaffinity(0), _threads._getcpu())
+            seen[part] = _threads._getcpu()
 
-    for _ in range(3):
-        _threads.side_by_side(work, 3)
+    for parts in (2, 3, 3, 5):  # more parts than threads so far: the new threads are kept off too
+        seen.clear()
+        _threads.side_by_side(work, parts)
         caller = _threads._kept_off
-        assert caller in os.sched_getaffinity(0)
-        for affinity, cpu in seen.values():
-            assert affinity == os.sched_getaffinity(0) - {caller} and cpu != caller
+        assert caller in os.sched_getaffinity(0) and len(_threads._worker_ids) >= parts - 1
+        assert all(os.sched_getaffinity(worker) == os.sched_getaffinity(0) - {caller} for worker in _threads._worker_ids)
+        assert sorted(seen) == list(range(1, parts)) and caller not in seen.values()

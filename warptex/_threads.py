@@ -116,13 +116,14 @@ def _run_task(work, part: int, done: threading.Lock, failures: list) -> None:
 
 def _start_workers(count: int) -> None:
     """At least ``count`` pool threads (daemons: they only run work a caller waits for)."""
-    global _started
+    global _started, _kept_off
     with _lock:
         while _started < count:
             thread = threading.Thread(target=_worker, name=f"warptex-{_started + 1}", daemon=True)
             thread.start()
             _worker_ids.append(thread.native_id)
             _started += 1
+            _kept_off = -1  # the new thread is kept off the caller's CPU too (side_by_side)
 
 
 def _sched_getcpu():
