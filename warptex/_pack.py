@@ -1,6 +1,7 @@
 """Public options and inputs packed into what kernels take: one place for every technique.
 
-- :func:`sampler_args`: a :class:`~warptex.Sampler` as ``SamplerArgs`` (``"auto"`` filtering resolved);
+- :func:`sampler_args`: a :class:`~warptex.Sampler` as ``SamplerArgs`` (``"auto"`` filtering resolved),
+  and :func:`sample_args`, a lookup's ``SampleArgs``;
 - :func:`stochastic_args`: a :class:`~warptex.Stochastic` as ``StochasticArgs``, with the texture
   the kernels must read (a histogram's Gaussianised copy, or the texture itself);
 - :func:`projection_args`: triplanar projection options as ``ProjectionArgs``;
@@ -25,6 +26,7 @@ from warptex._validate import as_device_array, as_float, as_float_array, param_a
 from warptex._warp import field_type
 from warptex.histogram import GAUSSIAN_MEAN, LUT_RANGE
 from warptex.kernels import projection as kp
+from warptex.kernels import sampling as ksa
 from warptex.kernels import stochastic as kst
 from warptex.kernels import texels as ks
 from warptex.options import Address, Filter, Method, Sampler, Stochastic
@@ -56,6 +58,16 @@ def sampler_args(func: str, sampler: Sampler, *, has_lod: bool, has_derivatives:
     smp.lod_bias, smp.min_lod, smp.max_lod = sampler.lod_bias, sampler.min_lod, sampler.max_lod
     smp.max_aniso = float(sampler.max_aniso)
     return smp
+
+
+def sample_args(func: str, texture: TextureArray, sampler: Sampler, lod_source: int, constant_lod: float, constant_layer: int) -> ksa.SampleArgs:
+    """A lookup of ``texture`` through ``sampler`` with the LOD source of :func:`lod_inputs` (which
+    says whether there is a LOD and UV derivatives), at level 0 (:func:`mip_levels` gives another)."""
+    args = ksa.SampleArgs()
+    smp = sampler_args(func, sampler, has_lod=lod_source != ks.LOD_NONE, has_derivatives=lod_source == ks.LOD_DERIVATIVES)
+    args.tex, args.smp, args.lod_source, args.constant_lod, args.constant_layer = texture.view, smp, lod_source, constant_lod, constant_layer
+    args.level, args.fraction = 0, 0.0
+    return args
 
 
 def mip_levels(lod: float, smp: ks.SamplerArgs, num_levels: int) -> tuple[int, float]:

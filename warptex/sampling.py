@@ -8,7 +8,7 @@ import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import footprints, lod_inputs, mip_levels, packed, reshaped, resolve_layer, sampler_args, struct_of, vec2_array
+from warptex._pack import footprints, lod_inputs, mip_levels, packed, reshaped, resolve_layer, sample_args, struct_of, vec2_array
 from warptex._validate import resolve_device
 from warptex.kernels import sampling as ks
 from warptex.kernels import texels as kx
@@ -50,11 +50,10 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
     single = not isinstance(given, wp.array) and np.ndim(given) == 1  # one UV, shape (2,): a result of shape (C,)
     shape, count = uv.shape, uv.size
     sampler = as_sampler(func, sampler)
-    has_lod, has_derivatives = lod is not None or uv_dx is not None or uv_dy is not None, uv_dx is not None or uv_dy is not None
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
     constant_layer, layers = resolve_layer(func, texture, layer, shape, device)
-    key = ("sample", sampler, has_lod, has_derivatives, lod_source, constant_lod, constant_layer)
-    setup = packed(texture, key, lambda: _setup(func, texture, sampler, has_lod, has_derivatives, lod_source, constant_lod, constant_layer))
+    key = ("sample", sampler, lod_source, constant_lod, constant_layer)
+    setup = packed(texture, key, lambda: _setup(func, texture, sampler, lod_source, constant_lod, constant_layer))
     pixels = struct_of(ks.SamplePixels, device, uv=reshaped(uv, (count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
     out = run(setup.kernels, count, args=setup.args, pixels=pixels, out=((count, texture.channels), float), device=device, footprints=setup.footprints, touched=setup.touched)
     return reshaped(out, (*(() if single else shape), texture.channels))
@@ -69,16 +68,13 @@ class _Setup(NamedTuple):
     touched: dict | None  # the texel entries the gradient can reach, when known (all levels otherwise)
 
 
-def _setup(func: str, texture: TextureArray, sampler: Sampler, has_lod: bool, has_derivatives: bool, lod_source: int, constant_lod: float, constant_layer: int) -> _Setup:
+def _setup(func: str, texture: TextureArray, sampler: Sampler, lod_source: int, constant_lod: float, constant_layer: int) -> _Setup:
     """The kernels and packed arguments of :func:`sample` on ``texture`` for these options: made once
     per texture and options (``warptex._pack.packed``), as a fit calls it again and again."""
-    smp = sampler_args(func, sampler, has_lod=has_lod, has_derivatives=has_derivatives)
-    args = ks.SampleArgs()
-    args.tex, args.smp, args.lod_source, args.constant_lod, args.constant_layer = texture.view, smp, lod_source, constant_lod, constant_layer
-    args.level, args.fraction = 0, 0.0
+    args = sample_args(func, texture, sampler, lod_source, constant_lod, constant_layer)
     touched = None
     level = lod_source in (kx.LOD_NONE, kx.LOD_CONSTANT)  # one LOD for all: its levels resolved here
     if level:
-        args.level, args.fraction = mip_levels(constant_lod, smp, texture.num_levels)
+        args.level, args.fraction = mip_levels(constant_lod, args.smp, texture.num_levels)
         touched = {"args.tex": texture.level_entries(args.level, args.level + 1 if args.fraction > 0.0 else args.level)}  # trilinear reads the next level too
-    return _Setup(ks.sample_kernels(level=level), args, footprints(smp), touched)
+    return _Setup(ks.sample_kernels(level=level), args, footprints(args.smp), touched)

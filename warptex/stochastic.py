@@ -15,7 +15,7 @@ import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import footprints, lod_inputs, packed, reshaped, resolve_layer, sampler_args, stochastic_args, struct_of, vec2_array
+from warptex._pack import footprints, lod_inputs, packed, reshaped, resolve_layer, sample_args, stochastic_args, struct_of, vec2_array
 from warptex._validate import resolve_device
 from warptex.kernels import sampling as ks
 from warptex.kernels import stochastic as kst
@@ -75,16 +75,15 @@ def stochastic(
     uv, given = vec2_array(func, "uv", uv, device), uv
     single = not isinstance(given, wp.array) and np.ndim(given) == 1  # one UV, shape (2,): a result of shape (C,)
     shape, count = uv.shape, uv.size
-    has_lod, has_derivatives = lod is not None or uv_dx is not None or uv_dy is not None, uv_dx is not None or uv_dy is not None
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
     constant_layer, layers = resolve_layer(func, texture, layer, shape, device)
 
     def build() -> _Setup:
-        return _setup(func, texture, option, sampler, has_lod, has_derivatives, lod_source, constant_lod, constant_layer)
+        return _setup(func, texture, option, sampler, lod_source, constant_lod, constant_layer)
 
     # Packed once per texture and options, but not with a histogram: the key would keep it, and a
     # histogram's Gaussianised texture is as large as the texture.
-    setup = build() if option.histogram is not None else packed(texture, ("stochastic", option, sampler, has_lod, has_derivatives, lod_source, constant_lod, constant_layer), build)
+    setup = build() if option.histogram is not None else packed(texture, ("stochastic", option, sampler, lod_source, constant_lod, constant_layer), build)
     pixels = struct_of(ks.SamplePixels, device, uv=reshaped(uv, (count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
     out = run(kst.stochastic_kernels(), count, args=setup.args, pixels=pixels, out=((count, texture.channels), float), device=device, linear=setup.linear, footprints=setup.footprints)
     return reshaped(out, (*(() if single else shape), texture.channels))
@@ -98,15 +97,12 @@ class _Setup(NamedTuple):
     linear: bool  # the histogram blend is not linear in the texels
 
 
-def _setup(func: str, texture: TextureArray, option: Stochastic, sampler: Sampler, has_lod: bool, has_derivatives: bool, lod_source: int, constant_lod: float, constant_layer: int) -> _Setup:
+def _setup(func: str, texture: TextureArray, option: Stochastic, sampler: Sampler, lod_source: int, constant_lod: float, constant_layer: int) -> _Setup:
     """The packed arguments of :func:`stochastic` on ``texture`` for these options, checked."""
     params, sampled = stochastic_args(func, option, texture, sampler)
-    smp = sampler_args(func, sampler, has_lod=has_lod, has_derivatives=has_derivatives)
-    plain = ks.SampleArgs()
-    plain.tex, plain.smp, plain.lod_source, plain.constant_lod, plain.constant_layer, plain.level, plain.fraction = sampled.view, smp, lod_source, constant_lod, constant_layer, 0, 0.0
     args = kst.StochasticSampleArgs()
-    args.sample, args.params = plain, params  # nested structs are set whole: Warp copies their values in
-    return _Setup(args, footprints(smp, params), params.histogram == 0)
+    args.sample, args.params = sample_args(func, sampled, sampler, lod_source, constant_lod, constant_layer), params  # nested structs are set whole: Warp copies their values in
+    return _Setup(args, footprints(args.sample.smp, params), params.histogram == 0)
 
 
 def hex_taps(uv, *, seed: int = 0, contrast: float = 1.0, rotation: float = 0.0, device=None):
