@@ -14,8 +14,15 @@ Scenes: the orthographic unit sphere (positions × 4 as triplanar coordinates; s
 read the Z projection's UV and derivatives), the default terrain from its default camera, and
 random UVs. Figures: Msamples/s = shaded (covered) pixels or UVs per second; nominal taps/s =
 Msamples/s × the texel reads a sample makes at most (trilinear reads 8; zero-weight projections,
-layers and stochastic taps are skipped, so real reads are fewer). Every time is the minimum of
-``--repeats`` timed runs after a warm-up run.
+layers and stochastic taps are skipped, so real reads are fewer).
+
+Every figure of a row (warptex at each thread count, each peer, each pass) is timed in the same
+``--repeats`` interleaved rounds, and is the fastest of its rounds. A round takes every figure in
+turn: a 50 ms pause (Dr.Jit's and torch's thread pools spin for up to ~25 ms after a call and would
+take a core from the next), one untimed call (it wakes the pool and refills the caches the previous
+figure took), then one timed call. Interleaving gives every figure the same share of the host's
+drift; on a shared host the same code's time moves by 2x over seconds, and figures timed one after
+another would put that drift into their ratio.
 
     python benchmarks/bench_samplers.py                      # full run, writes bench_out/
     python benchmarks/bench_samplers.py --quick --json r.json
@@ -122,18 +129,33 @@ def samples(data: dict) -> int:
 # -- timing -------------------------------------------------------------------------------------------
 
 
-def best_time(run, repeats: int, sync=wp.synchronize) -> float:
-    """Seconds of the fastest of ``repeats`` runs after one warm-up run (compiles, allocates); each
-    run ends with ``sync()``, which waits for work queued on a GPU."""
-    run()
-    sync()
-    best = float("inf")
+PAUSE_S = 0.05  # before each timed figure of a round: longer than the peers' pools spin after a call
+
+
+def interleaved_best(runs: dict, repeats: int, pause: float = PAUSE_S) -> dict:
+    """Seconds of the fastest call of each of ``runs``, timed in ``repeats`` interleaved rounds.
+
+    ``runs`` maps a name to ``(run, sync, setup)``. Each round takes every entry in turn: sleep
+    ``pause`` seconds, ``setup()`` (e.g. warptex's thread count), one untimed call, then one timed
+    call; both calls end with ``sync()``, which waits for work queued on a GPU. The first round's
+    untimed call also compiles and allocates.
+    """
+    best = dict.fromkeys(runs, float("inf"))
     for _ in range(repeats):
-        t = time.perf_counter()
-        run()
-        sync()
-        best = min(best, time.perf_counter() - t)
+        for name, (run, sync, setup) in runs.items():
+            time.sleep(pause)
+            setup()
+            run()
+            sync()
+            t = time.perf_counter()
+            run()
+            sync()
+            best[name] = min(best[name], time.perf_counter() - t)
     return best
+
+
+def _nothing() -> None:
+    pass
 
 
 def warptex_runs(technique: str, data: dict, objs: dict, device=None):
@@ -185,38 +207,47 @@ def measure_technique(technique: str, scene: str, args, tex, cache, backends: di
         return rec
 
     forward, forward_backward = warptex_runs(technique, data, objs, args.device)
-    reference = {}
+    runs, reference = {}, {}
     thread_counts = [None] if cuda else args.thread_counts  # a CUDA launch fills the device
     for threads in thread_counts:
         wt.set_num_threads(threads)
         out = forward().numpy()
         reference[threads] = out.reshape(-1, out.shape[-1])
-        record("warptex", "forward", threads, best_time(forward, args.repeats))
-        record("warptex", "forward+backward", threads, best_time(forward_backward, args.repeats))
-    wt.set_num_threads(None if cuda else args.threads)
+        setup = lambda threads=threads: wt.set_num_threads(threads)
+        runs["warptex", "forward", threads] = (forward, wp.synchronize, setup)
+        runs["warptex", "forward+backward", threads] = (forward_backward, wp.synchronize, setup)
     peer_threads = None if cuda else args.threads
     single_vs_all = max((float(np.nanmax(np.abs(r - reference[thread_counts[0]]))) if r.size else 0.0) for r in reference.values())
 
     expected = reference[peer_threads]
     if "mask" in data:
         expected = expected[data["mask"] > 0] if expected.shape[0] == data["mask"].shape[0] else expected
+    extras = {}
     for backend, table in backends.items():
         peer = table.get(technique)
         if peer is None:
             continue
         if not cuda:
             peers.set_threads(backend, args.threads)
-        sync = lambda: peers.synchronize(backend)  # noqa: E731
-        state = peer.prepare(data)
+        sync = lambda backend=backend: peers.synchronize(backend)  # noqa: E731
         try:
+            state = peer.prepare(data)
             out = np.asarray(peer.output(peer.forward(state)), np.float32)
             got = out[data["mask"] > 0] if "mask" in data and out.shape[0] == data["mask"].shape[0] else out
             diff = float(np.nanmax(np.abs(got - expected))) if got.size else 0.0
-            record(backend, "forward", peer_threads, best_time(lambda: peer.forward(state), args.repeats, sync), max_abs_diff=diff, note=peer.note)
+            runs[backend, "forward", peer_threads] = (lambda peer=peer, state=state: peer.forward(state), sync, _nothing)
+            extras[backend, "forward", peer_threads] = {"max_abs_diff": diff, "note": peer.note}
             if peer.forward_backward is not None:
-                record(backend, "forward+backward", peer_threads, best_time(lambda: peer.forward_backward(state), args.repeats, sync), note=peer.note)
+                peer.forward_backward(state)  # a peer that cannot hold the gradients fails here, untimed
+                runs[backend, "forward+backward", peer_threads] = (lambda peer=peer, state=state: peer.forward_backward(state), sync, _nothing)
+                extras[backend, "forward+backward", peer_threads] = {"note": peer.note}
         except MemoryError as err:  # a peer that cannot hold the scene is reported, not fatal
             report(f"  {backend}: skipped ({err})")
+            for key in [k for k in runs if k[0] == backend]:
+                del runs[key]
+    for key, seconds in interleaved_best(runs, args.repeats).items():
+        record(*key, seconds, **extras.get(key, {}))
+    wt.set_num_threads(peer_threads)
     report(format_rows(records, single_vs_all))
     for rec in records:
         rec["threaded_max_abs_diff"] = single_vs_all
@@ -290,18 +321,18 @@ def scaling(args, backends: dict, report) -> dict:
     for res in args.scaling_pixels:
         g = sphere(res, args.device)
         data = common.gbuffer_data(g, texture=tex, tiling=SPHERE_TILING)
-        row = {"warptex": best_time(lambda: wt.triplanar(g, tex, tiling=SPHERE_TILING), args.repeats)}
+        runs = {"warptex": (lambda g=g: wt.triplanar(g, tex, tiling=SPHERE_TILING), wp.synchronize, _nothing)}
         for backend, table in backends.items():
             peer = table.get("triplanar")
             if peer is not None:
                 state = peer.prepare(data)
-                row[backend] = best_time(lambda: peer.forward(state), args.repeats, lambda: peers.synchronize(backend))
-        out["pixels"][res] = row
+                runs[backend] = (lambda peer=peer, state=state: peer.forward(state), lambda backend=backend: peers.synchronize(backend), _nothing)
+        out["pixels"][res] = row = interleaved_best(runs, args.repeats)
         report(f"  pixels {res}²: " + "  ".join(f"{k} {v * 1e3:.1f} ms" for k, v in row.items()))
     g = sphere(args.scaling_pixels[len(args.scaling_pixels) // 2], args.device)
     for size in args.scaling_textures:
         t = texture(size, device=args.device)
-        out["texture"][size] = {"warptex": best_time(lambda: wt.triplanar(g, t, tiling=SPHERE_TILING), args.repeats)}
+        out["texture"][size] = interleaved_best({"warptex": (lambda t=t: wt.triplanar(g, t, tiling=SPHERE_TILING), wp.synchronize, _nothing)}, args.repeats)
         report(f"  texture {size}²: warptex {out['texture'][size]['warptex'] * 1e3:.1f} ms")
     return out
 

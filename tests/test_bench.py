@@ -43,6 +43,42 @@ def test_quick_benchmark_writes_json_and_plot(tmp_path):
         assert row.rstrip().endswith(want.strip()), (row, want)  # each peer's time over warptex's, same threads
 
 
+
+@pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/ is not part of this checkout")
+def test_figures_are_timed_in_interleaved_rounds(monkeypatch):
+    """Each round runs every figure in turn (pause, setup, untimed call, timed call), and a figure is
+    its fastest timed call, so drift of the host over the rounds lands on every figure alike."""
+    sys.path.insert(0, str(BENCH.parent))
+    try:
+        import bench_samplers
+    finally:
+        sys.path.remove(str(BENCH.parent))
+    events, clock = [], [0.0]
+    durations = {"a": iter([9, 5, 9, 7, 9, 6]), "b": iter([9, 4, 9, 8, 9, 3])}  # untimed, timed, ... per round
+
+    class FakeTime:
+        @staticmethod
+        def sleep(seconds):
+            events.append(("pause", seconds))
+
+        @staticmethod
+        def perf_counter():
+            return clock[0]
+
+    def figure(name):
+        def run():
+            events.append(("run", name))
+            clock[0] += next(durations[name])
+
+        return (run, lambda: events.append(("sync", name)), lambda: events.append(("setup", name)))
+
+    monkeypatch.setattr(bench_samplers, "time", FakeTime)
+    best = bench_samplers.interleaved_best({"a": figure("a"), "b": figure("b")}, repeats=3, pause=0.25)
+    assert best == {"a": 5, "b": 3}
+    block = lambda n: [("pause", 0.25), ("setup", n), ("run", n), ("sync", n), ("run", n), ("sync", n)]  # noqa: E731
+    assert events == (block("a") + block("b")) * 3
+
+
 BENCH_TORCH = BENCH.parent / "bench_torch.py"
 BENCH_VIEWS = BENCH.parent / "bench_views.py"
 
