@@ -12,7 +12,7 @@ import trimesh
 import warp as wp
 
 import warptex as wt
-from warptex import _launch, _op
+from warptex import _launch, _memory
 from warptex._op import one_pixel_kernels
 from warptex.kernels.lanes import LANES
 
@@ -403,14 +403,20 @@ def test_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter
     assert threads > 1 or (("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched) == takes
 
 
-def test_splat_gradient_lanes_read_the_colours_their_own_forward_kept(rng, launched):
+def test_splat_gradient_lanes_read_the_colours_their_own_forward_kept(rng, launched, monkeypatch):
     """A splat recorded with gradients keeps its layers' colours for its backward lane
     (``SplatPixels.saved``): two of one size on one tape each read their own, and one recorded after
-    that tape is gone takes a spare array still holding their colours, and overwrites every entry."""
+    that tape is gone takes the kept block still holding their colours (``warptex._memory``), and
+    overwrites every entry."""
+    monkeypatch.setattr(_memory, "MIN_BYTES", 0)  # this small test's 240 kB of colours are kept too
     g = _splat_gbuffer(rng, 3000)
     layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True)
     maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False, requires_grad=True)
     weights = rng.normal(size=(3000, 4)).astype(np.float32)
+    colours = 3000 * 20 * 4  # bytes: 5 layers of RGBA a pixel
+    taken = []
+    take = _memory._take
+    monkeypatch.setattr(_memory, "_take", lambda nbytes: taken.append((nbytes, take(nbytes))) or taken[-1][1])
 
     def grads(one_pixel: bool, tilings) -> list:
         layers.zero_grad()
@@ -426,21 +432,13 @@ def test_splat_gradient_lanes_read_the_colours_their_own_forward_kept(rng, launc
 
     for a, b in zip(grads(False, (1.0, 2.5)), grads(True, (1.0, 2.5))):
         _same_bits(a, b)
-    assert any(spare.shape == (3000, 20) for spare in _op._spares)  # the first tape's, now spare
+    kept = {address for nbytes, address in _memory._spares if nbytes == colours}
+    assert kept  # the first tape's, given back
+    taken.clear()
     for a, b in zip(grads(False, (0.7,)), grads(True, (0.7,))):
         _same_bits(a, b)
+    assert any(nbytes == colours and address in kept for nbytes, address in taken)
     assert sum(1 for name, _ in launched if name == "splat8_texel_grad_lanes") == 3
-
-
-def test_spare_arrays_are_the_latest_within_their_byte_budget(monkeypatch):
-    monkeypatch.setattr(_op, "SPARE_BYTES", 1000)
-    monkeypatch.setattr(_op, "_spares", [])
-    small = [wp.empty((10, 10), dtype=float) for _ in range(3)]  # 400 bytes each
-    for a in small:
-        _op._spare(a)
-    assert [id(a) for a in _op._spares] == [id(a) for a in small[1:]]  # the oldest went
-    _op._spare(wp.empty((100, 10), dtype=float))  # 4000 bytes: more than the budget alone
-    assert _op._spares == []
 
 
 @pytest.mark.parametrize("threads", [1, 3])

@@ -32,6 +32,7 @@ from typing import Iterator, NamedTuple
 import warp as wp
 
 from warptex._accumulate import Copy, private, run_ordered, slot_count, with_private_grads
+from warptex._memory import empty
 from warptex._pack import empty_array
 from warptex._threads import Split, cpu_count, grad_bounds, workers_for
 from warptex._warp import active_tape, struct_arrays
@@ -44,11 +45,12 @@ GENERATED = "generated"
 
 def output(shape, dtype, device, requires_grad: bool = False) -> wp.array:
     """A new per-pixel output for :func:`launch` (first axis: one row per pixel), and its gradient
-    when ``requires_grad``: allocated, not zeroed; :func:`launch` zeroes both, chunk by chunk on
-    the threads that fill them (module docstring)."""
-    out = wp.empty(shape, dtype=dtype, device=device)
+    when ``requires_grad``: allocated (on the CPU from a kept block, ``warptex._memory``), not
+    zeroed; :func:`launch` zeroes both, chunk by chunk on the threads that fill them (module
+    docstring)."""
+    out = empty(shape, dtype, device)
     if requires_grad:
-        out.grad = wp.empty(shape, dtype=dtype, device=device)
+        out.grad = empty(shape, dtype, device)
     return out
 
 

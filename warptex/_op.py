@@ -17,18 +17,19 @@ A technique hands :func:`run` its :class:`~warptex.kernels.family.Kernels`, its 
   composes it: the first step's intermediates, then the second step with its own backward;
 - **what the forward keeps for the backward**: where the CPU's lane kernels run both the launch and
   its hand-written backward, the values ``Kernels.lane_saved`` names, in an array the recorded pass
-  holds (a spare one where there is one, :func:`_kept`).
+  holds (made by ``warptex._memory.empty``: a new 50 MB array cost ~25 ms of page faults here on
+  its first writes, more than keeping the values saves).
 """
 
 from __future__ import annotations
 
 import contextlib
 import threading
-import weakref
 
 import warp as wp
 
 from warptex._launch import GENERATED, Target, launch, output, scatter
+from warptex._memory import empty
 from warptex._warp import active_tape, scalar_type, struct_arrays, struct_fields, struct_like
 from warptex.kernels.family import PIXELS, Kernels, Staged
 from warptex.kernels.texels import TextureView
@@ -149,44 +150,14 @@ def _run_path(kernels: Kernels, path: str, count: int, inputs: dict, result, dev
             if lanes is None or not wp.get_device(device).is_cpu:
                 grad_lanes = None  # (none kept: the one-pixel gradient)
             else:
-                inputs["pixels"].saved = _kept((count, kernels.lane_saved(inputs["args"])), device, owner=inputs["pixels"])
+                # held by the recorded pass alone; once it is gone, a kept block for the next (warptex._memory)
+                inputs["pixels"].saved = empty((count, kernels.lane_saved(inputs["args"])), float, device)
         launch(kernels.forward, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, lanes=lanes, **cut,
                backward=_texel_gradient(kernels, count, inputs, result, device, cut, touched, grad_lanes))  # fmt: skip
     elif kernels.adjoint is not None:
         launch(kernels.adjoint, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, **cut, backward=GENERATED)
     else:
         raise RuntimeError("warptex internal error: a gradient was asked for that this technique has no kernel for")
-
-
-# Arrays a lane forward kept values in for a backward pass that is gone, for the next of the same
-# shape (_kept): the first writes into a new 50 MB array cost ~25 ms of page faults here, more than
-# keeping the values saves. The latest, up to SPARE_BYTES together; a larger one is freed.
-_spares: list = []
-_spares_lock = threading.Lock()
-SPARE_BYTES = 256 << 20
-
-
-def _kept(shape: tuple, device, owner) -> wp.array:
-    """An uninitialised float array of ``shape`` on ``device`` for a lane forward to keep values in
-    (``Kernels.lane_saved``), a spare one where there is one; a spare again once ``owner`` (what the
-    recorded backward pass holds, and nothing else) is collected."""
-    array = None
-    with _spares_lock:
-        for k, spare in enumerate(_spares):
-            if spare.shape == shape and spare.device == device:
-                array = _spares.pop(k)
-                break
-    if array is None:
-        array = wp.empty(shape, dtype=float, device=device)
-    weakref.finalize(owner, _spare, array)
-    return array
-
-
-def _spare(array: wp.array) -> None:
-    with _spares_lock:
-        _spares.append(array)
-        while sum(a.capacity for a in _spares) > SPARE_BYTES:
-            del _spares[0]
 
 
 def _texel_gradient(kernels: Kernels, count: int, inputs: dict, result, device, cut: dict, touched, lanes):
