@@ -8,7 +8,7 @@ so the gradients are the same bits, and the same tile marks (``scatter.mark_rows
 
 import warp as wp
 
-from .lanes import cpu_snippet, lane_colours, lane_ints, lane_reads
+from .lanes import FOOTPRINT_CPP, SAMPLE_READS_CPP, cpu_snippet, lane_colours, lane_ints, lane_reads
 from .texels import TILE_SHIFT, SamplerArgs, TexelGrad, TextureView
 
 # scatter.scatter_levels for the lane: reads r = 0 .. reads - 1 of every lane pixel, read r from
@@ -218,4 +218,26 @@ def scatter_lod_lanes(tex0: TextureView, tex1: TextureView, tex2: TextureView, g
     ``weigh``; ``g[l]`` where not): read ``r`` of ``tex_r`` (layer ``layers[l]``) at its UV and LOD
     in ``reads`` (:data:`~.lanes.lane_reads`), into ``grad_r`` (nothing where it is empty), where its
     weight is positive, pixel by pixel and read by read as the scalar kernels add them."""
+    ...
+
+
+_SCATTER_SAMPLE = FOOTPRINT_CPP + _SCATTER_LOD_CORE + SAMPLE_READS_CPP + r"""
+wp::mat_t<WT_L, 4, float> g;  // texels.read_channels of the lane's output gradients
+for (int l = 0; l < WT_L; ++l) {
+    const char* row = (const char*)adj.data + (long long)(base + (l < count ? l : 0)) * adj.strides[0];
+    for (int c = 0; c < 4; ++c) g.data[l][c] = c < adj.shape[1] ? *(const float*)(row + (long long)c * adj.strides[1]) : 0.0f;
+}
+const decltype(tex)* texs[1] = {&tex};
+const decltype(grad)* grads[1] = {&grad};
+wt_scatter_lod(texs, grads, smp, 1, lane_layer, reads, 0, g);
+"""
+
+
+@wp.func_native(cpu_snippet(_SCATTER_SAMPLE))
+def scatter_footprint_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, uv: wp.array(dtype=wp.vec2), uv_dx: wp.array(dtype=wp.vec2), uv_dy: wp.array(dtype=wp.vec2),
+                           lods: wp.array(dtype=float), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32, lod_source: wp.int32, constant_lod: float,
+                           adj: wp.array2d(dtype=float), base: wp.int32):  # fmt: skip
+    """:func:`~warptex.kernels.scatter.scatter_footprint` of the gradient ``adj[i]`` for the lane's
+    pixels ``i = base ..`` (:func:`~.lanes.sample_footprint_lane`'s reads), one-tap footprints only
+    (every filter but the anisotropic one)."""
     ...

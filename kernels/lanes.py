@@ -21,7 +21,7 @@ texel-gradient twins of these helpers are in :mod:`.lane_scatter`.
 import warp as wp
 
 from .footprint import LOG2_CPP
-from .texels import SamplerArgs, TextureView
+from .texels import LOD_CONSTANT, LOD_DERIVATIVES, LOD_PER_SAMPLE, SamplerArgs, TextureView
 
 #: Pixels per lane: one launch index of a lane kernel computes pixels ``LANES·t .. LANES·t + LANES - 1``
 #: (fewer in a launch's last lane). 16 float32 lanes fill an AVX-512 register.
@@ -317,6 +317,99 @@ auto wt_accumulate_footprint = [&](const auto& tex, const auto& smp, const int* 
 """ % {"lanes": LANES} + LOG2_CPP
 
 
+# footprint.uv_footprint for a lane, and a lane_reads matrix's rows of a read: after _CORE, for the
+# helpers that work out footprints (.projection_lanes, and sample's below).
+FOOTPRINT_CPP = r"""
+// footprint.uv_footprint for the lane: the footprint (lod, step u, step v, taps) of UV derivatives
+// (dx0, dx1), (dy0, dy1) on a level-0 image of width × height texels. Every branch of the scalar block
+// is computed for every lane and chosen by selects; one log2 a lane, as the scalar block takes it.
+struct wt_footprint_lanes { wt_vf lod, du, dv, taps; };
+auto wt_vsqrt = [](wt_vf x) __attribute__((always_inline)) -> wt_vf { float a[WT_L]; __builtin_memcpy(a, &x, sizeof(a)); for (int l = 0; l < WT_L; ++l) a[l] = wp::sqrt(a[l]); __builtin_memcpy(&x, a, sizeof(a)); return x; };
+auto wt_vceil = [](wt_vf x) __attribute__((always_inline)) -> wt_vf { float a[WT_L]; __builtin_memcpy(a, &x, sizeof(a)); for (int l = 0; l < WT_L; ++l) a[l] = wp::ceil(a[l]); __builtin_memcpy(&x, a, sizeof(a)); return x; };
+auto wt_footprint = [&](const auto& smp, wt_vf dx0, wt_vf dx1, wt_vf dy0, wt_vf dy1, float width, float height) __attribute__((always_inline)) -> wt_footprint_lanes {
+    const wt_vf zero = 0.0f, one = 1.0f;
+    const wt_vf a0 = dx0 * width, a1 = dx1 * height, b0 = dy0 * width, b1 = dy1 * height;  // level-0 texels
+    const wt_vf aa = a0 * a0 + a1 * a1, bb = b0 * b0 + b1 * b1;
+    wt_vf arg = wt_vmin(wt_vmax(wt_vmax(aa, bb), 1.0e-30f), wt_float_max);  // footprint_lod's: log2 of the longer axis
+    wt_vi ellipse = 0;  // an anisotropic footprint's LOD, log2(extent), not halved and not NaN-checked
+    wt_footprint_lanes fp = {zero, zero, zero, one};
+    if (smp.filter == WT_ANISOTROPIC) {
+        const wt_vf h = aa - bb, ab = a0 * b0 + a1 * b1, round_floor = 1.0e-6f * (aa + bb);
+        const wt_vi round = h * h + ab * ab < round_floor * round_floor;  // round_footprint
+        const wt_vf A = a0 * a0 + b0 * b0, C = a1 * a1 + b1 * b1, area = A + C;  // anisotropic_footprint
+        const wt_vf B = a0 * a1 + b0 * b1, half_diff = 0.5f * (A - C), floor = 1.0e-6f * area;
+        const wt_vf root = wt_vsqrt(wt_vmax(half_diff * half_diff + B * B, floor * floor));
+        const wt_vf major2 = 0.5f * area + root, major = wt_vsqrt(major2);
+        const wt_vf minor = wt_vabs(a0 * b1 - a1 * b0) / major;
+        const wt_vf extent = wt_vmax(minor, major / smp.max_aniso);
+        const wt_vf taps = wt_vmin(wt_vmax(one, wt_vceil(major / extent - 1.0e-3f)), (wt_vf)smp.max_aniso);  // wp.clamp(x, 1, max_aniso)
+        const wt_vf o0 = major2 - C, o1 = B;  // the major axis: the longer of two eigenvector expressions
+        const wt_vi other = o0 * o0 + o1 * o1 > B * B + (major2 - A) * (major2 - A);
+        const wt_vf v0 = wt_sel(other, o0, B), v1 = wt_sel(other, o1, major2 - A);
+        const wt_vf length = wt_vsqrt(v0 * v0 + v1 * v1);
+        const wt_vf scale = major / taps;
+        ellipse = ~round & (area > 1.0e-12f) & (area < 1.0e18f);
+        const wt_vi several = ellipse & (taps != 1.0f);
+        arg = wt_sel(round, 0.5f * (aa + bb), wt_sel(ellipse, extent, arg));
+        fp.du = wt_sel(several, ((v0 / length) * scale) / width, zero);
+        fp.dv = wt_sel(several, ((v1 / length) * scale) / height, zero);
+        fp.taps = wt_sel(ellipse, taps, one);
+    }
+    float args[WT_L], logs[WT_L];
+    __builtin_memcpy(args, &arg, sizeof(args));
+    for (int l = 0; l < WT_L; ++l) logs[l] = wt_log2(args[l]);  // footprint.lod_log2
+    wt_vf log;
+    __builtin_memcpy(&log, logs, sizeof(log));
+    fp.lod = wt_sel(ellipse, log, wt_sel(aa + bb == aa + bb, 0.5f * log, __builtin_nanf("")));
+    return fp;
+};
+// Read r's rows of a lane_reads matrix: u, v, lod, weight, step u, step v, taps (zero where not read).
+auto wt_put_read = [&](wp::mat_t<21, WT_L, float>& out, int r, wt_vi read, wt_vf u, wt_vf v, const wt_footprint_lanes& fp, wt_vf weight) __attribute__((always_inline)) {
+    const wt_vf zero = 0.0f;
+    const wt_vf rows[7] = {wt_sel(read, u, zero), wt_sel(read, v, zero), wt_sel(read, fp.lod, zero), wt_sel(read, weight, zero), wt_sel(read, fp.du, zero), wt_sel(read, fp.dv, zero), wt_sel(read, fp.taps, zero)};
+    for (int q = 0; q < 7; ++q) __builtin_memcpy(out.data[3 * q + r], &rows[q], sizeof(wt_vf));
+};
+"""
+
+# sampling.sample_footprint_of and texels.resolve_layer for the lane's pixels base .. base + count - 1
+# (the tail repeats pixel base and is not read): `reads`, read 0 of a lane_reads matrix (weight 1), and
+# each pixel's layer (clamped where it is read). After FOOTPRINT_CPP; shared by the forward below and
+# its texel gradient (.lane_scatter).
+SAMPLE_READS_CPP = r"""
+const int n = uv.shape[0];
+const int count = n - base < WT_L ? n - base : WT_L;
+float raw[2][WT_L];
+wt_rows(uv, base, count, 2, raw);
+wt_vf U, V;
+__builtin_memcpy(&U, raw[0], sizeof(U));
+__builtin_memcpy(&V, raw[1], sizeof(V));
+wt_footprint_lanes fp = {(wt_vf)0.0f, (wt_vf)0.0f, (wt_vf)0.0f, (wt_vf)1.0f};  // footprint.point_footprint(0)
+if (lod_source == %(derivatives)d) {  // footprint.texture_footprint
+    float dx[2][WT_L], dy[2][WT_L];
+    wt_rows(uv_dx, base, count, 2, dx);
+    wt_rows(uv_dy, base, count, 2, dy);
+    wt_vf DX[2], DY[2];
+    for (int e = 0; e < 2; ++e) __builtin_memcpy(&DX[e], dx[e], sizeof(wt_vf)), __builtin_memcpy(&DY[e], dy[e], sizeof(wt_vf));
+    fp = wt_footprint(smp, DX[0], DX[1], DY[0], DY[1], (float)wt_int(tex.level_width, 0), (float)wt_int(tex.level_height, 0));
+} else if (lod_source == %(per_sample)d) {
+    float lod[1][WT_L];
+    wt_rows(lods, base, count, 1, lod);
+    __builtin_memcpy(&fp.lod, lod[0], sizeof(wt_vf));
+} else if (lod_source == %(constant)d) {
+    fp.lod = constant_lod;
+}
+int lane_layer[WT_L], in_lane[WT_L];
+for (int l = 0; l < WT_L; ++l) {
+    lane_layer[l] = layers.shape[0] > 0 ? wt_int(layers, base + (l < count ? l : 0)) : constant_layer;
+    in_lane[l] = l < count ? -1 : 0;
+}
+wt_vi read;
+__builtin_memcpy(&read, in_lane, sizeof(read));
+wp::mat_t<21, WT_L, float> reads;
+wt_put_read(reads, 0, read, U, V, fp, (wt_vf)1.0f);
+""" % {"derivatives": int(LOD_DERIVATIVES), "per_sample": int(LOD_PER_SAMPLE), "constant": int(LOD_CONSTANT)}
+
+
 def cpu_snippet(body: str, cuda: str = "") -> str:
     """A native helper's snippet: the shared core and ``body`` on the CPU, ``cuda`` (never run: lane
     kernels are CPU-only) when NVRTC compiles it."""
@@ -369,6 +462,30 @@ def sample_levels_lane(tex: TextureView, smp: SamplerArgs, uv: wp.array(dtype=wp
     """``out[i] =`` :func:`~warptex.kernels.filters.sample_levels` at ``uv[i]`` (NaN where it is not
     finite) on ``level``, blended by ``fraction`` with the next, for the lane's pixels ``i = base ..``:
     layer ``layers[i]`` clamped to the array, or ``constant_layer`` where ``layers`` is empty."""
+    ...
+
+
+_SAMPLE = FOOTPRINT_CPP + SAMPLE_READS_CPP + r"""
+wp::mat_t<WT_L, 4, float> value;
+wt_accumulate_footprint(tex, smp, lane_layer, reads.data[0], reads.data[3], reads.data[6], reads.data[12], reads.data[15], reads.data[18], reads.data[9], 0, value);
+char* ob = (char*)out.data;  // texels.write_channels
+const int channels = out.shape[1];
+for (int l = 0; l < count; ++l) {
+    char* row = ob + (long long)(base + l) * out.strides[0];
+    if (channels == 4 && out.strides[1] == 4) __builtin_memcpy(row, value.data[l], 16);
+    else for (int c = 0; c < channels; ++c) *(float*)(row + (long long)c * out.strides[1]) = value.data[l][c];
+}
+"""
+
+
+@wp.func_native(cpu_snippet(_SAMPLE))
+def sample_footprint_lane(tex: TextureView, smp: SamplerArgs, uv: wp.array(dtype=wp.vec2), uv_dx: wp.array(dtype=wp.vec2), uv_dy: wp.array(dtype=wp.vec2), lods: wp.array(dtype=float),
+                          layers: wp.array(dtype=wp.int32), constant_layer: wp.int32, lod_source: wp.int32, constant_lod: float, out: wp.array2d(dtype=float), base: wp.int32):  # fmt: skip
+    """``out[i] =`` :func:`~warptex.kernels.filters.sample_footprint` at ``uv[i]`` over the footprint
+    that ``lod_source`` gives (``sampling.sample_footprint_of``: ``constant_lod``, ``lods[i]`` or the
+    derivatives ``uv_dx[i]``, ``uv_dy[i]``; NaN where a tap's UV or the LOD is not finite), for the
+    lane's pixels ``i = base ..``: layer ``layers[i]`` clamped to the array, or ``constant_layer``
+    where ``layers`` is empty."""
     ...
 
 

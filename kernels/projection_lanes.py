@@ -17,57 +17,14 @@ import warp as wp
 
 from .faces import FaceTextures
 from .family import lane_covered
-from .lanes import cpu_snippet, lane_colours, lane_ints, lane_reads
+from .lanes import FOOTPRINT_CPP, cpu_snippet, lane_colours, lane_ints, lane_reads
 from .projection import ProjectionArgs, SurfacePixels
 from .texels import SamplerArgs, TextureView
 
-# One projection's reads at a tiling for the lane, projection.plane_uv and footprint.uv_footprint's one
-# tap (plane_footprint), given the lane's surface as vectors: also what a splat layer mapped triplanar
-# reads (.splat_lanes).
-PLANE_CPP = r"""
-// footprint.uv_footprint for the lane: the footprint (lod, step u, step v, taps) of UV derivatives
-// (dx0, dx1), (dy0, dy1) on a level-0 image of width × height texels. Every branch of the scalar block
-// is computed for every lane and chosen by selects; one log2 a lane, as the scalar block takes it.
-struct wt_footprint_lanes { wt_vf lod, du, dv, taps; };
-auto wt_vsqrt = [](wt_vf x) __attribute__((always_inline)) -> wt_vf { float a[WT_L]; __builtin_memcpy(a, &x, sizeof(a)); for (int l = 0; l < WT_L; ++l) a[l] = wp::sqrt(a[l]); __builtin_memcpy(&x, a, sizeof(a)); return x; };
-auto wt_vceil = [](wt_vf x) __attribute__((always_inline)) -> wt_vf { float a[WT_L]; __builtin_memcpy(a, &x, sizeof(a)); for (int l = 0; l < WT_L; ++l) a[l] = wp::ceil(a[l]); __builtin_memcpy(&x, a, sizeof(a)); return x; };
-auto wt_footprint = [&](const auto& smp, wt_vf dx0, wt_vf dx1, wt_vf dy0, wt_vf dy1, float width, float height) __attribute__((always_inline)) -> wt_footprint_lanes {
-    const wt_vf zero = 0.0f, one = 1.0f;
-    const wt_vf a0 = dx0 * width, a1 = dx1 * height, b0 = dy0 * width, b1 = dy1 * height;  // level-0 texels
-    const wt_vf aa = a0 * a0 + a1 * a1, bb = b0 * b0 + b1 * b1;
-    wt_vf arg = wt_vmin(wt_vmax(wt_vmax(aa, bb), 1.0e-30f), wt_float_max);  // footprint_lod's: log2 of the longer axis
-    wt_vi ellipse = 0;  // an anisotropic footprint's LOD, log2(extent), not halved and not NaN-checked
-    wt_footprint_lanes fp = {zero, zero, zero, one};
-    if (smp.filter == WT_ANISOTROPIC) {
-        const wt_vf h = aa - bb, ab = a0 * b0 + a1 * b1, round_floor = 1.0e-6f * (aa + bb);
-        const wt_vi round = h * h + ab * ab < round_floor * round_floor;  // round_footprint
-        const wt_vf A = a0 * a0 + b0 * b0, C = a1 * a1 + b1 * b1, area = A + C;  // anisotropic_footprint
-        const wt_vf B = a0 * a1 + b0 * b1, half_diff = 0.5f * (A - C), floor = 1.0e-6f * area;
-        const wt_vf root = wt_vsqrt(wt_vmax(half_diff * half_diff + B * B, floor * floor));
-        const wt_vf major2 = 0.5f * area + root, major = wt_vsqrt(major2);
-        const wt_vf minor = wt_vabs(a0 * b1 - a1 * b0) / major;
-        const wt_vf extent = wt_vmax(minor, major / smp.max_aniso);
-        const wt_vf taps = wt_vmin(wt_vmax(one, wt_vceil(major / extent - 1.0e-3f)), (wt_vf)smp.max_aniso);  // wp.clamp(x, 1, max_aniso)
-        const wt_vf o0 = major2 - C, o1 = B;  // the major axis: the longer of two eigenvector expressions
-        const wt_vi other = o0 * o0 + o1 * o1 > B * B + (major2 - A) * (major2 - A);
-        const wt_vf v0 = wt_sel(other, o0, B), v1 = wt_sel(other, o1, major2 - A);
-        const wt_vf length = wt_vsqrt(v0 * v0 + v1 * v1);
-        const wt_vf scale = major / taps;
-        ellipse = ~round & (area > 1.0e-12f) & (area < 1.0e18f);
-        const wt_vi several = ellipse & (taps != 1.0f);
-        arg = wt_sel(round, 0.5f * (aa + bb), wt_sel(ellipse, extent, arg));
-        fp.du = wt_sel(several, ((v0 / length) * scale) / width, zero);
-        fp.dv = wt_sel(several, ((v1 / length) * scale) / height, zero);
-        fp.taps = wt_sel(ellipse, taps, one);
-    }
-    float args[WT_L], logs[WT_L];
-    __builtin_memcpy(args, &arg, sizeof(args));
-    for (int l = 0; l < WT_L; ++l) logs[l] = wt_log2(args[l]);  // footprint.lod_log2
-    wt_vf log;
-    __builtin_memcpy(&log, logs, sizeof(log));
-    fp.lod = wt_sel(ellipse, log, wt_sel(aa + bb == aa + bb, 0.5f * log, __builtin_nanf("")));
-    return fp;
-};
+# One projection's reads at a tiling for the lane, projection.plane_uv and its footprint
+# (plane_footprint, lanes.FOOTPRINT_CPP), given the lane's surface as vectors: also what a splat layer
+# mapped triplanar reads (.splat_lanes).
+PLANE_CPP = FOOTPRINT_CPP + r"""
 // (u, v) and the footprint of projection `axis` at tiling t of `tex` (its level 0) on the lane's surface
 // P, N, DX, DY: projection.plane_uv and plane_footprint.
 auto wt_plane_reads = [&](const auto& proj, const auto& smp, int axis, float t, const auto& tex, const wt_vf* P, const wt_vf* N, const wt_vf* DX, const wt_vf* DY,
@@ -95,12 +52,6 @@ auto wt_plane_reads = [&](const auto& proj, const auto& smp, int axis, float t, 
     u = (P[c0] * t + o0) * s + off0;
     v = (P[c1] * t + o1) + off1;
     fp = wt_footprint(smp, (DX[c0] * t) * s, DX[c1] * t, (DY[c0] * t) * s, DY[c1] * t, width, height);  // plane_derivative
-};
-// Read r's rows of a lane_reads matrix: u, v, lod, weight, step u, step v, taps (zero where not read).
-auto wt_put_read = [&](wp::mat_t<21, WT_L, float>& out, int r, wt_vi read, wt_vf u, wt_vf v, const wt_footprint_lanes& fp, wt_vf weight) __attribute__((always_inline)) {
-    const wt_vf zero = 0.0f;
-    const wt_vf rows[7] = {wt_sel(read, u, zero), wt_sel(read, v, zero), wt_sel(read, fp.lod, zero), wt_sel(read, weight, zero), wt_sel(read, fp.du, zero), wt_sel(read, fp.dv, zero), wt_sel(read, fp.taps, zero)};
-    for (int q = 0; q < 7; ++q) __builtin_memcpy(out.data[3 * q + r], &rows[q], sizeof(wt_vf));
 };
 // Reads r = 0 .. count - 1 of a lane_reads matrix, read r of *texs[r] (lane pixel l's layer layers[l])
 // over its footprint, into value in read order (wt_accumulate_footprint: value += w · sample where

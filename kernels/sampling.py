@@ -9,14 +9,15 @@ import warp as wp
 
 from .family import Kernels, family, lane_kernel, pixel_kernels
 from . import inlined, specialised
-from .lane_scatter import scatter_levels_lane
-from .lanes import sample_levels_lane
+from .lane_scatter import scatter_footprint_lane, scatter_levels_lane
+from .lanes import LANES, sample_footprint_lane, sample_levels_lane
 from .filters import sample_footprint, sample_footprint_outlined, sample_levels
 from .footprint import point_footprint, texture_footprint
 from .scatter import scatter_footprint, scatter_levels
-from .texels import LOD_CONSTANT, LOD_DERIVATIVES, LOD_PER_SAMPLE, SamplerArgs, TexelGrad, TextureView, finite_uv_lod, read_channels, resolve_layer, write_channels
+from .texels import FILTER_ANISOTROPIC, LOD_CONSTANT, LOD_DERIVATIVES, LOD_PER_SAMPLE, SamplerArgs, TexelGrad, TextureView, finite_uv_lod, read_channels, resolve_layer, write_channels
 
 MODULE = "warptex.sample"
+LOD_MODULE = MODULE + ".lod"  # the lanes of a LOD per sample: apart from the one-LOD lanes, which every plain lookup compiles
 MIPS_MODULE = "warptex.mips"
 
 
@@ -124,6 +125,23 @@ def scatter_sample_level_lane(args: SampleArgs, pixels: SamplePixels, base: wp.i
     scatter_levels_lane(args.tex, grads.tex, args.smp, pixels.uv, pixels.layers, args.constant_layer, args.level, args.fraction, adj, base)
 
 
+@inlined
+def sample_lane(args: SampleArgs, pixels: SamplePixels, base: wp.int32, out: wp.array2d(dtype=float)):
+    """:func:`sample_pixel` for the lane of pixels from ``base`` (:mod:`.lanes`), on the CPU."""
+    sample_footprint_lane(args.tex, args.smp, pixels.uv, pixels.uv_dx, pixels.uv_dy, pixels.lods, pixels.layers, args.constant_layer, args.lod_source, args.constant_lod, out, base)
+
+
+@inlined
+def scatter_sample_lane(args: SampleArgs, pixels: SamplePixels, base: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):
+    """:func:`scatter_sample` for the lane of pixels from ``base`` (:mod:`.lanes`), on the CPU: the
+    anisotropic filter's footprints, which may take several taps, pixel by pixel."""
+    if args.smp.filter == FILTER_ANISOTROPIC:
+        for l in range(wp.min(adj.shape[0] - base, LANES)):
+            scatter_sample(args, pixels, base + l, grads, adj)
+    else:
+        scatter_footprint_lane(args.tex, grads.tex, args.smp, pixels.uv, pixels.uv_dx, pixels.uv_dy, pixels.lods, pixels.layers, args.constant_layer, args.lod_source, args.constant_lod, adj, base)
+
+
 sample_pixel = _footprint_bodies(sample_footprint, "sample_pixel")
 sample_pixel_outlined = _footprint_bodies(sample_footprint_outlined, "sample_pixel_outlined")
 
@@ -131,8 +149,8 @@ sample_pixel_outlined = _footprint_bodies(sample_footprint_outlined, "sample_pix
 @family(configurations=[{"level": False}, {"level": True}])
 def sample_kernels(*, level: bool) -> Kernels:
     """The ``sample`` kernels: with ``level``, for one LOD shared by every sample, its levels
-    resolved on the host (and lane kernels for the CPU, forward and texel gradient); else each
-    sample's LOD from ``args.lod_source``. The hand-written gradient reaches the texels; UVs, LODs
+    resolved on the host; else each sample's LOD from ``args.lod_source``. Each has lane kernels
+    for the CPU, forward and texel gradient. The hand-written gradient reaches the texels; UVs, LODs
     and derivatives take the generated adjoint."""
     if level:
         kernels = pixel_kernels("sample_level", module=MODULE, args=SampleArgs, pixels=SamplePixels, out=wp.array2d(dtype=float),
@@ -140,10 +158,11 @@ def sample_kernels(*, level: bool) -> Kernels:
         lanes = lane_kernel(sample_level_lane, SampleArgs, SamplePixels, wp.array2d(dtype=float), module=MODULE, name="sample_level_lanes")
         grad_lanes = lane_kernel(scatter_sample_level_lane, SampleArgs, SamplePixels, wp.array2d(dtype=float), grads_t=SampleGrads, module=MODULE + ".grad", name="sample_level_texel_grad_lanes")
         return Kernels(*kernels, grads=("args.tex",), lanes=lanes, texel_grad_lanes=grad_lanes)
-    else:
-        kernels = pixel_kernels("sample", module=MODULE, args=SampleArgs, pixels=SamplePixels, out=wp.array2d(dtype=float),
-                                body=sample_pixel, scatter=scatter_sample, grads=SampleGrads, adjoint_body=sample_pixel_outlined)  # fmt: skip
-    return Kernels(*kernels, grads=("args.tex",))
+    kernels = pixel_kernels("sample", module=MODULE, args=SampleArgs, pixels=SamplePixels, out=wp.array2d(dtype=float),
+                            body=sample_pixel, scatter=scatter_sample, grads=SampleGrads, adjoint_body=sample_pixel_outlined)  # fmt: skip
+    lanes = lane_kernel(sample_lane, SampleArgs, SamplePixels, wp.array2d(dtype=float), module=LOD_MODULE, name="sample_lanes")
+    grad_lanes = lane_kernel(scatter_sample_lane, SampleArgs, SamplePixels, wp.array2d(dtype=float), grads_t=SampleGrads, module=LOD_MODULE + ".grad", name="sample_texel_grad_lanes")
+    return Kernels(*kernels, grads=("args.tex",), lanes=lanes, texel_grad_lanes=grad_lanes)
 
 
 @wp.kernel(module=MIPS_MODULE)

@@ -90,6 +90,41 @@ def test_sample_lanes_give_the_one_pixel_bits(rng, launched, filter, lod, addres
     assert (("sample_level_lanes", -(-n // LANES)) in launched) and (("sample_level_forward", n) in launched)
 
 
+def _lod_inputs(rng, n, source: str) -> dict:
+    """A LOD per sample (``lod``: -2 to 9 on a 7-level chain, and non-finite ones) or UV
+    derivatives (``derivatives``: from 1/100 to 8 texels, stretched and skewed, zero, huge and
+    non-finite ones), for ``sample``'s per-sample kernels."""
+    if source == "lod":
+        lod = rng.uniform(-2.0, 9.0, n).astype(np.float32)
+        lod[20:24] = (np.nan, np.inf, -np.inf, 0.5)
+        return {"lod": lod}
+    scale = np.exp(rng.uniform(np.log(0.01), np.log(8.0), (n, 1))) / 64.0
+    dx = (rng.normal(size=(n, 2)) * scale).astype(np.float32)
+    dy = (rng.normal(size=(n, 2)) * scale * rng.uniform(0.05, 1.0, (n, 1))).astype(np.float32)  # anisotropic
+    dx[20:26] = ((0.0, 0.0), (np.nan, 0.0), (np.inf, 1.0), (1e30, 1e30), (1e-30, 0.0), (0.01, 0.0))
+    dy[20:26] = ((0.0, 0.0), (0.0, 0.0), (0.0, 1.0), (1e30, -1e30), (0.0, 1e-30), (0.0, 0.01))  # the last: round
+    return {"uv_dx": dx, "uv_dy": dy}
+
+
+@pytest.mark.parametrize("address", ["wrap", "clamp", "mirror", "border"])
+@pytest.mark.parametrize("filter,source", [("nearest", "lod"), ("bilinear", "derivatives"), ("trilinear", "lod"), ("trilinear", "derivatives"), ("anisotropic", "derivatives")])
+def test_sample_lanes_of_a_lod_per_sample_give_the_one_pixel_bits(rng, launched, filter, source, address):
+    """A LOD per sample, given or from UV derivatives (``sampling.sample_lane``), every filter."""
+    tex = wt.TextureArray(rng.random((3, 64, 48, 4), dtype=np.float32))
+    n = 1037  # not a multiple of LANES
+    uv = _uvs(rng, n)
+    per_sample = rng.integers(-2, 5, n).astype(np.int32)  # out-of-range layers clamp
+    smp = wt.Sampler(filter=filter, address=address, border=(0.1, 0.2, 0.3, 0.4))
+    lod = _lod_inputs(rng, n, source)
+    for layer in (2, per_sample):
+        lanes, scalar = _both(lambda: wt.sample(tex, uv, layer=layer, sampler=smp, **lod))
+        _same_bits(lanes, scalar)
+        assert np.isnan(lanes[:3]).all() and np.isfinite(lanes[30:]).all()
+    names = [name for name, _ in launched]
+    assert names.count("sample_lanes") == 2 and names.count("sample_forward") == 2
+    assert (("sample_lanes", -(-n // LANES)) in launched) and (("sample_forward", n) in launched)
+
+
 @pytest.mark.parametrize("channels", [1, 2, 3, 4])
 @pytest.mark.parametrize("n", [1, LANES - 1, LANES, LANES + 1, 3 * LANES + 5])
 def test_sample_lanes_write_only_their_pixels_and_channels(rng, channels, n):
@@ -134,6 +169,27 @@ def test_sample_lanes_on_a_real_texture_and_mesh(shared_data):
             smp = wt.Sampler(address=address)
             lanes, scalar = _both(lambda: wt.sample(tex, uv, lod=lod, sampler=smp))
             _same_bits(lanes, scalar)
+
+
+@pytest.mark.parametrize("filter", ["trilinear", "anisotropic"])
+def test_sample_lanes_at_a_rasterised_meshs_uv_derivatives(shared_data, filter):
+    """brick.png on the Duck at its own UV0 and the UV derivatives of a view of it: the lookup a
+    renderer makes (a LOD per pixel from its derivatives), forward and texel gradients."""
+    mesh = trimesh.load(shared_data / "meshes" / "Duck.glb", force="mesh")
+    centre = mesh.bounds.mean(0)
+    eye = centre + np.array((0.8, 0.5, 1.2)) * np.linalg.norm(mesh.extents)
+    g = wt.rasterize(mesh, wt.look_at(eye, centre, fov_y=35.0, resolution=(120, 160)))
+    uv = {k: g.uv("uv0")[k].numpy().reshape(-1, 2) for k in ("uv", "uv_dx", "uv_dy")}
+    covered = g.mask.numpy().reshape(-1) > 0
+    assert covered.mean() > 0.15  # the Duck is in view
+    uv = {k: np.ascontiguousarray(v[covered] * 3.0) for k, v in uv.items()}  # repeated: every level is read
+    rgb = wt.Texture.from_file(shared_data / "textures" / "brick.png")
+    smp = wt.Sampler(filter=filter)
+    lanes, scalar = _both(lambda: wt.sample(rgb, uv["uv"], uv_dx=uv["uv_dx"], uv_dy=uv["uv_dy"], sampler=smp))
+    _same_bits(lanes, scalar)
+    assert np.isfinite(lanes).all()
+    tex = wt.Texture(rgb.numpy(0), requires_grad=True)
+    _same_grads(lambda: wt.sample(tex, uv["uv"], uv_dx=uv["uv_dx"], uv_dy=uv["uv_dy"], sampler=smp), [tex], np.random.default_rng(0), tex.channels, len(uv["uv"]))
 
 
 # -- triplanar and biplanar colour --------------------------------------------------------------------
@@ -355,6 +411,28 @@ def test_sample_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, lod
     finally:
         wt.set_num_threads(previous)
     assert any(name == "sample_level_texel_grad_lanes" for name, _ in launched)
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+@pytest.mark.parametrize("address", ["wrap", "clamp", "border"])
+@pytest.mark.parametrize("filter,source", [("nearest", "lod"), ("trilinear", "lod"), ("trilinear", "derivatives"), ("anisotropic", "derivatives")])
+def test_sample_gradient_lanes_of_a_lod_per_sample_add_the_one_pixel_sums(rng, launched, filter, source, address, threads):
+    """The per-sample LOD's texel gradients (``sampling.scatter_sample_lane``; the anisotropic
+    filter's pixel by pixel inside the lane) are the one-pixel kernels' bits, on 3 threads too."""
+    tex = wt.TextureArray(rng.random((3, 64, 48, 4), dtype=np.float32), requires_grad=True)
+    n = 40_003
+    uv = _uvs(rng, n)
+    layers = rng.integers(-2, 5, n).astype(np.int32)
+    smp = wt.Sampler(filter=filter, address=address, border=(0.1, 0.2, 0.3, 0.4))
+    lod = _lod_inputs(rng, n, source)
+    previous = wt.get_num_threads()
+    wt.set_num_threads(threads)
+    try:
+        for layer in (1, layers):
+            _same_grads(lambda: wt.sample(tex, uv, layer=layer, sampler=smp, **lod), [tex], rng, 4, n)
+    finally:
+        wt.set_num_threads(previous)
+    assert any(name == "sample_texel_grad_lanes" for name, _ in launched)
 
 
 @pytest.mark.parametrize("threads", [1, 3])
