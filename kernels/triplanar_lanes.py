@@ -1,9 +1,9 @@
 """Triplanar and biplanar colour for a lane of pixels on the CPU (:mod:`.lanes`), forward and texel
 gradient, one texture per axis, plain sampling.
 
-What each pixel reads from each projection (its UV, footprint and weight) comes, with triplanar
-weights, from :func:`~.projection_lanes.triplanar_reads_lane` for the whole lane, and otherwise
-(biplanar) from the scalar blocks pixel by pixel; the lane's texture reads from
+What each pixel reads from each projection (its UV, footprint and weight, with triplanar or
+biplanar weights) comes from :func:`~.projection_lanes.triplanar_reads_lane` for the whole lane;
+the lane's texture reads from
 :func:`~.projection_lanes.accumulate_reads_lane` and its texel-gradient adds from
 :func:`~.lane_scatter.scatter_lod_lanes`, both in the order the scalar bodies take them, so the
 outputs and the gradients are the scalar kernels' bits. The gradient of the anisotropic filter,
@@ -15,10 +15,10 @@ import functools
 import warp as wp
 
 from . import inlined, specialised
-from .faces import FaceGrads, on_axis
+from .faces import FaceGrads
 from .lane_scatter import scatter_lod_lanes
 from .lanes import LANES, lane_colours, lane_ints, lane_reads
-from .projection import WEIGHTS_TRIPLANAR, SurfacePixels, projection_footprint, projection_uv, projection_weights, surface
+from .projection import SurfacePixels
 from .projection_lanes import accumulate_reads_lane, triplanar_reads_lane
 from .texels import FILTER_ANISOTROPIC, read_channels, write_channels
 
@@ -28,35 +28,6 @@ def lane_bodies(colour, colour_grad, args_t):
     """``(colour_lane, colour_grad_lane)``: the lane bodies of the plain colour body ``colour`` and its
     texel gradient ``colour_grad`` (one texture per axis), whose arguments are ``args_t``
     (:class:`~.triplanar.TriplanarArgs`)."""
-
-    def whole_lane(args: args_t):
-        """Whether :func:`~.projection_lanes.triplanar_reads_lane` computes the lane's reads:
-        triplanar weights."""
-        return args.proj.weights == WEIGHTS_TRIPLANAR
-
-    def projection_reads(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32) -> lane_reads:
-        """What each lane pixel (column) reads from each projection, pixel by pixel: its UV,
-        footprint and weight (:data:`~.lanes.lane_reads`; all 0 where the projection is not read: a
-        zero weight, or an uncovered pixel)."""
-        faces = args.faces
-        reads = lane_reads()
-        for l in range(count):
-            i = base + l
-            if pixels.mask[i] != 0.0:
-                p, n, dpdx, dpdy = surface(args.proj, pixels, i)
-                w = projection_weights(args.proj, n)
-                for axis in range(3):
-                    if w[axis] > 0.0:
-                        uv = projection_uv(args.proj, axis, p, n)
-                        fp = projection_footprint(on_axis(faces.px, faces.py, faces.pz, axis), args.proj, axis, n, dpdx, dpdy, args.smp)
-                        reads[axis, l] = uv[0]
-                        reads[3 + axis, l] = uv[1]
-                        reads[6 + axis, l] = fp[0]
-                        reads[9 + axis, l] = w[axis]
-                        reads[12 + axis, l] = fp[1]
-                        reads[15 + axis, l] = fp[2]
-                        reads[18 + axis, l] = fp[3]
-        return reads
 
     def write_colours(args: args_t, reads: lane_reads, base: wp.int32, count: wp.int32, out: wp.array2d(dtype=float)):
         """The lane's colours, the projections' samples blended by their weights, into ``out``."""
@@ -74,28 +45,19 @@ def lane_bodies(colour, colour_grad, args_t):
             g[l] = read_channels(adj, base + l)
         scatter_lod_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, 3, lane_ints(args.layer), reads, 1, g)
 
-    whole_lane = inlined(specialised(whole_lane, "triplanar_whole_lane"))
-    projection_reads = inlined(specialised(projection_reads, "triplanar_projection_reads"))
     write_colours = inlined(specialised(write_colours, "triplanar_write_colours"))
     scatter_colours = inlined(specialised(scatter_colours, "triplanar_scatter_colours"))
 
-    # Each branch below reads and uses its own values: values assigned in both branches of an `if`
-    # would be merged after it, matrix by matrix.
     def colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
-        if whole_lane(args):
-            write_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count), base, count, out)
-        else:
-            write_colours(args, projection_reads(args, pixels, base, count), base, count, out)
+        write_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count), base, count, out)
 
     def colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
         if args.smp.filter == FILTER_ANISOTROPIC:
             for l in range(count):
                 colour_grad(args, pixels, base + l, grads, adj)
-        elif whole_lane(args):
-            scatter_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count), base, count, grads, adj)
         else:
-            scatter_colours(args, projection_reads(args, pixels, base, count), base, count, grads, adj)
+            scatter_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count), base, count, grads, adj)
 
     return inlined(specialised(colour_lane, "triplanar_colour_lane")), inlined(specialised(colour_grad_lane, "triplanar_colour_grad_lane"))

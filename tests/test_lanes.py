@@ -232,6 +232,24 @@ def test_triplanar_lanes_give_the_one_pixel_bits(rng, launched, filter, address)
     assert ("triplanar_lanes", -(-1000 // LANES)) in launched
 
 
+@pytest.mark.parametrize("sharpness", [0.0, 2.5, 8.0, 40.0, 256.0, 3000.0])  # exponents 0, exp/log, 1, 5, 32 (not by squares), and underflow
+def test_biplanar_lanes_give_the_one_pixel_bits(rng, launched, sharpness):
+    """Biplanar weights (``projection_lanes.wt_biplanar_weights``, pixel by pixel in the lane) on
+    every kind of normal: ties between axes, normals on a diagonal (both remapped bases 0: equal
+    weights), normals too long to square, tiny ones, zero and non-finite ones."""
+    g = _hand_gbuffer(rng)
+    normals = g.normal.numpy().reshape(-1, 3)
+    normals[11:20] = [(1, 1, 1), (1, 1, 0), (-1, 0, 1), (0.5, 0.5, 0.2), (3e19, 1e19, -2e19), (1e-30, 2e-30, 0), (1e38, 1e38, 1e38), (0.2, 0.6, -0.6), (0.7, 0.7, 0.1)]
+    g.normal.assign(normals.reshape(1, -1, 3))
+    g.mask.assign(np.maximum(g.mask.numpy(), (np.arange(normals.shape[0]) < 20).reshape(1, -1).astype(np.float32)))
+    tex = wt.TextureArray(rng.random((2, 64, 32, 4), dtype=np.float32))
+    for smp in (wt.Sampler(), wt.Sampler(filter="anisotropic", address="mirror", max_aniso=4)):
+        lanes, scalar = _both(lambda: wt.biplanar(g, tex, sharpness=sharpness, tiling=(1.5, 2.0, 0.75), sampler=smp))
+        _same_bits(lanes, scalar)
+        assert (np.nan_to_num(lanes) > 0).any(-1).mean() > 0.5
+    assert ("triplanar_lanes", -(-1000 // LANES)) in launched
+
+
 @pytest.mark.parametrize("address", ["wrap", "clamp"])  # the origin folded by whole periods, or added exactly
 @pytest.mark.parametrize("sharpness", [2.5, 1.0, 31.0, 40.0])  # exp and log, and the integer exponents' edges
 def test_triplanar_lanes_far_from_the_origin(rng, address, sharpness):
