@@ -204,6 +204,16 @@ for (int e = 0; e < 3; ++e) {  // power_weight, its exponent the same in every l
 const wt_vf total = wt_vmax(W[0] + W[1] + W[2], 1.0e-20f);  // WEIGHT_EPS
 for (int e = 0; e < 3; ++e) W[e] = wt_sel(weighed, W[e] / total, zero);
 }
+if (unit_normals != 0) {  // triplanar.unit_base_normal: normal mapping reads on the unit normal
+    for (int l = 0; l < WT_L; ++l) {
+        wt_v3 n(N[0][l], N[1][l], N[2][l]);
+        if (wp::length(n) > 0.0f) {  // normals.direction
+            wt_v3 d = wp::normalize(n);
+            if (wp::length(n) > wt_float_max) d = wp::normalize(wp::div(n, wp::max(wt_v3(wp::abs(n.c[0]), wp::abs(n.c[1]), wp::abs(n.c[2])))));
+            for (int e = 0; e < 3; ++e) N[e][l] = d.c[e];
+        }
+    }
+}
 // Per projection: projection.plane_uv and plane_footprint, where its weight is > 0.
 wp::mat_t<21, WT_L, float> reads;
 for (int axis = 0; axis < 3; ++axis) {
@@ -219,12 +229,15 @@ return reads;
 
 
 @wp.func_native(cpu_snippet(_TRIPLANAR_READS, "return {};\n"))
-def triplanar_reads_lane(faces: FaceTextures, proj: ProjectionArgs, smp: SamplerArgs, pixels: SurfacePixels, base: wp.int32, count: wp.int32) -> lane_reads:
+def triplanar_reads_lane(faces: FaceTextures, proj: ProjectionArgs, smp: SamplerArgs, pixels: SurfacePixels, base: wp.int32, count: wp.int32, unit_normals: wp.int32) -> lane_reads:
     """What the lane's pixels ``base .. base + count - 1`` read from each projection, with triplanar
     or biplanar weights (``proj.weights``): the UVs, footprints and weights of ``projection.projection_uv``,
     ``projection.projection_footprint`` and ``projection.projection_weights``, as
     :data:`~.lanes.lane_reads` (all 0 where a projection is not read: a zero weight, or an uncovered
-    pixel)."""
+    pixel). With ``unit_normals``, the UVs and footprints are those of the unit normal
+    (``triplanar.unit_base_normal``, as normal mapping reads them; the weights are the normal's as
+    given either way): a normal's tiny component can round to zero as it is scaled, which turns its
+    mirror-fix sign."""
     ...
 
 

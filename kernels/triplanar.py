@@ -27,9 +27,10 @@ from .family import Kernels, Staged, family, forward_kernel, lane_kernel, pixel_
 from .normals import blend_projected, decode_normal, direction, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
-from .texels import SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
-from .projection_lanes import surface_covered
-from .triplanar_lanes import lane_bodies
+from .texels import SamplerArgs, TexelGrad, TextureView, pick3, read_channels, write_channels
+from .lanes import LANES
+from .projection_lanes import surface_covered, triplanar_reads_lane
+from .triplanar_lanes import lane_bodies, projection_samples_lane
 
 MODULE = "warptex.triplanar"
 GRAD_MODULE = MODULE + ".grad"
@@ -268,6 +269,31 @@ def normal_from_samples(args: NormalBlendArgs, pixels: StoredSamples, i: wp.int3
     write_normal(out, i, result)
 
 
+@inlined
+def normal_lane(args: TriplanarArgs, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
+    """The plain normal-mapping body (one texture per axis) for the lane of pixels from ``base``
+    (:mod:`.lanes`), on the CPU: the lane's reads and samples natively, then each pixel's normal
+    from them as the body makes it."""
+    count = wp.min(out.shape[0] - base, LANES)
+    reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1)
+    sx = projection_samples_lane(args.faces, args.smp, args.layer, reads, 0)
+    sy = projection_samples_lane(args.faces, args.smp, args.layer, reads, 1)
+    sz = projection_samples_lane(args.faces, args.smp, args.layer, reads, 2)
+    for l in range(count):
+        i = base + l
+        result = wp.vec3(0.0)
+        if pixels.mask[i] != 0.0:
+            p, n, dpdx, dpdy = surface(args.proj, pixels, i)
+            n = unit_base_normal(n)
+            total = wp.vec3(0.0)
+            for axis in range(3):
+                w = reads[9 + axis, l]  # projection_weights of the normal as given
+                if w > 0.0:
+                    total += w * projected_normal(pick3(sx[l], sy[l], sz[l], axis), axis, n, args.proj, args.normal_map)
+            result = unit_normal(total, n, args.proj)
+        write_normal(out, i, result)
+
+
 _PLAIN = _projection_reads(sample_plain, scatter_plain, "_plain")
 _STOCHASTIC = _projection_reads(sample_stochastic, scatter_stochastic, "_stochastic")
 _BODIES = {
@@ -318,7 +344,10 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
             grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
         return Kernels(forward, texel_grad, _adjoint(False), grads=FACE_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes)
     forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
+    lanes = None
+    if not stochastic and not faces:  # a module of its own: colour-only jobs do not compile it
+        lanes = lane_kernel(normal_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module + ".normal", name=name + "_normal_lanes", covered=surface_covered)
     first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,
                           body=bodies["samples"], scatter=bodies["samples_grad"], grads=FaceGrads)  # fmt: skip
     staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=FACE_GRADS), then=_normal_from_samples(), intermediates=_sample_shapes)
-    return Kernels(forward, None, _adjoint(True), staged=staged)
+    return Kernels(forward, None, _adjoint(True), staged=staged, lanes=lanes)

@@ -15,12 +15,25 @@ import functools
 import warp as wp
 
 from . import inlined, specialised
-from .faces import FaceGrads
+from .faces import FaceGrads, FaceTextures, on_axis
 from .lane_scatter import scatter_lod_lanes
 from .lanes import LANES, lane_colours, lane_ints, lane_reads
 from .projection import SurfacePixels
 from .projection_lanes import accumulate_reads_lane, triplanar_reads_lane
-from .texels import FILTER_ANISOTROPIC, read_channels, write_channels
+from .texels import FILTER_ANISOTROPIC, SamplerArgs, read_channels, write_channels
+
+
+@wp.func
+def projection_samples_lane(faces: FaceTextures, smp: SamplerArgs, layer: wp.int32, reads: lane_reads, axis: wp.int32) -> lane_colours:
+    """Row ``l``: lane pixel ``l``'s unweighted sample of projection ``axis`` (read ``axis`` of
+    ``reads``, on ``faces``' texture of that axis), where its weight is positive; the other rows are
+    not set."""
+    one = lane_reads()  # read `axis` alone, as read 0
+    for q in range(7):
+        for l in range(LANES):
+            one[3 * q, l] = reads[3 * q + axis, l]
+    tex = on_axis(faces.px, faces.py, faces.pz, axis)
+    return accumulate_reads_lane(tex, tex, tex, smp, lane_ints(layer), 1, 0, one)
 
 
 @functools.cache
@@ -50,7 +63,7 @@ def lane_bodies(colour, colour_grad, args_t):
 
     def colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
-        write_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count), base, count, out)
+        write_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0), base, count, out)
 
     def colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
@@ -58,6 +71,6 @@ def lane_bodies(colour, colour_grad, args_t):
             for l in range(count):
                 colour_grad(args, pixels, base + l, grads, adj)
         else:
-            scatter_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count), base, count, grads, adj)
+            scatter_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0), base, count, grads, adj)
 
     return inlined(specialised(colour_lane, "triplanar_colour_lane")), inlined(specialised(colour_grad_lane, "triplanar_colour_grad_lane"))

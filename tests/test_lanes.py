@@ -250,6 +250,28 @@ def test_biplanar_lanes_give_the_one_pixel_bits(rng, launched, sharpness):
     assert ("triplanar_lanes", -(-1000 // LANES)) in launched
 
 
+@pytest.mark.parametrize("channels", [2, 3, 4])
+@pytest.mark.parametrize("filter", ["nearest", "trilinear", "anisotropic"])
+def test_triplanar_normal_lanes_give_the_one_pixel_bits(rng, launched, filter, channels):
+    """Normal mapping's lane (``triplanar.normal_lane``): every blend, in world and object space,
+    and normals with a component so small that it rounds to zero as the normal is made unit length,
+    which turns that projection's mirror fix (read, at sharpness 0)."""
+    g = _hand_gbuffer(rng)
+    normals = g.normal.numpy().reshape(-1, 3)
+    normals[11:14] = [(10.0, 0.0, -1e-45), (0.0, -1e-45, 4.0), (3e19, -1e-30, 2e19)]
+    g.normal.assign(normals.reshape(1, -1, 3))
+    g.mask.assign(np.maximum(g.mask.numpy(), (np.arange(normals.shape[0]) < 20).reshape(1, -1).astype(np.float32)))
+    tex = wt.Texture(rng.random((64, 32, channels), dtype=np.float32))
+    smp = wt.Sampler(filter=filter, max_aniso=4)
+    placement = np.array([[0.0, 0.8, 0.0, 0.3], [-0.8, 0.0, 0.0, 0.0], [0.0, 0.0, 1.5, -0.2], [0.0, 0.0, 0.0, 1.0]], np.float32)
+    for blend in ("whiteout", "udn", "rnm"):
+        for kw in ({"sharpness": 3.0, "strength": 0.7}, {"sharpness": 0.0, "flip_green": True}, {"space": "object", "object_to_world": placement, "tiling": (1.5, 2.0, 0.75)}):
+            lanes, scalar = _both(lambda: wt.triplanar_normal(g, tex, blend=blend, sampler=smp, **kw))
+            _same_bits(lanes, scalar)
+            assert (np.abs(lanes).sum(-1) > 0.5).mean() > 0.5
+    assert ("triplanar_normal_lanes", -(-1000 // LANES)) in launched
+
+
 @pytest.mark.parametrize("address", ["wrap", "clamp"])  # the origin folded by whole periods, or added exactly
 @pytest.mark.parametrize("sharpness", [2.5, 1.0, 31.0, 40.0])  # exp and log, and the integer exponents' edges
 def test_triplanar_lanes_far_from_the_origin(rng, address, sharpness):
