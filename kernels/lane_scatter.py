@@ -161,10 +161,11 @@ def scatter_levels_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, uv:
 # Up to three reads per lane pixel (a pixel's projections, rows of a lane_reads matrix `at`), read r
 # from tex[r] into grad[r]; a read adds where its weight is positive and its UV and LOD are finite
 # (scatter.scatter_lod), and only into a gradient that is needed. It adds its share of the pixel's
-# gradient g[l]: w · g where weigh (a blend of projections), g itself where not.
+# gradient g[l] (read r's own, gr[r], where per_read; else gr[0]): w · g where weigh (a blend of
+# projections), g itself where not.
 _SCATTER_LOD_CORE = _SCATTER_CORE + r"""
-auto wt_scatter_lod = [&](const auto* const* texs, const auto* const* grads, const auto& smp, const int nreads, const int* layers, const wp::mat_t<21, WT_L, float>& at,
-                          const int weigh, const wp::mat_t<WT_L, 4, float>& g) __attribute__((always_inline)) {
+auto wt_scatter_lod_of = [&](const auto* const* texs, const auto* const* grads, const auto& smp, const int nreads, const int* layers, const wp::mat_t<21, WT_L, float>& at,
+                             const int weigh, const wp::mat_t<WT_L, 4, float>* const* gr, const int per_read) __attribute__((always_inline)) {
     float us[3][WT_L], vs[3][WT_L], fractions[3][WT_L];
     int levels[3][WT_L], layer[3][WT_L];
     bool active[3][WT_L];
@@ -195,13 +196,37 @@ auto wt_scatter_lod = [&](const auto* const* texs, const auto* const* grads, con
         __builtin_memcpy(layer[r], &lr, sizeof(lr));
         for (int l = 0; l < WT_L; ++l) {
             active[r][l] = ok[l] != 0;
+            const wp::mat_t<WT_L, 4, float>& g = *gr[per_read ? r : 0];
             const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
             gs[r][l] = weigh ? w[l] * gl : gl;
         }
     }
     wt_scatter_levels_any(nreads, texs, grads, smp, us, vs, levels, fractions, layer, active, gs);
 };
+// Every read's share of one gradient g[l] per lane pixel.
+auto wt_scatter_lod = [&](const auto* const* texs, const auto* const* grads, const auto& smp, const int nreads, const int* layers, const wp::mat_t<21, WT_L, float>& at,
+                          const int weigh, const wp::mat_t<WT_L, 4, float>& g) __attribute__((always_inline)) {
+    const wp::mat_t<WT_L, 4, float>* gr[1] = {&g};
+    wt_scatter_lod_of(texs, grads, smp, nreads, layers, at, weigh, gr, 0);
+};
 """
+
+_SCATTER_READS = _SCATTER_LOD_CORE + r"""
+const decltype(tex0)* texs[3] = {&tex0, &tex1, &tex2};
+const decltype(grad0)* grads[3] = {&grad0, &grad1, &grad2};
+const wp::mat_t<WT_L, 4, float>* gr[3] = {&g0, &g1, &g2};
+wt_scatter_lod_of(texs, grads, smp, 3, layers.c, reads, 0, gr, 1);
+"""
+
+
+@wp.func_native(cpu_snippet(_SCATTER_READS))
+def scatter_reads_lanes(tex0: TextureView, tex1: TextureView, tex2: TextureView, grad0: TexelGrad, grad1: TexelGrad, grad2: TexelGrad, smp: SamplerArgs,
+                        layers: lane_ints, reads: lane_reads, g0: lane_colours, g1: lane_colours, g2: lane_colours):  # fmt: skip
+    """:func:`scatter_lod_lanes` of three reads with a gradient each: read ``r`` of every lane
+    pixel ``l`` adds ``g_r[l]`` itself (not weighted) into ``grad_r``, where its weight in
+    ``reads`` is positive, pixel by pixel and read by read as the scalar kernels add them."""
+    ...
+
 
 _SCATTER_LOD = _SCATTER_LOD_CORE + r"""
 const decltype(tex0)* texs[3] = {&tex0, &tex1, &tex2};

@@ -27,8 +27,9 @@ from .family import Kernels, Staged, family, forward_kernel, lane_kernel, pixel_
 from .normals import blend_projected, decode_normal, direction, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
-from .texels import SamplerArgs, TexelGrad, TextureView, pick3, read_channels, write_channels
-from .lanes import LANES
+from .texels import FILTER_ANISOTROPIC, SamplerArgs, TexelGrad, TextureView, pick3, read_channels, write_channels
+from .lane_scatter import scatter_reads_lanes
+from .lanes import LANES, lane_colours, lane_ints
 from .projection_lanes import surface_covered, triplanar_reads_lane
 from .triplanar_lanes import lane_bodies, projection_samples_lane
 
@@ -294,6 +295,48 @@ def normal_lane(args: TriplanarArgs, pixels: SurfacePixels, base: wp.int32, out:
         write_normal(out, i, result)
 
 
+@functools.cache
+def _samples_lanes(samples_grad):
+    """The lanes of the two-step normal's first step, plain with a texture per axis: each
+    projection's sample and the weights (the ``samples`` body), and their texel gradients (the
+    ``samples_grad`` body; the anisotropic filter's, whose footprints may take several taps, pixel
+    by pixel through it)."""
+
+    def samples_lane(args: TriplanarArgs, pixels: SurfacePixels, base: wp.int32, out: ProjectionSamples):
+        count = wp.min(out.weights.shape[0] - base, LANES)
+        reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1)
+        sx = projection_samples_lane(args.faces, args.smp, args.layer, reads, 0)
+        sy = projection_samples_lane(args.faces, args.smp, args.layer, reads, 1)
+        sz = projection_samples_lane(args.faces, args.smp, args.layer, reads, 2)
+        for l in range(count):
+            i = base + l
+            out.weights[i] = wp.vec3(reads[9, l], reads[10, l], reads[11, l])  # 0 where not covered, as the body leaves it
+            for axis in range(3):
+                value = wp.vec4(0.0)
+                if reads[9 + axis, l] > 0.0:
+                    value = pick3(sx[l], sy[l], sz[l], axis)
+                out.samples[i, axis] = value
+
+    def samples_grad_lane(args: TriplanarArgs, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: ProjectionSamples):
+        count = wp.min(adj.weights.shape[0] - base, LANES)
+        if args.smp.filter == FILTER_ANISOTROPIC:
+            for l in range(count):
+                samples_grad(args, pixels, base + l, grads, adj)
+        else:
+            reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1)
+            gx = lane_colours()
+            gy = lane_colours()
+            gz = lane_colours()
+            for l in range(count):
+                gx[l] = adj.samples[base + l, 0]
+                gy[l] = adj.samples[base + l, 1]
+                gz[l] = adj.samples[base + l, 2]
+            faces = args.faces
+            scatter_reads_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, lane_ints(args.layer), reads, gx, gy, gz)
+
+    return inlined(specialised(samples_lane, "triplanar_samples_lane")), inlined(specialised(samples_grad_lane, "triplanar_samples_grad_lane"))
+
+
 _PLAIN = _projection_reads(sample_plain, scatter_plain, "_plain")
 _STOCHASTIC = _projection_reads(sample_stochastic, scatter_stochastic, "_stochastic")
 _BODIES = {
@@ -349,5 +392,10 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
         lanes = lane_kernel(normal_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module + ".normal", name=name + "_normal_lanes", covered=surface_covered)
     first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,
                           body=bodies["samples"], scatter=bodies["samples_grad"], grads=FaceGrads)  # fmt: skip
-    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=FACE_GRADS), then=_normal_from_samples(), intermediates=_sample_shapes)
+    first_lanes = {}
+    if not stochastic and not faces:
+        samples_lane, samples_grad_lane = _samples_lanes(bodies["samples_grad"])
+        first_lanes = {"lanes": lane_kernel(samples_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, module=module + ".normal.grad", name=name + "_samples_lanes"),
+                       "texel_grad_lanes": lane_kernel(samples_grad_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, grads_t=FaceGrads, module=module + ".normal.grad", name=name + "_samples_texel_grad_lanes")}  # fmt: skip
+    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=FACE_GRADS, **first_lanes), then=_normal_from_samples(), intermediates=_sample_shapes)
     return Kernels(forward, None, _adjoint(True), staged=staged, lanes=lanes)

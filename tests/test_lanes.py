@@ -454,6 +454,32 @@ def test_sample_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, lod
 
 
 @pytest.mark.parametrize("threads", [1, 3])
+@pytest.mark.parametrize("filter", ["nearest", "trilinear", "anisotropic"])
+def test_triplanar_normal_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, threads):
+    """Normal mapping's two-step gradient: the first step's lanes (``triplanar._samples_lanes``)
+    store the one-pixel kernel's samples and weights, and add each projection's own gradient into
+    the texels in its order (``lane_scatter.scatter_reads_lanes``), on 3 threads too."""
+    g = _hand_gbuffer(rng, 20_000)
+    tex = wt.Texture(rng.random((64, 32, 3), dtype=np.float32), requires_grad=True)
+    smp = wt.Sampler(filter=filter, max_aniso=4)
+    previous = wt.get_num_threads()
+    wt.set_num_threads(threads)
+    try:
+        for kw in ({"sharpness": 3.0, "blend": "rnm"}, {"sharpness": 0.0, "blend": "whiteout", "space": "object", "object_to_world": np.diag([0.5, 2.0, 1.0, 1.0]).astype(np.float32)}):
+            call = lambda: wt.triplanar_normal(g, tex, sampler=smp, **kw)  # noqa: E731
+            _same_grads(call, [tex], rng, 3, 20_000)
+            outs = []
+            for one in (False, True):
+                with one_pixel_kernels(one), wp.Tape():
+                    outs.append(call().numpy())
+            _same_bits(*outs)
+    finally:
+        wt.set_num_threads(previous)
+    names = {name for name, _ in launched}
+    assert {"triplanar_samples_lanes", "triplanar_samples_texel_grad_lanes", "triplanar_samples_forward", "triplanar_samples_texel_grad"} <= names
+
+
+@pytest.mark.parametrize("threads", [1, 3])
 @pytest.mark.parametrize("address", ["wrap", "clamp", "border"])
 @pytest.mark.parametrize("filter,source", [("nearest", "lod"), ("trilinear", "lod"), ("trilinear", "derivatives"), ("anisotropic", "derivatives")])
 def test_sample_gradient_lanes_of_a_lod_per_sample_add_the_one_pixel_sums(rng, launched, filter, source, address, threads):
