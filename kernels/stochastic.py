@@ -32,14 +32,15 @@ periodic address modes (wrap, period 1; mirror, period 2), the only ones stochas
 import warp as wp
 
 from . import hashing, inlined, out_of_line, specialised
-from .family import Kernels, family, pixel_kernels
+from .family import Kernels, family, lane_kernel, pixel_kernels
 from .filters import sample_footprint, sample_lod, sample_lod_outlined
 from .footprint import footprint_mean, footprint_taps, footprint_uv, mip_levels
 from .hashing import STREAM_CHEAP2_NOISE, STREAM_CHEAP2_OFFSET, STREAM_HASH4_CELL
 from .hexgrid import hex_grid, hex_steps, hex_tap, hex_weights
 from .sampling import SampleArgs, SampleGrads, SamplePixels, sample_footprint_of, sample_layer
 from .scatter import scatter_footprint, scatter_lod
-from .texels import SamplerArgs, TexelGrad, TextureView, finite_uv_lod, pick3, read_channels, write_channels
+from .lanes import LANES, accumulate_footprint_lane, lane_colours, lane_floats, lane_ints
+from .texels import FILTER_ANISOTROPIC, SamplerArgs, TexelGrad, TextureView, finite_uv_lod, pick3, read_channels, write_channels
 
 METHOD_NONE = wp.constant(0)
 METHOD_HASH4 = wp.constant(1)
@@ -346,13 +347,79 @@ stochastic_pixel = _stochastic_body(sample_stochastic, "stochastic_pixel")
 stochastic_pixel_outlined = _stochastic_body(sample_stochastic_outlined, "stochastic_pixel_outlined")
 
 
+@inlined
+def stochastic_lane(args: StochasticSampleArgs, pixels: SamplePixels, base: wp.int32, out: wp.array2d(dtype=float)):
+    """:func:`stochastic_pixel` for the lane of pixels from ``base`` (:mod:`.lanes`), on the CPU:
+    each pixel's taps and weights worked out one pixel at a time, then every tap of the lane read
+    natively (``lanes.accumulate_footprint_lane``: ``value += w · sample``, tap by tap, as
+    :func:`sample_stochastic` blends them). A histogram's blend (not linear), the anisotropic
+    filter's footprints (several taps, each with its stochastic taps) and plain sampling go pixel
+    by pixel through the body."""
+    a = args.sample
+    params = args.params
+    count = wp.min(out.shape[0] - base, LANES)
+    if a.smp.filter == FILTER_ANISOTROPIC or params.histogram != 0 or params.method == METHOD_NONE:
+        for l in range(count):
+            stochastic_pixel(args, pixels, base + l, out)
+    else:
+        layers = lane_ints()
+        lods = lane_floats()
+        finite = lane_ints()
+        u0 = lane_floats()
+        v0 = lane_floats()
+        w0 = lane_floats()
+        u1 = lane_floats()
+        v1 = lane_floats()
+        w1 = lane_floats()
+        u2 = lane_floats()
+        v2 = lane_floats()
+        w2 = lane_floats()
+        u3 = lane_floats()
+        v3 = lane_floats()
+        w3 = lane_floats()
+        for l in range(count):
+            i = base + l
+            uv = pixels.uv[i]
+            lod = sample_footprint_of(a, pixels, i)[0]  # one tap: it reads uv itself
+            layers[l] = sample_layer(a, pixels, i)
+            lods[l] = lod
+            if finite_uv_lod(uv, lod):
+                finite[l] = 1
+                t0, t1, t2, t3, w = stochastic_taps(uv, params)
+                u0[l] = t0[0]
+                v0[l] = t0[1]
+                w0[l] = w[0]
+                u1[l] = t1[0]
+                v1[l] = t1[1]
+                w1[l] = w[1]
+                u2[l] = t2[0]
+                v2[l] = t2[1]
+                w2[l] = w[2]
+                u3[l] = t3[0]
+                v3[l] = t3[1]
+                w3[l] = w[3]
+        zero = lane_floats()
+        one = lane_floats(1.0)
+        value = lane_colours()
+        value = accumulate_footprint_lane(a.tex, a.smp, layers, u0, v0, lods, zero, zero, one, w0, 1, value)
+        value = accumulate_footprint_lane(a.tex, a.smp, layers, u1, v1, lods, zero, zero, one, w1, 1, value)
+        value = accumulate_footprint_lane(a.tex, a.smp, layers, u2, v2, lods, zero, zero, one, w2, 1, value)
+        value = accumulate_footprint_lane(a.tex, a.smp, layers, u3, v3, lods, zero, zero, one, w3, 1, value)
+        for l in range(count):
+            result = wp.vec4(wp.nan)
+            if finite[l] != 0:
+                result = wp.vec4(0.0) + value[l]  # the body's `result += value`, from 0
+            write_channels(out, base + l, result)
+
+
 @family()
 def stochastic_kernels() -> Kernels:
     """The ``stochastic`` kernels (per-sample LODs, as ``sample_kernels(level=False)``): the
     hand-written gradient reaches the texels (linear blends: no histogram)."""
     kernels = pixel_kernels("stochastic", module=MODULE, args=StochasticSampleArgs, pixels=SamplePixels, out=wp.array2d(dtype=float),
                             body=stochastic_pixel, scatter=scatter_stochastic_pixel, grads=SampleGrads, adjoint_body=stochastic_pixel_outlined)  # fmt: skip
-    return Kernels(*kernels, grads=("args.sample.tex",))
+    lanes = lane_kernel(stochastic_lane, StochasticSampleArgs, SamplePixels, wp.array2d(dtype=float), module=MODULE, name="stochastic_lanes")
+    return Kernels(*kernels, grads=("args.sample.tex",), lanes=lanes)
 
 
 @wp.kernel(enable_backward=False, module=MODULE)

@@ -125,6 +125,40 @@ def test_sample_lanes_of_a_lod_per_sample_give_the_one_pixel_bits(rng, launched,
     assert (("sample_lanes", -(-n // LANES)) in launched) and (("sample_forward", n) in launched)
 
 
+@pytest.mark.parametrize("address", ["wrap", "mirror"])  # the periodic modes stochastic sampling takes
+@pytest.mark.parametrize("filter,source", [("nearest", "lod"), ("bilinear", "derivatives"), ("trilinear", "lod"), ("trilinear", "derivatives"), ("anisotropic", "derivatives")])
+@pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])
+def test_stochastic_lanes_give_the_one_pixel_bits(rng, launched, method, filter, source, address):
+    """``stochastic.stochastic_lane``: each pixel's taps, then the lane's reads natively, tap by
+    tap; non-finite UVs and LODs give NaN; the anisotropic filter goes pixel by pixel."""
+    tex = wt.TextureArray(rng.random((3, 64, 48, 3), dtype=np.float32))
+    n = 1037
+    uv = _uvs(rng, n)
+    per_sample = rng.integers(-2, 5, n).astype(np.int32)
+    smp = wt.Sampler(filter=filter, address=address)
+    lod = _lod_inputs(rng, n, source)
+    for layer in (2, per_sample):
+        for option in (wt.Stochastic(method), wt.Stochastic(method, seed=7, mirror=True)):
+            lanes, scalar = _both(lambda: wt.stochastic(tex, uv, option, layer=layer, sampler=smp, **lod))
+            _same_bits(lanes, scalar)
+            assert np.isnan(lanes[:3]).all() and np.isfinite(lanes[30:]).all()
+    assert ("stochastic_lanes", -(-n // LANES)) in launched
+
+
+def test_stochastic_lanes_with_a_histogram_and_on_a_real_texture(shared_data):
+    """brick.png, hex with the histogram-preserving blend (pixel by pixel inside the lane) and
+    without, at the Duck's UVs with a LOD per UV."""
+    tex = wt.Texture.from_file(shared_data / "textures" / "brick.png")
+    mesh = trimesh.load(shared_data / "meshes" / "Duck.glb", force="mesh")
+    uv = (np.asarray(mesh.visual.uv, np.float32) * 5.0).astype(np.float32)
+    lod = np.linspace(-1.0, 6.0, len(uv)).astype(np.float32)
+    histogram = wt.prepare_histogram(tex)
+    for option in (wt.Stochastic("hex"), wt.Stochastic("hex", histogram=histogram), wt.Stochastic("hash4", mirror=True)):
+        lanes, scalar = _both(lambda: wt.stochastic(tex, uv, option, lod=lod))
+        _same_bits(lanes, scalar)
+        assert np.isfinite(lanes).all()
+
+
 @pytest.mark.parametrize("channels", [1, 2, 3, 4])
 @pytest.mark.parametrize("n", [1, LANES - 1, LANES, LANES + 1, 3 * LANES + 5])
 def test_sample_lanes_write_only_their_pixels_and_channels(rng, channels, n):
