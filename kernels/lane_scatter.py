@@ -8,11 +8,11 @@ so the gradients are the same bits, and the same tile marks (``scatter.mark_rows
 
 import warp as wp
 
-from .lanes import FOOTPRINT_CPP, SAMPLE_READS_CPP, cpu_snippet, lane_colours, lane_ints, lane_reads
+from .lanes import FOOTPRINT_CPP, SAMPLE_READS_CPP, cpu_snippet, lane_colours, lane_ints, lane_reads, lane_taps
 from .texels import TILE_SHIFT, SamplerArgs, TexelGrad, TextureView
 
-# scatter.scatter_levels for the lane: reads r = 0 .. reads - 1 of every lane pixel, read r from
-# tex[r] into grad[r], the levels and fractions given (module docstring).
+# scatter.scatter_levels for the lane: reads r = 0 .. reads - 1 (up to 4) of every lane pixel, read r
+# from tex[r] into grad[r], the levels and fractions given (module docstring).
 _SCATTER_CORE = r"""
 enum { WT_TILE_SHIFT = %(tile_shift)d };
 struct wt_taps { int start, w, i0, i1, j0, j1; float fx, fy; };  // a lane pixel's taps of one level
@@ -23,7 +23,7 @@ typedef bool wt_lane_b[WT_L];
 typedef wt_f4 wt_lane_f4[WT_L];
 auto wt_scatter_levels = [&](const int address, const int reads, const auto* const* tex, const auto* const* grad, const auto& smp, const wt_lane_f* u, const wt_lane_f* v,
                              const wt_lane_i* level, const wt_lane_f* fraction, const wt_lane_i* layer, const wt_lane_b* active, const wt_lane_f4* g) __attribute__((always_inline)) {
-    wt_lane_taps taps[3][2];  // [read][fine, coarse], field by field, so that the loop below vectorises
+    wt_lane_taps taps[4][2];  // [read][fine, coarse], field by field, so that the loop below vectorises
     bool blend = false;  // a lane reads two levels (trilinear)
     for (int r = 0; r < reads; ++r)
         for (int l = 0; l < WT_L; ++l) blend |= smp.filter != WT_NEAREST && active[r][l] && fraction[r][l] > 0.0f;
@@ -63,7 +63,7 @@ auto wt_scatter_levels = [&](const int address, const int reads, const auto* con
     // Each read's gradient array as a pointer and strides, taken once: the adds' stores could alias
     // the array structs, which the compiler would then read again after every add.
     struct wt_target { char* texels; long long stride; char* tiles; long long tile_stride; bool marks; };
-    wt_target targets[3];
+    wt_target targets[4];
     for (int r = 0; r < reads; ++r)
         targets[r] = {(char*)grad[r]->texels.data, (long long)grad[r]->texels.strides[0], (char*)grad[r]->tiles.data, (long long)grad[r]->tiles.strides[0], grad[r]->tiles.shape[0] > 0};
     auto add = [&](const wt_target& gr, const wt_taps& t, int x, int y, const wt_f4 value) __attribute__((always_inline)) {  // scatter.scatter_texel
@@ -265,4 +265,40 @@ def scatter_footprint_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, 
     """:func:`~warptex.kernels.scatter.scatter_footprint` of the gradient ``adj[i]`` for the lane's
     pixels ``i = base ..`` (:func:`~.lanes.sample_footprint_lane`'s reads), one-tap footprints only
     (every filter but the anisotropic one)."""
+    ...
+
+
+_SCATTER_TAPS = _SCATTER_CORE + r"""
+// scatter_stochastic's one-tap footprints for the lane: tap k of pixel l at (u_k, v_k), rows 3k, 3k + 1
+// of `taps`, all at the pixel's LOD (row 12), adds w_k · g[l] (w_k: row 3k + 2) into `grad` where
+// w_k > 0, pixel by pixel and tap by tap (scatter.scatter_lod of each).
+float us[4][WT_L], vs[4][WT_L], fractions[4][WT_L];
+int levels[4][WT_L], layer[4][WT_L];
+bool active[4][WT_L];
+wt_f4 gs[4][WT_L];
+const bool needed = grad.texels.shape[0] > 0;
+for (int k = 0; k < 4; ++k) {
+    for (int l = 0; l < WT_L; ++l) {
+        const float w = taps.data[3 * k + 2][l];
+        const bool ok = needed && w > 0.0f;
+        active[k][l] = ok;
+        us[k][l] = ok ? taps.data[3 * k][l] : 0.0f;
+        vs[k][l] = ok ? taps.data[3 * k + 1][l] : 0.0f;
+        wt_mip_levels(tex, smp, ok ? taps.data[12][l] : 0.0f, levels[k][l], fractions[k][l]);
+        layer[k][l] = ok ? wp::clamp(layers.c[l], 0, tex.num_layers - 1) : 0;
+        const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
+        gs[k][l] = w * gl;
+    }
+}
+const decltype(tex)* texs[4] = {&tex, &tex, &tex, &tex};
+const decltype(grad)* grads[4] = {&grad, &grad, &grad, &grad};
+wt_scatter_levels_any(4, texs, grads, smp, us, vs, levels, fractions, layer, active, gs);
+"""
+
+
+@wp.func_native(cpu_snippet(_SCATTER_TAPS))
+def scatter_taps_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, layers: lane_ints, taps: lane_taps, g: lane_colours):
+    """:func:`~warptex.kernels.stochastic.scatter_stochastic` of one-tap footprints for the lane:
+    every stochastic tap in ``taps`` (:data:`~.lanes.lane_taps`) of lane pixel ``l`` adds its weight
+    times ``g[l]`` into ``grad`` (layer ``layers[l]``, clamped), where the weight is positive."""
     ...

@@ -35,6 +35,9 @@ lane_colours = wp.types.matrix(shape=(LANES, 4), dtype=wp.float32)
 #: rows ``3 q + r`` of read ``r``'s UV ``u`` (``q = 0``) and ``v`` (1), its LOD (2), its weight (3; 0:
 #: not read) and the rest of its footprint (footprint.py): step ``u`` (4), step ``v`` (5), taps (6).
 lane_reads = wp.types.matrix(shape=(21, LANES), dtype=wp.float32)
+#: Per lane pixel (column), a stochastic lookup's four taps: rows ``3 k``, ``3 k + 1`` tap ``k``'s UV,
+#: ``3 k + 2`` its weight (0: not read), 12 the pixel's LOD, 13 whether its UV and LOD are finite (1, 0).
+lane_taps = wp.types.matrix(shape=(14, LANES), dtype=wp.float32)
 
 # What every helper shares: the scalar formulas of texels.reduce_coord, texels.address_near,
 # footprint.mip_levels and filters.sample_levels, written for the lane (same ADDRESS_* and FILTER_*

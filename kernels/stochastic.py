@@ -39,7 +39,8 @@ from .hashing import STREAM_CHEAP2_NOISE, STREAM_CHEAP2_OFFSET, STREAM_HASH4_CEL
 from .hexgrid import hex_grid, hex_steps, hex_tap, hex_weights
 from .sampling import SampleArgs, SampleGrads, SamplePixels, sample_footprint_of, sample_layer
 from .scatter import scatter_footprint, scatter_lod
-from .lanes import LANES, accumulate_footprint_lane, lane_colours, lane_floats, lane_ints
+from .lane_scatter import scatter_taps_lane
+from .lanes import LANES, accumulate_footprint_lane, lane_colours, lane_floats, lane_ints, lane_taps
 from .texels import FILTER_ANISOTROPIC, SamplerArgs, TexelGrad, TextureView, finite_uv_lod, pick3, read_channels, write_channels
 
 METHOD_NONE = wp.constant(0)
@@ -347,69 +348,80 @@ stochastic_pixel = _stochastic_body(sample_stochastic, "stochastic_pixel")
 stochastic_pixel_outlined = _stochastic_body(sample_stochastic_outlined, "stochastic_pixel_outlined")
 
 
+@wp.func
+def stochastic_lane_taps(args: StochasticSampleArgs, pixels: SamplePixels, base: wp.int32, count: wp.int32):
+    """``(taps, layers)``: the lane's stochastic taps (:data:`~.lanes.lane_taps`), worked out one
+    pixel at a time with the body's blocks (one-tap footprints: each reads its UV itself), and each
+    pixel's layer."""
+    a = args.sample
+    taps = lane_taps()
+    layers = lane_ints()
+    for l in range(count):
+        i = base + l
+        uv = pixels.uv[i]
+        lod = sample_footprint_of(a, pixels, i)[0]
+        layers[l] = sample_layer(a, pixels, i)
+        taps[12, l] = lod
+        if finite_uv_lod(uv, lod):
+            taps[13, l] = 1.0
+            t0, t1, t2, t3, w = stochastic_taps(uv, args.params)
+            for k in range(4):
+                t = pick_tap(k, t0, t1, t2, t3)
+                taps[3 * k, l] = t[0]
+                taps[3 * k + 1, l] = t[1]
+                taps[3 * k + 2, l] = w[k]
+    return taps, layers
+
+
+@wp.func
+def lane_taps_linear(args: StochasticSampleArgs) -> bool:
+    """Whether the lanes take the launch tap by tap: a linear blend (no histogram) of one-tap
+    footprints (not the anisotropic filter) of a stochastic method."""
+    return args.sample.smp.filter != FILTER_ANISOTROPIC and args.params.histogram == 0 and args.params.method != METHOD_NONE
+
+
 @inlined
 def stochastic_lane(args: StochasticSampleArgs, pixels: SamplePixels, base: wp.int32, out: wp.array2d(dtype=float)):
     """:func:`stochastic_pixel` for the lane of pixels from ``base`` (:mod:`.lanes`), on the CPU:
-    each pixel's taps and weights worked out one pixel at a time, then every tap of the lane read
-    natively (``lanes.accumulate_footprint_lane``: ``value += w · sample``, tap by tap, as
-    :func:`sample_stochastic` blends them). A histogram's blend (not linear), the anisotropic
-    filter's footprints (several taps, each with its stochastic taps) and plain sampling go pixel
-    by pixel through the body."""
-    a = args.sample
-    params = args.params
+    the lane's taps (:func:`stochastic_lane_taps`), then read natively, tap by tap, with
+    ``lanes.accumulate_footprint_lane`` (``value += w · sample``, as :func:`sample_stochastic`
+    blends them, from 0). A histogram's blend (not linear), the anisotropic filter's footprints
+    (several taps, each with its stochastic taps) and plain sampling go pixel by pixel through the
+    body."""
     count = wp.min(out.shape[0] - base, LANES)
-    if a.smp.filter == FILTER_ANISOTROPIC or params.histogram != 0 or params.method == METHOD_NONE:
+    if not lane_taps_linear(args):
         for l in range(count):
             stochastic_pixel(args, pixels, base + l, out)
     else:
-        layers = lane_ints()
-        lods = lane_floats()
-        finite = lane_ints()
-        u0 = lane_floats()
-        v0 = lane_floats()
-        w0 = lane_floats()
-        u1 = lane_floats()
-        v1 = lane_floats()
-        w1 = lane_floats()
-        u2 = lane_floats()
-        v2 = lane_floats()
-        w2 = lane_floats()
-        u3 = lane_floats()
-        v3 = lane_floats()
-        w3 = lane_floats()
-        for l in range(count):
-            i = base + l
-            uv = pixels.uv[i]
-            lod = sample_footprint_of(a, pixels, i)[0]  # one tap: it reads uv itself
-            layers[l] = sample_layer(a, pixels, i)
-            lods[l] = lod
-            if finite_uv_lod(uv, lod):
-                finite[l] = 1
-                t0, t1, t2, t3, w = stochastic_taps(uv, params)
-                u0[l] = t0[0]
-                v0[l] = t0[1]
-                w0[l] = w[0]
-                u1[l] = t1[0]
-                v1[l] = t1[1]
-                w1[l] = w[1]
-                u2[l] = t2[0]
-                v2[l] = t2[1]
-                w2[l] = w[2]
-                u3[l] = t3[0]
-                v3[l] = t3[1]
-                w3[l] = w[3]
+        a = args.sample
+        taps, layers = stochastic_lane_taps(args, pixels, base, count)
         zero = lane_floats()
         one = lane_floats(1.0)
         value = lane_colours()
-        value = accumulate_footprint_lane(a.tex, a.smp, layers, u0, v0, lods, zero, zero, one, w0, 1, value)
-        value = accumulate_footprint_lane(a.tex, a.smp, layers, u1, v1, lods, zero, zero, one, w1, 1, value)
-        value = accumulate_footprint_lane(a.tex, a.smp, layers, u2, v2, lods, zero, zero, one, w2, 1, value)
-        value = accumulate_footprint_lane(a.tex, a.smp, layers, u3, v3, lods, zero, zero, one, w3, 1, value)
+        for k in range(4):
+            value = accumulate_footprint_lane(a.tex, a.smp, layers, taps[3 * k], taps[3 * k + 1], taps[12], zero, zero, one, taps[3 * k + 2], 1, value)
         for l in range(count):
             result = wp.vec4(wp.nan)
-            if finite[l] != 0:
+            if taps[13, l] != 0.0:
                 result = wp.vec4(0.0) + value[l]  # the body's `result += value`, from 0
             write_channels(out, base + l, result)
+
+
+@inlined
+def scatter_stochastic_lane(args: StochasticSampleArgs, pixels: SamplePixels, base: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):
+    """:func:`scatter_stochastic_pixel` for the lane of pixels from ``base``, on the CPU: the
+    lane's taps, then their adds natively (``lane_scatter.scatter_taps_lane``), pixel by pixel and
+    tap by tap as the body adds them; what :func:`stochastic_lane` takes pixel by pixel, likewise."""
+    count = wp.min(adj.shape[0] - base, LANES)
+    if not lane_taps_linear(args):
+        for l in range(count):
+            scatter_stochastic_pixel(args, pixels, base + l, grads, adj)
+    else:
+        taps, layers = stochastic_lane_taps(args, pixels, base, count)
+        g = lane_colours()
+        for l in range(count):
+            g[l] = read_channels(adj, base + l)
+        scatter_taps_lane(args.sample.tex, grads.tex, args.sample.smp, layers, taps, g)
 
 
 @family()
@@ -419,7 +431,8 @@ def stochastic_kernels() -> Kernels:
     kernels = pixel_kernels("stochastic", module=MODULE, args=StochasticSampleArgs, pixels=SamplePixels, out=wp.array2d(dtype=float),
                             body=stochastic_pixel, scatter=scatter_stochastic_pixel, grads=SampleGrads, adjoint_body=stochastic_pixel_outlined)  # fmt: skip
     lanes = lane_kernel(stochastic_lane, StochasticSampleArgs, SamplePixels, wp.array2d(dtype=float), module=MODULE, name="stochastic_lanes")
-    return Kernels(*kernels, grads=("args.sample.tex",), lanes=lanes)
+    grad_lanes = lane_kernel(scatter_stochastic_lane, StochasticSampleArgs, SamplePixels, wp.array2d(dtype=float), grads_t=SampleGrads, module=MODULE + ".grad", name="stochastic_texel_grad_lanes")
+    return Kernels(*kernels, grads=("args.sample.tex",), lanes=lanes, texel_grad_lanes=grad_lanes)
 
 
 @wp.kernel(enable_backward=False, module=MODULE)

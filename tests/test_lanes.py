@@ -488,6 +488,29 @@ def test_sample_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, lod
 
 
 @pytest.mark.parametrize("threads", [1, 3])
+@pytest.mark.parametrize("filter,source", [("nearest", "lod"), ("trilinear", "lod"), ("trilinear", "derivatives"), ("anisotropic", "derivatives")])
+@pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])
+def test_stochastic_gradient_lanes_add_the_one_pixel_sums(rng, launched, method, filter, source, threads):
+    """``stochastic.scatter_stochastic_lane``: every tap's share of the gradient added natively,
+    pixel by pixel and tap by tap (``lane_scatter.scatter_taps_lane``), the same bits as the
+    one-pixel kernel's, on 3 threads too; the anisotropic filter's pixel by pixel."""
+    tex = wt.TextureArray(rng.random((3, 64, 48, 4), dtype=np.float32), requires_grad=True)
+    n = 30_011
+    uv = _uvs(rng, n)
+    layers = rng.integers(-2, 5, n).astype(np.int32)
+    smp = wt.Sampler(filter=filter, address="mirror")
+    lod = _lod_inputs(rng, n, source)
+    previous = wt.get_num_threads()
+    wt.set_num_threads(threads)
+    try:
+        for layer, option in ((1, wt.Stochastic(method, mirror=True)), (layers, wt.Stochastic(method, seed=3))):
+            _same_grads(lambda: wt.stochastic(tex, uv, option, layer=layer, sampler=smp, **lod), [tex], rng, 4, n)
+    finally:
+        wt.set_num_threads(previous)
+    assert any(name == "stochastic_texel_grad_lanes" for name, _ in launched)
+
+
+@pytest.mark.parametrize("threads", [1, 3])
 @pytest.mark.parametrize("filter", ["nearest", "trilinear", "anisotropic"])
 def test_triplanar_normal_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, threads):
     """Normal mapping's two-step gradient: the first step's lanes (``triplanar._samples_lanes``)
