@@ -40,7 +40,7 @@ from .hexgrid import hex_grid, hex_steps, hex_tap, hex_weights
 from .sampling import SampleArgs, SampleGrads, SamplePixels, sample_footprint_of, sample_layer
 from .scatter import scatter_footprint, scatter_lod
 from .lane_scatter import scatter_taps_lane
-from .lanes import LANES, accumulate_footprint_lane, lane_colours, lane_floats, lane_ints, lane_taps
+from .lanes import FOOTPRINT_CPP, LANES, SAMPLE_READS_CPP, accumulate_footprint_lane, cpu_snippet, lane_colours, lane_floats, lane_ints, lane_taps
 from .texels import FILTER_ANISOTROPIC, SamplerArgs, TexelGrad, TextureView, finite_uv_lod, pick3, read_channels, write_channels
 
 METHOD_NONE = wp.constant(0)
@@ -348,23 +348,106 @@ stochastic_pixel = _stochastic_body(sample_stochastic, "stochastic_pixel")
 stochastic_pixel_outlined = _stochastic_body(sample_stochastic_outlined, "stochastic_pixel_outlined")
 
 
+# hashing.pcg4d / hash4_unit, hash4_taps and cheap2_taps (with value_noise, periodic_base and
+# offset_tap) for a lane, operation for operation (integer hashes; Warp's own wp::smoothstep, wp::lerp,
+# wp::floor; no contraction): loops over the lane's pixels with no branch, which the compiler
+# vectorises. Every tap is hashed, also the zero-weight ones the scalar blocks skip: those are not read.
+_TAPS = FOOTPRINT_CPP + SAMPLE_READS_CPP + r"""
+enum { WT_HASH4 = %(hash4)d, WT_CHEAP2 = %(cheap2)d, WT_STREAM_CELL = %(cell)d, WT_STREAM_OFFSET = %(offset)d, WT_STREAM_NOISE = %(noise)d };
+auto unit = [](unsigned a, unsigned b, unsigned c, unsigned d, float* h) __attribute__((always_inline)) {  // hash4_unit
+    unsigned x = a * 1664525u + 1013904223u, y = b * 1664525u + 1013904223u, z = c * 1664525u + 1013904223u, w = d * 1664525u + 1013904223u;
+    x += y * w; y += z * x; z += x * y; w += y * z;
+    x = x ^ (x >> 16u); y = y ^ (y >> 16u); z = z ^ (z >> 16u); w = w ^ (w >> 16u);
+    x += y * w; y += z * x; z += x * y; w += y * z;
+    const float inv = (float)(1.0 / 16777216.0);
+    h[0] = (float)(x >> 8u) * inv; h[1] = (float)(y >> 8u) * inv; h[2] = (float)(z >> 8u) * inv; h[3] = (float)(w >> 8u) * inv;
+};
+auto offset_tap = [](float bu, float bv, const float* h, int mirror, float& tu, float& tv) __attribute__((always_inline)) {
+    const float su = mirror != 0 && h[2] < 0.5f ? -1.0f : 1.0f, sv = mirror != 0 && h[3] < 0.5f ? -1.0f : 1.0f;
+    tu = su * bu + h[0];
+    tv = sv * bv + h[1];
+};
+wp::mat_t<14, WT_L, float> taps;
+for (int r = 0; r < 14; ++r) for (int l = 0; l < WT_L; ++l) taps.data[r][l] = 0.0f;
+float fin[WT_L];
+for (int l = 0; l < WT_L; ++l) {  // texels.finite_uv_lod
+    const float u = reads.data[0][l], v = reads.data[3][l], lod = reads.data[6][l];
+    fin[l] = l < count && __builtin_fabsf(u) <= wt_float_max && __builtin_fabsf(v) <= wt_float_max && __builtin_fabsf(lod) <= wt_float_max ? 1.0f : 0.0f;
+    taps.data[12][l] = lod;
+    taps.data[13][l] = fin[l];
+}
+const float lo = params.blend_lo, hi = params.blend_hi;
+const unsigned seed = params.seed;
+if (params.method == WT_HASH4) {
+    for (int l = 0; l < WT_L; ++l) {
+        const float u = fin[l] != 0.0f ? reads.data[0][l] : 0.0f, v = fin[l] != 0.0f ? reads.data[3][l] : 0.0f;
+        const float cu = wp::floor(u), cv = wp::floor(v);
+        const float bu = u - 2.0f * wp::floor(0.5f * u), bv = v - 2.0f * wp::floor(0.5f * v);  // periodic_base
+        const float bx = wp::smoothstep(lo, hi, u - cu), by = wp::smoothstep(lo, hi, v - cv);
+        const unsigned ix = (unsigned)(int)cu, iy = (unsigned)(int)cv;
+        const float w[4] = {(1.0f - bx) * (1.0f - by), bx * (1.0f - by), (1.0f - bx) * by, bx * by};
+        for (int k = 0; k < 4; ++k) {
+            float h[4];
+            unit(ix + (unsigned)(k & 1), iy + (unsigned)(k >> 1), seed, (unsigned)WT_STREAM_CELL, h);
+            offset_tap(bu, bv, h, params.mirror, taps.data[3 * k][l], taps.data[3 * k + 1][l]);
+            taps.data[3 * k + 2][l] = fin[l] != 0.0f ? w[k] : 0.0f;
+        }
+    }
+} else if (params.method == WT_CHEAP2) {
+    for (int l = 0; l < WT_L; ++l) {
+        const float u = fin[l] != 0.0f ? reads.data[0][l] : 0.0f, v = fin[l] != 0.0f ? reads.data[3][l] : 0.0f;
+        const float pu = u * params.noise_frequency, pv = v * params.noise_frequency;  // value_noise
+        const float cu = wp::floor(pu), cv = wp::floor(pv);
+        const float fu = pu - cu, fv = pv - cv;
+        const unsigned ix = (unsigned)(int)cu, iy = (unsigned)(int)cv;
+        float a[4], b[4], c[4], d[4];
+        unit(ix, iy, seed, (unsigned)WT_STREAM_NOISE, a);
+        unit(ix + 1u, iy, seed, (unsigned)WT_STREAM_NOISE, b);
+        unit(ix, iy + 1u, seed, (unsigned)WT_STREAM_NOISE, c);
+        unit(ix + 1u, iy + 1u, seed, (unsigned)WT_STREAM_NOISE, d);
+        const float sx = wp::smoothstep(0.0f, 1.0f, fu), sy = wp::smoothstep(0.0f, 1.0f, fv);
+        const float noise = wp::lerp(wp::lerp(a[0], b[0], sx), wp::lerp(c[0], d[0], sx), sy);
+        const float level = noise * params.noise_levels;  // cheap2_taps
+        const float index = wp::floor(level);
+        const float t = wp::smoothstep(lo, hi, level - index);
+        const float bu = u - 2.0f * wp::floor(0.5f * u), bv = v - 2.0f * wp::floor(0.5f * v);
+        const unsigned ia = (unsigned)(int)index;
+        float h0[4], h1[4];
+        unit(ia, 0u, seed, (unsigned)WT_STREAM_OFFSET, h0);
+        unit(ia + 1u, 0u, seed, (unsigned)WT_STREAM_OFFSET, h1);
+        offset_tap(bu, bv, h0, params.mirror, taps.data[0][l], taps.data[1][l]);
+        offset_tap(bu, bv, h1, params.mirror, taps.data[3][l], taps.data[4][l]);
+        taps.data[2][l] = fin[l] != 0.0f ? 1.0f - t : 0.0f;
+        taps.data[5][l] = fin[l] != 0.0f ? t : 0.0f;
+    }
+}
+return taps;
+""" % {"hash4": int(METHOD_HASH4), "cheap2": int(METHOD_CHEAP2), "cell": int(STREAM_HASH4_CELL), "offset": int(STREAM_CHEAP2_OFFSET), "noise": int(STREAM_CHEAP2_NOISE)}
+
+
+@wp.func_native(cpu_snippet(_TAPS, "return {};\n"))
+def stochastic_taps_lane(tex: TextureView, smp: SamplerArgs, params: StochasticArgs, uv: wp.array(dtype=wp.vec2), uv_dx: wp.array(dtype=wp.vec2), uv_dy: wp.array(dtype=wp.vec2),
+                         lods: wp.array(dtype=float), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32, lod_source: wp.int32, constant_lod: float, base: wp.int32) -> lane_taps:  # fmt: skip
+    """The lane's :data:`~.lanes.lane_taps` from ``base``: every pixel's LOD
+    (``sampling.sample_footprint_of``, one tap) and whether its UV and LOD are finite, and for hash4
+    and cheap2 its taps and their weights (0 where not finite); hex's taps are left 0."""
+    ...
+
+
 @wp.func
 def stochastic_lane_taps(args: StochasticSampleArgs, pixels: SamplePixels, base: wp.int32, count: wp.int32):
-    """``(taps, layers)``: the lane's stochastic taps (:data:`~.lanes.lane_taps`), worked out one
-    pixel at a time with the body's blocks (one-tap footprints: each reads its UV itself), and each
+    """``(taps, layers)``: the lane's stochastic taps (:data:`~.lanes.lane_taps`; one-tap footprints:
+    each reads its UV itself), hash4's and cheap2's natively for the whole lane
+    (:func:`stochastic_taps_lane`), hex's one pixel at a time with the body's blocks, and each
     pixel's layer."""
     a = args.sample
-    taps = lane_taps()
+    taps = stochastic_taps_lane(a.tex, a.smp, args.params, pixels.uv, pixels.uv_dx, pixels.uv_dy, pixels.lods, pixels.layers, a.constant_layer, a.lod_source, a.constant_lod, base)
     layers = lane_ints()
     for l in range(count):
         i = base + l
-        uv = pixels.uv[i]
-        lod = sample_footprint_of(a, pixels, i)[0]
         layers[l] = sample_layer(a, pixels, i)
-        taps[12, l] = lod
-        if finite_uv_lod(uv, lod):
-            taps[13, l] = 1.0
-            t0, t1, t2, t3, w = stochastic_taps(uv, args.params)
+        if args.params.method == METHOD_HEX and taps[13, l] != 0.0:  # hex's taps, one pixel at a time
+            t0, t1, t2, t3, w = stochastic_taps(pixels.uv[i], args.params)
             for k in range(4):
                 t = pick_tap(k, t0, t1, t2, t3)
                 taps[3 * k, l] = t[0]

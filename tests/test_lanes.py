@@ -138,7 +138,7 @@ def test_stochastic_lanes_give_the_one_pixel_bits(rng, launched, method, filter,
     smp = wt.Sampler(filter=filter, address=address)
     lod = _lod_inputs(rng, n, source)
     for layer in (2, per_sample):
-        for option in (wt.Stochastic(method), wt.Stochastic(method, seed=7, mirror=True)):
+        for option in (wt.Stochastic(method), wt.Stochastic(method, seed=7, mirror=True, blend=(0.1, 0.3), noise_frequency=3.7, noise_levels=5.5, contrast=3.0, rotation=0.6)):
             lanes, scalar = _both(lambda: wt.stochastic(tex, uv, option, layer=layer, sampler=smp, **lod))
             _same_bits(lanes, scalar)
             assert np.isnan(lanes[:3]).all() and np.isfinite(lanes[30:]).all()
