@@ -35,8 +35,8 @@ from . import hashing, inlined, out_of_line, specialised
 from .family import Kernels, family, lane_kernel, pixel_kernels
 from .filters import sample_footprint, sample_lod, sample_lod_outlined
 from .footprint import footprint_mean, footprint_taps, footprint_uv, mip_levels
-from .hashing import STREAM_CHEAP2_NOISE, STREAM_CHEAP2_OFFSET, STREAM_HASH4_CELL
-from .hexgrid import hex_grid, hex_steps, hex_tap, hex_weights
+from .hashing import STREAM_CHEAP2_NOISE, STREAM_CHEAP2_OFFSET, STREAM_HASH4_CELL, STREAM_HEX_VERTEX
+from .hexgrid import HALF_SQRT3, HEX_SCALE, INV_SQRT3, PI, hex_grid, hex_steps, hex_tap, hex_weights
 from .sampling import SampleArgs, SampleGrads, SamplePixels, sample_footprint_of, sample_layer
 from .scatter import scatter_footprint, scatter_lod
 from .lane_scatter import scatter_taps_lane
@@ -352,8 +352,10 @@ stochastic_pixel_outlined = _stochastic_body(sample_stochastic_outlined, "stocha
 # offset_tap) for a lane, operation for operation (integer hashes; Warp's own wp::smoothstep, wp::lerp,
 # wp::floor; no contraction): loops over the lane's pixels with no branch, which the compiler
 # vectorises. Every tap is hashed, also the zero-weight ones the scalar blocks skip: those are not read.
+# Hex's taps (hexgrid's blocks: a float64 grid, rotations, powers) go pixel by pixel, with Warp's own
+# wp::floor, wp::sin, wp::cos and wp::pow.
 _TAPS = FOOTPRINT_CPP + SAMPLE_READS_CPP + r"""
-enum { WT_HASH4 = %(hash4)d, WT_CHEAP2 = %(cheap2)d, WT_STREAM_CELL = %(cell)d, WT_STREAM_OFFSET = %(offset)d, WT_STREAM_NOISE = %(noise)d };
+enum { WT_HASH4 = %(hash4)d, WT_CHEAP2 = %(cheap2)d, WT_STREAM_CELL = %(cell)d, WT_STREAM_OFFSET = %(offset)d, WT_STREAM_NOISE = %(noise)d, WT_STREAM_HEX = %(hex)d };
 auto unit = [](unsigned a, unsigned b, unsigned c, unsigned d, float* h) __attribute__((always_inline)) {  // hash4_unit
     unsigned x = a * 1664525u + 1013904223u, y = b * 1664525u + 1013904223u, z = c * 1664525u + 1013904223u, w = d * 1664525u + 1013904223u;
     x += y * w; y += z * x; z += x * y; w += y * z;
@@ -420,39 +422,85 @@ if (params.method == WT_HASH4) {
         taps.data[2][l] = fin[l] != 0.0f ? 1.0f - t : 0.0f;
         taps.data[5][l] = fin[l] != 0.0f ? t : 0.0f;
     }
+} else {  // hexgrid: hex_grid (in float64), hex_steps, hex_tap, hex_weights
+    const double scale = %(hex_scale)r, inv_sqrt3 = %(inv_sqrt3)r, half_sqrt3_64 = %(half_sqrt3)r;  // wp.float64 of a constant: its value as a double
+    const float half_sqrt3 = (float)%(half_sqrt3)r, pi = (float)%(pi)r, hex_scale = (float)%(hex_scale)r;
+    auto lattice_id = [](double b) __attribute__((always_inline)) -> int {
+        const double limit = 1073741824.0;
+        if (b >= limit || b < -limit) b = b - wp::floor(b / limit) * limit;
+        return (int)b;
+    };
+    for (int l = 0; l < WT_L; ++l) {
+        if (fin[l] == 0.0f) continue;
+        const float u = reads.data[0][l], v = reads.data[3][l];
+        const double px = (double)u * scale, py = (double)v * scale;
+        const double sx = px - py * inv_sqrt3, sy = 2.0 * inv_sqrt3 * py;
+        const double bx = wp::floor(sx), by = wp::floor(sy);
+        const float f0 = (float)(sx - bx), f1 = (float)(sy - by);
+        const int i = lattice_id(bx), j = lattice_id(by);
+        const bool upper = f0 + f1 >= 1.0f;
+        float bary[3] = {1.0f - f0 - f1, f0, f1};
+        int vi[3] = {i, i + 1, i}, vj[3] = {j, j, j + 1};
+        float step_u[3] = {0.0f, 1.0f, 0.0f}, step_v[3] = {0.0f, 0.0f, 1.0f};
+        if (upper) {
+            bary[0] = f0 + f1 - 1.0f; bary[1] = 1.0f - f1; bary[2] = 1.0f - f0;
+            vi[0] = i + 1; vj[0] = j + 1;
+            step_u[0] = 1.0f; step_v[0] = 1.0f;
+        }
+        const float bu = u - 2.0f * wp::floor(0.5f * u), bv = v - 2.0f * wp::floor(0.5f * v);  // periodic_base
+        for (int k = 0; k < 3; ++k) {  // hex_tap
+            float h[4];
+            unit((unsigned)vi[k], (unsigned)vj[k], seed, (unsigned)WT_STREAM_HEX, h);
+            float tu = bu + h[0], tv = bv + h[1];
+            if (params.rotation != 0.0f) {
+                float du, dv;
+                if (wp::abs(u) < 1.0e8f && wp::abs(v) < 1.0e8f) {
+                    const double cu = ((double)vi[k] + 0.5 * (double)vj[k]) / scale, cv = half_sqrt3_64 * (double)vj[k] / scale;  // hex_centre64
+                    du = (float)((double)u - cu);
+                    dv = (float)((double)v - cv);
+                } else {
+                    const float x = f0 - step_u[k], y = f1 - step_v[k];
+                    du = (x + 0.5f * y) / hex_scale;
+                    dv = (half_sqrt3 * y) / hex_scale;
+                }
+                const float theta = (2.0f * h[2] - 1.0f) * pi * params.rotation;
+                const float cs = wp::cos(theta), sn = wp::sin(theta);
+                tu = tu + ((cs * du - sn * dv) - du);
+                tv = tv + ((sn * du + cs * dv) - dv);
+            }
+            taps.data[3 * k][l] = tu;
+            taps.data[3 * k + 1][l] = tv;
+        }
+        float pw[3];
+        for (int k = 0; k < 3; ++k) pw[k] = bary[k] > 0.0f ? wp::pow(bary[k], params.contrast) : 0.0f;  // hex_weights
+        const float total = pw[0] + pw[1] + pw[2];
+        for (int k = 0; k < 3; ++k) taps.data[3 * k + 2][l] = pw[k] / total;
+    }
 }
 return taps;
-""" % {"hash4": int(METHOD_HASH4), "cheap2": int(METHOD_CHEAP2), "cell": int(STREAM_HASH4_CELL), "offset": int(STREAM_CHEAP2_OFFSET), "noise": int(STREAM_CHEAP2_NOISE)}
+""" % {"hash4": int(METHOD_HASH4), "cheap2": int(METHOD_CHEAP2), "cell": int(STREAM_HASH4_CELL), "offset": int(STREAM_CHEAP2_OFFSET), "noise": int(STREAM_CHEAP2_NOISE),
+       "hex": int(STREAM_HEX_VERTEX), "hex_scale": float(HEX_SCALE), "inv_sqrt3": float(INV_SQRT3), "half_sqrt3": float(HALF_SQRT3), "pi": float(PI)}
 
 
 @wp.func_native(cpu_snippet(_TAPS, "return {};\n"))
 def stochastic_taps_lane(tex: TextureView, smp: SamplerArgs, params: StochasticArgs, uv: wp.array(dtype=wp.vec2), uv_dx: wp.array(dtype=wp.vec2), uv_dy: wp.array(dtype=wp.vec2),
                          lods: wp.array(dtype=float), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32, lod_source: wp.int32, constant_lod: float, base: wp.int32) -> lane_taps:  # fmt: skip
     """The lane's :data:`~.lanes.lane_taps` from ``base``: every pixel's LOD
-    (``sampling.sample_footprint_of``, one tap) and whether its UV and LOD are finite, and for hash4
-    and cheap2 its taps and their weights (0 where not finite); hex's taps are left 0."""
+    (``sampling.sample_footprint_of``, one tap), whether its UV and LOD are finite, and its taps and
+    their weights (0 where not finite)."""
     ...
 
 
 @wp.func
 def stochastic_lane_taps(args: StochasticSampleArgs, pixels: SamplePixels, base: wp.int32, count: wp.int32):
     """``(taps, layers)``: the lane's stochastic taps (:data:`~.lanes.lane_taps`; one-tap footprints:
-    each reads its UV itself), hash4's and cheap2's natively for the whole lane
-    (:func:`stochastic_taps_lane`), hex's one pixel at a time with the body's blocks, and each
-    pixel's layer."""
+    each reads its UV itself), worked out natively (:func:`stochastic_taps_lane`), and each pixel's
+    layer."""
     a = args.sample
     taps = stochastic_taps_lane(a.tex, a.smp, args.params, pixels.uv, pixels.uv_dx, pixels.uv_dy, pixels.lods, pixels.layers, a.constant_layer, a.lod_source, a.constant_lod, base)
     layers = lane_ints()
     for l in range(count):
-        i = base + l
-        layers[l] = sample_layer(a, pixels, i)
-        if args.params.method == METHOD_HEX and taps[13, l] != 0.0:  # hex's taps, one pixel at a time
-            t0, t1, t2, t3, w = stochastic_taps(pixels.uv[i], args.params)
-            for k in range(4):
-                t = pick_tap(k, t0, t1, t2, t3)
-                taps[3 * k, l] = t[0]
-                taps[3 * k + 1, l] = t[1]
-                taps[3 * k + 2, l] = w[k]
+        layers[l] = sample_layer(a, pixels, base + l)
     return taps, layers
 
 
