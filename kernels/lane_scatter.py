@@ -8,7 +8,8 @@ so the gradients are the same bits, and the same tile marks (``scatter.mark_rows
 
 import warp as wp
 
-from .lanes import FOOTPRINT_CPP, SAMPLE_READS_CPP, cpu_snippet, lane_colours, lane_ints, lane_reads, lane_taps
+from .lanes import FOOTPRINT_CPP, cpu_snippet, lane_colours, lane_ints, lane_reads, lane_taps
+from .sample_lanes import SAMPLE_READS_CPP
 from .texels import TILE_SHIFT, SamplerArgs, TexelGrad, TextureView
 
 # scatter.scatter_levels for the lane: reads r = 0 .. reads - 1 (up to 4) of every lane pixel, read r
@@ -154,7 +155,7 @@ wt_scatter_levels_any(1, texs, grads, smp, u, v, levels, fractions, layer, activ
 def scatter_levels_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, uv: wp.array(dtype=wp.vec2), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32,
                         level: wp.int32, fraction: float, adj: wp.array2d(dtype=float), base: wp.int32):  # fmt: skip
     """:func:`~warptex.kernels.scatter.scatter_levels` of the gradient ``adj[i]`` for the lane's
-    pixels ``i = base ..`` whose ``uv[i]`` is finite (:func:`sample_levels_lane`'s reads)."""
+    pixels ``i = base ..`` whose ``uv[i]`` is finite (:func:`~.sample_lanes.sample_levels_lane`'s reads)."""
     ...
 
 
@@ -263,7 +264,7 @@ def scatter_footprint_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, 
                            lods: wp.array(dtype=float), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32, lod_source: wp.int32, constant_lod: float,
                            adj: wp.array2d(dtype=float), base: wp.int32):  # fmt: skip
     """:func:`~warptex.kernels.scatter.scatter_footprint` of the gradient ``adj[i]`` for the lane's
-    pixels ``i = base ..`` (:func:`~.lanes.sample_footprint_lane`'s reads), one-tap footprints only
+    pixels ``i = base ..`` (:func:`~.sample_lanes.sample_footprint_lane`'s reads), one-tap footprints only
     (every filter but the anisotropic one)."""
     ...
 

@@ -10,7 +10,8 @@ import warp as wp
 from .family import Kernels, family, lane_kernel, pixel_kernels
 from . import inlined, specialised
 from .lane_scatter import scatter_footprint_lane, scatter_levels_lane
-from .lanes import LANES, sample_footprint_lane, sample_levels_lane
+from .lanes import LANES
+from .sample_lanes import sample_footprint_lane, sample_levels_lane
 from .filters import sample_footprint, sample_footprint_outlined, sample_levels
 from .footprint import point_footprint, texture_footprint
 from .scatter import scatter_footprint, scatter_levels

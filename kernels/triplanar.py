@@ -27,11 +27,9 @@ from .family import Kernels, Staged, family, forward_kernel, lane_kernel, pixel_
 from .normals import blend_projected, decode_normal, direction, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
-from .texels import FILTER_ANISOTROPIC, SamplerArgs, TexelGrad, TextureView, pick3, read_channels, write_channels
-from .lane_scatter import scatter_reads_lanes
-from .lanes import LANES, lane_colours, lane_ints
-from .projection_lanes import surface_covered, triplanar_reads_lane
-from .triplanar_lanes import lane_bodies, projection_samples_lane
+from .texels import SamplerArgs, TexelGrad, TextureView, pick3, read_channels, write_channels
+from .projection_lanes import surface_covered
+from .triplanar_lanes import lane_bodies, normal_lane_bodies
 
 MODULE = "warptex.triplanar"
 GRAD_MODULE = MODULE + ".grad"
@@ -121,6 +119,19 @@ def projected_normal(texel: wp.vec4, axis: wp.int32, n: wp.vec3, proj: Projectio
     t = wp.vec3(t[0] * u_sign(n, axis, proj.mirror_fix), t[1], t[2])
     base = plane_coords(n, axis)
     return to_world(blend_projected(t, wp.vec3(base[0], base[1], n[axis]), nm.blend), axis)
+
+
+@wp.func
+def normal_of_samples(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, w: wp.vec3, sx: wp.vec4, sy: wp.vec4, sz: wp.vec4) -> wp.vec3:
+    """Pixel ``i``'s normal (a covered pixel's) from its projections' weights ``w`` (of the normal as
+    given) and samples, as the normal body makes it: for the CPU lanes (``triplanar_lanes``)."""
+    p, n, dpdx, dpdy = surface(args.proj, pixels, i)
+    n = unit_base_normal(n)
+    total = wp.vec3(0.0)
+    for axis in range(3):
+        if w[axis] > 0.0:
+            total += w[axis] * projected_normal(pick3(sx, sy, sz, axis), axis, n, args.proj, args.normal_map)
+    return unit_normal(total, n, args.proj)
 
 
 @wp.func
@@ -270,73 +281,6 @@ def normal_from_samples(args: NormalBlendArgs, pixels: StoredSamples, i: wp.int3
     write_normal(out, i, result)
 
 
-@inlined
-def normal_lane(args: TriplanarArgs, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
-    """The plain normal-mapping body (one texture per axis) for the lane of pixels from ``base``
-    (:mod:`.lanes`), on the CPU: the lane's reads and samples natively, then each pixel's normal
-    from them as the body makes it."""
-    count = wp.min(out.shape[0] - base, LANES)
-    reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1)
-    sx = projection_samples_lane(args.faces, args.smp, args.layer, reads, 0)
-    sy = projection_samples_lane(args.faces, args.smp, args.layer, reads, 1)
-    sz = projection_samples_lane(args.faces, args.smp, args.layer, reads, 2)
-    for l in range(count):
-        i = base + l
-        result = wp.vec3(0.0)
-        if pixels.mask[i] != 0.0:
-            p, n, dpdx, dpdy = surface(args.proj, pixels, i)
-            n = unit_base_normal(n)
-            total = wp.vec3(0.0)
-            for axis in range(3):
-                w = reads[9 + axis, l]  # projection_weights of the normal as given
-                if w > 0.0:
-                    total += w * projected_normal(pick3(sx[l], sy[l], sz[l], axis), axis, n, args.proj, args.normal_map)
-            result = unit_normal(total, n, args.proj)
-        write_normal(out, i, result)
-
-
-@functools.cache
-def _samples_lanes(samples_grad):
-    """The lanes of the two-step normal's first step, plain with a texture per axis: each
-    projection's sample and the weights (the ``samples`` body), and their texel gradients (the
-    ``samples_grad`` body; the anisotropic filter's, whose footprints may take several taps, pixel
-    by pixel through it)."""
-
-    def samples_lane(args: TriplanarArgs, pixels: SurfacePixels, base: wp.int32, out: ProjectionSamples):
-        count = wp.min(out.weights.shape[0] - base, LANES)
-        reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1)
-        sx = projection_samples_lane(args.faces, args.smp, args.layer, reads, 0)
-        sy = projection_samples_lane(args.faces, args.smp, args.layer, reads, 1)
-        sz = projection_samples_lane(args.faces, args.smp, args.layer, reads, 2)
-        for l in range(count):
-            i = base + l
-            out.weights[i] = wp.vec3(reads[9, l], reads[10, l], reads[11, l])  # 0 where not covered, as the body leaves it
-            for axis in range(3):
-                value = wp.vec4(0.0)
-                if reads[9 + axis, l] > 0.0:
-                    value = pick3(sx[l], sy[l], sz[l], axis)
-                out.samples[i, axis] = value
-
-    def samples_grad_lane(args: TriplanarArgs, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: ProjectionSamples):
-        count = wp.min(adj.weights.shape[0] - base, LANES)
-        if args.smp.filter == FILTER_ANISOTROPIC:
-            for l in range(count):
-                samples_grad(args, pixels, base + l, grads, adj)
-        else:
-            reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1)
-            gx = lane_colours()
-            gy = lane_colours()
-            gz = lane_colours()
-            for l in range(count):
-                gx[l] = adj.samples[base + l, 0]
-                gy[l] = adj.samples[base + l, 1]
-                gz[l] = adj.samples[base + l, 2]
-            faces = args.faces
-            scatter_reads_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, lane_ints(args.layer), reads, gx, gy, gz)
-
-    return inlined(specialised(samples_lane, "triplanar_samples_lane")), inlined(specialised(samples_grad_lane, "triplanar_samples_grad_lane"))
-
-
 _PLAIN = _projection_reads(sample_plain, scatter_plain, "_plain")
 _STOCHASTIC = _projection_reads(sample_stochastic, scatter_stochastic, "_stochastic")
 _BODIES = {
@@ -387,15 +331,13 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
             grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
         return Kernels(forward, texel_grad, _adjoint(False), grads=FACE_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes)
     forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
-    lanes = None
-    if not stochastic and not faces:  # a module of its own: colour-only jobs do not compile it
+    lanes = first_lanes = None
+    if not stochastic and not faces:  # modules of their own: colour-only jobs do not compile them
+        normal_lane, samples_lane, samples_grad_lane = normal_lane_bodies(normal_of_samples, bodies["samples_grad"], TriplanarArgs, ProjectionSamples)
         lanes = lane_kernel(normal_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module + ".normal", name=name + "_normal_lanes", covered=surface_covered)
-    first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,
-                          body=bodies["samples"], scatter=bodies["samples_grad"], grads=FaceGrads)  # fmt: skip
-    first_lanes = {}
-    if not stochastic and not faces:
-        samples_lane, samples_grad_lane = _samples_lanes(bodies["samples_grad"])
         first_lanes = {"lanes": lane_kernel(samples_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, module=module + ".normal.grad", name=name + "_samples_lanes"),
                        "texel_grad_lanes": lane_kernel(samples_grad_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, grads_t=FaceGrads, module=module + ".normal.grad", name=name + "_samples_texel_grad_lanes")}  # fmt: skip
-    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=FACE_GRADS, **first_lanes), then=_normal_from_samples(), intermediates=_sample_shapes)
+    first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,
+                          body=bodies["samples"], scatter=bodies["samples_grad"], grads=FaceGrads)  # fmt: skip
+    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=FACE_GRADS, **(first_lanes or {})), then=_normal_from_samples(), intermediates=_sample_shapes)
     return Kernels(forward, None, _adjoint(True), staged=staged, lanes=lanes)

@@ -1,5 +1,6 @@
 """Triplanar and biplanar colour for a lane of pixels on the CPU (:mod:`.lanes`), forward and texel
-gradient, one texture per axis, plain sampling.
+gradient, and triplanar normal mapping (its forward, and the first step of its two-step gradient),
+one texture per axis, plain sampling.
 
 What each pixel reads from each projection (its UV, footprint and weight, with triplanar or
 biplanar weights) comes from :func:`~.projection_lanes.triplanar_reads_lane` for the whole lane;
@@ -16,11 +17,11 @@ import warp as wp
 
 from . import inlined, specialised
 from .faces import FaceGrads, FaceTextures, on_axis
-from .lane_scatter import scatter_lod_lanes
+from .lane_scatter import scatter_lod_lanes, scatter_reads_lanes
 from .lanes import LANES, lane_colours, lane_ints, lane_reads
 from .projection import SurfacePixels
 from .projection_lanes import accumulate_reads_lane, triplanar_reads_lane
-from .texels import FILTER_ANISOTROPIC, SamplerArgs, read_channels, write_channels
+from .texels import FILTER_ANISOTROPIC, SamplerArgs, pick3, read_channels, write_channels
 
 
 @wp.func
@@ -74,3 +75,67 @@ def lane_bodies(colour, colour_grad, args_t):
             scatter_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0), base, count, grads, adj)
 
     return inlined(specialised(colour_lane, "triplanar_colour_lane")), inlined(specialised(colour_grad_lane, "triplanar_colour_grad_lane"))
+
+
+@functools.cache
+def normal_lane_bodies(normal_of_samples, samples_grad, args_t, samples_t):
+    """``(normal_lane, samples_lane, samples_grad_lane)``: the lane bodies of plain normal mapping
+    (one texture per axis) and of the first step of its two-step gradient, which stores each
+    projection's sample and the weights (``samples_t``: :class:`~.triplanar.ProjectionSamples`) and
+    adds their texel gradients (the anisotropic filter's pixel by pixel through the body
+    ``samples_grad``). ``normal_of_samples(args, pixels, i, w, sx, sy, sz)`` makes a covered pixel's
+    normal from its weights and samples as the normal body does. Each reads the projections on the
+    unit normal, as the bodies do (``triplanar_reads_lane``'s ``unit_normals``)."""
+
+    def normal_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
+        count = wp.min(out.shape[0] - base, LANES)
+        reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1)
+        sx = projection_samples_lane(args.faces, args.smp, args.layer, reads, 0)
+        sy = projection_samples_lane(args.faces, args.smp, args.layer, reads, 1)
+        sz = projection_samples_lane(args.faces, args.smp, args.layer, reads, 2)
+        for l in range(count):
+            i = base + l
+            result = wp.vec3(0.0)
+            if pixels.mask[i] != 0.0:
+                result = normal_of_samples(args, pixels, i, wp.vec3(reads[9, l], reads[10, l], reads[11, l]), sx[l], sy[l], sz[l])
+            out[i, 0] = result[0]
+            out[i, 1] = result[1]
+            out[i, 2] = result[2]
+
+    def samples_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: samples_t):
+        count = wp.min(out.weights.shape[0] - base, LANES)
+        reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1)
+        sx = projection_samples_lane(args.faces, args.smp, args.layer, reads, 0)
+        sy = projection_samples_lane(args.faces, args.smp, args.layer, reads, 1)
+        sz = projection_samples_lane(args.faces, args.smp, args.layer, reads, 2)
+        for l in range(count):
+            i = base + l
+            out.weights[i] = wp.vec3(reads[9, l], reads[10, l], reads[11, l])  # 0 where not covered, as the body leaves it
+            for axis in range(3):
+                value = wp.vec4(0.0)
+                if reads[9 + axis, l] > 0.0:
+                    value = pick3(sx[l], sy[l], sz[l], axis)
+                out.samples[i, axis] = value
+
+    def samples_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: samples_t):
+        count = wp.min(adj.weights.shape[0] - base, LANES)
+        if args.smp.filter == FILTER_ANISOTROPIC:
+            for l in range(count):
+                samples_grad(args, pixels, base + l, grads, adj)
+        else:
+            reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1)
+            gx = lane_colours()
+            gy = lane_colours()
+            gz = lane_colours()
+            for l in range(count):
+                gx[l] = adj.samples[base + l, 0]
+                gy[l] = adj.samples[base + l, 1]
+                gz[l] = adj.samples[base + l, 2]
+            faces = args.faces
+            scatter_reads_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, lane_ints(args.layer), reads, gx, gy, gz)
+
+    return (
+        inlined(specialised(normal_lane, "triplanar_normal_lane")),
+        inlined(specialised(samples_lane, "triplanar_samples_lane")),
+        inlined(specialised(samples_grad_lane, "triplanar_samples_grad_lane")),
+    )

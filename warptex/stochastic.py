@@ -18,7 +18,7 @@ from warptex._op import run
 from warptex._pack import footprints, lod_inputs, packed, reshaped, resolve_layer, sample_args, stochastic_args, struct_of, vec2_array
 from warptex._validate import resolve_device
 from warptex.kernels import sampling as ks
-from warptex.kernels import stochastic as kst
+from warptex.kernels import stochastic_sample as kss
 from warptex.options import Method, Sampler, Stochastic, as_sampler, as_stochastic
 from warptex.texture import Texture, TextureArray
 
@@ -85,14 +85,14 @@ def stochastic(
     # histogram's Gaussianised texture is as large as the texture.
     setup = build() if option.histogram is not None else packed(texture, ("stochastic", option, sampler, lod_source, constant_lod, constant_layer), build)
     pixels = struct_of(ks.SamplePixels, device, uv=reshaped(uv, (count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
-    out = run(kst.stochastic_kernels(), count, args=setup.args, pixels=pixels, out=((count, texture.channels), float), device=device, linear=setup.linear, footprints=setup.footprints)
+    out = run(kss.stochastic_kernels(), count, args=setup.args, pixels=pixels, out=((count, texture.channels), float), device=device, linear=setup.linear, footprints=setup.footprints)
     return reshaped(out, (*(() if single else shape), texture.channels))
 
 
 class _Setup(NamedTuple):
     """What a :func:`stochastic` call on a texture needs beside its per-UV inputs (:func:`_setup`)."""
 
-    args: kst.StochasticSampleArgs
+    args: kss.StochasticSampleArgs
     footprints: int
     linear: bool  # the histogram blend is not linear in the texels
 
@@ -100,7 +100,7 @@ class _Setup(NamedTuple):
 def _setup(func: str, texture: TextureArray, option: Stochastic, sampler: Sampler, lod_source: int, constant_lod: float, constant_layer: int) -> _Setup:
     """The packed arguments of :func:`stochastic` on ``texture`` for these options, checked."""
     params, sampled = stochastic_args(func, option, texture, sampler)
-    args = kst.StochasticSampleArgs()
+    args = kss.StochasticSampleArgs()
     args.sample, args.params = sample_args(func, sampled, sampler, lod_source, constant_lod, constant_layer), params  # nested structs are set whole: Warp copies their values in
     return _Setup(args, footprints(args.sample.smp, params), params.histogram == 0)
 
@@ -132,6 +132,6 @@ def hex_taps(uv, *, seed: int = 0, contrast: float = 1.0, rotation: float = 0.0,
     vertices = wp.zeros((n, 3), dtype=wp.vec2i, device=device)
     taps = wp.zeros((n, 3), dtype=wp.vec2, device=device)
     if n:
-        wp.launch(kst.hex_taps_kernel, dim=n, inputs=[uv.reshape((n,)), params], outputs=[weights, vertices, taps], device=device, record_tape=False)
+        wp.launch(kss.hex_taps_kernel, dim=n, inputs=[uv.reshape((n,)), params], outputs=[weights, vertices, taps], device=device, record_tape=False)
     shape = uv.shape
     return weights.numpy().reshape(*shape, 3), vertices.numpy().reshape(*shape, 3, 2), taps.numpy().reshape(*shape, 3, 2)
