@@ -159,26 +159,28 @@ def scatter_levels_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, uv:
     ...
 
 
-# Up to three reads per lane pixel (a pixel's projections, rows of a lane_reads matrix `at`), read r
-# from tex[r] into grad[r]; a read adds where its weight is positive and its UV and LOD are finite
-# (scatter.scatter_lod), and only into a gradient that is needed. It adds its share of the pixel's
-# gradient g[l] (read r's own, gr[r], where per_read; else gr[0]): w · g where weigh (a blend of
-# projections), g itself where not.
+# Up to four reads per lane pixel, read r from tex[r] into grad[r], at the rows u[r], v[r], lod[r] and
+# weight w[r] of a value per lane pixel (a lane_reads matrix's: a pixel's projections; a lane_taps
+# matrix's: a stochastic lookup's taps); a read adds where its weight is positive and its UV and LOD
+# are finite (scatter.scatter_lod), and only into a gradient that is needed. It adds its share of the
+# pixel's gradient g[l] (read r's own, gr[r], where per_read; else gr[0]): w · g where weigh (a blend
+# of projections or taps), g itself where not.
 _SCATTER_LOD_CORE = _SCATTER_CORE + r"""
-auto wt_scatter_lod_of = [&](const auto* const* texs, const auto* const* grads, const auto& smp, const int nreads, const int* layers, const wp::mat_t<21, WT_L, float>& at,
-                             const int weigh, const wp::mat_t<WT_L, 4, float>* const* gr, const int per_read) __attribute__((always_inline)) {
-    float us[3][WT_L], vs[3][WT_L], fractions[3][WT_L];
-    int levels[3][WT_L], layer[3][WT_L];
-    bool active[3][WT_L];
-    wt_f4 gs[3][WT_L];
+auto wt_scatter_rows = [&](const auto* const* texs, const auto* const* grads, const auto& smp, const int nreads, const int* layers, const float* const* u_rows,
+                           const float* const* v_rows, const float* const* lod_rows, const float* const* w_rows, const int weigh,
+                           const wp::mat_t<WT_L, 4, float>* const* gr, const int per_read) __attribute__((always_inline)) {
+    float us[4][WT_L], vs[4][WT_L], fractions[4][WT_L];
+    int levels[4][WT_L], layer[4][WT_L];
+    bool active[4][WT_L];
+    wt_f4 gs[4][WT_L];
     wt_vi lane_layers;
     __builtin_memcpy(&lane_layers, layers, sizeof(lane_layers));
     for (int r = 0; r < nreads; ++r) {  // a lane of reads at a time (vector selects, the same values as the scalar formulas)
         wt_vf u, v, lod, w;
-        __builtin_memcpy(&u, at.data[r], sizeof(u));
-        __builtin_memcpy(&v, at.data[3 + r], sizeof(v));
-        __builtin_memcpy(&lod, at.data[6 + r], sizeof(lod));
-        __builtin_memcpy(&w, at.data[9 + r], sizeof(w));
+        __builtin_memcpy(&u, u_rows[r], sizeof(u));
+        __builtin_memcpy(&v, v_rows[r], sizeof(v));
+        __builtin_memcpy(&lod, lod_rows[r], sizeof(lod));
+        __builtin_memcpy(&w, w_rows[r], sizeof(w));
         const wt_vi needed = grads[r]->texels.shape[0] > 0 ? -1 : 0;
         const wt_vi ok = needed & (w > 0.0f) & (wt_vabs(u) <= wt_float_max) & (wt_vabs(v) <= wt_float_max) & (wt_vabs(lod) <= wt_float_max);
         const wt_vf zero = 0.0f;
@@ -203,6 +205,15 @@ auto wt_scatter_lod_of = [&](const auto* const* texs, const auto* const* grads, 
         }
     }
     wt_scatter_levels_any(nreads, texs, grads, smp, us, vs, levels, fractions, layer, active, gs);
+};
+// wt_scatter_rows of the reads of a lane_reads matrix `at`.
+auto wt_scatter_lod_of = [&](const auto* const* texs, const auto* const* grads, const auto& smp, const int nreads, const int* layers, const wp::mat_t<21, WT_L, float>& at,
+                             const int weigh, const wp::mat_t<WT_L, 4, float>* const* gr, const int per_read) __attribute__((always_inline)) {
+    const float* u[3] = {at.data[0], at.data[1], at.data[2]};
+    const float* v[3] = {at.data[3], at.data[4], at.data[5]};
+    const float* lod[3] = {at.data[6], at.data[7], at.data[8]};
+    const float* w[3] = {at.data[9], at.data[10], at.data[11]};
+    wt_scatter_rows(texs, grads, smp, nreads, layers, u, v, lod, w, weigh, gr, per_read);
 };
 // Every read's share of one gradient g[l] per lane pixel.
 auto wt_scatter_lod = [&](const auto* const* texs, const auto* const* grads, const auto& smp, const int nreads, const int* layers, const wp::mat_t<21, WT_L, float>& at,
@@ -269,31 +280,18 @@ def scatter_footprint_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, 
     ...
 
 
-_SCATTER_TAPS = _SCATTER_CORE + r"""
+_SCATTER_TAPS = _SCATTER_LOD_CORE + r"""
 // scatter_stochastic's one-tap footprints for the lane: tap k of pixel l at (u_k, v_k), rows 3k, 3k + 1
 // of `taps`, all at the pixel's LOD (row 12), adds w_k · g[l] (w_k: row 3k + 2) into `grad` where
 // w_k > 0, pixel by pixel and tap by tap (scatter.scatter_lod of each).
-float us[4][WT_L], vs[4][WT_L], fractions[4][WT_L];
-int levels[4][WT_L], layer[4][WT_L];
-bool active[4][WT_L];
-wt_f4 gs[4][WT_L];
-const bool needed = grad.texels.shape[0] > 0;
-for (int k = 0; k < 4; ++k) {
-    for (int l = 0; l < WT_L; ++l) {
-        const float w = taps.data[3 * k + 2][l];
-        const bool ok = needed && w > 0.0f;
-        active[k][l] = ok;
-        us[k][l] = ok ? taps.data[3 * k][l] : 0.0f;
-        vs[k][l] = ok ? taps.data[3 * k + 1][l] : 0.0f;
-        wt_mip_levels(tex, smp, ok ? taps.data[12][l] : 0.0f, levels[k][l], fractions[k][l]);
-        layer[k][l] = ok ? wp::clamp(layers.c[l], 0, tex.num_layers - 1) : 0;
-        const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
-        gs[k][l] = w * gl;
-    }
-}
+const float* u[4] = {taps.data[0], taps.data[3], taps.data[6], taps.data[9]};
+const float* v[4] = {taps.data[1], taps.data[4], taps.data[7], taps.data[10]};
+const float* w[4] = {taps.data[2], taps.data[5], taps.data[8], taps.data[11]};
+const float* lod[4] = {taps.data[12], taps.data[12], taps.data[12], taps.data[12]};
 const decltype(tex)* texs[4] = {&tex, &tex, &tex, &tex};
 const decltype(grad)* grads[4] = {&grad, &grad, &grad, &grad};
-wt_scatter_levels_any(4, texs, grads, smp, us, vs, levels, fractions, layer, active, gs);
+const wp::mat_t<WT_L, 4, float>* gr[1] = {&g};
+wt_scatter_rows(texs, grads, smp, 4, layers.c, u, v, lod, w, 1, gr, 0);
 """
 
 
