@@ -87,12 +87,19 @@ def normal_lane_bodies(normal_of_samples, samples_grad, args_t, samples_t):
     normal from its weights and samples as the normal body does. Each reads the projections on the
     unit normal, as the bodies do (``triplanar_reads_lane``'s ``unit_normals``)."""
 
-    def normal_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
-        count = wp.min(out.shape[0] - base, LANES)
+    def unit_normal_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
+        """``(reads, sx, sy, sz)``: the lane's reads on the unit normal and each projection's samples."""
         reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1)
         sx = projection_samples_lane(args.faces, args.smp, args.layer, reads, 0)
         sy = projection_samples_lane(args.faces, args.smp, args.layer, reads, 1)
         sz = projection_samples_lane(args.faces, args.smp, args.layer, reads, 2)
+        return reads, sx, sy, sz
+
+    unit_normal_samples = inlined(specialised(unit_normal_samples, "triplanar_unit_normal_samples"))
+
+    def normal_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
+        count = wp.min(out.shape[0] - base, LANES)
+        reads, sx, sy, sz = unit_normal_samples(args, pixels, base, count)
         for l in range(count):
             i = base + l
             result = wp.vec3(0.0)
@@ -104,10 +111,7 @@ def normal_lane_bodies(normal_of_samples, samples_grad, args_t, samples_t):
 
     def samples_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: samples_t):
         count = wp.min(out.weights.shape[0] - base, LANES)
-        reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1)
-        sx = projection_samples_lane(args.faces, args.smp, args.layer, reads, 0)
-        sy = projection_samples_lane(args.faces, args.smp, args.layer, reads, 1)
-        sz = projection_samples_lane(args.faces, args.smp, args.layer, reads, 2)
+        reads, sx, sy, sz = unit_normal_samples(args, pixels, base, count)
         for l in range(count):
             i = base + l
             out.weights[i] = wp.vec3(reads[9, l], reads[10, l], reads[11, l])  # 0 where not covered, as the body leaves it
