@@ -73,14 +73,22 @@ def _uvs(rng, n):
     return uv
 
 
+def _sample_lane_inputs(rng, filter: str, address: str):
+    """``(tex, n, uv, per_sample, smp)`` of the sample lane tests: a 3-layer array, ``n`` UVs (not a
+    multiple of LANES) with :func:`_uvs`' special cases, per-sample layers (out-of-range ones clamp)
+    and the sampler."""
+    tex = wt.TextureArray(rng.random((3, 64, 48, 4), dtype=np.float32))
+    n = 1037
+    uv = _uvs(rng, n)
+    per_sample = rng.integers(-2, 5, n).astype(np.int32)
+    smp = wt.Sampler(filter=filter, address=address, border=(0.1, 0.2, 0.3, 0.4))
+    return tex, n, uv, per_sample, smp
+
+
 @pytest.mark.parametrize("address", ["wrap", "clamp", "mirror", "border"])
 @pytest.mark.parametrize("filter,lod", [("bilinear", None), ("nearest", None), ("nearest", 1.6), ("trilinear", 1.3), ("trilinear", 0.0), ("trilinear", 40.0), ("trilinear", -2.0)])
 def test_sample_lanes_give_the_one_pixel_bits(rng, launched, filter, lod, address):
-    tex = wt.TextureArray(rng.random((3, 64, 48, 4), dtype=np.float32))
-    n = 1037  # not a multiple of LANES
-    uv = _uvs(rng, n)
-    per_sample = rng.integers(-2, 5, n).astype(np.int32)  # out-of-range layers clamp
-    smp = wt.Sampler(filter=filter, address=address, border=(0.1, 0.2, 0.3, 0.4))
+    tex, n, uv, per_sample, smp = _sample_lane_inputs(rng, filter, address)
     for layer in (2, per_sample):
         lanes, scalar = _both(lambda: wt.sample(tex, uv, layer=layer, lod=lod, sampler=smp))
         _same_bits(lanes, scalar)
@@ -110,11 +118,7 @@ def _lod_inputs(rng, n, source: str) -> dict:
 @pytest.mark.parametrize("filter,source", [("nearest", "lod"), ("bilinear", "derivatives"), ("trilinear", "lod"), ("trilinear", "derivatives"), ("anisotropic", "derivatives")])
 def test_sample_lanes_of_a_lod_per_sample_give_the_one_pixel_bits(rng, launched, filter, source, address):
     """A LOD per sample, given or from UV derivatives (``sampling.sample_lane``), every filter."""
-    tex = wt.TextureArray(rng.random((3, 64, 48, 4), dtype=np.float32))
-    n = 1037  # not a multiple of LANES
-    uv = _uvs(rng, n)
-    per_sample = rng.integers(-2, 5, n).astype(np.int32)  # out-of-range layers clamp
-    smp = wt.Sampler(filter=filter, address=address, border=(0.1, 0.2, 0.3, 0.4))
+    tex, n, uv, per_sample, smp = _sample_lane_inputs(rng, filter, address)
     lod = _lod_inputs(rng, n, source)
     for layer in (2, per_sample):
         lanes, scalar = _both(lambda: wt.sample(tex, uv, layer=layer, sampler=smp, **lod))
