@@ -56,15 +56,17 @@ class Staged:
     """A two-step alternative to one of a technique's backward paths: ``first`` stores per-pixel
     intermediates, ``then`` makes the output from them.
 
-    ``replaces`` is the path it stands in for, ``"texel_grad"`` or ``"adjoint"``; each step has the
-    other backward of the two (``first`` the one ``replaces`` names, ``then`` the other), so that
-    the costly sampling is differentiated by hand and the cheap blend by Warp, or the other way
-    round. ``first`` takes the technique's ``args`` and ``pixels``; ``intermediates(count, args)``
+    ``replaces`` is the path it stands in for, ``"texel_grad"`` or ``"adjoint"``; ``first`` has the
+    backward ``replaces`` names, and ``then`` the other (or a hand-written one, where ``then`` has a
+    ``texel_grad``: it serves the intermediates that carry gradients), so that the costly sampling
+    is differentiated by hand and the cheap blend by Warp, or the other way round, or both by hand.
+    ``first`` takes the technique's ``args`` and ``pixels``; ``intermediates(count, args)``
     gives its outputs as ``{field: (shape, dtype)}`` (the fields of ``first``'s ``out`` struct).
     ``then`` takes an ``args`` struct and a ``pixels`` struct whose fields are filled by name from the
     technique's ``args``, and from its ``pixels`` and the intermediates. ``then_only`` names the
     inputs (paths) only ``then`` differentiates: when they alone want gradients, the intermediates
-    need none and ``first``'s backward is not recorded.
+    need none and ``first``'s backward is not recorded. ``no_grad`` names the intermediates no
+    gradient flows back through (``first``'s backward does not read theirs): made without one.
     """
 
     replaces: str
@@ -72,6 +74,7 @@ class Staged:
     then: "Kernels"
     intermediates: Callable[[int, Any], dict]
     then_only: tuple = ()
+    no_grad: tuple = ()
 
 
 @dataclasses.dataclass(frozen=True)

@@ -102,3 +102,73 @@ def to_world(r: wp.vec3, axis: wp.int32) -> wp.vec3:
     elif axis == 1:
         w = wp.vec3(r[0], r[2], r[1])
     return w
+
+
+# -- hand-written gradients (of the normal made from stored samples: triplanar.normal_from_samples_grad) --
+
+
+@wp.func
+def normalize_grad(v: wp.vec3, g: wp.vec3) -> wp.vec3:
+    """The gradient of ``wp.normalize(v)`` for the result's gradient ``g``, as Warp's own adjoint
+    makes it: ``(g - u (u · g)) / |v|`` with ``u`` the result; 0 where ``v`` is 0."""
+    result = wp.vec3(0.0)
+    d = wp.length(v)
+    if d > 0.0:
+        invd = 1.0 / d
+        u = wp.normalize(v)
+        result = g * invd - u * wp.dot(u, g) * invd
+    return result
+
+
+@wp.func
+def direction_grad(v: wp.vec3, g: wp.vec3) -> wp.vec3:
+    """The gradient of :func:`direction` (a finite ``v``) for the result's gradient ``g``. Past
+    ~1.8e19 the direction is that of ``v`` scaled by ``1 / m``, ``m`` its largest component, and
+    the same function of ``v`` (the scale cancels): its gradient is the scaled vector's over ``m``."""
+    result = normalize_grad(v, g)
+    if wp.length(v) > FLOAT_MAX:
+        result = normalize_grad(unsquared(v), g) / wp.max(wp.vec3(wp.abs(v[0]), wp.abs(v[1]), wp.abs(v[2])))
+    return result
+
+
+@wp.func
+def decode_normal_grad(texel: wp.vec4, channels: wp.int32, strength: float, flip_green: wp.int32, g: wp.vec3) -> wp.vec4:
+    """The gradient of :func:`decode_normal` in the texel for the result's gradient ``g`` (its
+    ``w`` 0: not read; a two-channel map's ``z`` rebuilt from ``x`` and ``y`` adds into theirs)."""
+    x = texel[0] * 2.0 - 1.0
+    y = texel[1] * 2.0 - 1.0
+    if flip_green != 0:
+        y = -y
+    z = 0.0
+    r = 1.0 - x * x - y * y
+    if channels >= 3:
+        z = texel[2] * 2.0 - 1.0
+    elif r > 0.0:
+        z = wp.sqrt(r)
+    gt = normalize_grad(wp.vec3(x * strength, y * strength, z), g)
+    gx = gt[0] * strength
+    gy = gt[1] * strength
+    gz = 0.0
+    if channels >= 3:
+        gz = gt[2]
+    elif r > 0.0:  # z = sqrt(1 - x² - y²)
+        gx = gx - gt[2] * x / z
+        gy = gy - gt[2] * y / z
+    if flip_green != 0:
+        gy = -gy
+    return wp.vec4(gx * 2.0, gy * 2.0, gz * 2.0, 0.0)
+
+
+@wp.func
+def blend_projected_grad(t: wp.vec3, b: wp.vec3, blend: wp.int32, g: wp.vec3) -> wp.vec3:
+    """The gradient of :func:`blend_projected` in the tangent-space normal ``t`` (not in ``b``) for
+    the result's gradient ``g``."""
+    gt = wp.vec3(g[0], g[1], g[2] * b[2])
+    if blend == BLEND_UDN:
+        gt = wp.vec3(g[0], g[1], 0.0)
+    elif blend == BLEND_RNM:
+        n1 = wp.vec3(b[0], b[1], wp.abs(b[2]) + 1.0)
+        gr = wp.vec3(g[0], g[1], g[2] * sign_or_one(b[2]))
+        gn2 = n1 * (wp.dot(n1, gr) / n1[2]) - gr  # r = n1 (n1 · n2) / n1.z - n2
+        gt = wp.vec3(-gn2[0], -gn2[1], gn2[2])
+    return gt

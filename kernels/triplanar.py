@@ -11,7 +11,8 @@ tenth slower, and compiling it costs several times more); one texture per axis o
 (``faces``, choosing by the normal's sign, again a module of its own). Colour has a hand-written
 texel gradient; normal mapping, which is not linear in the texels, a two-step one (:class:`Staged`):
 the projections' samples stored per pixel with a hand-written texel gradient, then the normal made
-from them by a kernel whose generated adjoint is cheap (it samples nothing). The kernels with Warp's
+from them, with a hand-written gradient in the samples (:func:`normal_from_samples_grad`; Warp's
+generated adjoint of it cost four times its forward pass). The kernels with Warp's
 generated adjoint (for sharpness, offsets, G-buffer gradients, stochastic tiling or a histogram) are
 one per output, the most general configuration's (stochastic, by face; the same results), built on
 the out-of-line blocks of :mod:`warptex.kernels.projection`.
@@ -24,7 +25,7 @@ import warp as wp
 from . import adjoint_module, inlined, specialised
 from .faces import FACE_FIELDS, FaceGrads, FaceTextures, on_axis_face, on_face
 from .family import Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
-from .normals import blend_projected, decode_normal, direction, to_world
+from .normals import blend_projected, blend_projected_grad, decode_normal, decode_normal_grad, direction, direction_grad, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
 from .texels import SamplerArgs, TexelGrad, TextureView, pick3, read_channels, write_channels
@@ -32,7 +33,6 @@ from .projection_lanes import surface_covered
 from .triplanar_lanes import lane_bodies, normal_lane_bodies
 
 MODULE = "warptex.triplanar"
-GRAD_MODULE = MODULE + ".grad"
 
 # The stochastic kernels loop over the projections (and taps) rather than unroll them: unrolled, the
 # colour and normal kernels held six copies of the stochastic sampling code, 38 s to compile for sm_90.
@@ -92,6 +92,14 @@ class StoredSamples:
     weights: wp.array(dtype=wp.vec3)
 
 
+@wp.struct
+class StoredSampleGrads:
+    """What the gradient of the normal made from stored samples adds into: the samples' gradient
+    (the weights carry none, :func:`_sample_shapes`)."""
+
+    samples: wp.array2d(dtype=wp.vec4)
+
+
 # -- reading one projection ----------------------------------------------------------------------------
 
 
@@ -122,6 +130,17 @@ def projected_normal(texel: wp.vec4, axis: wp.int32, n: wp.vec3, proj: Projectio
 
 
 @wp.func
+def projected_normal_grad(texel: wp.vec4, axis: wp.int32, n: wp.vec3, proj: ProjectionArgs, nm: NormalMapArgs, g: wp.vec3) -> wp.vec4:
+    """The gradient of :func:`projected_normal` in ``texel`` for the result's gradient ``g`` (the
+    swizzle back to world axes is its own inverse, so it also takes ``g`` to the projection's frame)."""
+    t = decode_normal(texel, nm.channels, nm.strength, nm.flip_green)
+    s = u_sign(n, axis, proj.mirror_fix)
+    base = plane_coords(n, axis)
+    gt = blend_projected_grad(wp.vec3(t[0] * s, t[1], t[2]), wp.vec3(base[0], base[1], n[axis]), nm.blend, to_world(g, axis))
+    return decode_normal_grad(texel, nm.channels, nm.strength, nm.flip_green, wp.vec3(gt[0] * s, gt[1], gt[2]))
+
+
+@wp.func
 def normal_of_samples(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, w: wp.vec3, sx: wp.vec4, sy: wp.vec4, sz: wp.vec4) -> wp.vec3:
     """Pixel ``i``'s normal (a covered pixel's) from its projections' weights ``w`` (of the normal as
     given) and samples, as the normal body makes it: for the CPU lanes (``triplanar_lanes``)."""
@@ -145,6 +164,17 @@ def unit_normal(total: wp.vec3, n: wp.vec3, proj: ProjectionArgs) -> wp.vec3:
         result = direction(world)
     elif wp.length(surface_normal) > 0.0 and wp.isfinite(surface_normal):
         result = direction(surface_normal)
+    return result
+
+
+@wp.func
+def unit_normal_grad(total: wp.vec3, proj: ProjectionArgs, g: wp.vec3) -> wp.vec3:
+    """The gradient of :func:`unit_normal` in the blended normal ``total`` for the result's gradient
+    ``g``: 0 where the blend cancels out (the surface normal does not depend on it)."""
+    world = proj.normal_to_world * total
+    result = wp.vec3(0.0)
+    if wp.length(world) > 1.0e-12 and wp.isfinite(world):
+        result = wp.transpose(proj.normal_to_world) * direction_grad(world, g)
     return result
 
 
@@ -265,20 +295,40 @@ def normal_outlined(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out
     write_normal(out, i, result)
 
 
+@wp.func
+def stored_blend(args: NormalBlendArgs, pixels: StoredSamples, i: wp.int32):
+    """``(w, n, total)``: covered pixel ``i``'s stored weights, unit surface normal and blend of its
+    projections' normals (made from the stored samples), before the blend is normalised."""
+    w = pixels.weights[i]
+    n = unit_base_normal(args.proj.normal_to_object * pixels.normal[i])
+    total = wp.vec3(0.0)
+    for axis in range(3):
+        if w[axis] > 0.0:
+            total += w[axis] * projected_normal(pixels.samples[i, axis], axis, n, args.proj, args.normal_map)
+    return w, n, total
+
+
 @inlined
 def normal_from_samples(args: NormalBlendArgs, pixels: StoredSamples, i: wp.int32, out: wp.array2d(dtype=float)):
     """The normal-mapping body with each projection's sample and weight read from the stored ones
     (no gradient reaches the weights: this runs only where the sharpness and the G-buffer need none)."""
     result = wp.vec3(0.0)
     if pixels.mask[i] != 0.0:
-        w = pixels.weights[i]
-        n = unit_base_normal(args.proj.normal_to_object * pixels.normal[i])
-        total = wp.vec3(0.0)
-        for axis in range(3):
-            if w[axis] > 0.0:
-                total += w[axis] * projected_normal(pixels.samples[i, axis], axis, n, args.proj, args.normal_map)
+        w, n, total = stored_blend(args, pixels, i)
         result = unit_normal(total, n, args.proj)
     write_normal(out, i, result)
+
+
+@inlined
+def normal_from_samples_grad(args: NormalBlendArgs, pixels: StoredSamples, i: wp.int32, grads: StoredSampleGrads, adj: wp.array2d(dtype=float)):
+    """The hand-written gradient of :func:`normal_from_samples` in the stored samples, added into
+    ``grads.samples`` (Warp's generated adjoint of the same body cost four times its forward)."""
+    if pixels.mask[i] != 0.0 and grads.samples.shape[0] > 0:
+        w, n, total = stored_blend(args, pixels, i)
+        g = unit_normal_grad(total, args.proj, wp.vec3(adj[i, 0], adj[i, 1], adj[i, 2]))
+        for axis in range(3):
+            if w[axis] > 0.0:
+                grads.samples[i, axis] = grads.samples[i, axis] + projected_normal_grad(pixels.samples[i, axis], axis, n, args.proj, args.normal_map, w[axis] * g)
 
 
 _PLAIN = _projection_reads(sample_plain, scatter_plain, "_plain")
@@ -299,10 +349,13 @@ def _sample_shapes(count: int, args) -> dict:
 
 @functools.cache
 def _normal_from_samples() -> Kernels:
-    """The second step of the two-step normal (one kernel for every configuration, with its generated
-    adjoint, in the ``.grad`` module: it runs only where gradients are recorded)."""
-    kernel = forward_kernel(normal_from_samples, NormalBlendArgs, StoredSamples, wp.array2d(dtype=float), module=GRAD_MODULE, name="triplanar_normal_from_samples", enable_backward=True)
-    return Kernels(kernel, None, kernel)
+    """The second step of the two-step normal, one pair of kernels for every configuration, with its
+    hand-written gradient in the stored samples, in a module of its own (it runs only where
+    gradients are recorded, and a job on the CPU lanes compiles no other one-pixel kernel)."""
+    module = MODULE + ".normal.blend"
+    forward, texel_grad, _ = pixel_kernels("triplanar_normal_blend", module=module, grad_module=module, args=NormalBlendArgs, pixels=StoredSamples,
+                                           out=wp.array2d(dtype=float), body=normal_from_samples, scatter=normal_from_samples_grad, grads=StoredSampleGrads)  # fmt: skip
+    return Kernels(forward, texel_grad, grads=("pixels.samples",))
 
 
 @functools.cache
@@ -339,5 +392,5 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
                        "texel_grad_lanes": lane_kernel(samples_grad_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, grads_t=FaceGrads, module=module + ".normal.grad", name=name + "_samples_texel_grad_lanes")}  # fmt: skip
     first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,
                           body=bodies["samples"], scatter=bodies["samples_grad"], grads=FaceGrads)  # fmt: skip
-    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=FACE_GRADS, **(first_lanes or {})), then=_normal_from_samples(), intermediates=_sample_shapes)
+    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=FACE_GRADS, **(first_lanes or {})), then=_normal_from_samples(), intermediates=_sample_shapes, no_grad=("weights",))
     return Kernels(forward, None, _adjoint(True), staged=staged, lanes=lanes)

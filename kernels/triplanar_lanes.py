@@ -122,7 +122,7 @@ def normal_lane_bodies(normal_of_samples, samples_grad, args_t, samples_t):
                 out.samples[i, axis] = value
 
     def samples_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: samples_t):
-        count = wp.min(adj.weights.shape[0] - base, LANES)
+        count = wp.min(adj.samples.shape[0] - base, LANES)
         if args.smp.filter == FILTER_ANISOTROPIC:
             for l in range(count):
                 samples_grad(args, pixels, base + l, grads, adj)

@@ -19,8 +19,9 @@ def texel_gradients_both_ways(monkeypatch, threads: int, forward, weights: np.nd
     only texels needing gradients (the hand-written path), the same with the generated adjoint
     forced (``warptex._op.force_generated_adjoint``), and with another input needing gradients too
     (the generated adjoint, which then also differentiates that input, not compared); and how many
-    hand-written texel-gradient kernels were launched over the three runs (the blend of stored
-    samples that ``splat``'s generated-adjoint path launches by hand is not counted).
+    hand-written texel-gradient kernels were launched over the three runs (the blends of stored
+    samples, which ``splat``'s generated-adjoint path and normal mapping's two-step path launch by
+    hand, are not counted).
 
     ``forward(other_grads) -> (out, textures)`` runs the technique (on a tape) with fresh textures
     (or parameter arrays: their gradients are compared too). Each tape is zeroed afterwards, which

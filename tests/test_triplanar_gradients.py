@@ -215,8 +215,8 @@ def test_gradients_reach_each_per_axis_texture(sphere):
 def test_hand_written_texel_gradients_match_finite_differences(sphere, technique):
     """With only the texels needing gradients (numbers for tiling, sharpness, offsets), the
     hand-written texel gradient runs in place of the generated adjoint of the sampling kernel
-    (normal mapping: the generated adjoint of the normal from stored samples, then the samples'
-    texel gradient by hand): checked the same way."""
+    (normal mapping: the gradient of the normal from stored samples, then the samples' texel
+    gradient, both by hand): checked the same way."""
     rng = np.random.default_rng(8)
     img = _texture_for(technique, 16, 20, seed=6)
     r = _weights(sphere, 3)

@@ -30,6 +30,7 @@ import warp as wp
 
 from warptex._launch import GENERATED, Target, launch, output, scatter
 from warptex._memory import empty
+from warptex._pack import empty_array
 from warptex._warp import active_tape, scalar_type, struct_arrays, struct_fields, struct_like
 from warptex.kernels.family import PIXELS, Kernels, Staged
 from warptex.kernels.texels import TextureView
@@ -179,12 +180,13 @@ def _texel_gradient(kernels: Kernels, count: int, inputs: dict, result, device, 
 
 
 def _gradient_of(out):
-    """The gradient arrays of an output: its ``.grad``, or a struct of its fields' ``.grad``."""
+    """The gradient arrays of an output: its ``.grad``, or a struct of its fields' ``.grad`` (an
+    empty array for a field made without one: a staged step's ``no_grad`` intermediates)."""
     if wp.types.is_array(out):
         return out.grad
     grads = struct_like(out)
     for name, field in struct_fields(out).items():
-        setattr(grads, name, field.grad)
+        setattr(grads, name, field.grad if field.grad is not None else empty_array(field.dtype, field.ndim, field.device))
     return grads
 
 
@@ -195,8 +197,8 @@ def _run_staged(staged: Staged, count: int, inputs: dict, result, device, cut: d
     wanted = [a for p, a in differentiable(inputs) if a.requires_grad and not any(p == t or p.startswith(t + ".") for t in staged.then_only)]
     intermediates = _struct(next(a.type for a in staged.first.forward.adj.args if a.label == "out"), {})
     for name, (shape, dtype) in staged.intermediates(count, inputs["args"]).items():
-        setattr(intermediates, name, output(shape, dtype, device, requires_grad=bool(wanted)))
-    second = "adjoint" if staged.replaces == "texel_grad" else "texel_grad"
+        setattr(intermediates, name, output(shape, dtype, device, requires_grad=bool(wanted) and name not in staged.no_grad))
+    second = "texel_grad" if staged.replaces == "adjoint" or staged.then.texel_grad is not None else "adjoint"
     _run_path(staged.first, staged.replaces, count, inputs, intermediates, device, cut, None)
     then_inputs = {
         "args": _struct(staged.then.forward.adj.args[0].type, _by_name(inputs["args"])),

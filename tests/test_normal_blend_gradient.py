@@ -1,0 +1,140 @@
+"""The hand-written gradient of normal mapping's second step (the normal made from stored samples,
+``kernels.triplanar.normal_from_samples_grad``), on its own, against Warp's generated adjoint of
+the same body and against central differences, over every blend, channel count, green flip,
+strength, mirror fix and object-space matrix, with the edge cases its branches hold: texels that
+decode to zero, a blend of zero (the surface normal is kept: no gradient), blends past
+~1.8e19 (scaled down before they are normalised), zero weights, uncovered pixels and zero normals.
+"""
+
+import functools
+import itertools
+
+import numpy as np
+import pytest
+import warp as wp
+
+from warptex.kernels import triplanar as kt
+from warptex.kernels.family import forward_kernel
+from warptex.kernels.normals import BLEND_RNM, BLEND_UDN, BLEND_WHITEOUT
+
+N = 512
+BLENDS = {"whiteout": BLEND_WHITEOUT, "udn": BLEND_UDN, "rnm": BLEND_RNM}
+
+
+@functools.cache
+def _generated():
+    """The same body with Warp's generated adjoint (the product has none: it needs none)."""
+    return forward_kernel(kt.normal_from_samples, kt.NormalBlendArgs, kt.StoredSamples, wp.array2d(dtype=float), module="test_normal_blend_generated", name="normal_blend_generated", enable_backward=True)
+
+
+def _rotation(rng) -> np.ndarray:
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return q
+
+
+def _inputs(seed: int, matrix: str):
+    """Per-pixel inputs (float32 numpy) and the normal matrices: ``identity``, ``object`` (a
+    rotation and an anisotropic scale) or ``huge`` (every blend past ~1.8e19 in world space)."""
+    rng = np.random.default_rng(seed)
+    normal = rng.normal(size=(N, 3))
+    normal[::17] *= np.array([1.0, 1e-6, 0.0])  # a component at or near 0: the mirror fix's sign
+    weights = rng.random((N, 3))
+    weights[rng.random((N, 3)) < 0.3] = 0.0  # projections that are not read
+    normal[5], weights[5] = 0.0, 0.0  # a zero normal, whose weights the first step stores as 0
+    samples = rng.random((N, 3, 4))
+    samples[7, :, :3] = 0.5  # three-channel texels that decode to zero (strength aside: z = 0)
+    normal[9], weights[9], samples[9, 2, :3] = (0.0, 0.0, 2.0), (0.0, 0.0, 1.0), 0.5  # whiteout: a blend of 0, the surface normal kept
+    mask = np.ones(N)
+    mask[::11] = 0.0
+    to_object = to_world = np.eye(3)
+    if matrix != "identity":
+        m = _rotation(rng) @ np.diag([0.5, 2.0, 1.3]) @ _rotation(rng)
+        to_object, to_world = np.linalg.inv(m).T, m.T
+        if matrix == "huge":
+            to_world = to_world * 1e20
+    return [a.astype(np.float32) for a in (normal, weights, samples, mask)], (to_object, to_world)
+
+
+def _structs(inputs, matrices, blend, channels, flip_green, strength, mirror_fix, samples=None):
+    normal, weights, stored, mask = inputs
+    args = kt.NormalBlendArgs()
+    args.proj.normal_to_object = wp.mat33(*matrices[0].astype(np.float32).reshape(-1))
+    args.proj.normal_to_world = wp.mat33(*matrices[1].astype(np.float32).reshape(-1))
+    args.proj.mirror_fix = mirror_fix
+    args.proj.tiling, args.proj.sharpness, args.proj.offsets = wp.empty(0, dtype=float), wp.empty(0, dtype=float), wp.empty((0, 2), dtype=float)  # not read
+    args.normal_map.channels, args.normal_map.strength, args.normal_map.flip_green, args.normal_map.blend = channels, strength, flip_green, BLENDS[blend]
+    pixels = kt.StoredSamples()
+    pixels.normal = wp.array(normal, dtype=wp.vec3)
+    pixels.mask = wp.array(mask, dtype=float)
+    pixels.weights = wp.array(weights, dtype=wp.vec3)
+    pixels.samples = samples if samples is not None else wp.array(stored, dtype=wp.vec4)
+    return args, pixels
+
+
+def _forward(kernel, args, pixels) -> wp.array:
+    out = wp.zeros((N, 3), dtype=float, requires_grad=True)
+    wp.launch(kernel, dim=N, inputs=[args, pixels, 0], outputs=[out])
+    return out
+
+
+def _hand_written(args, pixels, adj: np.ndarray) -> np.ndarray:
+    grads = kt.StoredSampleGrads()
+    grads.samples = wp.zeros((N, 3), dtype=wp.vec4)
+    wp.launch(kt._normal_from_samples().texel_grad, dim=N, inputs=[args, pixels, 0, grads, wp.array(adj, dtype=float)])
+    return grads.samples.numpy()
+
+
+CONFIGURATIONS = list(itertools.product(BLENDS, (2, 3, 4), (0, 1)))
+
+
+@pytest.mark.parametrize(("blend", "channels", "flip_green"), CONFIGURATIONS)
+@pytest.mark.parametrize("matrix", ["identity", "object", "huge"])
+def test_hand_written_gradient_equals_the_generated_adjoint(blend, channels, flip_green, matrix):
+    inputs, matrices = _inputs(1, matrix)
+    adj = np.random.default_rng(2).normal(size=(N, 3)).astype(np.float32)
+    for strength, mirror_fix in ((1.0, 1), (0.6, 0), (2.5, 1)):
+        samples = wp.array(inputs[2], dtype=wp.vec4, requires_grad=True)
+        args, pixels = _structs(inputs, matrices, blend, channels, flip_green, strength, mirror_fix, samples)
+        tape = wp.Tape()
+        with tape:
+            out = _forward(_generated(), args, pixels)
+        out.grad.assign(adj)
+        tape.backward()
+        generated = samples.grad.numpy()
+        hand = _hand_written(args, pixels, adj)
+        np.testing.assert_array_equal(_forward(kt._normal_from_samples().forward, args, pixels).numpy(), out.numpy())
+        assert np.abs(hand).max() > 0
+        scale = np.abs(generated).max()
+        np.testing.assert_allclose(hand, generated, rtol=1e-5, atol=1e-6 * scale, err_msg=f"strength {strength}, mirror fix {mirror_fix}")
+        assert not hand[inputs[3] == 0].any() and not hand[5].any(), "uncovered pixels and a zero normal have no gradient"
+        assert not hand[inputs[1] == 0].any(), "a projection that is not read has no gradient"
+        assert not hand[..., 3].any(), "the fourth channel is not read"
+        if channels >= 3:
+            assert not hand[7].any() and not hand[9].any(), "texels that decode to zero have none"
+            if blend == "whiteout" and matrix == "identity":
+                np.testing.assert_array_equal(out.numpy()[9], (0.0, 0.0, 1.0))  # the surface normal
+
+
+@pytest.mark.parametrize(("blend", "channels", "flip_green"), CONFIGURATIONS)
+def test_hand_written_gradient_matches_central_differences(blend, channels, flip_green):
+    """Along random directions of every sample, in float64 sums of the float32 outputs, on texels
+    where the normal is smooth (a normal map's usual range: slopes within ±0.6, blue near 1; not
+    where a two-channel map's rebuilt ``z`` meets 0, nor texels that decode to 0)."""
+    inputs, matrices = _inputs(4, "object")
+    rng = np.random.default_rng(5)
+    inputs[2][...] = np.concatenate([rng.uniform(0.2, 0.8, (N, 3, 2)), rng.uniform(0.8, 1.0, (N, 3, 2))], -1)
+    adj = rng.normal(size=(N, 3))
+    strength, mirror_fix = 0.8, 1
+    args, pixels = _structs(inputs, matrices, blend, channels, flip_green, strength, mirror_fix)
+    hand = _hand_written(args, pixels, adj.astype(np.float32)).astype(np.float64)
+    kernel = kt._normal_from_samples().forward
+    step = 1e-3
+
+    def loss(samples: np.ndarray) -> float:
+        _, shifted = _structs(inputs, matrices, blend, channels, flip_green, strength, mirror_fix, wp.array(samples.astype(np.float32), dtype=wp.vec4))
+        return float((_forward(kernel, args, shifted).numpy().astype(np.float64) * adj).sum())
+
+    for _ in range(3):
+        direction = rng.normal(size=inputs[2].shape)
+        fd = (loss(inputs[2] + step * direction) - loss(inputs[2] - step * direction)) / (2 * step)
+        np.testing.assert_allclose((hand * direction).sum(), fd, rtol=2e-3, atol=2e-3)
