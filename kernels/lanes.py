@@ -83,6 +83,7 @@ auto wt_vmax = [&](wt_vf a, wt_vf b) __attribute__((always_inline)) -> wt_vf { r
 auto wt_vmin = [&](wt_vf a, wt_vf b) __attribute__((always_inline)) -> wt_vf { return wt_sel(a <= b, a, wt_sel(b == b, b, a)); };
 auto wt_vabs = [](wt_vf a) __attribute__((always_inline)) -> wt_vf { return (wt_vf)((wt_vi)a & 0x7fffffff); };
 auto wt_finite = [](wt_vf a) __attribute__((always_inline)) -> wt_vi { return a - a == 0.0f; };
+auto wt_vsqrt = [](wt_vf x) __attribute__((always_inline)) -> wt_vf { float a[WT_L]; __builtin_memcpy(a, &x, sizeof(a)); for (int l = 0; l < WT_L; ++l) a[l] = wp::sqrt(a[l]); __builtin_memcpy(&x, a, sizeof(a)); return x; };
 auto wt_mip_levels_lane = [&](const auto& tex, const auto& smp, wt_vf lod, wt_vi& level, wt_vf& fraction) __attribute__((always_inline)) {  // wt_mip_levels, lane by lane
     const wt_vf clamped = wt_vmin(wt_vmax((wt_vf)smp.min_lod, lod + smp.lod_bias), (wt_vf)smp.max_lod);  // wp::clamp(x, a, b) = fmin(fmax(a, x), b)
     const wt_vf c = wt_vmin(wt_vmax((wt_vf)0.0f, clamped), (wt_vf)(float)(tex.num_levels - 1));
@@ -327,7 +328,6 @@ FOOTPRINT_CPP = r"""
 // (dx0, dx1), (dy0, dy1) on a level-0 image of width × height texels. Every branch of the scalar block
 // is computed for every lane and chosen by selects; one log2 a lane, as the scalar block takes it.
 struct wt_footprint_lanes { wt_vf lod, du, dv, taps; };
-auto wt_vsqrt = [](wt_vf x) __attribute__((always_inline)) -> wt_vf { float a[WT_L]; __builtin_memcpy(a, &x, sizeof(a)); for (int l = 0; l < WT_L; ++l) a[l] = wp::sqrt(a[l]); __builtin_memcpy(&x, a, sizeof(a)); return x; };
 auto wt_vceil = [](wt_vf x) __attribute__((always_inline)) -> wt_vf { float a[WT_L]; __builtin_memcpy(a, &x, sizeof(a)); for (int l = 0; l < WT_L; ++l) a[l] = wp::ceil(a[l]); __builtin_memcpy(&x, a, sizeof(a)); return x; };
 auto wt_footprint = [&](const auto& smp, wt_vf dx0, wt_vf dx1, wt_vf dy0, wt_vf dy1, float width, float height) __attribute__((always_inline)) -> wt_footprint_lanes {
     const wt_vf zero = 0.0f, one = 1.0f;

@@ -16,6 +16,17 @@ BLEND_UDN = wp.constant(1)
 BLEND_RNM = wp.constant(2)
 
 
+@wp.struct
+class NormalMapArgs:
+    """How a normal map is read: ``channels`` (2 to 4), the slopes' ``strength``, ``flip_green``
+    for DirectX-style maps, and the ``blend`` with the surface normal (``BLEND_*``)."""
+
+    channels: wp.int32
+    strength: float
+    flip_green: wp.int32
+    blend: wp.int32
+
+
 @wp.func
 def unsquared(n: wp.vec3) -> wp.vec3:
     """``n`` divided by its largest component: its direction, with a length in [1, sqrt(3)] whose
@@ -160,9 +171,9 @@ def decode_normal_grad(texel: wp.vec4, channels: wp.int32, strength: float, flip
 
 
 @wp.func
-def blend_projected_grad(t: wp.vec3, b: wp.vec3, blend: wp.int32, g: wp.vec3) -> wp.vec3:
-    """The gradient of :func:`blend_projected` in the tangent-space normal ``t`` (not in ``b``) for
-    the result's gradient ``g``."""
+def blend_projected_grad(b: wp.vec3, blend: wp.int32, g: wp.vec3) -> wp.vec3:
+    """The gradient of :func:`blend_projected` in the tangent-space normal ``t`` (not in the base
+    normal ``b``) for the result's gradient ``g``: every blend is linear in ``t``."""
     gt = wp.vec3(g[0], g[1], g[2] * b[2])
     if blend == BLEND_UDN:
         gt = wp.vec3(g[0], g[1], 0.0)

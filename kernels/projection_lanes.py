@@ -20,6 +20,7 @@ import warp as wp
 from .faces import FaceTextures
 from .family import lane_covered
 from .lanes import FOOTPRINT_CPP, cpu_snippet, lane_colours, lane_ints, lane_reads
+from .normal_lanes import UNIT_NORMALS_CPP
 from .projection import BIPLANAR_EDGE, MAX_INT_EXPONENT, WEIGHT_EPS, WEIGHTS_BIPLANAR, ProjectionArgs, SurfacePixels
 from .texels import SamplerArgs, TextureView
 
@@ -81,8 +82,7 @@ def accumulate_reads_lane(tex0: TextureView, tex1: TextureView, tex2: TextureVie
     ...
 
 
-_TRIPLANAR_READS = PLANE_CPP + r"""
-typedef wp::vec_t<3, float> wt_v3;
+_TRIPLANAR_READS = PLANE_CPP + UNIT_NORMALS_CPP + r"""
 typedef wp::vec_t<2, float> wt_v2;
 // projection.power_weight, biplanar_pair and biplanar_weights, operation for operation with Warp's
 // own functions (normals.unsquared inline), for one pixel.
@@ -204,16 +204,7 @@ for (int e = 0; e < 3; ++e) {  // power_weight, its exponent the same in every l
 const wt_vf total = wt_vmax(W[0] + W[1] + W[2], 1.0e-20f);  // WEIGHT_EPS
 for (int e = 0; e < 3; ++e) W[e] = wt_sel(weighed, W[e] / total, zero);
 }
-if (unit_normals != 0) {  // triplanar.unit_base_normal: normal mapping reads on the unit normal
-    for (int l = 0; l < WT_L; ++l) {
-        wt_v3 n(N[0][l], N[1][l], N[2][l]);
-        if (wp::length(n) > 0.0f) {  // normals.direction
-            wt_v3 d = wp::normalize(n);
-            if (wp::length(n) > wt_float_max) d = wp::normalize(wp::div(n, wp::max(wt_v3(wp::abs(n.c[0]), wp::abs(n.c[1]), wp::abs(n.c[2])))));
-            for (int e = 0; e < 3; ++e) N[e][l] = d.c[e];
-        }
-    }
-}
+if (unit_normals != 0) wt_unit_normals(N);  // triplanar.unit_base_normal: normal mapping reads on the unit normal
 // Per projection: projection.plane_uv and plane_footprint, where its weight is > 0.
 wp::mat_t<21, WT_L, float> reads;
 for (int axis = 0; axis < 3; ++axis) {

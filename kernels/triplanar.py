@@ -25,12 +25,12 @@ import warp as wp
 from . import adjoint_module, inlined, specialised
 from .faces import FACE_FIELDS, FaceGrads, FaceTextures, on_axis_face, on_face
 from .family import Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
-from .normals import blend_projected, blend_projected_grad, decode_normal, decode_normal_grad, direction, direction_grad, to_world
+from .normals import NormalMapArgs, blend_projected, blend_projected_grad, decode_normal, decode_normal_grad, direction, direction_grad, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
 from .texels import SamplerArgs, TexelGrad, TextureView, pick3, read_channels, write_channels
 from .projection_lanes import surface_covered
-from .triplanar_lanes import lane_bodies, normal_lane_bodies
+from .triplanar_lanes import lane_bodies, normal_lane_bodies, stored_lane_bodies
 
 MODULE = "warptex.triplanar"
 
@@ -38,17 +38,6 @@ MODULE = "warptex.triplanar"
 # colour and normal kernels held six copies of the stochastic sampling code, 38 s to compile for sm_90.
 for _module in (f"{MODULE}.stochastic{faces}{grad}" for faces in ("", ".faces") for grad in ("", ".grad")):
     wp.set_module_options({"max_unroll": 1}, module=_module)
-
-
-@wp.struct
-class NormalMapArgs:
-    """How a normal map is read: ``channels`` (2 to 4), the slopes' ``strength``, ``flip_green``
-    for DirectX-style maps, and the ``blend`` with the surface normal (``normals.BLEND_*``)."""
-
-    channels: wp.int32
-    strength: float
-    flip_green: wp.int32
-    blend: wp.int32
 
 
 @wp.struct
@@ -133,24 +122,10 @@ def projected_normal(texel: wp.vec4, axis: wp.int32, n: wp.vec3, proj: Projectio
 def projected_normal_grad(texel: wp.vec4, axis: wp.int32, n: wp.vec3, proj: ProjectionArgs, nm: NormalMapArgs, g: wp.vec3) -> wp.vec4:
     """The gradient of :func:`projected_normal` in ``texel`` for the result's gradient ``g`` (the
     swizzle back to world axes is its own inverse, so it also takes ``g`` to the projection's frame)."""
-    t = decode_normal(texel, nm.channels, nm.strength, nm.flip_green)
     s = u_sign(n, axis, proj.mirror_fix)
     base = plane_coords(n, axis)
-    gt = blend_projected_grad(wp.vec3(t[0] * s, t[1], t[2]), wp.vec3(base[0], base[1], n[axis]), nm.blend, to_world(g, axis))
+    gt = blend_projected_grad(wp.vec3(base[0], base[1], n[axis]), nm.blend, to_world(g, axis))
     return decode_normal_grad(texel, nm.channels, nm.strength, nm.flip_green, wp.vec3(gt[0] * s, gt[1], gt[2]))
-
-
-@wp.func
-def normal_of_samples(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, w: wp.vec3, sx: wp.vec4, sy: wp.vec4, sz: wp.vec4) -> wp.vec3:
-    """Pixel ``i``'s normal (a covered pixel's) from its projections' weights ``w`` (of the normal as
-    given) and samples, as the normal body makes it: for the CPU lanes (``triplanar_lanes``)."""
-    p, n, dpdx, dpdy = surface(args.proj, pixels, i)
-    n = unit_base_normal(n)
-    total = wp.vec3(0.0)
-    for axis in range(3):
-        if w[axis] > 0.0:
-            total += w[axis] * projected_normal(pick3(sx, sy, sz, axis), axis, n, args.proj, args.normal_map)
-    return unit_normal(total, n, args.proj)
 
 
 @wp.func
@@ -351,11 +326,14 @@ def _sample_shapes(count: int, args) -> dict:
 def _normal_from_samples() -> Kernels:
     """The second step of the two-step normal, one pair of kernels for every configuration, with its
     hand-written gradient in the stored samples, in a module of its own (it runs only where
-    gradients are recorded, and a job on the CPU lanes compiles no other one-pixel kernel)."""
+    gradients are recorded), and their CPU lanes in another."""
     module = MODULE + ".normal.blend"
     forward, texel_grad, _ = pixel_kernels("triplanar_normal_blend", module=module, grad_module=module, args=NormalBlendArgs, pixels=StoredSamples,
                                            out=wp.array2d(dtype=float), body=normal_from_samples, scatter=normal_from_samples_grad, grads=StoredSampleGrads)  # fmt: skip
-    return Kernels(forward, texel_grad, grads=("pixels.samples",))
+    lane, grad_lane, covered = stored_lane_bodies(NormalBlendArgs, StoredSamples, StoredSampleGrads)
+    lanes = lane_kernel(lane, NormalBlendArgs, StoredSamples, wp.array2d(dtype=float), module=module, name="triplanar_normal_blend_lanes", covered=covered)
+    grad_lanes = lane_kernel(grad_lane, NormalBlendArgs, StoredSamples, wp.array2d(dtype=float), grads_t=StoredSampleGrads, module=module, name="triplanar_normal_blend_texel_grad_lanes", covered=covered)
+    return Kernels(forward, texel_grad, grads=("pixels.samples",), lanes=lanes, texel_grad_lanes=grad_lanes)
 
 
 @functools.cache
@@ -386,7 +364,7 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
     forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
     lanes = first_lanes = None
     if not stochastic and not faces:  # modules of their own: colour-only jobs do not compile them
-        normal_lane, samples_lane, samples_grad_lane = normal_lane_bodies(normal_of_samples, bodies["samples_grad"], TriplanarArgs, ProjectionSamples)
+        normal_lane, samples_lane, samples_grad_lane = normal_lane_bodies(bodies["samples_grad"], TriplanarArgs, ProjectionSamples)
         lanes = lane_kernel(normal_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module + ".normal", name=name + "_normal_lanes", covered=surface_covered)
         first_lanes = {"lanes": lane_kernel(samples_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, module=module + ".normal.grad", name=name + "_samples_lanes"),
                        "texel_grad_lanes": lane_kernel(samples_grad_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, grads_t=FaceGrads, module=module + ".normal.grad", name=name + "_samples_texel_grad_lanes")}  # fmt: skip

@@ -16,9 +16,11 @@ import functools
 import warp as wp
 
 from . import inlined, specialised
+from .family import lane_covered
 from .faces import FaceGrads, FaceTextures, on_axis
 from .lane_scatter import scatter_lod_lanes, scatter_reads_lanes
 from .lanes import LANES, lane_colours, lane_ints, lane_reads
+from .normal_lanes import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
 from .projection import SurfacePixels
 from .projection_lanes import accumulate_reads_lane, triplanar_reads_lane
 from .texels import FILTER_ANISOTROPIC, SamplerArgs, pick3, read_channels, write_channels
@@ -35,6 +37,15 @@ def projection_samples_lane(faces: FaceTextures, smp: SamplerArgs, layer: wp.int
             one[3 * q, l] = reads[3 * q + axis, l]
     tex = on_axis(faces.px, faces.py, faces.pz, axis)
     return accumulate_reads_lane(tex, tex, tex, smp, lane_ints(layer), 1, 0, one)
+
+
+@wp.func
+def write_normals(normals: lane_colours, base: wp.int32, count: wp.int32, out: wp.array2d(dtype=float)):
+    """Rows ``base .. base + count - 1`` of ``out``: the lane's normals (``x, y, z`` of each row)."""
+    for l in range(count):
+        out[base + l, 0] = normals[l, 0]
+        out[base + l, 1] = normals[l, 1]
+        out[base + l, 2] = normals[l, 2]
 
 
 @functools.cache
@@ -78,14 +89,14 @@ def lane_bodies(colour, colour_grad, args_t):
 
 
 @functools.cache
-def normal_lane_bodies(normal_of_samples, samples_grad, args_t, samples_t):
+def normal_lane_bodies(samples_grad, args_t, samples_t):
     """``(normal_lane, samples_lane, samples_grad_lane)``: the lane bodies of plain normal mapping
     (one texture per axis) and of the first step of its two-step gradient, which stores each
     projection's sample and the weights (``samples_t``: :class:`~.triplanar.ProjectionSamples`) and
     adds their texel gradients (the anisotropic filter's pixel by pixel through the body
-    ``samples_grad``). ``normal_of_samples(args, pixels, i, w, sx, sy, sz)`` makes a covered pixel's
-    normal from its weights and samples as the normal body does. Each reads the projections on the
-    unit normal, as the bodies do (``triplanar_reads_lane``'s ``unit_normals``)."""
+    ``samples_grad``). Each reads the projections on the unit normal, as the bodies do
+    (``triplanar_reads_lane``'s ``unit_normals``); the forward makes the normals from them natively
+    (:func:`~.normal_lanes.surface_normals_lane`)."""
 
     def unit_normal_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
         """``(reads, sx, sy, sz)``: the lane's reads on the unit normal and each projection's samples."""
@@ -100,14 +111,7 @@ def normal_lane_bodies(normal_of_samples, samples_grad, args_t, samples_t):
     def normal_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
         reads, sx, sy, sz = unit_normal_samples(args, pixels, base, count)
-        for l in range(count):
-            i = base + l
-            result = wp.vec3(0.0)
-            if pixels.mask[i] != 0.0:
-                result = normal_of_samples(args, pixels, i, wp.vec3(reads[9, l], reads[10, l], reads[11, l]), sx[l], sy[l], sz[l])
-            out[i, 0] = result[0]
-            out[i, 1] = result[1]
-            out[i, 2] = result[2]
+        write_normals(surface_normals_lane(args.proj, args.normal_map, pixels, base, count, reads, sx, sy, sz), base, count, out)
 
     def samples_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: samples_t):
         count = wp.min(out.weights.shape[0] - base, LANES)
@@ -142,4 +146,30 @@ def normal_lane_bodies(normal_of_samples, samples_grad, args_t, samples_t):
         inlined(specialised(normal_lane, "triplanar_normal_lane")),
         inlined(specialised(samples_lane, "triplanar_samples_lane")),
         inlined(specialised(samples_grad_lane, "triplanar_samples_grad_lane")),
+    )
+
+
+@functools.cache
+def stored_lane_bodies(args_t, pixels_t, grads_t):
+    """``(stored_lane, stored_grad_lane, covered)``: the lane bodies of the second step of normal
+    mapping's two-step gradient (the normal made from the stored samples, and its gradient in them,
+    natively: :mod:`.normal_lanes`), whose arguments are ``args_t``, ``pixels_t`` and ``grads_t``
+    (:class:`~.triplanar.NormalBlendArgs`, ``StoredSamples``, ``StoredSampleGrads``), and their
+    lanes' ``covered`` (``family.lane_kernel``)."""
+
+    def stored_lane(args: args_t, pixels: pixels_t, base: wp.int32, out: wp.array2d(dtype=float)):
+        count = wp.min(out.shape[0] - base, LANES)
+        write_normals(stored_normals_lane(args.proj, args.normal_map, pixels.normal, pixels.mask, pixels.weights, pixels.samples, base, count), base, count, out)
+
+    def stored_grad_lane(args: args_t, pixels: pixels_t, base: wp.int32, grads: grads_t, adj: wp.array2d(dtype=float)):
+        count = wp.min(adj.shape[0] - base, LANES)
+        stored_normals_grad_lane(args.proj, args.normal_map, pixels.normal, pixels.mask, pixels.weights, pixels.samples, base, count, adj, grads.samples)
+
+    def covered(pixels: pixels_t, base: wp.int32, count: wp.int32) -> bool:
+        return lane_covered(pixels.mask, base, count)
+
+    return (
+        inlined(specialised(stored_lane, "triplanar_stored_lane")),
+        inlined(specialised(stored_grad_lane, "triplanar_stored_grad_lane")),
+        inlined(specialised(covered, "triplanar_stored_covered")),
     )

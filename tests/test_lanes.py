@@ -293,10 +293,11 @@ def test_biplanar_lanes_give_the_one_pixel_bits(rng, launched, sharpness):
 def test_triplanar_normal_lanes_give_the_one_pixel_bits(rng, launched, filter, channels):
     """Normal mapping's lane (``triplanar.normal_lane``): every blend, in world and object space,
     and normals with a component so small that it rounds to zero as the normal is made unit length,
-    which turns that projection's mirror fix (read, at sharpness 0)."""
+    which turns that projection's mirror fix (read, at sharpness 0), and normals whose square
+    overflows (scaled down before they are made unit length: their signs turn the mirror fix)."""
     g = _hand_gbuffer(rng)
     normals = g.normal.numpy().reshape(-1, 3)
-    normals[11:14] = [(10.0, 0.0, -1e-45), (0.0, -1e-45, 4.0), (3e19, -1e-30, 2e19)]
+    normals[11:15] = [(10.0, 0.0, -1e-45), (0.0, -1e-45, 4.0), (3e19, -1e-30, 2e19), (2e19, -3e19, -1e19)]
     g.normal.assign(normals.reshape(1, -1, 3))
     g.mask.assign(np.maximum(g.mask.numpy(), (np.arange(normals.shape[0]) < 20).reshape(1, -1).astype(np.float32)))
     tex = wt.Texture(rng.random((64, 32, channels), dtype=np.float32))
@@ -519,7 +520,8 @@ def test_stochastic_gradient_lanes_add_the_one_pixel_sums(rng, launched, method,
 def test_triplanar_normal_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, threads):
     """Normal mapping's two-step gradient: the first step's lanes (``triplanar._samples_lanes``)
     store the one-pixel kernel's samples and weights, and add each projection's own gradient into
-    the texels in its order (``lane_scatter.scatter_reads_lanes``), on 3 threads too."""
+    the texels in its order (``lane_scatter.scatter_reads_lanes``), and the second step's lanes
+    make the normal and its gradient in the samples (``normal_lanes``), on 3 threads too."""
     g = _hand_gbuffer(rng, 20_000)
     tex = wt.Texture(rng.random((64, 32, 3), dtype=np.float32), requires_grad=True)
     smp = wt.Sampler(filter=filter, max_aniso=4)
@@ -538,6 +540,7 @@ def test_triplanar_normal_gradient_lanes_add_the_one_pixel_sums(rng, launched, f
         wt.set_num_threads(previous)
     names = {name for name, _ in launched}
     assert {"triplanar_samples_lanes", "triplanar_samples_texel_grad_lanes", "triplanar_samples_forward", "triplanar_samples_texel_grad"} <= names
+    assert {"triplanar_normal_blend_lanes", "triplanar_normal_blend_texel_grad_lanes", "triplanar_normal_blend_forward", "triplanar_normal_blend_texel_grad"} <= names
 
 
 @pytest.mark.parametrize("threads", [1, 3])

@@ -15,6 +15,7 @@ import warp as wp
 
 from warptex.kernels import triplanar as kt
 from warptex.kernels.family import forward_kernel
+from warptex.kernels.lanes import LANES
 from warptex.kernels.normals import BLEND_RNM, BLEND_UDN, BLEND_WHITEOUT
 
 N = 512
@@ -32,19 +33,19 @@ def _rotation(rng) -> np.ndarray:
     return q
 
 
-def _inputs(seed: int, matrix: str):
+def _inputs(seed: int, matrix: str, n: int = N):
     """Per-pixel inputs (float32 numpy) and the normal matrices: ``identity``, ``object`` (a
     rotation and an anisotropic scale) or ``huge`` (every blend past ~1.8e19 in world space)."""
     rng = np.random.default_rng(seed)
-    normal = rng.normal(size=(N, 3))
+    normal = rng.normal(size=(n, 3))
     normal[::17] *= np.array([1.0, 1e-6, 0.0])  # a component at or near 0: the mirror fix's sign
-    weights = rng.random((N, 3))
-    weights[rng.random((N, 3)) < 0.3] = 0.0  # projections that are not read
+    weights = rng.random((n, 3))
+    weights[rng.random((n, 3)) < 0.3] = 0.0  # projections that are not read
     normal[5], weights[5] = 0.0, 0.0  # a zero normal, whose weights the first step stores as 0
-    samples = rng.random((N, 3, 4))
+    samples = rng.random((n, 3, 4))
     samples[7, :, :3] = 0.5  # three-channel texels that decode to zero (strength aside: z = 0)
     normal[9], weights[9], samples[9, 2, :3] = (0.0, 0.0, 2.0), (0.0, 0.0, 1.0), 0.5  # whiteout: a blend of 0, the surface normal kept
-    mask = np.ones(N)
+    mask = np.ones(n)
     mask[::11] = 0.0
     to_object = to_world = np.eye(3)
     if matrix != "identity":
@@ -71,17 +72,27 @@ def _structs(inputs, matrices, blend, channels, flip_green, strength, mirror_fix
     return args, pixels
 
 
-def _forward(kernel, args, pixels) -> wp.array:
-    out = wp.zeros((N, 3), dtype=float, requires_grad=True)
-    wp.launch(kernel, dim=N, inputs=[args, pixels, 0], outputs=[out])
+def _forward(kernel, args, pixels, per_index: int = 1) -> wp.array:
+    n = pixels.mask.shape[0]
+    out = wp.zeros((n, 3), dtype=float, requires_grad=True)
+    wp.launch(kernel, dim=-(-n // per_index), inputs=[args, pixels, 0], outputs=[out])
     return out
 
 
-def _hand_written(args, pixels, adj: np.ndarray) -> np.ndarray:
+def _hand_written(args, pixels, adj: np.ndarray, kernel=None, per_index: int = 1) -> np.ndarray:
+    n = pixels.mask.shape[0]
     grads = kt.StoredSampleGrads()
-    grads.samples = wp.zeros((N, 3), dtype=wp.vec4)
-    wp.launch(kt._normal_from_samples().texel_grad, dim=N, inputs=[args, pixels, 0, grads, wp.array(adj, dtype=float)])
-    return grads.samples.numpy()
+    grads.samples = wp.array(np.full((n, 3, 4), 0.25, np.float32), dtype=wp.vec4)  # added into
+    wp.launch(kernel or kt._normal_from_samples().texel_grad, dim=-(-n // per_index), inputs=[args, pixels, 0, grads, wp.array(adj, dtype=float)])
+    return grads.samples.numpy() - 0.25
+
+
+def _same_bits(a: np.ndarray, b: np.ndarray) -> None:
+    """The same floats bit for bit, NaN wherever either is (any payload: which operand's NaN an
+    operation passes on is the compiler's choice of operand order)."""
+    nan = np.isnan(a)
+    np.testing.assert_array_equal(nan, np.isnan(b))
+    np.testing.assert_array_equal(a[~nan].view(np.uint32), b[~nan].view(np.uint32))
 
 
 CONFIGURATIONS = list(itertools.product(BLENDS, (2, 3, 4), (0, 1)))
@@ -138,3 +149,22 @@ def test_hand_written_gradient_matches_central_differences(blend, channels, flip
         direction = rng.normal(size=inputs[2].shape)
         fd = (loss(inputs[2] + step * direction) - loss(inputs[2] - step * direction)) / (2 * step)
         np.testing.assert_allclose((hand * direction).sum(), fd, rtol=2e-3, atol=2e-3)
+
+
+@pytest.mark.parametrize(("blend", "channels", "flip_green"), CONFIGURATIONS)
+def test_lanes_give_the_one_pixel_bits(blend, channels, flip_green):
+    """The CPU lanes of the step (``normal_lanes.stored_normals_lane`` and ``_grad_lane``): the
+    one-pixel kernels' normals and gradients, bit for bit, over a count that ends in a part lane
+    (the gradient added into a non-zero array, as the first step's pass leaves none)."""
+    kernels = kt._normal_from_samples()
+    n = 16 * 31 + 5
+    for matrix, (strength, mirror_fix) in itertools.product(("identity", "object", "huge"), ((1.0, 1), (0.6, 0), (2.5, 1))):
+        inputs, matrices = _inputs(6, matrix, n)
+        inputs[0][20:24] = [(3e19, -1e-30, 2e19), (2e19, -3e19, -1e19), (np.inf, 0.0, 1.0), (np.nan, 1.0, 0.0)]  # past ~1.8e19, non-finite
+        args, pixels = _structs(inputs, matrices, blend, channels, flip_green, strength, mirror_fix)
+        adj = np.random.default_rng(7).normal(size=(n, 3)).astype(np.float32)
+        lanes = _forward(kernels.lanes, args, pixels, LANES).numpy()
+        _same_bits(lanes, _forward(kernels.forward, args, pixels).numpy())
+        hand = _hand_written(args, pixels, adj)
+        _same_bits(_hand_written(args, pixels, adj, kernels.texel_grad_lanes, LANES), hand)
+        assert np.nanmax(np.abs(hand)) > 0 and np.nanmax(np.abs(lanes)) > 0

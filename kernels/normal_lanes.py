@@ -1,0 +1,341 @@
+"""Normal mapping's arithmetic for a lane of pixels on the CPU (:mod:`.lanes`): each projection's
+sample decoded, mirror-fixed, blended with the unit surface normal and swizzled back, the
+projections blended by their weights and the blend normalised in world space, and the gradient of
+all that in the samples, 16 pixels wide in SIMD registers where Warp's scalar code took a pixel at
+a time (it was most of normal mapping's time once the texture reads had lanes).
+
+Every helper computes what the scalar blocks of :mod:`.normals` and :mod:`.triplanar` compute,
+operation for operation and in the same order (Warp's ``wp::mul`` of a matrix and a vector column
+by column; ``wp::length`` and ``wp::dot`` as Warp writes them; each branch computed in every lane
+and chosen by selects; the rare blends past ~1.8e19 lane by lane with Warp's own functions), so the
+lanes' normals and gradients are the one-pixel kernels' bits (``tests/test_lanes.py``).
+"""
+
+import warp as wp
+
+from .lanes import cpu_snippet, lane_colours, lane_reads
+from .normals import BLEND_RNM, BLEND_UDN, NormalMapArgs
+from .projection import ProjectionArgs, SurfacePixels
+
+# triplanar.unit_base_normal for a lane: also what the reads of normal mapping take (.projection_lanes).
+UNIT_NORMALS_CPP = r"""
+typedef wp::vec_t<3, float> wt_v3;
+// triplanar.unit_base_normal for the lane, in place: normals.direction where |n| > 0, on vectors
+// (wp::length's and wp::normalize's own expressions, the same bits), lane by lane past ~1.8e19
+// (|n|² overflowed: normals.unsquared first).
+auto wt_unit_normals = [&](wt_vf* N) __attribute__((always_inline)) {
+    const wt_vf length = wt_vsqrt(N[0] * N[0] + N[1] * N[1] + N[2] * N[2]);
+    const wt_vi scaled = length > 0.0f;
+    const wt_vf n0 = N[0], n1 = N[1], n2 = N[2], divisor = wt_sel(scaled, length, (wt_vf)1.0f);
+    for (int e = 0; e < 3; ++e) N[e] = wt_sel(scaled, N[e] / divisor, N[e]);
+    if (!__builtin_reduce_or(length > wt_float_max)) return;
+    for (int l = 0; l < WT_L; ++l) {
+        if (length[l] > wt_float_max) {
+            const wt_v3 n(n0[l], n1[l], n2[l]);
+            const wt_v3 d = wp::normalize(wp::div(n, wp::max(wt_v3(wp::abs(n.c[0]), wp::abs(n.c[1]), wp::abs(n.c[2])))));
+            for (int e = 0; e < 3; ++e) N[e][l] = d.c[e];
+        }
+    }
+};
+"""
+
+_NORMAL_CPP = UNIT_NORMALS_CPP + r"""
+typedef wp::mat_t<3, 3, float> wt_m3;
+const wt_vf wt_zero = 0.0f, wt_one = 1.0f;
+auto wt_sign_or_one = [&](wt_vf x) __attribute__((always_inline)) -> wt_vf { return wt_sel(x < 0.0f, -wt_one, wt_one); };  // normals.sign_or_one
+auto wt_length3 = [&](const wt_vf* v) __attribute__((always_inline)) -> wt_vf { return wt_vsqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); };
+auto wt_dot3 = [](const wt_vf* a, const wt_vf* b) __attribute__((always_inline)) -> wt_vf { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; };
+// wp::mul(m, v) (transposed: wp::mul(wp::transpose(m), v)): the columns times v's components, added in order.
+auto wt_mul3 = [](const wt_m3& m, const wt_vf* v, wt_vf* r, bool transposed) __attribute__((always_inline)) {
+    for (int k = 0; k < 3; ++k) r[k] = (transposed ? m.data[0][k] : m.data[k][0]) * v[0];
+    for (int j = 1; j < 3; ++j)
+        for (int k = 0; k < 3; ++k) r[k] = r[k] + (transposed ? m.data[j][k] : m.data[k][j]) * v[j];
+};
+// wp::normalize(v): v over its length where that is > 0, else 0.
+auto wt_normalize3 = [&](const wt_vf* v, wt_vf length, wt_vf* u) __attribute__((always_inline)) {
+    const wt_vi positive = length > 0.0f;
+    const wt_vf divisor = wt_sel(positive, length, wt_one);
+    for (int e = 0; e < 3; ++e) u[e] = wt_sel(positive, v[e] / divisor, wt_zero);
+};
+// normals.direction, the lanes whose |v|² overflows lane by lane.
+auto wt_direction = [&](const wt_vf* v, wt_vf* u) __attribute__((always_inline)) {
+    const wt_vf length = wt_length3(v);
+    wt_normalize3(v, length, u);
+    if (!__builtin_reduce_or(length > wt_float_max)) return;
+    for (int l = 0; l < WT_L; ++l) {
+        if (length[l] > wt_float_max) {
+            const wt_v3 n(v[0][l], v[1][l], v[2][l]);
+            const wt_v3 d = wp::normalize(wp::div(n, wp::max(wt_v3(wp::abs(n.c[0]), wp::abs(n.c[1]), wp::abs(n.c[2])))));
+            for (int e = 0; e < 3; ++e) u[e][l] = d.c[e];
+        }
+    }
+};
+// normals.decode_normal: the slopes and z (x, y, z before the normalisation: xyz) and the unit t.
+auto wt_decode = [&](const wt_vf* s, const auto& nm, wt_vf* xyz, wt_vf& r, wt_vf* t) __attribute__((always_inline)) {
+    xyz[0] = s[0] * 2.0f - 1.0f;
+    xyz[1] = s[1] * 2.0f - 1.0f;
+    if (nm.flip_green != 0) xyz[1] = -xyz[1];
+    r = 1.0f - xyz[0] * xyz[0] - xyz[1] * xyz[1];
+    xyz[2] = nm.channels >= 3 ? s[2] * 2.0f - 1.0f : wt_sel(r > 0.0f, wt_vsqrt(r), wt_zero);
+    const wt_vf scaled[3] = {xyz[0] * nm.strength, xyz[1] * nm.strength, xyz[2]};
+    wt_normalize3(scaled, wt_length3(scaled), t);
+};
+// projection.u_sign and plane_coords: the mirror fix of projection `axis` and its base normal.
+auto wt_u_sign = [&](const wt_vf* n, int axis, int mirror_fix) __attribute__((always_inline)) -> wt_vf {
+    if (mirror_fix == 0) return wt_one;
+    return axis == 2 ? wt_sign_or_one(n[2]) : -wt_sign_or_one(n[axis]);
+};
+auto wt_base = [](const wt_vf* n, int axis, wt_vf* b) __attribute__((always_inline)) {
+    b[0] = axis == 0 ? n[2] : n[0];
+    b[1] = axis == 1 ? n[2] : n[1];
+    b[2] = n[axis];
+};
+// normals.to_world: r.zyx for X, r.xzy for Y, r for Z (each its own inverse: also from world axes).
+auto wt_to_world = [](const wt_vf* r, int axis, wt_vf* out) __attribute__((always_inline)) {
+    const int k[3][3] = {{2, 1, 0}, {0, 2, 1}, {0, 1, 2}};
+    for (int e = 0; e < 3; ++e) out[e] = r[k[axis][e]];
+};
+// triplanar.projected_normal: projection `axis`' normal (sample s) in world axes.
+auto wt_projected_normal = [&](const wt_vf* s, int axis, const wt_vf* n, const auto& proj, const auto& nm, wt_vf* out) __attribute__((always_inline)) {
+    wt_vf xyz[3], r2, t[3], b[3], r[3];
+    wt_decode(s, nm, xyz, r2, t);
+    t[0] = t[0] * wt_u_sign(n, axis, proj.mirror_fix);
+    wt_base(n, axis, b);
+    if (nm.blend == %(udn)d) {  // normals.blend_projected
+        r[0] = t[0] + b[0], r[1] = t[1] + b[1], r[2] = b[2];
+    } else if (nm.blend == %(rnm)d) {
+        const wt_vf n1[3] = {b[0], b[1], wt_vabs(b[2]) + 1.0f}, n2[3] = {-t[0], -t[1], t[2]};
+        const wt_vf q = wt_dot3(n1, n2) / n1[2];
+        for (int e = 0; e < 3; ++e) r[e] = n1[e] * q - n2[e];
+        r[2] = r[2] * wt_sign_or_one(b[2]);
+    } else {
+        r[0] = t[0] + b[0], r[1] = t[1] + b[1], r[2] = t[2] * b[2];
+    }
+    wt_to_world(r, axis, out);
+};
+// The blend of the projections' normals (before triplanar.unit_normal), where their weights are > 0.
+auto wt_total = [&](const wt_vf (*S)[4], const wt_vf* W, const wt_vf* n, const auto& proj, const auto& nm, wt_vf* total) __attribute__((always_inline)) {
+    for (int e = 0; e < 3; ++e) total[e] = wt_zero;
+    for (int axis = 0; axis < 3; ++axis) {
+        const wt_vi read = W[axis] > 0.0f;
+        if (!__builtin_reduce_or(read)) continue;
+        wt_vf pn[3];
+        wt_projected_normal(S[axis], axis, n, proj, nm, pn);
+        for (int e = 0; e < 3; ++e) total[e] = total[e] + wt_sel(read, W[axis] * pn[e], wt_zero);
+    }
+};
+// triplanar.unit_normal: the blend in world space, normalised (the surface normal where it cancels out).
+auto wt_unit_normal = [&](const wt_vf* total, const wt_vf* n, const auto& proj, wt_vf* out) __attribute__((always_inline)) {
+    wt_vf world[3], surface[3], a[3], b[3];
+    wt_mul3(proj.normal_to_world, total, world, false);
+    wt_mul3(proj.normal_to_world, n, surface, false);
+    const wt_vi blended = (wt_length3(world) > 1.0e-12f) & wt_finite(world[0]) & wt_finite(world[1]) & wt_finite(world[2]);
+    const wt_vi kept = (wt_length3(surface) > 0.0f) & wt_finite(surface[0]) & wt_finite(surface[1]) & wt_finite(surface[2]);
+    wt_direction(world, a);
+    wt_direction(surface, b);
+    for (int e = 0; e < 3; ++e) out[e] = wt_sel(blended, a[e], wt_sel(kept, b[e], wt_zero));
+};
+// The stored intermediates of lane pixels base .. base + count - 1 (the rest repeat pixel base) as
+// vectors: mask, unit normal (triplanar.stored_blend's: normal_to_object always applied), weights, samples.
+auto wt_stored = [&](const auto& proj, const auto& normal, const auto& mask, const auto& weights, const auto& samples, int base, int count,
+                     wt_vi& covered, wt_vf* N, wt_vf* W, wt_vf (*S)[4]) __attribute__((always_inline)) {
+    float m_[1][WT_L], n_[3][WT_L], w_[3][WT_L];
+    wt_rows(mask, base, count, 1, m_);
+    wt_rows(normal, base, count, 3, n_);
+    wt_rows(weights, base, count, 3, w_);
+    for (int axis = 0; axis < 3; ++axis) {  // each projection's RGBA rows, then a vector per channel
+        wt_f4 rows[WT_L];
+        for (int l = 0; l < WT_L; ++l)
+            __builtin_memcpy(&rows[l], (const char*)samples.data + (long long)(base + (l < count ? l : 0)) * samples.strides[0] + axis * samples.strides[1], sizeof(wt_f4));
+        wt_channels(rows, S[axis]);
+    }
+    wt_vf raw[3];
+    int c_[WT_L];
+    for (int l = 0; l < WT_L; ++l) c_[l] = l < count && m_[0][l] != 0.0f ? -1 : 0;
+    __builtin_memcpy(&covered, c_, sizeof(covered));
+    for (int e = 0; e < 3; ++e) {
+        __builtin_memcpy(&raw[e], n_[e], sizeof(wt_vf));
+        __builtin_memcpy(&W[e], w_[e], sizeof(wt_vf));
+    }
+    wt_mul3(proj.normal_to_object, raw, N, false);
+    wt_unit_normals(N);
+};
+// Row l of a lane_colours: (x, y, z, 0) of lane pixel l, 0 where it is not covered.
+auto wt_lane_normals = [&](const wt_vf* r, wt_vi covered) __attribute__((always_inline)) -> wp::mat_t<WT_L, 4, float> {
+    wp::mat_t<WT_L, 4, float> out;
+    for (int l = 0; l < WT_L; ++l)
+        for (int e = 0; e < 4; ++e) out.data[l][e] = e < 3 && covered[l] ? r[e][l] : 0.0f;
+    return out;
+};
+""" % {"udn": int(BLEND_UDN), "rnm": int(BLEND_RNM)}
+
+_SURFACE_NORMALS = _NORMAL_CPP + r"""
+float n_[3][WT_L], m_[1][WT_L];
+wt_rows(pixels.normal, base, count, 3, n_);
+wt_rows(pixels.mask, base, count, 1, m_);
+if (proj.object_space != 0) {  // projection.surface
+    for (int l = 0; l < WT_L; ++l) {
+        const wt_v3 n = wp::mul(proj.normal_to_object, wt_v3(n_[0][l], n_[1][l], n_[2][l]));
+        for (int e = 0; e < 3; ++e) n_[e][l] = n.c[e];
+    }
+}
+wt_vf N[3], W[3], S[3][4], total[3], r[3];
+int c_[WT_L];
+for (int l = 0; l < WT_L; ++l) c_[l] = l < count && m_[0][l] != 0.0f ? -1 : 0;
+wt_vi covered;
+__builtin_memcpy(&covered, c_, sizeof(covered));
+for (int e = 0; e < 3; ++e) {
+    __builtin_memcpy(&N[e], n_[e], sizeof(wt_vf));
+    __builtin_memcpy(&W[e], reads.data[9 + e], sizeof(wt_vf));
+}
+wt_unit_normals(N);
+const decltype(sx)* samples[3] = {&sx, &sy, &sz};
+for (int axis = 0; axis < 3; ++axis) {
+    wt_f4 rows[WT_L];
+    __builtin_memcpy(rows, samples[axis]->data, sizeof(rows));
+    wt_channels(rows, S[axis]);
+}
+wt_total(S, W, N, proj, nm, total);
+wt_unit_normal(total, N, proj, r);
+return wt_lane_normals(r, covered);
+"""
+
+
+@wp.func_native(cpu_snippet(_SURFACE_NORMALS, "return {};\n"))
+def surface_normals_lane(proj: ProjectionArgs, nm: NormalMapArgs, pixels: SurfacePixels, base: wp.int32, count: wp.int32, reads: lane_reads, sx: lane_colours, sy: lane_colours, sz: lane_colours) -> lane_colours:  # fmt: skip
+    """Row ``l``: lane pixel ``l``'s normal as normal mapping's pixel body makes it (``x, y, z, 0``),
+    from its projections' weights (rows 9-11 of ``reads``) and samples ``sx``, ``sy``, ``sz``; 0
+    where the pixel is not covered."""
+    ...
+
+
+_STORED_NORMALS = _NORMAL_CPP + r"""
+wt_vi covered;
+wt_vf N[3], W[3], S[3][4], total[3], r[3];
+wt_stored(proj, normal, mask, weights, samples, base, count, covered, N, W, S);
+wt_total(S, W, N, proj, nm, total);
+wt_unit_normal(total, N, proj, r);
+return wt_lane_normals(r, covered);
+"""
+
+
+@wp.func_native(cpu_snippet(_STORED_NORMALS, "return {};\n"))
+def stored_normals_lane(proj: ProjectionArgs, nm: NormalMapArgs, normal: wp.array(dtype=wp.vec3), mask: wp.array(dtype=float), weights: wp.array(dtype=wp.vec3),
+                        samples: wp.array2d(dtype=wp.vec4), base: wp.int32, count: wp.int32) -> lane_colours:  # fmt: skip
+    """Row ``l``: lane pixel ``l``'s normal made from its stored weights and samples
+    (:func:`~.triplanar.normal_from_samples`), ``(x, y, z, 0)``; 0 where it is not covered."""
+    ...
+
+
+_STORED_NORMALS_GRAD = _NORMAL_CPP + r"""
+// normals.normalize_grad
+auto wt_normalize_grad = [&](const wt_vf* v, const wt_vf* g, wt_vf* out) __attribute__((always_inline)) {
+    const wt_vf d = wt_length3(v);
+    const wt_vi positive = d > 0.0f;
+    const wt_vf invd = 1.0f / wt_sel(positive, d, wt_one);
+    wt_vf u[3];
+    wt_normalize3(v, d, u);
+    const wt_vf ug = wt_dot3(u, g);
+    for (int e = 0; e < 3; ++e) out[e] = wt_sel(positive, g[e] * invd - u[e] * ug * invd, wt_zero);
+};
+// normals.direction_grad, the lanes whose |v|² overflows lane by lane with Warp's own functions.
+auto wt_direction_grad = [&](const wt_vf* v, const wt_vf* g, wt_vf* out) __attribute__((always_inline)) {
+    wt_normalize_grad(v, g, out);
+    const wt_vf length = wt_length3(v);
+    if (!__builtin_reduce_or(length > wt_float_max)) return;
+    for (int l = 0; l < WT_L; ++l) {
+        if (length[l] > wt_float_max) {
+            const wt_v3 n(v[0][l], v[1][l], v[2][l]), gg(g[0][l], g[1][l], g[2][l]);
+            const float m = wp::max(wt_v3(wp::abs(n.c[0]), wp::abs(n.c[1]), wp::abs(n.c[2])));
+            const wt_v3 s = wp::div(n, m);
+            wt_v3 r(0.0f);
+            const float d = wp::length(s);
+            if (d > 0.0f) {
+                const float invd = 1.0f / d;
+                const wt_v3 u = wp::normalize(s);
+                r = wp::sub(wp::mul(gg, invd), wp::mul(wp::mul(u, wp::dot(u, gg)), invd));
+            }
+            r = wp::div(r, m);
+            for (int e = 0; e < 3; ++e) out[e][l] = r.c[e];
+        }
+    }
+};
+// normals.decode_normal_grad: the gradient in the texel's four channels (the fourth 0).
+auto wt_decode_grad = [&](const wt_vf* s, const auto& nm, const wt_vf* g, wt_vf* out) __attribute__((always_inline)) {
+    wt_vf xyz[3], r, t[3], gt[3];
+    wt_decode(s, nm, xyz, r, t);
+    const wt_vf scaled[3] = {xyz[0] * nm.strength, xyz[1] * nm.strength, xyz[2]};
+    wt_normalize_grad(scaled, g, gt);
+    wt_vf gx = gt[0] * nm.strength, gy = gt[1] * nm.strength, gz = wt_zero;
+    if (nm.channels >= 3) {
+        gz = gt[2];
+    } else {  // z = sqrt(1 - x² - y²) where that is > 0
+        const wt_vi root = r > 0.0f;
+        gx = wt_sel(root, gx - gt[2] * xyz[0] / xyz[2], gx);
+        gy = wt_sel(root, gy - gt[2] * xyz[1] / xyz[2], gy);
+    }
+    if (nm.flip_green != 0) gy = -gy;
+    out[0] = gx * 2.0f, out[1] = gy * 2.0f, out[2] = gz * 2.0f, out[3] = wt_zero;
+};
+// triplanar.projected_normal_grad (normals.blend_projected_grad inline): projection `axis`' gradient in its sample.
+auto wt_projected_normal_grad = [&](const wt_vf* s, int axis, const wt_vf* n, const auto& proj, const auto& nm, const wt_vf* g, wt_vf* out) __attribute__((always_inline)) {
+    wt_vf b[3], gw[3], gt[3];
+    const wt_vf sign = wt_u_sign(n, axis, proj.mirror_fix);
+    wt_base(n, axis, b);
+    wt_to_world(g, axis, gw);
+    if (nm.blend == %(udn)d) {
+        gt[0] = gw[0], gt[1] = gw[1], gt[2] = wt_zero;
+    } else if (nm.blend == %(rnm)d) {
+        const wt_vf n1[3] = {b[0], b[1], wt_vabs(b[2]) + 1.0f}, gr[3] = {gw[0], gw[1], gw[2] * wt_sign_or_one(b[2])};
+        const wt_vf q = wt_dot3(n1, gr) / n1[2];
+        wt_vf gn2[3];
+        for (int e = 0; e < 3; ++e) gn2[e] = n1[e] * q - gr[e];
+        gt[0] = -gn2[0], gt[1] = -gn2[1], gt[2] = gn2[2];
+    } else {
+        gt[0] = gw[0], gt[1] = gw[1], gt[2] = gw[2] * b[2];
+    }
+    gt[0] = gt[0] * sign;
+    wt_decode_grad(s, nm, gt, out);
+};
+if (grad.shape[0] == 0) return;
+wt_vi covered;
+wt_vf N[3], W[3], S[3][4], total[3], world[3], A[3], gw[3], g[3];
+wt_stored(proj, normal, mask, weights, samples, base, count, covered, N, W, S);
+wt_total(S, W, N, proj, nm, total);
+float a_[3][WT_L];
+for (int l = 0; l < WT_L; ++l)
+    for (int e = 0; e < 3; ++e) a_[e][l] = *(const float*)((const char*)adj.data + (long long)(base + (l < count ? l : 0)) * adj.strides[0] + e * adj.strides[1]);
+for (int e = 0; e < 3; ++e) __builtin_memcpy(&A[e], a_[e], sizeof(wt_vf));
+// triplanar.unit_normal_grad
+wt_mul3(proj.normal_to_world, total, world, false);
+const wt_vi blended = (wt_length3(world) > 1.0e-12f) & wt_finite(world[0]) & wt_finite(world[1]) & wt_finite(world[2]);
+wt_direction_grad(world, A, gw);
+wt_mul3(proj.normal_to_world, gw, g, true);
+for (int e = 0; e < 3; ++e) g[e] = wt_sel(blended, g[e], wt_zero);
+for (int axis = 0; axis < 3; ++axis) {
+    const wt_vi read = covered & (W[axis] > 0.0f);
+    if (!__builtin_reduce_or(read)) continue;
+    const wt_vf wg[3] = {W[axis] * g[0], W[axis] * g[1], W[axis] * g[2]};
+    wt_vf gs[4];
+    wt_projected_normal_grad(S[axis], axis, N, proj, nm, wg, gs);
+    wt_f4 rows[WT_L];
+    wt_rows_of_channels(gs, rows);
+    for (int l = 0; l < count; ++l) {
+        if (!read[l]) continue;
+        char* row = (char*)grad.data + (long long)(base + l) * grad.strides[0] + axis * grad.strides[1];
+        wt_f4 sum;
+        __builtin_memcpy(&sum, row, sizeof(sum));
+        sum = sum + rows[l];
+        __builtin_memcpy(row, &sum, sizeof(sum));
+    }
+}
+""" % {"udn": int(BLEND_UDN), "rnm": int(BLEND_RNM)}
+
+
+@wp.func_native(cpu_snippet(_STORED_NORMALS_GRAD))
+def stored_normals_grad_lane(proj: ProjectionArgs, nm: NormalMapArgs, normal: wp.array(dtype=wp.vec3), mask: wp.array(dtype=float), weights: wp.array(dtype=wp.vec3),
+                             samples: wp.array2d(dtype=wp.vec4), base: wp.int32, count: wp.int32, adj: wp.array2d(dtype=float), grad: wp.array2d(dtype=wp.vec4)):  # fmt: skip
+    """:func:`~.triplanar.normal_from_samples_grad` for the lane: the gradient ``adj[i]`` of lane pixel
+    ``i``'s normal added into ``grad[i, axis]``, the gradient of its stored sample of each projection
+    it reads (nothing where ``grad`` is empty)."""
+    ...
