@@ -53,8 +53,9 @@ stochastic_pixel_outlined = _stochastic_body(sample_stochastic_outlined, "stocha
 # offset_tap) for a lane, operation for operation (integer hashes; Warp's own wp::smoothstep, wp::lerp,
 # wp::floor; no contraction): loops over the lane's pixels with no branch, which the compiler
 # vectorises. Every tap is hashed, also the zero-weight ones the scalar blocks skip: those are not read.
-# Hex's taps (hexgrid's blocks: a float64 grid, rotations, powers) go pixel by pixel, with Warp's own
-# wp::floor, wp::sin, wp::cos and wp::pow.
+# Hex's taps (hexgrid's blocks) likewise, in phases over the lane: the float64 grid and the hashes in
+# loops with no branch, the rotations (wp::sin, wp::cos) and powers (wp::pow; none for a contrast of
+# 1, as hexgrid.hex_weights) lane by lane.
 _TAPS = FOOTPRINT_CPP + SAMPLE_READS_CPP + r"""
 enum { WT_HASH4 = %(hash4)d, WT_CHEAP2 = %(cheap2)d, WT_STREAM_CELL = %(cell)d, WT_STREAM_OFFSET = %(offset)d, WT_STREAM_NOISE = %(noise)d, WT_STREAM_HEX = %(hex)d };
 auto unit = [](unsigned a, unsigned b, unsigned c, unsigned d, float* h) __attribute__((always_inline)) {  // hash4_unit
@@ -123,59 +124,74 @@ if (params.method == WT_HASH4) {
         taps.data[2][l] = fin[l] != 0.0f ? 1.0f - t : 0.0f;
         taps.data[5][l] = fin[l] != 0.0f ? t : 0.0f;
     }
-} else {  // hexgrid: hex_grid (in float64), hex_steps, hex_tap, hex_weights
+} else {  // hexgrid: hex_grid (in float64), hex_steps, hex_tap, hex_weights, in phases over the lane
     const double scale = %(hex_scale)r, inv_sqrt3 = %(inv_sqrt3)r, half_sqrt3_64 = %(half_sqrt3)r;  // wp.float64 of a constant: its value as a double
     const float half_sqrt3 = (float)%(half_sqrt3)r, pi = (float)%(pi)r, hex_scale = (float)%(hex_scale)r;
-    auto lattice_id = [](double b) __attribute__((always_inline)) -> int {
-        const double limit = 1073741824.0;
-        if (b >= limit || b < -limit) b = b - wp::floor(b / limit) * limit;
-        return (int)b;
-    };
-    for (int l = 0; l < WT_L; ++l) {
-        if (fin[l] == 0.0f) continue;
-        const float u = reads.data[0][l], v = reads.data[3][l];
+    const double limit = 1073741824.0;
+    float f0[WT_L], f1[WT_L], bu[WT_L], bv[WT_L], hz[3][WT_L];
+    int vi[3][WT_L], vj[3][WT_L], upper[WT_L];
+    for (int l = 0; l < WT_L; ++l) {  // hex_grid, its vertices (hex_steps' order) and periodic_base
+        const float u = fin[l] != 0.0f ? reads.data[0][l] : 0.0f, v = fin[l] != 0.0f ? reads.data[3][l] : 0.0f;
         const double px = (double)u * scale, py = (double)v * scale;
         const double sx = px - py * inv_sqrt3, sy = 2.0 * inv_sqrt3 * py;
         const double bx = wp::floor(sx), by = wp::floor(sy);
-        const float f0 = (float)(sx - bx), f1 = (float)(sy - by);
-        const int i = lattice_id(bx), j = lattice_id(by);
-        const bool upper = f0 + f1 >= 1.0f;
-        float bary[3] = {1.0f - f0 - f1, f0, f1};
-        int vi[3] = {i, i + 1, i}, vj[3] = {j, j, j + 1};
-        float step_u[3] = {0.0f, 1.0f, 0.0f}, step_v[3] = {0.0f, 0.0f, 1.0f};
-        if (upper) {
-            bary[0] = f0 + f1 - 1.0f; bary[1] = 1.0f - f1; bary[2] = 1.0f - f0;
-            vi[0] = i + 1; vj[0] = j + 1;
-            step_u[0] = 1.0f; step_v[0] = 1.0f;
-        }
-        const float bu = u - 2.0f * wp::floor(0.5f * u), bv = v - 2.0f * wp::floor(0.5f * v);  // periodic_base
-        for (int k = 0; k < 3; ++k) {  // hex_tap
+        f0[l] = (float)(sx - bx);
+        f1[l] = (float)(sy - by);
+        const double lx = bx >= limit || bx < -limit ? bx - wp::floor(bx / limit) * limit : bx;  // lattice_id
+        const double ly = by >= limit || by < -limit ? by - wp::floor(by / limit) * limit : by;
+        const int i = (int)lx, j = (int)ly;
+        upper[l] = f0[l] + f1[l] >= 1.0f;
+        vi[0][l] = upper[l] ? i + 1 : i, vj[0][l] = upper[l] ? j + 1 : j;
+        vi[1][l] = i + 1, vj[1][l] = j;
+        vi[2][l] = i, vj[2][l] = j + 1;
+        bu[l] = u - 2.0f * wp::floor(0.5f * u);
+        bv[l] = v - 2.0f * wp::floor(0.5f * v);
+    }
+    for (int k = 0; k < 3; ++k) {  // hex_tap: the vertex's hash and offset
+        for (int l = 0; l < WT_L; ++l) {
             float h[4];
-            unit((unsigned)vi[k], (unsigned)vj[k], seed, (unsigned)WT_STREAM_HEX, h);
-            float tu = bu + h[0], tv = bv + h[1];
-            if (params.rotation != 0.0f) {
+            unit((unsigned)vi[k][l], (unsigned)vj[k][l], seed, (unsigned)WT_STREAM_HEX, h);
+            taps.data[3 * k][l] = bu[l] + h[0];
+            taps.data[3 * k + 1][l] = bv[l] + h[1];
+            hz[k][l] = h[2];
+        }
+    }
+    if (params.rotation != 0.0f) {  // hex_tap's rotation about the vertex centre, lane by lane
+        for (int l = 0; l < WT_L; ++l) {
+            if (fin[l] == 0.0f) continue;
+            const float u = reads.data[0][l], v = reads.data[3][l];
+            for (int k = 0; k < 3; ++k) {
                 float du, dv;
                 if (wp::abs(u) < 1.0e8f && wp::abs(v) < 1.0e8f) {
-                    const double cu = ((double)vi[k] + 0.5 * (double)vj[k]) / scale, cv = half_sqrt3_64 * (double)vj[k] / scale;  // hex_centre64
+                    const double cu = ((double)vi[k][l] + 0.5 * (double)vj[k][l]) / scale, cv = half_sqrt3_64 * (double)vj[k][l] / scale;  // hex_centre64
                     du = (float)((double)u - cu);
                     dv = (float)((double)v - cv);
                 } else {
-                    const float x = f0 - step_u[k], y = f1 - step_v[k];
+                    const float x = f0[l] - (k == 1 || (k == 0 && upper[l]) ? 1.0f : 0.0f), y = f1[l] - (k == 2 || (k == 0 && upper[l]) ? 1.0f : 0.0f);
                     du = (x + 0.5f * y) / hex_scale;
                     dv = (half_sqrt3 * y) / hex_scale;
                 }
-                const float theta = (2.0f * h[2] - 1.0f) * pi * params.rotation;
+                const float theta = (2.0f * hz[k][l] - 1.0f) * pi * params.rotation;
                 const float cs = wp::cos(theta), sn = wp::sin(theta);
-                tu = tu + ((cs * du - sn * dv) - du);
-                tv = tv + ((sn * du + cs * dv) - dv);
+                taps.data[3 * k][l] = taps.data[3 * k][l] + ((cs * du - sn * dv) - du);
+                taps.data[3 * k + 1][l] = taps.data[3 * k + 1][l] + ((sn * du + cs * dv) - dv);
             }
-            taps.data[3 * k][l] = tu;
-            taps.data[3 * k + 1][l] = tv;
         }
-        float pw[3];
-        for (int k = 0; k < 3; ++k) pw[k] = bary[k] > 0.0f ? wp::pow(bary[k], params.contrast) : 0.0f;  // hex_weights
-        const float total = pw[0] + pw[1] + pw[2];
-        for (int k = 0; k < 3; ++k) taps.data[3 * k + 2][l] = pw[k] / total;
+    }
+    float bary[3][WT_L], pw[3][WT_L];
+    for (int l = 0; l < WT_L; ++l) {
+        bary[0][l] = upper[l] ? f0[l] + f1[l] - 1.0f : 1.0f - f0[l] - f1[l];
+        bary[1][l] = upper[l] ? 1.0f - f1[l] : f0[l];
+        bary[2][l] = upper[l] ? 1.0f - f0[l] : f1[l];
+    }
+    for (int k = 0; k < 3; ++k)  // hex_weights (a contrast of 1 takes the weights as they are)
+        for (int l = 0; l < WT_L; ++l) pw[k][l] = bary[k][l] > 0.0f ? bary[k][l] : 0.0f;
+    if (params.contrast != 1.0f)
+        for (int k = 0; k < 3; ++k)
+            for (int l = 0; l < WT_L; ++l) pw[k][l] = bary[k][l] > 0.0f ? wp::pow(bary[k][l], params.contrast) : 0.0f;
+    for (int l = 0; l < WT_L; ++l) {
+        const float total = pw[0][l] + pw[1][l] + pw[2][l];
+        for (int k = 0; k < 3; ++k) taps.data[3 * k + 2][l] = fin[l] != 0.0f ? pw[k][l] / total : 0.0f;  // (a tap of weight 0 is not read)
     }
 }
 return taps;
