@@ -9,10 +9,9 @@ functions or their exact vector twins, no contraction), on clang vectors of a va
 (the weights' exponent and the other launch-wide choices are tested once, outside them; loops over
 lanes that the compiler was left to vectorise did not all vectorise), so the reads are the scalar
 blocks' bits; the LODs' ``log2`` is :func:`~.footprint.lod_log2`'s, 16 at a time. It covers every
-filter (the anisotropic footprint's branches as selects) and both weights: triplanar weights on the
-vectors, biplanar weights pixel by pixel in C++ with Warp's own functions (their branches pick each
-pixel's axes; in Warp's code, pixel by pixel with the rest of the reads, biplanar ran at 0.71 of
-Dr.Jit's speed on the benchmark sphere).
+filter (the anisotropic footprint's branches as selects) and both weights on the vectors: biplanar's
+branches, which pick each pixel's axes, as selects too (pixel by pixel in C++ they took half a
+biplanar lane's reads; the rare pairs whose powers underflow still go pixel by pixel).
 """
 
 import warp as wp
@@ -84,8 +83,8 @@ def accumulate_reads_lane(tex0: TextureView, tex1: TextureView, tex2: TextureVie
 
 _TRIPLANAR_READS = PLANE_CPP + UNIT_NORMALS_CPP + r"""
 typedef wp::vec_t<2, float> wt_v2;
-// projection.power_weight, biplanar_pair and biplanar_weights, operation for operation with Warp's
-// own functions (normals.unsquared inline), for one pixel.
+// projection.power_weight and biplanar_pair, operation for operation with Warp's own functions, for
+// one pixel (the rare lanes the vectors below leave to them).
 auto wt_power_weight = [](float r, float exponent) __attribute__((always_inline)) -> float {
     float w = 0.0f;
     if (exponent == 0.0f) {
@@ -111,30 +110,6 @@ auto wt_biplanar_pair = [&](float major, float median, float exponent) __attribu
         const float m = wp::max(b0, b1);
         if (m > 0.0f) w = wt_v2(wt_power_weight(b0 / m, exponent), wt_power_weight(b1 / m, exponent));
         else w = wt_v2(1.0f, 1.0f);
-    }
-    return w;
-};
-auto wt_biplanar_weights = [&](const wt_v3& n, float sharpness) __attribute__((always_inline)) -> wt_v3 {
-    wt_v3 w(0.0f), u = n;
-    float length = wp::length(n);
-    if (length > wt_float_max) {  // |n|² overflowed: normals.unsquared
-        u = wp::div(n, wp::max(wt_v3(wp::abs(n.c[0]), wp::abs(n.c[1]), wp::abs(n.c[2]))));
-        length = wp::length(u);
-    }
-    if (wp::isfinite(n) && length > 0.0f) {
-        const wt_v3 a = wp::div(wt_v3(wp::abs(u.c[0]), wp::abs(u.c[1]), wp::abs(u.c[2])), length);
-        const float e = sharpness / 8.0f;
-        if (a.c[2] <= a.c[0] && a.c[2] <= a.c[1]) {
-            const wt_v2 pair = wt_biplanar_pair(a.c[0], a.c[1], e);
-            w = wt_v3(pair.c[0], pair.c[1], 0.0f);
-        } else if (a.c[1] <= a.c[0]) {
-            const wt_v2 pair = wt_biplanar_pair(a.c[0], a.c[2], e);
-            w = wt_v3(pair.c[0], 0.0f, pair.c[1]);
-        } else {
-            const wt_v2 pair = wt_biplanar_pair(a.c[1], a.c[2], e);
-            w = wt_v3(0.0f, pair.c[0], pair.c[1]);
-        }
-        w = wp::div(w, wp::max(w.c[0] + w.c[1] + w.c[2], (float)%(eps)r));
     }
     return w;
 };
@@ -172,37 +147,61 @@ for (int e = 0; e < 3; ++e) {
 const wt_vf zero = 0.0f, one = 1.0f;
 const float sharpness = f32(proj.sharpness, 0);
 wt_vf W[3];
-if (proj.weights == %(biplanar)d) {  // projection.biplanar_weights, pixel by pixel: its branches pick the axes
-    float w[3][WT_L];
-    for (int l = 0; l < WT_L; ++l) {
-        const wt_v3 b = covered[l] ? wt_biplanar_weights(wt_v3(N[0][l], N[1][l], N[2][l]), sharpness) : wt_v3(0.0f);
-        for (int e = 0; e < 3; ++e) w[e][l] = b.c[e];
-    }
-    for (int e = 0; e < 3; ++e) __builtin_memcpy(&W[e], w[e], sizeof(wt_vf));
-} else {
-// projection.triplanar_weights, with power_weight's integer exponents by multiplication.
-const int k = (int)sharpness;
-const bool by_squares = (float)k == sharpness && k > 0 && k < 32;
-const wt_vf a0 = wt_vabs(N[0]), a1 = wt_vabs(N[1]), a2 = wt_vabs(N[2]);
-const wt_vf m = wt_vmax(wt_vmax(a0, a1), a2);
-const wt_vi weighed = covered & wt_finite(N[0]) & wt_finite(N[1]) & wt_finite(N[2]) & (m > 0.0f);
-const wt_vf R[3] = {a0 / m, a1 / m, a2 / m};  // |n| / max |n|
-for (int e = 0; e < 3; ++e) {  // power_weight, its exponent the same in every lane
-    const wt_vf r = R[e];
-    if (sharpness == 0.0f) {
-        W[e] = one;
-    } else if (by_squares) {
+// projection.power_weight of a lane's r, its exponent the same in every lane: integer exponents by
+// multiplication, others with exp and log lane by lane (where `active`).
+auto wt_power_lanes = [&](wt_vf r, float exponent, wt_vi active) __attribute__((always_inline)) -> wt_vf {
+    if (exponent == 0.0f) return one;
+    const int k = (int)exponent;
+    if ((float)k == exponent && k > 0 && k < %(max_int)d) {
         const wt_vf r2 = r * r, r4 = r2 * r2, r8 = r4 * r4;
         const wt_vf power = (((k & 1) != 0 ? r : one) * ((k & 2) != 0 ? r2 : one) * ((k & 4) != 0 ? r4 : one)) * ((k & 8) != 0 ? r8 : one) * ((k & 16) != 0 ? r8 * r8 : one);
-        W[e] = wt_sel(r > 0.0f, power, zero);
-    } else {
-        float w[WT_L];
-        for (int l = 0; l < WT_L; ++l) w[l] = weighed[l] && r[l] > 0.0f ? wp::exp(sharpness * wp::log(r[l])) : 0.0f;
-        __builtin_memcpy(&W[e], w, sizeof(wt_vf));
+        return wt_sel(r > 0.0f, power, zero);
     }
-}
-const wt_vf total = wt_vmax(W[0] + W[1] + W[2], 1.0e-20f);  // WEIGHT_EPS
-for (int e = 0; e < 3; ++e) W[e] = wt_sel(weighed, W[e] / total, zero);
+    float w[WT_L];
+    for (int l = 0; l < WT_L; ++l) w[l] = active[l] && r[l] > 0.0f ? wp::exp(exponent * wp::log(r[l])) : 0.0f;
+    wt_vf result;
+    __builtin_memcpy(&result, w, sizeof(result));
+    return result;
+};
+if (proj.weights == %(biplanar)d) {  // projection.biplanar_weights, each pixel's axes chosen by selects
+    const wt_vf length0 = wt_vsqrt(N[0] * N[0] + N[1] * N[1] + N[2] * N[2]);  // wp::length
+    const wt_vi over = length0 > wt_float_max;  // |n|² overflowed: normals.unsquared
+    const wt_vf largest = wt_vmax(wt_vmax(wt_vabs(N[0]), wt_vabs(N[1])), wt_vabs(N[2]));
+    wt_vf U[3];
+    for (int e = 0; e < 3; ++e) U[e] = wt_sel(over, N[e] / largest, N[e]);
+    const wt_vf length = wt_sel(over, wt_vsqrt(U[0] * U[0] + U[1] * U[1] + U[2] * U[2]), length0);
+    const wt_vi weighed = covered & wt_finite(N[0]) & wt_finite(N[1]) & wt_finite(N[2]) & (length > 0.0f);
+    const wt_vf divisor = wt_sel(weighed, length, one);
+    const wt_vf a0 = wt_vabs(U[0]) / divisor, a1 = wt_vabs(U[1]) / divisor, a2 = wt_vabs(U[2]) / divisor;
+    const float e = sharpness / 8.0f;
+    const wt_vi minor_z = (a2 <= a0) & (a2 <= a1), minor_y = ~minor_z & (a1 <= a0), minor_x = ~minor_z & ~minor_y;
+    const wt_vf major = wt_sel(minor_x, a1, a0), median = wt_sel(minor_z, a1, a2);
+    const float edge = (float)%(edge)r;  // biplanar_pair
+    const wt_vf b0 = wt_vmin(wt_vmax(zero, (major - edge) / (1.0f - edge)), one);  // wp::clamp(x, 0, 1) = fmin(fmax(0, x), 1)
+    const wt_vf b1 = wt_vmin(wt_vmax(zero, (median - edge) / (1.0f - edge)), one);
+    wt_vf p0 = wt_power_lanes(b0, e, weighed), p1 = wt_power_lanes(b1, e, weighed);
+    const wt_vi underflowed = weighed & (p0 + p1 < (float)%(eps)r);
+    if (__builtin_reduce_or(underflowed)) {  // both powers underflowed (or a diagonal): biplanar_pair's own fallback
+        for (int l = 0; l < WT_L; ++l) {
+            if (!underflowed[l]) continue;
+            const wt_v2 pair = wt_biplanar_pair(major[l], median[l], e);
+            p0[l] = pair.c[0];
+            p1[l] = pair.c[1];
+        }
+    }
+    W[0] = wt_sel(minor_x, zero, p0);
+    W[1] = wt_sel(minor_z, p1, wt_sel(minor_y, zero, p0));
+    W[2] = wt_sel(minor_z, zero, p1);
+    const wt_vf total = wt_vmax(W[0] + W[1] + W[2], (float)%(eps)r);
+    for (int e = 0; e < 3; ++e) W[e] = wt_sel(weighed, W[e] / total, zero);
+} else {  // projection.triplanar_weights
+    const wt_vf a0 = wt_vabs(N[0]), a1 = wt_vabs(N[1]), a2 = wt_vabs(N[2]);
+    const wt_vf m = wt_vmax(wt_vmax(a0, a1), a2);
+    const wt_vi weighed = covered & wt_finite(N[0]) & wt_finite(N[1]) & wt_finite(N[2]) & (m > 0.0f);
+    const wt_vf R[3] = {a0 / m, a1 / m, a2 / m};  // |n| / max |n|
+    for (int e = 0; e < 3; ++e) W[e] = wt_power_lanes(R[e], sharpness, weighed);
+    const wt_vf total = wt_vmax(W[0] + W[1] + W[2], (float)%(eps)r);
+    for (int e = 0; e < 3; ++e) W[e] = wt_sel(weighed, W[e] / total, zero);
 }
 if (unit_normals != 0) wt_unit_normals(N);  // triplanar.unit_base_normal: normal mapping reads on the unit normal
 // Per projection: projection.plane_uv and plane_footprint, where its weight is > 0.

@@ -274,8 +274,8 @@ def test_triplanar_lanes_give_the_one_pixel_bits(rng, launched, filter, address)
 
 @pytest.mark.parametrize("sharpness", [0.0, 2.5, 8.0, 40.0, 256.0, 3000.0])  # exponents 0, exp/log, 1, 5, 32 (not by squares), and underflow
 def test_biplanar_lanes_give_the_one_pixel_bits(rng, launched, sharpness):
-    """Biplanar weights (``projection_lanes.wt_biplanar_weights``, pixel by pixel in the lane) on
-    every kind of normal: ties between axes, normals on a diagonal (both remapped bases 0: equal
+    """Biplanar weights (``projection_lanes.triplanar_reads_lane``: the axes chosen by selects, the
+    pairs whose powers underflow pixel by pixel) on every kind of normal: ties between axes, normals on a diagonal (both remapped bases 0: equal
     weights), normals too long to square, tiny ones, zero and non-finite ones."""
     g = _hand_gbuffer(rng)
     normals = g.normal.numpy().reshape(-1, 3)
