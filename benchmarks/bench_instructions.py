@@ -8,10 +8,13 @@ off (``--instr-atstart=no``) through start-up, imports, compiling (the kernels c
 cache, filled by a first plain run) and a warm-up call, switches it on (``callgrind_control -i on``)
 for ``R`` more calls, and reports their instructions per sample. Instructions are not time: a cache
 miss costs many cycles and no instruction, so random access to a large texture is cheap here and
-slow on the clock.
+slow on the clock. ``--cache-sim`` also has callgrind simulate the caches (its first level and its
+last, sized as this machine's) and reports their data misses per sample: how much memory traffic
+each implementation makes, though not how well the hardware overlaps it.
 
     python benchmarks/bench_instructions.py                              # every case, warptex
     python benchmarks/bench_instructions.py --cases "bilinear sphere" --peers drjit torch
+    python benchmarks/bench_instructions.py --cases "bilinear random" --passes forward --peers drjit --cache-sim
 
 Needs valgrind (Debian's ``valgrind`` package); skips, saying why, without it.
 """
@@ -76,26 +79,50 @@ print("SAMPLES", samples(data))
 """
 
 
-def count(case: str, impl: str, passes: str, repeats: int) -> tuple[int, int]:
-    """``(instructions, samples)`` of ``repeats`` calls of ``case`` (after a warm-up call)."""
+def totals(text: str) -> dict[str, int]:
+    """The event totals of a callgrind output file, by event name (``Ir``: instructions; with the
+    cache simulation also ``Dr``, ``Dw`` and the misses ``D1mr``, ``D1mw``, ``DLmr``, ``DLmw``)."""
+    lines = text.splitlines()
+    names = next(line for line in lines if line.startswith("events:")).split()[1:]
+    values = [line for line in lines if line.startswith("totals:") or line.startswith("summary:")][-1].split()[1:]
+    return {name: int(value) for name, value in zip(names, values)}
+
+
+def count(case: str, impl: str, passes: str, repeats: int, cache_sim: bool = False) -> tuple[dict[str, int], int]:
+    """``(totals, samples)`` of ``repeats`` calls of ``case`` (after a warm-up call): the event
+    totals (:func:`totals`) and the samples a call takes."""
     technique, scene = CASES[case]
     code = _RUNNER.format(bench=str(HERE), technique=technique, scene=scene, impl=impl, passes=passes, repeats=repeats)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "callgrind.out"
         env = {**os.environ, "WARPTEX_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "PYTHONHASHSEED": "0"}
-        command = ["valgrind", "--tool=callgrind", "--instr-atstart=no", f"--callgrind-out-file={out}", sys.executable, "-c", code]
+        command = ["valgrind", "--tool=callgrind", "--instr-atstart=no", f"--cache-sim={'yes' if cache_sim else 'no'}", f"--callgrind-out-file={out}", sys.executable, "-c", code]
         result = subprocess.run(command, capture_output=True, text=True, env=env)
         if result.returncode != 0 or "SAMPLES" not in result.stdout:
             raise RuntimeError(f"{case} {impl} {passes} failed:\n{result.stdout[-2000:]}\n{result.stderr[-3000:]}")
         samples = int(result.stdout.split("SAMPLES")[1].split()[0])
-        totals = [line for line in out.read_text().splitlines() if line.startswith("totals:") or line.startswith("summary:")]
-        return int(totals[-1].split()[1]), samples
+        return totals(out.read_text()), samples
 
 
-def per_sample(case: str, impl: str, passes: str, repeats: int) -> float:
-    """Instructions per sample of a call (``repeats`` calls, averaged)."""
-    instructions, samples = count(case, impl, passes, repeats)
-    return instructions / (repeats * samples)
+def per_sample(case: str, impl: str, passes: str, repeats: int, cache_sim: bool = False) -> dict[str, float]:
+    """Per sample of a call (``repeats`` calls, averaged): ``instructions``, and with ``cache_sim``
+    the simulated first-level (``d1_misses``) and last-level (``ll_misses``) data misses, reads and
+    writes together."""
+    events, samples = count(case, impl, passes, repeats, cache_sim)
+    n = repeats * samples
+    figures = {"instructions": events["Ir"] / n}
+    if cache_sim:
+        figures["d1_misses"] = (events["D1mr"] + events["D1mw"]) / n
+        figures["ll_misses"] = (events["DLmr"] + events["DLmw"]) / n
+    return figures
+
+
+def format_figures(case: str, passes: str, impl: str, figures: dict[str, float]) -> str:
+    """One line of the report."""
+    line = f"{case:20s} {passes:16s} {impl:8s} {figures['instructions']:10.1f} instructions/sample"
+    if "d1_misses" in figures:
+        line += f"  {figures['d1_misses']:6.2f} D1 misses/sample  {figures['ll_misses']:6.3f} LL misses/sample"
+    return line
 
 
 def main(argv=None) -> int:
@@ -104,6 +131,7 @@ def main(argv=None) -> int:
     p.add_argument("--passes", nargs="+", default=["forward", "forward+backward"], choices=["forward", "forward+backward"])
     p.add_argument("--peers", nargs="*", default=[], help="peers to count too (drjit, torch, numpy)")
     p.add_argument("--repeats", type=int, default=2, help="calls counted after the warm-up call (default 2)")
+    p.add_argument("--cache-sim", action="store_true", help="also simulate the caches: data misses per sample (slower)")
     p.add_argument("--json", type=Path, help="write the figures here")
     args = p.parse_args(argv)
     if shutil.which("valgrind") is None:
@@ -116,12 +144,12 @@ def main(argv=None) -> int:
         for passes in args.passes:
             for impl in ["warptex", *args.peers]:
                 try:
-                    figure = per_sample(case, impl, passes, args.repeats)
+                    figures = per_sample(case, impl, passes, args.repeats, args.cache_sim)
                 except (RuntimeError, KeyError) as err:
                     print(f"{case:20s} {passes:16s} {impl:8s} skipped ({str(err).splitlines()[0]})", flush=True)
                     continue
-                rows.append({"case": case, "pass": passes, "impl": impl, "instructions_per_sample": figure})
-                print(f"{case:20s} {passes:16s} {impl:8s} {figure:10.1f} instructions/sample", flush=True)
+                rows.append({"case": case, "pass": passes, "impl": impl, **{f"{k}_per_sample": v for k, v in figures.items()}})
+                print(format_figures(case, passes, impl, figures), flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     return 0

@@ -101,3 +101,24 @@ def test_batched_views_benchmark_reports(tmp_path):
     rows = json.loads((tmp_path / "v.json").read_text())["rows"]
     assert rows[0]["api"] == "warptex.fit.fit_splat" and all(r["batch_s"] > 0 and r["loop_s"] > 0 for r in rows)
     assert "loop/batch" in result.stdout
+
+
+@pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/ is not part of this checkout")
+def test_instruction_counts_read_callgrind_events_per_sample(monkeypatch):
+    """``bench_instructions`` reads callgrind's totals by event name (their order follows the
+    ``events:`` line, which the cache simulation lengthens) and divides by the samples counted."""
+    sys.path.insert(0, str(BENCH.parent))
+    try:
+        import bench_instructions as bi
+    finally:
+        sys.path.remove(str(BENCH.parent))
+    plain = "version: 1\ncmd: python\nevents: Ir\nfn=(1) f\n0 5\nsummary: 4000\ntotals: 4000\n"
+    simulated = "events: Ir Dr Dw I1mr D1mr D1mw ILmr DLmr DLmw\nsummary: 4000 900 300 7 250 50 7 20 4\n"
+    assert bi.totals(plain) == {"Ir": 4000}
+    assert bi.totals(simulated) == {"Ir": 4000, "Dr": 900, "Dw": 300, "I1mr": 7, "D1mr": 250, "D1mw": 50, "ILmr": 7, "DLmr": 20, "DLmw": 4}
+    monkeypatch.setattr(bi, "count", lambda case, impl, passes, repeats, cache_sim=False: (bi.totals(simulated if cache_sim else plain), 50))
+    assert bi.per_sample("bilinear random", "warptex", "forward", 2) == {"instructions": 40.0}
+    figures = bi.per_sample("bilinear random", "warptex", "forward", 2, cache_sim=True)
+    assert figures == {"instructions": 40.0, "d1_misses": 3.0, "ll_misses": 0.24}
+    line = bi.format_figures("bilinear random", "forward", "warptex", figures)
+    assert "40.0 instructions/sample" in line and "3.00 D1 misses/sample" in line and "0.240 LL misses/sample" in line
