@@ -20,6 +20,10 @@ from .projection import ProjectionArgs, SurfacePixels
 # triplanar.unit_base_normal for a lane: also what the reads of normal mapping take (.projection_lanes).
 UNIT_NORMALS_CPP = r"""
 typedef wp::vec_t<3, float> wt_v3;
+// normals.direction of one v past ~1.8e19 (|v|² overflowed): normals.unsquared, then normalised.
+auto wt_unsquared_direction = [](const wt_v3& n) __attribute__((always_inline)) -> wt_v3 {
+    return wp::normalize(wp::div(n, wp::max(wt_v3(wp::abs(n.c[0]), wp::abs(n.c[1]), wp::abs(n.c[2])))));
+};
 // triplanar.unit_base_normal for the lane, in place: normals.direction where |n| > 0, on vectors
 // (wp::length's and wp::normalize's own expressions, the same bits), lane by lane past ~1.8e19
 // (|n|² overflowed: normals.unsquared first).
@@ -31,8 +35,7 @@ auto wt_unit_normals = [&](wt_vf* N) __attribute__((always_inline)) {
     if (!__builtin_reduce_or(length > wt_float_max)) return;
     for (int l = 0; l < WT_L; ++l) {
         if (length[l] > wt_float_max) {
-            const wt_v3 n(n0[l], n1[l], n2[l]);
-            const wt_v3 d = wp::normalize(wp::div(n, wp::max(wt_v3(wp::abs(n.c[0]), wp::abs(n.c[1]), wp::abs(n.c[2])))));
+            const wt_v3 d = wt_unsquared_direction(wt_v3(n0[l], n1[l], n2[l]));
             for (int e = 0; e < 3; ++e) N[e][l] = d.c[e];
         }
     }
@@ -64,8 +67,7 @@ auto wt_direction = [&](const wt_vf* v, wt_vf* u) __attribute__((always_inline))
     if (!__builtin_reduce_or(length > wt_float_max)) return;
     for (int l = 0; l < WT_L; ++l) {
         if (length[l] > wt_float_max) {
-            const wt_v3 n(v[0][l], v[1][l], v[2][l]);
-            const wt_v3 d = wp::normalize(wp::div(n, wp::max(wt_v3(wp::abs(n.c[0]), wp::abs(n.c[1]), wp::abs(n.c[2])))));
+            const wt_v3 d = wt_unsquared_direction(wt_v3(v[0][l], v[1][l], v[2][l]));
             for (int e = 0; e < 3; ++e) u[e][l] = d.c[e];
         }
     }
@@ -135,6 +137,14 @@ auto wt_unit_normal = [&](const wt_vf* total, const wt_vf* n, const auto& proj, 
     wt_direction(surface, b);
     for (int e = 0; e < 3; ++e) out[e] = wt_sel(blended, a[e], wt_sel(kept, b[e], wt_zero));
 };
+// Whether each of the lane's count pixels is covered (its mask row != 0), as a mask per lane pixel.
+auto wt_covered = [](const float* mask, int count) __attribute__((always_inline)) -> wt_vi {
+    int c[WT_L];
+    for (int l = 0; l < WT_L; ++l) c[l] = l < count && mask[l] != 0.0f ? -1 : 0;
+    wt_vi covered;
+    __builtin_memcpy(&covered, c, sizeof(covered));
+    return covered;
+};
 // The stored intermediates of lane pixels base .. base + count - 1 (the rest repeat pixel base) as
 // vectors: mask, unit normal (triplanar.stored_blend's: normal_to_object always applied), weights, samples.
 auto wt_stored = [&](const auto& proj, const auto& normal, const auto& mask, const auto& weights, const auto& samples, int base, int count,
@@ -150,9 +160,7 @@ auto wt_stored = [&](const auto& proj, const auto& normal, const auto& mask, con
         wt_channels(rows, S[axis]);
     }
     wt_vf raw[3];
-    int c_[WT_L];
-    for (int l = 0; l < WT_L; ++l) c_[l] = l < count && m_[0][l] != 0.0f ? -1 : 0;
-    __builtin_memcpy(&covered, c_, sizeof(covered));
+    covered = wt_covered(m_[0], count);
     for (int e = 0; e < 3; ++e) {
         __builtin_memcpy(&raw[e], n_[e], sizeof(wt_vf));
         __builtin_memcpy(&W[e], w_[e], sizeof(wt_vf));
@@ -173,20 +181,15 @@ _SURFACE_NORMALS = _NORMAL_CPP + r"""
 float n_[3][WT_L], m_[1][WT_L];
 wt_rows(pixels.normal, base, count, 3, n_);
 wt_rows(pixels.mask, base, count, 1, m_);
-if (proj.object_space != 0) {  // projection.surface
-    for (int l = 0; l < WT_L; ++l) {
-        const wt_v3 n = wp::mul(proj.normal_to_object, wt_v3(n_[0][l], n_[1][l], n_[2][l]));
-        for (int e = 0; e < 3; ++e) n_[e][l] = n.c[e];
-    }
-}
 wt_vf N[3], W[3], S[3][4], total[3], r[3];
-int c_[WT_L];
-for (int l = 0; l < WT_L; ++l) c_[l] = l < count && m_[0][l] != 0.0f ? -1 : 0;
-wt_vi covered;
-__builtin_memcpy(&covered, c_, sizeof(covered));
+const wt_vi covered = wt_covered(m_[0], count);
 for (int e = 0; e < 3; ++e) {
     __builtin_memcpy(&N[e], n_[e], sizeof(wt_vf));
     __builtin_memcpy(&W[e], reads.data[9 + e], sizeof(wt_vf));
+}
+if (proj.object_space != 0) {  // projection.surface
+    const wt_vf raw[3] = {N[0], N[1], N[2]};
+    wt_mul3(proj.normal_to_object, raw, N, false);
 }
 wt_unit_normals(N);
 const decltype(sx)* samples[3] = {&sx, &sy, &sz};
