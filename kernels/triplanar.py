@@ -28,7 +28,7 @@ from .family import Kernels, Staged, family, forward_kernel, lane_kernel, pixel_
 from .normals import NormalMapArgs, blend_projected, blend_projected_grad, decode_normal, decode_normal_grad, direction, direction_grad, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
-from .texels import SamplerArgs, TexelGrad, TextureView, pick3, read_channels, write_channels
+from .texels import SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
 from .projection_lanes import surface_covered
 from .triplanar_lanes import lane_bodies, normal_lane_bodies, stored_lane_bodies
 
