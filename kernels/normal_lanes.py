@@ -8,7 +8,8 @@ Every helper computes what the scalar blocks of :mod:`.normals` and :mod:`.tripl
 operation for operation and in the same order (Warp's ``wp::mul`` of a matrix and a vector column
 by column; ``wp::length`` and ``wp::dot`` as Warp writes them; each branch computed in every lane
 and chosen by selects; the rare blends past ~1.8e19 lane by lane with Warp's own functions), so the
-lanes' normals and gradients are the one-pixel kernels' bits (``tests/test_lanes.py``).
+lanes' normals and gradients are the one-pixel kernels' bits (``tests/test_lanes.py``,
+``tests/test_normal_blend_gradient.py``).
 """
 
 import warp as wp
