@@ -11,7 +11,7 @@ from .family import Kernels, family, lane_kernel, pixel_kernels
 from .hashing import STREAM_CHEAP2_NOISE, STREAM_CHEAP2_OFFSET, STREAM_HASH4_CELL, STREAM_HEX_VERTEX
 from .hexgrid import HALF_SQRT3, HEX_SCALE, INV_SQRT3, PI, hex_grid, hex_steps, hex_tap, hex_weights
 from .lane_scatter import scatter_taps_lane
-from .lanes import FOOTPRINT_CPP, LANES, accumulate_footprint_lane, cpu_snippet, lane_colours, lane_floats, lane_ints, lane_taps
+from .lanes import FOOTPRINT_CPP, LANES, accumulate_footprint_lane, cpu_snippet, lane_colours, lane_floats, lane_ints, lane_reads, lane_taps
 from .sample_lanes import SAMPLE_READS_CPP
 from .sampling import SampleArgs, SampleGrads, SamplePixels, sample_footprint_of, sample_layer
 from .stochastic import METHOD_CHEAP2, METHOD_HASH4, METHOD_NONE, StochasticArgs, periodic_base, sample_stochastic, sample_stochastic_outlined, scatter_stochastic
@@ -55,8 +55,10 @@ stochastic_pixel_outlined = _stochastic_body(sample_stochastic_outlined, "stocha
 # vectorises. Every tap is hashed, also the zero-weight ones the scalar blocks skip: those are not read.
 # Hex's taps (hexgrid's blocks) likewise, in phases over the lane: the float64 grid and the hashes in
 # loops with no branch, the rotations (wp::sin, wp::cos) and powers (wp::pow; none for a contrast of
-# 1, as hexgrid.hex_weights) lane by lane.
-_TAPS = FOOTPRINT_CPP + SAMPLE_READS_CPP + r"""
+# 1, as hexgrid.hex_weights) lane by lane. The rules take a lane's UV and LOD rows (tap_u, tap_v,
+# tap_lod) and pixel count, and fill `taps` (lanes.lane_taps): stochastic_taps and finite_uv_lod of
+# every pixel, for `stochastic` (_TAPS) and for a triplanar lane's projections (_PROJECTION_TAPS).
+_TAP_RULES = r"""
 enum { WT_HASH4 = %(hash4)d, WT_CHEAP2 = %(cheap2)d, WT_STREAM_CELL = %(cell)d, WT_STREAM_OFFSET = %(offset)d, WT_STREAM_NOISE = %(noise)d, WT_STREAM_HEX = %(hex)d };
 auto unit = [](unsigned a, unsigned b, unsigned c, unsigned d, float* h) __attribute__((always_inline)) {  // hash4_unit
     unsigned x = a * 1664525u + 1013904223u, y = b * 1664525u + 1013904223u, z = c * 1664525u + 1013904223u, w = d * 1664525u + 1013904223u;
@@ -75,7 +77,7 @@ wp::mat_t<14, WT_L, float> taps;
 for (int r = 0; r < 14; ++r) for (int l = 0; l < WT_L; ++l) taps.data[r][l] = 0.0f;
 float fin[WT_L];
 for (int l = 0; l < WT_L; ++l) {  // texels.finite_uv_lod
-    const float u = reads.data[0][l], v = reads.data[3][l], lod = reads.data[6][l];
+    const float u = tap_u[l], v = tap_v[l], lod = tap_lod[l];
     fin[l] = l < count && __builtin_fabsf(u) <= wt_float_max && __builtin_fabsf(v) <= wt_float_max && __builtin_fabsf(lod) <= wt_float_max ? 1.0f : 0.0f;
     taps.data[12][l] = lod;
     taps.data[13][l] = fin[l];
@@ -84,7 +86,7 @@ const float lo = params.blend_lo, hi = params.blend_hi;
 const unsigned seed = params.seed;
 if (params.method == WT_HASH4) {
     for (int l = 0; l < WT_L; ++l) {
-        const float u = fin[l] != 0.0f ? reads.data[0][l] : 0.0f, v = fin[l] != 0.0f ? reads.data[3][l] : 0.0f;
+        const float u = fin[l] != 0.0f ? tap_u[l] : 0.0f, v = fin[l] != 0.0f ? tap_v[l] : 0.0f;
         const float cu = wp::floor(u), cv = wp::floor(v);
         const float bu = u - 2.0f * wp::floor(0.5f * u), bv = v - 2.0f * wp::floor(0.5f * v);  // periodic_base
         const float bx = wp::smoothstep(lo, hi, u - cu), by = wp::smoothstep(lo, hi, v - cv);
@@ -99,7 +101,7 @@ if (params.method == WT_HASH4) {
     }
 } else if (params.method == WT_CHEAP2) {
     for (int l = 0; l < WT_L; ++l) {
-        const float u = fin[l] != 0.0f ? reads.data[0][l] : 0.0f, v = fin[l] != 0.0f ? reads.data[3][l] : 0.0f;
+        const float u = fin[l] != 0.0f ? tap_u[l] : 0.0f, v = fin[l] != 0.0f ? tap_v[l] : 0.0f;
         const float pu = u * params.noise_frequency, pv = v * params.noise_frequency;  // value_noise
         const float cu = wp::floor(pu), cv = wp::floor(pv);
         const float fu = pu - cu, fv = pv - cv;
@@ -131,7 +133,7 @@ if (params.method == WT_HASH4) {
     float f0[WT_L], f1[WT_L], bu[WT_L], bv[WT_L], hz[3][WT_L];
     int vi[3][WT_L], vj[3][WT_L], upper[WT_L];
     for (int l = 0; l < WT_L; ++l) {  // hex_grid, its vertices (hex_steps' order) and periodic_base
-        const float u = fin[l] != 0.0f ? reads.data[0][l] : 0.0f, v = fin[l] != 0.0f ? reads.data[3][l] : 0.0f;
+        const float u = fin[l] != 0.0f ? tap_u[l] : 0.0f, v = fin[l] != 0.0f ? tap_v[l] : 0.0f;
         const double px = (double)u * scale, py = (double)v * scale;
         const double sx = px - py * inv_sqrt3, sy = 2.0 * inv_sqrt3 * py;
         const double bx = wp::floor(sx), by = wp::floor(sy);
@@ -159,7 +161,7 @@ if (params.method == WT_HASH4) {
     if (params.rotation != 0.0f) {  // hex_tap's rotation about the vertex centre, lane by lane
         for (int l = 0; l < WT_L; ++l) {
             if (fin[l] == 0.0f) continue;
-            const float u = reads.data[0][l], v = reads.data[3][l];
+            const float u = tap_u[l], v = tap_v[l];
             for (int k = 0; k < 3; ++k) {
                 float du, dv;
                 if (wp::abs(u) < 1.0e8f && wp::abs(v) < 1.0e8f) {
@@ -194,9 +196,22 @@ if (params.method == WT_HASH4) {
         for (int k = 0; k < 3; ++k) taps.data[3 * k + 2][l] = fin[l] != 0.0f ? pw[k][l] / total : 0.0f;  // (a tap of weight 0 is not read)
     }
 }
-return taps;
 """ % {"hash4": int(METHOD_HASH4), "cheap2": int(METHOD_CHEAP2), "cell": int(STREAM_HASH4_CELL), "offset": int(STREAM_CHEAP2_OFFSET), "noise": int(STREAM_CHEAP2_NOISE),
        "hex": int(STREAM_HEX_VERTEX), "hex_scale": float(HEX_SCALE), "inv_sqrt3": float(INV_SQRT3), "half_sqrt3": float(HALF_SQRT3), "pi": float(PI)}
+
+_TAPS = FOOTPRINT_CPP + SAMPLE_READS_CPP + r"""
+const float *tap_u = reads.data[0], *tap_v = reads.data[3], *tap_lod = reads.data[6];
+""" + _TAP_RULES + "return taps;\n"
+
+# A triplanar lane's projection `axis`: its taps from its read's UV and LOD (lanes.lane_reads), the
+# weights of the pixels that do not read it (weight 0) set to 0, so that nothing reads them.
+_PROJECTION_TAPS = r"""
+const float *tap_u = reads.data[axis], *tap_v = reads.data[3 + axis], *tap_lod = reads.data[6 + axis];
+""" + _TAP_RULES + r"""
+for (int k = 0; k < 4; ++k)
+    for (int l = 0; l < WT_L; ++l) taps.data[3 * k + 2][l] = reads.data[9 + axis][l] > 0.0f ? taps.data[3 * k + 2][l] : 0.0f;
+return taps;
+"""
 
 
 @wp.func_native(cpu_snippet(_TAPS, "return {};\n"))
@@ -205,6 +220,14 @@ def stochastic_taps_lane(tex: TextureView, smp: SamplerArgs, params: StochasticA
     """The lane's :data:`~.lanes.lane_taps` from ``base``: every pixel's LOD
     (``sampling.sample_footprint_of``, one tap), whether its UV and LOD are finite, and its taps and
     their weights (0 where not finite)."""
+    ...
+
+
+@wp.func_native(cpu_snippet(_PROJECTION_TAPS, "return {};\n"))
+def projection_taps_lane(params: StochasticArgs, reads: lane_reads, axis: wp.int32, count: wp.int32) -> lane_taps:
+    """The :data:`~.lanes.lane_taps` of projection ``axis`` of a triplanar lane's ``reads``
+    (:data:`~.lanes.lane_reads`): each pixel's stochastic taps of that read's UV at its LOD, their
+    weights 0 where the pixel does not read the projection or its UV or LOD is not finite."""
     ...
 
 

@@ -24,19 +24,19 @@ import warp as wp
 
 from . import adjoint_module, inlined, specialised
 from .faces import FACE_FIELDS, FaceGrads, FaceTextures, on_axis_face, on_face
-from .family import Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
+from .family import LANES_SUFFIX, Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
 from .normals import NormalMapArgs, blend_projected, blend_projected_grad, decode_normal, decode_normal_grad, direction, direction_grad, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
 from .texels import SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
 from .projection_lanes import surface_covered
-from .triplanar_lanes import lane_bodies, normal_lane_bodies, stored_lane_bodies
+from .triplanar_lanes import lane_bodies, normal_lane_bodies, stochastic_lane_body, stored_lane_bodies
 
 MODULE = "warptex.triplanar"
 
 # The stochastic kernels loop over the projections (and taps) rather than unroll them: unrolled, the
 # colour and normal kernels held six copies of the stochastic sampling code, 38 s to compile for sm_90.
-for _module in (f"{MODULE}.stochastic{faces}{grad}" for faces in ("", ".faces") for grad in ("", ".grad")):
+for _module in (f"{MODULE}.stochastic{faces}{grad}" for faces in ("", ".faces") for grad in ("", ".grad", LANES_SUFFIX)):
     wp.set_module_options({"max_unroll": 1}, module=_module)
 
 
@@ -360,6 +360,8 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
             colour_lane, colour_grad_lane = lane_bodies(bodies["colour"], bodies["colour_grad"], TriplanarArgs)
             lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
             grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
+        elif not faces:  # the forward only: the texel gradient goes pixel by pixel
+            lanes = lane_kernel(stochastic_lane_body(bodies["colour"], TriplanarArgs), TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
         return Kernels(forward, texel_grad, _adjoint(False), grads=FACE_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes)
     forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
     lanes = first_lanes = None

@@ -1,6 +1,7 @@
 """Triplanar and biplanar colour for a lane of pixels on the CPU (:mod:`.lanes`), forward and texel
-gradient, and triplanar normal mapping (its forward, and the first step of its two-step gradient),
-one texture per axis, plain sampling.
+gradient, triplanar normal mapping (its forward, and both steps of its two-step gradient), one
+texture per axis, plain sampling; and the forward of stochastic colour mapping, one texture per axis
+(its texel gradient goes pixel by pixel: each pixel adds up to twelve taps' shares, in its order).
 
 What each pixel reads from each projection (its UV, footprint and weight, with triplanar or
 biplanar weights) comes from :func:`~.projection_lanes.triplanar_reads_lane` for the whole lane;
@@ -19,10 +20,12 @@ from . import inlined, specialised
 from .family import lane_covered
 from .faces import FaceGrads, FaceTextures, on_axis
 from .lane_scatter import scatter_lod_lanes, scatter_reads_lanes
-from .lanes import LANES, lane_colours, lane_ints, lane_reads
+from .lanes import LANES, accumulate_footprint_lane, lane_colours, lane_floats, lane_ints, lane_reads
 from .normal_lanes import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
 from .projection import SurfacePixels
 from .projection_lanes import accumulate_reads_lane, triplanar_reads_lane
+from .stochastic import METHOD_NONE
+from .stochastic_sample import projection_taps_lane
 from .texels import FILTER_ANISOTROPIC, SamplerArgs, pick3, read_channels, write_channels
 
 
@@ -86,6 +89,46 @@ def lane_bodies(colour, colour_grad, args_t):
             scatter_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0), base, count, grads, adj)
 
     return inlined(specialised(colour_lane, "triplanar_colour_lane")), inlined(specialised(colour_grad_lane, "triplanar_colour_grad_lane"))
+
+
+@functools.cache
+def stochastic_lane_body(colour, args_t):
+    """The lane body of stochastic colour mapping (one texture per axis) whose pixel body is
+    ``colour``: the lane's reads, then per projection its stochastic taps worked out natively
+    (:func:`~.stochastic_sample.projection_taps_lane`), read tap by tap (``value += w · sample``
+    from 0, as ``stochastic.sample_stochastic`` blends them; NaN where the UV or LOD is not finite)
+    and added with the projection's weight, in the order of the pixel body. A histogram's blend and
+    the anisotropic filter go pixel by pixel through ``colour``."""
+
+    def stochastic_colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
+        count = wp.min(out.shape[0] - base, LANES)
+        if args.smp.filter == FILTER_ANISOTROPIC or args.stoch.histogram != 0 or args.stoch.method == METHOD_NONE:
+            for l in range(count):
+                colour(args, pixels, base + l, out)
+        else:
+            faces = args.faces
+            reads = triplanar_reads_lane(faces, args.proj, args.smp, pixels, base, count, 0)
+            layers = lane_ints(args.layer)
+            zero = lane_floats()
+            one = lane_floats(1.0)
+            value = lane_colours()
+            for axis in range(3):
+                taps = projection_taps_lane(args.stoch, reads, axis, count)
+                tex = on_axis(faces.px, faces.py, faces.pz, axis)
+                sampled = lane_colours()
+                for k in range(4):
+                    sampled = accumulate_footprint_lane(tex, args.smp, layers, taps[3 * k], taps[3 * k + 1], taps[12], zero, zero, one, taps[3 * k + 2], 1, sampled)
+                for l in range(count):
+                    w = reads[9 + axis, l]
+                    if w > 0.0:
+                        s = wp.vec4(wp.nan)
+                        if taps[13, l] != 0.0:
+                            s = wp.vec4(0.0) + sampled[l]  # sample_stochastic's `result += value`, from 0
+                        value[l] = value[l] + w * s
+            for l in range(count):
+                write_channels(out, base + l, value[l])
+
+    return inlined(specialised(stochastic_colour_lane, "triplanar_stochastic_colour_lane"))
 
 
 @functools.cache

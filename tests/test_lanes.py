@@ -313,6 +313,30 @@ def test_triplanar_normal_lanes_give_the_one_pixel_bits(rng, launched, filter, c
     assert ("triplanar_normal_lanes", -(-1000 // LANES)) in launched
 
 
+@pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])
+@pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
+def test_stochastic_triplanar_lanes_give_the_one_pixel_bits(rng, launched, method, filter):
+    """Stochastic triplanar and biplanar colour (``triplanar_lanes.stochastic_lane_body``): each
+    projection's taps from its read (``stochastic_sample.projection_taps_lane``), read tap by tap and
+    weighted in the pixel body's order; non-finite positions and normals, mirrored taps, rotated hex
+    taps, a contrast, object space; the anisotropic filter and a histogram's blend pixel by pixel."""
+    g = _hand_gbuffer(rng)
+    tex = wt.Texture(rng.random((64, 32, 3), dtype=np.float32))
+    smp = wt.Sampler(filter=filter, address="mirror", max_aniso=4)
+    placement = np.array([[0.0, 0.8, 0.0, 0.3], [-0.8, 0.0, 0.0, 0.0], [0.0, 0.0, 1.5, -0.2], [0.0, 0.0, 0.0, 1.0]], np.float32)
+    options = (wt.Stochastic(method), wt.Stochastic(method, seed=7, mirror=True, blend=(0.1, 0.3), noise_frequency=3.7, noise_levels=5.5, contrast=2.5, rotation=0.6))
+    for option in options:
+        for technique, kw in ((wt.triplanar, {"sharpness": 3.0}), (wt.triplanar, {"sharpness": 0.0, "space": "object", "object_to_world": placement, "tiling": (1.5, 2.0, 0.75)}), (wt.biplanar, {})):
+            lanes, scalar = _both(lambda: technique(g, tex, sampler=smp, stochastic=option, **kw))
+            _same_bits(lanes, scalar)
+            assert (np.nan_to_num(lanes) > 0).any(-1).mean() > 0.5
+    if method == "hex" and filter == "trilinear":
+        histogram = wt.prepare_histogram(tex)
+        lanes, scalar = _both(lambda: wt.triplanar(g, histogram.texture, sampler=smp, stochastic=wt.Stochastic("hex", histogram=histogram)))
+        _same_bits(lanes, scalar)
+    assert ("triplanar_stochastic_lanes", -(-1000 // LANES)) in launched
+
+
 @pytest.mark.parametrize("address", ["wrap", "clamp"])  # the origin folded by whole periods, or added exactly
 @pytest.mark.parametrize("sharpness", [2.5, 1.0, 31.0, 40.0])  # exp and log, and the integer exponents' edges
 def test_triplanar_lanes_far_from_the_origin(rng, address, sharpness):
