@@ -12,10 +12,10 @@ from .lanes import FOOTPRINT_CPP, cpu_snippet, lane_colours, lane_ints, lane_rea
 from .sample_lanes import SAMPLE_READS_CPP
 from .texels import TILE_SHIFT, SamplerArgs, TexelGrad, TextureView
 
-# scatter.scatter_levels for the lane: reads r = 0 .. reads - 1 (up to 4) of every lane pixel, read r
+# scatter.scatter_levels for the lane: reads r = 0 .. reads - 1 (up to WT_MAX_READS) of every lane pixel, read r
 # from tex[r] into grad[r], the levels and fractions given (module docstring).
 _SCATTER_CORE = r"""
-enum { WT_TILE_SHIFT = %(tile_shift)d };
+enum { WT_TILE_SHIFT = %(tile_shift)d, WT_MAX_READS = 12 };
 struct wt_taps { int start, w, i0, i1, j0, j1; float fx, fy; };  // a lane pixel's taps of one level
 struct wt_lane_taps { int start[WT_L], w[WT_L], i0[WT_L], i1[WT_L], j0[WT_L], j1[WT_L]; float fx[WT_L], fy[WT_L]; };  // the lane's, a row per field
 typedef float wt_lane_f[WT_L];
@@ -24,7 +24,7 @@ typedef bool wt_lane_b[WT_L];
 typedef wt_f4 wt_lane_f4[WT_L];
 auto wt_scatter_levels = [&](const int address, const int reads, const auto* const* tex, const auto* const* grad, const auto& smp, const wt_lane_f* u, const wt_lane_f* v,
                              const wt_lane_i* level, const wt_lane_f* fraction, const wt_lane_i* layer, const wt_lane_b* active, const wt_lane_f4* g) __attribute__((always_inline)) {
-    wt_lane_taps taps[4][2];  // [read][fine, coarse], field by field, so that the loop below vectorises
+    wt_lane_taps taps[WT_MAX_READS][2];  // [read][fine, coarse], field by field, so that the loop below vectorises
     bool blend = false;  // a lane reads two levels (trilinear)
     for (int r = 0; r < reads; ++r)
         for (int l = 0; l < WT_L; ++l) blend |= smp.filter != WT_NEAREST && active[r][l] && fraction[r][l] > 0.0f;
@@ -64,7 +64,7 @@ auto wt_scatter_levels = [&](const int address, const int reads, const auto* con
     // Each read's gradient array as a pointer and strides, taken once: the adds' stores could alias
     // the array structs, which the compiler would then read again after every add.
     struct wt_target { char* texels; long long stride; char* tiles; long long tile_stride; bool marks; };
-    wt_target targets[4];
+    wt_target targets[WT_MAX_READS];
     for (int r = 0; r < reads; ++r)
         targets[r] = {(char*)grad[r]->texels.data, (long long)grad[r]->texels.strides[0], (char*)grad[r]->tiles.data, (long long)grad[r]->tiles.strides[0], grad[r]->tiles.shape[0] > 0};
     auto add = [&](const wt_target& gr, const wt_taps& t, int x, int y, const wt_f4 value) __attribute__((always_inline)) {  // scatter.scatter_texel
@@ -159,9 +159,9 @@ def scatter_levels_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, uv:
     ...
 
 
-# Up to four reads per lane pixel, read r from tex[r] into grad[r], at the rows u[r], v[r], lod[r] and
-# weight w[r] of a value per lane pixel (a lane_reads matrix's: a pixel's projections; a lane_taps
-# matrix's: a stochastic lookup's taps); a read adds where its weight is positive and its UV and LOD
+# Up to twelve reads per lane pixel, read r from tex[r] into grad[r], at the rows u[r], v[r], lod[r]
+# and weight w[r] of a value per lane pixel (a lane_reads matrix's: a pixel's projections; a lane_taps
+# matrix's: a stochastic lookup's taps; three of them: a stochastic triplanar pixel's); a read adds where its weight is positive and its UV and LOD
 # are finite (scatter.scatter_lod), and only into a gradient that is needed. It adds its share of the
 # pixel's gradient g[l] (read r's own, gr[r], where per_read; else gr[0]): w · g where weigh (a blend
 # of projections or taps), g itself where not.
@@ -169,10 +169,10 @@ _SCATTER_LOD_CORE = _SCATTER_CORE + r"""
 auto wt_scatter_rows = [&](const auto* const* texs, const auto* const* grads, const auto& smp, const int nreads, const int* layers, const float* const* u_rows,
                            const float* const* v_rows, const float* const* lod_rows, const float* const* w_rows, const int weigh,
                            const wp::mat_t<WT_L, 4, float>* const* gr, const int per_read) __attribute__((always_inline)) {
-    float us[4][WT_L], vs[4][WT_L], fractions[4][WT_L];
-    int levels[4][WT_L], layer[4][WT_L];
-    bool active[4][WT_L];
-    wt_f4 gs[4][WT_L];
+    float us[WT_MAX_READS][WT_L], vs[WT_MAX_READS][WT_L], fractions[WT_MAX_READS][WT_L];
+    int levels[WT_MAX_READS][WT_L], layer[WT_MAX_READS][WT_L];
+    bool active[WT_MAX_READS][WT_L];
+    wt_f4 gs[WT_MAX_READS][WT_L];
     wt_vi lane_layers;
     __builtin_memcpy(&lane_layers, layers, sizeof(lane_layers));
     for (int r = 0; r < nreads; ++r) {  // a lane of reads at a time (vector selects, the same values as the scalar formulas)
@@ -293,6 +293,39 @@ const decltype(grad)* grads[4] = {&grad, &grad, &grad, &grad};
 const wp::mat_t<WT_L, 4, float>* gr[1] = {&g};
 wt_scatter_rows(texs, grads, smp, 4, layers.c, u, v, lod, w, 1, gr, 0);
 """
+
+
+_SCATTER_PROJECTION_TAPS = _SCATTER_LOD_CORE + r"""
+// scatter_stochastic of each projection's one-tap footprints, projection by projection (tap k of
+// projection a: rows 3k, 3k + 1 of taps_a, its LOD row 12, weight row 3k + 2), each adding w_k · g_a[l]
+// into grad_a, pixel by pixel and read by read as the scalar colour gradient adds them.
+const decltype(taps0)* taps[3] = {&taps0, &taps1, &taps2};
+const decltype(tex0)* axis_texs[3] = {&tex0, &tex1, &tex2};
+const decltype(grad0)* axis_grads[3] = {&grad0, &grad1, &grad2};
+const wp::mat_t<WT_L, 4, float>* axis_g[3] = {&g0, &g1, &g2};
+const float *u[12], *v[12], *lod[12], *w[12];
+const decltype(tex0)* texs[12];
+const decltype(grad0)* grads[12];
+const wp::mat_t<WT_L, 4, float>* gr[12];
+for (int a = 0; a < 3; ++a) {
+    for (int k = 0; k < 4; ++k) {
+        const int r = 4 * a + k;
+        u[r] = taps[a]->data[3 * k], v[r] = taps[a]->data[3 * k + 1], w[r] = taps[a]->data[3 * k + 2], lod[r] = taps[a]->data[12];
+        texs[r] = axis_texs[a], grads[r] = axis_grads[a], gr[r] = axis_g[a];
+    }
+}
+wt_scatter_rows(texs, grads, smp, 12, layers.c, u, v, lod, w, 1, gr, 1);
+"""
+
+
+@wp.func_native(cpu_snippet(_SCATTER_PROJECTION_TAPS))
+def scatter_projection_taps_lanes(tex0: TextureView, tex1: TextureView, tex2: TextureView, grad0: TexelGrad, grad1: TexelGrad, grad2: TexelGrad, smp: SamplerArgs, layers: lane_ints,
+                                  taps0: lane_taps, taps1: lane_taps, taps2: lane_taps, g0: lane_colours, g1: lane_colours, g2: lane_colours):  # fmt: skip
+    """:func:`~warptex.kernels.stochastic.scatter_stochastic` of a stochastic triplanar lane's three
+    projections: every tap in ``taps_a`` (:func:`~.stochastic_sample.projection_taps_lane`) of lane
+    pixel ``l`` adds its weight times ``g_a[l]`` (the projection's share of the pixel's gradient)
+    into ``grad_a``, where the weight is positive, pixel by pixel in projection and tap order."""
+    ...
 
 
 @wp.func_native(cpu_snippet(_SCATTER_TAPS))

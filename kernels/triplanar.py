@@ -30,13 +30,13 @@ from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
 from .texels import SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
 from .projection_lanes import surface_covered
-from .triplanar_lanes import lane_bodies, normal_lane_bodies, stochastic_lane_body, stored_lane_bodies
+from .triplanar_lanes import lane_bodies, normal_lane_bodies, stochastic_lane_bodies, stored_lane_bodies
 
 MODULE = "warptex.triplanar"
 
 # The stochastic kernels loop over the projections (and taps) rather than unroll them: unrolled, the
 # colour and normal kernels held six copies of the stochastic sampling code, 38 s to compile for sm_90.
-for _module in (f"{MODULE}.stochastic{faces}{grad}" for faces in ("", ".faces") for grad in ("", ".grad", LANES_SUFFIX)):
+for _module in (f"{MODULE}.stochastic{faces}{grad}{lanes}" for faces in ("", ".faces") for grad in ("", ".grad") for lanes in ("", LANES_SUFFIX)):
     wp.set_module_options({"max_unroll": 1}, module=_module)
 
 
@@ -360,8 +360,10 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
             colour_lane, colour_grad_lane = lane_bodies(bodies["colour"], bodies["colour_grad"], TriplanarArgs)
             lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
             grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
-        elif not faces:  # the forward only: the texel gradient goes pixel by pixel
-            lanes = lane_kernel(stochastic_lane_body(bodies["colour"], TriplanarArgs), TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
+        elif not faces:
+            colour_lane, colour_grad_lane = stochastic_lane_bodies(bodies["colour"], bodies["colour_grad"], TriplanarArgs)
+            lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
+            grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
         return Kernels(forward, texel_grad, _adjoint(False), grads=FACE_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes)
     forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
     lanes = first_lanes = None

@@ -1,7 +1,7 @@
 """Triplanar and biplanar colour for a lane of pixels on the CPU (:mod:`.lanes`), forward and texel
 gradient, triplanar normal mapping (its forward, and both steps of its two-step gradient), one
-texture per axis, plain sampling; and the forward of stochastic colour mapping, one texture per axis
-(its texel gradient goes pixel by pixel: each pixel adds up to twelve taps' shares, in its order).
+texture per axis, plain sampling; and stochastic colour mapping, forward and texel gradient, one
+texture per axis.
 
 What each pixel reads from each projection (its UV, footprint and weight, with triplanar or
 biplanar weights) comes from :func:`~.projection_lanes.triplanar_reads_lane` for the whole lane;
@@ -19,7 +19,7 @@ import warp as wp
 from . import inlined, specialised
 from .family import lane_covered
 from .faces import FaceGrads, FaceTextures, on_axis
-from .lane_scatter import scatter_lod_lanes, scatter_reads_lanes
+from .lane_scatter import scatter_lod_lanes, scatter_projection_taps_lanes, scatter_reads_lanes
 from .lanes import LANES, accumulate_footprint_lane, lane_colours, lane_floats, lane_ints, lane_reads
 from .normal_lanes import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
 from .projection import SurfacePixels
@@ -92,17 +92,45 @@ def lane_bodies(colour, colour_grad, args_t):
 
 
 @functools.cache
-def stochastic_lane_body(colour, args_t):
-    """The lane body of stochastic colour mapping (one texture per axis) whose pixel body is
-    ``colour``: the lane's reads, then per projection its stochastic taps worked out natively
+def stochastic_lane_bodies(colour, colour_grad, args_t):
+    """``(colour_lane, colour_grad_lane)``: the lane bodies of stochastic colour mapping (one texture
+    per axis) whose pixel bodies are ``colour`` and its texel gradient ``colour_grad``: the lane's
+    reads, then per projection its stochastic taps worked out natively
     (:func:`~.stochastic_sample.projection_taps_lane`), read tap by tap (``value += w · sample``
     from 0, as ``stochastic.sample_stochastic`` blends them; NaN where the UV or LOD is not finite)
-    and added with the projection's weight, in the order of the pixel body. A histogram's blend and
-    the anisotropic filter go pixel by pixel through ``colour``."""
+    and added with the projection's weight, in the order of the pixel body; the gradient adds each
+    tap's share of the projection's share (``lane_scatter.scatter_projection_taps_lanes``). A
+    histogram's blend and the anisotropic filter go pixel by pixel through the pixel bodies."""
+
+    def pixel_by_pixel(args: args_t) -> bool:
+        return args.smp.filter == FILTER_ANISOTROPIC or args.stoch.histogram != 0 or args.stoch.method == METHOD_NONE
+
+    pixel_by_pixel = inlined(specialised(pixel_by_pixel, "triplanar_stochastic_pixel_by_pixel"))
+
+    def stochastic_colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
+        count = wp.min(adj.shape[0] - base, LANES)
+        if pixel_by_pixel(args):
+            for l in range(count):
+                colour_grad(args, pixels, base + l, grads, adj)
+        else:
+            faces = args.faces
+            reads = triplanar_reads_lane(faces, args.proj, args.smp, pixels, base, count, 0)
+            gx = lane_colours()
+            gy = lane_colours()
+            gz = lane_colours()
+            for l in range(count):
+                g = read_channels(adj, base + l)
+                gx[l] = reads[9, l] * g  # each projection's share, w · g, as the pixel body adds it
+                gy[l] = reads[10, l] * g
+                gz[l] = reads[11, l] * g
+            tx = projection_taps_lane(args.stoch, reads, 0, count)
+            ty = projection_taps_lane(args.stoch, reads, 1, count)
+            tz = projection_taps_lane(args.stoch, reads, 2, count)
+            scatter_projection_taps_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, lane_ints(args.layer), tx, ty, tz, gx, gy, gz)
 
     def stochastic_colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
-        if args.smp.filter == FILTER_ANISOTROPIC or args.stoch.histogram != 0 or args.stoch.method == METHOD_NONE:
+        if pixel_by_pixel(args):
             for l in range(count):
                 colour(args, pixels, base + l, out)
         else:
@@ -128,7 +156,7 @@ def stochastic_lane_body(colour, args_t):
             for l in range(count):
                 write_channels(out, base + l, value[l])
 
-    return inlined(specialised(stochastic_colour_lane, "triplanar_stochastic_colour_lane"))
+    return inlined(specialised(stochastic_colour_lane, "triplanar_stochastic_colour_lane")), inlined(specialised(stochastic_colour_grad_lane, "triplanar_stochastic_colour_grad_lane"))
 
 
 @functools.cache

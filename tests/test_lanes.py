@@ -337,6 +337,30 @@ def test_stochastic_triplanar_lanes_give_the_one_pixel_bits(rng, launched, metho
     assert ("triplanar_stochastic_lanes", -(-1000 // LANES)) in launched
 
 
+@pytest.mark.parametrize("threads", [1, 3])
+@pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])
+@pytest.mark.parametrize("filter", ["nearest", "trilinear", "anisotropic"])
+def test_stochastic_triplanar_gradient_lanes_add_the_one_pixel_sums(rng, launched, method, filter, threads):
+    """Stochastic triplanar's texel gradient (``lane_scatter.scatter_projection_taps_lanes``): every
+    tap of every projection adds its share pixel by pixel, projection by projection and tap by tap
+    as the pixel body does, into one texture shared by the three projections (their adds
+    interleave in its texels) and into a texture per axis, on 3 threads too; the anisotropic
+    filter's pixel by pixel."""
+    g = _hand_gbuffer(rng, 20_000)
+    shared = wt.Texture(rng.random((64, 32, 3), dtype=np.float32), requires_grad=True)
+    axes = [wt.Texture(rng.random((32 << a, 48, 3), dtype=np.float32), requires_grad=True) for a in range(3)]
+    smp = wt.Sampler(filter=filter, address="mirror", max_aniso=4)
+    previous = wt.get_num_threads()
+    wt.set_num_threads(threads)
+    try:
+        option = wt.Stochastic(method, seed=5, mirror=True, rotation=0.4)
+        _same_grads(lambda: wt.triplanar(g, shared, sampler=smp, stochastic=option, sharpness=3.0), [shared], rng, 3, 20_000)
+        _same_grads(lambda: wt.biplanar(g, textures_per_axis=axes, sampler=smp, stochastic=wt.Stochastic(method)), axes, rng, 3, 20_000)
+    finally:
+        wt.set_num_threads(previous)
+    assert any(name == "triplanar_stochastic_texel_grad_lanes" for name, _ in launched)
+
+
 @pytest.mark.parametrize("address", ["wrap", "clamp"])  # the origin folded by whole periods, or added exactly
 @pytest.mark.parametrize("sharpness", [2.5, 1.0, 31.0, 40.0])  # exp and log, and the integer exponents' edges
 def test_triplanar_lanes_far_from_the_origin(rng, address, sharpness):
