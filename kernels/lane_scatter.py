@@ -295,6 +295,33 @@ wt_scatter_rows(texs, grads, smp, 4, layers.c, u, v, lod, w, 1, gr, 0);
 """
 
 
+_SCATTER_FACE_READS = _SCATTER_LOD_CORE + r"""
+// A texture per face: each projection's read on its + face (rows of `plus`) and on its - face (rows of
+// `minus`; a pixel reads one of the two), in the order x+, x-, y+, y-, z+, z-, each adding w · g[l].
+const decltype(tex_px)* texs[6] = {&tex_px, &tex_nx, &tex_py, &tex_ny, &tex_pz, &tex_nz};
+const decltype(grad_px)* grads[6] = {&grad_px, &grad_nx, &grad_py, &grad_ny, &grad_pz, &grad_nz};
+const float *u[6], *v[6], *lod[6], *w[6];
+for (int r = 0; r < 6; ++r) {
+    const auto& at = r % 2 == 0 ? plus : minus;
+    const int axis = r / 2;
+    u[r] = at.data[axis], v[r] = at.data[3 + axis], lod[r] = at.data[6 + axis], w[r] = at.data[9 + axis];
+}
+const wp::mat_t<WT_L, 4, float>* gr[1] = {&g};
+wt_scatter_rows(texs, grads, smp, 6, layers.c, u, v, lod, w, 1, gr, 0);
+"""
+
+
+@wp.func_native(cpu_snippet(_SCATTER_FACE_READS))
+def scatter_face_reads_lanes(tex_px: TextureView, tex_nx: TextureView, tex_py: TextureView, tex_ny: TextureView, tex_pz: TextureView, tex_nz: TextureView,
+                             grad_px: TexelGrad, grad_nx: TexelGrad, grad_py: TexelGrad, grad_ny: TexelGrad, grad_pz: TexelGrad, grad_nz: TexelGrad,
+                             smp: SamplerArgs, layers: lane_ints, plus: lane_reads, minus: lane_reads, g: lane_colours):  # fmt: skip
+    """:func:`scatter_lod_lanes` with a texture per face: every lane pixel ``l`` adds each
+    projection's share ``w · g[l]`` into the gradient of the face it reads (``plus``, ``minus``:
+    ``projection_lanes.triplanar_reads_lane``'s reads of the two sides), where ``w`` is positive,
+    pixel by pixel and projection by projection as the scalar kernels add them."""
+    ...
+
+
 _SCATTER_PROJECTION_TAPS = _SCATTER_LOD_CORE + r"""
 // scatter_stochastic of each projection's one-tap footprints, projection by projection (tap k of
 // projection a: rows 3k, 3k + 1 of taps_a, its LOD row 12, weight row 3k + 2), each adding w_k · g_a[l]

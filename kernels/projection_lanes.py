@@ -203,12 +203,18 @@ if (proj.weights == %(biplanar)d) {  // projection.biplanar_weights, each pixel'
     const wt_vf total = wt_vmax(W[0] + W[1] + W[2], (float)%(eps)r);
     for (int e = 0; e < 3; ++e) W[e] = wt_sel(weighed, W[e] / total, zero);
 }
+if (side != 0) {  // faces.on_face: the - face where n[axis] < 0 (the normal as given), else the + face
+    for (int axis = 0; axis < 3; ++axis) {
+        const wt_vi negative = N[axis] < 0.0f;
+        W[axis] = wt_sel(side == 2 ? negative : ~negative, W[axis], zero);
+    }
+}
 if (unit_normals != 0) wt_unit_normals(N);  // triplanar.unit_base_normal: normal mapping reads on the unit normal
 // Per projection: projection.plane_uv and plane_footprint, where its weight is > 0.
 wp::mat_t<21, WT_L, float> reads;
 for (int axis = 0; axis < 3; ++axis) {
     const float t = f32(proj.tiling, wp::min(axis, proj.tiling.shape[0] - 1));  // projection_tiling
-    const auto& tex = axis == 0 ? faces.px : (axis == 1 ? faces.py : faces.pz);  // faces.on_axis
+    const auto& tex = side == 2 ? (axis == 0 ? faces.nx : (axis == 1 ? faces.ny : faces.nz)) : (axis == 0 ? faces.px : (axis == 1 ? faces.py : faces.pz));  // faces.on_axis
     wt_vf u, v;
     wt_footprint_lanes fp;
     wt_plane_reads(proj, smp, axis, t, tex, P, N, DX, DY, u, v, fp);
@@ -219,7 +225,7 @@ return reads;
 
 
 @wp.func_native(cpu_snippet(_TRIPLANAR_READS, "return {};\n"))
-def triplanar_reads_lane(faces: FaceTextures, proj: ProjectionArgs, smp: SamplerArgs, pixels: SurfacePixels, base: wp.int32, count: wp.int32, unit_normals: wp.int32) -> lane_reads:
+def triplanar_reads_lane(faces: FaceTextures, proj: ProjectionArgs, smp: SamplerArgs, pixels: SurfacePixels, base: wp.int32, count: wp.int32, unit_normals: wp.int32, side: wp.int32) -> lane_reads:
     """What the lane's pixels ``base .. base + count - 1`` read from each projection, with triplanar
     or biplanar weights (``proj.weights``): the UVs, footprints and weights of ``projection.projection_uv``,
     ``projection.projection_footprint`` and ``projection.projection_weights``, as
@@ -227,7 +233,10 @@ def triplanar_reads_lane(faces: FaceTextures, proj: ProjectionArgs, smp: Sampler
     pixel). With ``unit_normals``, the UVs and footprints are those of the unit normal
     (``triplanar.unit_base_normal``, as normal mapping reads them; the weights are the normal's as
     given either way): a normal's tiny component can round to zero as it is scaled, which turns its
-    mirror-fix sign."""
+    mirror-fix sign. ``side``: 0, each projection read on ``faces``' texture of its axis (``px``,
+    ``py``, ``pz``); with a texture per face (``faces.on_face``), 1 or 2, each projection read on the
+    face of that side (``+``: ``px``, ``py``, ``pz``; ``-``: ``nx``, ``ny``, ``nz``), its weight 0 where
+    the normal looks at the other face."""
     ...
 
 

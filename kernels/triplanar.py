@@ -30,7 +30,7 @@ from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
 from .texels import SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
 from .projection_lanes import surface_covered
-from .triplanar_lanes import lane_bodies, normal_lane_bodies, stochastic_lane_bodies, stored_lane_bodies
+from .triplanar_lanes import face_lane_bodies, lane_bodies, normal_lane_bodies, stochastic_lane_bodies, stored_lane_bodies
 
 MODULE = "warptex.triplanar"
 
@@ -358,6 +358,10 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
         lanes = grad_lanes = None
         if not stochastic and not faces:
             colour_lane, colour_grad_lane = lane_bodies(bodies["colour"], bodies["colour_grad"], TriplanarArgs)
+            lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
+            grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
+        elif not stochastic:
+            colour_lane, colour_grad_lane = face_lane_bodies(bodies["colour_grad"], TriplanarArgs)
             lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
             grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
         elif not faces:

@@ -1,7 +1,7 @@
 """Triplanar and biplanar colour for a lane of pixels on the CPU (:mod:`.lanes`), forward and texel
 gradient, triplanar normal mapping (its forward, and both steps of its two-step gradient), one
-texture per axis, plain sampling; and stochastic colour mapping, forward and texel gradient, one
-texture per axis.
+texture per axis, plain sampling; plain colour mapping with a texture per face; and stochastic
+colour mapping, one texture per axis, forward and texel gradient.
 
 What each pixel reads from each projection (its UV, footprint and weight, with triplanar or
 biplanar weights) comes from :func:`~.projection_lanes.triplanar_reads_lane` for the whole lane;
@@ -19,7 +19,7 @@ import warp as wp
 from . import inlined, specialised
 from .family import lane_covered
 from .faces import FaceGrads, FaceTextures, on_axis
-from .lane_scatter import scatter_lod_lanes, scatter_projection_taps_lanes, scatter_reads_lanes
+from .lane_scatter import scatter_face_reads_lanes, scatter_lod_lanes, scatter_projection_taps_lanes, scatter_reads_lanes
 from .lanes import LANES, accumulate_footprint_lane, lane_colours, lane_floats, lane_ints, lane_reads
 from .normal_lanes import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
 from .projection import SurfacePixels
@@ -78,7 +78,7 @@ def lane_bodies(colour, colour_grad, args_t):
 
     def colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
-        write_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0), base, count, out)
+        write_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0, 0), base, count, out)
 
     def colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
@@ -86,9 +86,47 @@ def lane_bodies(colour, colour_grad, args_t):
             for l in range(count):
                 colour_grad(args, pixels, base + l, grads, adj)
         else:
-            scatter_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0), base, count, grads, adj)
+            scatter_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0, 0), base, count, grads, adj)
 
     return inlined(specialised(colour_lane, "triplanar_colour_lane")), inlined(specialised(colour_grad_lane, "triplanar_colour_grad_lane"))
+
+
+@functools.cache
+def face_lane_bodies(colour_grad, args_t):
+    """``(colour_lane, colour_grad_lane)``: the lane bodies of plain colour mapping with a texture per
+    face (``faces.on_face``), whose pixel texel gradient is ``colour_grad``: the lane's reads on the
+    ``+`` faces and on the ``-`` faces (each pixel's weight on the side its normal looks at), read and
+    added projection by projection, ``+`` then ``-`` (a pixel reads one of the two), in the order
+    of the pixel bodies. The anisotropic filter's gradient goes pixel by pixel."""
+
+    def faces_colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
+        count = wp.min(out.shape[0] - base, LANES)
+        f = args.faces
+        plus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 1)
+        minus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 2)
+        layers = lane_ints(args.layer)
+        value = lane_colours()
+        for axis in range(3):
+            value = accumulate_footprint_lane(on_axis(f.px, f.py, f.pz, axis), args.smp, layers, plus[axis], plus[3 + axis], plus[6 + axis], plus[12 + axis], plus[15 + axis], plus[18 + axis], plus[9 + axis], 1, value)
+            value = accumulate_footprint_lane(on_axis(f.nx, f.ny, f.nz, axis), args.smp, layers, minus[axis], minus[3 + axis], minus[6 + axis], minus[12 + axis], minus[15 + axis], minus[18 + axis], minus[9 + axis], 1, value)
+        for l in range(count):
+            write_channels(out, base + l, value[l])
+
+    def faces_colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
+        count = wp.min(adj.shape[0] - base, LANES)
+        if args.smp.filter == FILTER_ANISOTROPIC:
+            for l in range(count):
+                colour_grad(args, pixels, base + l, grads, adj)
+        else:
+            f = args.faces
+            plus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 1)
+            minus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 2)
+            g = lane_colours()
+            for l in range(count):
+                g[l] = read_channels(adj, base + l)
+            scatter_face_reads_lanes(f.px, f.nx, f.py, f.ny, f.pz, f.nz, grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, args.smp, lane_ints(args.layer), plus, minus, g)
+
+    return inlined(specialised(faces_colour_lane, "triplanar_faces_colour_lane")), inlined(specialised(faces_colour_grad_lane, "triplanar_faces_colour_grad_lane"))
 
 
 @functools.cache
@@ -114,7 +152,7 @@ def stochastic_lane_bodies(colour, colour_grad, args_t):
                 colour_grad(args, pixels, base + l, grads, adj)
         else:
             faces = args.faces
-            reads = triplanar_reads_lane(faces, args.proj, args.smp, pixels, base, count, 0)
+            reads = triplanar_reads_lane(faces, args.proj, args.smp, pixels, base, count, 0, 0)
             gx = lane_colours()
             gy = lane_colours()
             gz = lane_colours()
@@ -135,7 +173,7 @@ def stochastic_lane_bodies(colour, colour_grad, args_t):
                 colour(args, pixels, base + l, out)
         else:
             faces = args.faces
-            reads = triplanar_reads_lane(faces, args.proj, args.smp, pixels, base, count, 0)
+            reads = triplanar_reads_lane(faces, args.proj, args.smp, pixels, base, count, 0, 0)
             layers = lane_ints(args.layer)
             zero = lane_floats()
             one = lane_floats(1.0)
@@ -171,7 +209,7 @@ def normal_lane_bodies(samples_grad, args_t, samples_t):
 
     def unit_normal_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
         """``(reads, sx, sy, sz)``: the lane's reads on the unit normal and each projection's samples."""
-        reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1)
+        reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 0)
         sx = projection_samples_lane(args.faces, args.smp, args.layer, reads, 0)
         sy = projection_samples_lane(args.faces, args.smp, args.layer, reads, 1)
         sz = projection_samples_lane(args.faces, args.smp, args.layer, reads, 2)
@@ -202,7 +240,7 @@ def normal_lane_bodies(samples_grad, args_t, samples_t):
             for l in range(count):
                 samples_grad(args, pixels, base + l, grads, adj)
         else:
-            reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1)
+            reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 0)
             gx = lane_colours()
             gy = lane_colours()
             gz = lane_colours()

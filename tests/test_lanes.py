@@ -313,6 +313,39 @@ def test_triplanar_normal_lanes_give_the_one_pixel_bits(rng, launched, filter, c
     assert ("triplanar_normal_lanes", -(-1000 // LANES)) in launched
 
 
+@pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
+def test_face_lanes_give_the_one_pixel_bits(rng, launched, filter):
+    """A texture per face (``triplanar_lanes.face_lane_bodies``): each projection read on the + and
+    on the - face (``triplanar_reads_lane``'s ``side``), every face a texture of its own size (the
+    LODs differ), normals whose components are -0, tiny negative or exactly 0 (the - face is
+    chosen by ``n < 0``), in world and object space, triplanar and biplanar; forward and texel
+    gradient (every face's), on 3 threads too."""
+    g = _hand_gbuffer(rng, 5000)
+    normals = g.normal.numpy().reshape(-1, 3)
+    normals[11:16] = [(-0.0, 1.0, 0.5), (-1e-45, 0.3, 2.0), (0.0, -0.0, -1.0), (0.4, -1e-38, 0.0), (-3e19, 1e19, -2e19)]
+    g.normal.assign(normals.reshape(1, -1, 3))
+    g.mask.assign(np.maximum(g.mask.numpy(), (np.arange(normals.shape[0]) < 20).reshape(1, -1).astype(np.float32)))
+    faces = [wt.Texture(rng.random((16 << (k % 3), 24 + 8 * k, 3), dtype=np.float32), requires_grad=True) for k in range(6)]
+    smp = wt.Sampler(filter=filter, address="mirror", max_aniso=4)
+    placement = np.array([[0.0, 0.8, 0.0, 0.3], [-0.8, 0.0, 0.0, 0.0], [0.0, 0.0, 1.5, -0.2], [0.0, 0.0, 0.0, 1.0]], np.float32)
+    calls = (lambda: wt.triplanar(g, textures_per_face=faces, sampler=smp, sharpness=3.0),
+             lambda: wt.triplanar(g, textures_per_face=faces, sampler=smp, sharpness=0.0, space="object", object_to_world=placement, tiling=(1.5, 2.0, 0.75)),
+             lambda: wt.biplanar(g, textures_per_face=faces, sampler=smp))  # fmt: skip
+    previous = wt.get_num_threads()
+    try:
+        for threads in (1, 3):
+            wt.set_num_threads(threads)
+            for call in calls:
+                lanes, scalar = _both(call)
+                _same_bits(lanes, scalar)
+                assert (np.nan_to_num(lanes) > 0).any(-1).mean() > 0.5
+                _same_grads(call, faces, rng, 3, 5000)
+    finally:
+        wt.set_num_threads(previous)
+    names = {name for name, _ in launched}
+    assert {"triplanar_faces_lanes", "triplanar_faces_texel_grad_lanes"} <= names
+
+
 @pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])
 @pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
 def test_stochastic_triplanar_lanes_give_the_one_pixel_bits(rng, launched, method, filter):
