@@ -173,18 +173,18 @@ if (proj.weights == %(biplanar)d) {  // projection.biplanar_weights, each pixel'
     const wt_vi weighed = covered & wt_finite(N[0]) & wt_finite(N[1]) & wt_finite(N[2]) & (length > 0.0f);
     const wt_vf divisor = wt_sel(weighed, length, one);
     const wt_vf a0 = wt_vabs(U[0]) / divisor, a1 = wt_vabs(U[1]) / divisor, a2 = wt_vabs(U[2]) / divisor;
-    const float e = sharpness / 8.0f;
+    const float exponent = sharpness / 8.0f;
     const wt_vi minor_z = (a2 <= a0) & (a2 <= a1), minor_y = ~minor_z & (a1 <= a0), minor_x = ~minor_z & ~minor_y;
     const wt_vf major = wt_sel(minor_x, a1, a0), median = wt_sel(minor_z, a1, a2);
     const float edge = (float)%(edge)r;  // biplanar_pair
     const wt_vf b0 = wt_vmin(wt_vmax(zero, (major - edge) / (1.0f - edge)), one);  // wp::clamp(x, 0, 1) = fmin(fmax(0, x), 1)
     const wt_vf b1 = wt_vmin(wt_vmax(zero, (median - edge) / (1.0f - edge)), one);
-    wt_vf p0 = wt_power_lanes(b0, e, weighed), p1 = wt_power_lanes(b1, e, weighed);
+    wt_vf p0 = wt_power_lanes(b0, exponent, weighed), p1 = wt_power_lanes(b1, exponent, weighed);
     const wt_vi underflowed = weighed & (p0 + p1 < (float)%(eps)r);
     if (__builtin_reduce_or(underflowed)) {  // both powers underflowed (or a diagonal): biplanar_pair's own fallback
         for (int l = 0; l < WT_L; ++l) {
             if (!underflowed[l]) continue;
-            const wt_v2 pair = wt_biplanar_pair(major[l], median[l], e);
+            const wt_v2 pair = wt_biplanar_pair(major[l], median[l], exponent);
             p0[l] = pair.c[0];
             p1[l] = pair.c[1];
         }
