@@ -160,9 +160,10 @@ def scatter_levels_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, uv:
 
 
 # Up to twelve reads per lane pixel, read r from tex[r] into grad[r], at the rows u[r], v[r], lod[r]
-# and weight w[r] of a value per lane pixel (a lane_reads matrix's: a pixel's projections; a lane_taps
-# matrix's: a stochastic lookup's taps; three of them: a stochastic triplanar pixel's); a read adds where its weight is positive and its UV and LOD
-# are finite (scatter.scatter_lod), and only into a gradient that is needed. It adds its share of the
+# and weight w[r] of a value per lane pixel (a lane_reads matrix's: a pixel's projections, or two of
+# them: a pixel's faces; a lane_taps matrix's: a stochastic lookup's taps, or three of them: a
+# stochastic triplanar pixel's); a read adds where its weight is positive and its UV and LOD are
+# finite (scatter.scatter_lod), and only into a gradient that is needed. It adds its share of the
 # pixel's gradient g[l] (read r's own, gr[r], where per_read; else gr[0]): w · g where weigh (a blend
 # of projections or taps), g itself where not.
 _SCATTER_LOD_CORE = _SCATTER_CORE + r"""
