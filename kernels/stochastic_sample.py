@@ -245,10 +245,11 @@ def stochastic_lane_taps(args: StochasticSampleArgs, pixels: SamplePixels, base:
 
 
 @wp.func
-def lane_taps_linear(args: StochasticSampleArgs) -> bool:
-    """Whether the lanes take the launch tap by tap: a linear blend (no histogram) of one-tap
-    footprints (not the anisotropic filter) of a stochastic method."""
-    return args.sample.smp.filter != FILTER_ANISOTROPIC and args.params.histogram == 0 and args.params.method != METHOD_NONE
+def lane_taps_linear(smp: SamplerArgs, params: StochasticArgs) -> bool:
+    """Whether the lanes take a lookup tap by tap: a linear blend (no histogram) of one-tap
+    footprints (not the anisotropic filter) of a stochastic method (``stochastic``'s lanes, and
+    those of stochastic triplanar)."""
+    return smp.filter != FILTER_ANISOTROPIC and params.histogram == 0 and params.method != METHOD_NONE
 
 
 @inlined
@@ -260,7 +261,7 @@ def stochastic_lane(args: StochasticSampleArgs, pixels: SamplePixels, base: wp.i
     (several taps, each with its stochastic taps) and plain sampling go pixel by pixel through the
     body."""
     count = wp.min(out.shape[0] - base, LANES)
-    if not lane_taps_linear(args):
+    if not lane_taps_linear(args.sample.smp, args.params):
         for l in range(count):
             stochastic_pixel(args, pixels, base + l, out)
     else:
@@ -284,7 +285,7 @@ def scatter_stochastic_lane(args: StochasticSampleArgs, pixels: SamplePixels, ba
     lane's taps, then their adds natively (``lane_scatter.scatter_taps_lane``), pixel by pixel and
     tap by tap as the body adds them; what :func:`stochastic_lane` takes pixel by pixel, likewise."""
     count = wp.min(adj.shape[0] - base, LANES)
-    if not lane_taps_linear(args):
+    if not lane_taps_linear(args.sample.smp, args.params):
         for l in range(count):
             scatter_stochastic_pixel(args, pixels, base + l, grads, adj)
     else:

@@ -24,8 +24,7 @@ from .lanes import LANES, accumulate_footprint_lane, lane_colours, lane_floats, 
 from .normal_lanes import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
 from .projection import SurfacePixels
 from .projection_lanes import accumulate_reads_lane, triplanar_reads_lane
-from .stochastic import METHOD_NONE
-from .stochastic_sample import projection_taps_lane
+from .stochastic_sample import lane_taps_linear, projection_taps_lane
 from .texels import FILTER_ANISOTROPIC, SamplerArgs, pick3, read_channels, write_channels
 
 
@@ -140,14 +139,9 @@ def stochastic_lane_bodies(colour, colour_grad, args_t):
     tap's share of the projection's share (``lane_scatter.scatter_projection_taps_lanes``). A
     histogram's blend and the anisotropic filter go pixel by pixel through the pixel bodies."""
 
-    def pixel_by_pixel(args: args_t) -> bool:
-        return args.smp.filter == FILTER_ANISOTROPIC or args.stoch.histogram != 0 or args.stoch.method == METHOD_NONE
-
-    pixel_by_pixel = inlined(specialised(pixel_by_pixel, "triplanar_stochastic_pixel_by_pixel"))
-
     def stochastic_colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
-        if pixel_by_pixel(args):
+        if not lane_taps_linear(args.smp, args.stoch):
             for l in range(count):
                 colour_grad(args, pixels, base + l, grads, adj)
         else:
@@ -168,7 +162,7 @@ def stochastic_lane_bodies(colour, colour_grad, args_t):
 
     def stochastic_colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
-        if pixel_by_pixel(args):
+        if not lane_taps_linear(args.smp, args.stoch):
             for l in range(count):
                 colour(args, pixels, base + l, out)
         else:
