@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 import OpenEXR
-import PIL.Image
 import pytest
 from PIL import Image
 
@@ -419,23 +418,19 @@ def test_write_png_errors(tmp_path, image, kwargs, exc):
 # --------------------------------------------------------------------------- atomic writes
 
 
-def _failing_after_partial_write(path_arg_index):
-    def fail(*args, **kwargs):
-        with open(args[path_arg_index], "wb") as f:
-            f.write(b"partial")
-        raise OSError("simulated encoder failure")
-    return fail
+def _failing(*args, **kwargs):
+    raise OSError("simulated encoder failure")
 
 
-@pytest.mark.parametrize("writer, ext, target, index", [
-    (write_png, ".png", (PIL.Image.Image, "save"), 1),
-    (write_exr, ".exr", (OpenEXR.File, "write"), 1),
+@pytest.mark.parametrize("writer, ext, target", [
+    (write_png, ".png", ("warptex.png._filter_rows", _failing)),  # after the PNG's header is written
+    (write_exr, ".exr", ("warptex.exr_writer._compressed", _failing)),  # after the EXR's header
 ])
-def test_failed_write_keeps_old_file(tmp_path, monkeypatch, writer, ext, target, index):
+def test_failed_write_keeps_old_file(tmp_path, monkeypatch, writer, ext, target):
     path = tmp_path / f"out{ext}"
     writer(path, np.full((4, 4, 3), 0.5, np.float32))
     before = path.read_bytes()
-    monkeypatch.setattr(*target, _failing_after_partial_write(index))
+    monkeypatch.setattr(*target)
     with pytest.raises(OSError, match="simulated"):
         writer(path, np.zeros((4, 4, 3), np.float32))
     assert path.read_bytes() == before

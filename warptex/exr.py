@@ -1,4 +1,5 @@
-"""OpenEXR files: linear float images with any channel names, read by layer, written atomically.
+"""OpenEXR files: linear float images with any channel names, read by layer (written by
+:mod:`warptex.exr_writer`, band by band).
 
 Channel names follow OpenEXR's layer convention: ``diffuse.R`` is channel ``R`` of layer
 ``diffuse`` (as Blender, Nuke and most renderers write them), a name without a dot belongs to the
@@ -13,10 +14,9 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import OpenEXR
 
-from warptex._files import _as_image, _atomic_output, _checked_input_path, _checked_output_path
+from warptex._files import _checked_input_path
 
 EXR_MAGIC = b"\x76\x2f\x31\x01"
-_DEFAULT_EXR_NAMES = {1: ("Y",), 2: ("Y", "A"), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}
 
 
 def read_exr(path, channels: Sequence[str] | None = None, *, layer: str | None = None) -> tuple[np.ndarray, tuple[str, ...]]:
@@ -93,66 +93,6 @@ def _channel_names(path: str, fn: str) -> tuple[str, ...]:
             return tuple(channel.name for channel in exr.header()["channels"])
     except (RuntimeError, UnicodeDecodeError) as exc:  # a corrupt header may hold a name that is not UTF-8
         raise ValueError(f"{fn}(): cannot decode '{path}' as an OpenEXR image: {exc}") from None
-
-
-def write_exr(path, image, *, channel_names: Sequence[str] | None = None, half: bool = False, attributes: Mapping | None = None) -> None:
-    """Write an OpenEXR file (ZIP compression), atomically, creating missing parent directories.
-
-    Args:
-        path: ``str`` or ``os.PathLike`` of the file to write.
-        image: Array-like of real numbers shaped [H, W] or [H, W, C], or a
-            dict mapping channel names to [H, W] arrays of equal size.
-        channel_names: Names for the C channels of an array (any names, e.g.
-            ``'Position.X'``). Defaults: 1 -> Y, 2 -> Y,A, 3 -> R,G,B,
-            4 -> R,G,B,A; required for other channel counts. Not allowed
-            with a dict.
-        half: If True, store float16 (values beyond +-65504 become +-inf);
-            otherwise float32.
-        attributes: Extra header attributes ``{name: value}`` (ints, floats,
-            strings, float64 ``(3,)`` arrays...), read back by :func:`exr_attributes`.
-
-    Raises:
-        ValueError: On a wrong rank, empty image, mismatched channel sizes,
-            or missing/duplicate/wrong-length channel names.
-        TypeError: If the pixels are not numeric or names are not str.
-    """
-    path = _checked_output_path(path, "write_exr")
-    if isinstance(image, Mapping):
-        if channel_names is not None:
-            raise ValueError("write_exr(): channel_names cannot be given with a dict image; "
-                             "the dict keys are the channel names")
-        names = _name_tuple(list(image), "write_exr", "dict keys")
-        planes = [_as_image(image[name], "write_exr") for name in names]
-        if any(p.shape[-1] != 1 for p in planes):
-            raise ValueError("write_exr(): dict values must be [H, W] arrays")
-        if len({p.shape for p in planes}) > 1:
-            sizes = ", ".join(f"{k!r}: {p.shape[:2]}" for k, p in zip(names, planes))
-            raise ValueError(f"write_exr(): all channels must have the same size, got {sizes}")
-    else:
-        pixels = _as_image(image, "write_exr")
-        n = pixels.shape[-1]
-        if channel_names is None:
-            if n not in _DEFAULT_EXR_NAMES:
-                raise ValueError(f"write_exr(): image has {n} channels; pass channel_names=")
-            channel_names = _DEFAULT_EXR_NAMES[n]
-        names = _name_tuple(channel_names, "write_exr", "channel_names")
-        if len(names) != n:
-            raise ValueError(f"write_exr(): got {len(names)} channel_names for an image with {n} channels")
-        planes = [pixels[..., i : i + 1] for i in range(n)]
-    if not names:
-        raise ValueError("write_exr(): image has no channels")
-    if len(set(names)) != len(names) or "" in names:
-        raise ValueError(f"write_exr(): channel names must be unique and non-empty, got {names}")
-    with np.errstate(over="ignore"):
-        dtype = np.float16 if half else np.float32
-        channels = {name: np.ascontiguousarray(p[..., 0], dtype=dtype) for name, p in zip(names, planes)}
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    for key, value in (attributes or {}).items():
-        if not isinstance(key, str) or key in header or key in _STANDARD_ATTRIBUTES:
-            raise ValueError(f"write_exr(): attribute names must be str and not standard ones, got {key!r}")
-        header[key] = value
-    with _atomic_output(path) as tmp:
-        OpenEXR.File(header, channels).write(tmp)
 
 
 def _read_exr(path: str, channels, layer, fn: str) -> tuple[np.ndarray, tuple[str, ...]]:

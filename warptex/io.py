@@ -20,7 +20,9 @@ import numpy as np
 from PIL import Image
 
 from warptex._files import _as_image, _atomic_output, _checked_input_path, _checked_output_path, _fspath, process_alive  # noqa: F401 (re-exported)
-from warptex.exr import EXR_MAGIC, _read_exr, exr_attributes, exr_channel_names, exr_layers, read_exr, write_exr
+from warptex.exr import EXR_MAGIC, _read_exr, exr_attributes, exr_channel_names, exr_layers, read_exr
+from warptex.exr_writer import write_exr
+from warptex.png import PngWriter, codes
 
 __all__ = [
     "srgb_to_linear",
@@ -145,8 +147,8 @@ def write_png(path, image, *, data: bool = False, bits: int = 8) -> None:
         image: Array-like of real numbers shaped [H, W] or [H, W, C], C in
             1..4, nominally in [0, 1] (also for integer dtypes).
         data: If True, write values as-is instead of sRGB-encoding colour.
-        bits: 8 or 16 per channel (16-bit colour is encoded with libpng
-            through ``imagecodecs``, as Pillow cannot).
+        bits: 8 or 16 per channel. Encoded by :class:`warptex.png.PngWriter`, which
+            also writes images band by band.
 
     Raises:
         ValueError: On a wrong rank or channel count, an empty image, NaN
@@ -164,22 +166,8 @@ def write_png(path, image, *, data: bool = False, bits: int = 8) -> None:
     if nans:
         raise ValueError(f"write_png(): image has {nans} NaN value(s) of {image.size}; a PNG has no NaN "
                          "(replace them, e.g. np.nan_to_num, or write_exr() to keep them)")
-    values = np.clip(image, 0.0, 1.0)
-    if not data:
-        n_colour = n - 1 if n in (2, 4) else n
-        values[..., :n_colour] = linear_to_srgb(values[..., :n_colour])
-    maxval, dtype = (255, np.uint8) if bits == 8 else (65535, np.uint16)
-    codes = np.rint(values * maxval).astype(dtype)
-    if bits == 16 and n > 1:
-        import imagecodecs
-
-        encoded = imagecodecs.png_encode(codes)
-        with _atomic_output(path) as tmp, open(tmp, "wb") as f:
-            f.write(encoded)
-        return
-    pil_image = Image.fromarray(codes[..., 0] if n == 1 else codes)
-    with _atomic_output(path) as tmp:
-        pil_image.save(tmp, format="PNG")
+    with PngWriter(path, image.shape[0], image.shape[1], n, bits=bits, data=data) as writer:
+        writer.write_codes(codes(image, data=data, bits=bits))
 
 
 def _is_sixteen_bit_colour_png(head: bytes) -> bool:
