@@ -15,7 +15,8 @@ import numpy as np
 import warp as wp
 
 from warptex.camera import look_at
-from warptex.gbuffer import load_mesh, rasterize
+from warptex.gbuffer import load_mesh
+from warptex.raster import rasterize
 
 DEFAULT_MESH = Path(__file__).resolve().parents[2] / "shared" / "data" / "meshes" / "bunny.ply"
 

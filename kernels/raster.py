@@ -27,6 +27,7 @@ class CameraView:
     height: wp.int32
     orthographic: wp.int32
     strata: wp.int32  # samples per pixel side (>= 1): warptex.camera.Camera.supersampled's pattern
+    first_row: wp.int32  # the image row of launch row 0: a tile of rows [first_row, first_row + launch rows)
 
 
 @wp.func
@@ -79,13 +80,14 @@ def raster_kernel(
     position_dx: wp.array3d(dtype=wp.vec3),
     position_dy: wp.array3d(dtype=wp.vec3),
 ):
-    """Closest hit per pixel of every view (``cams[view]``: arrays are ``(views, H, W)``, one
-    launch for a batch of cameras); normals face the camera (flipped on back faces, shading normals
-    bent). ``indices`` holds the triangles in the BVH, ``face_ids`` their index in the mesh. Misses
-    keep the outputs' background values (zeros, ``depth = inf``, ``triangle = -1``) written by the caller."""
+    """Closest hit per pixel of every view (``cams[view]``: arrays are ``(views, rows, W)``, one
+    launch for a batch of cameras, launch row ``row`` being image row ``cam.first_row + row``);
+    normals face the camera (flipped on back faces, shading normals bent). ``indices`` holds the
+    triangles in the BVH, ``face_ids`` their index in the mesh. Misses keep the outputs' background
+    values (zeros, ``depth = inf``, ``triangle = -1``) written by the caller."""
     view, row, col = wp.tid()
     cam = cams[view]
-    o, d, do_dx, do_dy, dd_dx, dd_dy = primary_ray(cam, row, col)
+    o, d, do_dx, do_dy, dd_dx, dd_dy = primary_ray(cam, cam.first_row + row, col)
     hit = wp.mesh_query_ray(mesh, o, d, 1.0e30)
     if hit.result:
         f = hit.face

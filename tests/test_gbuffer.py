@@ -8,7 +8,8 @@ import trimesh
 import warptex as wt
 from warptex import io
 from warptex.camera import look_at, orthographic
-from warptex.gbuffer import GBuffer, load_mesh, rasterize
+from warptex.gbuffer import GBuffer, load_mesh
+from warptex.raster import rasterize
 from warptex.gbuffer_io import load_gbuffer, save_gbuffer
 
 MESHES = ("bunny.ply", "fandisk.obj", "featuretype.ply", "Duck.glb", "monkey.glb")

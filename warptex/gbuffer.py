@@ -111,6 +111,18 @@ class GBuffer:
         camera = self.camera[int(k)] if isinstance(self.camera, tuple) else self.camera
         return GBuffer(**arrays, uv_sets=sets, camera=camera, samples=self.samples, origin=self.origin)
 
+    def rows(self, start: int, stop: int) -> "GBuffer":
+        """Rows ``start <= row < stop`` of an ``(H, W)`` G-buffer, sharing its memory (a band of
+        whole rows is contiguous in every array)."""
+        if self.num_views is not None:
+            raise ValueError("GBuffer.rows(): the G-buffer is a batch of views; take one first (gbuffer.view(k))")
+        height = self.resolution[0]
+        if not (isinstance(start, (int, np.integer)) and isinstance(stop, (int, np.integer)) and 0 <= start < stop <= height):
+            raise ValueError(f"GBuffer.rows(): rows must satisfy 0 <= start < stop <= {height}, got {start}, {stop}")
+        arrays = {name: getattr(self, name)[int(start) : int(stop)] for name in FIELDS}
+        sets = {s: {f: a[int(start) : int(stop)] for f, a in fields.items()} for s, fields in self.uv_sets.items()}
+        return GBuffer(**arrays, uv_sets=sets, camera=self.camera, samples=self.samples, origin=self.origin)
+
     @property
     def device(self):
         return self.mask.device
@@ -358,6 +370,14 @@ def gbuffer_device(func: str, gbuffer, device) -> wp.context.Device:
     return device
 
 
-# Mesh loading and rasterising live in their own modules; their names stay importable from here.
+# Mesh loading and rasterising live in their own modules; their names stay importable from here
+# (rasterize on first use: warptex.raster imports this module).
 from warptex.mesh import checked_geometry, load_mesh, mesh_uv_sets, vertex_normals, vertex_tangents  # noqa: E402,F401
-from warptex.raster import rasterize  # noqa: E402,F401
+
+
+def __getattr__(name: str):
+    if name == "rasterize":
+        from warptex.raster import rasterize
+
+        return rasterize
+    raise AttributeError(f"module 'warptex.gbuffer' has no attribute {name!r}")

@@ -15,11 +15,11 @@ from warptex.kernels import raster as kr
 from warptex.mesh import checked_geometry, load_mesh, mesh_uv_sets, vertex_normals, vertex_tangents
 
 
-def _checked_mesh(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _checked_mesh(func: str, mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Vertices, faces and smooth vertex normals of a valid mesh, or a ``TypeError``/``ValueError``."""
     if not isinstance(mesh, trimesh.Trimesh):
-        raise TypeError(f"rasterize(): mesh must be a trimesh.Trimesh or a path, got {type(mesh).__name__}")
-    vertices, faces = checked_geometry("rasterize():", mesh)
+        raise TypeError(f"{func}(): mesh must be a trimesh.Trimesh or a path, got {type(mesh).__name__}")
+    vertices, faces = checked_geometry(f"{func}():", mesh)
     return vertices, faces, vertex_normals(mesh)
 
 
@@ -29,7 +29,7 @@ def _checked_mesh(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 ORIGIN_RANGE = 2.0**12
 
 
-def _camera_view(camera: Camera, origin: np.ndarray) -> kr.CameraView:
+def _camera_view(camera: Camera, origin: np.ndarray, first_row: int = 0) -> kr.CameraView:
     view = kr.CameraView()
     view.eye = wp.vec3(*np.asarray(camera.eye - origin, np.float32))  # subtracted in float64
     view.forward, view.right, view.up = (wp.vec3(*np.asarray(v, np.float32)) for v in (camera.forward, camera.right, camera.up))
@@ -37,6 +37,7 @@ def _camera_view(camera: Camera, origin: np.ndarray) -> kr.CameraView:
     view.height, view.width = camera.resolution
     view.orthographic = int(camera.orthographic)
     view.strata = camera.strata
+    view.first_row = first_row
     return view
 
 
@@ -54,7 +55,7 @@ def _origin(func: str, origin, vertices: np.ndarray, cameras: list[Camera]) -> n
     return point
 
 
-def rasterize(mesh, camera, *, samples: int = 1, origin=None, device=None) -> GBuffer:
+def rasterize(mesh, camera, *, samples: int = 1, origin=None, rows=None, device=None) -> GBuffer:
     """Rasterise ``mesh`` seen by ``camera`` into a :class:`GBuffer` (primary rays against a BVH).
 
     Degenerate (zero-area) triangles are never hit; a camera inside the mesh sees its back faces
@@ -79,6 +80,10 @@ def rasterize(mesh, camera, *, samples: int = 1, origin=None, device=None) -> GB
             before they become float32, so a scene far from the world origin (map coordinates in
             the millions) keeps its precision. ``None``: the world origin for scenes within
             :data:`ORIGIN_RANGE` of it, else the (first) camera's eye. Kept as ``g.origin``.
+        rows: ``(start, stop)``: only the image rows ``start <= row < stop`` (of every view), a
+            G-buffer of ``stop - start`` rows (``s``-times that with ``samples``) whose pixels are
+            those rows of the whole image's, bit for bit; ``None``: every row. :func:`gbuffer_tiles`
+            cuts an image into such bands.
         device: Warp device for the BVH, the launches and the resulting arrays.
 
     Returns:
@@ -86,7 +91,27 @@ def rasterize(mesh, camera, *, samples: int = 1, origin=None, device=None) -> GB
         ``camera`` is the camera (supersampled: :meth:`~warptex.camera.Camera.supersampled`), or
         the tuple of cameras of a batch.
     """
-    func = "rasterize"
+    scene, cameras, batch = prepare("rasterize", mesh, camera, samples=samples, origin=origin, device=device)
+    return scene.rasterize(cameras, checked_rows("rasterize", rows, cameras[0].pixel_resolution[0]), batch=batch)
+
+
+def checked_rows(func: str, rows, height: int) -> tuple[int, int]:
+    """``rows`` as ``(start, stop)`` with ``0 <= start < stop <= height`` (``None``: every row), or
+    a ``ValueError`` naming ``func``."""
+    if rows is None:
+        return 0, height
+    try:
+        start, stop = (int(v) if isinstance(v, (int, np.integer)) and not isinstance(v, bool) else None for v in rows)
+    except (TypeError, ValueError):
+        start = stop = None
+    if start is None or stop is None or not 0 <= start < stop <= height:
+        raise ValueError(f"{func}(): rows must be (start, stop) with 0 <= start < stop <= {height} (the image's rows), got {rows!r}")
+    return start, stop
+
+
+def prepare(func: str, mesh, camera, *, samples: int = 1, origin=None, device=None) -> tuple["Scene", list[Camera], bool]:
+    """``(scene, cameras, batch)``: ``mesh`` prepared for rasterising through ``camera`` (one or a
+    sequence, supersampled by ``samples``), every argument checked as :func:`rasterize` checks it."""
     if isinstance(camera, Camera):
         cameras, batch = [camera], False
     elif isinstance(camera, (list, tuple)) and camera and all(isinstance(c, Camera) for c in camera):
@@ -103,63 +128,64 @@ def rasterize(mesh, camera, *, samples: int = 1, origin=None, device=None) -> GB
         if c.resolution != resolution:
             raise ValueError(f"{func}(): the cameras of a batch must share one resolution; camera 0 has {resolution}, camera {k} {c.resolution}")
     trimesh_mesh = load_mesh(mesh) if isinstance(mesh, (str, os.PathLike)) else mesh
-    vertices, faces, normals = _checked_mesh(trimesh_mesh)
-    uv_sets = mesh_uv_sets(trimesh_mesh)
+    vertices, faces, normals = _checked_mesh(func, trimesh_mesh)
     origin = _origin(func, origin, vertices, cameras)
-    vertices = vertices - origin  # float64, before float32
-    device = checked_device(f"{func}()", device)
-    shape = (len(cameras), *resolution)  # the kernels' (views, H, W)
+    return Scene(func, vertices, faces, normals, mesh_uv_sets(trimesh_mesh), origin, checked_device(f"{func}()", device)), cameras, batch
 
-    # Zero-area triangles have no plane (no normal, no differentials): they are left out of the
-    # BVH, and hits report the index of the face in the full mesh.
-    area2 = np.linalg.norm(np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]]), axis=1)
-    face_ids = np.flatnonzero(area2 > 0)
-    if len(face_ids) == 0:
-        raise ValueError(f"{func}(): all {len(faces)} triangles of the mesh are degenerate (zero area)")
-    points = wp.array(vertices.astype(np.float32), dtype=wp.vec3, device=device)
-    indices = wp.array(faces.reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
-    hit_indices = wp.array(faces[face_ids].reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
-    bvh = wp.Mesh(points=points, indices=hit_indices)
-    g = GBuffer.empty(shape if batch else resolution, uv_sets=uv_sets, camera=tuple(cameras) if batch else cameras[0], samples=cameras[0].strata**2, origin=origin, device=device)
 
-    def batched(a: wp.array) -> wp.array:
-        return a.reshape(shape)
+class Scene:
+    """A mesh ready to rasterise on a device: its BVH, vertex arrays and tangents, made once and
+    used for every band of rows and every view (building the BVH of a large mesh takes longer than
+    tracing a band)."""
 
-    barycentric = wp.zeros(shape, dtype=wp.vec3, device=device)
-    wp.launch(
-        kr.raster_kernel,
-        dim=shape,
-        inputs=[
-            bvh.id,
-            points,
-            hit_indices,
-            wp.array(face_ids.astype(np.int32), dtype=wp.int32, device=device),
-            wp.array(normals.astype(np.float32), dtype=wp.vec3, device=device),
-            wp.array([_camera_view(c, origin) for c in cameras], dtype=kr.CameraView, device=device),
-        ],
-        outputs=[batched(a) for a in (g.position, g.normal, g.geometric_normal, g.depth, g.mask, g.triangle)] + [barycentric, batched(g.position_dx), batched(g.position_dy)],
-        device=device,
-        record_tape=False,
-    )
-    for name, uv in uv_sets.items():
-        out = g.uv_sets[name]
-        tangents = vertex_tangents(vertices, faces, normals, uv)
+    def __init__(self, func: str, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, uv_sets: dict, origin: np.ndarray, device):
+        self.origin, self.device = origin, device
+        vertices = vertices - origin  # float64, before float32
+        # Zero-area triangles have no plane (no normal, no differentials): they are left out of the
+        # BVH, and hits report the index of the face in the full mesh.
+        area2 = np.linalg.norm(np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]]), axis=1)
+        face_ids = np.flatnonzero(area2 > 0)
+        if len(face_ids) == 0:
+            raise ValueError(f"{func}(): all {len(faces)} triangles of the mesh are degenerate (zero area)")
+        self.points = wp.array(vertices.astype(np.float32), dtype=wp.vec3, device=device)
+        self.indices = wp.array(faces.reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
+        self.hit_indices = wp.array(faces[face_ids].reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
+        self.face_ids = wp.array(face_ids.astype(np.int32), dtype=wp.int32, device=device)
+        self.normals = wp.array(normals.astype(np.float32), dtype=wp.vec3, device=device)
+        self.bvh = wp.Mesh(points=self.points, indices=self.hit_indices)
+        self.uv_sets = {
+            name: (wp.array(uv, dtype=wp.vec2, device=device), wp.array(vertex_tangents(vertices, faces, normals, uv), dtype=wp.vec4, device=device))
+            for name, uv in uv_sets.items()
+        }
+
+    def rasterize(self, cameras: list[Camera], rows: tuple[int, int], *, batch: bool = False) -> GBuffer:
+        """The G-buffer of image rows ``rows`` (``(start, stop)``, in pixels of the image) of every
+        camera (supersampled ones: ``strata``-times as many rows of samples)."""
+        device, s = self.device, cameras[0].strata
+        shape = (len(cameras), (rows[1] - rows[0]) * s, cameras[0].resolution[1])  # the kernels' (views, rows, W)
+        g = GBuffer.empty(shape if batch else shape[1:], uv_sets=self.uv_sets, camera=tuple(cameras) if batch else cameras[0], samples=s * s, origin=self.origin, device=device)
+
+        def batched(a: wp.array) -> wp.array:
+            return a.reshape(shape)
+
+        barycentric = wp.zeros(shape, dtype=wp.vec3, device=device)
+        views = wp.array([_camera_view(c, self.origin, rows[0] * s) for c in cameras], dtype=kr.CameraView, device=device)
         wp.launch(
-            kr.uv_kernel,
+            kr.raster_kernel,
             dim=shape,
-            inputs=[
-                points,
-                indices,
-                wp.array(uv, dtype=wp.vec2, device=device),
-                wp.array(tangents, dtype=wp.vec4, device=device),
-                batched(g.triangle),
-                barycentric,
-                batched(g.normal),
-                batched(g.position_dx),
-                batched(g.position_dy),
-            ],
-            outputs=[batched(out[k]) for k in ("uv", "uv_dx", "uv_dy", "tangent")],
+            inputs=[self.bvh.id, self.points, self.hit_indices, self.face_ids, self.normals, views],
+            outputs=[batched(a) for a in (g.position, g.normal, g.geometric_normal, g.depth, g.mask, g.triangle)] + [barycentric, batched(g.position_dx), batched(g.position_dy)],
             device=device,
             record_tape=False,
         )
-    return g
+        for name, (uv, tangents) in self.uv_sets.items():
+            out = g.uv_sets[name]
+            wp.launch(
+                kr.uv_kernel,
+                dim=shape,
+                inputs=[self.points, self.indices, uv, tangents, batched(g.triangle), barycentric, batched(g.normal), batched(g.position_dx), batched(g.position_dy)],
+                outputs=[batched(out[k]) for k in ("uv", "uv_dx", "uv_dy", "tangent")],
+                device=device,
+                record_tape=False,
+            )
+        return g

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from warptex.camera import Camera, look_at, orthographic
-from warptex.gbuffer import rasterize
+from warptex.raster import rasterize
 
 #: The default terrain's vertex grid, one splat texel per vertex.
 TERRAIN_GRID = (129, 129)
