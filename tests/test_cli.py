@@ -92,11 +92,13 @@ def test_a_truncated_exr_texture_is_a_clear_error(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
-def test_a_resolution_beyond_memory_is_refused_up_front(tmp_path, capsys, monkeypatch):
+def test_a_memory_budget_beyond_memory_is_refused_up_front(tmp_path, capsys, monkeypatch):
+    """A render is made in bands of at most --memory: a picture of any size fits, a budget past
+    the machine's memory is refused before any work."""
     monkeypatch.setattr(output, "_available_memory", lambda: 2 * 2**30)
-    assert main(["--out", str(tmp_path / "out"), "--resolution", "100000x100000"]) == 1
+    assert main(["--out", str(tmp_path / "out"), "--resolution", "100000x100000", "--memory", "3GiB"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == ["warptex: error: run_render(): a 100000x100000 render of 4 samples per pixel needs about 11921.2 GiB of memory, but 2.0 GiB is available; use a smaller resolution or fewer samples"]
+    assert err == ["warptex: error: run_render(): a 100000x100000 render of 4 samples per pixel needs about 3.4 GiB of memory, but 2.0 GiB is available; use a smaller --memory"]
     assert main(["fit", "--out", str(tmp_path / "out"), "--resolution", "20000x20000"]) == 1
     assert "run_fit(): a fit of 2 20000x20000 view(s) needs about" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
@@ -108,10 +110,10 @@ def test_failed_allocations_are_reported_not_raised(tmp_path, capsys, monkeypatc
     def fail(*args, **kwargs):
         raise RuntimeError("Failed to allocate 8000000000 bytes on device 'cpu'")
 
-    monkeypatch.setattr(render, "rasterize", fail)
+    monkeypatch.setattr(render, "gbuffer_tiles", fail)
     assert main(["--out", str(tmp_path / "out"), *SMALL]) == 1
     assert capsys.readouterr().err.strip() == "warptex: error: out of memory: Failed to allocate 8000000000 bytes on device 'cpu'"
-    monkeypatch.setattr(render, "rasterize", lambda *a, **k: (_ for _ in ()).throw(RuntimeError("a bug")))
+    monkeypatch.setattr(render, "gbuffer_tiles", lambda *a, **k: (_ for _ in ()).throw(RuntimeError("a bug")))
     with pytest.raises(RuntimeError, match="a bug"):  # anything else is a bug and keeps its traceback
         main(["--out", str(tmp_path / "out"), *SMALL])
 
@@ -159,7 +161,7 @@ def test_ctrl_c_is_one_line_exit_130_and_keeps_the_previous_files(tmp_path, caps
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(render, "save_gbuffer", interrupted)  # the last file: the others are written by then
+    monkeypatch.setattr(render.GBufferWriter, "write", interrupted)  # the last file of the first band: the others have rows by then
     assert main(["--out", str(tmp_path), "--seed", "5", *SMALL]) == 130
     captured = capsys.readouterr()
     assert captured.err.strip() == "warptex: interrupted; no files were written" and "wrote" not in captured.out
@@ -198,7 +200,7 @@ def test_output_set_moves_files_only_when_all_are_written(tmp_path):
 def test_an_output_folder_that_is_a_file_is_refused_before_the_work(tmp_path, capsys, monkeypatch):
     import warptex.apps.render as render
 
-    monkeypatch.setattr(render, "rasterize", None)  # would fail if the render started
+    monkeypatch.setattr(render, "gbuffer_tiles", None)  # would fail if the render started
     (tmp_path / "out").write_text("a file")
     assert main(["--out", str(tmp_path / "out"), *SMALL]) == 1
     assert capsys.readouterr().err.strip() == f"warptex: error: run_render(): the output folder {str(tmp_path / 'out')!r} is a file"
@@ -237,8 +239,8 @@ def test_a_top_down_view_and_an_eye_typed_with_a_space(tmp_path, monkeypatch):
     import warptex.apps.render as render
 
     cameras = []
-    real = render.rasterize
-    monkeypatch.setattr(render, "rasterize", lambda mesh, camera, **kw: cameras.append(camera) or real(mesh, camera, **kw))
+    real = render.gbuffer_tiles
+    monkeypatch.setattr(render, "gbuffer_tiles", lambda mesh, camera, **kw: cameras.append(camera) or real(mesh, camera, **kw))
     assert main(["--out", str(tmp_path / "top"), "--eye", "0,10,0", "--target", "0,0,0", *SMALL]) == 0
     np.testing.assert_allclose(cameras[-1].up, [0, 0, -1], atol=1e-12)
     assert main(["render", "--out", str(tmp_path / "space"), "--eye", "-30,25,40", "--target", "-1.5,0,0", *SMALL]) == 0
@@ -267,3 +269,46 @@ def test_the_layer_of_an_exr_texture_is_chosen_on_the_command_line(tmp_path, cap
     albedo = io.read_image(tmp_path / "out" / "albedo.png")
     centre = albedo[12, 16]
     np.testing.assert_allclose(centre, 0.1, atol=0.01)
+
+
+@pytest.mark.parametrize("command, delays", [
+    (["render", "--resolution", "256x256", "--samples", "16"], (0.3, 0.6, 1.5, 4.0)),
+    (["bake", "--size", "512", "--out", "{out}/asset.glb"], (0.4, 3.0)),
+    (["fit", "--iters", "40", "--resolution", "64x96"], (0.4, 3.0)),
+])
+def test_ctrl_c_at_any_moment_is_one_line_exit_130_within_5_s(tmp_path, command, delays):
+    """SIGINT to ``warptex`` while it starts (its imports: Python's own start-up, the first ~60 ms,
+    comes before any of warptex's code), prepares or works: the one line, exit status 130 within
+    5 s, and the folder's previous files as they were."""
+    import signal
+    import time
+
+    out = tmp_path / "out"
+    out.mkdir()
+    before = {name: name.encode() * 100 for name in ("render.png", "asset.glb", "summary.json")}
+    for name, data in before.items():
+        (out / name).write_bytes(data)
+    subprocess.run([sys.executable, "-m", "warptex", "--version"], cwd=ROOT, capture_output=True, check=True)  # byte-compiled
+    command = [c.replace("{out}", str(out)) for c in command]
+    if "--out" not in command:
+        command += ["--out", str(out)]
+    for delay in delays:
+        child = subprocess.Popen([sys.executable, "-m", "warptex", *command], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                 preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        time.sleep(delay)
+        sent = time.perf_counter()
+        child.send_signal(signal.SIGINT)
+        _, err = child.communicate(timeout=60)
+        waited = time.perf_counter() - sent
+        if child.returncode == 0:  # finished before the signal: nothing to check at this moment
+            before = {p.name: p.read_bytes() for p in out.iterdir()}
+            continue
+        assert child.returncode == 130, (delay, child.returncode, err[-2000:])
+        assert waited < 5.0, f"exit {waited:.1f} s after Ctrl-C ({delay} s in)"
+        after = {p.name: p.read_bytes() for p in out.iterdir()}
+        if err.strip() == "warptex: interrupted; its files were written before it":  # the signal came as they were renamed
+            assert set(after) >= set(before) and after != before, delay
+            before = after
+        else:
+            assert err.strip() == "warptex: interrupted; no files were written", (delay, err[-2000:])
+            assert after == before, f"the previous files changed ({delay} s in)"

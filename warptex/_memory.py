@@ -88,6 +88,30 @@ def _free(address: int, nbytes: int) -> None:
     wp.get_device("cpu").get_allocator().deallocate(address, nbytes)
 
 
+def trim() -> None:
+    """Give the C heap's free pages back to the system (glibc's ``malloc_trim``; nothing elsewhere).
+
+    A tiled job frees a tile's NumPy arrays before it makes the next one's. glibc serves blocks
+    below its mmap threshold from the heap, raises that threshold each time it frees a larger
+    mapped block, and returns freed heap memory only from the heap's top, so without this a job's
+    resident memory grew by a third of a tile's over its first tiles (measured: 464 MB between
+    tiles with it, 600-700 MB without, ``warptex render`` at 2048²)."""
+    if _malloc_trim is not None:
+        _malloc_trim(0)
+
+
+def _libc_malloc_trim():
+    try:
+        import ctypes
+
+        return ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):  # not glibc
+        return None
+
+
+_malloc_trim = _libc_malloc_trim()
+
+
 def _after_fork() -> None:  # a lock held by another thread at the fork would never be released in the child
     global _lock
     _lock = threading.Lock()

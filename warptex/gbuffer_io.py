@@ -67,11 +67,18 @@ _BLENDER_PASSES = {"Position", "Normal", "UV", "Depth", "Combined", "Image", "Al
 
 def save_gbuffer(path: str | os.PathLike, gbuffer: GBuffer) -> None:
     """Write ``gbuffer`` to a float32 multi-channel EXR (channel names in the module docstring), atomically."""
-    if not isinstance(gbuffer, GBuffer):
-        raise TypeError(f"save_gbuffer(): gbuffer must be a GBuffer, got {type(gbuffer).__name__}")
     func = "save_gbuffer"
+    if not isinstance(gbuffer, GBuffer):
+        raise TypeError(f"{func}(): gbuffer must be a GBuffer, got {type(gbuffer).__name__}")
     if gbuffer.num_views is not None:
         raise ValueError(f"{func}(): the G-buffer is a batch of {gbuffer.num_views} views; save one at a time (gbuffer.view(k))")
+    channels = gbuffer_channels(func, gbuffer)
+    with _named(func), GBufferWriter(path, *gbuffer.resolution, uv_sets=list(gbuffer.uv_sets), origin=gbuffer.origin, samples=gbuffer.samples) as writer:
+        writer.write(gbuffer, channels)
+
+
+def gbuffer_channels(func: str, gbuffer: GBuffer) -> dict[str, np.ndarray]:
+    """``{channel name: (H, W) float32}`` of an ``(H, W)`` G-buffer, as :func:`save_gbuffer` names them."""
     channels = {}
     h, w = gbuffer.resolution
 
@@ -87,8 +94,36 @@ def save_gbuffer(path: str | os.PathLike, gbuffer: GBuffer) -> None:
     for set_name, arrays in gbuffer.uv_sets.items():
         for name, suffixes in _UV_NAMES.items():
             put(f"{set_name} {name}", [f"{set_name}.{s}" for s in suffixes], arrays[name].numpy())
-    with _named(func):
-        io.write_exr(path, channels, attributes={ORIGIN_ATTRIBUTE: np.asarray(gbuffer.origin, np.float64), SAMPLES_ATTRIBUTE: int(gbuffer.samples)})
+    return channels
+
+
+class GBufferWriter:
+    """:func:`save_gbuffer` band by band, for an image rasterised in tiles (:mod:`warptex.tiles`):
+    :meth:`write` takes the G-buffer of the next rows. A context manager: the file appears when
+    every row is written, and not at all on an error.
+
+    Args:
+        path: the ``.exr`` to write.
+        height, width: the whole image's size.
+        uv_sets: the names of the G-buffers' UV sets. origin, samples: as the G-buffers have them.
+    """
+
+    def __init__(self, path, height: int, width: int, *, uv_sets, origin, samples: int = 1):
+        names = [n for field in FIELDS for n in _NAMES[field]] + [f"{s}.{x}" for s in uv_sets for suffixes in _UV_NAMES.values() for x in suffixes]
+        attributes = {ORIGIN_ATTRIBUTE: np.asarray(origin, np.float64), SAMPLES_ATTRIBUTE: int(samples)}
+        self._names = names
+        self._writer = io.ExrWriter(path, height, width, names, attributes=attributes)
+
+    def write(self, gbuffer: GBuffer, channels: dict | None = None) -> None:
+        """Append the rows of ``gbuffer`` (an ``(n, W)`` G-buffer of the image's next rows)."""
+        channels = gbuffer_channels("GBufferWriter.write", gbuffer) if channels is None else channels
+        self._writer.write({name: channels[name] for name in self._names})
+
+    def __enter__(self) -> "GBufferWriter":
+        return self
+
+    def __exit__(self, kind, error, trace) -> None:
+        self._writer.__exit__(kind, error, trace)
 
 
 def load_gbuffer(path: str | os.PathLike, *, layer: str | None = None, device=None) -> GBuffer:

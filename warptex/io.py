@@ -21,7 +21,7 @@ from PIL import Image
 
 from warptex._files import _as_image, _atomic_output, _checked_input_path, _checked_output_path, _fspath, process_alive  # noqa: F401 (re-exported)
 from warptex.exr import EXR_MAGIC, _read_exr, exr_attributes, exr_channel_names, exr_layers, read_exr
-from warptex.exr_writer import write_exr
+from warptex.exr_writer import ExrWriter, write_exr
 from warptex.png import PngWriter, codes
 
 __all__ = [
@@ -34,6 +34,8 @@ __all__ = [
     "exr_attributes",
     "write_png",
     "write_exr",
+    "PngWriter",
+    "ExrWriter",
 ]
 
 _REC709_LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)

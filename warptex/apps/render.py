@@ -14,6 +14,7 @@ import functools
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Callable
 
@@ -23,16 +24,20 @@ import warp as wp
 
 from warptex import io
 from warptex._compile import preload
+from warptex._memory import trim
 from warptex.kernels import splat as kl
 from warptex.kernels import raster as kr
 from warptex.kernels import sampling as ks
 from warptex.kernels import triplanar as kt
 from warptex.camera import checked_resolution, look_at
-from warptex.gbuffer import GBuffer, load_mesh, rasterize
-from warptex.gbuffer_io import save_gbuffer
+from warptex.exr_writer import ExrWriter
+from warptex.gbuffer import GBuffer, load_mesh
+from warptex.gbuffer_io import GBufferWriter
+from warptex.png import PngWriter
 from warptex.resolve import resolve
 from warptex.sampling import sample
 from warptex._output import check_memory, check_output_folder, output_set
+from warptex.tiles import SAMPLE_BYTES, checked_memory, gbuffer_tiles
 from warptex.apps.shade import SKY, sun_and_sky, to_rgb
 from warptex.scenes import TERRAIN_GRID, terrain_camera
 from warptex.scenes import framing_camera as default_camera
@@ -44,21 +49,21 @@ from warptex.scenes.material import LAYER_NAMES, noise_texture, terrain_layers, 
 from warptex.triplanar import triplanar
 
 
-#: Peak memory of a render, measured (peak RSS, 512² to 2048²): ~200 MB plus ~260 B per sample
-#: (G-buffer, mip chains, images); with a margin.
-RENDER_BYTES = (300e6, 320.0)
+#: Memory of a render beside its bands, measured (peak RSS of a 64² render, the default terrain):
+#: Python, Warp, the compiled kernels, the mesh and its textures; with a margin.
+RENDER_BASE_BYTES = 400e6
 #: Samples per pixel of a render (2 × 2, stratified): anti-aliased silhouettes and texture detail
 #: with the cold start of ``warptex render`` inside 10 s on two cores.
 DEFAULT_SAMPLES = 4
 
 
-def _albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, texture: Texture, tiling: float, sampler: Sampler, device) -> np.ndarray:
+def _albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, *, texture: Texture, tiling: float, sampler: Sampler, device) -> np.ndarray:
     """The material colour: UV0 × tiling when the mesh has UVs, else triplanar with ``tiling``
     repeats across the mesh's largest extent."""
     if "uv0" in gbuffer.uv_sets:
         uv, uv_dx, uv_dy = (np.ascontiguousarray(gbuffer.uv_sets["uv0"][k].numpy() * tiling, np.float32) for k in ("uv", "uv_dx", "uv_dy"))
-        return to_rgb(sample(texture, uv, uv_dx=uv_dx, uv_dy=uv_dy, sampler=sampler, device=device))
-    return to_rgb(triplanar_material(mesh, texture, tiling, sampler, device)(gbuffer))
+        return sample(texture, uv, uv_dx=uv_dx, uv_dy=uv_dy, sampler=sampler, device=device)
+    return triplanar_material(mesh, texture, tiling, sampler, device)(gbuffer)
 
 
 def triplanar_material(mesh: trimesh.Trimesh, texture: Texture, tiling: float, sampler: Sampler, device, technique=triplanar) -> Callable[[GBuffer], wp.array]:
@@ -137,10 +142,15 @@ def run_render(
     seed: int = 0,
     samples: int = DEFAULT_SAMPLES,
     filter: Filter | str = Filter.ANISOTROPIC,
+    memory: int | None = None,
     progress: bool | None = None,
     device=None,
 ) -> list[Path]:
     """Render a mesh and write ``render.png``, ``albedo.png``, ``normals.png``, ``render.exr`` and ``gbuffer.exr``.
+
+    The image is made in bands of rows (:func:`warptex.gbuffer_tiles`), each rasterised, textured,
+    lit, resolved and written before the next, so memory stays near ``memory`` whatever the
+    resolution; the pixels are the same bits at any band height.
 
     Args:
         out_dir: output folder (created if missing).
@@ -163,29 +173,34 @@ def run_render(
             per pixel (its centre), the size of the images.
         filter: the texture filter (:class:`~warptex.Filter`); default anisotropic, which keeps
             surfaces seen at grazing angles (the distant terrain) sharp where trilinear blurs them.
+        memory: bytes a band's work may take (default :data:`warptex.tiles.DEFAULT_MEMORY`,
+            256 MiB); the job takes about this plus the textures and ~300 MB of code.
         progress: show a progress bar (``None``: only on a terminal).
         device: Warp device.
 
     Returns:
         The paths written.
     """
-    from tqdm import tqdm  # a progress bar over the stages: the first run compiles kernels for seconds
+    from tqdm import tqdm  # a progress bar over the rows: the first run also compiles kernels for seconds
 
-    check_output_folder("run_render", out_dir)
+    func = "run_render"
+    check_output_folder(func, out_dir)
     if texture_layer is not None and texture_path is None:
-        raise ValueError(f"run_render(): texture_layer={texture_layer!r} names a layer of the texture file, but no texture_path is given")
+        raise ValueError(f"{func}(): texture_layer={texture_layer!r} names a layer of the texture file, but no texture_path is given")
     sampler = Sampler(filter=filter)
-    h, w = resolution = checked_resolution("run_render", resolution)
+    h, w = resolution = checked_resolution(func, resolution)
     if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1 or math.isqrt(int(samples)) ** 2 != samples:
-        raise ValueError(f"run_render(): samples must be a square number of samples per pixel (1, 4, 9, 16, ...), got {samples!r}")
-    check_memory("run_render", f"a {h}x{w} render of {samples} samples per pixel", RENDER_BYTES[0] + RENDER_BYTES[1] * h * w * samples, hint="use a smaller resolution or fewer samples")
+        raise ValueError(f"{func}(): samples must be a square number of samples per pixel (1, 4, 9, 16, ...), got {samples!r}")
+    memory = checked_memory(func, memory)
+    band = min(memory, SAMPLE_BYTES * samples * h * w)
+    check_memory(func, f"a {h}x{w} render of {samples} samples per pixel", RENDER_BASE_BYTES + band, hint="use a smaller --memory")
     if tiling is not None and not (np.isfinite(tiling) and tiling > 0):
-        raise ValueError(f"run_render(): tiling must be a finite number > 0, got {tiling!r}")
-    stages = tqdm(total=5, desc="render", unit="stage", disable=False if progress else None if progress is None else True)
+        raise ValueError(f"{func}(): tiling must be a finite number > 0, got {tiling!r}")
+    bar = tqdm(total=h, desc="render", unit="row", disable=False if progress else None if progress is None else True)
     is_terrain = mesh_path is None and texture_path is None
-    stages.set_postfix_str("kernels")
+    bar.set_postfix_str("kernels")
     preload(_kernels(is_terrain, device), device)  # a cold start compiles them side by side
-    stages.set_postfix_str("mesh")
+    bar.set_postfix_str("mesh")
     mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
     framing = terrain_camera(resolution, fov_y) if mesh_path is None else default_camera(mesh, resolution, fov_y)
     if eye is None and target is None and up is None:
@@ -194,46 +209,53 @@ def run_render(
         eye = framing.eye if eye is None else eye
         target = mesh.bounds.mean(axis=0) if target is None else target
         camera = look_at(eye, target, up, fov_y=fov_y, resolution=resolution)
-    stages.update()
 
-    stages.set_postfix_str("rasterise")
-    with ThreadPoolExecutor(1) as pool:  # the material's NumPy beside the rasteriser's kernel (both release the GIL)
-        material = pool.submit(terrain_textures, mesh, seed, device) if is_terrain else None
+    bar.set_postfix_str("textures")
+    with ThreadPoolExecutor(1) as pool:  # the material's NumPy beside the rasteriser's BVH (both release the GIL)
+        textures = pool.submit(terrain_textures, mesh, seed, device) if is_terrain else None
         shaded = _smooth_normals(mesh) if mesh_path is None else mesh  # the splat rules keep the terrain's own normals
-        g = rasterize(shaded, camera, samples=samples, device=device)
-        material = material.result() if material is not None else None
-    stages.update()
-
-    stages.set_postfix_str("texture")
+        tiles = gbuffer_tiles(shaded, camera, samples=samples, memory=memory, device=device)
+        textures = textures.result() if textures is not None else None
     if is_terrain:
-        albedo = to_rgb(terrain_material(mesh, tiling, seed, sampler, device, textures=material)(g))
+        material = terrain_material(mesh, tiling, seed, sampler, device, textures=textures)
     else:
         embedded = _embedded_texture(mesh) if texture_path is None else None
         image = io.read_image(texture_path, layer=texture_layer) if texture_path is not None else embedded if embedded is not None else noise_texture(seed=seed)
         tiling = (1.0 if embedded is not None else 8.0) if tiling is None else float(tiling)
-        albedo = _albedo(mesh, g, Texture(image, device=device), tiling, sampler, device)
-    stages.update()
+        material = functools.partial(_albedo, mesh, texture=Texture(image, device=device), tiling=tiling, sampler=sampler, device=device)
 
-    stages.set_postfix_str("shade")
+    names = ["render.png", "albedo.png", "normals.png", "render.exr", "gbuffer.exr"]
+    bar.set_postfix_str("")
+    with output_set(out_dir) as staging, ExitStack() as files:  # all five files appear together, or none do
+        colour = [files.enter_context(PngWriter(staging / n, h, w, 3, data=n == "normals.png")) for n in names[:3]]
+        linear = files.enter_context(ExrWriter(staging / names[3], h, w, ("R", "G", "B", "A")))
+        centres = None
+        for tile in tiles:
+            lit, albedo, normal, alpha = _shaded_pixels(tile.gbuffer, material, samples, device)
+            colour[0].write(lit + (1.0 - alpha) * SKY)
+            colour[1].write(albedo + (1.0 - alpha) * SKY)
+            colour[2].write(normal)  # over black
+            # premultiplied linear RGBA, alpha the pixel's coverage: the sky is transparent black, so it composites over anything
+            linear.write(np.concatenate([lit, alpha], axis=-1))
+            centre = tile.gbuffer if samples == 1 else tile.rasterize(1)  # gbuffer.exr: one sample per pixel
+            if centres is None:
+                centres = files.enter_context(GBufferWriter(staging / names[4], h, w, uv_sets=list(centre.uv_sets), origin=centre.origin))
+            centres.write(centre)
+            bar.update(tile.rows.stop - tile.rows.start)
+            del tile, centre, lit, albedo, normal, alpha  # before the next tile is made: one tile's arrays at a time
+            trim()
+    bar.close()
+    return [Path(out_dir) / name for name in names]
+
+
+def _shaded_pixels(g: GBuffer, material: Callable[[GBuffer], wp.array], samples: int, device) -> tuple[np.ndarray, ...]:
+    """A tile's lit colour, albedo and normals (premultiplied by coverage) and its coverage, each
+    ``(rows, W, C)``: its samples textured, lit by the sun and the sky, and resolved to pixels."""
+    albedo = to_rgb(material(g))
     lit = sun_and_sky(g, albedo)
     # Premultiplied samples (0 where the mesh is missed), resolved to pixels in one launch:
     # colours whose alpha is the pixel's coverage, so silhouettes blend with the sky.
     covered = g.mask.numpy()[..., None]
     normal = g.normal.numpy() * 0.5 + 0.5
     pixels = resolve(np.concatenate([lit * covered, albedo * covered, normal * covered, covered], axis=-1), samples, device=device).numpy()
-    lit, albedo, normal, alpha = pixels[..., 0:3], pixels[..., 3:6], pixels[..., 6:9], pixels[..., 9:10]
-    centre = g if samples == 1 else rasterize(shaded, camera, device=device)  # gbuffer.exr: one sample per pixel
-    stages.update()
-
-    stages.set_postfix_str("write")
-    names = ["render.png", "albedo.png", "normals.png", "render.exr", "gbuffer.exr"]
-    with output_set(out_dir) as staging:  # all five files appear together, or none do
-        io.write_png(staging / names[0], lit + (1.0 - alpha) * SKY)
-        io.write_png(staging / names[1], albedo + (1.0 - alpha) * SKY)
-        io.write_png(staging / names[2], normal, data=True)  # over black
-        # premultiplied linear RGBA, alpha the pixel's coverage: the sky is transparent black, so it composites over anything
-        io.write_exr(staging / names[3], np.concatenate([lit, alpha], axis=-1))
-        save_gbuffer(staging / names[4], centre)
-    stages.update()
-    stages.close()
-    return [Path(out_dir) / name for name in names]
+    return pixels[..., 0:3], pixels[..., 3:6], pixels[..., 6:9], pixels[..., 9:10]
