@@ -25,15 +25,17 @@ FAR = wp.constant(1.0e30)
 @wp.kernel(enable_backward=False, module=MODULE)
 def chart_kernel(uv_mesh: wp.uint64, face_ids: wp.array(dtype=wp.int32), view: CameraView, triangle: wp.array2d(dtype=wp.int32), seed: wp.array2d(dtype=wp.int32)):
     """The atlas triangle under each texel centre (``face_ids[hit]``, -1 for none); covered texels
-    are their own jump-flood seed (``row * W + col``), the others -1."""
+    are their own jump-flood seed (``row * W + col``, ``row`` the atlas row ``view.first_row +``
+    the launch row), the others -1."""
     row, col = wp.tid()
-    o, d, do_dx, do_dy, dd_dx, dd_dy = primary_ray(view, row, col)
+    atlas_row = view.first_row + row
+    o, d, do_dx, do_dy, dd_dx, dd_dy = primary_ray(view, atlas_row, col)
     hit = wp.mesh_query_ray(uv_mesh, o, d, 2.0)
     f = wp.int32(-1)
     s = wp.int32(-1)
     if hit.result:
         f = face_ids[hit.face]
-        s = row * view.width + col
+        s = atlas_row * view.width + col
     triangle[row, col] = f
     seed[row, col] = s
 
@@ -49,21 +51,22 @@ def seed_distance2(row: wp.int32, col: wp.int32, s: wp.int32, width: wp.int32) -
 
 
 @wp.kernel(enable_backward=False, module=MODULE)
-def flood_kernel(seed_in: wp.array2d(dtype=wp.int32), step: wp.int32, seed_out: wp.array2d(dtype=wp.int32)):
-    """One jump-flooding pass (Rong and Tan 2006): each texel keeps the nearest of its own seed
-    and the seeds of the 8 texels ``step`` away."""
+def flood_kernel(seed_in: wp.array2d(dtype=wp.int32), step: wp.int32, first_row: wp.int32, seed_out: wp.array2d(dtype=wp.int32)):
+    """One jump-flooding pass (Rong and Tan 2006) over a band of atlas rows (row 0 of the arrays is
+    atlas row ``first_row``): each texel keeps the nearest of its own seed and the seeds of the 8
+    texels ``step`` away that the band holds."""
     row, col = wp.tid()
     height = seed_in.shape[0]
     width = seed_in.shape[1]
     best = seed_in[row, col]
-    best_d = seed_distance2(row, col, best, width)
+    best_d = seed_distance2(first_row + row, col, best, width)
     for i in range(-1, 2):
         for j in range(-1, 2):
             r = row + i * step
             c = col + j * step
             if r >= 0 and r < height and c >= 0 and c < width:
                 s = seed_in[r, c]
-                d = seed_distance2(row, col, s, width)
+                d = seed_distance2(first_row + row, col, s, width)
                 if d < best_d:
                     best = s
                     best_d = d
@@ -91,6 +94,9 @@ def surface_kernel(
     chart: wp.array2d(dtype=wp.int32),
     seed: wp.array2d(dtype=wp.int32),
     gutter: float,
+    chart_row: wp.int32,
+    first_row: wp.int32,
+    height: wp.int32,
     position: wp.array2d(dtype=wp.vec3),
     normal: wp.array2d(dtype=wp.vec3),
     geometric_normal: wp.array2d(dtype=wp.vec3),
@@ -110,17 +116,20 @@ def surface_kernel(
     continue the edge's normal), the geometric normal is the face's, turned to the shading
     normal's side; ``position_dx``/``position_dy`` are ``dp/du / W`` and ``-dp/dv / H`` (one texel
     right, one texel down). Outputs of texels without a triangle are left as the caller wrote them.
+
+    The outputs are a band of the atlas's ``height`` rows, from row ``first_row`` on; ``chart`` and
+    ``seed`` hold the rows from ``chart_row`` on: the band's and those within ``gutter`` of it.
     """
     row, col = wp.tid()
-    height = chart.shape[0]
     width = chart.shape[1]
-    f = chart[row, col]
+    atlas_row = first_row + row
+    f = chart[atlas_row - chart_row, col]
     covered = 1.0
     if f < 0:
         covered = 0.0
-        s = seed[row, col]
-        if s >= 0 and seed_distance2(row, col, s, width) <= gutter * gutter:
-            f = chart[s / width, s % width]
+        s = seed[atlas_row - chart_row, col]
+        if s >= 0 and seed_distance2(atlas_row, col, s, width) <= gutter * gutter:
+            f = chart[s / width - chart_row, s % width]
     if f >= 0:
         i = indices[3 * f]
         j = indices[3 * f + 1]
@@ -128,7 +137,7 @@ def surface_kernel(
         ta = corner_uvs[3 * f]
         tb = corner_uvs[3 * f + 1]
         tc = corner_uvs[3 * f + 2]
-        uv = wp.vec2((float(col) + 0.5) / float(width), 1.0 - (float(row) + 0.5) / float(height))
+        uv = wp.vec2((float(col) + 0.5) / float(width), 1.0 - (float(atlas_row) + 0.5) / float(height))
         b = uv_barycentric(uv, ta, tb, tc)
         e1 = points[j] - points[i]
         e2 = points[k] - points[i]

@@ -274,8 +274,12 @@ def test_bad_input_is_reported_before_any_work(no_work, monkeypatch):
     with pytest.raises(TypeError, match=r"bake\(\): technique must be a function of a G-buffer"):
         wt.bake(mesh, texture)
     monkeypatch.setattr(sys.modules["warptex._output"], "_available_memory", lambda: 2 * 2**30)
-    with pytest.raises(MemoryError, match=r"bake\(\): a 8192x8192 bake needs about .* GiB of memory, but 2.0 GiB is available"):
+    with pytest.raises(MemoryError, match=r"bake\(\): a 8192x8192 bake needs about .* GiB of memory, but 2.0 GiB is available; use a smaller size, or warptex.bake_gltf"):
         wt.bake(mesh, colour, size=8192)
+    with pytest.raises(MemoryError, match=r"bake_gltf\(\): a 8192x8192 bake needs about 4.4 GiB .* use a smaller memory budget"):
+        wt.bake_gltf(mesh, "never.glb", colour, size=8192, memory=4 << 30)
+    with pytest.raises(ValueError, match=r"bake\(\): atlas must be one of 'auto', 'xatlas', 'projection', got 'lscm'"):
+        wt.bake(mesh, colour, atlas="lscm")
     monkeypatch.undo()
 
 
@@ -590,10 +594,14 @@ def test_warptex_bake_refuses_bad_options_before_any_work(argv, message, tmp_pat
     assert not list(tmp_path.iterdir())
 
 
-def test_warptex_bake_refuses_a_size_past_memory(tmp_path, capsys, monkeypatch):
+def test_warptex_bake_refuses_a_memory_budget_past_memory(tmp_path, capsys, monkeypatch):
+    """warptex bake works in bands of at most --memory: an atlas of any size fits, a budget past
+    the machine's memory is refused before any work."""
     monkeypatch.setattr(sys.modules["warptex._output"], "_available_memory", lambda: 2 * 2**30)
-    assert cli_main(["bake", "--size", "16384", "--out", str(tmp_path / "a.glb")]) == 1
-    assert "a 16384x16384 bake needs about" in capsys.readouterr().err and not list(tmp_path.iterdir())
+    assert cli_main(["bake", "--size", "16384", "--memory", "4GiB", "--out", str(tmp_path / "a.glb")]) == 1
+    err = capsys.readouterr().err
+    assert "run_bake(): a 16384x16384 bake needs about 4.4 GiB of memory, but 2.0 GiB is available; use a smaller --memory" in err, err
+    assert not list(tmp_path.iterdir())
     with pytest.raises(SystemExit):
         cli_main(["bake", "--size", "0"])
 

@@ -28,14 +28,18 @@ import warp as wp
 
 from warptex._output import check_memory
 from warptex._warp import paused_tape
+from warptex.raster import checked_rows
+from warptex.tiles import Tile, checked_memory, tile_rows
 from warptex.gbuffer import GBuffer, checked_geometry, gbuffer_device, load_mesh, mesh_uv_sets, vertex_normals, vertex_tangents
 from warptex.kernels import bake as kb
 from warptex.kernels import raster as kr
-from warptex.unwrap import ATLAS_FILL, UVLayout, bakeable_faces, checked_size, face_areas, unusable_reason, unwrap
+from warptex.unwrap import ATLAS_FILL, ATLAS_METHODS, UVLayout, bakeable_faces, checked_size, face_areas, unusable_reason, unwrap
 
 #: Peak memory of a bake, measured (peak RSS, bunny, 512² to 4096²): ~300 MB plus ~400 B per texel
 #: (texture-space G-buffer, the technique's outputs, PNG encoding); with a margin.
 BAKE_BYTES = (400e6, 520.0)
+#: What a tiled bake's work takes per texel of a band (:func:`texture_gbuffer_tiles`), measured.
+BAKE_TEXEL_BYTES = 400
 
 
 @dataclass
@@ -80,82 +84,133 @@ def default_gutter(mesh: trimesh.Trimesh, size: int, *, view_size: int = 512, uv
     return max(2, 2 ** (level + 1))
 
 
-def texture_gbuffer(layout: UVLayout, size: int, *, gutter: int = 8, device=None) -> tuple[GBuffer, wp.array]:
+def texture_gbuffer(layout: UVLayout, size: int, *, gutter: int = 8, rows=None, device=None) -> tuple[GBuffer, wp.array]:
     """The texture-space G-buffer of ``layout`` at ``size``² texels (module docstring).
 
     Args:
         layout: from :func:`~warptex.unwrap.unwrap`.
         size: texels per side.
         gutter: texels around the charts evaluated past their edges (``>= 0``).
+        rows: ``(start, stop)``: only those rows of the atlas, bit for bit as the whole atlas has
+            them (:func:`texture_gbuffer_tiles` cuts an atlas into such bands); ``None``: all.
         device: Warp device.
 
     Returns:
         ``(gbuffer, coverage)``: the :class:`~warptex.GBuffer` (``mask`` 1 on chart and gutter
         texels, ``depth`` 0 there; derivatives per texel step), and the ``(size, size)`` float32
-        chart coverage (0 in gutters).
+        chart coverage (0 in gutters); ``(stop - start, size)`` with ``rows``.
     """
-    func = "texture_gbuffer"
-    size = checked_size(func, size)
-    if isinstance(gutter, bool) or not isinstance(gutter, (int, np.integer)) or gutter < 0:
-        raise ValueError(f"{func}(): gutter must be an int >= 0 (texels), got {gutter!r}")
-    device = wp.get_device(device)
-    shape = (size, size)
-    faces = np.asarray(layout.faces, np.int64)
-    world = np.asarray(layout.vertices, np.float64)
-    face_ids = bakeable_faces(world, faces, layout.uv)
-    if len(face_ids) == 0:
-        raise ValueError(f"{func}(): no triangle has area both in the world and in the atlas")
+    space = TextureSpace("texture_gbuffer", layout, size, gutter, device)
+    return space.gbuffer(checked_rows("texture_gbuffer", rows, space.size))
 
-    uv_points = np.concatenate([layout.uv, np.zeros((len(layout.uv), 1))], axis=1).astype(np.float32)
-    bvh_points = wp.array(uv_points, dtype=wp.vec3, device=device)
-    bvh = wp.Mesh(points=bvh_points, indices=wp.array(faces[face_ids].reshape(-1).astype(np.int32), dtype=wp.int32, device=device))
-    view = kr.CameraView()
-    view.eye, view.forward, view.right, view.up = wp.vec3(0.5, 0.5, 1.0), wp.vec3(0.0, 0.0, -1.0), wp.vec3(1.0, 0.0, 0.0), wp.vec3(0.0, 1.0, 0.0)
-    view.half_x, view.half_y, view.height, view.width, view.orthographic = 0.5, 0.5, size, size, 1
-    chart = wp.empty(shape, dtype=wp.int32, device=device)
-    seed = wp.empty(shape, dtype=wp.int32, device=device)
-    launch = dict(device=device, record_tape=False)
-    wp.launch(kb.chart_kernel, dim=shape, inputs=[bvh.id, wp.array(face_ids.astype(np.int32), dtype=wp.int32, device=device), view], outputs=[chart, seed], **launch)
-    if gutter > 0:  # jump flooding: steps 2^k down to 1 reach any texel up to 2^(k+1) - 1 away
-        other = wp.empty_like(seed)
-        step = 1 << max(0, math.ceil(math.log2(gutter + 1)) - 1)
+
+def texture_gbuffer_tiles(layout: UVLayout, size: int, *, gutter: int = 8, memory: int | None = None, device=None):
+    """The texture-space G-buffer of ``layout`` (:func:`texture_gbuffer`) in bands of rows whose
+    work takes at most ``memory`` bytes (default :data:`warptex.tiles.DEFAULT_MEMORY`), for bakes
+    larger than memory: each band's texels are the whole atlas's, bit for bit.
+
+    Every argument is checked, and the UV mesh's BVH built, before the first band is made.
+
+    Returns:
+        An iterator of tiles (:class:`~warptex.tiles.Tile`: ``rows``, ``gbuffer``, ``index``,
+        ``count``), each with its band's chart ``coverage``.
+    """
+    func = "texture_gbuffer_tiles"
+    memory = checked_memory(func, memory)
+    space = TextureSpace(func, layout, size, gutter, device)
+    bands = tile_rows(space.size, BAKE_TEXEL_BYTES * space.size, memory)
+    return _tiles(space, bands)
+
+
+def _tiles(space: "TextureSpace", bands: list[tuple[int, int]]):
+    for k, rows in enumerate(bands):
+        g, coverage = space.gbuffer(rows)
+        yield Tile(slice(*rows), g, k, len(bands), coverage)
+
+
+class TextureSpace:
+    """An atlas ready to be evaluated band by band: the BVH of its UV triangles and the mesh's
+    arrays on a device, made once (``func`` names the caller in errors)."""
+
+    def __init__(self, func: str, layout: UVLayout, size: int, gutter: int, device):
+        self.size = checked_size(func, size)
+        if isinstance(gutter, bool) or not isinstance(gutter, (int, np.integer)) or gutter < 0:
+            raise ValueError(f"{func}(): gutter must be an int >= 0 (texels), got {gutter!r}")
+        self.gutter = int(gutter)
+        self.device = device = wp.get_device(device)
+        faces = np.asarray(layout.faces, np.int64)
+        world = np.asarray(layout.vertices, np.float64)
+        face_ids = bakeable_faces(world, faces, layout.uv)
+        if len(face_ids) == 0:
+            raise ValueError(f"{func}(): no triangle has area both in the world and in the atlas")
+        uv_points = np.concatenate([layout.uv, np.zeros((len(layout.uv), 1))], axis=1).astype(np.float32)
+        self._bvh_points = wp.array(uv_points, dtype=wp.vec3, device=device)
+        self._bvh = wp.Mesh(points=self._bvh_points, indices=wp.array(faces[face_ids].reshape(-1).astype(np.int32), dtype=wp.int32, device=device))
+        self._face_ids = wp.array(face_ids.astype(np.int32), dtype=wp.int32, device=device)
+        self._points = wp.array(world.astype(np.float32), dtype=wp.vec3, device=device)
+        self._indices = wp.array(faces.reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
+        self._corner_uvs = wp.array(layout.uv[faces].reshape(-1, 2).astype(np.float32), dtype=wp.vec2, device=device)
+        self._normals = wp.array(np.asarray(layout.normals, np.float32), dtype=wp.vec3, device=device)
+        # Every UV set is interpolated as the rasteriser does it (kernels.raster.uv_kernel), over the
+        # layout's vertices; the mesh's own sets with the tangents of the mesh's own topology, so that
+        # an atlas seam splits none of their tangents.
+        sets = mesh_uv_sets(layout.mesh) if layout.mesh is not None else {}
+        vertex_map = np.asarray(layout.vertex_map, np.int64)
+        jobs = [(name, uv[vertex_map], vertex_tangents(np.asarray(layout.mesh.vertices, np.float64), vertex_map[faces], vertex_normals(layout.mesh), uv)[vertex_map]) for name, uv in sets.items()]
+        jobs.append(("atlas", layout.uv, layout.tangents()))
+        self._uv_sets = {name: (wp.array(np.asarray(uv, np.float32), dtype=wp.vec2, device=device), wp.array(tangents, dtype=wp.vec4, device=device)) for name, uv, tangents in jobs}
+        # Jump flooding: steps 2^k down to 1 reach any texel up to 2^(k+1) - 1 away, and a texel's
+        # seed after them depends only on the texels that far from it: a band evaluated with that
+        # many rows more on each side (the halo) floods exactly as the whole atlas does.
+        self._steps = []
+        step = 1 << max(0, math.ceil(math.log2(self.gutter + 1)) - 1) if self.gutter > 0 else 0
         while step >= 1:
-            wp.launch(kb.flood_kernel, dim=shape, inputs=[seed, step], outputs=[other], **launch)
-            seed, other = other, seed
+            self._steps.append(step)
             step //= 2
+        self.halo = max(sum(self._steps), self.gutter)
 
-    sets = mesh_uv_sets(layout.mesh) if layout.mesh is not None else {}
-    g = GBuffer.empty(shape, uv_sets=[*sets, "atlas"], device=device)
-    barycentric = wp.zeros(shape, dtype=wp.vec3, device=device)
-    coverage = wp.zeros(shape, dtype=float, device=device)
-    points = wp.array(world.astype(np.float32), dtype=wp.vec3, device=device)
-    indices = wp.array(faces.reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
-    corner_uvs = wp.array(layout.uv[faces].reshape(-1, 2).astype(np.float32), dtype=wp.vec2, device=device)
-    normals = wp.array(np.asarray(layout.normals, np.float32), dtype=wp.vec3, device=device)
-    wp.launch(
-        kb.surface_kernel,
-        dim=shape,
-        inputs=[points, indices, corner_uvs, normals, chart, seed, float(gutter)],
-        outputs=[g.position, g.normal, g.geometric_normal, g.depth, g.mask, g.triangle, barycentric, g.position_dx, g.position_dy, coverage],
-        **launch,
-    )
-    # Every UV set is interpolated as the rasteriser does it (kernels.raster.uv_kernel), over the
-    # layout's vertices; the mesh's own sets with the tangents of the mesh's own topology, so that
-    # an atlas seam splits none of their tangents.
-    batched = [a.reshape((1, *shape)) for a in (g.triangle, barycentric, g.normal, g.position_dx, g.position_dy)]
-    vertex_map = np.asarray(layout.vertex_map, np.int64)
-    jobs = [(name, uv[vertex_map], vertex_tangents(np.asarray(layout.mesh.vertices, np.float64), vertex_map[faces], vertex_normals(layout.mesh), uv)[vertex_map]) for name, uv in sets.items()]
-    jobs.append(("atlas", layout.uv, layout.tangents()))
-    for name, uv, tangents in jobs:
-        out = g.uv_sets[name]
+    def gbuffer(self, rows: tuple[int, int]) -> tuple[GBuffer, wp.array]:
+        """``(gbuffer, coverage)`` of atlas rows ``rows`` (``(start, stop)``)."""
+        device, size = self.device, self.size
+        start, stop = rows
+        lo, hi = max(0, start - self.halo), min(size, stop + self.halo)  # the band and its halo
+        view = kr.CameraView()
+        view.eye, view.forward, view.right, view.up = wp.vec3(0.5, 0.5, 1.0), wp.vec3(0.0, 0.0, -1.0), wp.vec3(1.0, 0.0, 0.0), wp.vec3(0.0, 1.0, 0.0)
+        view.half_x, view.half_y, view.height, view.width, view.orthographic, view.strata, view.first_row = 0.5, 0.5, size, size, 1, 1, lo
+        chart = wp.empty((hi - lo, size), dtype=wp.int32, device=device)
+        seed = wp.empty((hi - lo, size), dtype=wp.int32, device=device)
+        launch = dict(device=device, record_tape=False)
+        wp.launch(kb.chart_kernel, dim=chart.shape, inputs=[self._bvh.id, self._face_ids, view], outputs=[chart, seed], **launch)
+        if self._steps:
+            other = wp.empty_like(seed)
+            for step in self._steps:
+                wp.launch(kb.flood_kernel, dim=seed.shape, inputs=[seed, step, lo], outputs=[other], **launch)
+                seed, other = other, seed
+            del other
+
+        shape = (stop - start, size)
+        g = GBuffer.empty(shape, uv_sets=[*self._uv_sets], device=device)
+        barycentric = wp.zeros(shape, dtype=wp.vec3, device=device)
+        coverage = wp.zeros(shape, dtype=float, device=device)
         wp.launch(
-            kr.uv_kernel,
-            dim=(1, *shape),
-            inputs=[points, indices, wp.array(np.asarray(uv, np.float32), dtype=wp.vec2, device=device), wp.array(tangents, dtype=wp.vec4, device=device), *batched],
-            outputs=[out[k].reshape((1, *shape)) for k in ("uv", "uv_dx", "uv_dy", "tangent")],
+            kb.surface_kernel,
+            dim=shape,
+            inputs=[self._points, self._indices, self._corner_uvs, self._normals, chart, seed, float(self.gutter), lo, start, size],
+            outputs=[g.position, g.normal, g.geometric_normal, g.depth, g.mask, g.triangle, barycentric, g.position_dx, g.position_dy, coverage],
             **launch,
         )
-    return g, coverage
+        del chart, seed
+        batched = [a.reshape((1, *shape)) for a in (g.triangle, barycentric, g.normal, g.position_dx, g.position_dy)]
+        for name, (uv, tangents) in self._uv_sets.items():
+            out = g.uv_sets[name]
+            wp.launch(
+                kr.uv_kernel,
+                dim=(1, *shape),
+                inputs=[self._points, self._indices, uv, tangents, *batched],
+                outputs=[out[k].reshape((1, *shape)) for k in ("uv", "uv_dx", "uv_dy", "tangent")],
+                **launch,
+            )
+        return g, coverage
 
 
 def tangent_space(gbuffer: GBuffer, normals: wp.array, *, uv_set: str = "atlas", to_world: bool = False, device=None) -> wp.array:
@@ -191,6 +246,7 @@ def bake(
     gutter: int | None = None,
     view_size: int = 512,
     force_atlas: bool = False,
+    atlas: str = "auto",
     device=None,
 ) -> Baked:
     """Bake a technique into textures of the mesh's UV atlas (its own UV0 when usable, else an
@@ -214,7 +270,9 @@ def bake(
             then meet midway, and background is left only farther than ``gutter`` from every chart.
         gutter: texels filled around each chart; default :func:`default_gutter` for ``view_size``.
         view_size: pixels across which the asset is meant to be seen whole (sets the default gutter).
-        force_atlas: make an xatlas atlas even when the mesh's UVs are usable.
+        force_atlas: make an atlas even when the mesh's UVs are usable.
+        atlas: how an atlas is made: ``"auto"``, ``"xatlas"`` or ``"projection"``
+            (:func:`~warptex.unwrap.unwrap`).
         device: Warp device.
 
     Returns:
@@ -226,6 +284,17 @@ def bake(
             xatlas cannot unwrap. MemoryError: a size past this machine's memory.
     """
     func = "bake"
+    layout, gutter, device = prepare_bake(func, mesh, technique, normal, size=size, padding=padding, gutter=gutter, view_size=view_size, force_atlas=force_atlas, atlas=atlas, device=device, needed=lambda n: BAKE_BYTES[0] + BAKE_BYTES[1] * n * n, hint="use a smaller size, or warptex.bake_gltf, which bakes in bands")
+    g, coverage = texture_gbuffer(layout, size, gutter=gutter, device=device)
+    color = technique(g) if technique is not None else None
+    normal_map = tangent_space(g, normal(g)) if normal is not None else None
+    return Baked(layout, g, coverage, color, normal_map, gutter)
+
+
+def prepare_bake(func: str, mesh, technique, normal, *, size, padding, gutter, view_size, force_atlas, atlas, device, needed: Callable[[int], float], hint: str) -> tuple[UVLayout, int, wp.context.Device]:
+    """What a bake checks and makes before its texels: ``(layout, gutter, device)``. Every
+    argument is checked (``needed(size)``: the bytes the bake will take, against what is
+    available) and the techniques tried on an empty G-buffer before the mesh is unwrapped."""
     mesh = load_mesh(mesh) if not isinstance(mesh, trimesh.Trimesh) else mesh
     checked_geometry(f"{func}():", mesh)
     size = checked_size(func, size)
@@ -238,7 +307,9 @@ def bake(
             raise TypeError(f"{func}(): {name} must be a function of a G-buffer (e.g. functools.partial(warptex.triplanar, ...)), got {type(f).__name__}")
     if technique is None and normal is None:
         raise ValueError(f"{func}(): nothing to bake: pass a technique, a normal technique or both")
-    check_memory(func, f"a {size}x{size} bake", BAKE_BYTES[0] + BAKE_BYTES[1] * size * size, device)
+    if atlas not in ATLAS_METHODS:
+        raise ValueError(f"{func}(): atlas must be one of {', '.join(map(repr, ATLAS_METHODS))}, got {atlas!r}")
+    check_memory(func, f"a {size}x{size} bake", needed(size), device, hint=hint)
     device = wp.get_device(device)
     uv_sets = mesh_uv_sets(mesh)
     _dry_run(func, technique, normal, uv_sets, device)
@@ -247,11 +318,8 @@ def bake(
     force_atlas = bool(force_atlas) or bool(unusable_reason(own, np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64), device=device))
     fill = ATLAS_FILL if force_atlas else max(float(face_areas(mesh.vertices, mesh.faces, own)[1].sum()), 1e-6)
     gutter = default_gutter(mesh, size, view_size=view_size, uv_fill=fill) if gutter is None else int(gutter)
-    layout = unwrap(mesh, size=size, padding=gutter if padding is None else int(padding), force_atlas=force_atlas, device=device)
-    g, coverage = texture_gbuffer(layout, size, gutter=gutter, device=device)
-    color = technique(g) if technique is not None else None
-    normal_map = tangent_space(g, normal(g)) if normal is not None else None
-    return Baked(layout, g, coverage, color, normal_map, gutter)
+    layout = unwrap(mesh, size=size, padding=gutter if padding is None else int(padding), force_atlas=force_atlas, atlas=atlas, device=device)
+    return layout, gutter, device
 
 
 def _dry_run(func: str, technique, normal, uv_sets: dict, device) -> None:

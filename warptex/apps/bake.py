@@ -2,10 +2,10 @@
 
 The mesh (the procedural terrain by default) gets the material ``render`` gives it, or the one the
 options name: one texture mapped triplanar or biplanar (optionally anti-tiled, with a normal map),
-or splat-blended layers. :func:`warptex.bake.bake` evaluates it over the texture-space G-buffer
-of the mesh's atlas (its own UV0 when usable, else xatlas), and :func:`warptex.gltf.export_gltf`
-writes ``asset.glb`` with ``asset_color.png`` (and ``asset_normal.png``, ``asset_alpha.png``)
-beside it, all at once.
+or splat-blended layers. :func:`warptex.bake_gltf` evaluates it over the texture-space G-buffer
+of the mesh's atlas (its own UV0 when usable, else xatlas), band by band, and writes
+``asset.glb`` with ``asset_color.png`` (and ``asset_normal.png``, ``asset_alpha.png``) beside it,
+all at once.
 """
 
 from __future__ import annotations
@@ -20,9 +20,10 @@ from warptex import io
 from warptex._compile import preload
 from warptex._output import check_memory, check_output_folder
 from warptex.apps.render import terrain_material, triplanar_material
-from warptex.bake import BAKE_BYTES, bake
+from warptex.bake import BAKE_BYTES, BAKE_TEXEL_BYTES
 from warptex.gbuffer import load_mesh
-from warptex.gltf import export_gltf
+from warptex.gltf import bake_gltf
+from warptex.tiles import checked_memory
 from warptex.kernels import bake as kb
 from warptex.kernels import splat as kl
 from warptex.kernels import raster as kr
@@ -87,6 +88,9 @@ def run_bake(
     tiling: float | None = None,
     seed: int = 0,
     filter: Filter | str = Filter.ANISOTROPIC,
+    atlas: str = "auto",
+    memory: int | None = None,
+    progress: bool | None = None,
     device=None,
 ) -> list[Path]:
     """Bake a mesh's texturing and write ``out_path`` (``.glb``) and its textures beside it.
@@ -105,7 +109,11 @@ def run_bake(
         size: atlas texels per side. padding, gutter: see :func:`warptex.bake.bake`.
         tiling: as for ``warptex render`` (texture repeats across the mesh's largest extent,
             default 8; layers: repeats per world unit, default 1/6).
-        seed: terrain and procedural texture seed. filter: the texture filter. device: Warp device.
+        seed: terrain and procedural texture seed. filter: the texture filter.
+        atlas: how a mesh without usable UVs is unwrapped (:func:`warptex.unwrap`).
+        memory: bytes a band of the atlas may take (:func:`warptex.bake_gltf`, which bakes in
+            bands: memory stays near this whatever the size). progress: a progress bar (``None``:
+            on a terminal). device: Warp device.
 
     Returns:
         The paths written, the GLB first.
@@ -117,7 +125,8 @@ def run_bake(
     check_output_folder(func, out_path.parent)
     technique = _choose_technique(func, technique, mesh_path, texture_path, layer_paths, splat_path, normal_map_path)
     size = checked_size(func, size)
-    check_memory(func, f"a {size}x{size} bake", BAKE_BYTES[0] + BAKE_BYTES[1] * size * size, device)
+    memory = checked_memory(func, memory)
+    check_memory(func, f"a {size}x{size} bake", BAKE_BYTES[0] + min(memory, BAKE_TEXEL_BYTES * size * size), device, hint="use a smaller --memory")
     if tiling is not None and not (np.isfinite(tiling) and tiling > 0):
         raise ValueError(f"{func}(): tiling must be a finite number > 0, got {tiling!r}")
     sampler = Sampler(filter=filter)
@@ -139,5 +148,4 @@ def run_bake(
             maps = Texture(io.read_image(normal_map_path, data=True, channels=3), device=device)
             normal = functools.partial(triplanar_normal, normal_map=maps, tiling=colour.keywords["tiling"], biplanar=technique == "biplanar", stochastic=stochastic, sampler=sampler, device=device)
     colour = functools.partial(colour, stochastic=stochastic) if stochastic else colour
-    baked = bake(mesh, colour, normal=normal, size=size, padding=padding, gutter=gutter, device=device)
-    return export_gltf(baked, out_path)
+    return bake_gltf(mesh, out_path, colour, normal=normal, size=size, padding=padding, gutter=gutter, atlas=atlas, memory=memory, progress=progress, device=device)
