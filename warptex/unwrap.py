@@ -5,18 +5,27 @@ triangles overlap in UV space (mirrored or stacked charts would have to share te
 triangle is tested against those whose bounds it meets (a BVH of the UV triangles, see
 :func:`warptex.kernels.bake.overlap_kernel`) with the separating-axis test, so triangles that only
 share an edge or a corner do not count. Otherwise the mesh is unwrapped by
-`xatlas <https://github.com/jpcy/xatlas>`_ into charts packed ``padding`` texels apart.
+`xatlas <https://github.com/jpcy/xatlas>`_ into charts packed ``padding`` texels apart, in a
+process of its own (``warptex._xatlas_child``: xatlas crashes on some meshes, and must not take
+the caller with it), or, for meshes too large for xatlas or where it crashed, into projected
+charts (:mod:`warptex.charts`).
 """
 
 from __future__ import annotations
 
 import math
+import os
+import signal
+import subprocess
+import sys
+import tempfile
 from dataclasses import dataclass
 
 import numpy as np
 import trimesh
 import warp as wp
 
+from warptex.charts import projected_atlas
 from warptex.gbuffer import checked_geometry, mesh_uv_sets, vertex_normals, vertex_tangents
 from warptex.kernels import bake as kb
 
@@ -27,7 +36,9 @@ OVERLAP_TOLERANCE = 2e-5
 # padding than asked: its packing fills 40-50% of the square before padding on the meshes tried, and
 # an atlas up to this much larger than the texture is scaled down into it without losing padding.
 ATLAS_FILL = 0.45
-PADDING_MARGIN = 1.15
+PADDING_MARGIN = 1.15  # also in warptex._xatlas_child
+#: The ways :func:`unwrap` makes an atlas.
+ATLAS_METHODS = ("auto", "xatlas", "projection")
 
 
 @dataclass
@@ -41,10 +52,12 @@ class UVLayout:
         normals: ``[V', 3]`` float64 unit vertex normals (the input mesh's; ``+z`` for a vertex of
             zero-area faces only, which has none).
         vertex_map: ``[V']`` int64, the input vertex each vertex comes from.
-        source: ``"mesh"`` (the mesh's own UV0) or ``"xatlas"``.
+        source: ``"mesh"`` (the mesh's own UV0), ``"xatlas"`` or ``"projection"`` (projected
+            charts, :mod:`warptex.charts`).
         reason: why the mesh's UVs were not used (``""`` when they were).
-        padding: texels between charts (xatlas), ``None`` for the mesh's own UVs.
+        padding: texels between charts (an atlas), ``None`` for the mesh's own UVs.
         mesh: the input mesh.
+        note: why projected charts rather than xatlas's (``""`` otherwise).
     """
 
     vertices: np.ndarray
@@ -56,6 +69,7 @@ class UVLayout:
     reason: str = ""
     padding: int | None = None
     mesh: trimesh.Trimesh | None = None
+    note: str = ""
 
     def trimesh(self) -> trimesh.Trimesh:
         """The layout as a ``trimesh.Trimesh`` with its normals and atlas UVs (no texture yet)."""
@@ -90,36 +104,58 @@ def unusable_reason(uv: np.ndarray | None, vertices: np.ndarray, faces: np.ndarr
     used = uv[np.unique(faces)]
     if used.min() < 0.0 or used.max() > 1.0:
         return f"its UVs leave the texture (they span [{used.min():.3g}, {used.max():.3g}], not inside [0, 1])"
-    ids = bakeable_faces(vertices, faces, uv)
-    if len(ids) == 0:
+    has_area = _has_area(vertices, faces)
+    if len(bakeable_faces(vertices, faces, uv)) == 0:
         return "every UV triangle has zero area"
+    found = overlapping_faces(uv, faces, has_area, device=device)
+    hits = np.flatnonzero(found >= 0)
+    if len(hits):
+        return f"its UV charts overlap ({len(hits)} triangles, e.g. faces {hits[0]} and {found[hits[0]]})"
+    return ""
+
+
+def overlapping_faces(uv: np.ndarray, faces: np.ndarray, has_area: np.ndarray, *, device=None) -> np.ndarray:
+    """For each face ``[F]``, a later face (by index) whose UV triangle overlaps its own by more
+    than :data:`OVERLAP_TOLERANCE`, or -1 (also for faces without world area, ``~has_area``, or
+    UV area, which hold no texel): a BVH of the UV triangles and the separating-axis test
+    (:func:`warptex.kernels.bake.overlap_kernel`)."""
+    _, texture = face_areas(np.zeros((len(uv), 3)), faces, uv)
+    ids = np.flatnonzero(has_area & (texture > 0))
+    found = np.full(len(faces), -1, np.int64)
+    if len(ids) == 0:
+        return found
     device = wp.get_device(device)
     points = wp.array(np.concatenate([uv, np.zeros((len(uv), 1))], axis=1).astype(np.float32), dtype=wp.vec3, device=device)
     indices = wp.array(faces[ids].reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
     bvh = wp.Mesh(points=points, indices=indices)
     overlaps = wp.empty(len(ids), dtype=wp.int32, device=device)
     wp.launch(kb.overlap_kernel, dim=len(ids), inputs=[bvh.id, points, indices, OVERLAP_TOLERANCE], outputs=[overlaps], device=device, record_tape=False)
-    found = overlaps.numpy()
-    hits = np.flatnonzero(found >= 0)
-    if len(hits):
-        return f"its UV charts overlap ({len(hits)} triangles, e.g. faces {ids[hits[0]]} and {ids[found[hits[0]]]})"
-    return ""
+    other = overlaps.numpy()
+    hit = other >= 0
+    found[ids[hit]] = ids[other[hit]]
+    return found
 
 
-def unwrap(mesh: trimesh.Trimesh, *, size: int = 2048, padding: int = 8, force_atlas: bool = False, device=None) -> UVLayout:
+def unwrap(mesh: trimesh.Trimesh, *, size: int = 2048, padding: int = 8, force_atlas: bool = False, atlas: str = "auto", device=None) -> UVLayout:
     """The UV layout to bake ``mesh`` into: its first UV set (``"uv0"``) when usable (see the
-    module docstring), else (or with ``force_atlas``) an automatic atlas from xatlas.
+    module docstring), else (or with ``force_atlas``) an automatic atlas.
 
     Args:
         mesh: a ``trimesh.Trimesh``.
         size: texels per side of the texture the atlas is made for.
-        padding: texels between xatlas's charts (the gutters live there), ``>= 0``.
+        padding: texels between the atlas's charts (the gutters live there), ``>= 0``.
         force_atlas: make an atlas even when the mesh's UVs are usable.
+        atlas: how an atlas is made: ``"xatlas"`` (few seams, little stretch; a minute for
+            80 000 faces), ``"projection"`` (charts projected along six axes,
+            :mod:`warptex.charts`: seconds for a million faces), or ``"auto"`` (default): xatlas
+            up to :data:`XATLAS_FACES` faces, and projected charts for larger meshes or where
+            xatlas crashes; ``UVLayout.source`` and ``UVLayout.note`` say which and why.
         device: Warp device for the overlap test.
 
     Raises:
-        TypeError, ValueError: a bad argument, or a mesh xatlas cannot unwrap (no triangle with
-            area, non-finite vertices, or xatlas leaving a triangle without UV area).
+        TypeError, ValueError: a bad argument, or a mesh that cannot be unwrapped (no triangle
+            with area, non-finite vertices, xatlas leaving a triangle without UV area, charts
+            that do not fit ``size`` with ``padding``).
     """
     func = "unwrap"
     if not isinstance(mesh, trimesh.Trimesh):
@@ -127,6 +163,8 @@ def unwrap(mesh: trimesh.Trimesh, *, size: int = 2048, padding: int = 8, force_a
     size = checked_size(func, size)
     if isinstance(padding, bool) or not isinstance(padding, (int, np.integer)) or padding < 0:
         raise ValueError(f"{func}(): padding must be an int >= 0 (texels between charts), got {padding!r}")
+    if atlas not in ATLAS_METHODS:
+        raise ValueError(f"{func}(): atlas must be one of {', '.join(map(repr, ATLAS_METHODS))}, got {atlas!r}")
     vertices, faces = checked_geometry(f"{func}():", mesh)
     normals = vertex_normals(mesh)
     # A vertex of zero-area faces only has no normal; glTF wants unit ones, and no face with area
@@ -136,8 +174,8 @@ def unwrap(mesh: trimesh.Trimesh, *, size: int = 2048, padding: int = 8, force_a
     if not reason:
         uv = mesh_uv_sets(mesh)["uv0"]
         return UVLayout(vertices, faces, uv, normals, np.arange(len(vertices)), "mesh", mesh=mesh)
-    vertex_map, new_faces, uv = _xatlas(func, vertices, faces, size, int(padding))
-    return UVLayout(vertices[vertex_map], new_faces, uv, normals[vertex_map], vertex_map, "xatlas", reason, int(padding), mesh)
+    vertex_map, new_faces, uv, source, note = _atlas(func, vertices, faces, size, int(padding), atlas, device)
+    return UVLayout(vertices[vertex_map], new_faces, uv, normals[vertex_map], vertex_map, source, reason, int(padding), mesh, note)
 
 
 def face_areas(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
@@ -151,6 +189,12 @@ def face_areas(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = 
     return world, 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
 
 
+def _has_area(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``[F]`` bool: the faces with world area (beyond rounding: 1e-12 of the largest)."""
+    world, _ = face_areas(vertices, faces)
+    return world > 1e-12 * max(world.max(), 1e-300)
+
+
 def bakeable_faces(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """Indices of the faces with area both in the world and in UV space: the others hold no texel
     (no UV area) or no surface (no world area: no normal, no Jacobian)."""
@@ -158,10 +202,48 @@ def bakeable_faces(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray) -> n
     return np.flatnonzero((world > 1e-12 * max(world.max(), 1e-300)) & (texture > 0))
 
 
-def _xatlas(func: str, vertices: np.ndarray, faces: np.ndarray, size: int, padding: int):
-    """xatlas's atlas of the mesh scaled into a ``size``² texture: ``(vertex_map, faces, uv)``."""
+#: Meshes of more faces get projected charts (:mod:`warptex.charts`) rather than xatlas's: xatlas
+#: took 55 s for 81 920 faces here (a noisy icosphere) and longer than linearly for more; the
+#: projected atlas of a million faces takes seconds.
+XATLAS_FACES = 50_000
+#: The longest xatlas may take (seconds) before a bake falls back to projected charts.
+XATLAS_TIMEOUT = 600.0
+#: The script that runs xatlas, in a process of its own.
+_CHILD = os.path.join(os.path.dirname(os.path.abspath(__file__)), "_xatlas_child.py")
+
+
+def _atlas(func: str, vertices: np.ndarray, faces: np.ndarray, size: int, padding: int, method: str, device) -> tuple[np.ndarray, np.ndarray, np.ndarray, str, str]:
+    """``(vertex_map, faces, uv, source, note)``: xatlas's atlas or projected charts, as
+    ``method`` says (``"auto"``: xatlas up to :data:`XATLAS_FACES` faces), and why the projected
+    charts where xatlas was not used."""
+    note = ""
+    if method == "xatlas" or (method == "auto" and len(faces) <= XATLAS_FACES):
+        try:
+            return (*_xatlas(func, vertices, faces, size, padding), "xatlas", "")
+        except _XatlasFailed as err:
+            if method == "xatlas":
+                raise ValueError(f"{func}(): {err}; unwrap with atlas='projection' (warptex bake: --atlas projection)") from None
+            note = str(err)
+    elif method == "auto":
+        note = f"it has {len(faces)} faces, more than xatlas unwraps in reasonable time ({XATLAS_FACES})"
+
+    has_area = _has_area(vertices, faces)
     try:
-        import xatlas
+        vertex_map, new_faces, uv = projected_atlas(vertices, faces, size, padding, overlaps=lambda uv, f: overlapping_faces(uv, f, has_area, device=device) >= 0)
+    except ValueError as err:
+        raise ValueError(f"{func}(): projected charts cannot unwrap this mesh: {err}") from None
+    return vertex_map, new_faces, uv, "projection", note
+
+
+class _XatlasFailed(Exception):
+    """xatlas's process died or took too long (not a refusal of the mesh, which is a ValueError)."""
+
+
+def _xatlas(func: str, vertices: np.ndarray, faces: np.ndarray, size: int, padding: int):
+    """xatlas's atlas of the mesh scaled into a ``size``² texture: ``(vertex_map, faces, uv)``,
+    made in a process of its own (:mod:`warptex._xatlas_child`)."""
+    try:
+        import xatlas  # noqa: F401 (checked here, used by the child process)
     except ImportError as err:  # a dependency; only a broken install lacks it
         raise ImportError(f"{func}(): the mesh needs an automatic UV atlas, which needs the xatlas package (pip install xatlas)") from err
     # Charts do not depend on scale: a unit-sized copy keeps xatlas's arithmetic in range (it
@@ -173,28 +255,23 @@ def _xatlas(func: str, vertices: np.ndarray, faces: np.ndarray, size: int, paddi
     if not area > 1e-12:
         raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: its {len(faces)} triangles have no area")
     texels_per_unit = math.sqrt(ATLAS_FILL * size * size / area)
-    asked = math.ceil(padding * PADDING_MARGIN)
-    border = (asked + 1) // 2  # charts keep half the padding from the texture's edges: room for their gutters
-    for _ in range(8):
-        atlas = xatlas.Atlas()
+    with tempfile.TemporaryDirectory(prefix="warptex-xatlas-") as folder:
+        given, made = os.path.join(folder, "in.npz"), os.path.join(folder, "out.npz")
+        np.savez(given, vertices=unit.astype(np.float32), faces=faces.astype(np.uint32), texels_per_unit=texels_per_unit, padding=padding, size=size)
         try:
-            atlas.add_mesh(unit.astype(np.float32), faces.astype(np.uint32))
-            options = xatlas.PackOptions()
-            options.padding, options.bilinear, options.texels_per_unit = asked, True, texels_per_unit
-            atlas.generate(xatlas.ChartOptions(), options)
-        except RuntimeError as err:
-            raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: {err}") from err
-        if atlas.atlas_count != 1:
-            raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: it made {atlas.atlas_count} atlases, not 1")
-        extent = max(atlas.width, atlas.height) + 2 * border
-        if extent <= size * PADDING_MARGIN:
-            break
-        texels_per_unit *= min(0.9, 0.97 * size / extent)  # too large to keep the padding when scaled down: again, smaller
-    else:
-        raise ValueError(f"{func}(): xatlas cannot pack this mesh's charts into {size}² texels with {padding} texels of padding between them; use a larger size or less padding")
-    vertex_map, new_faces, uv = atlas[0]
+            done = subprocess.run([sys.executable, _CHILD, given, made], capture_output=True, text=True, timeout=XATLAS_TIMEOUT)
+        except subprocess.TimeoutExpired:
+            raise _XatlasFailed(f"xatlas did not finish within {XATLAS_TIMEOUT:g} s") from None
+        if done.returncode != 0 or not os.path.exists(made):
+            how = f"crashed ({_signal_name(-done.returncode)})" if done.returncode < 0 else f"failed (exit status {done.returncode}: {done.stderr.strip().splitlines()[-1] if done.stderr.strip() else 'no message'})"
+            raise _XatlasFailed(f"xatlas {how} on this mesh")
+        with np.load(made) as out:
+            result = {k: out[k] for k in out.files}
+    if "error" in result:
+        raise ValueError(f"{func}(): {result['error']}")
+    vertex_map, new_faces, uv = result["vertex_map"], result["faces"], result["uv"]
     # xatlas gives u = x / width, v = y / height; one scale for both keeps texels square.
-    uv = ((uv * np.array([atlas.width, atlas.height], np.float64) + border) / extent).astype(np.float32)
+    uv = ((uv * np.array([result["width"], result["height"]], np.float64) + result["border"]) / result["extent"]).astype(np.float32)
     new_faces = new_faces.astype(np.int64)
     if len(new_faces) != len(faces) or not (vertex_map[new_faces] == faces).all():
         raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: it changed the mesh's triangles")
@@ -203,3 +280,10 @@ def _xatlas(func: str, vertices: np.ndarray, faces: np.ndarray, size: int, paddi
     if len(lost):
         raise ValueError(f"{func}(): xatlas cannot unwrap this mesh: {len(lost)} triangles with area got no UV area (e.g. face {lost[0]})")
     return vertex_map.astype(np.int64), new_faces, np.clip(uv, 0.0, 1.0)
+
+
+def _signal_name(number: int) -> str:
+    try:
+        return signal.Signals(number).name
+    except ValueError:
+        return f"signal {number}"
