@@ -24,7 +24,7 @@ from warptex import io
 from warptex.camera import checked_resolution
 from warptex.fit import FitView, SplatParameters, check_inputs, default_stages, fit_splat, psnr, render_views, shard
 from warptex.apps.fit_report import heat_image, legend, splat_coverage, weights_image, write_curve, write_json
-from warptex.gbuffer import rasterize
+from warptex.raster import rasterize
 from warptex.gbuffer_io import load_gbuffer
 from warptex._validate import check_layer_count
 from warptex.splat import splat
@@ -76,6 +76,7 @@ def run_fit(
     progress: bool | None = None,
     job=None,
     dist_timeout: float = 30.0,
+    memory: int | None = None,
     device=None,
 ) -> dict:
     """Fit splat maps (and tiling) to images and write the results into ``out_dir``.
@@ -116,6 +117,8 @@ def run_fit(
             (:func:`warptex.fit.shard`) and loads only those; rank 0 loads all of them for the
             pictures and alone writes the outputs.
         dist_timeout: with ``job``, the seconds a rank waits for the others in a collective.
+        memory: bytes the work on one band of a view may take (:func:`warptex.fit.fit_splat`;
+            default 256 MiB).
         device: Warp device.
 
     Returns:
@@ -156,7 +159,7 @@ def run_fit(
     mine = problem.views if rank else shard(problem.views, rank=0, world_size=world)
     initial = render_views(problem.views, problem.layers, params, splat_options=options)  # also compiles the kernels
     group = None if job is None else job.ready(dist_timeout)
-    result = fit_splat(mine, problem.layers, params, stages=stages, loss=loss, entropy=entropy, splat_options=options, progress=progress, report_every=report_every, process_group=group, device=device)
+    result = fit_splat(mine, problem.layers, params, stages=stages, loss=loss, entropy=entropy, splat_options=options, progress=progress, report_every=report_every, process_group=group, memory=memory, device=device)
     if rank:
         return {"rank": rank, "world_size": world, "iterations": result.iterations, "files": []}
     fitted = render_views(problem.views, problem.layers, params, splat_options=options)

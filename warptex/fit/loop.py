@@ -36,10 +36,12 @@ import warp as wp
 import warp.optim
 
 from warptex._validate import as_enum, as_float
+from warptex._warp import paused_tape
 from warptex.fit.losses import Loss, psnr
 from warptex.fit.objective import FitView, Objective, prepare_views, render_view, views_device
 from warptex.fit.parameters import SplatParameters
 from warptex.texture import TextureArray
+from warptex.tiles import checked_memory
 
 __all__ = ["FitResult", "Stage", "default_stages", "fit_splat", "render_views"]
 
@@ -133,7 +135,8 @@ def _scan_tiling(objective: Objective, stage: Stage) -> dict:
     for d in deltas:
         params.log_tiling.assign((base + d).astype(np.float32))
         params.apply()
-        losses.append(float(objective(stage.sigma, stage.stride)[0].numpy()[0]))
+        with paused_tape():
+            losses.append(float(objective(stage.sigma, stage.stride)[0].numpy()[0]))
     losses = np.asarray(losses if objective.reduce is None else objective.reduce(losses))
     k = int(np.argmin(losses))
     best = deltas[k]
@@ -165,6 +168,7 @@ def fit_splat(
     progress: bool | None = None,
     report_every: int = 0,
     process_group=None,
+    memory: int | None = None,
     device=None,
 ) -> FitResult:
     """Fit splat weights (and tiling, and sharpness) so that the views render like their targets.
@@ -199,6 +203,9 @@ def fit_splat(
             settings; rank 0's ``params`` are broadcast, the gradients are summed over the ranks
             and every rank ends with the same parameters; only rank 0 prints.
             :mod:`warptex.fit.distributed` says how. ``None`` (default): one process.
+        memory: bytes the work on one band of a view may take (:class:`~warptex.fit.Objective`,
+            default 256 MiB): views are rendered and differentiated in bands of rows, so their
+            size is bounded by what their G-buffers and targets take, not by the work.
         device: Warp device (default the first G-buffer's).
 
     Returns:
@@ -222,7 +229,7 @@ def fit_splat(
         reducer = Reducer(func, process_group)
     error, settings = None, {}
     try:
-        device, kind, entropy, options, prepared, stages = _checked(func, views, layers, params, stages, iters, loss, entropy, splat_options, device)
+        device, kind, entropy, options, prepared, stages = _checked(func, views, layers, params, stages, iters, loss, entropy, splat_options, memory, device)
         if reducer is not None:
             shape = (params.num_layers, params.size, params.maps.texels.shape, params.log_tiling.shape, params.sharpness is not None)
             settings = {"stages": stages, "loss": kind, "entropy": entropy, "parameters": shape, "layers": layers.texels, "target channels": prepared[0].target.shape[2]}
@@ -237,10 +244,10 @@ def fit_splat(
         if reducer.rank != 0:
             progress, report_every = False, 0
 
-    objective = Objective(prepared, layers, params, options, kind, entropy if reducer is None or reducer.rank == 0 else 0.0, device, reduce=None if reducer is None else reducer.sum)
+    objective = Objective(prepared, layers, params, options, kind, entropy if reducer is None or reducer.rank == 0 else 0.0, device, reduce=None if reducer is None else reducer.sum, memory=memory)
     objective.normalise([(0.0, 1)] + [key for s in stages for key in ((s.sigma, s.stride), (0.0, s.stride))])
     params.apply()
-    result = FitResult(stages=stages, initial_mse=objective.sharp_mse(objective(0.0)[1]), world_size=1 if reducer is None else reducer.world_size)
+    result = FitResult(stages=stages, initial_mse=objective.mse(), world_size=1 if reducer is None else reducer.world_size)
     total = sum(s.iters for s in stages)
     bar = tqdm(total=total, desc="fit", unit="it", disable=False if progress else None if progress is None else True)
     if report_every:
@@ -257,12 +264,13 @@ def fit_splat(
         optimisers = _optimisers(params, stage)
         for k in range(stage.iters):
             factor = stage.decay + (1 - stage.decay) * 0.5 * (1 + math.cos(math.pi * k / max(stage.iters - 1, 1)))
-            tape = wp.Tape()
+            tape = wp.Tape()  # the parameters' maps and the prior; the renders' bands take tapes of their own
             with tape:
                 params.apply()
-                value, renders = objective(stage.sigma, stage.stride)
-            tape.backward(loss=value)
-            loss_value, mse = float(value.numpy()[0]), objective.sharp_mse(renders, stage.stride, local=True)
+                prior = objective.prior()
+            loss_value, mse = objective.gradient(stage.sigma, stage.stride)
+            tape.backward(loss=prior)  # the bands' gradients of the maps, and the prior's, back to the raw parameters
+            loss_value += float(prior.numpy()[0]) if prior is not None else 0.0
             if reducer is not None:  # every rank's gradients summed, and its share of loss and MSE
                 loss_value, mse = (float(v) for v in reducer.sum_gradients([a.grad for a in params.arrays], [loss_value, mse]))
             for opt, lr in optimisers:
@@ -280,7 +288,7 @@ def fit_splat(
                 bar.write(f"iter {it:4d}/{total}  stage {index}  objective {loss_value:.4e}  psnr {psnr(mse):6.2f} dB  tiling {h['tiling'][-1]:.6f}")
     bar.close()
     params.apply()
-    result.final_mse = objective.sharp_mse(objective(0.0)[1])
+    result.final_mse = objective.mse()
     result.final_psnr = psnr(result.final_mse)
     result.iterations = it
     if reducer is not None:
@@ -298,9 +306,10 @@ def _describe(stage: Stage) -> str:
     return (scan + ", then " if scan else "") + f"{stage.iters} iteration{'s' if stage.iters != 1 else ''}, " + (f"blur {stage.sigma:g} px" if stage.sigma > 0 else "sharp") + pixels
 
 
-def _checked(func, views, layers, params, stages, iters, loss, entropy, splat_options, device):
-    """:func:`fit_splat`'s checks: the device, loss, prior, splat options, prepared views and schedule."""
+def _checked(func, views, layers, params, stages, iters, loss, entropy, splat_options, memory, device):
+    """:func:`fit_splat`'s checks: the device, loss, prior, memory, splat options, prepared views and schedule."""
     device = views_device(func, views, device)
+    checked_memory(func, memory)
     kind = as_enum(func, "loss", loss, Loss)
     entropy = as_float(func, "entropy", entropy)
     if entropy < 0:

@@ -14,13 +14,15 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from warptex.fit.losses import Loss, blur, image_loss, weight_entropy
+from warptex._warp import paused_tape
+from warptex.fit.losses import Loss, blur, gaussian_taps, image_loss, weight_entropy
 from warptex.fit.parameters import SplatParameters
 from warptex.gbuffer import FIELDS, GBuffer, gbuffer_device
 from warptex.kernels import fit as kf
 from warptex._validate import check_layer_count
 from warptex.splat import splat
 from warptex.texture import TextureArray
+from warptex.tiles import checked_memory, tile_rows
 
 __all__ = ["FitView", "Objective", "check_inputs", "prepare_views", "render_view", "subsample_gbuffer", "views_device"]
 
@@ -199,14 +201,40 @@ def prepare_views(func: str, views, layers: TextureArray, params: SplatParameter
     return prepared
 
 
-class Objective:
-    """Render every view, mask, blur, and sum the per-view losses (and the entropy prior) into one
-    float64 scalar; ``objective(sigma, stride)`` returns it with the sharp renders."""
+#: What a fit's work takes per pixel of a band (the render, its gradient, the blur's buffers, the
+#: backward pass's per-pixel arrays), measured; :class:`Objective` cuts views into bands of rows
+#: whose pixels take at most its ``memory``.
+FIT_PIXEL_BYTES = 450
 
-    def __init__(self, views: list[_Prepared], layers: TextureArray, params: SplatParameters, options: dict, loss: Loss, entropy: float, device, *, reduce=None):
+
+@dataclass
+class _Band:
+    """Rows of one or more views rendered in one call: ``gbuffer`` (a band of one view, or a
+    whole batch), and for each view ``(prepared view, index in the batch or None, lo, r0, r1)``:
+    the band's first row ``lo`` and the rows ``r0 <= r < r1`` it scores (the rest, up to a blur's
+    radius on each side, only feeds the blur)."""
+
+    gbuffer: GBuffer
+    parts: list
+
+
+class Objective:
+    """The loss of every view's render against its target: masked, blurred, summed over the views
+    (one normalisation for all), and the entropy prior; in bands of rows whose work takes at most
+    ``memory`` bytes (default :data:`warptex.tiles.DEFAULT_MEMORY`), so views of any size fit.
+
+    ``objective(sigma, stride)`` records the loss on the active tape (every band is kept until its
+    backward); :meth:`gradient` takes each band's gradient on a tape of its own before the next
+    band, so a fit holds one band's work at a time. Bands never change the loss beyond float
+    rounding: a blurred band is rendered with a halo of the blur's radius above and below, and
+    scores only its own rows.
+    """
+
+    def __init__(self, views: list[_Prepared], layers: TextureArray, params: SplatParameters, options: dict, loss: Loss, entropy: float, device, *, reduce=None, memory: int | None = None):
         self.views, self.layers, self.params, self.options = views, layers, params, options
         self.loss, self.entropy, self.device = loss, entropy, device
         self.reduce = reduce  # sums float64 vectors over the ranks of a distributed fit (None: one process)
+        self.memory = checked_memory("fit_splat", memory)
         self.channels = views[0].target.shape[2]
         self._scales = {}
 
@@ -225,41 +253,82 @@ class Objective:
         self.normalise([(sigma, stride)])
         return self._scales[(sigma, stride)]
 
-    def render(self, view: _Prepared) -> wp.array:
-        return render_view(view.gbuffer, self.layers, self.params, self.options, self.device)
-
-    def __call__(self, sigma: float, stride: int = 1) -> tuple[wp.array, list[wp.array]]:
-        """The loss (float64 ``(1,)``, ``requires_grad``) and the sharp renders of every view."""
+    def __call__(self, sigma: float, stride: int = 1) -> tuple[wp.array, float]:
+        """``(loss, mse)``: the loss (float64 ``(1,)``, ``requires_grad``, recorded on the active
+        tape, the prior included) and this rank's share of the sharp renders' mean squared error."""
         total = wp.zeros(1, dtype=wp.float64, device=self.device, requires_grad=True)
-        renders = []
-        batches = {}  # id(batch) -> its render (V, H, W, C), one call for all its views
-        for full in self.views:
-            view = full.at(stride)
-            if view.batch is None:
-                render = self.render(view)
-            else:
-                if id(view.batch) not in batches:
-                    batches[id(view.batch)] = render_view(view.batch.at(stride), self.layers, self.params, self.options, self.device)
-                render = batches[id(view.batch)][view.index]  # a view: its gradient lands in the batch's
-            renders.append(render)
-            target, weight = view.level(sigma)
-            if sigma > 0:  # the render is 0 off the G-buffer; the user's mask may hide more
-                masked = wp.zeros((*render.shape[:2], self.channels), dtype=float, device=self.device, requires_grad=render.requires_grad)
-                wp.launch(kf.mask_kernel, dim=masked.shape, inputs=[render, view.mask], outputs=[masked], device=self.device)
-                render = blur(masked, sigma)
-            image_loss(render, target, weight=weight, loss=self.loss, scale=self._scale(sigma, stride), out=total, device=self.device)
+        mse = wp.zeros(1, dtype=wp.float64, device=self.device)
+        for band in self._bands(sigma, stride):
+            self._band_loss(band, sigma, stride, total, mse)
         if self.entropy > 0:
             weight_entropy(self.params, self.entropy, out=total)
-        return total, renders
+        return total, float(mse.numpy()[0])
 
-    def sharp_mse(self, renders: list[wp.array], stride: int = 1, *, local: bool = False) -> float:
-        """The mean squared error of sharp renders (from :meth:`__call__`) over all views (of all
-        ranks; ``local``: this rank's share of it)."""
+    def gradient(self, sigma: float, stride: int = 1) -> tuple[float, float]:
+        """``(loss, mse)`` of the renders (without the prior) as :meth:`__call__`, each band's
+        gradient added into the arrays its render reads (the splat maps' texels, ``tiling``,
+        ``sharpness``) before the next band is made. The caller takes the rest on its own tape:
+        :meth:`~warptex.fit.SplatParameters.apply` and :meth:`prior`."""
+        loss = 0.0
         mse = wp.zeros(1, dtype=wp.float64, device=self.device)
-        for full, render in zip(self.views, renders):
-            view = full.at(stride)
-            image_loss(render, view.target, weight=view.mask, loss=Loss.L2, scale=self._scale(0.0, stride), out=mse, device=self.device)
-        value = float(mse.numpy()[0])
+        for band in self._bands(sigma, stride):
+            part = wp.zeros(1, dtype=wp.float64, device=self.device, requires_grad=True)
+            tape = wp.Tape()
+            with tape:
+                self._band_loss(band, sigma, stride, part, mse)
+            tape.backward(loss=part)
+            loss += float(part.numpy()[0])
+            del tape, part  # the band's arrays go before the next band's are made
+        return loss, float(mse.numpy()[0])
+
+    def prior(self) -> wp.array | None:
+        """The entropy prior of the current splat maps (float64 ``(1,)``, recorded on the active
+        tape), or ``None`` without one."""
+        return weight_entropy(self.params, self.entropy) if self.entropy > 0 else None
+
+    def mse(self, stride: int = 1, *, local: bool = False) -> float:
+        """The sharp renders' mean squared error over all views (of all ranks; ``local``: this
+        rank's share), at the current parameters."""
+        with paused_tape():
+            value = self(0.0, stride)[1]
         return value if local or self.reduce is None else float(self.reduce([value])[0])
 
+    def _bands(self, sigma: float, stride: int):
+        """The bands of every view (:class:`_Band`), each view's rows cut so that a band's pixels,
+        its blur halo included, take at most ``memory`` of work; a batch of views whole when all
+        of it fits."""
+        halo = len(gaussian_taps(sigma)) // 2
+        batches = set()
+        for full in self.views:
+            view = full.at(stride)
+            if view.batch is not None:
+                batch = view.batch.at(stride)
+                if FIT_PIXEL_BYTES * batch.pixel_count <= self.memory:
+                    if id(view.batch) not in batches:
+                        batches.add(id(view.batch))
+                        members = [v.at(stride) for v in self.views if v.batch is view.batch]
+                        yield _Band(batch, [(v, v.index, 0, 0, v.mask.shape[0]) for v in members])
+                    continue
+            height, width = view.mask.shape
+            for r0, r1 in tile_rows(height, FIT_PIXEL_BYTES * width, self.memory):
+                lo, hi = max(0, r0 - halo), min(height, r1 + halo)
+                yield _Band(view.gbuffer.rows(lo, hi), [(view, None, lo, r0, r1)])
 
+    def _band_loss(self, band: _Band, sigma: float, stride: int, out: wp.array, mse: wp.array) -> None:
+        """Render ``band`` and add its rows' losses into ``out`` (on the active tape) and their
+        sharp squared errors into ``mse`` (off it)."""
+        render = render_view(band.gbuffer, self.layers, self.params, self.options, self.device)
+        for view, index, lo, r0, r1 in band.parts:
+            image = render[index] if index is not None else render  # a view of a batch: its gradient lands in the batch's
+            hi = lo + image.shape[0]
+            inner = slice(r0 - lo, r1 - lo)
+            target, weight = view.level(sigma)
+            if sigma > 0:  # the render is 0 off the G-buffer; the user's mask may hide more
+                masked = wp.zeros((hi - lo, image.shape[1], self.channels), dtype=float, device=self.device, requires_grad=image.requires_grad)
+                wp.launch(kf.mask_kernel, dim=masked.shape, inputs=[image, view.mask[lo:hi]], outputs=[masked], device=self.device)
+                scored = blur(masked, sigma)[inner]
+            else:
+                scored = image[inner]
+            image_loss(scored, target[r0:r1], weight=weight[r0:r1], loss=self.loss, scale=self._scale(sigma, stride), out=out, device=self.device)
+            with paused_tape():
+                image_loss(image[inner], view.target[r0:r1], weight=view.mask[r0:r1], loss=Loss.L2, scale=self._scale(0.0, stride), out=mse, device=self.device)
