@@ -39,7 +39,7 @@ README = REPO / "README.md"
 SHARED = REPO.parent / "shared"
 
 # Fenced blocks per info string: a new block must be added here, and so gets a test.
-EXPECTED_BLOCKS = {"python": 13, "sh": 5, "": 1}
+EXPECTED_BLOCKS = {"python": 14, "sh": 5, "": 1}
 EXPECTED_COMMANDS = {"warptex": 14, "python": 2, "skipped": 5, "torchrun": 1}
 
 # Python blocks that continue earlier ones (by "<section> #<n>"): they run after those, in one namespace.
@@ -52,6 +52,8 @@ PYTHON_QUICK = [
     ("Fitting splat maps and tiling to images #2", "iters=240", "iters=3"),
     ("Baking into a UV texture, exported as glTF #1", "size=2048", "size=256"),
     ("Baking into a UV texture, exported as glTF #3", "1024", "512"),
+    ("Pictures larger than memory: tiles #1", "1024, 1024", "96, 128"),
+    ("Pictures larger than memory: tiles #1", "64 << 20", "1 << 20"),  # bands of 8 rows
 ]
 
 QUICK_RESOLUTION = "48x64"  # of `warptex render` and `warptex demo`, and of the out/ the Python blocks read
@@ -225,6 +227,15 @@ def _check_supersampled(ns, d):
     assert _shape(ns["premultiplied"]) == (128, 128, 1)
 
 
+def _check_tiles(ns, d):
+    """The image made in bands is the whole image, bit for bit."""
+    import warptex as wt
+
+    whole = wt.resolve(wt.triplanar(wt.rasterize("../shared/data/meshes/bunny.ply", ns["camera"], samples=4), ns["brick"], tiling=20.0), 4).numpy()
+    assert ns["image"].shape == whole.shape == (96, 128, 1) and ns["image"].tobytes() == whole.tobytes()
+    assert ns["tile"].count == 12 and ns["tile"].rows == slice(88, 96)
+
+
 def _check_triplanar(ns, d):
     assert _shape(ns["colour"]) == (512, 512, 1) and _shape(ns["normals"]) == (512, 512, 3)
     assert ns["image"].shape == (512, 512, 3) and np.isfinite(ns["image"]).all()
@@ -292,6 +303,7 @@ CHECKS = {
     "PyTorch #1": _check_torch,
     "G-buffers #1": _check_gbuffers,
     "G-buffers #2": _check_supersampled,
+    "Pictures larger than memory: tiles #1": _check_tiles,
     "Triplanar, biplanar and triplanar normal mapping #1": _check_triplanar,
     "Triplanar, biplanar and triplanar normal mapping #2": _check_tiling_gradient,
     "A texture per face (six-planar) #1": _check_six_planar,
