@@ -51,11 +51,13 @@ def seed_distance2(row: wp.int32, col: wp.int32, s: wp.int32, width: wp.int32) -
 
 
 @wp.kernel(enable_backward=False, module=MODULE)
-def flood_kernel(seed_in: wp.array2d(dtype=wp.int32), step: wp.int32, first_row: wp.int32, seed_out: wp.array2d(dtype=wp.int32)):
-    """One jump-flooding pass (Rong and Tan 2006) over a band of atlas rows (row 0 of the arrays is
-    atlas row ``first_row``): each texel keeps the nearest of its own seed and the seeds of the 8
-    texels ``step`` away that the band holds."""
-    row, col = wp.tid()
+def flood_kernel(seed_in: wp.array2d(dtype=wp.int32), step: wp.int32, first_row: wp.int32, offset: wp.int32, seed_out: wp.array2d(dtype=wp.int32)):
+    """One jump-flooding pass (Rong and Tan 2006) over a band of atlas rows (row 0 of ``seed_in``
+    is atlas row ``first_row``): each texel keeps the nearest of its own seed and the seeds of the
+    8 texels ``step`` away that the band holds. Launch row ``row`` is ``seed_in``'s row ``offset +
+    row`` and ``seed_out``'s row ``row`` (a launch over some of the band's rows, into their slice)."""
+    launch_row, col = wp.tid()
+    row = offset + launch_row
     height = seed_in.shape[0]
     width = seed_in.shape[1]
     best = seed_in[row, col]
@@ -70,7 +72,7 @@ def flood_kernel(seed_in: wp.array2d(dtype=wp.int32), step: wp.int32, first_row:
                 if d < best_d:
                     best = s
                     best_d = d
-    seed_out[row, col] = best
+    seed_out[launch_row, col] = best
 
 
 @wp.func

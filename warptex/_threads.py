@@ -268,6 +268,16 @@ def side_by_side(work, parts: int) -> None:
         raise failures[0]
 
 
+def rows_side_by_side(rows: int, work, device) -> None:
+    """``work(a, b)`` over rows ``0 .. rows`` cut into one range per CPU thread, side by side: for
+    the kernels that compute each pixel (or texel) on its own from its row, the rasteriser's and
+    the bake's, which Warp runs on one thread a launch; the ranges give one launch's bits. One
+    range on a GPU, or for fewer than 64 rows."""
+    parts = 1 if not wp.get_device(device).is_cpu or rows < 64 else min(get_num_threads(), rows // 32)
+    bounds = [rows * k // parts for k in range(parts + 1)]
+    side_by_side(lambda part: work(bounds[part], bounds[part + 1]), parts)
+
+
 def zero(array: wp.array) -> None:
     """``array.zero_()``; on the CPU, a contiguous array of :data:`PARALLEL_SUM_BYTES` or more is
     zeroed in ranges on :func:`get_num_threads` threads side by side (one core does not fill the

@@ -27,6 +27,7 @@ import trimesh
 import warp as wp
 
 from warptex._output import check_memory
+from warptex._threads import rows_side_by_side
 from warptex._warp import paused_tape
 from warptex.raster import checked_rows
 from warptex.tiles import Tile, checked_memory, tile_rows
@@ -40,6 +41,8 @@ from warptex.unwrap import ATLAS_FILL, ATLAS_METHODS, UVLayout, bakeable_faces, 
 BAKE_BYTES = (400e6, 520.0)
 #: What a tiled bake's work takes per texel of a band (:func:`texture_gbuffer_tiles`), measured.
 BAKE_TEXEL_BYTES = 400
+#: What a flood window takes per texel: each texel's triangle and jump-flood seed, twice (int32).
+FLOOD_TEXEL_BYTES = 12
 
 
 @dataclass
@@ -118,14 +121,27 @@ def texture_gbuffer_tiles(layout: UVLayout, size: int, *, gutter: int = 8, memor
     func = "texture_gbuffer_tiles"
     memory = checked_memory(func, memory)
     space = TextureSpace(func, layout, size, gutter, device)
-    bands = tile_rows(space.size, BAKE_TEXEL_BYTES * space.size, memory)
-    return _tiles(space, bands)
+    # Half the budget for the bands' work, half for the flood windows that several bands share:
+    # a band flooded on its own would flood its halo again (4× its rows at 8192², gutter 64).
+    bands = tile_rows(space.size, BAKE_TEXEL_BYTES * space.size, memory // 2)
+    window = (memory // 2) // (FLOOD_TEXEL_BYTES * space.size) - 2 * space.halo
+    return _tiles(space, bands, window)
 
 
-def _tiles(space: "TextureSpace", bands: list[tuple[int, int]]):
-    for k, rows in enumerate(bands):
-        g, coverage = space.gbuffer(rows)
-        yield Tile(slice(*rows), g, k, len(bands), coverage)
+def _tiles(space: "TextureSpace", bands: list[tuple[int, int]], window: int):
+    """The bands' tiles, flooded a window of consecutive bands at a time (of at most ``window``
+    rows, at least one band)."""
+    first = 0
+    while first < len(bands):
+        last = first
+        while last + 1 < len(bands) and bands[last + 1][1] - bands[first][0] <= window:
+            last += 1
+        flooded = space.flood((bands[first][0], bands[last][1]))
+        for k in range(first, last + 1):
+            g, coverage = space.surface(bands[k], flooded)
+            yield Tile(slice(*bands[k]), g, k, len(bands), coverage)
+        del flooded
+        first = last + 1
 
 
 class TextureSpace:
@@ -171,45 +187,68 @@ class TextureSpace:
 
     def gbuffer(self, rows: tuple[int, int]) -> tuple[GBuffer, wp.array]:
         """``(gbuffer, coverage)`` of atlas rows ``rows`` (``(start, stop)``)."""
-        device, size = self.device, self.size
-        start, stop = rows
-        lo, hi = max(0, start - self.halo), min(size, stop + self.halo)  # the band and its halo
+        return self.surface(rows, self.flood(rows))
+
+    def _view(self, first_row: int) -> kr.CameraView:
+        """The orthographic camera over the unit square whose rays pass through the texel centres,
+        its launch row 0 atlas row ``first_row`` (:mod:`warptex.kernels.bake`)."""
         view = kr.CameraView()
         view.eye, view.forward, view.right, view.up = wp.vec3(0.5, 0.5, 1.0), wp.vec3(0.0, 0.0, -1.0), wp.vec3(1.0, 0.0, 0.0), wp.vec3(0.0, 1.0, 0.0)
-        view.half_x, view.half_y, view.height, view.width, view.orthographic, view.strata, view.first_row = 0.5, 0.5, size, size, 1, 1, lo
+        view.half_x, view.half_y, view.height, view.width, view.orthographic, view.strata, view.first_row = 0.5, 0.5, self.size, self.size, 1, 1, first_row
+        return view
+
+    def flood(self, rows: tuple[int, int]) -> tuple[wp.array, wp.array, int]:
+        """``(chart, seed, first)``: each texel's triangle and jump-flood seed, for atlas rows
+        ``rows`` and :attr:`halo` rows beyond them on each side (from atlas row ``first`` on),
+        those of ``rows`` exactly as the whole atlas floods them."""
+        device, size = self.device, self.size
+        lo, hi = max(0, rows[0] - self.halo), min(size, rows[1] + self.halo)
         chart = wp.empty((hi - lo, size), dtype=wp.int32, device=device)
         seed = wp.empty((hi - lo, size), dtype=wp.int32, device=device)
         launch = dict(device=device, record_tape=False)
-        wp.launch(kb.chart_kernel, dim=chart.shape, inputs=[self._bvh.id, self._face_ids, view], outputs=[chart, seed], **launch)
+
+        def cast(a: int, b: int) -> None:  # rows a..b of the window
+            wp.launch(kb.chart_kernel, dim=(b - a, size), inputs=[self._bvh.id, self._face_ids, self._view(lo + a)], outputs=[chart[a:b], seed[a:b]], **launch)
+
+        rows_side_by_side(hi - lo, cast, device)
         if self._steps:
             other = wp.empty_like(seed)
             for step in self._steps:
-                wp.launch(kb.flood_kernel, dim=seed.shape, inputs=[seed, step, lo], outputs=[other], **launch)
-                seed, other = other, seed
-            del other
 
+                def flood(a: int, b: int) -> None:
+                    wp.launch(kb.flood_kernel, dim=(b - a, size), inputs=[seed, step, lo, a], outputs=[other[a:b]], **launch)
+
+                rows_side_by_side(hi - lo, flood, device)
+                seed, other = other, seed
+        return chart, seed, lo
+
+    def surface(self, rows: tuple[int, int], flooded: tuple[wp.array, wp.array, int]) -> tuple[GBuffer, wp.array]:
+        """``(gbuffer, coverage)`` of atlas rows ``rows``, within the rows :meth:`flood` made ``flooded``."""
+        device, size = self.device, self.size
+        chart, seed, lo = flooded
+        start, stop = rows
+        launch = dict(device=device, record_tape=False)
         shape = (stop - start, size)
         g = GBuffer.empty(shape, uv_sets=[*self._uv_sets], device=device)
         barycentric = wp.zeros(shape, dtype=wp.vec3, device=device)
         coverage = wp.zeros(shape, dtype=float, device=device)
-        wp.launch(
-            kb.surface_kernel,
-            dim=shape,
-            inputs=[self._points, self._indices, self._corner_uvs, self._normals, chart, seed, float(self.gutter), lo, start, size],
-            outputs=[g.position, g.normal, g.geometric_normal, g.depth, g.mask, g.triangle, barycentric, g.position_dx, g.position_dy, coverage],
-            **launch,
-        )
-        del chart, seed
-        batched = [a.reshape((1, *shape)) for a in (g.triangle, barycentric, g.normal, g.position_dx, g.position_dy)]
-        for name, (uv, tangents) in self._uv_sets.items():
-            out = g.uv_sets[name]
-            wp.launch(
-                kr.uv_kernel,
-                dim=(1, *shape),
-                inputs=[self._points, self._indices, uv, tangents, *batched],
-                outputs=[out[k].reshape((1, *shape)) for k in ("uv", "uv_dx", "uv_dy", "tangent")],
-                **launch,
-            )
+
+        def evaluate(a: int, b: int) -> None:  # rows a..b of the band
+            outputs = [g.position, g.normal, g.geometric_normal, g.depth, g.mask, g.triangle, barycentric, g.position_dx, g.position_dy, coverage]
+            inputs = [self._points, self._indices, self._corner_uvs, self._normals, chart, seed, float(self.gutter), lo, start + a, size]
+            wp.launch(kb.surface_kernel, dim=(b - a, size), inputs=inputs, outputs=[o[a:b] for o in outputs], **launch)
+            part = (1, b - a, size)  # the UV kernel's (views, rows, W)
+            for name, (uv, tangents) in self._uv_sets.items():
+                out = g.uv_sets[name]
+                wp.launch(
+                    kr.uv_kernel,
+                    dim=part,
+                    inputs=[self._points, self._indices, uv, tangents, *(x[a:b].reshape(part) for x in (g.triangle, barycentric, g.normal, g.position_dx, g.position_dy))],
+                    outputs=[out[k][a:b].reshape(part) for k in ("uv", "uv_dx", "uv_dy", "tangent")],
+                    **launch,
+                )
+
+        rows_side_by_side(stop - start, evaluate, device)
         return g, coverage
 
 

@@ -192,7 +192,8 @@ def _compressed(lines: np.ndarray) -> bytes:
     raw = np.ascontiguousarray(lines.transpose(0, 2, 1)).view(np.uint8).reshape(-1)
     interleaved = np.concatenate([raw[0::2], raw[1::2]])
     delta = interleaved.copy()
-    delta[1:] = (interleaved[1:].astype(np.int16) - interleaved[:-1] + 128).astype(np.uint8)
+    np.subtract(interleaved[1:], interleaved[:-1], out=delta[1:])  # uint8: wraps modulo 256, as OpenEXR's does
+    delta[1:] += 128
     packed = zlib.compress(delta.tobytes(), _LEVEL)
     return packed if len(packed) < len(raw) else raw.tobytes()
 

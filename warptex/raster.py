@@ -8,6 +8,7 @@ import numpy as np
 import trimesh
 import warp as wp
 
+from warptex._threads import rows_side_by_side
 from warptex._validate import checked_device
 from warptex.camera import Camera
 from warptex.gbuffer import GBuffer
@@ -169,23 +170,23 @@ class Scene:
             return a.reshape(shape)
 
         barycentric = wp.zeros(shape, dtype=wp.vec3, device=device)
-        views = wp.array([_camera_view(c, self.origin, rows[0] * s) for c in cameras], dtype=kr.CameraView, device=device)
-        wp.launch(
-            kr.raster_kernel,
-            dim=shape,
-            inputs=[self.bvh.id, self.points, self.hit_indices, self.face_ids, self.normals, views],
-            outputs=[batched(a) for a in (g.position, g.normal, g.geometric_normal, g.depth, g.mask, g.triangle)] + [barycentric, batched(g.position_dx), batched(g.position_dy)],
-            device=device,
-            record_tape=False,
-        )
-        for name, (uv, tangents) in self.uv_sets.items():
-            out = g.uv_sets[name]
-            wp.launch(
-                kr.uv_kernel,
-                dim=shape,
-                inputs=[self.points, self.indices, uv, tangents, batched(g.triangle), barycentric, batched(g.normal), batched(g.position_dx), batched(g.position_dy)],
-                outputs=[batched(out[k]) for k in ("uv", "uv_dx", "uv_dy", "tangent")],
-                device=device,
-                record_tape=False,
-            )
+        outputs = [batched(a) for a in (g.position, g.normal, g.geometric_normal, g.depth, g.mask, g.triangle)] + [barycentric, batched(g.position_dx), batched(g.position_dy)]
+        sets = {name: [batched(g.uv_sets[name][k]) for k in ("uv", "uv_dx", "uv_dy", "tangent")] for name in self.uv_sets}
+
+        def trace(a: int, b: int) -> None:  # launch rows a..b of every view: the same pixels as one launch
+            views = wp.array([_camera_view(c, self.origin, rows[0] * s + a) for c in cameras], dtype=kr.CameraView, device=device)
+            part = [o[:, a:b] for o in outputs]
+            wp.launch(kr.raster_kernel, dim=(shape[0], b - a, shape[2]), inputs=[self.bvh.id, self.points, self.hit_indices, self.face_ids, self.normals, views], outputs=part, device=device, record_tape=False)
+            triangle, barycentric_part, normal, dx, dy = part[5], part[6], part[1], part[7], part[8]
+            for name, (uv, tangents) in self.uv_sets.items():
+                wp.launch(
+                    kr.uv_kernel,
+                    dim=(shape[0], b - a, shape[2]),
+                    inputs=[self.points, self.indices, uv, tangents, triangle, barycentric_part, normal, dx, dy],
+                    outputs=[o[:, a:b] for o in sets[name]],
+                    device=device,
+                    record_tape=False,
+                )
+
+        rows_side_by_side(shape[1], trace, device)
         return g

@@ -56,7 +56,9 @@ def tile_rows(height: int, row_bytes: float, memory: int | None = None) -> list[
     takes ``row_bytes`` and a band may take ``memory`` (default :data:`DEFAULT_MEMORY`): as few
     bands as fit, of equal heights (the first ones one row taller where they cannot all be
     equal), at least one row each."""
-    memory = checked_memory("tile_rows", memory)
+    memory = DEFAULT_MEMORY if memory is None else memory
+    if isinstance(memory, bool) or not isinstance(memory, (int, np.integer)) or memory < 1:
+        raise ValueError(f"tile_rows(): memory must be a number of bytes >= 1, got {memory!r}")
     if isinstance(height, bool) or not isinstance(height, (int, np.integer)) or height < 1:
         raise ValueError(f"tile_rows(): height must be an int >= 1, got {height!r}")
     most = max(1, int(memory // max(float(row_bytes), 1.0)))
