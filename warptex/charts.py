@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-__all__ = ["MIN_FACES", "MIN_FACING", "projected_atlas"]
+__all__ = ["MERGE_FACING", "MIN_FACES", "MIN_FACING", "SMOOTHING", "projected_atlas"]
 
 MIN_FACING = 0.1
 """The least ``n · d`` of a triangle's unit normal ``n`` and its chart's direction ``d``: every
@@ -35,6 +35,14 @@ triangle faces its projection (none flips), and none is squeezed to a sliver (1/
 
 MIN_FACES = 24
 """Charts smaller than this join a neighbour where every triangle can (fewer, larger charts)."""
+
+MERGE_FACING = 0.02
+"""The least ``n · d`` of the triangles of a small chart that joins a neighbour: none flips, and a
+fragment a scan's noise tilted may shrink further than :data:`MIN_FACING` allows a chart's own."""
+
+SMOOTHING = 8
+"""Passes of neighbour averaging of the normals that choose directions: noise on a scan, which
+turns single triangles every way, does not scatter the charts."""
 
 _DIRECTIONS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
 # Each direction's plane axes (u, v) with u × v = the direction: no chart is mirrored.
@@ -101,10 +109,10 @@ def _adjacent_faces(faces: np.ndarray) -> np.ndarray:
 
 def _directions(unit: np.ndarray, area: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     """Each face's direction index (:data:`_DIRECTIONS`): that of its normal smoothed over its
-    neighbours (three passes of area-weighted averaging: noise on a scan does not scatter the
-    charts), or of its own normal where it faces the smoothed one's direction too little."""
+    neighbours (:data:`SMOOTHING` passes of area-weighted averaging), or of its own normal where
+    it faces the smoothed one's direction by less than :data:`MIN_FACING`."""
     smooth = unit * area[:, None]
-    for _ in range(3):
+    for _ in range(SMOOTHING):
         total = smooth.copy()
         np.add.at(total, pairs[:, 0], smooth[pairs[:, 1]])
         np.add.at(total, pairs[:, 1], smooth[pairs[:, 0]])
@@ -139,32 +147,30 @@ def _components(count: int, pairs: np.ndarray, key: np.ndarray) -> np.ndarray:
 
 def _merge_small(chart: np.ndarray, direction: np.ndarray, unit: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Charts of fewer than :data:`MIN_FACES` faces take the direction of their largest neighbour
-    where every one of their faces faces it by :data:`MIN_FACING` or more: ``(chart, direction)``
+    that every one of their faces faces by more than :data:`MERGE_FACING`: ``(chart, direction)``
     anew."""
-    for _ in range(4):
+    faced = unit @ _DIRECTIONS.T > MERGE_FACING  # [F, 6]: which directions each face may be projected along
+    for _ in range(8):
         count = chart.max() + 1
         sizes = np.bincount(chart, minlength=count)
+        chart_direction = np.zeros(count, np.int64)
+        chart_direction[chart] = direction
+        # Per chart and direction, whether all its faces face it.
+        allowed = np.stack([np.bincount(chart, weights=~faced[:, d], minlength=count) == 0 for d in range(6)], axis=1)
         across = pairs[chart[pairs[:, 0]] != chart[pairs[:, 1]]]
         across = np.concatenate([across, across[:, ::-1]])
-        across = across[sizes[chart[across[:, 0]]] < MIN_FACES]  # (face of a small chart, face of a neighbour)
-        if len(across) == 0:
-            break
         src, dst = chart[across[:, 0]], chart[across[:, 1]]
+        keep = (sizes[src] < MIN_FACES) & allowed[src, chart_direction[dst]]  # small charts, neighbours they may join
+        src, dst = src[keep], dst[keep]
+        if len(src) == 0:
+            break
         order = np.lexsort((-sizes[dst], src))  # by small chart, its largest neighbour first
         src, dst = src[order], dst[order]
         first = np.concatenate([[True], src[1:] != src[:-1]])
-        chart_direction = np.zeros(count, np.int64)
-        chart_direction[chart] = direction
         target = np.full(count, -1)
-        target[src[first]] = chart_direction[dst[first]]  # the direction each small chart would take
-        wanted = target[chart]
-        candidate = wanted >= 0
-        facing = np.einsum("fi,fi->f", unit, _DIRECTIONS[np.maximum(wanted, 0)]) >= MIN_FACING
-        refused = np.bincount(chart[candidate & ~facing], minlength=count) > 0
-        move = candidate & ~refused[chart]
-        if not move.any():
-            break
-        direction = np.where(move, wanted, direction)
+        target[src[first]] = chart_direction[dst[first]]
+        move = target[chart] >= 0
+        direction = np.where(move, target[chart], direction)
         chart = _components(len(chart), pairs, direction)
     return chart, direction
 
