@@ -10,12 +10,15 @@ is launched, and caches the result. warptex therefore names a Warp module for ea
 (the ``MODULE`` constants of each file) so that a job compiles only what it runs: a technique's plain
 kernels apart from its stochastic ones, forward and hand-written gradient kernels apart from the
 kernels that carry Warp's generated adjoint (recorded only when an input other than the texels
-needs gradients). ``benchmarks/bench_compile.py`` measures every module.
+needs gradients). ``benchmarks/bench_compile.py`` measures every module. Every module is named
+through :func:`.native.use`, which gives its CPU build the native headers.
 """
 
 import inspect
 
 import warp as wp
+
+from . import native
 
 # The kernels with Warp's generated adjoint live in Warp modules of their own, compiled the first
 # time such a gradient is recorded: ``warptex.adjoint`` for sample, stochastic and the atlas, and one
@@ -32,10 +35,8 @@ def adjoint_module(technique: str | None = None) -> str:
     """The Warp module of ``technique``'s generated-adjoint kernels (``None``: the shared one), at -O2."""
     name = ADJOINT_MODULE if technique is None else f"{ADJOINT_MODULE}.{technique}"
     wp.set_module_options({"optimization_level": 2}, module=name)
-    return name
+    return native.use(name)
 
-
-adjoint_module()
 
 # Warp 1.18 added the inline hint to @wp.func.
 _HAS_INLINE_HINT = "inline" in inspect.signature(wp.func).parameters
@@ -83,3 +84,6 @@ def all_kernels(layer_counts=(4,)) -> list:
         kernels += [v for v in vars(module).values() if isinstance(v, wp.Kernel)]
     kernels += registered_kernels({"layer_counts": tuple(layer_counts)})
     return list({id(k): k for k in kernels}.values())
+
+
+adjoint_module()

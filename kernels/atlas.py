@@ -34,9 +34,10 @@ from . import inlined, specialised
 from .family import Kernels, family, pixel_kernels
 from .filters import sample_lod, sample_lod_outlined
 from .footprint import footprint_mean, footprint_taps, footprint_uv, uv_footprint
+from .native import use
 from .texels import ADDRESS_WRAP, SamplerArgs, TextureView, fetch, reduce_coord, write_channels
 
-MODULE = "warptex.atlas"
+MODULE = use("warptex.atlas")
 
 MAX_ENTRIES = wp.constant(4)  # the most index-map entries (k) per texel: an RGBA index map
 ATLAS_EPS = wp.constant(1.0e-20)

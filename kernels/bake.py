@@ -13,10 +13,11 @@ normals, and the position derivatives per texel step from the triangle's UV-to-w
 
 import warp as wp
 
+from .native import use
 from .normals import direction
 from .raster import CameraView, primary_ray
 
-MODULE = "warptex.bake"
+MODULE = use("warptex.bake")
 
 # Texels whose jump-flood seed is farther than any gutter keep this squared distance.
 FAR = wp.constant(1.0e30)

@@ -42,6 +42,7 @@ import warp as wp
 
 from . import adjoint_module
 from .lanes import LANES
+from .native import cpu_snippet, use
 
 #: Gradient paths that name a per-pixel input start with this (see :attr:`Kernels.grads`).
 PIXELS = "pixels."
@@ -190,7 +191,7 @@ def pixel_kernels(name: str, *, module: str, args, pixels, out, body, scatter=No
 def forward_kernel(body, args_t, pixels_t, out_t, *, module: str, name: str, enable_backward: bool):
     """The ``forward(args, pixels, first, out)`` kernel of ``body`` alone (see :func:`pixel_kernels`)."""
 
-    @wp.kernel(enable_backward=enable_backward, module=module, name=name)
+    @wp.kernel(enable_backward=enable_backward, module=use(module), name=name)
     def forward(args: args_t, pixels: pixels_t, first: wp.int32, out: out_t):
         body(args, pixels, first + wp.tid(), out)
 
@@ -219,7 +220,7 @@ def lane_kernel(lane_body, args_t, pixels_t, out_t, *, module: str, name: str, g
     pixel against 36 for a shaded one; skipped, 2.4 (1 thread). Without ``covered`` (no G-buffer)
     the kernels test nothing: a test that always passed (``return True``) made the ``sample``
     gradient lane 30% slower on random UVs, with the same native code inlined either way."""
-    module += LANES_SUFFIX
+    module = use(module + LANES_SUFFIX)
     if covered is None:
         if grads_t is None:
 
@@ -256,21 +257,7 @@ def lane_kernel(lane_body, args_t, pixels_t, out_t, *, module: str, name: str, g
     return covered_grad_lanes
 
 
-_ZERO_ROWS = r"""
-#if !defined(__CUDA_ARCH__)
-char* row = (char*)out.data + (long long)base * out.strides[0];
-const int channels = out.shape[1];
-if (out.strides[1] == 4 && out.strides[0] == 4 * channels) {
-    __builtin_memset(row, 0, (size_t)count * channels * 4);
-} else {
-    for (int l = 0; l < count; ++l, row += out.strides[0])
-        for (int c = 0; c < channels; ++c) *(float*)(row + (long long)c * out.strides[1]) = 0.0f;
-}
-#endif
-"""
-
-
-@wp.func_native(_ZERO_ROWS)
+@wp.func_native(cpu_snippet("wt_zero_rows(out, base, count);\n"))
 def zero_rows(out: wp.array2d(dtype=float), base: wp.int32, count: wp.int32):
     """Rows ``base .. base + count - 1`` of ``out`` set to 0, on the CPU (one ``memset`` where the
     rows are packed: Warp's element stores took 77 ns a lane of 16 RGBA rows)."""
@@ -293,7 +280,7 @@ def cpu_only(kernel) -> bool:
 
 
 def _texel_grad(scatter, args_t, pixels_t, grads_t, adj_t, *, module: str, name: str):
-    @wp.kernel(enable_backward=False, module=module, name=name)
+    @wp.kernel(enable_backward=False, module=use(module), name=name)
     def texel_grad(args: args_t, pixels: pixels_t, first: wp.int32, grads: grads_t, adj: adj_t):
         scatter(args, pixels, first + wp.tid(), grads, adj)
 

@@ -30,7 +30,9 @@ float64::
 
 import warp as wp
 
-MODULE = "warptex.fit"
+from .native import use
+
+MODULE = use("warptex.fit")
 
 LOSS_L2 = wp.constant(0)
 LOSS_L1 = wp.constant(1)

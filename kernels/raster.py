@@ -8,9 +8,10 @@ them through the triangle's position-to-UV map.
 
 import warp as wp
 
+from .native import use
 from .normals import direction
 
-MODULE = "warptex.raster"
+MODULE = use("warptex.raster")
 
 
 @wp.struct

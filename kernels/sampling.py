@@ -7,19 +7,20 @@ addressing and channel I/O in :mod:`.texels`, levels of detail and footprints in
 
 import warp as wp
 
-from .family import Kernels, family, lane_kernel, pixel_kernels
 from . import inlined, specialised
-from .lane_scatter import scatter_footprint_lane, scatter_levels_lane
-from .lanes import LANES
-from .sample_lanes import sample_footprint_lane, sample_levels_lane
+from .family import Kernels, family, lane_kernel, pixel_kernels
 from .filters import sample_footprint, sample_footprint_outlined, sample_levels
 from .footprint import point_footprint, texture_footprint
+from .lanes import LANES
+from .lanes.sample import sample_footprint_lane, sample_levels_lane
+from .lanes.scatter import scatter_footprint_lane, scatter_levels_lane
+from .native import use
 from .scatter import scatter_footprint, scatter_levels
 from .texels import FILTER_ANISOTROPIC, LOD_CONSTANT, LOD_DERIVATIVES, LOD_PER_SAMPLE, SamplerArgs, TexelGrad, TextureView, finite_uv_lod, read_channels, resolve_layer, write_channels
 
-MODULE = "warptex.sample"
-LOD_MODULE = MODULE + ".lod"  # the lanes of a LOD per sample: apart from the one-LOD lanes, which every plain lookup compiles
-MIPS_MODULE = "warptex.mips"
+MODULE = use("warptex.sample")
+LOD_MODULE = use(MODULE + ".lod")  # the lanes of a LOD per sample: apart from the one-LOD lanes, which every plain lookup compiles
+MIPS_MODULE = use("warptex.mips")
 
 
 @wp.struct

@@ -1,4 +1,4 @@
-"""Splat-map terrain texturing, part 2: the kernels (options and layer reads: :mod:`.splat_layers`;
+"""Splat-map terrain texturing: the kernels (options and layer reads: :mod:`.splat_layers`;
 the blend: :mod:`.splat_blend`).
 
 **Configurations** (:func:`splat_kernels`): a *capacity* of layers (8, 16, 32...: the layer count is
@@ -36,7 +36,7 @@ from . import adjoint_module, inlined, specialised
 from .family import Kernels, Staged, family, forward_kernel, lane_covered, lane_kernel, pixel_kernels
 from .projection import SurfacePixels, surface_frame
 from .splat_blend import blend_functions, capacity
-from .splat_lanes import grad_lanes_take, lane_bodies, lane_saved, lanes_take
+from .lanes.splat import grad_lanes_take, lane_bodies, lane_saved, lanes_take
 from .splat_layers import (
     HEIGHT_ARRAY,
     HEIGHT_CHANNEL,

@@ -1,4 +1,4 @@
-"""Splat-map terrain texturing, part 3: the blend of a pixel's layers and its hand-written gradient,
+"""Splat-map terrain texturing: the blend of a pixel's layers and its hand-written gradient,
 for a fixed capacity of layers (:func:`blend_functions`; formulas in :mod:`.splat_layers`).
 
 Per pixel the kernels keep each layer's colour and height in local storage of a fixed capacity (8,

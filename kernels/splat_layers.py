@@ -1,4 +1,4 @@
-"""Splat-map terrain texturing, part 1: the options and reading one layer (part 2: :mod:`.splat`).
+"""Splat-map terrain texturing: the options and reading one layer (the kernels: :mod:`.splat`).
 
 Texture-array layers blended by splat maps, with height-based blending.
 

@@ -25,14 +25,15 @@ import warp as wp
 from . import adjoint_module, inlined, specialised
 from .faces import FACE_FIELDS, FaceGrads, FaceTextures, on_axis_face, on_face
 from .family import LANES_SUFFIX, Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
+from .lanes.projection import surface_covered
+from .lanes.triplanar import face_lane_bodies, lane_bodies, normal_lane_bodies, stochastic_lane_bodies, stored_lane_bodies
+from .native import use
 from .normals import NormalMapArgs, blend_projected, blend_projected_grad, decode_normal, decode_normal_grad, direction, direction_grad, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
 from .texels import SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
-from .projection_lanes import surface_covered
-from .triplanar_lanes import face_lane_bodies, lane_bodies, normal_lane_bodies, stochastic_lane_bodies, stored_lane_bodies
 
-MODULE = "warptex.triplanar"
+MODULE = use("warptex.triplanar")
 
 # The stochastic kernels loop over the projections (and taps) rather than unroll them: unrolled, the
 # colour and normal kernels held six copies of the stochastic sampling code, 38 s to compile for sm_90.

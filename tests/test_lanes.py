@@ -6,6 +6,9 @@ bit (NaN payloads aside), over every filter, address mode, level, layer and chan
 launches whose pixel count is not a multiple of the lane width.
 """
 
+import os
+import re
+
 import numpy as np
 import pytest
 import trimesh
@@ -14,15 +17,76 @@ import warp as wp
 import warptex as wt
 from warptex import _launch, _memory
 from warptex._op import one_pixel_kernels
+from warptex.kernels import native
+from warptex.kernels.family import cpu_only
 from warptex.kernels.lanes import LANES
+from warptex.kernels.texels import read_channels
+
+
+FUNCTION = type(read_channels)  # Warp's @wp.func type (its module path differs across releases)
+
+#: The lane kernels the running test launched (``lane_kernels_launched``), for failure messages.
+_LANE_KERNELS: dict = {}
+
+
+def native_helpers(kernel) -> dict[str, str]:
+    """The native functions a lane kernel calls, each with the header that defines it: the ``wt_*``
+    calls of every ``wp.func_native`` its body reaches (through globals and factory closures)."""
+    headers = {h.name: h.read_text() for h in native.folder().glob("*.h")}
+    helpers, seen, stack = {}, set(), [kernel.func]
+    while stack:
+        f = stack.pop()
+        if id(f) in seen or not hasattr(f, "__code__"):
+            continue
+        seen.add(id(f))
+        refs = [f.__globals__.get(name) for name in f.__code__.co_names]
+        for cell in f.__closure__ or ():
+            try:
+                refs.append(cell.cell_contents)
+            except ValueError:  # an empty cell
+                pass
+        for ref in refs:
+            if isinstance(ref, FUNCTION) and getattr(ref, "native_snippet", None):
+                for name in re.findall(r"\b(wt_\w+)\s*\(", ref.native_snippet.split("#else")[0]):
+                    helpers[name] = next((h for h, text in headers.items() if re.search(rf"\b{name}\s*\(", text) and f" {name}(" in text), "?")
+            elif isinstance(ref, FUNCTION) and getattr(ref, "func", None) is not None:
+                stack.append(ref.func)
+    return helpers
 
 
 def _same_bits(a: np.ndarray, b: np.ndarray) -> None:
-    """``a`` and ``b`` are the same floats bit for bit, NaN wherever either is (any payload)."""
+    """``a`` and ``b`` are the same floats bit for bit, NaN wherever either is (any payload). A
+    failure names the case (the test's parameters), the first pixel that differs and its lane, and
+    the lane kernels the test launched with the native helpers (and headers) each calls."""
     assert a.shape == b.shape
-    nan = np.isnan(a)
-    np.testing.assert_array_equal(nan, np.isnan(b))
-    np.testing.assert_array_equal(a[~nan].view(np.uint32), b[~nan].view(np.uint32))
+    nan_a, nan_b = np.isnan(a), np.isnan(b)
+    differs = (nan_a != nan_b) | (~nan_a & ~nan_b & (a.view(np.uint32) != b.view(np.uint32)))
+    if differs.any():
+        where = np.argwhere(differs)
+        first = tuple(int(i) for i in where[0])
+        # a trailing axis of at most 4 is the channel; the launch index is the flat pixel before it
+        channels = a.ndim >= 2 and a.shape[-1] <= 4
+        pixel = int(np.ravel_multi_index(first[:-1], a.shape[:-1])) if channels else int(np.ravel_multi_index(first, a.shape))
+        kernels = "; ".join(f"{key}: " + ", ".join(f"{h} ({header})" for h, header in sorted(native_helpers(k).items())) for key, k in _LANE_KERNELS.items())
+        pytest.fail(
+            f"{len(where)} entries differ in {os.environ.get('PYTEST_CURRENT_TEST', '?').split(' ')[0]}: first at {first} "
+            f"(pixel {pixel}, lane {pixel % LANES}): lanes {float(a[first])!r}, one-pixel {float(b[first])!r}\n"
+            f"lane kernels launched: {kernels or 'none'}"
+        )
+
+
+@pytest.fixture(autouse=True)
+def lane_kernels_launched(monkeypatch):
+    """Records the lane kernels each test launches (:data:`_LANE_KERNELS`)."""
+    _LANE_KERNELS.clear()
+    launch = wp.launch
+
+    def spy(kernel, *args, **kwargs):
+        if cpu_only(kernel):
+            _LANE_KERNELS[kernel.key] = kernel
+        return launch(kernel, *args, **kwargs)
+
+    monkeypatch.setattr(_launch.wp, "launch", spy)
 
 
 def _both(call):
@@ -802,3 +866,4 @@ def test_anisotropic_lanes_read_every_tap(rng, address):
     trilinear = wt.triplanar(g, tex, tiling=2.0, sampler=wt.Sampler(filter="trilinear", address=address)).numpy()
     stretched = (stretch[:, 0] == 100.0) & (g.mask.numpy()[0] > 0)
     assert (np.abs(lanes - trilinear)[0][stretched].max(-1) > 1e-3).mean() > 0.5  # those pixels read several taps
+

@@ -1,11 +1,10 @@
-"""Splat-map terrain texturing, part 4: the plain splat for a lane of pixels on the CPU, forward and
-texel gradient (:mod:`.lanes`).
+"""The plain splat for a lane of pixels on the CPU, forward and texel gradient (:mod:`.`).
 
-The forward lane body computes what :mod:`.splat`'s forward body computes for
-:data:`~.lanes.LANES` pixels: the splat maps read for the whole lane and the pixels' splat weights;
+The forward lane body computes what :mod:`warptex.kernels.splat`'s forward body computes for
+:data:`~.LANES` pixels: the splat maps read for the whole lane and the pixels' splat weights;
 then layer by layer, in one native call (:func:`layer_values_lane`), the lane's reads of the layer
 (UV, footprint, weight: ``layer_read`` restated, ``wt_layer_reads``) and its texels' reads over
-their footprints (``lanes.wt_accumulate_footprint``), projection by projection in the order
+their footprints (``wt_accumulate_footprint``), projection by projection in the order
 ``read_layer`` adds them; then the blend. Without height blending the blend is a weighted sum in
 the layers' order, added a layer at a time inside that call (:func:`layer_blend_lane`). Where the
 forward ran on a tape, its lane keeps each pixel's layer colours (``SplatPixels.saved``,
@@ -16,7 +15,7 @@ layer's reads touch texels of its own array layer only, so every texel gets the 
 sums in its order, and the outputs and gradients are the one-pixel kernels' bits. Face layers,
 and for the gradient the cases :func:`grad_lanes_take` names, run the one-pixel kernels
 (``Kernels.lanes_take``). In the kernels of up to 8 layers the weights, the blend and the blend
-and weights backwards are native code for the whole lane (:mod:`.splat_blend_lanes`); beyond, the
+and weights backwards are native code for the whole lane (:mod:`.splat_blend`); beyond, the
 scalar blocks run pixel by pixel.
 """
 
@@ -24,94 +23,21 @@ import functools
 
 import warp as wp
 
-from . import inlined, specialised
-from .lane_scatter import _SCATTER_LOD_CORE
-from .lanes import LANES, accumulate_footprint_lane, cpu_snippet, lane_colours, lane_floats, lane_ints
-from .projection import SurfacePixels
-from .projection_lanes import PLANE_CPP
-from .splat_blend import blend_functions
-from .splat_blend_lanes import GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, weights_lane8
-from .splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerReads, SplatArgs, SplatParams, layer_textures, map_count, pick, surface_weights
-from .texels import FILTER_ANISOTROPIC, TexelGrad, TextureView, read_channels, write_channels
+from .. import inlined, specialised
+from ..native import cpu_snippet
+from ..projection import SurfacePixels
+from ..splat_blend import blend_functions
+from ..splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerReads, SplatArgs, SplatParams, layer_textures, map_count, pick, surface_weights
+from ..texels import FILTER_ANISOTROPIC, TexelGrad, TextureView, read_channels, write_channels
+from . import LANES, lane_colours, lane_floats, lane_ints
+from .sample import accumulate_footprint_lane
+from .splat_blend import GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, weights_lane8
 
 # Per lane pixel (row): its projections' triplanar weights.
 _lane_vec3 = wp.types.matrix(shape=(LANES, 3), dtype=float)
 
 
-_LAYER_READS = PLANE_CPP + r"""
-// The lane's reading points (layer_point) as rows (wt_rows), then as vectors (the tail repeats pixel
-// base, not read).
-auto rows_of = [&](const auto& a, const int dims, wt_vf* out) __attribute__((always_inline)) {
-    float rows[3][WT_L];
-    wt_rows(a, base, count, dims, rows);
-    for (int d = 0; d < dims; ++d) __builtin_memcpy(&out[d], rows[d], sizeof(wt_vf));
-};
-// What each lane pixel l (pixel base + l of the launch) with weighted[l] > 0 reads of layer j of tex
-// (no face layers): splat_layers.layer_read's UV, footprint and weight of each read k at the pixel's
-// point (its UV0 and their derivatives, or its surface; tri_w: its triplanar weights), as a
-// lane_reads matrix (all 0 for the other pixels), 16 pixels at a time.
-auto wt_layer_reads = [&](const float* weighted) __attribute__((always_inline)) -> wp::mat_t<21, WT_L, float> {
-    const auto& params = reads.params;
-    const float t = *(const float*)((const char*)params.tiling.data + (long long)wp::min(j, params.tiling.shape[0] - 1) * params.tiling.strides[0]);  // layer_tiling
-    wt_vf w;
-    __builtin_memcpy(&w, weighted, sizeof(w));
-    const wt_vi read = w > 0.0f;
-    const wt_vf zero = 0.0f, one = 1.0f;
-    wp::mat_t<21, WT_L, float> out;
-    wt_footprint_lanes fp;
-    if (params.projection == 0) {  // PROJECT_UV: UV0 × tiling, its footprint from UV0's derivatives × tiling
-        wt_vf uv[2], dx[2], dy[2];
-        rows_of(uv0, 2, uv);
-        rows_of(uv0_dx, 2, dx);
-        rows_of(uv0_dy, 2, dy);
-        fp = wt_footprint(reads.smp, dx[0] * t, dx[1] * t, dy[0] * t, dy[1] * t, (float)wt_int(tex.level_width, 0), (float)wt_int(tex.level_height, 0));
-        wt_put_read(out, 0, read, uv[0] * t, uv[1] * t, fp, one);
-    } else {
-        wt_vf P[3], DX[3], DY[3], u, v;
-        rows_of(surface.position, 3, P);
-        rows_of(surface.position_dx, 3, DX);
-        rows_of(surface.position_dy, 3, DY);
-        if (params.projection == 1) {  // PROJECT_WORLD_XZ: the Y projection seen from above
-            const wt_vf up[3] = {zero, one, zero};
-            wt_plane_reads(reads.proj, reads.smp, 1, t, tex, P, up, DX, DY, u, v, fp);
-            wt_put_read(out, 0, read, u, v, fp, one);
-        } else {  // PROJECT_TRIPLANAR: the three projections, weighted by tri_w
-            wt_vf N[3];
-            rows_of(surface.normal, 3, N);
-            for (int k = 0; k < 3; ++k) {
-                float weight[WT_L];
-                for (int l = 0; l < WT_L; ++l) weight[l] = tri_w.data[l][k];
-                wt_vf wk;
-                __builtin_memcpy(&wk, weight, sizeof(wk));
-                wt_plane_reads(reads.proj, reads.smp, k, t, tex, P, N, DX, DY, u, v, fp);
-                wt_put_read(out, k, read, u, v, fp, wk);
-            }
-        }
-    }
-    return out;
-};
-"""
-
-
-# Layer j's texels read over wt_layer_reads's reads (read_layer: per projection value += w · sample
-# where triplanar, value = sample for the one read of the other projections), in one native call.
-_LAYER_VALUES = _LAYER_READS + r"""
-int layer[WT_L];
-for (int l = 0; l < WT_L; ++l) layer[l] = j;
-const decltype(tex)* texs[3] = {&tex, &tex, &tex};
-const int triplanar = reads.params.projection == 2;  // PROJECT_TRIPLANAR: value += w · sample, else value = sample
-wp::mat_t<WT_L, 4, float> value;
-wt_accumulate_reads(texs, reads.smp, layer, triplanar ? 3 : 1, triplanar, wt_layer_reads(weighted.c), value);
-if (keep && saved.shape[0] > 0) {  // SplatPixels.saved: row base + l, the layer's 4 floats
-    for (int l = 0; l < count; ++l) {
-        float* row = (float*)((char*)saved.data + (long long)(base + l) * saved.strides[0]);
-        for (int c = 0; c < 4; ++c) *(float*)((char*)row + (long long)(4 * j + c) * saved.strides[1]) = value.data[l][c];
-    }
-}
-"""
-
-
-@wp.func_native(cpu_snippet(_LAYER_VALUES + "return value;\n", "return {};\n"))
+@wp.func_native(cpu_snippet("return wt_layer_values_lane(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, keep, saved);\n", "return {};\n"))
 def layer_values_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
                       uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3, keep: wp.int32,
                       saved: wp.array2d(dtype=float)) -> lane_colours:  # fmt: skip
@@ -145,15 +71,7 @@ def lane_saved(args: SplatArgs) -> int:
     return 4 * args.reads.params.num_layers
 
 
-# splat_blend.blend without heights, a layer at a time: colour += w · c in the layers' order.
-_LAYER_BLEND = _LAYER_VALUES + r"""
-for (int l = 0; l < WT_L; ++l)
-    for (int c = 0; c < 4; ++c) colour.data[l][c] = colour.data[l][c] + weighted.c[l] * value.data[l][c];
-return colour;
-"""
-
-
-@wp.func_native(cpu_snippet(_LAYER_BLEND, "return {};\n"))
+@wp.func_native(cpu_snippet("return wt_layer_blend_lane(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, keep, saved, colour);\n", "return {};\n"))
 def layer_blend_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
                      uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3, keep: wp.int32,
                      saved: wp.array2d(dtype=float), colour: lane_colours) -> lane_colours:  # fmt: skip
@@ -163,26 +81,14 @@ def layer_blend_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted:
     ...
 
 
-# scatter_layer for the lane: layer j's reads (wt_layer_reads) and each read's share of the pixel's
-# gradient added into its texels (lane_scatter's wt_scatter_lod), in one native call.
-_LAYER_SCATTER = _LAYER_READS + _SCATTER_LOD_CORE + r"""
-int layer[WT_L];
-for (int l = 0; l < WT_L; ++l) layer[l] = j;
-const decltype(tex)* texs[3] = {&tex, &tex, &tex};
-const decltype(grad)* grads[3] = {&grad, &grad, &grad};
-const int triplanar = reads.params.projection == 2;  // PROJECT_TRIPLANAR: w · g per projection, else g for the one read
-wt_scatter_lod(texs, grads, reads.smp, triplanar ? 3 : 1, layer, wt_layer_reads(weighted.c), triplanar, g);
-"""
-
-
-@wp.func_native(cpu_snippet(_LAYER_SCATTER))
+@wp.func_native(cpu_snippet("wt_scatter_layer_lane(tex, grad, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, g);\n"))
 def scatter_layer_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2),
                        uv0_dx: wp.array(dtype=wp.vec2), uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32,
                        tri_w: _lane_vec3, g: lane_colours):  # fmt: skip
     """``scatter_layer`` of the gradients ``g[l]`` of layer ``j``'s reads of ``tex`` (``wt_layer_reads``,
     as :func:`layer_values_lane` reads them) into ``grad``, pixel by pixel and read by read:
     ``w · g`` per projection where triplanar (``scatter_projections``), ``g`` itself for the one
-    read of the other projections (``lane_scatter.scatter_lod_lanes``)."""
+    read of the other projections (``.scatter.scatter_lod_lanes``)."""
     ...
 
 

@@ -1,13 +1,13 @@
-"""Triplanar and biplanar colour for a lane of pixels on the CPU (:mod:`.lanes`), forward and texel
+"""Triplanar and biplanar colour for a lane of pixels on the CPU (:mod:`.`), forward and texel
 gradient, triplanar normal mapping (its forward, and both steps of its two-step gradient), one
 texture per axis, plain sampling; plain colour mapping with a texture per face; and stochastic
 colour mapping, one texture per axis, forward and texel gradient.
 
 What each pixel reads from each projection (its UV, footprint and weight, with triplanar or
-biplanar weights) comes from :func:`~.projection_lanes.triplanar_reads_lane` for the whole lane;
+biplanar weights) comes from :func:`~.projection.triplanar_reads_lane` for the whole lane;
 the lane's texture reads from
-:func:`~.projection_lanes.accumulate_reads_lane` and its texel-gradient adds from
-:func:`~.lane_scatter.scatter_lod_lanes`, both in the order the scalar bodies take them, so the
+:func:`~.projection.accumulate_reads_lane` and its texel-gradient adds from
+:func:`~.scatter.scatter_lod_lanes`, both in the order the scalar bodies take them, so the
 outputs and the gradients are the scalar kernels' bits. The gradient of the anisotropic filter,
 whose footprints may take several taps, goes pixel by pixel through the scalar body.
 """
@@ -16,16 +16,17 @@ import functools
 
 import warp as wp
 
-from . import inlined, specialised
-from .family import lane_covered
-from .faces import FaceGrads, FaceTextures, on_axis
-from .lane_scatter import scatter_face_reads_lanes, scatter_lod_lanes, scatter_projection_taps_lanes, scatter_reads_lanes
-from .lanes import LANES, accumulate_footprint_lane, lane_colours, lane_floats, lane_ints, lane_reads
-from .normal_lanes import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
-from .projection import SurfacePixels
-from .projection_lanes import accumulate_reads_lane, triplanar_reads_lane
-from .stochastic_sample import lane_taps_linear, projection_taps_lane
-from .texels import FILTER_ANISOTROPIC, SamplerArgs, pick3, read_channels, write_channels
+from .. import inlined, specialised
+from ..faces import FaceGrads, FaceTextures, on_axis
+from ..family import lane_covered
+from ..projection import SurfacePixels
+from ..texels import FILTER_ANISOTROPIC, SamplerArgs, pick3, read_channels, write_channels
+from . import LANES, lane_colours, lane_floats, lane_ints, lane_reads
+from .normals import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
+from .projection import accumulate_reads_lane, triplanar_reads_lane
+from .sample import accumulate_footprint_lane
+from .scatter import scatter_face_reads_lanes, scatter_lod_lanes, scatter_projection_taps_lanes, scatter_reads_lanes
+from .stochastic import lane_taps_linear, projection_taps_lane
 
 
 @wp.func
@@ -136,7 +137,7 @@ def stochastic_lane_bodies(colour, colour_grad, args_t):
     (:func:`~.stochastic_sample.projection_taps_lane`), read tap by tap (``value += w · sample``
     from 0, as ``stochastic.sample_stochastic`` blends them; NaN where the UV or LOD is not finite)
     and added with the projection's weight, in the order of the pixel body; the gradient adds each
-    tap's share of the projection's share (``lane_scatter.scatter_projection_taps_lanes``). A
+    tap's share of the projection's share (``.scatter.scatter_projection_taps_lanes``). A
     histogram's blend and the anisotropic filter go pixel by pixel through the pixel bodies."""
 
     def stochastic_colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
@@ -199,7 +200,7 @@ def normal_lane_bodies(samples_grad, args_t, samples_t):
     adds their texel gradients (the anisotropic filter's pixel by pixel through the body
     ``samples_grad``). Each reads the projections on the unit normal, as the bodies do
     (``triplanar_reads_lane``'s ``unit_normals``); the forward makes the normals from them natively
-    (:func:`~.normal_lanes.surface_normals_lane`)."""
+    (:func:`~.normals.surface_normals_lane`)."""
 
     def unit_normal_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
         """``(reads, sx, sy, sz)``: the lane's reads on the unit normal and each projection's samples."""
@@ -256,7 +257,7 @@ def normal_lane_bodies(samples_grad, args_t, samples_t):
 def stored_lane_bodies(args_t, pixels_t, grads_t):
     """``(stored_lane, stored_grad_lane, covered)``: the lane bodies of the second step of normal
     mapping's two-step gradient (the normal made from the stored samples, and its gradient in them,
-    natively: :mod:`.normal_lanes`), whose arguments are ``args_t``, ``pixels_t`` and ``grads_t``
+    natively: :mod:`.normals`), whose arguments are ``args_t``, ``pixels_t`` and ``grads_t``
     (:class:`~.triplanar.NormalBlendArgs`, ``StoredSamples``, ``StoredSampleGrads``), and their
     lanes' ``covered`` (``family.lane_kernel``)."""
 

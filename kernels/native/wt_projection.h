@@ -1,0 +1,240 @@
+// Plane projections for a lane of pixels: what each pixel of a triplanar lane reads from each
+// projection, its UV, LOD and weight, 16 pixels at a time. The scalar blocks of
+// warptex.kernels.projection and .footprint restated operation for operation (Warp's own wp::
+// functions or their exact vector twins, no contraction) on clang vectors of a value per lane pixel
+// (the weights' exponent and the other launch-wide choices are tested once, outside them), so the
+// reads are the scalar blocks' bits. Every filter (the anisotropic footprint's branches as
+// selects) and both weights: biplanar's branches, which pick each pixel's axes, as selects too (the
+// rare pairs whose powers underflow go pixel by pixel).
+#pragma once
+#include "wt_config.h"
+#include "wt_core.h"
+#include "wt_footprint.h"
+#include "wt_normals.h"
+#include "wt_sample.h"
+
+// (u, v) and the footprint of projection `axis` at tiling t of `tex` (its level 0) on the lane's
+// surface P, N, DX, DY (projection.plane_uv and plane_footprint): also what a splat layer mapped
+// triplanar reads.
+// twin: projection.plane_uv
+template <class Proj, class Smp, class Tex>
+WT_INLINE void wt_plane_reads(const Proj& proj, const Smp& smp, int axis, float t, const Tex& tex, const wt_vf* P,
+                              const wt_vf* N, const wt_vf* DX, const wt_vf* DY, wt_vf& u, wt_vf& v,
+                              wt_footprint_lanes& fp) {
+    float o0 = 0.0f, o1 = 0.0f;  // projection.origin_uv, in float64
+    if (proj.origin_mode != 0) {
+        const double a = axis == 0 ? proj.origin.c[2] : proj.origin.c[0];
+        const double b = axis == 1 ? proj.origin.c[2] : proj.origin.c[1];
+        const double td = (double)t;
+        double ou = a * td, ov = b * td;
+        if (proj.origin_mode == WT_ORIGIN_FOLDED) {
+            ou = ou - wp::floor(ou * 0.5) * 2.0;
+            ov = ov - wp::floor(ov * 0.5) * 2.0;
+        }
+        o0 = (float)ou;
+        o1 = (float)ov;
+    }
+    const char* offset = (const char*)proj.offsets.data + (long long)axis * proj.offsets.strides[0];
+    const float off0 = *(const float*)offset, off1 = *(const float*)(offset + proj.offsets.strides[1]);
+    const float width = (float)wt_int(tex.level_width, 0), height = (float)wt_int(tex.level_height, 0);
+    const int c0 = axis == 0 ? 2 : 0, c1 = axis == 1 ? 2 : 1;  // projection.plane_coords
+    const wt_vf one = 1.0f;
+    wt_vf s = one;  // projection.u_sign: sign_or_one(n.z) for Z, -sign_or_one(n[axis]) for X and Y
+    if (proj.mirror_fix != 0) s = axis == 2 ? wt_sel(N[2] < 0.0f, -one, one) : -wt_sel(N[axis] < 0.0f, -one, one);
+    u = (P[c0] * t + o0) * s + off0;
+    v = (P[c1] * t + o1) + off1;
+    fp = wt_footprint(smp, (DX[c0] * t) * s, DX[c1] * t, (DY[c0] * t) * s, DY[c1] * t, width,
+                      height);  // plane_derivative
+}
+
+// Reads r = 0 .. count - 1 of a lane_reads matrix, read r of *texs[r] (lane pixel l's layer
+// layers[l]) over its footprint, into value in read order (wt_accumulate_footprint: value += w ·
+// sample where add, value = sample where not).
+template <class Tex, class Smp> WT_INLINE void wt_accumulate_reads(const Tex* const* texs, const Smp& smp,
+                                                                   const int* layers, int count, int add,
+                                                                   const wt_lane_reads& at, wt_lane_colours& value) {
+    for (int r = 0; r < count; ++r)
+        wt_accumulate_footprint(*texs[r], smp, layers, at.data[r], at.data[3 + r], at.data[6 + r], at.data[12 + r],
+                                at.data[15 + r], at.data[18 + r], at.data[9 + r], add, value);
+}
+
+// lanes.projection.accumulate_reads_lane: row l, lane pixel l's reads r = 0 .. count - 1 blended in
+// read order by their weights where add, the one read's sample where not; 0 where it reads nothing.
+template <class Tex, class Smp, class Ints>
+WT_INLINE wt_lane_colours wt_accumulate_reads_lane(const Tex& tex0, const Tex& tex1, const Tex& tex2, const Smp& smp,
+                                                   const Ints& layers, int count, int add, const wt_lane_reads& reads) {
+    const Tex* texs[3] = {&tex0, &tex1, &tex2};
+    wt_lane_colours value;
+    wt_accumulate_reads(texs, smp, layers.c, count, add, reads, value);
+    return value;
+}
+
+// projection.power_weight, operation for operation with Warp's own functions, for one pixel (the
+// rare lanes the vectors leave to it).
+// twin: projection.power_weight
+WT_INLINE float wt_power_weight(float r, float exponent) {
+    float w = 0.0f;
+    if (exponent == 0.0f) {
+        w = 1.0f;
+    } else if (r > 0.0f) {
+        const int k = (int)exponent;
+        if ((float)k == exponent && k > 0 && k < WT_MAX_INT_EXPONENT) {
+            const float r2 = r * r, r4 = r2 * r2, r8 = r4 * r4;
+            w = ((k & 1) != 0 ? r : 1.0f) * ((k & 2) != 0 ? r2 : 1.0f) * ((k & 4) != 0 ? r4 : 1.0f);
+            w = w * ((k & 8) != 0 ? r8 : 1.0f) * ((k & 16) != 0 ? r8 * r8 : 1.0f);
+        } else {
+            w = wp::exp(exponent * wp::log(r));
+        }
+    }
+    return w;
+}
+
+// twin: projection.biplanar_pair
+WT_INLINE wt_v2 wt_biplanar_pair(float major, float median, float exponent) {
+    const float edge = (float)WT_BIPLANAR_EDGE;
+    const float b0 = wp::clamp((major - edge) / (1.0f - edge), 0.0f, 1.0f);
+    const float b1 = wp::clamp((median - edge) / (1.0f - edge), 0.0f, 1.0f);
+    wt_v2 w(wt_power_weight(b0, exponent), wt_power_weight(b1, exponent));
+    if (w.c[0] + w.c[1] < (float)WT_WEIGHT_EPS) {
+        const float m = wp::max(b0, b1);
+        if (m > 0.0f)
+            w = wt_v2(wt_power_weight(b0 / m, exponent), wt_power_weight(b1 / m, exponent));
+        else
+            w = wt_v2(1.0f, 1.0f);
+    }
+    return w;
+}
+
+// projection.power_weight of a lane's r, its exponent the same in every lane: integer exponents by
+// multiplication, others with exp and log lane by lane (where `active`).
+// twin: projection.power_weight
+WT_INLINE wt_vf wt_power_lanes(wt_vf r, float exponent, wt_vi active) {
+    const wt_vf zero = 0.0f, one = 1.0f;
+    if (exponent == 0.0f) return one;
+    const int k = (int)exponent;
+    if ((float)k == exponent && k > 0 && k < WT_MAX_INT_EXPONENT) {
+        const wt_vf r2 = r * r, r4 = r2 * r2, r8 = r4 * r4;
+        const wt_vf power = (((k & 1) != 0 ? r : one) * ((k & 2) != 0 ? r2 : one) * ((k & 4) != 0 ? r4 : one)) *
+                            ((k & 8) != 0 ? r8 : one) * ((k & 16) != 0 ? r8 * r8 : one);
+        return wt_sel(r > 0.0f, power, zero);
+    }
+    float w[WT_L];
+    for (int l = 0; l < WT_L; ++l) w[l] = active[l] && r[l] > 0.0f ? wp::exp(exponent * wp::log(r[l])) : 0.0f;
+    wt_vf result;
+    __builtin_memcpy(&result, w, sizeof(result));
+    return result;
+}
+
+// projection.biplanar_weights of the lane, each pixel's axes chosen by selects.
+// twin: projection.biplanar_weights
+WT_INLINE void wt_biplanar_weights(const wt_vf* N, wt_vi covered, float sharpness, wt_vf* W) {
+    const wt_vf zero = 0.0f, one = 1.0f;
+    const wt_vf length0 = wt_vsqrt(N[0] * N[0] + N[1] * N[1] + N[2] * N[2]);  // wp::length
+    const wt_vi over = length0 > wt_float_max;                                // |n|² overflowed: normals.unsquared
+    const wt_vf largest = wt_vmax(wt_vmax(wt_vabs(N[0]), wt_vabs(N[1])), wt_vabs(N[2]));
+    wt_vf U[3];
+    for (int e = 0; e < 3; ++e) U[e] = wt_sel(over, N[e] / largest, N[e]);
+    const wt_vf length = wt_sel(over, wt_vsqrt(U[0] * U[0] + U[1] * U[1] + U[2] * U[2]), length0);
+    const wt_vi weighed = covered & wt_finite(N[0]) & wt_finite(N[1]) & wt_finite(N[2]) & (length > 0.0f);
+    const wt_vf divisor = wt_sel(weighed, length, one);
+    const wt_vf a0 = wt_vabs(U[0]) / divisor, a1 = wt_vabs(U[1]) / divisor, a2 = wt_vabs(U[2]) / divisor;
+    const float exponent = sharpness / 8.0f;
+    const wt_vi minor_z = (a2 <= a0) & (a2 <= a1), minor_y = ~minor_z & (a1 <= a0), minor_x = ~minor_z & ~minor_y;
+    const wt_vf major = wt_sel(minor_x, a1, a0), median = wt_sel(minor_z, a1, a2);
+    const float edge = (float)WT_BIPLANAR_EDGE;  // biplanar_pair
+    const wt_vf b0 =
+        wt_vmin(wt_vmax(zero, (major - edge) / (1.0f - edge)), one);  // wp::clamp(x, 0, 1) = fmin(fmax(0, x), 1)
+    const wt_vf b1 = wt_vmin(wt_vmax(zero, (median - edge) / (1.0f - edge)), one);
+    wt_vf p0 = wt_power_lanes(b0, exponent, weighed), p1 = wt_power_lanes(b1, exponent, weighed);
+    const wt_vi underflowed = weighed & (p0 + p1 < (float)WT_WEIGHT_EPS);
+    if (__builtin_reduce_or(underflowed)) {  // both powers underflowed (or a diagonal): biplanar_pair's own fallback
+        for (int l = 0; l < WT_L; ++l) {
+            if (!underflowed[l]) continue;
+            const wt_v2 pair = wt_biplanar_pair(major[l], median[l], exponent);
+            p0[l] = pair.c[0];
+            p1[l] = pair.c[1];
+        }
+    }
+    W[0] = wt_sel(minor_x, zero, p0);
+    W[1] = wt_sel(minor_z, p1, wt_sel(minor_y, zero, p0));
+    W[2] = wt_sel(minor_z, zero, p1);
+    const wt_vf total = wt_vmax(W[0] + W[1] + W[2], (float)WT_WEIGHT_EPS);
+    for (int e = 0; e < 3; ++e) W[e] = wt_sel(weighed, W[e] / total, zero);
+}
+
+// projection.triplanar_weights of the lane.
+// twin: projection.triplanar_weights
+WT_INLINE void wt_triplanar_weights(const wt_vf* N, wt_vi covered, float sharpness, wt_vf* W) {
+    const wt_vf zero = 0.0f;
+    const wt_vf a0 = wt_vabs(N[0]), a1 = wt_vabs(N[1]), a2 = wt_vabs(N[2]);
+    const wt_vf m = wt_vmax(wt_vmax(a0, a1), a2);
+    const wt_vi weighed = covered & wt_finite(N[0]) & wt_finite(N[1]) & wt_finite(N[2]) & (m > 0.0f);
+    const wt_vf R[3] = {a0 / m, a1 / m, a2 / m};  // |n| / max |n|
+    for (int e = 0; e < 3; ++e) W[e] = wt_power_lanes(R[e], sharpness, weighed);
+    const wt_vf total = wt_vmax(W[0] + W[1] + W[2], (float)WT_WEIGHT_EPS);
+    for (int e = 0; e < 3; ++e) W[e] = wt_sel(weighed, W[e] / total, zero);
+}
+
+// lanes.projection.triplanar_reads_lane: what the lane's pixels base .. base + count - 1 read from
+// each projection, with triplanar or biplanar weights (proj.weights): projection.projection_uv,
+// projection_footprint and projection_weights, as a lane_reads matrix (all 0 where a projection is
+// not read). unit_normals: the UVs and footprints of the unit normal (triplanar.unit_base_normal,
+// as normal mapping reads them). side: 0, each projection on faces' texture of its axis (px, py,
+// pz); 1 or 2, on the + or - face of that axis, weight 0 where the normal looks at the other face.
+// twin: projection.projection_weights
+template <class Faces, class Proj, class Smp, class Pixels>
+WT_INLINE wt_lane_reads wt_triplanar_reads_lane(const Faces& faces, const Proj& proj, const Smp& smp,
+                                                const Pixels& pixels, int base, int count, int unit_normals, int side) {
+    // projection.surface: the lane's pixels (the tail repeats pixel base, not read), in the projected space.
+    float p_[3][WT_L], n_[3][WT_L], dx_[3][WT_L], dy_[3][WT_L], mask_[1][WT_L];  // read into arrays, then as vectors
+    wt_rows(pixels.position, base, count, 3, p_);
+    wt_rows(pixels.normal, base, count, 3, n_);
+    wt_rows(pixels.position_dx, base, count, 3, dx_);
+    wt_rows(pixels.position_dy, base, count, 3, dy_);
+    wt_rows(pixels.mask, base, count, 1, mask_);
+    const wt_vi covered = wt_covered(mask_[0], count);
+    if (proj.object_space != 0) {  // projection.object_space
+        for (int l = 0; l < WT_L; ++l) {
+            wt_v3 p, n, dx, dy;
+            for (int e = 0; e < 3; ++e) p.c[e] = p_[e][l], n.c[e] = n_[e][l], dx.c[e] = dx_[e][l], dy.c[e] = dy_[e][l];
+            p = wp::transform_point(proj.world_to_object, p);
+            n = wp::mul(proj.normal_to_object, n);
+            dx = wp::transform_vector(proj.world_to_object, dx);
+            dy = wp::transform_vector(proj.world_to_object, dy);
+            for (int e = 0; e < 3; ++e) p_[e][l] = p.c[e], n_[e][l] = n.c[e], dx_[e][l] = dx.c[e], dy_[e][l] = dy.c[e];
+        }
+    }
+    wt_vf P[3], N[3], DX[3], DY[3];
+    for (int e = 0; e < 3; ++e) {
+        __builtin_memcpy(&P[e], p_[e], sizeof(wt_vf));
+        __builtin_memcpy(&N[e], n_[e], sizeof(wt_vf));
+        __builtin_memcpy(&DX[e], dx_[e], sizeof(wt_vf));
+        __builtin_memcpy(&DY[e], dy_[e], sizeof(wt_vf));
+    }
+    const float sharpness = wt_float(proj.sharpness, 0);
+    wt_vf W[3];
+    if (proj.weights == WT_WEIGHTS_BIPLANAR)
+        wt_biplanar_weights(N, covered, sharpness, W);
+    else
+        wt_triplanar_weights(N, covered, sharpness, W);
+    if (side != 0) {  // faces.on_face: the - face where n[axis] < 0 (the normal as given), else the + face
+        for (int axis = 0; axis < 3; ++axis) {
+            const wt_vi negative = N[axis] < 0.0f;
+            W[axis] = wt_sel(side == 2 ? negative : ~negative, W[axis], (wt_vf)0.0f);
+        }
+    }
+    if (unit_normals != 0) wt_unit_normals(N);  // triplanar.unit_base_normal: normal mapping reads on the unit normal
+    // Per projection: projection.plane_uv and plane_footprint, where its weight is > 0.
+    wt_lane_reads reads;
+    for (int axis = 0; axis < 3; ++axis) {
+        const float t = wt_float(proj.tiling, wp::min(axis, proj.tiling.shape[0] - 1));  // projection_tiling
+        // faces.on_axis
+        const auto& tex = side == 2 ? (axis == 0 ? faces.nx : (axis == 1 ? faces.ny : faces.nz))
+                                    : (axis == 0 ? faces.px : (axis == 1 ? faces.py : faces.pz));
+        wt_vf u, v;
+        wt_footprint_lanes fp;
+        wt_plane_reads(proj, smp, axis, t, tex, P, N, DX, DY, u, v, fp);
+        wt_put_read(reads, axis, W[axis] > 0.0f, u, v, fp, W[axis]);
+    }
+    return reads;
+}

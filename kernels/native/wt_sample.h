@@ -1,0 +1,293 @@
+// Texture reads for a lane: filtered samples of each lane pixel's level(s) and over its footprint,
+// and `sample`'s reads, forward (the lanes of warptex.kernels.lanes.sample).
+#pragma once
+#include "wt_config.h"
+#include "wt_core.h"
+#include "wt_footprint.h"
+
+// res[l] = filters.sample_levels(tex, layer[l], (u[l], v[l]), level[l], fraction[l], smp) for every
+// lane, the address mode a constant (wt_sample_levels_any compiles it once per mode: a mode tested
+// per texel measured slower). Each level read is cut in two: every lane's addresses and weights,
+// then every lane's loads, so that the loads are in flight together.
+// twin: filters.sample_levels
+template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int address, const Tex& tex, const Smp& smp,
+                                                                const float* u, const float* v, const int* level,
+                                                                const float* fraction, const int* layer, wt_f4* res) {
+    const char* tb = (const char*)tex.texels.data;
+    const long long ts = tex.texels.strides[0];
+    const wt_f4 border = {smp.border.c[0], smp.border.c[1], smp.border.c[2], smp.border.c[3]};
+    auto load = [&](int index, bool inside) __attribute__((always_inline)) -> wt_f4 {  // texels.texel
+        wt_f4 t;
+        if (address != WT_BORDER) {  // only the border mode reads outside
+            __builtin_memcpy(&t, tb + (long long)index * ts, 16);
+            return t;
+        }
+        __builtin_memcpy(&t, tb + (inside ? (long long)index : 0) * ts, 16);
+        return inside ? t : border;
+    };
+    float ru[WT_L], rv[WT_L];
+    bool blend = false;  // a lane reads two levels (trilinear)
+    for (int l = 0; l < WT_L; ++l) {
+        ru[l] = wt_reduce(u[l], address);
+        rv[l] = wt_reduce(v[l], address);
+        blend |= fraction[l] > 0.0f;
+    }
+    int index[4][WT_L];
+    bool inside[4][WT_L];
+    int lw[WT_L], lh[WT_L], ls[WT_L];  // each lane's level's size and offset
+    if (smp.filter == WT_NEAREST) {    // filters.sample_nearest
+        wt_level_sizes(tex, level, lw, lh, ls);
+        for (int l = 0; l < WT_L; ++l) {
+            const int w = lw[l], h = lh[l], start = ls[l];
+            const int x = wt_address((int)wp::floor(ru[l] * (float)w), w, address);
+            const int y = wt_address((int)wp::floor((1.0f - rv[l]) * (float)h), h, address);
+            index[0][l] = start + layer[l] * h * w + y * w + x;
+            inside[0][l] = address != WT_BORDER || (x >= 0 && y >= 0);  // only the border mode reads outside
+        }
+        for (int l = 0; l < WT_L; ++l) res[l] = load(index[0][l], inside[0][l]);
+        return;
+    }
+    float fx[WT_L], fy[WT_L];
+    wt_vf R[4];                                           // the result's channels
+    for (int pass = 0; pass < (blend ? 2 : 1); ++pass) {  // the level, then (trilinear) the next one
+        int read[WT_L];
+        for (int l = 0; l < WT_L; ++l) read[l] = pass == 0 || fraction[l] <= 0.0f ? level[l] : level[l] + 1;
+        wt_level_sizes(tex, read, lw, lh, ls);
+        for (int l = 0; l < WT_L; ++l) {  // filters.bilinear_taps
+            const int w = lw[l], h = lh[l], start = ls[l];
+            const int s = start + layer[l] * h * w;
+            const float x = ru[l] * (float)w - 0.5f;
+            const float y = (1.0f - rv[l]) * (float)h - 0.5f;
+            const float x0 = wp::floor(x);
+            const float y0 = wp::floor(y);
+            const int i0 = wt_address((int)x0, w, address), i1 = wt_address((int)x0 + 1, w, address);
+            const int j0 = wt_address((int)y0, h, address), j1 = wt_address((int)y0 + 1, h, address);
+            index[0][l] = s + j0 * w + i0;
+            index[1][l] = s + j0 * w + i1;
+            index[2][l] = s + j1 * w + i0;
+            index[3][l] = s + j1 * w + i1;
+            inside[0][l] = address != WT_BORDER || (i0 >= 0 && j0 >= 0);
+            inside[1][l] = address != WT_BORDER || (i1 >= 0 && j0 >= 0);
+            inside[2][l] = address != WT_BORDER || (i0 >= 0 && j1 >= 0);
+            inside[3][l] = address != WT_BORDER || (i1 >= 0 && j1 >= 0);
+            fx[l] = x - x0;
+            fy[l] = y - y0;
+        }
+        // filters.sample_bilinear, and the blend of filters.sample_levels, a channel of 16 pixels at a time
+        wt_vf taps[4][4], FX, FY;
+        for (int k = 0; k < 4; ++k) {
+            wt_f4 t[WT_L];
+            _Pragma("clang loop unroll(full)") for (int l = 0; l < WT_L; ++l) t[l] = load(index[k][l], inside[k][l]);
+            wt_channels(t, taps[k]);
+        }
+        __builtin_memcpy(&FX, fx, sizeof(FX));
+        __builtin_memcpy(&FY, fy, sizeof(FY));
+        const wt_vf GX = 1.0f - FX, GY = 1.0f - FY;
+        for (int c = 0; c < 4; ++c) {
+            const wt_vf top = taps[0][c] * GX + taps[1][c] * FX;
+            const wt_vf bottom = taps[2][c] * GX + taps[3][c] * FX;
+            const wt_vf value = top * GY + bottom * FY;
+            if (pass == 0) {
+                R[c] = value;
+            } else {
+                wt_vf F;
+                __builtin_memcpy(&F, fraction, sizeof(F));
+                R[c] = wt_sel(F > 0.0f, R[c] * (1.0f - F) + value * F, R[c]);
+            }
+        }
+    }
+    wt_rows_of_channels(R, res);
+}
+
+// wt_sample_levels with the address mode a constant, once per mode.
+// twin: filters.sample_levels
+template <class Tex, class Smp>
+WT_INLINE void wt_sample_levels_any(const Tex& tex, const Smp& smp, const float* u, const float* v, const int* level,
+                                    const float* fraction, const int* layer, wt_f4* res) {
+    switch (smp.address) {
+    case WT_WRAP:
+        wt_sample_levels(WT_WRAP, tex, smp, u, v, level, fraction, layer, res);
+        break;
+    case WT_CLAMP:
+        wt_sample_levels(WT_CLAMP, tex, smp, u, v, level, fraction, layer, res);
+        break;
+    case WT_MIRROR:
+        wt_sample_levels(WT_MIRROR, tex, smp, u, v, level, fraction, layer, res);
+        break;
+    default:
+        wt_sample_levels(WT_BORDER, tex, smp, u, v, level, fraction, layer, res);
+        break;
+    }
+}
+
+// filters.sample_footprint of each read lane (weight > 0): one tap reads (u, v) itself; a footprint
+// of several taps (the anisotropic filter's) the mean of its taps at footprint.footprint_uv, summed
+// in tap order, times 1 / taps. Lanes past their taps, not read, or not finite read (0, 0) at level
+// 0. Into out: out[l] + weight[l] · sample where add (a blend of reads), the sample itself where
+// not; the other lanes' rows as they are.
+// twin: filters.sample_footprint
+template <class Tex, class Smp>
+WT_INLINE void wt_accumulate_footprint(const Tex& tex, const Smp& smp, const int* layers, const float* u,
+                                       const float* v, const float* lod, const float* du, const float* dv,
+                                       const float* taps, const float* weight, int add, wt_lane_colours& out) {
+    float us[WT_L], vs[WT_L], fractions[WT_L];
+    int levels[WT_L], layer[WT_L];
+    bool read[WT_L], finite[WT_L];
+    int most = 0;  // the most taps of a read lane
+    for (int l = 0; l < WT_L; ++l) {
+        read[l] = weight[l] > 0.0f;
+        layer[l] =
+            read[l] ? wp::clamp(layers[l], 0, tex.num_layers - 1) : 0;  // valid (the API checks), clamped all the same
+        wt_mip_levels(tex, smp, read[l] ? lod[l] : 0.0f, levels[l], fractions[l]);
+        const int n = read[l] ? (int)taps[l] : 0;  // footprint.footprint_taps
+        most = n > most ? n : most;
+    }
+    wt_f4 total[WT_L], single[WT_L];  // the taps' sum; a one-tap footprint's sample itself
+    for (int l = 0; l < WT_L; ++l) total[l] = (wt_f4){0.0f, 0.0f, 0.0f, 0.0f};
+    for (int k = 0; k < most; ++k) {
+        bool tap[WT_L];
+        for (int l = 0; l < WT_L; ++l) {
+            const bool one = taps[l] == 1.0f;
+            const float s = (float)k + 0.5f - 0.5f * taps[l];
+            const float tu = one ? u[l] : u[l] + du[l] * s;  // footprint.footprint_uv
+            const float tv = one ? v[l] : v[l] + dv[l] * s;
+            tap[l] = read[l] && k < (int)taps[l];
+            finite[l] = __builtin_fabsf(tu) <= wt_float_max && __builtin_fabsf(tv) <= wt_float_max &&
+                        __builtin_fabsf(lod[l]) <= wt_float_max;  // texels.finite_uv_lod
+            const bool ok = tap[l] && finite[l];
+            us[l] = ok ? tu : 0.0f;
+            vs[l] = ok ? tv : 0.0f;
+        }
+        wt_f4 result[WT_L];
+        wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layer, result);
+        const wt_f4 nan4 = __builtin_nanf("");
+        for (int l = 0; l < WT_L; ++l) {
+            const wt_f4 r = finite[l] ? result[l] : nan4;
+            if (k == 0) single[l] = r;
+            if (tap[l]) total[l] = total[l] + r;
+        }
+    }
+    for (int l = 0; l < WT_L; ++l) {
+        if (!read[l]) continue;
+        const wt_f4 r = taps[l] == 1.0f ? single[l] : total[l] * (1.0f / taps[l]);
+        for (int c = 0; c < 4; ++c) out.data[l][c] = add ? out.data[l][c] + weight[l] * r[c] : r[c];
+    }
+}
+
+// lanes.accumulate_footprint_lane: acc with each read lane's sample over its footprint added (or in place).
+template <class Tex, class Smp, class Ints, class Floats, class Colours>
+WT_INLINE wt_lane_colours wt_accumulate_footprint_lane(const Tex& tex, const Smp& smp, const Ints& layers,
+                                                       const Floats& u, const Floats& v, const Floats& lod,
+                                                       const Floats& du, const Floats& dv, const Floats& taps,
+                                                       const Floats& weight, int add, const Colours& acc) {
+    wt_lane_colours out = acc;
+    wt_accumulate_footprint(tex, smp, layers.c, u.c, v.c, lod.c, du.c, dv.c, taps.c, weight.c, add, out);
+    return out;
+}
+
+// Writes sample r (a wt_f4) into row base + l of out (texels.write_channels), l < count.
+// twin: texels.write_channels
+template <class A> WT_INLINE void wt_write_row(const A& out, int row_index, const wt_f4& r) {
+    char* row = (char*)out.data + (long long)row_index * out.strides[0];
+    const int channels = out.shape[1];
+    if (channels == 4 && out.strides[1] == 4) {
+        __builtin_memcpy(row, &r, 16);
+    } else {
+        for (int c = 0; c < channels; ++c) *(float*)(row + (long long)c * out.strides[1]) = r[c];
+    }
+}
+
+// What a lane of `sample` reads (sampling.sample_footprint_of and texels.resolve_layer for the
+// lane's pixels base .. base + count - 1; the tail repeats pixel base and is not read): read 0 of a
+// lane_reads matrix (weight 1), and each pixel's layer (clamped where it is read).
+struct wt_sample_reads {
+    int count;
+    int layer[WT_L];
+    wt_lane_reads reads;
+};
+// twin: sampling.sample_footprint_of
+template <class Tex, class Smp, class UV, class Lods, class Layers>
+WT_INLINE wt_sample_reads wt_sample_reads_of(const Tex& tex, const Smp& smp, const UV& uv, const UV& uv_dx,
+                                             const UV& uv_dy, const Lods& lods, const Layers& layers,
+                                             int constant_layer, int lod_source, float constant_lod, int base) {
+    wt_sample_reads out;
+    const int n = uv.shape[0];
+    const int count = n - base < WT_L ? n - base : WT_L;
+    out.count = count;
+    wt_vf U[2];
+    wt_row_vectors(uv, base, count, 2, U);
+    wt_footprint_lanes fp = {(wt_vf)0.0f, (wt_vf)0.0f, (wt_vf)0.0f, (wt_vf)1.0f};  // footprint.point_footprint(0)
+    if (lod_source == WT_LOD_DERIVATIVES) {                                        // footprint.texture_footprint
+        wt_vf DX[2], DY[2];
+        wt_row_vectors(uv_dx, base, count, 2, DX);
+        wt_row_vectors(uv_dy, base, count, 2, DY);
+        fp = wt_footprint(smp, DX[0], DX[1], DY[0], DY[1], (float)wt_int(tex.level_width, 0),
+                          (float)wt_int(tex.level_height, 0));
+    } else if (lod_source == WT_LOD_PER_SAMPLE) {
+        wt_vf lod[1];
+        wt_row_vectors(lods, base, count, 1, lod);
+        fp.lod = lod[0];
+    } else if (lod_source == WT_LOD_CONSTANT) {
+        fp.lod = constant_lod;
+    }
+    int in_lane[WT_L];
+    for (int l = 0; l < WT_L; ++l) {
+        out.layer[l] = layers.shape[0] > 0 ? wt_int(layers, base + (l < count ? l : 0)) : constant_layer;
+        in_lane[l] = l < count ? -1 : 0;
+    }
+    wt_vi read;
+    __builtin_memcpy(&read, in_lane, sizeof(read));
+    wt_put_read(out.reads, 0, read, U[0], U[1], fp, (wt_vf)1.0f);
+    return out;
+}
+
+// lanes.sample.sample_levels_lane: out[i] = filters.sample_levels at uv[i] (NaN where it is not
+// finite) for the lane's pixels i = base .. (the lane's tail repeats pixel base, not stored).
+// twin: filters.sample_levels
+template <class Tex, class Smp, class UV, class Layers, class Out>
+WT_INLINE void wt_sample_levels_lane(const Tex& tex, const Smp& smp, const UV& uv, const Layers& layers,
+                                     int constant_layer, int level, float fraction, const Out& out, int base) {
+    const int n = uv.shape[0];
+    const int count = n - base < WT_L ? n - base : WT_L;
+    float u[WT_L], v[WT_L], fractions[WT_L];
+    int levels[WT_L], layer[WT_L];
+    bool finite[WT_L];
+    float raw[2][WT_L];
+    wt_rows(uv, base, count, 2, raw);
+    for (int l = 0; l < WT_L; ++l) {  // texels.finite_uv_lod: a non-finite UV reads (0, 0), its output NaN
+        finite[l] = __builtin_fabsf(raw[0][l]) <= wt_float_max && __builtin_fabsf(raw[1][l]) <= wt_float_max;
+        u[l] = finite[l] ? raw[0][l] : 0.0f;
+        v[l] = finite[l] ? raw[1][l] : 0.0f;
+        levels[l] = level;
+        fractions[l] = fraction;
+        layer[l] = constant_layer;
+    }
+    if (layers.shape[0] > 0) {  // texels.resolve_layer
+        for (int l = 0; l < WT_L; ++l)
+            layer[l] = wp::clamp(wt_int(layers, base + (l < count ? l : 0)), 0, tex.num_layers - 1);
+    }
+    wt_f4 result[WT_L];
+    wt_sample_levels_any(tex, smp, u, v, levels, fractions, layer, result);
+    const wt_f4 nan4 = __builtin_nanf("");
+    for (int l = 0; l < count; ++l) wt_write_row(out, base + l, finite[l] ? result[l] : nan4);
+}
+
+// lanes.sample.sample_footprint_lane: out[i] = filters.sample_footprint at uv[i] over the footprint
+// that lod_source gives, for the lane's pixels i = base ...
+// twin: filters.sample_footprint
+template <class Tex, class Smp, class UV, class Lods, class Layers, class Out>
+WT_INLINE void wt_sample_footprint_lane(const Tex& tex, const Smp& smp, const UV& uv, const UV& uv_dx, const UV& uv_dy,
+                                        const Lods& lods, const Layers& layers, int constant_layer, int lod_source,
+                                        float constant_lod, const Out& out, int base) {
+    const wt_sample_reads s =
+        wt_sample_reads_of(tex, smp, uv, uv_dx, uv_dy, lods, layers, constant_layer, lod_source, constant_lod, base);
+    const wt_lane_reads& reads = s.reads;
+    wt_lane_colours value;
+    wt_accumulate_footprint(tex, smp, s.layer, reads.data[0], reads.data[3], reads.data[6], reads.data[12],
+                            reads.data[15], reads.data[18], reads.data[9], 0, value);
+    for (int l = 0; l < s.count; ++l) {
+        wt_f4 r;
+        __builtin_memcpy(&r, value.data[l], 16);
+        wt_write_row(out, base + l, r);
+    }
+}

@@ -1,0 +1,369 @@
+// Texel gradients for a lane of pixels (the twins of warptex.kernels.scatter). A lane's taps and
+// weights are computed for every pixel first, then added pixel by pixel and read by read, in the
+// order the scalar kernels add them: the same texels get the same sums in the same order, so the
+// gradients are the same bits, and the same tile marks (scatter.mark_rows) are made.
+#pragma once
+#include "wt_config.h"
+#include "wt_core.h"
+#include "wt_sample.h"
+
+constexpr int WT_MAX_READS = 12;
+// A lane pixel's taps of one level, and the lane's (a row per field, so that the loop that fills
+// them vectorises).
+struct wt_texel_taps {
+    int start, w, i0, i1, j0, j1;
+    float fx, fy;
+};
+struct wt_lane_texel_taps {
+    int start[WT_L], w[WT_L], i0[WT_L], i1[WT_L], j0[WT_L], j1[WT_L];
+    float fx[WT_L], fy[WT_L];
+};
+typedef float wt_lane_f[WT_L];
+typedef int wt_lane_i[WT_L];
+typedef bool wt_lane_b[WT_L];
+typedef wt_f4 wt_lane_f4[WT_L];
+
+// scatter.scatter_levels for the lane, the address mode a constant: reads r = 0 .. reads - 1 (up to
+// WT_MAX_READS) of every lane pixel, read r from *tex[r] into *grad[r], at the levels and fractions
+// given, where active, adding g[r][l].
+// twin: scatter.scatter_levels
+template <class Tex, class Grad, class Smp>
+WT_INLINE void wt_scatter_levels(const int address, const int reads, const Tex* const* tex, const Grad* const* grad,
+                                 const Smp& smp, const wt_lane_f* u, const wt_lane_f* v, const wt_lane_i* level,
+                                 const wt_lane_f* fraction, const wt_lane_i* layer, const wt_lane_b* active,
+                                 const wt_lane_f4* g) {
+    wt_lane_texel_taps taps[WT_MAX_READS]
+                           [2];  // [read][fine, coarse], field by field, so that the loop below vectorises
+    bool blend = false;          // a lane reads two levels (trilinear)
+    for (int r = 0; r < reads; ++r)
+        for (int l = 0; l < WT_L; ++l) blend |= smp.filter != WT_NEAREST && active[r][l] && fraction[r][l] > 0.0f;
+    for (int r = 0; r < reads; ++r) {
+        for (int pass = 0; pass < (blend ? 2 : 1); ++pass) {
+            int k[WT_L], lw[WT_L], lh[WT_L], ls[WT_L];  // each lane's level, its size and offset
+            for (int l = 0; l < WT_L; ++l) k[l] = pass == 0 || fraction[r][l] <= 0.0f ? level[r][l] : level[r][l] + 1;
+            wt_level_sizes(*tex[r], k, lw, lh, ls);
+            wt_lane_texel_taps& t = taps[r][pass];
+            for (int l = 0; l < WT_L; ++l) {  // filters.nearest_tap / bilinear_taps
+                const float ru = wt_reduce(u[r][l], address), rv = wt_reduce(v[r][l], address);
+                const int w = lw[l], h = lh[l];
+                t.w[l] = w;
+                t.start[l] = ls[l] + layer[r][l] * h * w;
+                if (smp.filter == WT_NEAREST) {
+                    t.i0[l] = wt_address((int)wp::floor(ru * (float)w), w, address);
+                    t.j0[l] = wt_address((int)wp::floor((1.0f - rv) * (float)h), h, address);
+                } else {
+                    const float x = ru * (float)w - 0.5f;
+                    const float y = (1.0f - rv) * (float)h - 0.5f;
+                    const float x0 = wp::floor(x);
+                    const float y0 = wp::floor(y);
+                    t.i0[l] = wt_address((int)x0, w, address);
+                    t.i1[l] = wt_address((int)x0 + 1, w, address);
+                    t.j0[l] = wt_address((int)y0, h, address);
+                    t.j1[l] = wt_address((int)y0 + 1, h, address);
+                    t.fx[l] = x - x0;
+                    t.fy[l] = y - y0;
+                }
+            }
+        }
+    }
+    auto tap = [&](int r, int pass, int l) __attribute__((always_inline)) -> wt_texel_taps {
+        const wt_lane_texel_taps& t = taps[r][pass];
+        return {t.start[l], t.w[l], t.i0[l], t.i1[l], t.j0[l], t.j1[l], t.fx[l], t.fy[l]};
+    };
+    // Each read's gradient array as a pointer and strides, taken once: the adds' stores could alias
+    // the array structs, which the compiler would then read again after every add.
+    struct wt_target {
+        char* texels;
+        long long stride;
+        char* tiles;
+        long long tile_stride;
+        bool marks;
+    };
+    wt_target targets[WT_MAX_READS];
+    for (int r = 0; r < reads; ++r)
+        targets[r] = {(char*)grad[r]->texels.data, (long long)grad[r]->texels.strides[0], (char*)grad[r]->tiles.data,
+                      (long long)grad[r]->tiles.strides[0], grad[r]->tiles.shape[0] > 0};
+    auto add = [&](const wt_target& gr, const wt_texel_taps& t, int x, int y, const wt_f4 value)
+                   __attribute__((always_inline)) {                       // scatter.scatter_texel
+                       if (address != WT_BORDER || (x >= 0 && y >= 0)) {  // only the border mode has taps outside
+                           float* p = (float*)(gr.texels + (long long)(t.start + y * t.w + x) * gr.stride);
+                           for (int c = 0; c < 4; ++c) p[c] = p[c] + value[c];
+                       }
+                   };
+    auto mark = [&](const wt_target& gr, const wt_texel_taps& t, int j)
+                    __attribute__((always_inline)) {  // scatter.mark_rows
+                        const int row = t.start + j * t.w;
+                        int* tile = (int*)(gr.tiles + (long long)(row >> WT_TILE_SHIFT) * gr.tile_stride);
+                        const int reach = (((row & ((1 << WT_TILE_SHIFT) - 1)) + 2 * t.w - 1) >> WT_TILE_SHIFT) + 1;
+                        if (*tile < reach) *tile = reach;
+                    };
+    auto bilinear = [&](const wt_target& gr, const wt_texel_taps& t, const wt_f4 value)
+                        __attribute__((always_inline)) {  // scatter.scatter_bilinear
+                            const wt_f4 top = value * (1.0f - t.fy);
+                            const wt_f4 bottom = value * t.fy;
+                            add(gr, t, t.i0, t.j0, top * (1.0f - t.fx));
+                            add(gr, t, t.i1, t.j0, top * t.fx);
+                            add(gr, t, t.i0, t.j1, bottom * (1.0f - t.fx));
+                            add(gr, t, t.i1, t.j1, bottom * t.fx);
+                            if (gr.marks) {
+                                if (t.j0 >= 0) mark(gr, t, t.j0);
+                                if (t.j1 >= 0 && (t.j0 < 0 || t.j1 < t.j0 || t.j1 > t.j0 + 1)) mark(gr, t, t.j1);
+                            }
+                        };
+    for (int l = 0; l < WT_L; ++l) {
+        for (int r = 0; r < reads; ++r) {
+            if (!active[r][l]) continue;
+            const wt_target& gr = targets[r];
+            if (smp.filter == WT_NEAREST) {
+                const wt_texel_taps t = tap(r, 0, l);
+                add(gr, t, t.i0, t.j0, g[r][l]);
+                if (gr.marks && t.j0 >= 0) mark(gr, t, t.j0);
+            } else {  // scatter.scatter_levels: the coarser level first
+                wt_f4 finer = g[r][l];
+                if (fraction[r][l] > 0.0f) {
+                    finer = g[r][l] * (1.0f - fraction[r][l]);
+                    bilinear(gr, tap(r, 1, l), g[r][l] * fraction[r][l]);
+                }
+                bilinear(gr, tap(r, 0, l), finer);
+            }
+        }
+    }
+}
+
+// wt_scatter_levels with the address mode a constant, once per mode.
+// twin: scatter.scatter_levels
+template <class Tex, class Grad, class Smp>
+WT_INLINE void wt_scatter_levels_any(const int reads, const Tex* const* tex, const Grad* const* grad, const Smp& smp,
+                                     const wt_lane_f* u, const wt_lane_f* v, const wt_lane_i* level,
+                                     const wt_lane_f* fraction, const wt_lane_i* layer, const wt_lane_b* active,
+                                     const wt_lane_f4* g) {
+    switch (smp.address) {
+    case WT_WRAP:
+        wt_scatter_levels(WT_WRAP, reads, tex, grad, smp, u, v, level, fraction, layer, active, g);
+        break;
+    case WT_CLAMP:
+        wt_scatter_levels(WT_CLAMP, reads, tex, grad, smp, u, v, level, fraction, layer, active, g);
+        break;
+    case WT_MIRROR:
+        wt_scatter_levels(WT_MIRROR, reads, tex, grad, smp, u, v, level, fraction, layer, active, g);
+        break;
+    default:
+        wt_scatter_levels(WT_BORDER, reads, tex, grad, smp, u, v, level, fraction, layer, active, g);
+        break;
+    }
+}
+
+// Up to twelve reads per lane pixel, read r from *texs[r] into *grads[r], at the rows u_rows[r],
+// v_rows[r], lod_rows[r] and weight w_rows[r] of a value per lane pixel (a lane_reads matrix's: a
+// pixel's projections, or two of them: a pixel's faces; a lane_taps matrix's: a stochastic lookup's
+// taps, or three of them: a stochastic triplanar pixel's); a read adds where its weight is positive
+// and its UV and LOD are finite (scatter.scatter_lod), and only into a gradient that is needed. It
+// adds its share of the pixel's gradient g[l] (read r's own, gr[r], where per_read; else gr[0]):
+// w · g where weigh (a blend of projections or taps), g itself where not.
+// twin: scatter.scatter_lod
+template <class Tex, class Grad, class Smp>
+WT_INLINE void wt_scatter_rows(const Tex* const* texs, const Grad* const* grads, const Smp& smp, const int nreads,
+                               const int* layers, const float* const* u_rows, const float* const* v_rows,
+                               const float* const* lod_rows, const float* const* w_rows, const int weigh,
+                               const wt_lane_colours* const* gr, const int per_read) {
+    float us[WT_MAX_READS][WT_L], vs[WT_MAX_READS][WT_L], fractions[WT_MAX_READS][WT_L];
+    int levels[WT_MAX_READS][WT_L], layer[WT_MAX_READS][WT_L];
+    bool active[WT_MAX_READS][WT_L];
+    wt_f4 gs[WT_MAX_READS][WT_L];
+    wt_vi lane_layers;
+    __builtin_memcpy(&lane_layers, layers, sizeof(lane_layers));
+    for (int r = 0; r < nreads;
+         ++r) {  // a lane of reads at a time (vector selects, the same values as the scalar formulas)
+        wt_vf u, v, lod, w;
+        __builtin_memcpy(&u, u_rows[r], sizeof(u));
+        __builtin_memcpy(&v, v_rows[r], sizeof(v));
+        __builtin_memcpy(&lod, lod_rows[r], sizeof(lod));
+        __builtin_memcpy(&w, w_rows[r], sizeof(w));
+        const wt_vi needed = grads[r]->texels.shape[0] > 0 ? -1 : 0;
+        const wt_vi ok = needed & (w > 0.0f) & (wt_vabs(u) <= wt_float_max) & (wt_vabs(v) <= wt_float_max) &
+                         (wt_vabs(lod) <= wt_float_max);
+        const wt_vf zero = 0.0f;
+        const wt_vf ur = wt_sel(ok, u, zero), vr = wt_sel(ok, v, zero);
+        wt_vi level;
+        wt_vf fraction;
+        wt_mip_levels_lane(*texs[r], smp, wt_sel(ok, lod, zero), level, fraction);
+        const int top = texs[r]->num_layers - 1;  // wp::clamp(layer, 0, top)
+        wt_vi lr = lane_layers & ~(lane_layers < 0);
+        const wt_vi over = lr > top;
+        lr = ((lr & ~over) | (top & over)) & ok;
+        __builtin_memcpy(us[r], &ur, sizeof(ur));
+        __builtin_memcpy(vs[r], &vr, sizeof(vr));
+        __builtin_memcpy(levels[r], &level, sizeof(level));
+        __builtin_memcpy(fractions[r], &fraction, sizeof(fraction));
+        __builtin_memcpy(layer[r], &lr, sizeof(lr));
+        for (int l = 0; l < WT_L; ++l) {
+            active[r][l] = ok[l] != 0;
+            const wt_lane_colours& g = *gr[per_read ? r : 0];
+            const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
+            gs[r][l] = weigh ? w[l] * gl : gl;
+        }
+    }
+    wt_scatter_levels_any(nreads, texs, grads, smp, us, vs, levels, fractions, layer, active, gs);
+}
+
+// wt_scatter_rows of the reads of a lane_reads matrix `at`.
+template <class Tex, class Grad, class Smp>
+WT_INLINE void wt_scatter_lod_of(const Tex* const* texs, const Grad* const* grads, const Smp& smp, const int nreads,
+                                 const int* layers, const wt_lane_reads& at, const int weigh,
+                                 const wt_lane_colours* const* gr, const int per_read) {
+    const float* u[3] = {at.data[0], at.data[1], at.data[2]};
+    const float* v[3] = {at.data[3], at.data[4], at.data[5]};
+    const float* lod[3] = {at.data[6], at.data[7], at.data[8]};
+    const float* w[3] = {at.data[9], at.data[10], at.data[11]};
+    wt_scatter_rows(texs, grads, smp, nreads, layers, u, v, lod, w, weigh, gr, per_read);
+}
+
+// Every read's share of one gradient g[l] per lane pixel.
+template <class Tex, class Grad, class Smp>
+WT_INLINE void wt_scatter_lod(const Tex* const* texs, const Grad* const* grads, const Smp& smp, const int nreads,
+                              const int* layers, const wt_lane_reads& at, const int weigh, const wt_lane_colours& g) {
+    const wt_lane_colours* gr[1] = {&g};
+    wt_scatter_lod_of(texs, grads, smp, nreads, layers, at, weigh, gr, 0);
+}
+
+// lanes.scatter.scatter_levels_lane: scatter.scatter_levels of the gradient adj[i] for the lane's
+// pixels i = base .. whose uv[i] is finite, their layer, one level for all.
+// twin: scatter.scatter_levels
+template <class Tex, class Grad, class Smp, class UV, class Layers, class Adj>
+WT_INLINE void wt_scatter_levels_lane(const Tex& tex, const Grad& grad, const Smp& smp, const UV& uv,
+                                      const Layers& layers, int constant_layer, int level, float fraction,
+                                      const Adj& adj, int base) {
+    const int n = uv.shape[0];
+    const int count = n - base < WT_L ? n - base : WT_L;
+    float u[1][WT_L], v[1][WT_L], fractions[1][WT_L];
+    int levels[1][WT_L], layer[1][WT_L];
+    bool active[1][WT_L];
+    wt_f4 g[1][WT_L];
+    float p[2][WT_L];
+    wt_rows(uv, base, count, 2, p);
+    for (int l = 0; l < WT_L; ++l) {
+        const int k = base + (l < count ? l : 0);
+        const bool finite = __builtin_fabsf(p[0][l]) <= wt_float_max && __builtin_fabsf(p[1][l]) <= wt_float_max;
+        active[0][l] = l < count && finite;
+        u[0][l] = active[0][l] ? p[0][l] : 0.0f;
+        v[0][l] = active[0][l] ? p[1][l] : 0.0f;
+        levels[0][l] = level;
+        fractions[0][l] = fraction;
+        layer[0][l] = layers.shape[0] > 0 ? wp::clamp(wt_int(layers, k), 0, tex.num_layers - 1)
+                                          : constant_layer;  // texels.resolve_layer
+        g[0][l] = wt_read_channels(adj, k);
+    }
+    const Tex* texs[1] = {&tex};
+    const Grad* grads[1] = {&grad};
+    wt_scatter_levels_any(1, texs, grads, smp, u, v, levels, fractions, layer, active, g);
+}
+
+// lanes.scatter.scatter_reads_lanes: three reads with a gradient each, g_r[l] added (not weighted).
+template <class Tex, class Grad, class Smp, class Ints>
+WT_INLINE void wt_scatter_reads_lanes(const Tex& tex0, const Tex& tex1, const Tex& tex2, const Grad& grad0,
+                                      const Grad& grad1, const Grad& grad2, const Smp& smp, const Ints& layers,
+                                      const wt_lane_reads& reads, const wt_lane_colours& g0, const wt_lane_colours& g1,
+                                      const wt_lane_colours& g2) {
+    const Tex* texs[3] = {&tex0, &tex1, &tex2};
+    const Grad* grads[3] = {&grad0, &grad1, &grad2};
+    const wt_lane_colours* gr[3] = {&g0, &g1, &g2};
+    wt_scatter_lod_of(texs, grads, smp, 3, layers.c, reads, 0, gr, 1);
+}
+
+// lanes.scatter.scatter_lod_lanes: reads r = 0 .. count - 1, each adding its share of g.
+template <class Tex, class Grad, class Smp, class Ints>
+WT_INLINE void wt_scatter_lod_lanes(const Tex& tex0, const Tex& tex1, const Tex& tex2, const Grad& grad0,
+                                    const Grad& grad1, const Grad& grad2, const Smp& smp, int count, const Ints& layers,
+                                    const wt_lane_reads& reads, int weigh, const wt_lane_colours& g) {
+    const Tex* texs[3] = {&tex0, &tex1, &tex2};
+    const Grad* grads[3] = {&grad0, &grad1, &grad2};
+    wt_scatter_lod(texs, grads, smp, count, layers.c, reads, weigh, g);
+}
+
+// lanes.scatter.scatter_footprint_lane: scatter.scatter_footprint of adj[i] for the lane's pixels
+// i = base .. (wt_sample_reads_of's reads), one-tap footprints only.
+// twin: scatter.scatter_footprint
+template <class Tex, class Grad, class Smp, class UV, class Lods, class Layers, class Adj>
+WT_INLINE void wt_scatter_footprint_lane(const Tex& tex, const Grad& grad, const Smp& smp, const UV& uv,
+                                         const UV& uv_dx, const UV& uv_dy, const Lods& lods, const Layers& layers,
+                                         int constant_layer, int lod_source, float constant_lod, const Adj& adj,
+                                         int base) {
+    const wt_sample_reads s =
+        wt_sample_reads_of(tex, smp, uv, uv_dx, uv_dy, lods, layers, constant_layer, lod_source, constant_lod, base);
+    wt_lane_colours g;  // texels.read_channels of the lane's output gradients
+    for (int l = 0; l < WT_L; ++l) {
+        const char* row = (const char*)adj.data + (long long)(base + (l < s.count ? l : 0)) * adj.strides[0];
+        for (int c = 0; c < 4; ++c)
+            g.data[l][c] = c < adj.shape[1] ? *(const float*)(row + (long long)c * adj.strides[1]) : 0.0f;
+    }
+    const Tex* texs[1] = {&tex};
+    const Grad* grads[1] = {&grad};
+    wt_scatter_lod(texs, grads, smp, 1, s.layer, s.reads, 0, g);
+}
+
+// lanes.scatter.scatter_taps_lane: stochastic.scatter_stochastic of one-tap footprints: tap k of
+// pixel l at (u_k, v_k), rows 3k, 3k + 1 of `taps`, all at the pixel's LOD (row 12), adds w_k · g[l]
+// (w_k: row 3k + 2) into grad where w_k > 0, pixel by pixel and tap by tap.
+// twin: stochastic.scatter_stochastic
+template <class Tex, class Grad, class Smp, class Ints>
+WT_INLINE void wt_scatter_taps_lane(const Tex& tex, const Grad& grad, const Smp& smp, const Ints& layers,
+                                    const wt_lane_taps& taps, const wt_lane_colours& g) {
+    const float* u[4] = {taps.data[0], taps.data[3], taps.data[6], taps.data[9]};
+    const float* v[4] = {taps.data[1], taps.data[4], taps.data[7], taps.data[10]};
+    const float* w[4] = {taps.data[2], taps.data[5], taps.data[8], taps.data[11]};
+    const float* lod[4] = {taps.data[12], taps.data[12], taps.data[12], taps.data[12]};
+    const Tex* texs[4] = {&tex, &tex, &tex, &tex};
+    const Grad* grads[4] = {&grad, &grad, &grad, &grad};
+    const wt_lane_colours* gr[1] = {&g};
+    wt_scatter_rows(texs, grads, smp, 4, layers.c, u, v, lod, w, 1, gr, 0);
+}
+
+// lanes.scatter.scatter_face_reads_lanes: a texture per face: each projection's read on its + face
+// (rows of `plus`) and on its - face (rows of `minus`; a pixel reads one of the two), in the order
+// x+, x-, y+, y-, z+, z-, each adding w · g[l].
+template <class Tex, class Grad, class Smp, class Ints>
+WT_INLINE void wt_scatter_face_reads_lanes(const Tex& tex_px, const Tex& tex_nx, const Tex& tex_py, const Tex& tex_ny,
+                                           const Tex& tex_pz, const Tex& tex_nz, const Grad& grad_px,
+                                           const Grad& grad_nx, const Grad& grad_py, const Grad& grad_ny,
+                                           const Grad& grad_pz, const Grad& grad_nz, const Smp& smp, const Ints& layers,
+                                           const wt_lane_reads& plus, const wt_lane_reads& minus,
+                                           const wt_lane_colours& g) {
+    const Tex* texs[6] = {&tex_px, &tex_nx, &tex_py, &tex_ny, &tex_pz, &tex_nz};
+    const Grad* grads[6] = {&grad_px, &grad_nx, &grad_py, &grad_ny, &grad_pz, &grad_nz};
+    const float *u[6], *v[6], *lod[6], *w[6];
+    for (int r = 0; r < 6; ++r) {
+        const wt_lane_reads& at = r % 2 == 0 ? plus : minus;
+        const int axis = r / 2;
+        u[r] = at.data[axis], v[r] = at.data[3 + axis], lod[r] = at.data[6 + axis], w[r] = at.data[9 + axis];
+    }
+    const wt_lane_colours* gr[1] = {&g};
+    wt_scatter_rows(texs, grads, smp, 6, layers.c, u, v, lod, w, 1, gr, 0);
+}
+
+// lanes.scatter.scatter_projection_taps_lanes: scatter_stochastic of each projection's one-tap
+// footprints, projection by projection (tap k of projection a: rows 3k, 3k + 1 of taps_a, its LOD
+// row 12, weight row 3k + 2), each adding w_k · g_a[l] into grad_a, pixel by pixel and read by read
+// as the scalar colour gradient adds them.
+template <class Tex, class Grad, class Smp, class Ints> WT_INLINE void
+wt_scatter_projection_taps_lanes(const Tex& tex0, const Tex& tex1, const Tex& tex2, const Grad& grad0,
+                                 const Grad& grad1, const Grad& grad2, const Smp& smp, const Ints& layers,
+                                 const wt_lane_taps& taps0, const wt_lane_taps& taps1, const wt_lane_taps& taps2,
+                                 const wt_lane_colours& g0, const wt_lane_colours& g1, const wt_lane_colours& g2) {
+    const wt_lane_taps* taps[3] = {&taps0, &taps1, &taps2};
+    const Tex* axis_texs[3] = {&tex0, &tex1, &tex2};
+    const Grad* axis_grads[3] = {&grad0, &grad1, &grad2};
+    const wt_lane_colours* axis_g[3] = {&g0, &g1, &g2};
+    const float *u[12], *v[12], *lod[12], *w[12];
+    const Tex* texs[12];
+    const Grad* grads[12];
+    const wt_lane_colours* gr[12];
+    for (int a = 0; a < 3; ++a) {
+        for (int k = 0; k < 4; ++k) {
+            const int r = 4 * a + k;
+            u[r] = taps[a]->data[3 * k], v[r] = taps[a]->data[3 * k + 1], w[r] = taps[a]->data[3 * k + 2],
+            lod[r] = taps[a]->data[12];
+            texs[r] = axis_texs[a], grads[r] = axis_grads[a], gr[r] = axis_g[a];
+        }
+    }
+    wt_scatter_rows(texs, grads, smp, 12, layers.c, u, v, lod, w, 1, gr, 1);
+}
