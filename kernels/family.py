@@ -34,8 +34,10 @@ forward and forward+backward alike (interleaved runs).
 """
 
 
+import contextlib
 import dataclasses
 import functools
+import threading
 from typing import Any, Callable, Iterable
 
 import warp as wp
@@ -116,11 +118,9 @@ class Kernels:
     lane_saved: Callable[[Any], int] | None = None
 
     def launched(self, device, grad: bool = False):
-        """The kernel a forward launch (``grad``: a hand-written gradient) runs on ``device``: its
-        lane kernel on the CPU where there is one, else the one-pixel kernel (for :func:`preload`)."""
-        lanes = self.texel_grad_lanes if grad else self.lanes
-        one = self.texel_grad if grad else self.forward
-        return lanes if lanes is not None and wp.get_device(device).is_cpu else one
+        """The kernel a forward launch (``grad``: a hand-written gradient) runs on ``device``, as
+        :func:`lanes_for` decides, for ``warptex.preload``."""
+        return lanes_for(self, device, grad=grad) or (self.texel_grad if grad else self.forward)
 
     def all(self) -> list:
         """Every Warp kernel of this configuration, the staged steps' included."""
@@ -128,6 +128,38 @@ class Kernels:
         if self.staged is not None:
             kernels += self.staged.first.all() + self.staged.then.all()
         return kernels
+
+
+_ONE_PIXEL = threading.local()
+
+
+@contextlib.contextmanager
+def one_pixel_kernels(enabled: bool = True):
+    """Within this block (on this thread), CPU launches run the one-pixel-per-index kernels, never
+    their lane kernels: for tests and benchmarks that compare the two."""
+    previous = getattr(_ONE_PIXEL, "value", False)
+    _ONE_PIXEL.value = enabled
+    try:
+        yield
+    finally:
+        _ONE_PIXEL.value = previous
+
+
+def lanes_for(kernels: Kernels, device, args=None, grad: bool = False):
+    """The one place that decides whether a launch runs lanes: ``kernels``' lane kernel (of the
+    hand-written gradient with ``grad``) where the launch on ``device`` runs it, else ``None`` (the
+    one-pixel kernel runs). Lanes run on the CPU only, where the configuration has them, where they
+    take a launch with the kernels' ``args`` struct (``None``: any launch, as for compiling ahead),
+    and not within :func:`one_pixel_kernels`. A gradient lane that reads what the forward lane keeps
+    (``Kernels.lane_saved``) runs only where the forward lane does."""
+    if getattr(_ONE_PIXEL, "value", False) or not wp.get_device(device).is_cpu:
+        return None
+    if grad and kernels.lane_saved is not None and lanes_for(kernels, device, args) is None:
+        return None
+    lanes, take = (kernels.texel_grad_lanes, kernels.grad_lanes_take) if grad else (kernels.lanes, kernels.lanes_take)
+    if lanes is None or (args is not None and take is not None and not take(args)):
+        return None
+    return lanes
 
 
 # Every family's cached factory, with the configurations all_kernels() compiles.

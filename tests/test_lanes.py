@@ -867,3 +867,25 @@ def test_anisotropic_lanes_read_every_tap(rng, address):
     stretched = (stretch[:, 0] == 100.0) & (g.mask.numpy()[0] > 0)
     assert (np.abs(lanes - trilinear)[0][stretched].max(-1) > 1e-3).mean() > 0.5  # those pixels read several taps
 
+
+def test_one_lane_decision():
+    """``lanes_for`` alone decides whether a launch runs lanes: CPU only, where the configuration has
+    them and takes the launch's ``args``, not within ``one_pixel_kernels``, and a gradient lane that
+    reads what the forward lane keeps only where that lane runs."""
+    from warptex.kernels.family import Kernels, lanes_for
+
+    forward, grad, lanes, grad_lanes = (object() for _ in range(4))
+    plain = Kernels(forward, grad, lanes=lanes, texel_grad_lanes=grad_lanes)
+    assert lanes_for(plain, "cpu") is lanes and lanes_for(plain, "cpu", grad=True) is grad_lanes
+    assert plain.launched("cpu") is lanes and plain.launched("cpu", grad=True) is grad_lanes
+    with one_pixel_kernels():
+        assert lanes_for(plain, "cpu") is None and lanes_for(plain, "cpu", grad=True) is None
+        assert plain.launched("cpu") is forward and plain.launched("cpu", grad=True) is grad
+    assert lanes_for(Kernels(forward, grad), "cpu") is None
+    picky = Kernels(forward, grad, lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=lambda args: args == "small", lane_saved=lambda args: 3)
+    assert lanes_for(picky, "cpu", "small") is lanes and lanes_for(picky, "cpu", "small", grad=True) is grad_lanes
+    assert lanes_for(picky, "cpu", "big") is None
+    assert lanes_for(picky, "cpu", "big", grad=True) is None  # its forward lane keeps nothing to read
+    assert lanes_for(picky, "cpu") is lanes  # no args: as compiled ahead, any launch
+    if wp.is_cuda_available():
+        assert lanes_for(plain, "cuda:0") is None and plain.launched("cuda:0") is forward

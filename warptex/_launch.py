@@ -101,13 +101,16 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
         footprints: the bilinear footprints a pixel reads at most: with the size of the gradients
             all pixels share, it sizes a backward pass's chunks (``warptex._threads.grad_bounds``).
         lanes: ``kernel``'s lane kernel (``warptex.kernels.family.lane_kernel``: the same outputs),
-            which a CPU launch runs instead, over a lane of pixels per launch index, when it records
-            no generated adjoint.
+            to run instead, over a lane of pixels per launch index, where
+            ``warptex.kernels.family.lanes_for`` decided the launch runs lanes; never with
+            :data:`GENERATED` (Warp differentiates the one-pixel kernel).
     """
     if count <= 0:
         return
     device = wp.get_device(device)
     _check_rows(count, pixels, out)
+    if lanes is not None and backward is GENERATED:
+        raise ValueError("a launch that records Warp's generated adjoint runs the one-pixel kernel, not lanes")
     tape = active_tape()
     recorded = [a for a in arrays(out) if a.requires_grad] if tape is not None and backward is not None else []
     if recorded and backward is not GENERATED:
@@ -115,7 +118,7 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
     generated = bool(recorded) and backward is GENERATED
     workers = min(workers_for(device, count, threads), cpu_count())  # threads past the cores would only take turns
     chunks = grad_bounds(count, covered, _shared_bytes(args), footprints) if generated and device.is_cpu else [0, count]  # CUDA: one launch
-    kernel, per_index = _with_lanes(kernel, None if generated else lanes, device)
+    kernel, per_index = _with_lanes(kernel, lanes)
     fills = per_index > 1  # a lane kernel writes every entry of its outputs (family.lane_kernel)
     if workers == 1:
         _zero_rows(out, 0, count, fills)
@@ -134,10 +137,11 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
         tape.record_func(_on(tape, backward), arrays=recorded)
 
 
-def _with_lanes(kernel, lanes, device) -> tuple:
-    """``(kernel to launch, pixels per launch index)``: ``lanes`` and its lane width on the CPU where
-    there is one, else ``kernel`` and 1 (launched over ``ceil(pixels / width)`` indices)."""
-    return (lanes, LANES) if lanes is not None and device.is_cpu else (kernel, 1)
+def _with_lanes(kernel, lanes) -> tuple:
+    """``(kernel to launch, pixels per launch index)``: ``lanes`` and its lane width where the caller
+    passed it (``warptex.kernels.family.lanes_for`` decided), else ``kernel`` and 1 (launched over
+    ``ceil(pixels / width)`` indices)."""
+    return (lanes, LANES) if lanes is not None else (kernel, 1)
 
 
 def _nbytes(array: wp.array) -> int:
@@ -208,15 +212,15 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
         entries: ``{id(target): (start, stop)}`` for shared targets the kernel adds into only there
             (the mip levels a constant-LOD lookup reads): only the tiles of those entries are summed
             from the private copies, tracked or not (the rest stays zero).
-        lanes: ``kernel``'s lane kernel (the same sums in the same order), which CPU launches run
-            instead, a lane of pixels per launch index.
+        lanes: ``kernel``'s lane kernel (the same sums in the same order), to run instead, a lane
+            of pixels per launch index, where ``warptex.kernels.family.lanes_for`` decided so.
     """
     if count <= 0:
         return
     device = wp.get_device(device)
     _check_rows(count, pixels, adj, *[t.grad for t in grads if t.per_pixel and t.grad is not None])
     grads_t = next(a.type for a in kernel.adj.args if a.label == "grads")
-    kernel, per_index = _with_lanes(kernel, lanes, device)
+    kernel, per_index = _with_lanes(kernel, lanes)
     texel = [t.grad for (name, ftype), t in zip(grads_t.vars.items(), grads) if t.grad is not None and not t.per_pixel and ftype.type is TexelGrad]
     plain = [t.grad for (name, ftype), t in zip(grads_t.vars.items(), grads) if t.grad is not None and not t.per_pixel and ftype.type is not TexelGrad]
     shared = list({id(g): g for g in texel + plain}.values())  # one texture may feed several fields

@@ -32,11 +32,10 @@ from warptex._launch import GENERATED, Target, launch, output, scatter
 from warptex._memory import empty
 from warptex._pack import empty_array
 from warptex._warp import active_tape, scalar_type, struct_arrays, struct_fields, struct_like
-from warptex.kernels.family import PIXELS, Kernels, Staged
+from warptex.kernels.family import PIXELS, Kernels, Staged, lanes_for, one_pixel_kernels  # noqa: F401 (one_pixel_kernels: re-exported)
 from warptex.kernels.texels import TextureView
 
 _forced = threading.local()
-_one_pixel = threading.local()
 
 # Scalar types of the arrays that can carry gradients.
 _FLOATS = (wp.float16, wp.float32, wp.float64)
@@ -57,21 +56,6 @@ def force_generated_adjoint(enabled: bool = True):
     """Within this block (on this thread), every recorded backward pass is Warp's generated adjoint,
     never a hand-written gradient: for tests that compare the two."""
     return _thread_flag(_forced, enabled)
-
-
-def one_pixel_kernels(enabled: bool = True):
-    """Within this block (on this thread), CPU launches run the one-pixel-per-index kernels, never
-    their lane kernels (``Kernels.lanes``): for tests and benchmarks that compare the two."""
-    return _thread_flag(_one_pixel, enabled)
-
-
-def _lanes(kernels: Kernels, args, grad: bool = False):
-    """``kernels``' lane kernel (of the texel gradient with ``grad``), where it takes a launch with
-    ``args``, unless turned off on this thread."""
-    lanes, take = (kernels.texel_grad_lanes, kernels.grad_lanes_take) if grad else (kernels.lanes, kernels.lanes_take)
-    if getattr(_one_pixel, "value", False) or (lanes is not None and take is not None and not take(args)):
-        return None
-    return lanes
 
 
 def differentiable(value, path: str = ""):
@@ -125,7 +109,7 @@ def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linea
     result = output(*out, device=device, requires_grad=bool(wanted))
     cut = {"covered": covered, "footprints": footprints}  # how launches are cut into chunks
     if active_tape() is None or not wanted:
-        launch(kernels.forward, count, args=args, pixels=pixels, out=result, device=device, lanes=_lanes(kernels, args), **cut)
+        launch(kernels.forward, count, args=args, pixels=pixels, out=result, device=device, lanes=lanes_for(kernels, device, args), **cut)
     else:
         _run_path(kernels, _backward_path(kernels, inputs, wanted, linear), count, inputs, result, device, cut, touched)
     return result
@@ -146,13 +130,10 @@ def _run_path(kernels: Kernels, path: str, count: int, inputs: dict, result, dev
     if kernels.staged is not None and kernels.staged.replaces == path and (kernels.texel_grad if path == "texel_grad" else kernels.adjoint) is None:
         _run_staged(kernels.staged, count, inputs, result, device, cut)
     elif path == "texel_grad":
-        lanes, grad_lanes = _lanes(kernels, inputs["args"]), _lanes(kernels, inputs["args"], grad=True)
-        if kernels.lane_saved is not None and grad_lanes is not None:  # a gradient lane that reads what the forward lane keeps
-            if lanes is None or not wp.get_device(device).is_cpu:
-                grad_lanes = None  # (none kept: the one-pixel gradient)
-            else:
-                # held by the recorded pass alone; once it is gone, a kept block for the next (warptex._memory)
-                inputs["pixels"].saved = empty((count, kernels.lane_saved(inputs["args"])), float, device)
+        lanes, grad_lanes = lanes_for(kernels, device, inputs["args"]), lanes_for(kernels, device, inputs["args"], grad=True)
+        if kernels.lane_saved is not None and grad_lanes is not None:  # a gradient lane that reads what the forward lane keeps:
+            # held by the recorded pass alone; once it is gone, a kept block for the next (warptex._memory)
+            inputs["pixels"].saved = empty((count, kernels.lane_saved(inputs["args"])), float, device)
         launch(kernels.forward, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, lanes=lanes, **cut,
                backward=_texel_gradient(kernels, count, inputs, result, device, cut, touched, grad_lanes))  # fmt: skip
     elif kernels.adjoint is not None:
