@@ -120,3 +120,66 @@ def process_alive(pid: int, path: str | os.PathLike) -> bool:
         return time.time() - os.stat(path).st_mtime < 86400.0
     except OSError:
         return False
+
+
+class _RowFile:
+    """A file written in bands of rows to a temporary beside ``path`` and renamed onto it by
+    :meth:`close` once all ``height`` rows are written; any error (or :meth:`abort`) removes it,
+    so nothing appears at ``path``. Subclasses call :meth:`_open` once their header is ready, count
+    rows in ``_rows``, and write what follows the last row in :meth:`_finish`; used as a context
+    manager, it closes on success and aborts on error."""
+
+    path: str
+    height: int
+    _rows: int
+    _file = None
+
+    def _open(self):
+        """The temporary file, open for writing."""
+        self._atomic = _atomic_output(self.path)
+        self._file = open(self._atomic.__enter__(), "wb")  # noqa: SIM115 (closed in close/abort)
+        return self._file
+
+    def _finish(self) -> None:
+        """Write what follows the last row (the file is still open)."""
+
+    @property
+    def rows_written(self) -> int:
+        return self._rows
+
+    def close(self) -> None:
+        """Finish the file and rename it onto ``path``: every row must have been written."""
+        if self._file is None:
+            return
+        if self._rows != self.height:
+            self.abort()
+            raise ValueError(f"{type(self).__name__}.close(): {self._rows} of {self.height} rows were written; the file is removed")
+        try:
+            self._finish()
+            self._file.close()
+            self._file = None
+            self._atomic.__exit__(None, None, None)
+        except BaseException as err:
+            self.abort(err)
+            raise
+
+    def abort(self, error: BaseException | None = None) -> None:
+        """Stop and remove the partial file (nothing appears at ``path``)."""
+        if self._file is None:
+            return
+        self._file.close()
+        self._file = None
+        err = error if error is not None else RuntimeError("aborted")
+        try:
+            self._atomic.__exit__(type(err), err, None)
+        except BaseException:  # _atomic_output re-raises what it was given: the file is gone
+            pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, error, trace) -> None:
+        if error is None:
+            self.close()
+        else:
+            self.abort(error)

@@ -20,7 +20,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from warptex._files import _as_image, _atomic_output, _checked_output_path
+from warptex._files import _as_image, _checked_output_path, _RowFile
 from warptex.exr import _STANDARD_ATTRIBUTES, EXR_MAGIC, _name_tuple
 
 __all__ = ["ExrWriter", "write_exr"]
@@ -50,7 +50,7 @@ def _attribute(name: str, value) -> tuple[str, bytes]:
     raise ValueError(f"write_exr(): attribute {name!r} must be an int, float, str or a float32/float64 vector of 2 or 3, got {value!r}")
 
 
-class ExrWriter:
+class ExrWriter(_RowFile):
     """Write a ``height × width`` scanline OpenEXR file (ZIP) of named float channels band by
     band: :meth:`write` takes rows. Use it as a context manager, which renames the file onto
     ``path`` on success (every row written) and removes it on any error.
@@ -104,13 +104,7 @@ class ExrWriter:
         head += b"".join(n.encode() + b"\0" + t.encode() + b"\0" + struct.pack("<i", len(v)) + v for n, t, v in sorted(header)) + b"\0"
         self._chunks = -(-self.height // _LINES)
         self._table = len(head)
-        self._atomic = _atomic_output(self.path)
-        self._file = open(self._atomic.__enter__(), "wb")  # noqa: SIM115 (closed in close/abort)
-        self._file.write(head + bytes(8 * self._chunks))  # the offset table, filled in by close()
-
-    @property
-    def rows_written(self) -> int:
-        return self._rows
+        self._open().write(head + bytes(8 * self._chunks))  # the offset table, filled in by close()
 
     def write(self, rows) -> None:
         """Append rows: ``[n, width, C]`` for the C channels in the order named (``[n, width]``
@@ -143,45 +137,15 @@ class ExrWriter:
                 self._offsets.append(self._file.tell())
                 self._file.write(struct.pack("<ii", first + start, len(data)) + data)
 
-    def close(self) -> None:
-        """Finish the file (its chunk table) and rename it onto ``path``: every row must have been written."""
-        if self._file is None:
-            return
-        if self._rows != self.height:
-            self.abort()
-            raise ValueError(f"ExrWriter.close(): {self._rows} of {self.height} rows were written; the file is removed")
-        try:
-            self._file.seek(self._table)
-            self._file.write(struct.pack(f"<{len(self._offsets)}Q", *self._offsets))
-            self._file.close()
-            self._file = None
-            self._pool.shutdown()
-            self._atomic.__exit__(None, None, None)
-        except BaseException as err:
-            self.abort(err)
-            raise
+    def _finish(self) -> None:
+        self._file.seek(self._table)
+        self._file.write(struct.pack(f"<{len(self._offsets)}Q", *self._offsets))
+        self._pool.shutdown()
 
     def abort(self, error: BaseException | None = None) -> None:
         """Stop and remove the partial file (nothing appears at ``path``)."""
         self._pool.shutdown(cancel_futures=True)
-        if self._file is None:
-            return
-        self._file.close()
-        self._file = None
-        err = error if error is not None else RuntimeError("aborted")
-        try:
-            self._atomic.__exit__(type(err), err, None)
-        except BaseException:  # _atomic_output re-raises what it was given: the file is gone
-            pass
-
-    def __enter__(self) -> "ExrWriter":
-        return self
-
-    def __exit__(self, kind, error, trace) -> None:
-        if error is None:
-            self.close()
-        else:
-            self.abort(error)
+        super().abort(error)
 
 
 def _compressed(lines: np.ndarray) -> bytes:

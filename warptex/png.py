@@ -24,6 +24,8 @@ import zlib
 
 import numpy as np
 
+from warptex._files import _RowFile
+
 __all__ = ["PngWriter", "codes"]
 
 SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -51,7 +53,7 @@ def _chunk(kind: bytes, payload: bytes) -> bytes:
     return struct.pack(">I", len(payload)) + kind + payload + struct.pack(">I", zlib.crc32(payload, zlib.crc32(kind)))
 
 
-class PngWriter:
+class PngWriter(_RowFile):
     """Write a ``height × width`` PNG of ``channels`` (1-4: gray, gray+alpha, RGB, RGBA) band by
     band: :meth:`write` takes float values, :meth:`write_codes` codes; use it as a context
     manager, which renames the file onto ``path`` on success (every row written) and removes it
@@ -66,7 +68,7 @@ class PngWriter:
     """
 
     def __init__(self, path, height: int, width: int, channels: int, *, bits: int = 8, data: bool = False):
-        from warptex._files import _atomic_output, _checked_output_path
+        from warptex._files import _checked_output_path
 
         func = "PngWriter"
         for name, value, low in (("height", height, 1), ("width", width, 1), ("channels", channels, 1)):
@@ -85,14 +87,8 @@ class PngWriter:
         self._previous = np.zeros(self.width * self._pixel, np.uint8)  # the row above the first is zero
         self._zlib = zlib.compressobj(6)
         self._pending = bytearray()
-        self._atomic = _atomic_output(self.path)
-        self._file = open(self._atomic.__enter__(), "wb")  # noqa: SIM115 (closed in close/abort)
         header = struct.pack(">IIBBBBB", self.width, self.height, bits, _COLOUR_TYPES[channels], 0, 0, 0)
-        self._file.write(SIGNATURE + _chunk(b"IHDR", header))
-
-    @property
-    def rows_written(self) -> int:
-        return self._rows
+        self._open().write(SIGNATURE + _chunk(b"IHDR", header))
 
     def write(self, values) -> None:
         """Append rows of float values, ``[n, width, channels]`` (``[n, width]`` for one channel),
@@ -125,44 +121,10 @@ class PngWriter:
             self._flush(final=False)
         self._rows += len(band)
 
-    def close(self) -> None:
-        """Finish the file and rename it onto ``path``: every row must have been written."""
-        if self._file is None:
-            return
-        if self._rows != self.height:
-            self.abort()
-            raise ValueError(f"PngWriter.close(): {self._rows} of {self.height} rows were written; the file is removed")
-        try:
-            self._pending += self._zlib.flush()
-            self._flush(final=True)
-            self._file.write(_chunk(b"IEND", b""))
-            self._file.close()
-            self._file = None
-            self._atomic.__exit__(None, None, None)
-        except BaseException as err:
-            self.abort(err)
-            raise
-
-    def abort(self, error: BaseException | None = None) -> None:
-        """Stop and remove the partial file (nothing appears at ``path``)."""
-        if self._file is None:
-            return
-        self._file.close()
-        self._file = None
-        err = error if error is not None else RuntimeError("aborted")
-        try:
-            self._atomic.__exit__(type(err), err, None)
-        except BaseException:  # _atomic_output re-raises what it was given: the file is gone
-            pass
-
-    def __enter__(self) -> "PngWriter":
-        return self
-
-    def __exit__(self, kind, error, trace) -> None:
-        if error is None:
-            self.close()
-        else:
-            self.abort(error)
+    def _finish(self) -> None:
+        self._pending += self._zlib.flush()
+        self._flush(final=True)
+        self._file.write(_chunk(b"IEND", b""))
 
     def _check_shape(self, band: np.ndarray) -> None:
         if band.ndim != 3 or band.shape[1:] != (self.width, self.channels) or len(band) == 0:
