@@ -1,6 +1,9 @@
 """All of warptex's Warp code: ``@wp.func`` building blocks and ``@wp.kernel`` entry points.
 
-This package sees only Warp and its own modules; the public API lives in ``warptex``.
+This package sees only Warp and its own modules; the public API lives in ``warptex``. It is the
+folder ``kernels/`` beside ``warptex/``: installed, ``pyproject.toml`` maps it to ``warptex.kernels``;
+in a checkout, ``warptex/__init__.py`` grafts it there (``_find_kernels_of_a_checkout``).
+``kernels/README.md`` maps the technique × {one pixel, lanes, gradient} grid onto the files.
 
 **Kernel families.** Every technique's kernels come from one factory per technique, cached per
 configuration, each per-pixel kernel made from ``@wp.func`` bodies by one shell (:mod:`.family`).

@@ -134,15 +134,20 @@ _ONE_PIXEL = threading.local()
 
 
 @contextlib.contextmanager
-def one_pixel_kernels(enabled: bool = True):
-    """Within this block (on this thread), CPU launches run the one-pixel-per-index kernels, never
-    their lane kernels: for tests and benchmarks that compare the two."""
-    previous = getattr(_ONE_PIXEL, "value", False)
-    _ONE_PIXEL.value = enabled
+def thread_flag(flag: threading.local, enabled: bool):
+    """``flag.value`` set to ``enabled`` within the block, on this thread."""
+    previous = getattr(flag, "value", False)
+    flag.value = enabled
     try:
         yield
     finally:
-        _ONE_PIXEL.value = previous
+        flag.value = previous
+
+
+def one_pixel_kernels(enabled: bool = True):
+    """Within this block (on this thread), CPU launches run the one-pixel-per-index kernels, never
+    their lane kernels: for tests and benchmarks that compare the two."""
+    return thread_flag(_ONE_PIXEL, enabled)
 
 
 def lanes_for(kernels: Kernels, device, args=None, grad: bool = False):

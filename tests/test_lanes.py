@@ -75,6 +75,16 @@ def _same_bits(a: np.ndarray, b: np.ndarray) -> None:
         )
 
 
+
+def _both_on_threads(threads: int, call):
+    """:func:`_both` with warptex on ``threads`` CPU threads."""
+    previous = wt.get_num_threads()
+    wt.set_num_threads(threads)
+    try:
+        return _both(call)
+    finally:
+        wt.set_num_threads(previous)
+
 @pytest.fixture(autouse=True)
 def lane_kernels_launched(monkeypatch):
     """Records the lane kernels each test launches (:data:`_LANE_KERNELS`)."""
@@ -244,12 +254,7 @@ def test_sample_lanes_over_threads(rng, threads):
     """Chunks of a threaded launch end anywhere, so each has its own last, short lane."""
     tex = wt.Texture(rng.random((256, 256, 4), dtype=np.float32))
     uv = rng.uniform(0.0, 4.0, (100_003, 2)).astype(np.float32)
-    previous = wt.get_num_threads()
-    wt.set_num_threads(threads)
-    try:
-        lanes, scalar = _both(lambda: wt.sample(tex, uv, lod=0.7))
-    finally:
-        wt.set_num_threads(previous)
+    lanes, scalar = _both_on_threads(threads, lambda: wt.sample(tex, uv, lod=0.7))
     _same_bits(lanes, scalar)
 
 
@@ -489,12 +494,7 @@ def test_triplanar_lanes_on_a_real_mesh(shared_data, threads):
     centre = mesh.bounds.mean(0)
     g = wt.rasterize(mesh, wt.look_at(centre + (0.0, 0.05, 0.25), centre, fov_y=35.0, resolution=(160, 200)))
     tex = wt.Texture.from_file(shared_data / "textures" / "brick.png")
-    previous = wt.get_num_threads()
-    wt.set_num_threads(threads)
-    try:
-        lanes, scalar = _both(lambda: wt.triplanar(g, tex, tiling=20.0))
-    finally:
-        wt.set_num_threads(previous)
+    lanes, scalar = _both_on_threads(threads, lambda: wt.triplanar(g, tex, tiling=20.0))
     _same_bits(lanes, scalar)
     assert (lanes[..., :3] > 0).mean() > 0.3  # the bunny covers the view
 

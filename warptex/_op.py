@@ -23,7 +23,6 @@ A technique hands :func:`run` its :class:`~warptex.kernels.family.Kernels`, its 
 
 from __future__ import annotations
 
-import contextlib
 import threading
 
 import warp as wp
@@ -32,7 +31,7 @@ from warptex._launch import GENERATED, Target, launch, output, scatter
 from warptex._memory import empty
 from warptex._pack import empty_array
 from warptex._warp import active_tape, scalar_type, struct_arrays, struct_fields, struct_like
-from warptex.kernels.family import PIXELS, Kernels, Staged, lanes_for, one_pixel_kernels  # noqa: F401 (one_pixel_kernels: re-exported)
+from warptex.kernels.family import PIXELS, Kernels, Staged, lanes_for, one_pixel_kernels, thread_flag  # noqa: F401 (one_pixel_kernels: re-exported)
 from warptex.kernels.texels import TextureView
 
 _forced = threading.local()
@@ -41,21 +40,10 @@ _forced = threading.local()
 _FLOATS = (wp.float16, wp.float32, wp.float64)
 
 
-@contextlib.contextmanager
-def _thread_flag(flag: threading.local, enabled: bool):
-    """``flag.value`` set to ``enabled`` within the block, on this thread."""
-    previous = getattr(flag, "value", False)
-    flag.value = enabled
-    try:
-        yield
-    finally:
-        flag.value = previous
-
-
 def force_generated_adjoint(enabled: bool = True):
     """Within this block (on this thread), every recorded backward pass is Warp's generated adjoint,
     never a hand-written gradient: for tests that compare the two."""
-    return _thread_flag(_forced, enabled)
+    return thread_flag(_forced, enabled)
 
 
 def differentiable(value, path: str = ""):

@@ -68,21 +68,21 @@ WT_INLINE wt_vf wt_vmin(wt_vf a, wt_vf b) { return wt_sel(a <= b, a, wt_sel(b ==
 WT_INLINE wt_vf wt_vabs(wt_vf a) { return (wt_vf)((wt_vi)a & 0x7fffffff); }
 // wp::isfinite, as a mask
 WT_INLINE wt_vi wt_finite(wt_vf a) { return a - a == 0.0f; }
-// wp::sqrt, lane by lane
-WT_INLINE wt_vf wt_vsqrt(wt_vf x) {
+// f (a scalar Warp builtin) lane by lane: the same bits as Warp's one-pixel call
+template <typename F> WT_INLINE wt_vf wt_lanewise(wt_vf x, F f) {
     float a[WT_L];
     __builtin_memcpy(a, &x, sizeof(a));
-    for (int l = 0; l < WT_L; ++l) a[l] = wp::sqrt(a[l]);
+    for (int l = 0; l < WT_L; ++l) a[l] = f(a[l]);
     __builtin_memcpy(&x, a, sizeof(a));
     return x;
 }
+// wp::sqrt, lane by lane
+WT_INLINE wt_vf wt_vsqrt(wt_vf x) {
+    return wt_lanewise(x, [](float v) { return wp::sqrt(v); });
+}
 // wp::ceil, lane by lane
 WT_INLINE wt_vf wt_vceil(wt_vf x) {
-    float a[WT_L];
-    __builtin_memcpy(a, &x, sizeof(a));
-    for (int l = 0; l < WT_L; ++l) a[l] = wp::ceil(a[l]);
-    __builtin_memcpy(&x, a, sizeof(a));
-    return x;
+    return wt_lanewise(x, [](float v) { return wp::ceil(v); });
 }
 
 // wt_mip_levels, lane by lane.

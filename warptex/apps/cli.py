@@ -39,11 +39,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     render.add_argument("--seed", type=int, default=0, help="terrain and procedural texture seed (default: 0)")
     render.add_argument("--samples", type=square, default=4, help="stratified samples per pixel, 1, 4, 9, 16... (anti-aliasing; default: 4)")
-    render.add_argument(
-        "--filter", choices=("nearest", "bilinear", "trilinear", "anisotropic"), default="anisotropic", help="texture filter (default: %(default)s)"
-    )
-    render.add_argument("--memory", type=memory_size, default=None, help="memory for the work on one band of the image, e.g. 512MiB or 2GiB; larger images are made band by band (default: 256MiB)")
-    render.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0 (default: Warp's default)")
+    _add_filter(render)
+    _add_memory(render, "the image", "larger images are made band by band")
+    _add_device(render)
     demo = commands.add_parser(
         "demo",
         help="render the texture-sampling demo (filters and address modes)",
@@ -53,7 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="out", help="output folder (default: %(default)s)")
     demo.add_argument("--texture", default=None, help="image file to use (default: a procedural checkerboard)")
     demo.add_argument("--resolution", type=resolution, default=(360, 480), help="panel size HxW (default: 360x480)")
-    demo.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0 (default: Warp's default)")
+    _add_device(demo)
     fit = commands.add_parser(
         "fit",
         help="fit splat maps and tiling to images (the default terrain, or your targets)",
@@ -84,15 +82,13 @@ def build_parser() -> argparse.ArgumentParser:
     bake.add_argument("--gutter", type=count(0), default=None, help="texels filled around each chart (default: enough for the mips of a 512-pixel view)")
     bake.add_argument("--tiling", type=number(0.0, None), default=None, help="texture repeats across the mesh (default: 8; layers: 1/6 per unit)")
     bake.add_argument("--seed", type=int, default=0, help="terrain and procedural texture seed (default: 0)")
-    bake.add_argument(
-        "--filter", choices=("nearest", "bilinear", "trilinear", "anisotropic"), default="anisotropic", help="texture filter (default: %(default)s)"
-    )
+    _add_filter(bake)
     bake.add_argument(
         "--atlas", choices=("auto", "xatlas", "projection"), default="auto",
         help="how a mesh without usable UVs is unwrapped: xatlas (few seams), projection (charts along six axes, for large scans), or auto: xatlas up to 50,000 faces (default: auto)",
     )
-    bake.add_argument("--memory", type=memory_size, default=None, help="memory for the work on one band of the atlas, e.g. 512MiB or 2GiB; larger atlases are baked band by band (default: 256MiB)")
-    bake.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0 (default: Warp's default)")
+    _add_memory(bake, "the atlas", "larger atlases are baked band by band")
+    _add_device(bake)
     assets = commands.add_parser(
         "assets",
         help="write the sample inputs the README's snippets read (the terrain's layers and splat map)",
@@ -104,6 +100,18 @@ def build_parser() -> argparse.ArgumentParser:
     assets.add_argument("--device", default=None, help=argparse.SUPPRESS)
     parser.commands = {"render": render, "demo": demo, "fit": fit, "bake": bake, "assets": assets}  # for errors in a command's own usage
     return parser
+
+
+def _add_filter(command: argparse.ArgumentParser) -> None:
+    command.add_argument("--filter", choices=("nearest", "bilinear", "trilinear", "anisotropic"), default="anisotropic", help="texture filter (default: %(default)s)")
+
+
+def _add_memory(command: argparse.ArgumentParser, band_of: str, larger: str) -> None:
+    command.add_argument("--memory", type=memory_size, default=None, help=f"memory for the work on one band of {band_of}, e.g. 512MiB or 2GiB; {larger} (default: 256MiB)")
+
+
+def _add_device(command: argparse.ArgumentParser) -> None:
+    command.add_argument("--device", default=None, help="Warp device, e.g. cpu or cuda:0 (default: Warp's default)")
 
 
 def fit_report(summary: dict) -> str:
