@@ -58,7 +58,7 @@ def backward(run):
 
 _SNIPPETS = {
     "sample": "wt.sample(texture(GRAD), uv, lod=1.5)",
-    "stochastic (hex)": "wt.stochastic(texture(GRAD), uv, method='hex', lod=1.5)",
+    "stochastic (hex)": "wt.stochastic(texture(GRAD), uv, 'hex', lod=1.5)",
     "triplanar": "wt.triplanar(g, texture(GRAD), tiling=4.0)",
     "triplanar (hash4)": "wt.triplanar(g, texture(GRAD), tiling=4.0, stochastic='hash4')",
     "triplanar (faces)": "wt.triplanar(g, textures_per_face=[texture(GRAD) for _ in range(6)], tiling=4.0)",

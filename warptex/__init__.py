@@ -6,7 +6,7 @@ The library:
 - options every technique takes: :class:`Sampler` (with :class:`Filter`, :class:`Address`) and
   :class:`Stochastic` (with :class:`Method`);
 - the techniques: :func:`sample`, :func:`stochastic` (with :func:`prepare_histogram`,
-  :class:`Histogram`), :func:`triplanar`, :func:`biplanar`, :func:`triplanar_normal` (with
+  :class:`Histogram`), :func:`triplanar`, :func:`biplanar`, :func:`triplanar_normal`, :func:`biplanar_normal` (with
   :class:`Space`, :class:`Blend`), :func:`splat` (with :class:`LayerProjection`), and the atlas variant
   :func:`pack_atlas`, :func:`export_index_maps`, :func:`splat_atlas` (:class:`Atlas`);
 - G-buffers: :func:`rasterize` of a mesh (:func:`load_mesh`) through a :class:`Camera`
@@ -78,7 +78,7 @@ _NAMES = {
     "resolve": "resolve", "sample": "sampling", "hex_taps": "stochastic", "stochastic": "stochastic",
     "Texture": "texture", "TextureArray": "texture", "mip_sizes": "texture",
     "Tile": "tiles", "gbuffer_tiles": "tiles",
-    "Blend": "triplanar", "Space": "triplanar", "biplanar": "triplanar", "triplanar": "triplanar", "triplanar_normal": "triplanar",
+    "Blend": "triplanar", "Space": "triplanar", "biplanar": "triplanar", "biplanar_normal": "triplanar", "triplanar": "triplanar", "triplanar_normal": "triplanar",
     "UVLayout": "unwrap", "unwrap": "unwrap",
 }
 
@@ -131,6 +131,7 @@ __all__ = [
     "bake",
     "bake_gltf",
     "biplanar",
+    "biplanar_normal",
     "export_gltf",
     "export_index_maps",
     "fit",

@@ -18,49 +18,49 @@ from contextlib import contextmanager
 import numpy as np
 
 
-def _as_image(image, fn: str) -> np.ndarray:
+def _as_image(image, func: str) -> np.ndarray:
     """Validate array-like pixels and return them as a float32 [H, W, C] array (always a new array)."""
     try:
         array = np.asarray(image)
     except ValueError as exc:  # ragged nested sequences
-        raise ValueError(f"{fn}(): image must be a rectangular array of numbers: {exc}") from None
+        raise ValueError(f"{func}(): image must be a rectangular array of numbers: {exc}") from None
     if not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)
             or array.dtype == np.bool_):
-        raise TypeError(f"{fn}(): image must hold real numbers, got dtype {array.dtype}")
+        raise TypeError(f"{func}(): image must hold real numbers, got dtype {array.dtype}")
     if array.ndim == 2:
         array = array[..., None]
     if array.ndim != 3:
-        raise ValueError(f"{fn}(): image must be shaped [H, W] or [H, W, C], got shape {array.shape}")
+        raise ValueError(f"{func}(): image must be shaped [H, W] or [H, W, C], got shape {array.shape}")
     if 0 in array.shape:
-        raise ValueError(f"{fn}(): image must not be empty, got shape {array.shape}")
+        raise ValueError(f"{func}(): image must not be empty, got shape {array.shape}")
     return array.astype(np.float32, copy=True)
 
 
-def _fspath(path, fn: str) -> str:
+def _fspath(path, func: str) -> str:
     try:
         return os.fsdecode(path)
     except TypeError:
-        raise TypeError(f"{fn}(): path must be str or os.PathLike, got {type(path).__name__}") from None
+        raise TypeError(f"{func}(): path must be str or os.PathLike, got {type(path).__name__}") from None
 
 
-def _checked_input_path(path, fn: str) -> str:
-    path = _fspath(path, fn)
+def _checked_input_path(path, func: str) -> str:
+    path = _fspath(path, func)
     if not os.path.exists(path):
-        raise FileNotFoundError(f"{fn}(): file not found: '{path}'")
+        raise FileNotFoundError(f"{func}(): file not found: '{path}'")
     if os.path.isdir(path):
-        raise ValueError(f"{fn}(): '{path}' is a directory, not an image file")
+        raise ValueError(f"{func}(): '{path}' is a directory, not an image file")
     return path
 
 
-def _checked_output_path(path, fn: str) -> str:
-    path = _fspath(path, fn)
+def _checked_output_path(path, func: str) -> str:
+    path = _fspath(path, func)
     if os.path.isdir(path):
-        raise ValueError(f"{fn}(): '{path}' is a directory")
+        raise ValueError(f"{func}(): '{path}' is a directory")
     folder = os.path.dirname(os.path.abspath(path))
     while not os.path.exists(folder):  # the folders to create: their first existing ancestor must be a folder
         folder = os.path.dirname(folder)
     if not os.path.isdir(folder):
-        raise NotADirectoryError(f"{fn}(): cannot write '{path}': '{folder}' is a file, not a folder")
+        raise NotADirectoryError(f"{func}(): cannot write '{path}': '{folder}' is a file, not a folder")
     return path
 
 

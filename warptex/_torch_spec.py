@@ -143,7 +143,7 @@ def _role_tensor(func: str, role: str, t: torch.Tensor) -> torch.Tensor:
         t = t.to(torch.float32).contiguous()
     elif role.startswith("histogram."):  # the transform's LUT, basis, centre: float32 data
         return t.detach().to(torch.float32).contiguous()
-    else:  # e.g. object_to_world, face_layers: plain values, passed on as NumPy
+    else:  # e.g. object_to_world, layers_per_face: plain values, passed on as NumPy
         return t.detach().contiguous()
     if role in VEC2 and (t.dim() < 2 or t.shape[-1] != 2):
         raise ValueError(f"{func}(): {role} must have shape (..., 2) with a sample axis (uv[None] for one UV), got {tuple(t.shape)}")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import enum
 import math
+import warnings
 from typing import TypeVar
 
 import numpy as np
@@ -138,14 +139,32 @@ def as_device_array(func: str, name: str, value: wp.array, device, *, beside: st
     return value
 
 
-def checked_device(who: str, device):
-    """``wp.get_device(device)``, or a ``ValueError`` starting with ``who`` (``"rasterize()"``,
-    ``"--device"``) that says which devices this machine has (Warp's own says only "Invalid device
-    identifier")."""
+def checked_device(func: str, device):
+    """``wp.get_device(device)``, or a ``ValueError`` that says which devices this machine has
+    (Warp's own says only "Invalid device identifier"), starting ``"func(): "`` as every error of
+    a function does, or ``"--device: "`` for a command-line option (a ``func`` starting ``-``)."""
     try:
         return wp.get_device(device)
     except (ValueError, RuntimeError):
         pass
     have = ", ".join(d.alias for d in wp.get_devices())
     cuda = "" if wp.get_cuda_device_count() else "no CUDA device is available here; "
-    raise ValueError(f"{who}: device {device!r} does not exist: {cuda}the devices are {have}")
+    where = func if func.startswith("-") else f"{func}()"
+    raise ValueError(f"{where}: device {device!r} does not exist: {cuda}the devices are {have}")
+
+
+def warn_renamed(old: str, new: str, *, stacklevel: int = 3) -> None:
+    """A ``DeprecationWarning`` that ``old`` (an argument, keyword or name) is now spelt ``new``;
+    old spellings keep working for one release. ``stacklevel`` 3 points at the caller's caller."""
+    warnings.warn(f"{old} is deprecated and goes in the next release: use {new}", DeprecationWarning, stacklevel=stacklevel)
+
+
+def renamed_attribute(module: str, name: str, renamed: dict[str, str], scope: dict):
+    """For a module's ``__getattr__``: the value of an old public name in ``renamed`` (``{old: new}``,
+    ``new`` in ``scope``, the module's globals), with a warning naming the new one; an
+    ``AttributeError`` for any other name."""
+    if name not in renamed:
+        raise AttributeError(f"module {module!r} has no attribute {name!r}")
+    new = renamed[name]
+    warn_renamed(f"{module}.{name}", f"{module}.{new}" + (", an internal helper" if new.startswith("_") else ""))
+    return scope[new]

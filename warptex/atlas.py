@@ -26,9 +26,9 @@ import warp as wp
 from warptex._op import run
 from warptex._pack import footprints, sampler_args, struct_of
 from warptex._validate import as_device_array, as_float_array, as_on_device, check_layer_count, param_array
-from warptex.gbuffer import GBuffer, gbuffer_device
+from warptex.gbuffer import GBuffer, _gbuffer_device
 from warptex.kernels import atlas as ka
-from warptex.options import Address, Filter, Sampler, as_sampler
+from warptex.options import Address, Filter, Sampler, _as_sampler
 from warptex.texture import Texture, TextureArray
 
 MAX_K = 4  # ka.MAX_ENTRIES: an RGBA index map
@@ -319,7 +319,7 @@ def splat_atlas(
         ``weights``, ``tiling`` and the G-buffer's UVs and derivatives.
     """
     func = "splat_atlas"
-    device = gbuffer_device(func, gbuffer, device)
+    device = _gbuffer_device(func, gbuffer, device)
     as_on_device(func, "atlas", atlas, Atlas, "an Atlas (from pack_atlas)", device)
     gbuffer.require(func, "mask", f"{uv_set}.uv", f"{uv_set}.uv_dx", f"{uv_set}.uv_dy")
     idx = _map_array(func, "indices", indices, wp.int32, None, device)
@@ -335,7 +335,7 @@ def splat_atlas(
     wts = _map_array(func, "weights", weights, wp.float32, idx.shape, device)
     num = atlas.num_layers
     tiling = param_array(func, "tiling", tiling, ((1,), (num,)), device, nonzero=True)
-    sampler = as_sampler(func, sampler)
+    sampler = _as_sampler(func, sampler)
     if sampler.address != Address.WRAP:
         raise ValueError(f"{func}(): the atlas wraps every layer through its gutter; sampler.address must be 'wrap', got {sampler.address.value!r}")
     if sampler.min_lod > atlas.max_lod:

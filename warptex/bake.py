@@ -31,10 +31,10 @@ from warptex._threads import rows_side_by_side
 from warptex._warp import paused_tape
 from warptex.raster import checked_rows
 from warptex.tiles import Tile, checked_memory, tile_rows
-from warptex.gbuffer import GBuffer, checked_geometry, gbuffer_device, load_mesh, mesh_uv_sets, vertex_normals, vertex_tangents
+from warptex.gbuffer import GBuffer, checked_geometry, _gbuffer_device, load_mesh, mesh_uv_sets, vertex_normals, vertex_tangents
 from warptex.kernels import bake as kb
 from warptex.kernels import raster as kr
-from warptex.unwrap import ATLAS_FILL, ATLAS_METHODS, UVLayout, bakeable_faces, checked_size, face_areas, unusable_reason, unwrap
+from warptex.unwrap import ATLAS_FILL, ATLAS_METHODS, UVLayout, bakeable_faces, _checked_size, face_areas, unusable_reason, unwrap
 
 #: Peak memory of a bake, measured (peak RSS, bunny, 512² to 4096²): ~300 MB plus ~400 B per texel
 #: (texture-space G-buffer, the technique's outputs, PNG encoding); with a margin.
@@ -149,7 +149,7 @@ class TextureSpace:
     arrays on a device, made once (``func`` names the caller in errors)."""
 
     def __init__(self, func: str, layout: UVLayout, size: int, gutter: int, device):
-        self.size = checked_size(func, size)
+        self.size = _checked_size(func, size)
         if isinstance(gutter, bool) or not isinstance(gutter, (int, np.integer)) or gutter < 0:
             raise ValueError(f"{func}(): gutter must be an int >= 0 (texels), got {gutter!r}")
         self.gutter = int(gutter)
@@ -262,7 +262,7 @@ def tangent_space(gbuffer: GBuffer, normals: wp.array, *, uv_set: str = "atlas",
     mask is 0.
     """
     func = "tangent_space"
-    device = gbuffer_device(func, gbuffer, device)
+    device = _gbuffer_device(func, gbuffer, device)
     gbuffer.require(func, "normal", "mask", f"{uv_set}.tangent")
     shape = (*gbuffer.resolution, 3)
     if not isinstance(normals, wp.array) or normals.dtype != wp.float32 or tuple(normals.shape) != shape or not normals.is_contiguous:
@@ -336,7 +336,7 @@ def prepare_bake(func: str, mesh, technique, normal, *, size, padding, gutter, v
     available) and the techniques tried on an empty G-buffer before the mesh is unwrapped."""
     mesh = load_mesh(mesh) if not isinstance(mesh, trimesh.Trimesh) else mesh
     checked_geometry(f"{func}():", mesh)
-    size = checked_size(func, size)
+    size = _checked_size(func, size)
     for name, value in (("view_size", view_size), ("gutter", gutter), ("padding", padding)):
         low = 1 if name == "view_size" else 0
         if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low):

@@ -87,21 +87,21 @@ def exr_attributes(path) -> dict:
         raise ValueError(f"exr_attributes(): cannot decode '{path}' as an OpenEXR image: {exc}") from None
 
 
-def _channel_names(path: str, fn: str) -> tuple[str, ...]:
+def _channel_names(path: str, func: str) -> tuple[str, ...]:
     try:
         with OpenEXR.File(path, header_only=True) as exr:
             return tuple(channel.name for channel in exr.header()["channels"])
     except (RuntimeError, UnicodeDecodeError) as exc:  # a corrupt header may hold a name that is not UTF-8
-        raise ValueError(f"{fn}(): cannot decode '{path}' as an OpenEXR image: {exc}") from None
+        raise ValueError(f"{func}(): cannot decode '{path}' as an OpenEXR image: {exc}") from None
 
 
-def _read_exr(path: str, channels, layer, fn: str) -> tuple[np.ndarray, tuple[str, ...]]:
+def _read_exr(path: str, channels, layer, func: str) -> tuple[np.ndarray, tuple[str, ...]]:
     if layer is not None and not isinstance(layer, str):
-        raise TypeError(f"{fn}(): layer must be a str such as 'diffuse', got {type(layer).__name__}")
+        raise TypeError(f"{func}(): layer must be a str such as 'diffuse', got {type(layer).__name__}")
     if channels is not None:
-        channels = _name_tuple(channels, fn, "channels")
+        channels = _name_tuple(channels, func, "channels")
         if not channels:
-            raise ValueError(f"{fn}(): channels must name at least one channel")
+            raise ValueError(f"{func}(): channels must name at least one channel")
         if layer:
             channels = tuple(f"{layer}.{name}" for name in channels)
     try:
@@ -112,7 +112,7 @@ def _read_exr(path: str, channels, layer, fn: str) -> tuple[np.ndarray, tuple[st
         first = parts[0]
         available = dict(first.channels)
         if channels is None:
-            channels = _default_exr_channels(available, layer, path, fn)
+            channels = _default_exr_channels(available, layer, path, func)
         else:
             size = (first.height(), first.width())
             for part in parts[1:]:
@@ -120,36 +120,36 @@ def _read_exr(path: str, channels, layer, fn: str) -> tuple[np.ndarray, tuple[st
                     for name, channel in part.channels.items():
                         available.setdefault(name, channel)
     except (RuntimeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{fn}(): cannot decode '{path}' as an OpenEXR image: {exc}") from exc
+        raise ValueError(f"{func}(): cannot decode '{path}' as an OpenEXR image: {exc}") from exc
     missing = [name for name in channels if name not in available]
     if missing:
-        raise ValueError(f"{fn}(): channels {missing} not found in '{path}'; "
+        raise ValueError(f"{func}(): channels {missing} not found in '{path}'; "
                          f"available channels: {sorted(available)}")
     planes = [available[name].pixels for name in channels]
     if any(p is None or p.ndim != 2 for p in planes):
-        raise ValueError(f"{fn}(): '{path}' holds deep or non-2D channel data, which is not supported")
+        raise ValueError(f"{func}(): '{path}' holds deep or non-2D channel data, which is not supported")
     if len({p.shape for p in planes}) > 1:
         sizes = ", ".join(f"{name!r}: {p.shape}" for name, p in zip(channels, planes))
-        raise ValueError(f"{fn}(): channels of '{path}' differ in size (subsampled?): {sizes}")
+        raise ValueError(f"{func}(): channels of '{path}' differ in size (subsampled?): {sizes}")
     return np.stack([p.astype(np.float32, copy=False) for p in planes], axis=-1), channels
 
 
-def _default_exr_channels(available: Mapping, layer: str | None, path: str, fn: str) -> tuple[str, ...]:
+def _default_exr_channels(available: Mapping, layer: str | None, path: str, func: str) -> tuple[str, ...]:
     """The channels read when none are named: a layer chosen as :func:`read_exr` says, its channels
     in the order of their suffixes."""
     layers = _layers(available)
     if not layers:
-        raise ValueError(f"{fn}(): '{path}' has no channels")
+        raise ValueError(f"{func}(): '{path}' has no channels")
     if layer is None:
         if "" in layers:
             layer = ""
         elif len(layers) == 1:
             layer = next(iter(layers))
         else:
-            raise ValueError(f"{fn}(): '{path}' holds several layers {sorted(layers)} and no default one; "
+            raise ValueError(f"{func}(): '{path}' holds several layers {sorted(layers)} and no default one; "
                              "choose one with layer= (warptex render: --texture-layer)")
     if layer not in layers:
-        raise ValueError(f"{fn}(): '{path}' has no layer {layer!r}; its layers: {_layer_list(layers)}")
+        raise ValueError(f"{func}(): '{path}' has no layer {layer!r}; its layers: {_layer_list(layers)}")
     suffixes = layers[layer]
     full = (lambda s: f"{layer}.{s}") if layer else (lambda s: s)
     alpha = ("A",) if "A" in suffixes else ()
@@ -161,7 +161,7 @@ def _default_exr_channels(available: Mapping, layer: str | None, path: str, fn: 
         chosen = tuple(sorted(suffixes, key=_suffix_rank))
         if len(chosen) > 4:
             where = f"layer {layer!r} of '{path}'" if layer else f"'{path}'"
-            raise ValueError(f"{fn}(): {where} has {len(chosen)} channels {[full(s) for s in chosen]} and no R,G,B or Y; "
+            raise ValueError(f"{func}(): {where} has {len(chosen)} channels {[full(s) for s in chosen]} and no R,G,B or Y; "
                              "pass channels= to choose which to read")
     return tuple(full(s) for s in chosen)
 
@@ -203,13 +203,13 @@ def exr_layers(path) -> dict[str, tuple[str, ...]]:
     return {layer: tuple(sorted(suffixes.values())) for layer, suffixes in sorted(_layers(names).items())}
 
 
-def _name_tuple(names, fn: str, arg: str) -> tuple[str, ...]:
+def _name_tuple(names, func: str, arg: str) -> tuple[str, ...]:
     """Return channel names as a tuple of str; a lone str is rejected as ambiguous ('RGB' vs ('RGB',))."""
     try:
         result = None if isinstance(names, (str, bytes)) else tuple(names)
     except TypeError:
         result = None
     if result is None or not all(isinstance(name, str) for name in result):
-        raise TypeError(f"{fn}(): {arg} must be a sequence of str channel names such as ('R', 'G'), "
+        raise TypeError(f"{func}(): {arg} must be a sequence of str channel names such as ('R', 'G'), "
                         f"got {names!r}")
     return tuple(str(name) for name in result)

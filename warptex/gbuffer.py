@@ -131,7 +131,7 @@ class GBuffer:
         """This G-buffer on ``device`` (e.g. ``"cuda:0"``): a copy of every array there, or
         ``self`` when it is there already. Rasterise once and texture on either device with the
         same pixels: the CPU and CUDA rasterisers agree only to float rounding."""
-        device = checked_device("GBuffer.to()", device)
+        device = checked_device("GBuffer.to", device)
         if device == self.device:
             return self
         arrays = {name: wp.clone(getattr(self, name), device=device) for name in FIELDS}
@@ -359,7 +359,7 @@ def _host_array(func: str, name: str, value, channels: int, flip_y: bool, shape=
     return a[::-1].copy() if flip_y else a
 
 
-def gbuffer_device(func: str, gbuffer, device) -> wp.context.Device:
+def _gbuffer_device(func: str, gbuffer, device) -> wp.context.Device:
     """The device a technique launches on over ``gbuffer``: ``device`` if given (it must be the
     G-buffer's), else the G-buffer's; a ``TypeError`` if ``gbuffer`` is not a :class:`GBuffer`."""
     if not isinstance(gbuffer, GBuffer):
@@ -375,9 +375,14 @@ def gbuffer_device(func: str, gbuffer, device) -> wp.context.Device:
 from warptex.mesh import checked_geometry, load_mesh, mesh_uv_sets, vertex_normals, vertex_tangents  # noqa: E402,F401
 
 
+_RENAMED = {"gbuffer_device": "_gbuffer_device"}  # old public spellings, kept for one release
+
+
 def __getattr__(name: str):
     if name == "rasterize":
         from warptex.raster import rasterize
 
         return rasterize
-    raise AttributeError(f"module 'warptex.gbuffer' has no attribute {name!r}")
+    from warptex._validate import renamed_attribute
+
+    return renamed_attribute(__name__, name, _RENAMED, globals())

@@ -121,7 +121,7 @@ def _border(func: str, border) -> tuple:
 _DEFAULTS = Sampler()
 
 
-def as_sampler(func: str, sampler) -> Sampler:
+def _as_sampler(func: str, sampler) -> Sampler:
     """``sampler=`` of a technique: a :class:`Sampler`, or ``None`` for the defaults."""
     if sampler is None:
         return _DEFAULTS
@@ -236,7 +236,7 @@ class Stochastic:
         return self.blend if self.blend is not None else _DEFAULT_BLEND.get(self.method, (0.25, 0.75))
 
 
-def as_stochastic(func: str, option) -> Stochastic:
+def _as_stochastic(func: str, option) -> Stochastic:
     """``stochastic=`` of a technique: ``None`` (method ``"none"``), a :class:`Method` name, or a
     :class:`Stochastic`."""
     if option is None:
@@ -249,3 +249,12 @@ def as_stochastic(func: str, option) -> Stochastic:
     if not isinstance(option, Stochastic):
         raise TypeError(f"{func}(): stochastic must be None, a method name or a warptex.Stochastic, got {type(option).__name__}")
     return option
+
+
+_RENAMED = {'as_sampler': '_as_sampler', 'as_stochastic': '_as_stochastic'}  # old public spellings, kept for one release
+
+
+def __getattr__(name: str):
+    from warptex._validate import renamed_attribute
+
+    return renamed_attribute(__name__, name, _RENAMED, globals())

@@ -29,13 +29,13 @@ def line_chart(
         title: a title over all panels.
         dpi: resolution.
     """
-    fn = "line_chart"
+    func = "line_chart"
     if not panels:
-        raise ValueError(f"{fn}(): needs at least one panel")
+        raise ValueError(f"{func}(): needs at least one panel")
     for panel in panels:
         if not panel.get("series"):
-            raise ValueError(f"{fn}(): every panel needs a non-empty 'series' dict")
-    target = _checked_output_path(path, fn)
+            raise ValueError(f"{func}(): every panel needs a non-empty 'series' dict")
+    target = _checked_output_path(path, func)
 
     import matplotlib
 

@@ -131,7 +131,7 @@ def prepare(func: str, mesh, camera, *, samples: int = 1, origin=None, device=No
     trimesh_mesh = load_mesh(mesh) if isinstance(mesh, (str, os.PathLike)) else mesh
     vertices, faces, normals = _checked_mesh(func, trimesh_mesh)
     origin = _origin(func, origin, vertices, cameras)
-    return Scene(func, vertices, faces, normals, mesh_uv_sets(trimesh_mesh), origin, checked_device(f"{func}()", device)), cameras, batch
+    return Scene(func, vertices, faces, normals, mesh_uv_sets(trimesh_mesh), origin, checked_device(func, device)), cameras, batch
 
 
 class Scene:

@@ -13,7 +13,7 @@ from warptex._validate import resolve_device
 from warptex.kernels import sampling as ks
 from warptex.kernels import texels as kx
 from warptex.kernels.family import Kernels
-from warptex.options import Sampler, as_sampler
+from warptex.options import Sampler, _as_sampler
 from warptex.texture import TextureArray
 
 
@@ -49,7 +49,7 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
     uv, given = vec2_array(func, "uv", uv, device), uv
     single = not isinstance(given, wp.array) and np.ndim(given) == 1  # one UV, shape (2,): a result of shape (C,)
     shape, count = uv.shape, uv.size
-    sampler = as_sampler(func, sampler)
+    sampler = _as_sampler(func, sampler)
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
     constant_layer, layers = resolve_layer(func, texture, layer, shape, device)
     key = ("sample", sampler, lod_source, constant_lod, constant_layer)

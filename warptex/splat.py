@@ -13,13 +13,13 @@ import warp as wp
 
 from warptex._op import run
 from warptex._pack import MAP_SAMPLER, footprints, empty_array, projection_args, sampler_args, stochastic_args, struct_of
-from warptex._validate import as_enum, as_on_device, check_layer_count, param_array
-from warptex.gbuffer import GBuffer, gbuffer_device
+from warptex._validate import as_enum, as_on_device, check_layer_count, param_array, warn_renamed
+from warptex.gbuffer import GBuffer, _gbuffer_device
 from warptex.kernels import projection as kp
 from warptex.kernels import splat as kl
 from warptex.kernels import splat_layers as ksl
 from warptex.kernels import stochastic as kst
-from warptex.options import Sampler, Stochastic, as_sampler, as_stochastic
+from warptex.options import Sampler, Stochastic, _as_sampler, _as_stochastic
 from warptex.texture import TextureArray
 
 
@@ -41,7 +41,7 @@ class LayerProjection(str, enum.Enum):
 _PROJECTION_IDS = {LayerProjection.UV: ksl.PROJECT_UV, LayerProjection.WORLD_XZ: ksl.PROJECT_WORLD_XZ, LayerProjection.TRIPLANAR: ksl.PROJECT_TRIPLANAR}
 
 
-def as_splat_maps(func: str, splat_maps, device) -> TextureArray:
+def _as_splat_maps(func: str, splat_maps, device) -> TextureArray:
     """``splat_maps`` as a :class:`TextureArray` (NumPy ``[H, W, C]`` or ``[M, H, W, C]`` arrays are
     wrapped without mips); weights are data, never sRGB-decoded."""
     if isinstance(splat_maps, TextureArray):
@@ -73,10 +73,11 @@ def splat(
     sharpness=4.0,
     offsets=None,
     mirror_fix: bool = True,
-    face_layers=None,
+    layers_per_face=None,
     stochastic: Stochastic | str | None = None,
     sampler: Sampler | None = None,
     device=None,
+    face_layers=None,
 ) -> wp.array:
     """Blend the ``L`` layers of a texture array by splat-map weights, per pixel of a G-buffer.
 
@@ -104,8 +105,9 @@ def splat(
         height_channel: the channel of ``layers`` holding height when ``heights`` is ``None``.
         uv_set: the G-buffer UV set holding the splat-map UVs (and the layer UVs for ``"uv"``).
         sharpness, offsets, mirror_fix: the triplanar options, for ``projection="triplanar"``.
-        face_layers: for ``projection="triplanar"``: which array layers a layer reads on each face
-            of the cube of directions (grass on top, rock beneath). ``None`` (every layer reads
+        layers_per_face: for ``projection="triplanar"``: which array layers a layer reads on each
+            face of the cube of directions (grass on top, rock beneath), as
+            :func:`~warptex.triplanar`'s ``textures_per_face`` picks a texture per face. ``None`` (every layer reads
             itself), or ``L`` entries (a sequence, or an int array ``(L, 6)``), one per layer
             ``l``: ``None`` (``l`` itself on every face) or 6 layer indices ``(+x, -x, +y, -y,
             +z, -z)``, where a ``None`` index means ``l`` itself. Projection ``a`` reads the
@@ -121,6 +123,7 @@ def splat(
         sampler: a :class:`~warptex.Sampler` for the layers (and heights); its ``"auto"`` filter
             is trilinear. The splat maps have their own: bilinear on level 0, clamped.
         device: Warp device; must be the G-buffer's and the textures'.
+        face_layers: the old name of ``layers_per_face`` (deprecated).
 
     Returns:
         ``wp.array`` of float32, shape ``(H, W, C_out)``; 0 where the mask is 0. Recorded on the
@@ -128,9 +131,14 @@ def splat(
         ``heights``, and ``tiling`` / ``height_blend`` when given as arrays that require them.
     """
     func = "splat"
-    device = gbuffer_device(func, gbuffer, device)
+    if face_layers is not None:
+        if layers_per_face is not None:
+            raise TypeError(f"{func}(): got layers_per_face= and its old name face_layers=; pass layers_per_face= alone")
+        warn_renamed("splat(face_layers=...)", "splat(layers_per_face=...), named as triplanar's textures_per_face")
+        layers_per_face = face_layers
+    device = _gbuffer_device(func, gbuffer, device)
     as_on_device(func, "layers", layers, TextureArray, "a TextureArray", device)
-    maps = as_splat_maps(func, splat_maps, device)
+    maps = _as_splat_maps(func, splat_maps, device)
     num_layers = layers.num_layers
     check_layer_count(func, num_layers, maps)
     gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask", f"{uv_set}.uv", f"{uv_set}.uv_dx", f"{uv_set}.uv_dy")
@@ -170,14 +178,14 @@ def splat(
                 )
             params.height_mode, height_tex = ksl.HEIGHT_ARRAY, heights
 
-    option, sampler = as_stochastic(func, stochastic), as_sampler(func, sampler)
+    option, sampler = _as_stochastic(func, stochastic), _as_sampler(func, sampler)
     stoch, layers_read = stochastic_args(func, option, layers, sampler)
     if height_tex is layers:
         height_tex, height_stoch = layers_read, stoch  # heights from a channel of the same (decoded) sample
     else:  # a separate height array: the same taps, without the layers' histogram
         height_stoch, _ = stochastic_args(func, option.replace(histogram=None), height_tex, sampler)
 
-    params.face_layers = _face_layers(func, face_layers, num_layers, params.projection, device)
+    params.face_layers = _face_layers(func, layers_per_face, num_layers, params.projection, device)
 
     reads.proj = projection_args(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kp.WEIGHTS_TRIPLANAR,
                                  origin=gbuffer.origin, address=sampler.address, device=device)  # fmt: skip
@@ -202,37 +210,46 @@ def splat(
 FACE_NAMES = ("+x", "-x", "+y", "-y", "+z", "-z")
 
 
-def _face_layers(func: str, face_layers, num_layers: int, projection: int, device) -> wp.array:
-    """``face_layers`` checked, as the kernels' int32 array of ``6 L`` indices (``SplatArgs``);
+def _face_layers(func: str, layers_per_face, num_layers: int, projection: int, device) -> wp.array:
+    """``layers_per_face`` checked, as the kernels' int32 array of ``6 L`` indices (``SplatArgs``);
     empty when not given or when every layer reads itself on every face (the default path)."""
     empty = empty_array(wp.int32, 1, device)
-    if face_layers is None:
+    if layers_per_face is None:
         return empty
     if projection != ksl.PROJECT_TRIPLANAR:
-        raise ValueError(f"{func}(): face_layers needs projection='triplanar' (the faces are those of the triplanar projections)")
-    if isinstance(face_layers, np.ndarray):
-        if face_layers.ndim != 2 or face_layers.shape[1] != 6:
-            raise ValueError(f"{func}(): face_layers as an array must have shape ({num_layers}, 6), got {face_layers.shape}")
-        face_layers = [list(row) for row in face_layers]
-    if isinstance(face_layers, (str, bytes)) or not isinstance(face_layers, Sequence) or len(face_layers) != num_layers:
+        raise ValueError(f"{func}(): layers_per_face needs projection='triplanar' (the faces are those of the triplanar projections)")
+    if isinstance(layers_per_face, np.ndarray):
+        if layers_per_face.ndim != 2 or layers_per_face.shape[1] != 6:
+            raise ValueError(f"{func}(): layers_per_face as an array must have shape ({num_layers}, 6), got {layers_per_face.shape}")
+        layers_per_face = [list(row) for row in layers_per_face]
+    if isinstance(layers_per_face, (str, bytes)) or not isinstance(layers_per_face, Sequence) or len(layers_per_face) != num_layers:
         raise ValueError(
-            f"{func}(): face_layers must be a sequence of {num_layers} entries (one per layer), each None or 6 layer indices "
-            f"(+x, -x, +y, -y, +z, -z), got {face_layers!r}"
+            f"{func}(): layers_per_face must be a sequence of {num_layers} entries (one per layer), each None or 6 layer indices "
+            f"(+x, -x, +y, -y, +z, -z), got {layers_per_face!r}"
         )
     table = np.arange(num_layers, dtype=np.int32).repeat(6).reshape(num_layers, 6)
-    for layer, entry in enumerate(face_layers):
+    for layer, entry in enumerate(layers_per_face):
         if entry is None:
             continue
         if isinstance(entry, (str, bytes)) or not isinstance(entry, (Sequence, np.ndarray)) or len(entry) != 6:
-            raise ValueError(f"{func}(): face_layers[{layer}] must be None or 6 layer indices (+x, -x, +y, -y, +z, -z), got {entry!r}")
+            raise ValueError(f"{func}(): layers_per_face[{layer}] must be None or 6 layer indices (+x, -x, +y, -y, +z, -z), got {entry!r}")
         for f, index in enumerate(entry):
             if index is None:
                 continue
             if isinstance(index, (bool, np.bool_)) or not isinstance(index, (int, np.integer)):
-                raise TypeError(f"{func}(): face_layers[{layer}][{f}] (the {FACE_NAMES[f]} face) must be a layer index or None, got {index!r}")
+                raise TypeError(f"{func}(): layers_per_face[{layer}][{f}] (the {FACE_NAMES[f]} face) must be a layer index or None, got {index!r}")
             if not 0 <= index < num_layers:
-                raise ValueError(f"{func}(): face_layers[{layer}][{f}] (the {FACE_NAMES[f]} face) must be a layer in [0, {num_layers - 1}], got {index}")
+                raise ValueError(f"{func}(): layers_per_face[{layer}][{f}] (the {FACE_NAMES[f]} face) must be a layer in [0, {num_layers - 1}], got {index}")
             table[layer, f] = index
     if (table == np.arange(num_layers)[:, None]).all():
         return empty
     return wp.array(table.reshape(-1), dtype=wp.int32, device=device)
+
+
+_RENAMED = {'as_splat_maps': '_as_splat_maps'}  # old public spellings, kept for one release
+
+
+def __getattr__(name: str):
+    from warptex._validate import renamed_attribute
+
+    return renamed_attribute(__name__, name, _RENAMED, globals())

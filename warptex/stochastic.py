@@ -16,10 +16,10 @@ import warp as wp
 
 from warptex._op import run
 from warptex._pack import footprints, lod_inputs, packed, reshaped, resolve_layer, sample_args, stochastic_args, struct_of, vec2_array
-from warptex._validate import resolve_device
+from warptex._validate import resolve_device, warn_renamed
 from warptex.kernels import sampling as ks
 from warptex.kernels import stochastic_sample as kss
-from warptex.options import Method, Sampler, Stochastic, as_sampler, as_stochastic
+from warptex.options import Method, Sampler, Stochastic, _as_sampler, _as_stochastic
 from warptex.texture import Texture, TextureArray
 
 
@@ -27,7 +27,7 @@ from warptex.texture import Texture, TextureArray
 def stochastic(
     texture: TextureArray,
     uv,
-    method: Stochastic | Method | str = Method.HASH4,
+    stochastic: Stochastic | Method | str = Method.HASH4,
     *,
     layer=None,
     lod=None,
@@ -35,6 +35,7 @@ def stochastic(
     uv_dy=None,
     sampler: Sampler | None = None,
     device=None,
+    method: Stochastic | Method | str | None = None,
 ) -> wp.array:
     """Sample a tiled texture with randomised tiles, so that the repetition is not visible.
 
@@ -49,8 +50,9 @@ def stochastic(
             ``wp.vec2`` of any shape (receives gradients when it has ``requires_grad``). One unit is
             one texture repeat, so ``uv = s * uv0`` tiles ``s`` times; its gradient gives the
             gradient to ``s`` as ``Σ uv0 · ∂L/∂uv``. Non-finite UVs give NaN in every channel.
-        method: a :class:`Stochastic` (the technique and its options: seed, blend window, mirror,
-            contrast, rotation, noise, histogram), or just a :class:`Method` name with the defaults.
+        stochastic: a :class:`Stochastic` (the technique and its options: seed, blend window,
+            mirror, contrast, rotation, noise, histogram), or just a :class:`Method` name with the
+            defaults: the ``stochastic=`` every technique takes.
         layer: as for :func:`warptex.sample`: an int, or one int per UV, for a texture array.
         lod: level of detail: a number, or one float per UV (a ``wp.array`` of float receives
             gradients). Exclusive with ``uv_dx``/``uv_dy``.
@@ -60,6 +62,7 @@ def stochastic(
         sampler: a :class:`Sampler`; its address mode must be ``"wrap"`` (the default) or
             ``"mirror"``: stochastic tiling needs a periodic texture.
         device: Warp device; must be the texture's (``None``: the texture's).
+        method: the old name of ``stochastic`` (deprecated).
 
     Returns:
         ``wp.array`` of float32, shape ``(..., C)``, recorded on the active ``wp.Tape``: gradients
@@ -70,8 +73,13 @@ def stochastic(
     if not isinstance(texture, TextureArray):
         raise TypeError(f"{func}(): texture must be a Texture or TextureArray, got {type(texture).__name__}")
     device = resolve_device(func, device, texture.device)
-    option = as_stochastic(func, method)
-    sampler = as_sampler(func, sampler)
+    if method is not None:
+        if stochastic is not Method.HASH4:
+            raise TypeError(f"{func}(): got stochastic= and its old name method=; pass stochastic= alone")
+        warn_renamed("stochastic(method=...)", "stochastic(stochastic=...), the name every technique gives it")
+        stochastic = method
+    option = _as_stochastic(func, stochastic)
+    sampler = _as_sampler(func, sampler)
     uv, given = vec2_array(func, "uv", uv, device), uv
     single = not isinstance(given, wp.array) and np.ndim(given) == 1  # one UV, shape (2,): a result of shape (C,)
     shape, count = uv.shape, uv.size

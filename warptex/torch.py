@@ -11,7 +11,7 @@
     colour.square().mean().backward()                       # texture.grad, uv.grad
 
 The functions take the native functions' arguments (:func:`warptex.sample`, :func:`~warptex.stochastic`,
-:func:`~warptex.triplanar`, :func:`~warptex.biplanar`, :func:`~warptex.triplanar_normal`,
+:func:`~warptex.triplanar`, :func:`~warptex.biplanar`, :func:`~warptex.triplanar_normal`, :func:`~warptex.biplanar_normal`,
 :func:`~warptex.splat`, :func:`~warptex.splat_atlas`), with torch tensors where those take arrays:
 
 - **textures** are float tensors, ``[H, W, C]`` for one texture or ``[L, H, W, C]`` for a texture
@@ -63,11 +63,13 @@ from warptex.sampling import sample as _sample
 from warptex.splat import splat as _splat
 from warptex.stochastic import stochastic as _stochastic
 from warptex.triplanar import biplanar as _biplanar
+from warptex.triplanar import biplanar_normal as _biplanar_normal
 from warptex.triplanar import triplanar as _triplanar
 from warptex.triplanar import triplanar_normal as _triplanar_normal
 
 __all__ = [
     "biplanar",
+    "biplanar_normal",
     "gbuffer_tensors",
     "prepare_histogram",
     "sample",
@@ -123,6 +125,7 @@ stochastic = bridge(_stochastic, "texture", "uv", rows="uv", doc="With a histogr
 triplanar = bridge(_triplanar, "gbuffer", "texture", doc="Returns ``(H, W, C)``.")
 biplanar = bridge(_biplanar, "gbuffer", "texture", doc="Returns ``(H, W, C)``.")
 triplanar_normal = bridge(_triplanar_normal, "gbuffer", "normal_map", channels=3, doc="``normal_map`` as stored (``[0, 1]`` data). Returns unit world-space normals ``(H, W, 3)``.")
+biplanar_normal = bridge(_biplanar_normal, "gbuffer", "normal_map", channels=3, doc="As :func:`triplanar_normal`, with biplanar weights.")
 splat = bridge(_splat, "gbuffer", "layers", "splat_maps", doc="``layers`` ``[L, H, W, C]``, ``splat_maps`` ``[h, w, C]`` or ``[M, h, w, C]`` (read on "
                "level 0, no mips), ``heights`` ``[L, h, w, 1]``. Returns ``(H, W, C)``.")  # fmt: skip
 splat_atlas = bridge(_splat_atlas_of_layers, "gbuffer", "layers", "indices", "weights", doc="``layers`` ``[L, H, W, C]`` are packed into an atlas "

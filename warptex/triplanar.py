@@ -22,14 +22,14 @@ import warp as wp
 
 from warptex._op import run
 from warptex._pack import footprints, projection_args, sampler_args, stochastic_args, struct_of
-from warptex._validate import as_enum, as_float
-from warptex.gbuffer import GBuffer, gbuffer_device
+from warptex._validate import as_enum, as_float, warn_renamed
+from warptex.gbuffer import GBuffer, _gbuffer_device
 from warptex.kernels import faces as kf
 from warptex.kernels import normals as kn
 from warptex.kernels import projection as kp
 from warptex.kernels import triplanar as kt
 from warptex.kernels.stochastic import METHOD_NONE
-from warptex.options import Sampler, Stochastic, as_sampler, as_stochastic
+from warptex.options import Sampler, Stochastic, _as_sampler, _as_stochastic
 from warptex.texture import TextureArray
 
 
@@ -152,10 +152,7 @@ def biplanar(gbuffer: GBuffer, texture: TextureArray | None = None, *, sharpness
     Returns:
         As :func:`triplanar`.
     """
-    unknown = sorted(set(options) - set(_Setup.OPTIONS))
-    if unknown:
-        raise TypeError(f"biplanar() got an unexpected keyword argument {unknown[0]!r} (its options are triplanar()'s: {', '.join(_Setup.OPTIONS)})")
-    setup = _Setup("biplanar", kp.WEIGHTS_BIPLANAR, gbuffer, texture, sharpness=sharpness, **options)
+    setup = _Setup("biplanar", kp.WEIGHTS_BIPLANAR, gbuffer, texture, sharpness=sharpness, **_Setup.options("biplanar", "triplanar", options))
     return setup.launch(setup.channels)
 
 
@@ -173,7 +170,7 @@ def triplanar_normal(
     blend: Blend | str = Blend.WHITEOUT,
     strength: float = 1.0,
     flip_green: bool = False,
-    biplanar: bool = False,
+    biplanar: bool | None = None,
     space: Space | str = Space.WORLD,
     object_to_world=None,
     stochastic: Stochastic | str | None = None,
@@ -196,8 +193,8 @@ def triplanar_normal(
         blend: :class:`Blend`: ``"whiteout"``, ``"udn"`` or ``"rnm"``.
         strength: ``>= 0``; scales the map's slopes (0: flat, 1: as authored).
         flip_green: for DirectX-style (green down) maps.
-        biplanar: weight the projections as :func:`biplanar` does (pass ``sharpness=8`` for
-            Quilez' default).
+        biplanar: deprecated: call :func:`biplanar_normal`, which weights the projections as
+            :func:`biplanar` does (with Quilez' ``sharpness=8`` by default).
         stochastic: as for :func:`triplanar`, without ``mirror`` or ``rotation`` (they would turn
             the map's slopes without turning its tangent frame).
         textures_per_axis, textures_per_face: normal maps per projection or per face, as the
@@ -208,19 +205,49 @@ def triplanar_normal(
         ``wp.array`` of float32, shape ``(H, W, 3)``: unit normals, ``(0, 0, 0)`` where the mask
         is 0 or the surface normal is zero or non-finite. Differentiable like :func:`triplanar`.
     """
-    func = "triplanar_normal"
+    if biplanar is not None:
+        warn_renamed("triplanar_normal(biplanar=...)", "warptex.biplanar_normal(...) for biplanar weights")
+    options = dict(tiling=tiling, offsets=offsets, mirror_fix=mirror_fix, textures_per_axis=textures_per_axis, textures_per_face=textures_per_face, layer=layer,
+                   space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device)  # fmt: skip
+    weights = kp.WEIGHTS_BIPLANAR if biplanar else kp.WEIGHTS_TRIPLANAR
+    return _normal_mapping("triplanar_normal", weights, gbuffer, normal_map, sharpness=sharpness, blend=blend, strength=strength, flip_green=flip_green, **options)
+
+
+def biplanar_normal(
+    gbuffer: GBuffer, normal_map: TextureArray | None = None, *, sharpness=8.0, blend: Blend | str = Blend.WHITEOUT, strength: float = 1.0, flip_green: bool = False, **options
+) -> wp.array:
+    """Biplanar normal mapping: :func:`triplanar_normal` with the projections weighted as
+    :func:`biplanar` weights them (the major and median axes only, at most two taps).
+
+    Args:
+        gbuffer, normal_map, blend, strength, flip_green: as for :func:`triplanar_normal`.
+        sharpness: as for :func:`biplanar` (default 8: Quilez' exponent 1).
+        options: :func:`triplanar`'s other keywords, with its defaults: ``tiling``, ``offsets``,
+            ``mirror_fix``, ``textures_per_axis``, ``textures_per_face``, ``layer``, ``space``,
+            ``object_to_world``, ``stochastic`` (as for :func:`triplanar_normal`), ``sampler``,
+            ``device``.
+
+    Returns:
+        As :func:`triplanar_normal`.
+    """
+    options = _Setup.options("biplanar_normal", "triplanar_normal", options)
+    return _normal_mapping("biplanar_normal", kp.WEIGHTS_BIPLANAR, gbuffer, normal_map, sharpness=sharpness, blend=blend, strength=strength, flip_green=flip_green, **options)
+
+
+# -- internals --------------------------------------------------------------------------------------
+
+
+def _normal_mapping(func, weights, gbuffer, normal_map, *, blend, strength, flip_green, stochastic=None, **options) -> wp.array:
+    """Normal mapping with the projections weighted by ``weights`` (``kp.WEIGHTS_*``): the body of
+    :func:`triplanar_normal` and :func:`biplanar_normal`."""
     blend_id = _BLEND_IDS[as_enum(func, "blend", blend, Blend)]
     strength = as_float(func, "strength", strength)
     if strength < 0:
         raise ValueError(f"{func}(): strength must be >= 0, got {strength}")
-    option = as_stochastic(func, stochastic)
+    option = _as_stochastic(func, stochastic)
     if option.mirror or option.rotation:
         raise ValueError(f"{func}(): stochastic mirror and rotation would turn a normal map's slopes without its tangent frame; use neither")
-    setup = _Setup(
-        func, kp.WEIGHTS_BIPLANAR if biplanar else kp.WEIGHTS_TRIPLANAR, gbuffer, normal_map, tiling=tiling, sharpness=sharpness, offsets=offsets,
-        mirror_fix=mirror_fix, textures_per_axis=textures_per_axis, textures_per_face=textures_per_face, layer=layer, space=space, object_to_world=object_to_world, stochastic=option,
-        sampler=sampler, device=device,
-    )  # fmt: skip
+    setup = _Setup(func, weights, gbuffer, normal_map, stochastic=option, **options)
     if setup.channels < 2:
         raise ValueError(f"{func}(): a normal map needs 2 to 4 channels, got {setup.channels}")
     normal_map = kt.NormalMapArgs()
@@ -228,26 +255,31 @@ def triplanar_normal(
     return setup.launch(3, normal_map)
 
 
-# -- internals --------------------------------------------------------------------------------------
-
-
 class _Setup:
-    """The checked, packed inputs of the three public functions, and their launch."""
+    """The checked, packed inputs of the public functions, and their launch."""
 
     #: The keyword options every projection function takes (``biplanar``'s ``**options``).
     OPTIONS = ("tiling", "offsets", "mirror_fix", "textures_per_axis", "textures_per_face", "layer", "space", "object_to_world", "stochastic", "sampler", "device")
+
+    @staticmethod
+    def options(func: str, like: str, options: dict) -> dict:
+        """``options`` (a ``**options`` of ``func``), or a ``TypeError`` naming the first unknown one."""
+        unknown = sorted(set(options) - set(_Setup.OPTIONS))
+        if unknown:
+            raise TypeError(f"{func}() got an unexpected keyword argument {unknown[0]!r} (its options are {like}()'s: {', '.join(_Setup.OPTIONS)})")
+        return options
 
     def __init__(
         self, func, weights, gbuffer, texture, *, tiling=1.0, sharpness=4.0, offsets=None, mirror_fix=True, textures_per_axis=None, textures_per_face=None,
         layer=0, space=Space.WORLD, object_to_world=None, stochastic=None, sampler=None, device=None,
     ):  # fmt: skip
-        device = gbuffer_device(func, gbuffer, device)
+        device = _gbuffer_device(func, gbuffer, device)
         gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask")
         textures = _textures(func, texture, textures_per_axis, textures_per_face, layer, device)
         object_to_world = _object_to_world(func, space, object_to_world)
         proj = projection_args(func, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=weights, object_to_world=object_to_world,
-                               origin=gbuffer.origin, address=as_sampler(func, sampler).address, device=device)  # fmt: skip
-        option, sampler = as_stochastic(func, stochastic), as_sampler(func, sampler)
+                               origin=gbuffer.origin, address=_as_sampler(func, sampler).address, device=device)  # fmt: skip
+        option, sampler = _as_stochastic(func, stochastic), _as_sampler(func, sampler)
         if option.histogram is not None and not all(t is textures[0] for t in textures):
             raise ValueError(f"{func}(): a stochastic histogram needs one texture for every projection (textures_per_axis or textures_per_face differ)")
         stoch, sampled = stochastic_args(func, option, textures[0], sampler)

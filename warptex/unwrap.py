@@ -84,7 +84,7 @@ class UVLayout:
         return vertex_tangents(self.vertices, self.faces, self.normals, self.uv)
 
 
-def checked_size(func: str, size) -> int:
+def _checked_size(func: str, size) -> int:
     """The bake size as an int in ``[2, 16384]``, or a ``TypeError``/``ValueError`` naming ``func``."""
     if isinstance(size, bool) or not isinstance(size, (int, np.integer)):
         raise TypeError(f"{func}(): size must be an int (texels per side), got {type(size).__name__}")
@@ -160,7 +160,7 @@ def unwrap(mesh: trimesh.Trimesh, *, size: int = 2048, padding: int = 8, force_a
     func = "unwrap"
     if not isinstance(mesh, trimesh.Trimesh):
         raise TypeError(f"{func}(): mesh must be a trimesh.Trimesh, got {type(mesh).__name__}")
-    size = checked_size(func, size)
+    size = _checked_size(func, size)
     if isinstance(padding, bool) or not isinstance(padding, (int, np.integer)) or padding < 0:
         raise ValueError(f"{func}(): padding must be an int >= 0 (texels between charts), got {padding!r}")
     if atlas not in ATLAS_METHODS:
@@ -287,3 +287,12 @@ def _signal_name(number: int) -> str:
         return signal.Signals(number).name
     except ValueError:
         return f"signal {number}"
+
+
+_RENAMED = {'checked_size': '_checked_size'}  # old public spellings, kept for one release
+
+
+def __getattr__(name: str):
+    from warptex._validate import renamed_attribute
+
+    return renamed_attribute(__name__, name, _RENAMED, globals())

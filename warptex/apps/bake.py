@@ -35,8 +35,8 @@ from warptex.scenes import TERRAIN_GRID
 from warptex.scenes.material import noise_texture
 from warptex.scenes.terrain import terrain
 from warptex.texture import Texture, TextureArray
-from warptex.triplanar import biplanar, triplanar, triplanar_normal
-from warptex.unwrap import checked_size
+from warptex.triplanar import biplanar, biplanar_normal, triplanar, triplanar_normal
+from warptex.unwrap import _checked_size
 
 TECHNIQUES = ("triplanar", "biplanar", "splat")
 
@@ -124,7 +124,7 @@ def run_bake(
         raise ValueError(f"{func}(): the output must be a .glb file, got {str(out_path)!r}")
     check_output_folder(func, out_path.parent)
     technique = _choose_technique(func, technique, mesh_path, texture_path, layer_paths, splat_path, normal_map_path)
-    size = checked_size(func, size)
+    size = _checked_size(func, size)
     memory = checked_memory(func, memory)
     check_memory(func, f"a {size}x{size} bake", BAKE_BYTES[0] + min(memory, BAKE_TEXEL_BYTES * size * size), device, hint="use a smaller --memory")
     if tiling is not None and not (np.isfinite(tiling) and tiling > 0):
@@ -146,6 +146,7 @@ def run_bake(
         colour = triplanar_material(mesh, Texture(image, device=device), tiling, sampler, device, technique=triplanar if technique == "triplanar" else biplanar)
         if normal_map_path is not None:
             maps = Texture(io.read_image(normal_map_path, data=True, channels=3), device=device)
-            normal = functools.partial(triplanar_normal, normal_map=maps, tiling=colour.keywords["tiling"], biplanar=technique == "biplanar", stochastic=stochastic, sampler=sampler, device=device)
+            mapping = triplanar_normal if technique == "triplanar" else biplanar_normal  # the colour's weights (and default sharpness)
+            normal = functools.partial(mapping, normal_map=maps, tiling=colour.keywords["tiling"], stochastic=stochastic, sampler=sampler, device=device)
     colour = functools.partial(colour, stochastic=stochastic) if stochastic else colour
     return bake_gltf(mesh, out_path, colour, normal=normal, size=size, padding=padding, gutter=gutter, atlas=atlas, memory=memory, progress=progress, device=device)

@@ -17,7 +17,7 @@ import warp as wp
 from warptex._warp import paused_tape
 from warptex.fit.losses import Loss, blur, gaussian_taps, image_loss, weight_entropy
 from warptex.fit.parameters import SplatParameters
-from warptex.gbuffer import FIELDS, GBuffer, gbuffer_device
+from warptex.gbuffer import FIELDS, GBuffer, _gbuffer_device
 from warptex.kernels import fit as kf
 from warptex._validate import check_layer_count
 from warptex.splat import splat
@@ -113,7 +113,7 @@ def views_device(func: str, views, device):
     """The Warp device of a fit: ``device``, which must be the first view's G-buffer's, or that
     G-buffer's device."""
     first = views if isinstance(views, FitView) else next(iter(views), None)
-    return gbuffer_device(func, first.gbuffer, device) if isinstance(first, FitView) else wp.get_device(device)
+    return _gbuffer_device(func, first.gbuffer, device) if isinstance(first, FitView) else wp.get_device(device)
 
 
 def check_inputs(views, layers: TextureArray, params: SplatParameters, *, device=None) -> None:
@@ -156,7 +156,7 @@ def prepare_views(func: str, views, layers: TextureArray, params: SplatParameter
                 f"{func}(): view {k}'s G-buffer is supersampled ({view.gbuffer.samples} samples a pixel); a fit compares one "
                 "sample a pixel with its target: rasterize the view with the camera itself, not camera.supersampled()"
             )
-        gbuffer_device(func, view.gbuffer, device)
+        _gbuffer_device(func, view.gbuffer, device)
         count = view.gbuffer.num_views
         if count is None:
             flat.append((f"view {k}", view, None, 0))
