@@ -63,3 +63,28 @@ def assert_same_gradients(hand_written: list, generated: list) -> None:
     for k, ((parameter, hand), (_, gen)) in enumerate(zip(hand_written, generated)):
         rtol = 1e-3 if parameter else 1e-5
         np.testing.assert_allclose(hand, gen, rtol=rtol, atol=2 * rtol * np.abs(gen).max(), err_msg=f"input {k}")
+
+
+def splat_inputs(layer_data, map_data, tiling, other_grads: bool, *, plain: bool, height_blend=None, height_data=None, histogram=False):
+    """Fresh inputs of a ``splat`` for :func:`texel_gradients_both_ways`: ``(layers, maps, kw,
+    textures)``, the layers and splat maps with gradients, and ``kw`` the arrays to pass besides:
+    ``tiling`` (with gradients when ``plain``: neither a stochastic method nor the histogram blend),
+    ``sharpness`` (with gradients when ``other_grads``, which takes the generated adjoint), and
+    where asked a ``height_blend`` transition array, separate ``heights`` from ``height_data`` and
+    a hex ``stochastic`` with the layers' histogram. ``textures`` lists, in that order, the inputs
+    whose gradients are compared (the histogram's texture in place of the layers)."""
+    layers = wt.TextureArray(layer_data, requires_grad=True)
+    maps = wt.TextureArray(map_data, mipmaps=False, requires_grad=True)
+    kw = {"tiling": wp.array(tiling, dtype=float, requires_grad=plain), "sharpness": wp.array([4.0], dtype=float, requires_grad=other_grads)}
+    textures = [layers, maps] + ([kw["tiling"]] if plain else [])
+    if height_blend is not None:
+        kw["height_blend"] = wp.array([height_blend], dtype=float, requires_grad=True)
+        textures.append(kw["height_blend"])
+    if height_data is not None:
+        kw["heights"] = wt.TextureArray(height_data, requires_grad=True)
+        textures.append(kw["heights"])
+    if histogram:
+        hist = wt.prepare_histogram(layers, requires_grad=True)
+        kw["stochastic"] = wt.Stochastic("hex", histogram=hist)
+        textures[0] = hist.texture
+    return layers, maps, kw, textures

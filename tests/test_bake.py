@@ -26,6 +26,7 @@ from warptex.scenes import TERRAIN_GRID
 from warptex.scenes.terrain import terrain
 from warptex.unwrap import unusable_reason
 
+from conftest import face_charts
 from fd import check_parameter_gradient
 
 REPO = Path(__file__).resolve().parents[1]
@@ -218,7 +219,7 @@ def test_xatlas_atlases_cover_the_mesh_without_overlap_and_keep_the_padding(shar
     np.testing.assert_allclose(layout.vertices, np.asarray(mesh.vertices)[layout.vertex_map])
     # Charts (faces joined through shared atlas vertices) stay `padding` texels apart.
     g, coverage = wt.texture_gbuffer(layout, size, gutter=0)
-    chart = _chart_of_face(layout.faces, len(layout.uv))[np.maximum(g.triangle.numpy(), 0)]
+    chart = face_charts(layout.faces, len(layout.uv))[np.maximum(g.triangle.numpy(), 0)]
     chart = np.where(coverage.numpy() > 0, chart, -1)
     rows, cols = np.nonzero(chart >= 0)
     border = padding // 2  # charts keep half the padding from the edges, room for their gutters
@@ -228,21 +229,6 @@ def test_xatlas_atlases_cover_the_mesh_without_overlap_and_keep_the_padding(shar
             a = chart[max(dy, 0) : size + min(dy, 0), max(dx, 0) : size + min(dx, 0)]
             b = chart[max(-dy, 0) : size + min(-dy, 0), max(-dx, 0) : size + min(-dx, 0)]
             assert not ((a >= 0) & (b >= 0) & (a != b)).any(), f"two charts closer than {padding} texels ({dy}, {dx})"
-
-
-def _chart_of_face(faces: np.ndarray, count: int) -> np.ndarray:
-    parent = np.arange(count)
-
-    def root(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    for a, b, c in faces:
-        for x, y in ((a, b), (a, c)):
-            parent[root(x)] = root(y)
-    return np.array([root(f[0]) for f in faces])
 
 
 # -- bad input -------------------------------------------------------------------------------------

@@ -9,28 +9,13 @@ import sys
 import numpy as np
 import pytest
 import trimesh
+from conftest import face_charts
 
 import warptex as wt
 from warptex.charts import MERGE_FACING, projected_atlas
 from warptex.unwrap import face_areas, unusable_reason
 
 unwrap_module = importlib.import_module("warptex.unwrap")  # the module (warptex.unwrap is the function)
-
-
-def _charts(faces: np.ndarray, count: int) -> np.ndarray:
-    """Each face's chart: faces joined through shared atlas vertices (union-find)."""
-    parent = np.arange(count)
-
-    def root(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    for a, b, c in faces:
-        for x, y in ((a, b), (a, c)):
-            parent[root(x)] = root(y)
-    return np.array([root(f[0]) for f in faces])
 
 
 def _scan(subdivisions: int = 5, noise: float = 0.1, seed: int = 0) -> trimesh.Trimesh:
@@ -68,7 +53,7 @@ def test_projected_charts_cover_every_face_without_overlap_flip_or_lost_area(mes
     density = texture[has_area] / world[has_area]
     assert density.max() / density.min() <= 1 / MERGE_FACING * 1.001
     # Charts stay `padding` texels apart: no texel is within padding/2 of two charts' triangles.
-    chart = _charts(faces, len(uv))
+    chart = face_charts(faces, len(uv))
     assert len(np.unique(chart)) < len(f) / 20, "charts are fragmented"
     boxes = {}
     for c in np.unique(chart):

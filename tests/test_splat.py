@@ -7,7 +7,7 @@ import warp as wp
 import warptex as wt
 from conftest import with_sampler
 from warptex.scenes.terrain import terrain
-from backward_paths import assert_same_gradients, texel_gradients_both_ways
+from backward_paths import assert_same_gradients, splat_inputs, texel_gradients_both_ways
 from fd import check_parameter_gradient
 from reference_layers import splat_reference
 from warptex.splat import splat
@@ -199,21 +199,9 @@ def test_hand_written_gradients_equal_the_generated_adjoint(monkeypatch, case, t
     plain = "stochastic" not in c and not histogram
 
     def forward(other_grads):
-        layers = wt.TextureArray(layer_data, requires_grad=True)
-        maps = wt.TextureArray(map_data, mipmaps=False, requires_grad=True)
-        kw = {**c, "tiling": wp.array(tiling, dtype=float, requires_grad=plain), "sharpness": wp.array([4.0], dtype=float, requires_grad=other_grads)}
-        textures = [layers, maps] + ([kw["tiling"]] if plain else [])
-        if height is not None:
-            kw["height_blend"] = wp.array([0.15], dtype=float, requires_grad=True)
-            textures.append(kw["height_blend"])
-        if height == "array":
-            kw["heights"] = wt.TextureArray(height_data, requires_grad=True)
-            textures.append(kw["heights"])
-        if histogram:
-            hist = wt.prepare_histogram(layers, requires_grad=True)
-            kw["stochastic"] = wt.Stochastic("hex", histogram=hist)
-            textures[0] = hist.texture
-        return splat(g, layers, maps, **with_sampler(kw)), textures
+        blend, heights = (0.15 if height is not None else None), (height_data if height == "array" else None)
+        layers, maps, kw, textures = splat_inputs(layer_data, map_data, tiling, other_grads, plain=plain, height_blend=blend, height_data=heights, histogram=histogram)
+        return splat(g, layers, maps, **with_sampler({**c, **kw})), textures
 
     weights = rng.normal(size=(*g.resolution, 4)).astype(np.float32)
     hand, forced, generated, scatters = texel_gradients_both_ways(monkeypatch, threads, forward, weights)

@@ -15,6 +15,7 @@ import trimesh
 import warp as wp
 
 import warptex as wt
+from conftest import triplanar_backward
 from warptex import _accumulate, _launch, _threads
 from warptex.kernels.lanes import LANES
 from warptex.kernels.texels import TILE_SHIFT
@@ -77,12 +78,7 @@ def test_threaded_launch_gives_the_same_gradients(threads):
         threads(n)
         tex = _texture(requires_grad=True)
         tiling = wp.array([3.0], dtype=float, requires_grad=True)
-        tape = wp.Tape()
-        with tape:
-            tex.update()
-            out = wt.triplanar(g, tex, tiling=tiling)
-        out.grad.assign(weights)
-        tape.backward()
+        tape = triplanar_backward(g, tex, tiling, weights)
         split = [launch for launch in tape.launches if callable(launch)]
         assert len(split) == 1  # one recorded step runs the adjoints of the chunks (4 of 16 384 pixels: a small texture)
         grads.append((tex.grad(), tiling.grad.numpy()))

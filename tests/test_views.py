@@ -8,6 +8,7 @@ import pytest
 import warp as wp
 
 import warptex as wt
+from conftest import triplanar_backward
 from warptex.scenes import terrain_cameras
 from warptex.scenes import TERRAIN_GRID
 from warptex.scenes.terrain import terrain
@@ -71,12 +72,7 @@ def test_batch_gradients_are_the_sum_of_the_views(scene, rng):
     def gradients(g, weights):
         texture = wt.Texture(image, requires_grad=True)
         tiling = wp.array([0.2, 0.25, 0.3], dtype=float, requires_grad=True)
-        tape = wp.Tape()
-        with tape:
-            texture.update()
-            out = wt.triplanar(g, texture, tiling=tiling)
-        out.grad.assign(weights)
-        tape.backward()
+        triplanar_backward(g, texture, tiling, weights)
         return texture.grad(0), tiling.grad.numpy()
 
     batch = gradients(scene["batch"], r)

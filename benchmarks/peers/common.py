@@ -55,6 +55,35 @@ def sample_lod(state: dict, from_derivatives):
     return None
 
 
+def sized_sample_lod(lod_from_derivatives):
+    """:func:`sample_lod` for a backend whose ``lod_from_derivatives(size, dx, dy)`` takes level 0's
+    ``(w, h)``: ``_sample_lod(state, size)``."""
+
+    def _sample_lod(state: dict, size):
+        return sample_lod(state, lambda dx, dy: lod_from_derivatives(size, dx, dy))
+
+    return _sample_lod
+
+
+def technique_bodies(*, bilinear, trilinear, planar, triplanar_normal, splat, stochastic) -> dict:
+    """Every technique's body, ``body(state, textures) -> output``, by name (in the order of
+    :data:`peers.TECHNIQUES`), for a backend's ``peers()``: ``planar(biplanar)`` builds the
+    triplanar (``False``) and biplanar (``True``) bodies, ``stochastic(technique)`` those of hash4,
+    cheap2 and hex."""
+    return {
+        "bilinear": bilinear,
+        "trilinear": trilinear,
+        "triplanar": planar(False),
+        "biplanar": planar(True),
+        "triplanar_normal": triplanar_normal,
+        "splat4": splat,
+        "splat8": splat,
+        "hash4": stochastic("hash4"),
+        "cheap2": stochastic("cheap2"),
+        "hex": stochastic("hex"),
+    }
+
+
 # -- builders (warptex objects -> peer data) ---------------------------------------------------------
 
 

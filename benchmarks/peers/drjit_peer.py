@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import Peer, PeerUnavailable
-from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options, sample_lod
+from . import Peer, PeerUnavailable, common
+from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options
 
 MIN_LLVM = 17  # 15.0.6 and 16.0.6 fail as described below; 19.1.7 works
 
@@ -163,6 +163,9 @@ def lod_from_derivatives(size, dx, dy):
     return 0.5 * dr.log2(dr.maximum(dr.maximum(a[0] * a[0] + a[1] * a[1], b[0] * b[0] + b[1] * b[1]), 1e-30))
 
 
+_sample_lod = common.sized_sample_lod(lod_from_derivatives)
+
+
 def _columns(a):
     a = np.asarray(a, np.float32)
     return [Float(np.ascontiguousarray(a[:, c])) for c in range(a.shape[1])] if a.ndim == 2 else Float(np.ascontiguousarray(a))
@@ -190,10 +193,6 @@ def _prepare(technique):
         return state
 
     return prepare
-
-
-def _sample_lod(state, size):
-    return sample_lod(state, lambda dx, dy: lod_from_derivatives(size, dx, dy))
 
 
 def _sign(x):
@@ -381,16 +380,5 @@ def _make(technique, body):
 def peers() -> dict[str, Peer]:
     from .drjit_stochastic import stochastic as _stochastic
 
-    bodies = {
-        "bilinear": _bilinear,
-        "trilinear": _trilinear,
-        "triplanar": _planar(False),
-        "biplanar": _planar(True),
-        "triplanar_normal": _triplanar_normal,
-        "splat4": _splat,
-        "splat8": _splat,
-        "hash4": _stochastic("hash4"),
-        "cheap2": _stochastic("cheap2"),
-        "hex": _stochastic("hex"),
-    }
+    bodies = common.technique_bodies(bilinear=_bilinear, trilinear=_trilinear, planar=_planar, triplanar_normal=_triplanar_normal, splat=_splat, stochastic=_stochastic)
     return {t: _make(t, b) for t, b in bodies.items()}

@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import Peer, PeerUnavailable
-from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options, sample_lod
+from . import Peer, PeerUnavailable, common
+from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options
 
 try:
     import torch
@@ -148,6 +148,9 @@ def lod_from_derivatives(size, dx, dy):
     return 0.5 * torch.log2(torch.clamp(torch.maximum((a * a).sum(-1), (b * b).sum(-1)), min=1e-30))
 
 
+_sample_lod = common.sized_sample_lod(lod_from_derivatives)
+
+
 def _tensors(data, keys):
     return {k: _tensor(data[k]) for k in keys if k in data}
 
@@ -173,10 +176,6 @@ def _prepare(technique):
         return state
 
     return prepare
-
-
-def _sample_lod(state, size):
-    return sample_lod(state, lambda dx, dy: lod_from_derivatives(size, dx, dy))
 
 
 def _sign(x):
@@ -222,19 +221,22 @@ def _project(state, axis, rows, tiling, size):
     return u, c[:, 1], lod
 
 
-def _planar(state, padded, biplanar):
-    opts = state["options"]
-    n = state["normal"]
-    w = (biplanar_weights if biplanar else triplanar_weights)(n, opts["sharpness"])
-    tex = padded["texture"]
-    size = (tex[0].shape[-1] - 2, tex[0].shape[-2] - 2)
-    covered = state["mask"] != 0
-    out = torch.zeros((len(n), tex[0].shape[1]))
-    for axis in range(3):
-        rows = torch.nonzero(covered & (w[:, axis] > 0)).squeeze(1)
-        u, v, lod = _project(state, axis, rows, float(opts["tiling"]), size)
-        out = out.index_add(0, rows, w[rows, axis, None] * sample(tex, u, v, lod))
-    return out
+def _planar(biplanar):
+    def run(state, padded):
+        opts = state["options"]
+        n = state["normal"]
+        w = (biplanar_weights if biplanar else triplanar_weights)(n, opts["sharpness"])
+        tex = padded["texture"]
+        size = (tex[0].shape[-1] - 2, tex[0].shape[-2] - 2)
+        covered = state["mask"] != 0
+        out = torch.zeros((len(n), tex[0].shape[1]))
+        for axis in range(3):
+            rows = torch.nonzero(covered & (w[:, axis] > 0)).squeeze(1)
+            u, v, lod = _project(state, axis, rows, float(opts["tiling"]), size)
+            out = out.index_add(0, rows, w[rows, axis, None] * sample(tex, u, v, lod))
+        return out
+
+    return run
 
 
 def _normalize(v):
@@ -343,16 +345,5 @@ def _make(technique, body):
 def peers() -> dict[str, Peer]:
     from .torch_stochastic import stochastic as _stochastic
 
-    bodies = {
-        "bilinear": _bilinear,
-        "trilinear": _trilinear,
-        "triplanar": lambda s, p: _planar(s, p, False),
-        "biplanar": lambda s, p: _planar(s, p, True),
-        "triplanar_normal": _triplanar_normal,
-        "splat4": _splat,
-        "splat8": _splat,
-        "hash4": _stochastic("hash4"),
-        "cheap2": _stochastic("cheap2"),
-        "hex": _stochastic("hex"),
-    }
+    bodies = common.technique_bodies(bilinear=_bilinear, trilinear=_trilinear, planar=_planar, triplanar_normal=_triplanar_normal, splat=_splat, stochastic=_stochastic)
     return {t: _make(t, b) for t, b in bodies.items()}
