@@ -1,4 +1,4 @@
-"""Shared fixtures: Warp set-up, the shared data folder, and finite-difference helpers."""
+"""Shared fixtures: Warp set-up, the shared data folder, and helpers several test modules use."""
 
 from pathlib import Path
 
@@ -63,3 +63,43 @@ def with_sampler(kw: dict) -> dict:
 
         kw["sampler"] = warptex.Sampler(**fields)
     return kw
+
+
+def face_charts(faces: np.ndarray, count: int) -> np.ndarray:
+    """Each face's chart of an atlas with ``count`` vertices: faces joined through shared atlas
+    vertices (union-find), one representative vertex index per face."""
+    parent = np.arange(count)
+
+    def root(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for a, b, c in faces:
+        for x, y in ((a, b), (a, c)):
+            parent[root(x)] = root(y)
+    return np.array([root(f[0]) for f in faces])
+
+
+def triplanar_backward(g, texture, tiling, weights: np.ndarray) -> wp.Tape:
+    """``warptex.triplanar(g, texture, tiling=tiling)`` recorded on a tape (with the texture's mip
+    chain update) and taken backward from the output gradient ``weights``; returns the tape. The
+    gradients land in ``texture.grad(k)`` and ``tiling.grad``."""
+    import warptex
+
+    tape = wp.Tape()
+    with tape:
+        texture.update()
+        out = warptex.triplanar(g, texture, tiling=tiling)
+    out.grad.assign(weights)
+    tape.backward()
+    return tape
+
+
+def normal_mapping(biplanar: bool):
+    """``warptex.biplanar_normal`` or ``warptex.triplanar_normal``: the function a test case's
+    ``biplanar`` flag picks (the references take the flag)."""
+    import warptex
+
+    return warptex.biplanar_normal if biplanar else warptex.triplanar_normal

@@ -49,11 +49,11 @@ def _layer_samples(chain, g, t, projection, sharpness, face_chains=None):
     return total
 
 
-def splat_reference(g, layers, maps, *, tiling, projection="uv", normalize=True, transition=None, heights=None, height_channel=3, sharpness=4.0, face_layers=None):
+def splat_reference(g, layers, maps, *, tiling, projection="uv", normalize=True, transition=None, heights=None, height_channel=3, sharpness=4.0, layers_per_face=None):
     """Expected ``splat()`` output ``[N, C]`` for flattened G-buffer arrays ``g`` (covered pixels only).
 
     ``layers``: ``[L, h, w, C]``; ``maps``: ``[M, hm, wm, Cm]``; ``heights``: ``[L, hh, wh, 1]`` or None;
-    ``face_layers``: ``[L, 6]`` array layers read per face (``+x, -x, +y, -y, +z, -z``) or None.
+    ``layers_per_face``: ``[L, 6]`` array layers read per face (``+x, -x, +y, -y, +z, -z``) or None.
     """
     num_layers = len(layers)
     tiling = np.broadcast_to(np.asarray(tiling, np.float64), (num_layers,))
@@ -65,7 +65,7 @@ def splat_reference(g, layers, maps, *, tiling, projection="uv", normalize=True,
     height_chains = None if heights is None else [mip_chain(h) for h in heights]
 
     def faces(source, j):
-        return None if face_layers is None else [source[int(k)] for k in face_layers[j]]
+        return None if layers_per_face is None else [source[int(k)] for k in layers_per_face[j]]
 
     samples = np.stack([_layer_samples(chains[j], g, tiling[j], projection, sharpness, faces(chains, j)) for j in range(num_layers)], axis=1)
     if transition is not None:

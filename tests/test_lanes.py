@@ -525,7 +525,7 @@ SPLAT_CASES = {
     "world xz, height array": {"projection": "world_xz", "height_blend": 0.3, "heights": True},
     "triplanar": {"projection": "triplanar", "sharpness": 3.0, "height_blend": 0.1},
     "triplanar, no heights": {"projection": "triplanar", "sharpness": 3.0},
-    "triplanar, face layers": {"projection": "triplanar", "face_layers": [None, (1, 2, 3, 4, 0, 1), None, (0, 0, 4, 4, 2, 2), None], "offsets": [(0.1, 0.2), (0.0, 0.3), (0.5, 0.5)]},
+    "triplanar, face layers": {"projection": "triplanar", "layers_per_face": [None, (1, 2, 3, 4, 0, 1), None, (0, 0, 4, 4, 2, 2), None], "offsets": [(0.1, 0.2), (0.0, 0.3), (0.5, 0.5)]},
 }
 
 

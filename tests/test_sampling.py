@@ -9,6 +9,7 @@ import warp as wp
 import reference as ref
 import warptex as wt
 from conftest import with_sampler
+from warptex.kernels import native
 from warptex.kernels.footprint import lod_log2
 
 BORDER = (0.25, 0.5, 0.75, 1.0)
@@ -375,7 +376,7 @@ def test_texture_array_needs_a_layer():
 # -- the LODs' log2 ------------------------------------------------------------------------------------
 
 
-@wp.kernel
+@wp.kernel(module=native.use("tests.lod_log2"))  # lod_log2's CPU code is in the native headers
 def _lod_log2_kernel(x: wp.array(dtype=float), y: wp.array(dtype=float)):
     i = wp.tid()
     y[i] = lod_log2(x[i])

@@ -1,12 +1,12 @@
 """Six-planar textures: a texture per face of the cube of directions (``textures_per_face`` of
-triplanar, biplanar and triplanar normal mapping; ``face_layers`` of splat layers mapped triplanar).
+triplanar, biplanar and triplanar normal mapping; ``layers_per_face`` of splat layers mapped triplanar).
 
 Projection ``a`` reads the ``+a`` face's texture where the (projected-space) normal has
 ``n[a] >= 0`` and the ``-a`` face's where ``n[a] < 0``. Checked here: agreement with the NumPy
 references on synthetic G-buffers whose normals lie in every octant and on the axis planes (exact
 zeros, ``-0.0`` too); that the default and one-texture cases are the three-texture kernels bit for
 bit; texel gradients of all six textures (hand-written, generated adjoint, finite differences);
-splat ``face_layers``; a sphere whose six faces show their own colours with a continuous equator;
+splat ``layers_per_face``; a sphere whose six faces show their own colours with a continuous equator;
 and bad input.
 """
 
@@ -21,7 +21,8 @@ import warp as wp
 
 import reference_triplanar as rt
 import warptex as wt
-from backward_paths import assert_same_gradients, texel_gradients_both_ways
+from backward_paths import assert_same_gradients, splat_inputs, texel_gradients_both_ways
+from conftest import normal_mapping
 from reference_layers import splat_reference
 from warptex.splat import splat
 from warptex.triplanar import biplanar, triplanar, triplanar_normal
@@ -173,8 +174,9 @@ def test_object_space_picks_faces_by_the_object_space_normal():
 def test_normal_mapping_matches_numpy_reference(blend, use_biplanar):
     g, gn = _synthetic()
     images, texs = _six("normal")
-    kw = dict(tiling=1.7, strength=0.8, sharpness=8.0 if use_biplanar else 4.0, biplanar=use_biplanar)
-    out = triplanar_normal(g, textures_per_face=texs, blend=blend, **kw).numpy()
+    kw = dict(tiling=1.7, strength=0.8, sharpness=8.0 if use_biplanar else 4.0)
+    out = normal_mapping(use_biplanar)(g, textures_per_face=texs, blend=blend, **kw).numpy()
+    kw["biplanar"] = use_biplanar
     expected = rt.triplanar_normal(gn, images, blend_kind=blend, **kw)
     assert np.abs(out - expected).max() <= ATOL
     plus_only = rt.triplanar_normal(gn, [images[f] for f in (0, 2, 4)], blend_kind=blend, **kw)
@@ -205,7 +207,7 @@ def _techniques():
         "biplanar": lambda g, t, **kw: biplanar(g, t, **kw, tiling=1.3),
         "triplanar hash4": lambda g, t, **kw: triplanar(g, t, **kw, tiling=1.3, stochastic="hash4"),
         "normal whiteout": lambda g, t, **kw: triplanar_normal(g, t, **kw, tiling=1.3),
-        "normal rnm biplanar": lambda g, t, **kw: triplanar_normal(g, t, **kw, tiling=1.3, blend="rnm", biplanar=True),
+        "normal rnm biplanar": lambda g, t, **kw: wt.biplanar_normal(g, t, **kw, tiling=1.3, blend="rnm", sharpness=4.0),
     }
 
 
@@ -252,7 +254,7 @@ def _forward(technique, g, textures, tiling):
     if technique == "normal whiteout":
         return triplanar_normal(g, **kw, strength=0.8)
     if technique == "normal rnm biplanar":
-        return triplanar_normal(g, **kw, strength=0.8, blend="rnm", biplanar=True)
+        return wt.biplanar_normal(g, **kw, strength=0.8, blend="rnm", sharpness=4.0)
     raise ValueError(technique)
 
 
@@ -313,13 +315,13 @@ def test_hand_written_texel_gradients_of_every_face_equal_the_generated_adjoint(
 
 # -- splat layers per face -------------------------------------------------------------------------------
 
-FACE_LAYERS = [None, (1, 2, 3, None, 0, 1), (None,) * 6, [3, 3, 0, 0, None, 2]]
+LAYERS_PER_FACE = [None, (1, 2, 3, None, 0, 1), (None,) * 6, [3, 3, 0, 0, None, 2]]
 RESOLVED = np.array([[0] * 6, [1, 2, 3, 1, 0, 1], [2] * 6, [3, 3, 0, 0, 3, 2]])
 
 
 @pytest.mark.parametrize("height", [None, "channel", "array"])
 @pytest.mark.parametrize("view", ["synthetic", "sphere"])
-def test_splat_face_layers_match_numpy_reference(view, height):
+def test_splat_layers_per_face_match_numpy_reference(view, height):
     g, gn = _synthetic() if view == "synthetic" else _two_views(48)
     mask = gn["mask"] > 0
     flat = {k: gn[k][mask].astype(np.float64) for k in ("position", "normal", "position_dx", "position_dy")}
@@ -334,23 +336,23 @@ def test_splat_face_layers_match_numpy_reference(view, height):
     if height == "array":
         heights = rng.random((4, 16, 16, 1)).astype(np.float32)
         kw["heights"], ref_kw["heights"] = wt.TextureArray(heights), heights
-    out = splat(g, wt.TextureArray(layers), wt.TextureArray(maps), tiling=tiling, projection="triplanar", face_layers=FACE_LAYERS, **kw).numpy()
-    expected = splat_reference(flat, layers, maps, tiling=tiling, projection="triplanar", face_layers=RESOLVED, **ref_kw)
+    out = splat(g, wt.TextureArray(layers), wt.TextureArray(maps), tiling=tiling, projection="triplanar", layers_per_face=LAYERS_PER_FACE, **kw).numpy()
+    expected = splat_reference(flat, layers, maps, tiling=tiling, projection="triplanar", layers_per_face=RESOLVED, **ref_kw)
     np.testing.assert_allclose(out[mask], expected, atol=ATOL)
     np.testing.assert_array_equal(out[~mask], 0.0)
     plain = splat_reference(flat, layers, maps, tiling=tiling, projection="triplanar", **ref_kw)
     assert np.abs(plain - expected).max() > 0.1, "the face layers change the result"
 
 
-def test_splat_default_face_layers_are_bit_identical():
+def test_splat_default_layers_per_face_are_bit_identical():
     g, _ = _two_views(48)
     rng = np.random.default_rng(6)
     layers = wt.TextureArray(rng.random((4, 16, 16, 4)).astype(np.float32))
     maps = wt.TextureArray(rng.random((1, 9, 7, 4)).astype(np.float32))
     kw = dict(tiling=0.8, projection="triplanar", height_blend=0.2)
     base = splat(g, layers, maps, **kw).numpy()
-    for face_layers in ([None] * 4, [[j] * 6 for j in range(4)], np.repeat(np.arange(4), 6).reshape(4, 6)):
-        np.testing.assert_array_equal(splat(g, layers, maps, face_layers=face_layers, **kw).numpy(), base)
+    for layers_per_face in ([None] * 4, [[j] * 6 for j in range(4)], np.repeat(np.arange(4), 6).reshape(4, 6)):
+        np.testing.assert_array_equal(splat(g, layers, maps, layers_per_face=layers_per_face, **kw).numpy(), base)
 
 
 SPLAT_BACKWARD_CASES = {
@@ -375,18 +377,8 @@ def test_splat_face_layer_gradients_equal_the_generated_adjoint(monkeypatch, cas
     plain = "stochastic" not in c and not histogram
 
     def forward(other_grads):
-        layers = wt.TextureArray(layer_data, requires_grad=True)
-        maps = wt.TextureArray(map_data, mipmaps=False, requires_grad=True)
-        kw = {**c, "tiling": wp.array([0.7, 1.3, 0.9, 1.1], dtype=float, requires_grad=plain), "sharpness": wp.array([4.0], dtype=float, requires_grad=other_grads)}
-        textures = [layers, maps] + ([kw["tiling"]] if plain else [])
-        if heights:
-            kw["heights"] = wt.TextureArray(height_data, requires_grad=True)
-            textures.append(kw["heights"])
-        if histogram:
-            hist = wt.prepare_histogram(layers, requires_grad=True)
-            kw["stochastic"] = wt.Stochastic("hex", histogram=hist)
-            textures[0] = hist.texture
-        return splat(g, layers, maps, projection="triplanar", face_layers=FACE_LAYERS, **kw), textures
+        layers, maps, kw, textures = splat_inputs(layer_data, map_data, [0.7, 1.3, 0.9, 1.1], other_grads, plain=plain, height_data=height_data if heights else None, histogram=histogram)
+        return splat(g, layers, maps, projection="triplanar", layers_per_face=LAYERS_PER_FACE, **c, **kw), textures
 
     weights = rng.normal(size=(*g.resolution, 4)).astype(np.float32)
     hand, forced, generated, scatters = texel_gradients_both_ways(monkeypatch, 1, forward, weights)
@@ -403,17 +395,17 @@ def test_splat_face_layer_texel_gradients_match_finite_differences():
     layers = rng.random((4, 12, 10, 4)).astype(np.float32)
     maps = np.zeros((1, 5, 5, 4), np.float32)
     maps[..., 0] = 1.0
-    face_layers = [(1, 1, 2, 2, 3, 3), None, None, None]
+    layers_per_face = [(1, 1, 2, 2, 3, 3), None, None, None]
     r = rng.normal(size=(*g.resolution, 4))
 
     def loss(data):
-        return float((splat(g, wt.TextureArray(data), maps, tiling=1.2, projection="triplanar", face_layers=face_layers).numpy().astype(np.float64) * r).sum())
+        return float((splat(g, wt.TextureArray(data), maps, tiling=1.2, projection="triplanar", layers_per_face=layers_per_face).numpy().astype(np.float64) * r).sum())
 
     lt = wt.TextureArray(layers, requires_grad=True)
     tape = wp.Tape()
     with tape:
         lt.update()
-        out = splat(g, lt, maps, tiling=1.2, projection="triplanar", face_layers=face_layers)
+        out = splat(g, lt, maps, tiling=1.2, projection="triplanar", layers_per_face=layers_per_face)
     out.grad.assign(r.astype(np.float32))
     tape.backward()
     grad = lt.grad(0).astype(np.float64)
@@ -576,23 +568,23 @@ def test_bad_input_raises_with_a_clear_message():
             call()
 
 
-def test_splat_bad_face_layers_raise_with_a_clear_message():
+def test_splat_bad_layers_per_face_raise_with_a_clear_message():
     g, _ = _two_views(48)
     rng = np.random.default_rng(3)
     layers = wt.TextureArray(rng.random((4, 8, 8, 4)).astype(np.float32))
     maps = rng.random((1, 5, 5, 4)).astype(np.float32)
     tri = dict(projection="triplanar")
     cases = [
-        (ValueError, r"splat\(\): face_layers needs projection='triplanar'", lambda: splat(g, layers, maps, face_layers=[None] * 4)),
-        (ValueError, r"splat\(\): face_layers needs projection='triplanar'", lambda: splat(g, layers, maps, projection="world_xz", face_layers=[None] * 4)),
-        (ValueError, r"splat\(\): face_layers must be a sequence of 4 entries \(one per layer\), each None or 6 layer indices", lambda: splat(g, layers, maps, **tri, face_layers=[None] * 3)),
-        (ValueError, r"splat\(\): face_layers must be a sequence of 4 entries", lambda: splat(g, layers, maps, **tri, face_layers=(0, 1, 2, 3, 0, 1))),
-        (ValueError, r"splat\(\): face_layers\[1\] must be None or 6 layer indices \(\+x, -x, \+y, -y, \+z, -z\), got \(0, 1\)", lambda: splat(g, layers, maps, **tri, face_layers=[None, (0, 1), None, None])),
-        (ValueError, r"splat\(\): face_layers\[2\]\[3\] \(the -y face\) must be a layer in \[0, 3\], got 4", lambda: splat(g, layers, maps, **tri, face_layers=[None, None, (0, 0, 0, 4, 0, 0), None])),
-        (ValueError, r"splat\(\): face_layers\[0\]\[0\] \(the \+x face\) must be a layer in \[0, 3\], got -1", lambda: splat(g, layers, maps, **tri, face_layers=[(-1, 0, 0, 0, 0, 0), None, None, None])),
-        (TypeError, r"splat\(\): face_layers\[3\]\[5\] \(the -z face\) must be a layer index or None, got 1.0", lambda: splat(g, layers, maps, **tri, face_layers=[None, None, None, (0, 0, 0, 0, 0, 1.0)])),
-        (TypeError, r"splat\(\): face_layers\[0\]\[2\] \(the \+y face\) must be a layer index or None, got True", lambda: splat(g, layers, maps, **tri, face_layers=[(0, 0, True, 0, 0, 0), None, None, None])),
-        (ValueError, r"splat\(\): face_layers as an array must have shape \(4, 6\), got \(4, 3\)", lambda: splat(g, layers, maps, **tri, face_layers=np.zeros((4, 3), int))),
+        (ValueError, r"splat\(\): layers_per_face needs projection='triplanar'", lambda: splat(g, layers, maps, layers_per_face=[None] * 4)),
+        (ValueError, r"splat\(\): layers_per_face needs projection='triplanar'", lambda: splat(g, layers, maps, projection="world_xz", layers_per_face=[None] * 4)),
+        (ValueError, r"splat\(\): layers_per_face must be a sequence of 4 entries \(one per layer\), each None or 6 layer indices", lambda: splat(g, layers, maps, **tri, layers_per_face=[None] * 3)),
+        (ValueError, r"splat\(\): layers_per_face must be a sequence of 4 entries", lambda: splat(g, layers, maps, **tri, layers_per_face=(0, 1, 2, 3, 0, 1))),
+        (ValueError, r"splat\(\): layers_per_face\[1\] must be None or 6 layer indices \(\+x, -x, \+y, -y, \+z, -z\), got \(0, 1\)", lambda: splat(g, layers, maps, **tri, layers_per_face=[None, (0, 1), None, None])),
+        (ValueError, r"splat\(\): layers_per_face\[2\]\[3\] \(the -y face\) must be a layer in \[0, 3\], got 4", lambda: splat(g, layers, maps, **tri, layers_per_face=[None, None, (0, 0, 0, 4, 0, 0), None])),
+        (ValueError, r"splat\(\): layers_per_face\[0\]\[0\] \(the \+x face\) must be a layer in \[0, 3\], got -1", lambda: splat(g, layers, maps, **tri, layers_per_face=[(-1, 0, 0, 0, 0, 0), None, None, None])),
+        (TypeError, r"splat\(\): layers_per_face\[3\]\[5\] \(the -z face\) must be a layer index or None, got 1.0", lambda: splat(g, layers, maps, **tri, layers_per_face=[None, None, None, (0, 0, 0, 0, 0, 1.0)])),
+        (TypeError, r"splat\(\): layers_per_face\[0\]\[2\] \(the \+y face\) must be a layer index or None, got True", lambda: splat(g, layers, maps, **tri, layers_per_face=[(0, 0, True, 0, 0, 0), None, None, None])),
+        (ValueError, r"splat\(\): layers_per_face as an array must have shape \(4, 6\), got \(4, 3\)", lambda: splat(g, layers, maps, **tri, layers_per_face=np.zeros((4, 3), int))),
     ]
     for exc, match, call in cases:
         with pytest.raises(exc, match=match):

@@ -17,7 +17,7 @@ import warp as wp
 
 import reference_triplanar as rt
 import warptex as wt
-from conftest import with_sampler
+from conftest import normal_mapping, with_sampler
 from conftest import SHARED_DATA
 from warptex.camera import Camera
 from warptex.triplanar import biplanar, triplanar, triplanar_normal
@@ -194,7 +194,7 @@ def test_normal_mapping_matches_numpy_reference(scene, case, blend):
     key, kw, ref_kw = NORMAL_CASES[case]
     imgs, texs = _images()
     kw = _scaled(kw, scale)
-    out = triplanar_normal(g, texs[key], blend=blend, **kw).numpy()
+    out = normal_mapping(kw.get("biplanar", False))(g, texs[key], blend=blend, **{k: v for k, v in kw.items() if k != "biplanar"}).numpy()
     ref_args = {k: v for k, v in kw.items() if k not in ("space", "object_to_world")}
     expected = rt.triplanar_normal(gn, [imgs[key]] * 3, blend_kind=blend, **ref_args, **ref_kw)
     err = np.abs(out - expected).max()
@@ -282,7 +282,7 @@ def test_zero_and_non_finite_normals_give_finite_zero_output(func):
     np.testing.assert_array_equal(out[5], 0.0)  # masked out
     assert (out[4] > 0).all()
     for blend in BLENDS:
-        nrm = triplanar_normal(g, texs["normal"], blend=blend, biplanar=func is biplanar).numpy()[0]
+        nrm = normal_mapping(func is biplanar)(g, texs["normal"], blend=blend).numpy()[0]
         assert np.isfinite(nrm).all()
         np.testing.assert_array_equal(nrm[[0, 1, 2, 3, 5]], 0.0)
         assert abs(np.linalg.norm(nrm[4]) - 1) < 1e-6
@@ -412,7 +412,7 @@ def test_tilted_map_tilts_along_the_colour_tangent_frame(axis, sign, blend):
 def test_flat_normal_map_returns_the_surface_normal(scene, blend, channels, use_biplanar):
     g, gn, scale = scene
     flat = wt.Texture(np.broadcast_to(np.array([0.5, 0.5, 1.0, 0.3], np.float32)[:channels], (8, 8, channels)).copy())
-    out = triplanar_normal(g, flat, blend=blend, biplanar=use_biplanar, tiling=1.7 * scale, strength=1.3).numpy()
+    out = normal_mapping(use_biplanar)(g, flat, blend=blend, tiling=1.7 * scale, strength=1.3).numpy()
     covered = _covered(gn)
     np.testing.assert_allclose(out[covered], gn["normal"][covered], atol=1e-6)
     assert (out[~covered] == 0).all()

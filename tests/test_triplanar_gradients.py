@@ -18,6 +18,7 @@ import warp as wp
 import warptex as wt
 from warptex.kernels import triplanar as kt
 from backward_paths import assert_same_gradients, texel_gradients_both_ways
+from conftest import normal_mapping
 from fd import check_parameter_gradient
 from warptex.triplanar import biplanar, triplanar, triplanar_normal
 
@@ -26,7 +27,7 @@ TECHNIQUES = {
     "biplanar": lambda g, t, **kw: biplanar(g, t, **kw),
     "normal_whiteout": lambda g, t, **kw: triplanar_normal(g, t, blend="whiteout", **kw),
     "normal_rnm": lambda g, t, **kw: triplanar_normal(g, t, blend="rnm", **kw),
-    "normal_udn_biplanar": lambda g, t, **kw: triplanar_normal(g, t, blend="udn", biplanar=True, **kw),
+    "normal_udn_biplanar": lambda g, t, **kw: wt.biplanar_normal(g, t, blend="udn", **{"sharpness": 4.0, **kw}),
 }
 
 
@@ -291,7 +292,7 @@ def test_hand_written_texel_gradients_equal_the_generated_adjoint(monkeypatch, c
         if normal:
             kw["normal_map"] = kw.pop("texture", None)
             blend = next((b for b in ("rnm", "udn") if b in case), "whiteout")
-            technique = functools.partial(triplanar_normal, blend=blend, biplanar="biplanar" in case, strength=0.8)
+            technique = functools.partial(normal_mapping("biplanar" in case), blend=blend, strength=0.8, **({"sharpness": 4.0} if "biplanar" in case else {}))
         else:
             technique = biplanar if case.startswith("biplanar") else triplanar
         return technique(g, tiling=wp.array([2.5], dtype=float, requires_grad=tiling_grad), **kw), textures

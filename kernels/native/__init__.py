@@ -113,7 +113,12 @@ _used: set[str] = set()
 
 
 def use(module: str) -> str:
-    """Give Warp module ``module`` the headers (once), before its kernels compile; returns its name."""
+    """Give Warp module ``module`` the headers (once), before its kernels compile; returns its name.
+
+    Every Warp module whose kernels call a function with native CPU code (the lanes, and
+    ``footprint.lod_log2`` under every sampler) needs it, a module of one's own included:
+    ``@wp.kernel(module=native.use("my.module"))``; without, the CPU build fails on an undeclared
+    ``wt_...`` identifier."""
     if module not in _used:
         wp.set_module_options({"extra_build_options": build_options()}, module=module)
         _used.add(module)
