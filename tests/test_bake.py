@@ -326,6 +326,9 @@ def test_bake_gradients_reach_tiling_and_texels():
         tape.backward()
         return tiling.grad.numpy()
 
+    # Once (CI, a loaded machine) the finite differences found only 34% of the texels smooth, which
+    # no tiling step explains; not seen again in 8 runs under load. A bake must repeat its bits:
+    np.testing.assert_array_equal(render([1.3]), render([1.3]), err_msg="the same bake twice gave different texels")
     check_parameter_gradient(render, gradient, np.array([1.3]), r, 1e-3, rtol=2e-2, atol=2e-3, label="tiling")
 
     texture = wt.Texture(values, requires_grad=True)

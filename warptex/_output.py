@@ -15,14 +15,14 @@ import os
 import re
 import secrets
 import shutil
-import signal
 import stat
-import threading
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
 
 import warp as wp
+
+from warptex._interrupts import interrupts_deferred
 
 from warptex import io
 
@@ -41,7 +41,7 @@ def output_set(out_dir: str | os.PathLike) -> Iterator[Path]:
     staging.mkdir()
     try:
         yield staging
-        with _interrupts_deferred():  # a Ctrl-C among the renames would leave old and new files mixed
+        with interrupts_deferred():  # a Ctrl-C among the renames would leave old and new files mixed
             for item in sorted(staging.iterdir()):
                 if not item.name.startswith("."):  # a writer's own hidden temporaries stay behind
                     os.replace(item, out / item.name)
@@ -58,23 +58,6 @@ def commits() -> int:
     """How many output sets this process has moved into place: a Ctrl-C that arrives after a
     job's set is in place (:func:`output_set` defers it past the renames) finds this changed."""
     return _commits
-
-
-@contextmanager
-def _interrupts_deferred() -> Iterator[None]:
-    """Within the block, a SIGINT (Ctrl-C) waits: it is raised as ``KeyboardInterrupt`` once the
-    block is done. Only the main thread can change a signal's handler; elsewhere nothing changes."""
-    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
-        yield
-        return
-    pending = []
-    signal.signal(signal.SIGINT, lambda number, frame: pending.append(number))
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-    if pending:
-        raise KeyboardInterrupt
 
 
 # Tries to create and write into a new output folder: processes that check the same one at once

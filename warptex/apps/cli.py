@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from warptex.apps.arguments import add_fit_arguments, check_fit_options, count, fit_arguments, memory_size, number, resolution, square, vector
@@ -159,8 +160,15 @@ def main(argv: list[str] | None = None) -> int:
         check_fit_options(parser.commands["fit"], args)
     written = None  # output sets moved into place before the run (Ctrl-C may come after the job's own)
     try:
-        from warptex import _output  # imports Warp: inside, so that Ctrl-C meanwhile is one line too
+        from warptex._interrupts import interrupts_deferred
 
+        # The libraries' imports finish before a Ctrl-C is raised: one cut inside would leave a
+        # module half made, and trimesh catches BaseException around its optional imports, so it
+        # would swallow the KeyboardInterrupt and fail later with another error.
+        with interrupts_deferred():
+            import trimesh  # noqa: F401
+
+            from warptex import _output
         written = _output.commits()
         paths = _run(args)
     except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM under torchrun (apps.distributed.Terminated)
@@ -183,6 +191,19 @@ def main(argv: list[str] | None = None) -> int:
     for path in paths:
         print(f"wrote {path}")
     return 0
+
+
+def entry() -> None:
+    """The ``warptex`` command and ``python -m warptex``: :func:`main`, then exit with its status.
+    After a Ctrl-C the process ends at once (its files are already as they were, its message is
+    out), without Python's shutdown, which would first wait for any kernel compile still running
+    on another thread."""
+    status = main()
+    if status == 130:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    sys.exit(status)
 
 
 VECTOR_OPTIONS = ("--eye", "--target", "--up")

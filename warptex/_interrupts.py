@@ -1,0 +1,28 @@
+"""Ctrl-C held back over a block that must not be cut: a set of renames, or the libraries' imports.
+
+Light on purpose (the standard library only): the command line enters it before importing Warp.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from contextlib import contextmanager
+from typing import Iterator
+
+
+@contextmanager
+def interrupts_deferred() -> Iterator[None]:
+    """Within the block, a SIGINT (Ctrl-C) waits: it is raised as ``KeyboardInterrupt`` once the
+    block is done. Only the main thread can change a signal's handler; elsewhere nothing changes."""
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield
+        return
+    pending = []
+    signal.signal(signal.SIGINT, lambda number, frame: pending.append(number))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if pending:
+        raise KeyboardInterrupt
