@@ -257,7 +257,7 @@ def lane_kernel(lane_body, args_t, pixels_t, out_t, *, module: str, name: str, g
     pixel against 36 for a shaded one; skipped, 2.4 (1 thread). Without ``covered`` (no G-buffer)
     the kernels test nothing: a test that always passed (``return True``) made the ``sample``
     gradient lane 30% slower on random UVs, with the same native code inlined either way."""
-    module = use(module + LANES_SUFFIX)
+    module = use(module + LANES_SUFFIX, lanes=True)
     if covered is None:
         if grads_t is None:
 

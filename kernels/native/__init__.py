@@ -10,9 +10,11 @@ and a preamble, inserted after Warp's own headers, of
 1. the constants the C++ shares with Python (address and filter modes, LOD sources, lanes, hash
    streams, blend modes...), generated from the Python modules that define them
    (:func:`constants`), so that no value is written twice;
-2. ``#include`` of every header, between ``#pragma clang fp contract(off)`` and ``(on)``: the lanes
+2. ``#include`` of the headers, between ``#pragma clang fp contract(off)`` and ``(on)``: the lanes
    compute the scalar ``@wp.func`` blocks' bits, operation for operation, and a fused
-   multiply-add would round differently.
+   multiply-add would round differently. A lane module gets every header; a one-pixel module only
+   :data:`ONE_PIXEL_HEADERS` (``lod_log2``'s), which keeps the headers out of the compile of
+   modules that never call them (all headers cost ``warptex.mips`` about 1.3 s of CPU compile).
 
 The compiler reads the headers themselves, so an error names the header and its line. Warp hashes
 their contents into the module's hash (``extra_build_dependencies``): editing one recompiles what
@@ -98,28 +100,36 @@ def preamble(headers=HEADERS) -> str:
     return constants() + "#pragma clang fp contract(off)\n" + includes + "#pragma clang fp contract(on)\n"
 
 
+#: What a module of one-pixel kernels needs: ``footprint.lod_log2``'s ``wt_log2``.
+ONE_PIXEL_HEADERS = ("wt_config.h", "wt_log2.h")
+
+
 @functools.cache
-def build_options() -> wp.ModuleBuildOptions:
-    """The build options that give a Warp module the headers (module docstring)."""
+def build_options(headers=HEADERS) -> wp.ModuleBuildOptions:
+    """The build options that give a Warp module ``headers`` (module docstring)."""
     here = folder()
     return wp.ModuleBuildOptions(
         extra_cpu_include_dirs=[str(here)],
-        extra_cpu_preamble=preamble(),
-        extra_build_dependencies=[str(here / name) for name in HEADERS],
+        extra_cpu_preamble=preamble(headers),
+        extra_build_dependencies=[str(here / name) for name in headers],
     )
 
 
-_used: set[str] = set()
+_used: dict[str, bool] = {}  # module -> lanes
 
 
-def use(module: str) -> str:
+def use(module: str, *, lanes: bool = False) -> str:
     """Give Warp module ``module`` the headers (once), before its kernels compile; returns its name.
+    ``lanes``: a module of lane kernels (every header), else of one-pixel kernels
+    (:data:`ONE_PIXEL_HEADERS`).
 
-    Every Warp module whose kernels call a function with native CPU code (the lanes, and
-    ``footprint.lod_log2`` under every sampler) needs it, a module of one's own included:
-    ``@wp.kernel(module=native.use("my.module"))``; without, the CPU build fails on an undeclared
-    ``wt_...`` identifier."""
+    Every Warp module whose kernels call a function with native CPU code needs it, a module of
+    one's own included: ``@wp.kernel(module=native.use("my.module"))`` for one that calls
+    ``footprint.lod_log2`` (under every sampler), ``lanes=True`` for one that calls a lane
+    function; without, the CPU build fails on an undeclared ``wt_...`` identifier."""
     if module not in _used:
-        wp.set_module_options({"extra_build_options": build_options()}, module=module)
-        _used.add(module)
+        wp.set_module_options({"extra_build_options": build_options(HEADERS if lanes else ONE_PIXEL_HEADERS)}, module=module)
+        _used[module] = lanes
+    elif _used[module] != lanes:
+        raise ValueError(f"warptex internal error: Warp module {module!r} named both for lanes and for one-pixel kernels")
     return module

@@ -15,13 +15,9 @@ COMMANDS = ("render", "demo", "fit", "bake", "assets")
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="warptex", description="Differentiable texture sampling with NVIDIA Warp.")
     commands = parser.add_subparsers(dest="command")
-    render = commands.add_parser(
-        "render",
-        help="render the default terrain, or your mesh (the default command)",
+    render = _command(commands, "render", out=("out", "output folder (default: %(default)s)"), help="render the default terrain, or your mesh (the default command)",
         description="Rasterise a mesh into a G-buffer, texture and light it; writes render.png, albedo.png, "
-        "normals.png, render.exr (linear RGBA) and gbuffer.exr into the output folder.",
-    )
-    render.add_argument("--out", default="out", help="output folder (default: %(default)s)")
+        "normals.png, render.exr (linear RGBA) and gbuffer.exr into the output folder.")  # fmt: skip
     render.add_argument("--mesh", default=None, help="mesh file: OBJ, PLY, STL, GLB/GLTF... (default: procedural terrain)")
     render.add_argument("--texture", default=None, help="texture image (default: the mesh's own, else procedural ground)")
     render.add_argument("--texture-layer", default=None, metavar="NAME", help="the layer of an EXR texture to read, e.g. diffuse for diffuse.R, diffuse.G... (default: its only or unprefixed layer)")
@@ -43,13 +39,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_filter(render)
     _add_memory(render, "the image", "larger images are made band by band")
     _add_device(render)
-    demo = commands.add_parser(
-        "demo",
-        help="render the texture-sampling demo (filters and address modes)",
+    demo = _command(commands, "demo", out=("out", "output folder (default: %(default)s)"), help="render the texture-sampling demo (filters and address modes)",
         description="Sample a texture on a ground plane (nearest, bilinear, trilinear, anisotropic) and show the "
-        "address modes; writes demo.png, demo_trilinear.exr and demo_anisotropic.exr into the output folder.",
-    )
-    demo.add_argument("--out", default="out", help="output folder (default: %(default)s)")
+        "address modes; writes demo.png, demo_trilinear.exr and demo_anisotropic.exr into the output folder.")  # fmt: skip
     demo.add_argument("--texture", default=None, help="image file to use (default: a procedural checkerboard)")
     demo.add_argument("--resolution", type=resolution, default=(360, 480), help="panel size HxW (default: 360x480)")
     _add_device(demo)
@@ -63,14 +55,10 @@ def build_parser() -> argparse.ArgumentParser:
         "splat_true.png, splat_fitted.png, splat_maps.png, splat_fitted.exr, curve.png and summary.json.",
     )
     add_fit_arguments(fit)
-    bake = commands.add_parser(
-        "bake",
-        help="bake a mesh's texturing into a UV atlas and export a glTF asset (.glb)",
+    bake = _command(commands, "bake", out=("out/asset.glb", "the .glb file to write (default: %(default)s)"), help="bake a mesh's texturing into a UV atlas and export a glTF asset (.glb)",
         description="Texture a mesh as render does (or with the technique named), bake it into the mesh's UV atlas "
         "(its own UVs when usable, else an automatic atlas from xatlas) and write OUT (.glb) with OUT_color.png "
-        "(and OUT_normal.png with --normal-map, OUT_alpha.png for layers with height in alpha) beside it.",
-    )
-    bake.add_argument("--out", default="out/asset.glb", help="the .glb file to write (default: %(default)s)")
+        "(and OUT_normal.png with --normal-map, OUT_alpha.png for layers with height in alpha) beside it.")  # fmt: skip
     bake.add_argument("--mesh", default=None, help="mesh file: OBJ, PLY, STL, GLB/GLTF... (default: procedural terrain)")
     bake.add_argument("--technique", choices=("triplanar", "biplanar", "splat"), default=None, help="texturing (default: splat for the terrain or with --layers, else triplanar)")
     bake.add_argument("--texture", default=None, help="texture image for triplanar/biplanar (default: procedural ground)")
@@ -90,17 +78,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_memory(bake, "the atlas", "larger atlases are baked band by band")
     _add_device(bake)
-    assets = commands.add_parser(
-        "assets",
-        help="write the sample inputs the README's snippets read (the terrain's layers and splat map)",
+    assets = _command(commands, "assets", out=("assets", "output folder (default: %(default)s)"), help="write the sample inputs the README's snippets read (the terrain's layers and splat map)",
         description="Write grass.png, gravel.png, rock.png and snow.png (RGBA: colour, height in alpha) and "
-        "splat.png (their weights) of the default terrain into the output folder.",
-    )
-    assets.add_argument("--out", default="assets", help="output folder (default: %(default)s)")
+        "splat.png (their weights) of the default terrain into the output folder.")  # fmt: skip
     assets.add_argument("--seed", type=int, default=0, help="terrain and layer seed (default: 0)")
     assets.add_argument("--device", default=None, help=argparse.SUPPRESS)
     parser.commands = {"render": render, "demo": demo, "fit": fit, "bake": bake, "assets": assets}  # for errors in a command's own usage
     return parser
+
+
+def _command(commands, name: str, *, help: str, description: str, out: tuple[str, str]) -> argparse.ArgumentParser:  # noqa: A002 (argparse's word)
+    """A command's parser, with its ``--out`` (``(default, help)``) first."""
+    command = commands.add_parser(name, help=help, description=description)
+    command.add_argument("--out", default=out[0], help=out[1])
+    return command
 
 
 def _add_filter(command: argparse.ArgumentParser) -> None:
