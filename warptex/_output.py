@@ -22,9 +22,8 @@ from typing import Iterator
 
 import warp as wp
 
-from warptex._interrupts import interrupts_deferred
-
 from warptex import io
+from warptex._interrupts import interrupts_deferred
 
 _STAGING = re.compile(r"^\.warptex-(\d+)-[0-9a-f]+\.partial$")
 

@@ -107,8 +107,8 @@ def splat(
         sharpness, offsets, mirror_fix: the triplanar options, for ``projection="triplanar"``.
         layers_per_face: for ``projection="triplanar"``: which array layers a layer reads on each
             face of the cube of directions (grass on top, rock beneath), as
-            :func:`~warptex.triplanar`'s ``textures_per_face`` picks a texture per face. ``None`` (every layer reads
-            itself), or ``L`` entries (a sequence, or an int array ``(L, 6)``), one per layer
+            :func:`~warptex.triplanar`'s ``textures_per_face`` picks a texture per face.
+            ``None`` (every layer reads itself), or ``L`` entries (a sequence, or an int array ``(L, 6)``), one per layer
             ``l``: ``None`` (``l`` itself on every face) or 6 layer indices ``(+x, -x, +y, -y,
             +z, -z)``, where a ``None`` index means ``l`` itself. Projection ``a`` reads the
             ``+a`` face's layer where the normal has ``n[a] >= 0``, the ``-a`` face's where
