@@ -11,6 +11,7 @@ textures are sampled trilinear and clamped to the edge (:data:`SAMPLER`).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -128,21 +129,23 @@ def bake_gltf(
     writer = None
     try:
         with output_set(path.parent) as staging:
-            for tile in tiles:
-                with paused_tape():
-                    colour = technique(tile.gbuffer).numpy() if technique is not None else None
-                    normals = tangent_space(tile.gbuffer, normal(tile.gbuffer)).numpy() if normal is not None else None
-                if writer is None:
-                    writer = AssetWriter(staging, path.name, layout, size, colour_channels=None if colour is None else colour.shape[-1], normal=normals is not None)
-                writer.write(tile.gbuffer.mask.numpy() > 0, colour, normals)
-                bar.update(tile.rows.stop - tile.rows.start)
-                del tile, colour, normals  # one band's arrays at a time
-                trim()
-            bar.set_postfix_str("glTF")
-            writer.close()
+            try:
+                for tile in tiles:
+                    with paused_tape():
+                        colour = technique(tile.gbuffer).numpy() if technique is not None else None
+                        normals = tangent_space(tile.gbuffer, normal(tile.gbuffer)).numpy() if normal is not None else None
+                    if writer is None:
+                        writer = AssetWriter(staging, path.name, layout, size, colour_channels=None if colour is None else colour.shape[-1], normal=normals is not None)
+                    writer.write(tile.gbuffer.mask.numpy() > 0, colour, normals)
+                    bar.update(tile.rows.stop - tile.rows.start)
+                    del tile, colour, normals  # one band's arrays at a time
+                    trim()
+                bar.set_postfix_str("glTF")
+                writer.close()
+            finally:  # (before output_set removes the staging folder the writer's files are in)
+                if writer is not None:
+                    writer._release()
     finally:
-        if writer is not None:
-            writer._release()
         bar.close()
     return [path] + [path.parent / n for n in writer.texture_names.values()]
 
@@ -238,7 +241,8 @@ class AssetWriter:
     def _release(self) -> None:
         for f in self._codes.values():
             f.close()
-            os.remove(f.name)
+            with contextlib.suppress(FileNotFoundError):  # its folder may be gone (an error's clean-up)
+                os.remove(f.name)
         self._codes = {}
         if self._normal is not None:
             self._normal.abort()  # nothing once closed
