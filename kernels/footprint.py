@@ -20,7 +20,7 @@ def lod_log2(x: float) -> float:
     """``log2(x)`` of a positive normal ``x``, for LODs: ``wt_log2`` (``native/wt_log2.h``) on the
     CPU, the same bits as the CPU lanes' (NaN for any other ``x``; the header says how and how
     close), ``log2f`` on CUDA; its gradient is Warp's ``log2``'s. Every Warp module of warptex has
-    the headers (:func:`warptex.kernels.native.use`)."""
+    that header (:func:`warptex.kernels.native.use`)."""
     ...
 
 
