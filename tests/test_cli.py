@@ -271,6 +271,22 @@ def test_the_layer_of_an_exr_texture_is_chosen_on_the_command_line(tmp_path, cap
     np.testing.assert_allclose(centre, 0.1, atol=0.01)
 
 
+def test_ctrl_c_once_the_run_is_over_keeps_its_status(tmp_path):
+    """SIGINT after the last ``wrote`` line, during Python's shutdown and the compiler's clean-up
+    after it: the run is done, so it exits 0, not killed by the signal."""
+    import signal
+    import time
+
+    for delay in (0.0, 0.05, 0.2):
+        child = subprocess.Popen([sys.executable, "-m", "warptex", "render", *SMALL, "--out", str(tmp_path / "out")], cwd=ROOT, stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, text=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        assert child.stdout.readline().startswith("wrote ")
+        time.sleep(delay)
+        child.send_signal(signal.SIGINT)
+        out, err = child.communicate(timeout=60)
+        assert child.returncode == 0, (delay, child.returncode, err[-2000:])
+
+
 @pytest.mark.parametrize("command, delays", [
     (["render", "--resolution", "256x256", "--samples", "16"], (0.3, 0.6, 1.5, 4.0)),
     (["bake", "--size", "512", "--out", "{out}/asset.glb"], (0.4, 3.0)),

@@ -365,3 +365,29 @@ def _record(errors: list, run, *args) -> None:
         run(*args)
     except OSError as err:
         errors.append(err)
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="sends itself SIGTERM, which Windows cannot catch")
+def test_a_sigterm_while_a_failed_rank_says_why_does_not_replace_its_line(monkeypatch, capsys):
+    """torchrun sends SIGTERM to every rank once one fails: it may come while this rank is still
+    reporting its own failure (stop 55's CI). The rank's one line must come out all the same."""
+    from warptex.apps import cli
+    from warptex.apps.distributed import _terminate
+    from warptex.fit.distributed import DistributedError
+
+    def fail(args):
+        raise DistributedError("another rank of the process group died")
+
+    def one_line(err):
+        os.kill(os.getpid(), signal.SIGTERM)  # arrives while the line is being made
+        time.sleep(0.05)
+        return str(err)
+
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        monkeypatch.setattr(cli, "_run", fail)
+        monkeypatch.setattr(cli, "_one_line", one_line)
+        assert cli_main(["fit", "--iters", "1", "--out", "unused"]) == 1
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert capsys.readouterr().err == "warptex: error: another rank of the process group died\n"

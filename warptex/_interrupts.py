@@ -1,4 +1,5 @@
-"""Ctrl-C held back over a block that must not be cut: a set of renames, or the libraries' imports.
+"""Ctrl-C held back over a block that must not be cut: a set of renames, the libraries' imports,
+or the one line that reports how a run ended.
 
 Light on purpose (the standard library only): the command line enters it before importing Warp.
 """
@@ -26,3 +27,20 @@ def interrupts_deferred() -> Iterator[None]:
         signal.signal(signal.SIGINT, signal.default_int_handler)
     if pending:
         raise KeyboardInterrupt
+
+
+@contextmanager
+def interrupts_ignored() -> Iterator[None]:
+    """Within the block, SIGINT and SIGTERM are dropped. For the report of a run that already
+    failed: torchrun sends SIGTERM to every rank once one fails, which may be while this rank is
+    saying why it failed. Only the main thread can change a signal's handler; elsewhere nothing
+    changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    kept = {number: signal.signal(number, signal.SIG_IGN) for number in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for number, handler in kept.items():
+            signal.signal(number, handler)

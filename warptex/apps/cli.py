@@ -161,39 +161,70 @@ def main(argv: list[str] | None = None) -> int:
 
             from warptex import _output
         written = _output.commits()
-        paths = _run(args)
-    except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM under torchrun (apps.distributed.Terminated)
+        for path in _run(args):
+            print(f"wrote {path}")
+    except BaseException as err:
+        status = _reported(err, written)
+        if status is None:
+            raise
+        return status
+    return 0
+
+
+def _reported(err: BaseException, written) -> int | None:
+    """Say on stderr, in one line, why the run ended; its exit status, or None for an error that
+    is a bug (its traceback is then the report). A signal that arrives while saying so (torchrun
+    sends SIGTERM to every rank once one fails) does not replace the line."""
+    from warptex._interrupts import interrupts_ignored
+
+    while True:
+        try:
+            with interrupts_ignored():
+                return _report(err, written)
+        except KeyboardInterrupt:  # came before the block dropped it: say the first thing again
+            continue
+
+
+def _report(err: BaseException, written) -> int | None:
+    if isinstance(err, KeyboardInterrupt):  # Ctrl-C, or SIGTERM under torchrun (apps.distributed.Terminated)
+        from warptex import _output
+
         what = "no files were written" if written is None or _output.commits() == written else "its files were written before it"
         print(f"warptex: {str(err) or 'interrupted'}; {what}", file=sys.stderr)
         return getattr(err, "status", 130)
-    except (OSError, ValueError, TypeError, MemoryError) as err:
+    if isinstance(err, (OSError, ValueError, TypeError, MemoryError)):
         print(f"warptex: error: {_one_line(err)}", file=sys.stderr)
         return 1
-    except RuntimeError as err:
+    if isinstance(err, RuntimeError):
         from warptex.fit.distributed import DistributedError
 
         if isinstance(err, DistributedError):  # another process of a torchrun job failed
             print(f"warptex: error: {_one_line(err)}", file=sys.stderr)
             return 1
-        if "alloc" not in str(err).lower():  # Warp reports a failed allocation so; anything else is a bug
-            raise
-        print(f"warptex: error: out of memory: {_one_line(err)}", file=sys.stderr)
-        return 1
-    for path in paths:
-        print(f"wrote {path}")
-    return 0
+        if "alloc" in str(err).lower():  # Warp reports a failed allocation so; anything else is a bug
+            print(f"warptex: error: out of memory: {_one_line(err)}", file=sys.stderr)
+            return 1
+    return None
 
 
 def entry() -> None:
     """The ``warptex`` command and ``python -m warptex``: :func:`main`, then exit with its status.
     After a Ctrl-C the process ends at once (its files are already as they were, its message is
     out), without Python's shutdown, which would first wait for any kernel compile still running
-    on another thread."""
+    on another thread. Once the run is over, a Ctrl-C in that wait ends the process at once with
+    the run's status, and one in the rest of the shutdown (tenths of a second, mostly the
+    compiler's own clean-up after Python's) is ignored: the run is done, and the signal would
+    otherwise end it with a failing status."""
+    import atexit
+    import signal
+
     status = main()
+    sys.stdout.flush()
+    sys.stderr.flush()
     if status == 130:
-        sys.stdout.flush()
-        sys.stderr.flush()
         os._exit(status)
+    signal.signal(signal.SIGINT, lambda number, frame: os._exit(status))
+    atexit.register(signal.signal, signal.SIGINT, signal.SIG_IGN)  # runs after other threads are joined
     sys.exit(status)
 
 
