@@ -89,14 +89,25 @@ def _both_on_threads(threads: int, call):
 def lane_kernels_launched(monkeypatch):
     """Records the lane kernels each test launches (:data:`_LANE_KERNELS`)."""
     _LANE_KERNELS.clear()
-    launch = wp.launch
+    _spy_launches(monkeypatch, lambda kernel, dim: cpu_only(kernel) and _LANE_KERNELS.setdefault(kernel.key, kernel))
 
-    def spy(kernel, *args, **kwargs):
-        if cpu_only(kernel):
-            _LANE_KERNELS[kernel.key] = kernel
-        return launch(kernel, *args, **kwargs)
+
+def _spy_launches(monkeypatch, seen) -> None:
+    """Call ``seen(kernel, dim)`` for every launch of ``warptex._launch``: through ``wp.launch``,
+    and through the ``wp.Launch`` it keeps for an unsplit launch (``_launch.replay``)."""
+    launch, replay = wp.launch, _launch.replay
+
+    def spy(kernel, dim, *args, **kwargs):
+        if not kwargs.get("record_cmd"):  # replay's own recording: seen by spy_replay
+            seen(kernel, dim)
+        return launch(kernel, dim, *args, **kwargs)
+
+    def spy_replay(kernel, dim, *args):
+        seen(kernel, dim)
+        return replay(kernel, dim, *args)
 
     monkeypatch.setattr(_launch.wp, "launch", spy)
+    monkeypatch.setattr(_launch, "replay", spy_replay)
 
 
 def _both(call):
@@ -127,13 +138,7 @@ def nan_outputs(monkeypatch):
 def launched(monkeypatch):
     """The names of the kernels ``warptex._launch`` launches, with their launch sizes."""
     seen = []
-    launch = wp.launch
-
-    def spy(kernel, dim, *args, **kwargs):
-        seen.append((kernel.key, dim))
-        return launch(kernel, dim, *args, **kwargs)
-
-    monkeypatch.setattr(_launch.wp, "launch", spy)
+    _spy_launches(monkeypatch, lambda kernel, dim: seen.append((kernel.key, dim)))
     return seen
 
 

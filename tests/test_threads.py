@@ -114,12 +114,12 @@ def test_small_launches_are_not_split():
     calls = []
 
     x = wp.array(np.arange(100, dtype=np.float32))
-    original = wp.launch
+    original = _launch.replay  # an unsplit launch runs through a kept wp.Launch
     try:
-        wp.launch = lambda kernel, *a, **k: (kernel is _add_one and calls.append(k["dim"]), original(kernel, *a, **k))  # only ours: any other launch meanwhile is not this test's
+        _launch.replay = lambda kernel, dim, *a: (kernel is _add_one and calls.append(dim), original(kernel, dim, *a))  # only ours: any other launch meanwhile is not this test's
         _launch.launch(_add_one, 100, args=_Nothing(), pixels=_values(x), out=out, device="cpu", threads=4)
     finally:
-        wp.launch = original
+        _launch.replay = original
     assert calls == [100]
     np.testing.assert_array_equal(out.numpy()[:, 0], np.arange(100) + 1)
 

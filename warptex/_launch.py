@@ -26,6 +26,7 @@ CUDA launches are never split: one launch fills the device.
 from __future__ import annotations
 
 import functools
+import threading
 import weakref
 from typing import Iterator, NamedTuple
 
@@ -116,13 +117,18 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
     if recorded and backward is not GENERATED:
         tape.record_func(_on(tape, backward), arrays=recorded)
     generated = bool(recorded) and backward is GENERATED
-    workers = min(workers_for(device, count, threads), cpu_count())  # threads past the cores would only take turns
+    workers = workers_for(device, count, threads)
+    if workers > 1:
+        workers = min(workers, cpu_count())  # threads past the cores would only take turns
     chunks = grad_bounds(count, covered, _shared_bytes(args), footprints) if generated and device.is_cpu else [0, count]  # CUDA: one launch
     kernel, per_index = _with_lanes(kernel, lanes)
     fills = per_index > 1  # a lane kernel writes every entry of its outputs (family.lane_kernel)
     if workers == 1:
         _zero_rows(out, 0, count, fills)
-        wp.launch(kernel, dim=-(-count // per_index), inputs=[args, pixels, 0], outputs=[out], device=device, record_tape=generated and len(chunks) == 2)
+        if generated and len(chunks) == 2:  # Warp records the launch's own adjoint on the tape
+            wp.launch(kernel, dim=-(-count // per_index), inputs=[args, pixels, 0], outputs=[out], device=device, record_tape=True)
+        else:
+            replay(kernel, -(-count // per_index), (args, pixels, 0, out), device)
     else:
         split = Split(count, workers, covered)
 
@@ -135,6 +141,29 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
     if generated and (workers > 1 or len(chunks) > 2):  # else Warp recorded the launch's own adjoint
         backward = functools.partial(_backward, kernel=kernel, bounds=chunks, workers=workers, args=args, pixels=pixels, out=out, device=device)
         tape.record_func(_on(tape, backward), arrays=recorded)
+
+
+_replays = threading.local()
+
+
+def replay(kernel, dim: int, params: tuple, device) -> None:
+    """``wp.launch(kernel, dim, params)``, not recorded on a tape, through a ``wp.Launch`` kept per
+    thread, kernel and device: its parameters are set and it runs. A small call's cost is mostly
+    Python, and ``wp.launch`` resolves the module, hooks and argument types each time (a 1,024-UV
+    lookup: ~9 us of its ~30 us). The kept launch holds no array (its parameters are their
+    addresses only; ``fwd_args``, which Warp keeps for CPU graph capture, is dropped), so nothing
+    is kept alive past the call."""
+    launches = _replays.__dict__.setdefault("launches", {})
+    key = (kernel, device.alias)
+    cmd = launches.get(key)
+    if cmd is None or cmd.kernel is not kernel:
+        cmd = launches[key] = wp.launch(kernel, dim=dim, inputs=list(params), device=device, record_cmd=True)
+    else:
+        cmd.set_dim(dim)
+        for index, value in enumerate(params):
+            cmd.set_param_at_index(index, value)
+    cmd.fwd_args = None
+    cmd.launch()
 
 
 def _with_lanes(kernel, lanes) -> tuple:

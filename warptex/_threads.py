@@ -171,8 +171,11 @@ os.register_at_fork(after_in_child=_after_fork)
 
 
 def workers_for(device, count: int, threads: int | None) -> int:
-    """Threads a launch of ``count`` pixels is split over: 1 on CUDA and for small launches."""
-    threads = 1 if device.is_cuda else get_num_threads() if threads is None else threads
+    """Threads a launch of ``count`` pixels is split over: 1 on CUDA and for small launches
+    (decided first: a small call does not pay for reading the thread settings)."""
+    if device.is_cuda or count < 2 * MIN_PIXELS_PER_THREAD:
+        return 1
+    threads = get_num_threads() if threads is None else threads
     return max(1, min(threads, count // MIN_PIXELS_PER_THREAD))
 
 

@@ -26,10 +26,11 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import operator
 import os
 import sys
 import tempfile
-from typing import Any, Iterator
+from typing import Any
 
 import warp as wp
 
@@ -68,16 +69,23 @@ def field_type(value, name: str):
     return value._cls.vars[name].type
 
 
-def struct_arrays(value, scalars: tuple | None = None) -> Iterator[tuple[str, Any]]:
+def struct_arrays(value, scalars: tuple | None = None) -> list[tuple[str, Any]]:
     """``(dotted path, array)`` of every array field of the ``@wp.struct`` instance ``value``,
-    those of its nested structs included, in declaration order (the paths cached per struct type);
-    with ``scalars``, only the fields declared with one of those scalar types (e.g. the float
-    arrays, which can carry gradients: Warp refuses an array of another dtype)."""
-    for dotted, names in _paths(value._cls, scalars):
-        array = value
-        for name in names:
-            array = getattr(array, name)
-        yield dotted, array
+    those of its nested structs included, in declaration order; with ``scalars``, only the fields
+    declared with one of those scalar types (e.g. the float arrays, which can carry gradients: Warp
+    refuses an array of another dtype). Read by one ``operator.attrgetter`` made per struct type
+    (a call of a technique walks its structs several times)."""
+    paths, read = _reader(value._cls, scalars)
+    return list(zip(paths, read(value))) if read is not None else []
+
+
+@functools.lru_cache(maxsize=None)
+def _reader(struct_t, scalars: tuple | None) -> tuple:
+    paths = tuple(dotted for dotted, _ in _paths(struct_t, scalars))
+    if not paths:
+        return paths, None
+    get = operator.attrgetter(*paths)
+    return paths, (get if len(paths) > 1 else lambda value: (get(value),))
 
 
 @functools.lru_cache(maxsize=None)
