@@ -78,7 +78,8 @@ def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linea
         kernels: the technique's :class:`~warptex.kernels.family.Kernels` for this configuration.
         count: pixels (launch size).
         args, pixels: the kernels' fixed and per-pixel argument structs.
-        out: ``(shape, dtype)`` of the output (first axis: ``count``).
+        out: ``(shape, dtype)`` of a new output (first axis: ``count``), or the caller's array
+            (``out=`` of a technique, checked by ``warptex._pack.out_array``), filled in place.
         device: the Warp device.
         linear: whether the blend of taps is linear in the texels (``False``: a histogram blend,
             which only the generated adjoint differentiates).
@@ -94,7 +95,12 @@ def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linea
     """
     inputs = {"args": args, "pixels": pixels}
     wanted = [a for _, a in differentiable(inputs) if a.requires_grad]
-    result = output(*out, device=device, requires_grad=bool(wanted))
+    if isinstance(out, wp.array):
+        result = out
+        if wanted and not result.requires_grad and active_tape() is not None:
+            raise ValueError("out= must be made with requires_grad=True: an input requires gradients, and the active wp.Tape records this call")
+    else:
+        result = output(*out, device=device, requires_grad=bool(wanted))
     cut = {"covered": covered, "footprints": footprints}  # how launches are cut into chunks
     if active_tape() is None or not wanted:
         launch(kernels.forward, count, args=args, pixels=pixels, out=result, device=device, lanes=lanes_for(kernels, device, args), **cut)

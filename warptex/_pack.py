@@ -244,6 +244,20 @@ def resolve_layer(func: str, texture: TextureArray, layer, shape, device):
     return 0, reshaped(_per_sample(func, "layer", layer, shape, wp.int32, device), (math.prod(shape),))
 
 
+def out_array(func: str, out, shape: tuple, device) -> wp.array | None:
+    """The caller's ``out=``, checked: ``None``, or a contiguous float32 ``wp.array`` of exactly
+    ``shape`` on ``device``; returned as ``(pixels, channels)`` rows, as the kernels write them.
+    Checked before any work, so a wrong one changes nothing."""
+    if out is None:
+        return None
+    if not isinstance(out, wp.array):
+        raise TypeError(f"{func}(): out must be a wp.array of float32, got {type(out).__name__}")
+    if out.dtype != wp.float32 or tuple(out.shape) != tuple(shape) or out.device != device or not out.is_contiguous:
+        got = f"{'a non-contiguous ' if not out.is_contiguous else ''}{wp.types.type_repr(out.dtype)} {tuple(out.shape)} on {out.device}"
+        raise ValueError(f"{func}(): out must be a contiguous float32 wp.array of shape {tuple(shape)} on {device}, got {got}")
+    return reshaped(out, (math.prod(shape[:-1]), shape[-1]))
+
+
 def reshaped(array: wp.array, shape: tuple) -> wp.array:
     """``array`` with ``shape``: itself where it has it already (a new view costs a call ~30 us of
     Python on cold caches, as the one a lookup's 1-D UVs and output made)."""

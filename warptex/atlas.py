@@ -24,7 +24,7 @@ import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import footprints, sampler_args, struct_of
+from warptex._pack import footprints, out_array, sampler_args, struct_of
 from warptex._validate import as_device_array, as_float_array, as_on_device, check_layer_count, param_array
 from warptex.gbuffer import GBuffer, _gbuffer_device
 from warptex.kernels import atlas as ka
@@ -283,6 +283,7 @@ def splat_atlas(
     uv_set: str = "uv0",
     sampler: Sampler | None = None,
     device=None,
+    out=None,
 ) -> wp.array:
     """Blend ``k`` atlas layers per pixel by an index map and a weight map.
 
@@ -311,9 +312,12 @@ def splat_atlas(
             exceed ``atlas.max_lod``; ``max_lod=0`` turns mips off). Its address mode must be
             ``"wrap"``, the default: every tile wraps through its gutter.
         device: Warp device; must be the G-buffer's and the atlas'.
+        out: a float32 ``wp.array`` of shape ``(H, W, C)`` on the device, to fill in place and
+            return (a loop's buffer, reused call after call); ``None``: a new array. It must not
+            overlap an input.
 
     Returns:
-        ``wp.array`` of float32, shape ``(H, W, C)``, 0 where the mask is 0, NaN where the UV is
+        ``wp.array`` of float32 (``out`` when given), shape ``(H, W, C)``, 0 where the mask is 0, NaN where the UV is
         not finite. Recorded on the active ``wp.Tape``: gradients reach the atlas texels (every
         level read; level 0 and the layers too when the atlas was packed or updated on the tape),
         ``weights``, ``tiling`` and the G-buffer's UVs and derivatives.
@@ -345,9 +349,11 @@ def splat_atlas(
     # The tile UV is wrapped in the kernel; the atlas itself is read clamped, up to its safe level.
     smp = sampler_args(func, sampler.replace(address=Address.CLAMP, max_lod=min(sampler.max_lod, float(atlas.max_lod))), has_lod=True)
 
+    into = out_array(func, out, (*gbuffer.resolution, atlas.channels), device)
     count = gbuffer.pixel_count
     uvs = gbuffer.uv_sets[uv_set]
     pixels = struct_of(ka.AtlasPixels, device, uv0=uvs["uv"].reshape((count,)), uv0_dx=uvs["uv_dx"].reshape((count,)), uv0_dy=uvs["uv_dy"].reshape((count,)), mask=gbuffer.mask.reshape((count,)))
     args = struct_of(ka.AtlasArgs, device, atlas=atlas.texture.view, layout=atlas.layout, indices=idx, weights=wts, tiling=tiling, smp=smp, normalize=int(bool(normalize)))
-    out = run(ka.atlas_kernels(), count, args=args, pixels=pixels, out=((count, atlas.channels), float), device=device, covered=pixels.mask, footprints=footprints(smp, lookups=k))
-    return out.reshape((*gbuffer.resolution, atlas.channels))
+    result = run(ka.atlas_kernels(), count, args=args, pixels=pixels, out=((count, atlas.channels), float) if into is None else into, device=device, covered=pixels.mask,
+                 footprints=footprints(smp, lookups=k))
+    return out if into is not None else result.reshape((*gbuffer.resolution, atlas.channels))

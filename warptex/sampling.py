@@ -8,7 +8,7 @@ import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import footprints, lod_inputs, mip_levels, packed, reshaped, resolve_layer, sample_args, struct_of, vec2_array
+from warptex._pack import footprints, lod_inputs, mip_levels, out_array, packed, reshaped, resolve_layer, sample_args, struct_of, vec2_array
 from warptex._validate import resolve_device
 from warptex.kernels import sampling as ks
 from warptex.kernels import texels as kx
@@ -17,7 +17,7 @@ from warptex.options import Sampler, _as_sampler
 from warptex.texture import TextureArray
 
 
-def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy=None, sampler: Sampler | None = None, device=None) -> wp.array:
+def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy=None, sampler: Sampler | None = None, device=None, out=None) -> wp.array:
     """Sample a texture (or a layer of a texture array) at UV coordinates.
 
     Args:
@@ -36,9 +36,12 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
         sampler: a :class:`Sampler` (filtering, addressing, LOD bias and clamp); ``None``: the
             defaults, with ``"auto"`` filtering: trilinear when a LOD is given, else bilinear.
         device: Warp device; must be the texture's (``None``: the texture's).
+        out: a float32 ``wp.array`` of the result's shape on the device, to fill in place and
+            return (a loop's buffer, reused call after call); ``None``: a new array. It must not
+            overlap an input.
 
     Returns:
-        ``wp.array`` of float32, shape ``(..., C)`` (``uv``'s sample shape plus the channels),
+        ``wp.array`` of float32 (``out`` when given), shape ``(..., C)`` (``uv``'s sample shape plus the channels),
         recorded on the active ``wp.Tape``: gradients reach the texels of every sampled level,
         ``uv``, and a per-UV ``lod`` or ``uv_dx``/``uv_dy`` arrays. Call ``.numpy()`` for NumPy.
     """
@@ -52,11 +55,13 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
     sampler = _as_sampler(func, sampler)
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
     constant_layer, layers = resolve_layer(func, texture, layer, shape, device)
+    into = out_array(func, out, (*(() if single else shape), texture.channels), device)
     key = ("sample", sampler, lod_source, constant_lod, constant_layer)
     setup = packed(texture, key, lambda: _setup(func, texture, sampler, lod_source, constant_lod, constant_layer))
     pixels = struct_of(ks.SamplePixels, device, uv=reshaped(uv, (count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
-    out = run(setup.kernels, count, args=setup.args, pixels=pixels, out=((count, texture.channels), float), device=device, footprints=setup.footprints, touched=setup.touched)
-    return reshaped(out, (*(() if single else shape), texture.channels))
+    result = run(setup.kernels, count, args=setup.args, pixels=pixels, out=((count, texture.channels), float) if into is None else into,
+                 device=device, footprints=setup.footprints, touched=setup.touched)
+    return out if into is not None else reshaped(result, (*(() if single else shape), texture.channels))
 
 
 class _Setup(NamedTuple):

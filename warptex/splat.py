@@ -12,7 +12,7 @@ import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import MAP_SAMPLER, footprints, empty_array, projection_args, sampler_args, stochastic_args, struct_of
+from warptex._pack import MAP_SAMPLER, footprints, empty_array, out_array, projection_args, sampler_args, stochastic_args, struct_of
 from warptex._validate import as_enum, as_on_device, check_layer_count, param_array, warn_renamed
 from warptex.gbuffer import GBuffer, _gbuffer_device
 from warptex.kernels import projection as kp
@@ -77,6 +77,7 @@ def splat(
     stochastic: Stochastic | str | None = None,
     sampler: Sampler | None = None,
     device=None,
+    out=None,
     face_layers=None,
 ) -> wp.array:
     """Blend the ``L`` layers of a texture array by splat-map weights, per pixel of a G-buffer.
@@ -123,10 +124,13 @@ def splat(
         sampler: a :class:`~warptex.Sampler` for the layers (and heights); its ``"auto"`` filter
             is trilinear. The splat maps have their own: bilinear on level 0, clamped.
         device: Warp device; must be the G-buffer's and the textures'.
+        out: a float32 ``wp.array`` of shape ``(H, W, C_out)`` on the device, to fill in place and
+            return (a loop's buffer, reused call after call); ``None``: a new array. It must not
+            overlap an input.
         face_layers: the old name of ``layers_per_face`` (deprecated).
 
     Returns:
-        ``wp.array`` of float32, shape ``(H, W, C_out)``; 0 where the mask is 0. Recorded on the
+        ``wp.array`` of float32 (``out`` when given), shape ``(H, W, C_out)``; 0 where the mask is 0. Recorded on the
         active ``wp.Tape``: gradients reach the splat-map texels (every channel), the layer texels,
         ``heights``, and ``tiling`` / ``height_blend`` when given as arrays that require them.
     """
@@ -193,6 +197,7 @@ def splat(
     args.layers, args.heights, args.maps = layers_read.view, height_tex.view, maps.view
     args.map_smp, args.stoch, args.height_stoch = sampler_args(func, MAP_SAMPLER, has_lod=False), stoch, height_stoch
 
+    into = out_array(func, out, (*gbuffer.resolution, layers.channels), device)
     count = gbuffer.pixel_count
     uvs = gbuffer.uv_sets[uv_set]
     pixels = struct_of(kl.SplatPixels, device, uv0=uvs["uv"].reshape((count,)), uv0_dx=uvs["uv_dx"].reshape((count,)), uv0_dy=uvs["uv_dy"].reshape((count,)), saved=None)
@@ -202,9 +207,9 @@ def splat(
     # A layer's lookup costs about two footprints: its share of the blend (weights, heights,
     # normalising) as much as its filtering (44 ns a footprint in a splat's backward against 20 for bilinear).
     lookups = 2 * num_layers * (3 if params.projection == ksl.PROJECT_TRIPLANAR else 1)
-    out = run(kernels, count, args=args, pixels=pixels, out=((count, layers.channels), float), device=device, linear=linear, covered=surface.mask,
-              footprints=footprints(reads.smp, stoch, lookups=lookups))
-    return out.reshape((*gbuffer.resolution, layers.channels))
+    result = run(kernels, count, args=args, pixels=pixels, out=((count, layers.channels), float) if into is None else into, device=device, linear=linear, covered=surface.mask,
+                 footprints=footprints(reads.smp, stoch, lookups=lookups))
+    return out if into is not None else result.reshape((*gbuffer.resolution, layers.channels))
 
 
 FACE_NAMES = ("+x", "-x", "+y", "-y", "+z", "-z")

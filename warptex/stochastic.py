@@ -15,7 +15,7 @@ import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import footprints, lod_inputs, packed, reshaped, resolve_layer, sample_args, stochastic_args, struct_of, vec2_array
+from warptex._pack import footprints, lod_inputs, out_array, packed, reshaped, resolve_layer, sample_args, stochastic_args, struct_of, vec2_array
 from warptex._validate import resolve_device, warn_renamed
 from warptex.kernels import sampling as ks
 from warptex.kernels import stochastic_sample as kss
@@ -35,6 +35,7 @@ def stochastic(
     uv_dy=None,
     sampler: Sampler | None = None,
     device=None,
+    out=None,
     method: Stochastic | Method | str | None = None,
 ) -> wp.array:
     """Sample a tiled texture with randomised tiles, so that the repetition is not visible.
@@ -62,10 +63,13 @@ def stochastic(
         sampler: a :class:`Sampler`; its address mode must be ``"wrap"`` (the default) or
             ``"mirror"``: stochastic tiling needs a periodic texture.
         device: Warp device; must be the texture's (``None``: the texture's).
+        out: a float32 ``wp.array`` of the result's shape on the device, to fill in place and
+            return (a loop's buffer, reused call after call); ``None``: a new array. It must not
+            overlap an input.
         method: the old name of ``stochastic`` (deprecated).
 
     Returns:
-        ``wp.array`` of float32, shape ``(..., C)``, recorded on the active ``wp.Tape``: gradients
+        ``wp.array`` of float32 (``out`` when given), shape ``(..., C)``, recorded on the active ``wp.Tape``: gradients
         reach the texels of every sampled level (of ``histogram.texture`` when a histogram is
         given), ``uv``, and a per-UV ``lod`` or ``uv_dx``/``uv_dy`` arrays.
     """
@@ -85,6 +89,7 @@ def stochastic(
     shape, count = uv.shape, uv.size
     lod_source, constant_lod, lods, dx, dy = lod_inputs(func, lod, uv_dx, uv_dy, shape, device)
     constant_layer, layers = resolve_layer(func, texture, layer, shape, device)
+    into = out_array(func, out, (*(() if single else shape), texture.channels), device)
 
     def build() -> _Setup:
         return _setup(func, texture, option, sampler, lod_source, constant_lod, constant_layer)
@@ -93,8 +98,9 @@ def stochastic(
     # histogram's Gaussianised texture is as large as the texture.
     setup = build() if option.histogram is not None else packed(texture, ("stochastic", option, sampler, lod_source, constant_lod, constant_layer), build)
     pixels = struct_of(ks.SamplePixels, device, uv=reshaped(uv, (count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
-    out = run(kss.stochastic_kernels(), count, args=setup.args, pixels=pixels, out=((count, texture.channels), float), device=device, linear=setup.linear, footprints=setup.footprints)
-    return reshaped(out, (*(() if single else shape), texture.channels))
+    result = run(kss.stochastic_kernels(), count, args=setup.args, pixels=pixels, out=((count, texture.channels), float) if into is None else into, device=device,
+                 linear=setup.linear, footprints=setup.footprints)
+    return out if into is not None else reshaped(result, (*(() if single else shape), texture.channels))
 
 
 class _Setup(NamedTuple):

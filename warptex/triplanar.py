@@ -21,7 +21,7 @@ import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import footprints, projection_args, sampler_args, stochastic_args, struct_of
+from warptex._pack import footprints, out_array, projection_args, sampler_args, stochastic_args, struct_of
 from warptex._validate import as_enum, as_float, warn_renamed
 from warptex.gbuffer import GBuffer, _gbuffer_device
 from warptex.kernels import faces as kf
@@ -77,6 +77,7 @@ def triplanar(
     stochastic: Stochastic | str | None = None,
     sampler: Sampler | None = None,
     device=None,
+    out=None,
 ) -> wp.array:
     """Triplanar mapping: three plane projections blended by ``pow(|n|, sharpness)``.
 
@@ -120,15 +121,19 @@ def triplanar(
         sampler: a :class:`~warptex.Sampler` for every projection; its ``"auto"`` filter is
             trilinear (the G-buffer's derivatives give every pixel a LOD).
         device: Warp device; must be the G-buffer's and the textures'.
+        out: a float32 ``wp.array`` of shape ``(H, W, C)`` on the device, to fill in place and
+            return (a loop's buffer, reused call after call); ``None``: a new array. It must not
+            overlap an input.
 
     Returns:
-        ``wp.array`` of float32, shape ``(H, W, C)``: 0 where the mask is 0 or the normal is zero
+        ``wp.array`` of float32 (``out`` when given), shape ``(H, W, C)``: 0 where the mask is 0 or the normal is zero
         or non-finite. Recorded on the active ``wp.Tape``: gradients reach the texels,
         ``tiling``, ``sharpness`` and ``offsets`` when those are arrays that require them.
     """
     setup = _Setup(
         "triplanar", kp.WEIGHTS_TRIPLANAR, gbuffer, texture, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix,
         textures_per_axis=textures_per_axis, textures_per_face=textures_per_face, layer=layer, space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device,
+        out=out,
     )  # fmt: skip
     return setup.launch(setup.channels)
 
@@ -147,7 +152,7 @@ def biplanar(gbuffer: GBuffer, texture: TextureArray | None = None, *, sharpness
             ``(1,)``, receives gradients); the weights' exponent is ``k / 8``.
         options: :func:`triplanar`'s other keywords, with its defaults: ``tiling``, ``offsets``,
             ``mirror_fix``, ``textures_per_axis``, ``textures_per_face``, ``layer``, ``space``,
-            ``object_to_world``, ``stochastic``, ``sampler``, ``device``.
+            ``object_to_world``, ``stochastic``, ``sampler``, ``device``, ``out``.
 
     Returns:
         As :func:`triplanar`.
@@ -176,6 +181,7 @@ def triplanar_normal(
     stochastic: Stochastic | str | None = None,
     sampler: Sampler | None = None,
     device=None,
+    out=None,
 ) -> wp.array:
     """Triplanar normal mapping (Golus): unit world-space normals perturbed by a tangent-space map.
 
@@ -208,7 +214,7 @@ def triplanar_normal(
     if biplanar is not None:
         warn_renamed("triplanar_normal(biplanar=...)", "warptex.biplanar_normal(...) for biplanar weights")
     options = dict(tiling=tiling, offsets=offsets, mirror_fix=mirror_fix, textures_per_axis=textures_per_axis, textures_per_face=textures_per_face, layer=layer,
-                   space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device)  # fmt: skip
+                   space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device, out=out)  # fmt: skip
     weights = kp.WEIGHTS_BIPLANAR if biplanar else kp.WEIGHTS_TRIPLANAR
     return _normal_mapping("triplanar_normal", weights, gbuffer, normal_map, sharpness=sharpness, blend=blend, strength=strength, flip_green=flip_green, **options)
 
@@ -225,7 +231,7 @@ def biplanar_normal(
         options: :func:`triplanar`'s other keywords, with its defaults: ``tiling``, ``offsets``,
             ``mirror_fix``, ``textures_per_axis``, ``textures_per_face``, ``layer``, ``space``,
             ``object_to_world``, ``stochastic`` (as for :func:`triplanar_normal`), ``sampler``,
-            ``device``.
+            ``device``, ``out``.
 
     Returns:
         As :func:`triplanar_normal`.
@@ -259,7 +265,7 @@ class _Setup:
     """The checked, packed inputs of the public functions, and their launch."""
 
     #: The keyword options every projection function takes (``biplanar``'s ``**options``).
-    OPTIONS = ("tiling", "offsets", "mirror_fix", "textures_per_axis", "textures_per_face", "layer", "space", "object_to_world", "stochastic", "sampler", "device")
+    OPTIONS = ("tiling", "offsets", "mirror_fix", "textures_per_axis", "textures_per_face", "layer", "space", "object_to_world", "stochastic", "sampler", "device", "out")
 
     @staticmethod
     def options(func: str, like: str, options: dict) -> dict:
@@ -271,7 +277,7 @@ class _Setup:
 
     def __init__(
         self, func, weights, gbuffer, texture, *, tiling=1.0, sharpness=4.0, offsets=None, mirror_fix=True, textures_per_axis=None, textures_per_face=None,
-        layer=0, space=Space.WORLD, object_to_world=None, stochastic=None, sampler=None, device=None,
+        layer=0, space=Space.WORLD, object_to_world=None, stochastic=None, sampler=None, device=None, out=None,
     ):  # fmt: skip
         device = _gbuffer_device(func, gbuffer, device)
         gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask")
@@ -290,7 +296,7 @@ class _Setup:
         for name, t in zip(kf.FACE_FIELDS, textures):  # into the struct's own faces (assigning a struct copies it field by field)
             setattr(self.args.faces, name, t.view)
         self.args.layer, self.args.proj, self.args.smp, self.args.stoch = layer, proj, sampler_args(func, sampler, has_lod=True), stoch
-        self.gbuffer, self.device, self.channels = gbuffer, device, textures[0].channels
+        self.func, self.gbuffer, self.device, self.channels, self.out = func, gbuffer, device, textures[0].channels, out
         self.stochastic = stoch.method != METHOD_NONE
         self.faces = any(textures[2 * a] is not textures[2 * a + 1] for a in range(3))  # a face of some axis differs from its opposite
         self.count = gbuffer.pixel_count
@@ -298,13 +304,15 @@ class _Setup:
         self.linear = stoch.histogram == 0  # the histogram blend is not linear in the texels
 
     def launch(self, channels: int, normal_map: kt.NormalMapArgs | None = None) -> wp.array:
-        """Run colour mapping (or, given ``normal_map``, normal mapping) into a new ``(H, W, channels)`` array."""
+        """Run colour mapping (or, given ``normal_map``, normal mapping) into a new ``(H, W, channels)``
+        array, or the caller's ``out``."""
+        into = out_array(self.func, self.out, (*self.gbuffer.resolution, channels), self.device)
         if normal_map is not None:
             self.args.normal_map = normal_map
         kernels = kt.triplanar_kernels(normal=normal_map is not None, stochastic=self.stochastic, faces=self.faces)
-        out = run(kernels, self.count, args=self.args, pixels=self.pixels, out=((self.count, channels), float), device=self.device, linear=self.linear, covered=self.pixels.mask,
-                  footprints=footprints(self.args.smp, self.args.stoch, lookups=3))
-        return out.reshape((*self.gbuffer.resolution, channels))
+        result = run(kernels, self.count, args=self.args, pixels=self.pixels, out=((self.count, channels), float) if into is None else into, device=self.device,
+                     linear=self.linear, covered=self.pixels.mask, footprints=footprints(self.args.smp, self.args.stoch, lookups=3))
+        return self.out if into is not None else result.reshape((*self.gbuffer.resolution, channels))
 
 
 def _textures(func, texture, per_axis, per_face, layer, device) -> list[TextureArray]:
