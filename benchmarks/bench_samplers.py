@@ -27,6 +27,13 @@ another would put that drift into their ratio.
     python benchmarks/bench_samplers.py                      # full run, writes bench_out/
     python benchmarks/bench_samplers.py --quick --json r.json
     python benchmarks/bench_samplers.py --device cuda:0      # on a GPU: torch and Dr.Jit on CUDA too
+    python benchmarks/bench_samplers.py --call-cost          # what a small call costs, against torch
+
+``--call-cost`` times what a call costs when it computes little: ``sample`` (bilinear, a 256² RGBA
+texture) on 1, 1,024 and 65,536 random UVs, into a new output and into ``out=``, forward and
+forward+backward (gradients to every texel), against torch ``grid_sample`` on the same data (a
+UV array or tensor kept between calls, as a loop keeps it). Each figure is the median of many
+calls, taken in interleaved rounds.
 
 On a CUDA device, warptex runs one launch per call (no CPU threads), the peers are torch on the same
 device and Dr.Jit's CUDA backend (NumPy is skipped), and every timed call ends by waiting for the GPU.
@@ -357,6 +364,102 @@ def plot_scaling(path: Path, result: dict, threads: int) -> None:
 # -- main ---------------------------------------------------------------------------------------------
 
 
+CALL_SAMPLES = (1, 1024, 65536)
+
+
+def call_cost(args, report) -> list[dict]:
+    """Median seconds per call of ``sample`` and torch ``grid_sample`` (module docstring)."""
+    import torch
+
+    device = wp.get_device(args.device)
+    torch_device = "cuda" if device.is_cuda else "cpu"
+    if device.is_cuda:
+        torch.cuda.set_device(device.ordinal)
+    rng = np.random.default_rng(0)
+    image = rng.random((256, 256, 4), dtype=np.float32)
+    tex = wt.Texture(image, mipmaps=False, requires_grad=True, device=device)
+    # grid_sample's y = -1 is the image's first (top) row; warptex's v = 0 its bottom one
+    timg = torch.tensor(image, device=torch_device).permute(2, 0, 1)[None].contiguous().requires_grad_(True)
+    sampler = wt.Sampler(filter="bilinear", address="clamp")
+
+    def sync() -> None:
+        if device.is_cuda:
+            wp.synchronize_device(device)
+            torch.cuda.synchronize()
+
+    rows = []
+    for n in CALL_SAMPLES:
+        uv_np = rng.random((n, 2), dtype=np.float32)
+        uv = wp.array(uv_np, dtype=wp.vec2, device=device)
+        out = wp.empty((n, 4), dtype=wp.float32, device=device, requires_grad=True)
+        grid = torch.tensor(uv_np * [2, -2] + [-1, 1], device=torch_device, dtype=torch.float32).reshape(1, 1, n, 2)
+        weights = wp.ones((n, 4), dtype=wp.float32, device=device)
+
+        def ours_backward(into=None):
+            tape = wp.Tape()
+            with tape:
+                result = wt.sample(tex, uv, sampler=sampler, out=into)
+            tape.backward(grads={result: weights})
+            tape.zero()
+
+        def torch_forward():
+            with torch.no_grad():
+                return torch.nn.functional.grid_sample(timg, grid, mode="bilinear", padding_mode="border", align_corners=False)
+
+        def torch_backward():
+            timg.grad = None
+            torch.nn.functional.grid_sample(timg, grid, mode="bilinear", padding_mode="border", align_corners=False).sum().backward()
+
+        with torch.no_grad():
+            ours, theirs = wt.sample(tex, uv, sampler=sampler).numpy(), torch_forward()[0, :, 0].T.cpu().numpy()
+        diff = float(np.abs(ours - theirs).max())
+        figures = {
+            ("forward", "warptex"): lambda: wt.sample(tex, uv, sampler=sampler),
+            ("forward", "warptex out="): lambda: wt.sample(tex, uv, sampler=sampler, out=out),
+            ("forward", "torch"): torch_forward,
+            ("forward+backward", "warptex"): ours_backward,
+            ("forward+backward", "warptex out="): lambda: ours_backward(out),
+            ("forward+backward", "torch"): torch_backward,
+        }
+        median = interleaved_median(figures, sync, rounds=args.repeats, calls=args.calls)
+        for (pass_, impl), seconds in median.items():
+            rows.append({"samples": n, "pass": pass_, "impl": impl, "seconds": seconds, "max_abs_diff": diff if impl == "torch" else 0.0})
+    report(format_call_cost(rows))
+    report(f"max |warptex - torch| over the outputs: {max(r['max_abs_diff'] for r in rows):.2e}")
+    return rows
+
+
+def interleaved_median(figures: dict, sync, rounds: int, calls: int) -> dict:
+    """Median seconds per call of each of ``figures`` (``{key: call}``): ``rounds`` rounds, each
+    giving every figure in turn a few untimed calls, then ``calls`` timed one by one."""
+    times = {key: [] for key in figures}
+    for _ in range(rounds):
+        for key, call in figures.items():
+            for _ in range(3):
+                call()
+            sync()
+            for _ in range(calls):
+                t = time.perf_counter()
+                call()
+                sync()
+                times[key].append(time.perf_counter() - t)
+    return {key: float(np.median(ts)) for key, ts in times.items()}
+
+
+def format_call_cost(rows: list[dict]) -> str:
+    """The call-cost table: microseconds per call, and each warptex figure over torch's."""
+    lines = ["call cost (median us per call; warptex / torch in brackets):", f"{'samples':>8} {'pass':<17} {'warptex':>16} {'warptex out=':>16} {'torch':>9}"]
+    for n in CALL_SAMPLES:
+        for pass_ in ("forward", "forward+backward"):
+            got = {r["impl"]: r["seconds"] for r in rows if r["samples"] == n and r["pass"] == pass_}
+            if not got:
+                continue
+            torch_s = got["torch"]
+            cells = [f"{got[i] * 1e6:8.1f} ({got[i] / torch_s:5.2f}x)" for i in ("warptex", "warptex out=")]
+            lines.append(f"{n:>8} {pass_:<17} {cells[0]:>16} {cells[1]:>16} {torch_s * 1e6:9.1f}")
+    return "\n".join(lines)
+
+
 def run(args) -> dict:
     wp.config.quiet = True
     wp.init()
@@ -365,6 +468,15 @@ def run(args) -> dict:
     def report(text):
         print(text, flush=True)
         lines.append(text)
+
+    if args.call_cost:
+        try:
+            import torch  # noqa: F401
+        except ImportError:
+            report("call cost: skipped (torch is not installed: pip install 'warptex[torch]')")
+            return {"call_cost": [], "skipped_peers": {"torch": "not installed"}}
+        return {"machine": {"platform": platform.platform(), "cpus": wt.get_num_threads(), "device": wp.get_device(args.device).name, "warp": wp.config.version},
+                "call_cost": call_cost(args, report)}  # fmt: skip
 
     backends, skipped = {}, {}
     for backend in args.peers:
@@ -406,6 +518,8 @@ def parse(argv=None):
     p.add_argument("--techniques", nargs="+", default=list(TECHNIQUES), choices=TECHNIQUES)
     p.add_argument("--peers", nargs="*", default=list(peers.BACKENDS), choices=peers.BACKENDS)
     p.add_argument("--no-scaling", action="store_true", help="skip the pixel-count and texture-size sweeps")
+    p.add_argument("--call-cost", action="store_true", help="only the cost of small calls: sample() on 1, 1,024 and 65,536 UVs against torch")
+    p.add_argument("--calls", type=int, default=None, help="--call-cost: timed calls per figure and round (default 200, quick 20)")
     args = p.parse_args(argv)
     wp.config.quiet = True
     wp.init()
@@ -419,6 +533,7 @@ def parse(argv=None):
     doubling = [] if args.quick else [2**k for k in range(1, args.threads.bit_length()) if 2**k < args.threads]
     args.thread_counts = sorted({1, args.threads, *(args.thread_counts if args.thread_counts is not None else doubling)})
     args.repeats = args.repeats or (1 if args.quick else 5)
+    args.calls = args.calls or (20 if args.quick else 200)
     args.sizes = {"sphere": 256, "terrain": 128, "random": 1 << 16} if args.quick else {"sphere": 1024, "terrain": 512, "random": 1 << 20}
     args.texture_size = 256 if args.quick else 1024
     args.scaling_pixels = [64, 128] if args.quick else [256, 512, 1024, 2048]
