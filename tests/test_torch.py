@@ -425,3 +425,18 @@ def test_a_camera_relative_supersampled_gbuffer_keeps_its_origin_and_samples(rng
     np.testing.assert_array_equal(got, want)
     moved = wt.GBuffer(**{k: getattr(g, k) for k in FIELDS}, uv_sets=g.uv_sets, samples=4)  # the same arrays at the world origin
     assert np.abs(wt.triplanar(moved, wt.Texture(texture.numpy()), tiling=0.5).numpy() - want).max() > 0.05  # the origin matters here
+
+
+def test_the_torch_functions_take_no_out():
+    """The native functions' ``out=`` fills a Warp array in place; a torch function returns a new
+    tensor (autograd needs one), so it has no ``out`` and refuses one by any route."""
+    import inspect
+
+    texture, uv = torch.rand(8, 8, 3), torch.rand(4, 2)
+    for function in (wtt.sample, wtt.stochastic, wtt.triplanar, wtt.biplanar, wtt.triplanar_normal, wtt.biplanar_normal, wtt.splat, wtt.splat_atlas):
+        assert "out" not in inspect.signature(function).parameters, function.__name__
+    with pytest.raises(TypeError, match="unexpected keyword argument 'out'"):
+        wtt.sample(texture, uv, out=torch.empty(4, 3))
+    g = wt.GBuffer.empty((2, 3))
+    with pytest.raises(TypeError, match=r"biplanar\(\) got an unexpected keyword argument 'out': the torch functions return a new tensor"):
+        wtt.biplanar(g, texture, out=torch.empty(2, 3, 3))

@@ -84,7 +84,8 @@ __all__ = [
 def bridge(native, *positional: str, rows: str = "gbuffer", channels: int | None = None, doc: str = ""):
     """Register ``native`` (a warptex technique) with the bridge and return its torch function.
 
-    The function takes ``native``'s arguments (``device`` aside: the tensors' device is used), with
+    The function takes ``native``'s arguments (``device`` and ``out`` aside: the tensors' device is
+    used, and the result is a new tensor), with
     tensors where ``native`` takes arrays, and returns a tensor ``(..., C)``: per sample of ``uv``
     (``rows="uv"``) or per G-buffer pixel (``"gbuffer"``), with ``channels`` channels or (``None``)
     those of its first texture. ``positional`` names ``native``'s positional arguments in order.
@@ -92,7 +93,7 @@ def bridge(native, *positional: str, rows: str = "gbuffer", channels: int | None
     """
     name = native.__name__
     TECHNIQUES[name] = Technique(native, positional, rows, channels)
-    signature = inspect.Signature([p for p in inspect.signature(native).parameters.values() if p.name != "device"], return_annotation=torch.Tensor)
+    signature = inspect.Signature([p for p in inspect.signature(native).parameters.values() if p.name not in ("device", "out")], return_annotation=torch.Tensor)
 
     options = [p.name for p in signature.parameters.values() if p.kind is p.VAR_KEYWORD]
 
@@ -101,6 +102,8 @@ def bridge(native, *positional: str, rows: str = "gbuffer", channels: int | None
         arguments = dict(signature.bind(*args, **kwargs).arguments)
         for group in options:  # **options are passed on as keywords of their own
             arguments.update(arguments.pop(group, {}))
+        if "out" in arguments:  # through **options: the native out= fills a Warp array
+            raise TypeError(f"{name}() got an unexpected keyword argument 'out': the torch functions return a new tensor")
         return _op.call(name, arguments)
 
     function.__signature__ = signature
