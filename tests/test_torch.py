@@ -440,3 +440,32 @@ def test_the_torch_functions_take_no_out():
     g = wt.GBuffer.empty((2, 3))
     with pytest.raises(TypeError, match=r"biplanar\(\) got an unexpected keyword argument 'out': the torch functions return a new tensor"):
         wtt.biplanar(g, texture, out=torch.empty(2, 3, 3))
+
+
+@pytest.mark.parametrize("sampler, mips", [(None, False), (wt.Sampler(filter="nearest"), False), (wt.Sampler(lod_bias=0.4), False),
+                                           (wt.Sampler(lod_bias=1.0), True), (wt.Sampler(min_lod=2.0), True)])
+def test_sample_without_a_lod_builds_mips_only_where_its_sampler_reads_them(monkeypatch, sampler, mips):
+    """The op builds a texture's mips (and runs their backward) only where the call may read past
+    level 0: a small call's time was mostly that. A sampler whose bias or clamp moves LOD 0 to a
+    coarser level still reads it, as natively."""
+    from warptex import _torch_op
+
+    built, around = [], _torch_op._texture_around
+    monkeypatch.setattr(_torch_op, "_texture_around", lambda t, *, mipmaps, **kw: (built.append(mipmaps), around(t, mipmaps=mipmaps, **kw))[1])
+    rng = np.random.default_rng(5)
+    image = torch.tensor(rng.random((16, 16, 3), dtype=np.float32), requires_grad=True)
+    uv = torch.tensor(rng.random((50, 2), dtype=np.float32) * 2)
+    out = wtt.sample(image, uv, sampler=sampler)
+    assert built == [mips]
+    tex = wt.Texture(image.detach().numpy(), requires_grad=True)
+    tape = wp.Tape()
+    with tape:
+        native = wt.sample(tex, uv.numpy(), sampler=sampler)
+    np.testing.assert_array_equal(out.detach().numpy(), native.numpy())
+    assert out.detach().numpy().std() > 0.01  # not a constant (level 2 is a 4 x 4 average)
+    if not mips:  # level 0 alone is read: its gradient is the native one (with mips, the other tests' path)
+        weights = rng.random((50, 3), dtype=np.float32)
+        (out * torch.tensor(weights)).sum().backward()
+        tape.backward(grads={native: wp.array(weights, dtype=float)})
+        np.testing.assert_array_equal(image.grad.numpy(), tex.texels.grad.numpy()[..., :3])
+        assert np.abs(image.grad.numpy()).max() > 0

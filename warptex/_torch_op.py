@@ -20,6 +20,7 @@ import numpy as np
 import torch
 import warp as wp
 
+from warptex._pack import mip_levels, sampler_args
 from warptex._torch_spec import DIFFERENTIABLE, HISTOGRAM, INTS, TECHNIQUES, TEXTURES, VEC2, op_arguments, out_shape, parse
 from warptex.gbuffer import FIELDS, UV_FIELDS, GBuffer
 from warptex.histogram import Histogram
@@ -75,16 +76,17 @@ class _State:
 def _technique(spec: str, tensors: list[torch.Tensor]) -> list[torch.Tensor]:
     s = parse(spec)
     device = _warp_device(tensors[0].device)
+    mips = _reads_mips(s)
     with _torch_stream(device):
         grads: dict[int, Any] = {}
         want = set(s["grad"])
         tape = wp.Tape() if want else None
         if tape is not None:
             with tape:  # textures are built on the tape too: their mips' gradients reach level 0
-                args = _decode(s["args"], tensors, want, grads, device)
+                args = _decode(s["args"], tensors, want, grads, device, mips)
                 out = _run(s["technique"], args)
         else:
-            args = _decode(s["args"], tensors, want, grads, device)
+            args = _decode(s["args"], tensors, want, grads, device, mips)
             out = _run(s["technique"], args)
         result = wp.to_torch(out, requires_grad=False)
     if tape is None:
@@ -170,32 +172,51 @@ def _run(name: str, args: dict) -> wp.array:
     return technique.native(*[args.pop(k) for k in technique.positional], **args)
 
 
-def _decode(value, tensors: list[torch.Tensor], want: set, grads: dict, device):
-    """The native arguments of a spec: tensors as Warp views (or textures built around them), with
-    gradient buffers where ``want`` asks, whose readers go into ``grads``."""
+def _reads_mips(s: dict) -> bool:
+    """Whether the call may read a texture's levels past 0, so that its textures need their mips
+    (built in the op, with their backward: most of a small call's time). ``sample`` and
+    ``stochastic`` without a LOD (no ``lod``, ``uv_dx`` or ``uv_dy``) read the level that their
+    sampler's bias and clamps make of LOD 0 (``warptex._pack.mip_levels``): level 0 alone where
+    that is 0, as with the default sampler."""
+    args = s["args"]
+    if s["technique"] not in ("sample", "stochastic") or any(args.get(k) is not None for k in ("lod", "uv_dx", "uv_dy")):
+        return True
+    sampler = args.get("sampler")
+    if sampler is None:
+        return False
+    try:
+        smp = sampler_args(s["technique"], Sampler(**sampler["$sampler"]), has_lod=False)
+    except (TypeError, ValueError, KeyError):  # the native call says what is wrong
+        return True
+    return mip_levels(0.0, smp, num_levels=1 << 16) != (0, 0.0)
+
+
+def _decode(value, tensors: list[torch.Tensor], want: set, grads: dict, device, mips: bool = True):
+    """The native arguments of a spec: tensors as Warp views (or textures built around them, with
+    their mips where ``mips``), with gradient buffers where ``want`` asks, whose readers go into ``grads``."""
     if isinstance(value, list):
-        return [_decode(v, tensors, want, grads, device) for v in value]
+        return [_decode(v, tensors, want, grads, device, mips) for v in value]
     if not isinstance(value, dict):
         return value
     if "$t" in value:
-        return _decode_tensor(value["role"], value["$t"], tensors, want, grads, device)
+        return _decode_tensor(value["role"], value["$t"], tensors, want, grads, device, mips)
     if "$gbuffer" in value:
         return _decode_gbuffer(value["$gbuffer"], tensors)
     if "$sampler" in value:
-        return Sampler(**_decode(value["$sampler"], tensors, want, grads, device))
+        return Sampler(**_decode(value["$sampler"], tensors, want, grads, device, mips))
     if "$stochastic" in value:
-        return Stochastic(**_decode(value["$stochastic"], tensors, want, grads, device))
+        return Stochastic(**_decode(value["$stochastic"], tensors, want, grads, device, mips))
     if "$histogram" in value:
-        return Histogram(**_decode(value["$histogram"], tensors, want, grads, device))
-    return {k: _decode(v, tensors, want, grads, device) for k, v in value.items()}
+        return Histogram(**_decode(value["$histogram"], tensors, want, grads, device, mips))
+    return {k: _decode(v, tensors, want, grads, device, mips) for k, v in value.items()}
 
 
-def _decode_tensor(role: str, i: int, tensors, want, grads, device):
+def _decode_tensor(role: str, i: int, tensors, want, grads, device, mips: bool = True):
     # Every Warp view says requires_grad=False or names its gradient buffer: wp.from_torch would
     # otherwise give a tensor that requires gradients a .grad of its own (the user's, in eager mode).
     t = tensors[i]
     if role in TEXTURES or role == "histogram":
-        return _texture_around(t, mipmaps=role != "splat_maps", index=i if i in want else None, grads=grads, device=device)
+        return _texture_around(t, mipmaps=mips and role != "splat_maps", index=i if i in want else None, grads=grads, device=device)
     if role in HISTOGRAM:
         return wp.from_torch(t, dtype=HISTOGRAM[role], requires_grad=False)
     if role not in DIFFERENTIABLE and role not in INTS:
