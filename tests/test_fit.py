@@ -517,3 +517,38 @@ def test_cli_fits_a_users_target_and_gbuffer(tmp_path, capsys):
     assert summary["mode"] == "user" and summary["map_size"] == [17, 17] and "splat_mae_covered" not in summary
     assert io.read_image(out / "splat_fitted.exr").shape == (17, 17, 4)
     assert not (out / "splat_true.png").exists()
+
+
+@pytest.mark.parametrize("count", [2, 3, 5])
+def test_the_synthetic_fit_takes_any_number_of_layers(tmp_path, count):
+    """``warptex fit --layers`` with other than the terrain's four layers fitted, then failed at
+    the end (fewer: its score compared L weights with four) or at once with an error about splat
+    maps the user never gave (more). The truth gives the terrain's rules to the layers in order:
+    the last takes those left out; layers past four weigh nothing."""
+    paths = []
+    for k, layer in enumerate(smooth_layers(count, seed=3)):
+        paths.append(str(tmp_path / f"layer{k}.png"))
+        io.write_png(paths[-1], layer)
+    out = tmp_path / "fit"
+    assert cli_main(["fit", "--layers", *paths, "--iters", "6", "--resolution", "24x32", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["final_psnr_db"] > summary["initial_psnr_db"]
+    assert 0.0 <= summary["splat_mae_covered"] < summary["splat_mae_uniform_start"]
+
+
+def test_the_terrain_rules_become_one_weight_per_layer():
+    from warptex.apps.fit_demo import layer_weights, packed_maps
+
+    rules = np.random.default_rng(2).dirichlet(np.ones(4), size=(5, 6)).astype(np.float32)
+    three = layer_weights(rules, 3)
+    np.testing.assert_array_equal(three[..., :2], rules[..., :2])
+    np.testing.assert_allclose(three[..., 2], rules[..., 2] + rules[..., 3])
+    six = layer_weights(rules, 6)
+    np.testing.assert_array_equal(six[..., :4], rules)
+    assert not six[..., 4:].any()
+    maps = packed_maps(six)
+    assert maps.shape == (2, 5, 6, 4)
+    np.testing.assert_array_equal(maps[0], rules)
+    np.testing.assert_array_equal(maps[1], 0)
+    np.testing.assert_array_equal(packed_maps(three)[0, ..., :3], three)
+    assert not packed_maps(three)[0, ..., 3].any()

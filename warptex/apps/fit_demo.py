@@ -216,10 +216,31 @@ def synthetic_problem(func: str, *, resolution, views: int, seed: int, tiling_er
     mesh = terrain(resolution=TERRAIN_GRID, seed=seed)
     gbuffers = [rasterize(mesh, cam, device=device) for cam in _wanted(terrain_cameras(resolution, views), rank, world_size)]
     layer_tex, names = _layers(func, layers, options, seed, device)
-    true_maps = terrain_splat_maps(mesh, TERRAIN_GRID)
-    truth = TextureArray(true_maps[None], mipmaps=False, device=device)
+    true_maps = layer_weights(terrain_splat_maps(mesh, TERRAIN_GRID), layer_tex.num_layers)
+    truth = TextureArray(packed_maps(true_maps), mipmaps=False, device=device)
     targets = [splat(g, layer_tex, truth, tiling=TRUE_TILING, device=device, **options).numpy()[..., :3] for g in gbuffers]
     return Problem([FitView(g, t) for g, t in zip(gbuffers, targets)], layer_tex, names, options, TRUE_TILING * (1.0 + float(tiling_error)), true_maps, TRUE_TILING)
+
+
+def layer_weights(rules: np.ndarray, num_layers: int) -> np.ndarray:
+    """The terrain's four weights (grass, gravel, rock, snow; ``[H, W, 4]``) for ``num_layers``
+    layers in that order, ``[H, W, L]``, still summing to 1: with fewer layers, the last one also
+    takes the weights of those left out (three layers: rock where there would be snow); past four,
+    the extra layers weigh nothing (the fit may still use them)."""
+    if num_layers <= rules.shape[-1]:
+        weights = rules[..., :num_layers].copy()
+        weights[..., -1] += rules[..., num_layers:].sum(axis=-1)
+        return weights
+    return np.concatenate([rules, np.zeros((*rules.shape[:-1], num_layers - rules.shape[-1]), rules.dtype)], axis=-1)
+
+
+def packed_maps(weights: np.ndarray, channels: int = 4) -> np.ndarray:
+    """Per-layer weights ``[H, W, L]`` as ``ceil(L / channels)`` splat maps ``[M, H, W, channels]``
+    (layer ``m·channels + c`` in map ``m``'s channel ``c``; the last map's unused channels 0)."""
+    h, w, num_layers = weights.shape
+    maps = np.zeros((-(-num_layers // channels) * channels, h, w), np.float32)
+    maps[:num_layers] = np.moveaxis(weights, -1, 0)
+    return np.ascontiguousarray(maps.reshape(-1, channels, h, w).transpose(0, 2, 3, 1))
 
 
 def user_problem(func: str, targets, gbuffers, *, layers, tiling, options: dict, rank: int = 0, world_size: int = 1, device) -> Problem:
