@@ -179,6 +179,35 @@ def test_a_z_up_model_is_framed_upright():
     assert camera.forward[1] > 0.75 and camera.up[2] > 0.9, (camera.forward, camera.up)
 
 
+def test_a_gltf_is_framed_from_above_its_underside_notwithstanding(tmp_path):
+    """glTF is +Y up by its specification: a car whose underside (wheels, axles) shows the most
+    triangles was framed from underneath (issue 50 item 4). ``warptex render`` now frames a
+    .glb from one of the four sides around +Y, from above; a format that leaves up to the
+    exporter keeps the six-sided guess."""
+    from warptex.gbuffer import load_mesh
+    from warptex.mesh import up_axis
+
+    body = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
+    underside = trimesh.creation.icosphere(subdivisions=5)  # dense detail under the body
+    underside.vertices = underside.vertices * [0.9, 0.15, 0.4] + [0.0, -0.6, 0.0]
+    car = trimesh.util.concatenate([body, underside])
+    assert default_camera(car, (64, 64)).forward[1] > 0.75  # the six-sided guess: from underneath
+    path = tmp_path / "car.glb"
+    car.export(path)
+    mesh = load_mesh(path)
+    assert up_axis(path) == (0.0, 1.0, 0.0) and up_axis(tmp_path / "car.obj") is None
+    camera = default_camera(mesh, (64, 64), up=up_axis(path))
+    assert camera.forward[1] < -0.2 and camera.up[1] > 0.9, (camera.forward, camera.up)
+    run_render(tmp_path / "out", mesh_path=path, resolution=(24, 32), progress=False)
+    import warptex as wt
+
+    g = wt.load_gbuffer(tmp_path / "out" / "gbuffer.exr")  # what the render saw: the body's top, lit from above
+    seen = g.normal.numpy()[g.mask.numpy() > 0]
+    assert (seen[:, 1] > 0.5).sum() > 2 * (seen[:, 1] < -0.5).sum(), seen[:, 1]  # more top than underside
+    with pytest.raises(ValueError, match=r"framing_camera\(\): up must be along an axis"):
+        default_camera(mesh, (64, 64), up=(1.0, 1.0, 0.0))
+
+
 # -- the preview's look (issue 34 item 9) ----------------------------------------------------------
 
 

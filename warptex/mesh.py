@@ -42,6 +42,12 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
     return loaded
 
 
+def up_axis(path: str | os.PathLike) -> tuple[float, float, float] | None:
+    """The up axis a mesh file's format specifies: +Y for glTF (``.glb``, ``.gltf``); ``None`` for
+    formats that leave it to the exporter (OBJ, PLY, STL...)."""
+    return (0.0, 1.0, 0.0) if os.path.splitext(os.fspath(path))[1].lower() in (".glb", ".gltf") else None
+
+
 # Formats whose files start with a signature, by extension: a file that lacks it is not that format
 # (trimesh would report a failure deep inside its parser instead).
 _SIGNATURES = {".glb": b"glTF"}

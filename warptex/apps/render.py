@@ -32,6 +32,7 @@ from warptex.kernels import triplanar as kt
 from warptex.camera import checked_resolution, look_at
 from warptex.exr_writer import ExrWriter
 from warptex.gbuffer import GBuffer, load_mesh
+from warptex.mesh import up_axis
 from warptex.gbuffer_io import GBufferWriter
 from warptex.png import PngWriter
 from warptex.resolve import resolve
@@ -202,7 +203,7 @@ def run_render(
     preload(_kernels(is_terrain, device), device)  # a cold start compiles them side by side
     bar.set_postfix_str("mesh")
     mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
-    framing = terrain_camera(resolution, fov_y) if mesh_path is None else default_camera(mesh, resolution, fov_y)
+    framing = terrain_camera(resolution, fov_y) if mesh_path is None else default_camera(mesh, resolution, fov_y, up=up_axis(mesh_path))
     if eye is None and target is None and up is None:
         camera = framing
     else:

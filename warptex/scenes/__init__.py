@@ -20,19 +20,33 @@ from warptex.raster import rasterize
 TERRAIN_GRID = (129, 129)
 
 
-def framing_camera(mesh, resolution, fov_y: float = 45.0) -> Camera:
+def framing_camera(mesh, resolution, fov_y: float = 45.0, *, up=None) -> Camera:
     """A three-quarter view of the mesh's front, a little from above and the right, far enough that
     its bounding sphere fits the view: ``warptex render``'s default camera.
 
     Files do not say where a model's front is, and not all are +Y up as glTF's are (Blender's
     axes, Z up and facing -Y, are common): the front is taken to be the side, of the six along
     the axes, that shows the most triangles (a face, a head's features, a building's facade rather
-    than its roof), found by rasterising the six views small, in one launch. Seen from ±Y, the
+    than its roof), found by rasterising the views small, in one launch. Seen from ±Y, the
     model is taken to be Z-up (that view is then its front, with +Z up).
+
+    ``up``: the model's up axis where the file says it (glTF: +Y, by its specification): the
+    front is then one of the four sides around it, and the view comes from above, never from
+    underneath (a car's wheels show more triangles than its roof).
     """
     centre, radius = mesh.bounds.mean(axis=0), max(float(np.linalg.norm(mesh.extents)) / 2, 1e-9)
     axes = np.concatenate([np.eye(3), -np.eye(3)])[[2, 0, 5, 3, 1, 4]]  # +Z first: glTF's front wins ties
-    ups = [(0.0, 0.0, 1.0) if abs(a[1]) > 0.5 else (0.0, 1.0, 0.0) for a in axes]
+    if up is None:
+        ups = [(0.0, 0.0, 1.0) if abs(a[1]) > 0.5 else (0.0, 1.0, 0.0) for a in axes]
+    else:
+        up = np.asarray(up, np.float64)
+        if up.shape != (3,) or not np.isfinite(up).all() or np.linalg.norm(up) == 0:
+            raise ValueError(f"framing_camera(): up must be 3 finite numbers, not all 0, got {up.tolist()}")
+        up = up / np.linalg.norm(up)
+        axes = np.array([a for a in axes if abs(float(a @ up)) < 0.5])  # the sides around an axis-aligned up
+        if len(axes) != 4:
+            raise ValueError(f"framing_camera(): up must be along an axis (±X, ±Y or ±Z), got {up.tolist()}")
+        ups = [tuple(up)] * len(axes)
     views = [orthographic(centre + a * 2 * radius, centre, up=u, height=2 * radius, resolution=(48, 48)) for a, u in zip(axes, ups)]
     triangles = rasterize(mesh, views).triangle.numpy()
     shown = [len(np.unique(t[t >= 0])) for t in triangles]
