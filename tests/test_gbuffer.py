@@ -312,6 +312,26 @@ def test_gltf_scenes_are_flattened_with_their_node_transforms(tmp_path):
     np.testing.assert_allclose(mesh.bounds, [[-10.5, -0.5, -0.5], [10.5, 0.5, 0.5]], atol=1e-6)
 
 
+def test_an_stl_mesh_is_shaded_smooth_as_other_formats_are(tmp_path):
+    """STL stores every triangle's corners apart: loaded as they were, its vertex normals were the
+    faces' own and a sphere rendered faceted (issue 50 item 12). The corners are now joined, and
+    the G-buffer's normals follow the sphere as an OBJ's do."""
+    ball = trimesh.creation.icosphere(subdivisions=2)
+    for ext in ("stl", "obj"):
+        ball.export(tmp_path / f"ball.{ext}")
+    meshes = {ext: wt.load_mesh(tmp_path / f"ball.{ext}") for ext in ("stl", "obj")}
+    assert len(meshes["stl"].vertices) == len(meshes["obj"].vertices) == len(ball.vertices)
+    camera = wt.look_at((0.0, 0.0, 4.0), (0.0, 0.0, 0.0), resolution=(48, 48))
+    errors = {}
+    for ext, mesh in meshes.items():
+        g = wt.rasterize(mesh, camera)
+        covered = g.mask.numpy() > 0
+        n, p = g.normal.numpy()[covered], g.position.numpy()[covered]
+        errors[ext] = np.degrees(np.arccos(np.clip(np.sum(n * p / np.linalg.norm(p, axis=1, keepdims=True), axis=1), -1, 1)))
+    assert np.median(errors["stl"]) < 3.0 and np.percentile(errors["stl"], 99) < 8.0, np.percentile(errors["stl"], [50, 99])
+    np.testing.assert_allclose(np.median(errors["stl"]), np.median(errors["obj"]), atol=0.5)
+
+
 def test_flipped_triangles_shade_like_their_neighbours(tmp_path):
     """A sphere with every fifth triangle wound the other way (as scanned meshes such as the
     bunny's ears have): the shading normal of every pixel faces its triangle's front, so the

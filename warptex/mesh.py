@@ -13,7 +13,8 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
     """Load a mesh file (OBJ, PLY, STL, GLB/GLTF, ...) as one ``trimesh.Trimesh``.
 
     Scenes are flattened with their node transforms; materials and UVs are kept where trimesh can
-    merge them. The mesh is checked as :func:`rasterize` checks it (triangles, finite vertices and
+    merge them. An STL file's triangles, stored apart, are joined at their shared corners, so
+    that it is shaded smooth as other formats are. The mesh is checked as :func:`rasterize` checks it (triangles, finite vertices and
     UVs, face indices in range), so a bad file is reported as such, naming it, before anything
     is rendered.
 
@@ -38,6 +39,8 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
         raise ValueError(f"load_mesh(): {path!r} holds no triangle mesh (got {type(loaded).__name__})")
     if len(loaded.faces) == 0:
         _no_faces(path)
+    if os.path.splitext(path)[1].lower() == ".stl":  # STL stores each triangle's corners apart:
+        loaded.merge_vertices()  # shared, they get the smooth vertex normals other formats get
     checked_geometry(f"load_mesh(): {path!r}:", loaded)
     return loaded
 
