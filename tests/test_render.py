@@ -150,6 +150,30 @@ def test_an_obj_materials_map_kd_is_its_texture(tmp_path):
     np.testing.assert_allclose(albedo[covered].mean(axis=0), [0.8, 0.1, 0.05], atol=0.02)
 
 
+@pytest.mark.parametrize("missing", ["quad.mtl", "kd.png"])
+def test_an_obj_whose_material_is_missing_says_so_and_is_not_flat_grey(tmp_path, capsys, missing):
+    """trimesh gives an OBJ whose MTL file (or its map_Kd image) is missing a placeholder: a flat
+    grey image, which rendered as the mesh's own texture with no word (issue 50 item 5). The
+    mesh is now loaded without it, with a warning naming the file, and rendered as a mesh without
+    a texture (the default noise, through its UVs)."""
+    path = _quad_with_material(tmp_path, (0.8, 0.1, 0.05))
+    (tmp_path / missing).unlink()
+    from warptex.gbuffer import load_mesh
+
+    with pytest.warns(UserWarning, match=rf"load_mesh\(\): '.*quad.obj' names .*'{missing}'.*, not found: it is loaded without its material"):
+        mesh = load_mesh(path)
+    assert mesh.visual.uv is not None and len(mesh.visual.uv) == 4  # the UVs stay
+    out = tmp_path / "out"
+    assert main(["render", "--mesh", str(path), "--resolution", "24x32", "--out", str(out)]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert [line for line in err if "warning" in line] == [f"warptex: warning: load_mesh(): {str(path)!r} names " + (
+        "its material file 'quad.mtl'" if missing == "quad.mtl" else "the image 'kd.png' of 'quad.mtl'") + ", not found: it is loaded without its material"]
+    albedo = io.read_image(out / "albedo.png")
+    covered = io.read_image(out / "render.exr", channels=["A"])[..., 0] == 1  # wholly covered: no sky blended in
+    assert covered.mean() > 0.1
+    assert np.ptp(albedo[covered].mean(axis=0)) > 0.05, "the default texture's colour, not the placeholder's grey"
+
+
 def test_the_default_view_is_from_the_front():
     """glTF's convention (and most exporters'): a model faces +Z. The default three-quarter view
     looks from the front, the right and above (the glTF Duck, facing +X+Z, shows its face)."""

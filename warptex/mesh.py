@@ -4,6 +4,7 @@ normals and tangents, as :func:`warptex.raster.rasterize` uses them."""
 from __future__ import annotations
 
 import os
+import warnings
 
 import numpy as np
 import trimesh
@@ -39,10 +40,41 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
         raise ValueError(f"load_mesh(): {path!r} holds no triangle mesh (got {type(loaded).__name__})")
     if len(loaded.faces) == 0:
         _no_faces(path)
+    if os.path.splitext(path)[1].lower() == ".obj":
+        _drop_missing_materials(path, loaded)
     if os.path.splitext(path)[1].lower() == ".stl":  # STL stores each triangle's corners apart:
         loaded.merge_vertices()  # shared, they get the smooth vertex normals other formats get
     checked_geometry(f"load_mesh(): {path!r}:", loaded)
     return loaded
+
+
+def _drop_missing_materials(path: str, mesh: trimesh.Trimesh) -> None:
+    """An OBJ whose material file (``mtllib``), or its colour image (``map_Kd``), is not there:
+    trimesh gives it a placeholder material, a flat grey image, which would pass for the mesh's
+    own texture. Warn, naming the missing file, and keep the UVs without a material."""
+    folder = os.path.dirname(path)
+    missing = []
+    for library in (name for names in _directives(path, "mtllib") for name in names):
+        library_path = os.path.join(folder, library)
+        if not os.path.isfile(library_path):
+            missing.append(f"its material file {library!r}")
+            continue
+        missing += [f"the image {image!r} of {library!r}" for *_, image in _directives(library_path, "map_Kd") if not os.path.isfile(os.path.join(folder, image))]
+    if missing and isinstance(mesh.visual, trimesh.visual.TextureVisuals):
+        warnings.warn(f"load_mesh(): {path!r} names {', '.join(missing)}, not found: it is loaded without its material", UserWarning, stacklevel=3)
+        mesh.visual = trimesh.visual.TextureVisuals(uv=mesh.visual.uv, material=trimesh.visual.material.SimpleMaterial(image=None))
+
+
+def _directives(path: str, keyword: str) -> list[list[str]]:
+    """The arguments of each of an OBJ or MTL file's ``keyword`` lines (``mtllib`` names one file
+    or more; ``map_Kd`` options such as ``-bm 1`` come before its file)."""
+    found = []
+    with open(path, encoding="utf-8", errors="replace") as f:
+        for line in f:
+            words = line.split()
+            if len(words) > 1 and words[0] == keyword:
+                found.append(words[1:])
+    return found
 
 
 def up_axis(path: str | os.PathLike) -> tuple[float, float, float] | None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
 
 from warptex.apps.arguments import add_fit_arguments, check_fit_options, count, fit_arguments, memory_size, number, resolution, square, vector
 
@@ -161,14 +162,22 @@ def main(argv: list[str] | None = None) -> int:
 
             from warptex import _output
         written = _output.commits()
-        for path in _run(args):
-            print(f"wrote {path}")
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            for path in _run(args):
+                print(f"wrote {path}")
     except BaseException as err:
         status = _reported(err, written)
         if status is None:
             raise
         return status
     return 0
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning (a mesh's missing material...) as one line of the command's own, not Python's
+    ``file:line: UserWarning:`` with the source line."""
+    print(f"warptex: warning: {message}", file=sys.stderr)
 
 
 def _reported(err: BaseException, written) -> int | None:
