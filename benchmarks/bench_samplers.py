@@ -473,7 +473,7 @@ def run(args) -> dict:
         try:
             import torch  # noqa: F401
         except ImportError:
-            report("call cost: skipped (torch is not installed: pip install 'warptex[torch]')")
+            report("call cost: skipped (torch is not installed: pip install torch)")
             return {"call_cost": [], "skipped_peers": {"torch": "not installed"}}
         return {"machine": {"platform": platform.platform(), "cpus": wt.get_num_threads(), "device": wp.get_device(args.device).name, "warp": wp.config.version},
                 "call_cost": call_cost(args, report)}  # fmt: skip

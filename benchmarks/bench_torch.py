@@ -25,7 +25,7 @@ import warp as wp
 try:
     import torch
 except ImportError:  # pragma: no cover - the message is the point
-    sys.exit("bench_torch.py needs PyTorch: pip install 'warptex[torch]'")
+    sys.exit("bench_torch.py needs PyTorch: pip install torch")
 
 import warptex as wt
 import warptex.torch as wtt

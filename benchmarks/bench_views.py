@@ -123,7 +123,7 @@ def main(argv=None) -> int:
 
             import warptex.torch as wtt
         except ImportError:
-            print("torch rows skipped: PyTorch is not installed (pip install 'warptex[torch]')")
+            print("torch rows skipped: PyTorch is not installed (pip install torch)")
         else:
             t_layers = torch.tensor(layers.numpy())
             t_batch, t_targets = [wtt.gbuffer_tensors(batch)], [torch.tensor(targets)]

@@ -374,7 +374,7 @@ def test_baked_normal_map_gradients_reach_the_normal_map():
 
 
 def test_warptex_torch_techniques_run_on_the_texture_space_gbuffer():
-    torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
+    torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
     import warptex.torch as wtt
 
     rng = np.random.default_rng(5)

@@ -46,7 +46,7 @@ def test_quick_benchmark_writes_json_and_plot(tmp_path):
 
 @pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/ is not part of this checkout")
 def test_call_cost_rows_time_small_calls_against_torch(tmp_path):
-    pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
+    pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
     result = subprocess.run([sys.executable, str(BENCH), "--call-cost", "--quick", "--calls", "2", "--json", str(tmp_path / "c.json")], capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     rows = json.loads((tmp_path / "c.json").read_text())["call_cost"]
@@ -102,7 +102,7 @@ BENCH_VIEWS = BENCH.parent / "bench_views.py"
 
 @pytest.mark.skipif(not BENCH_TORCH.exists(), reason="benchmarks/ is not part of this checkout")
 def test_bridge_overhead_benchmark_checks_and_reports(tmp_path):
-    pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
+    pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
     result = subprocess.run([sys.executable, str(BENCH_TORCH), "--resolution", "32", "--texture-size", "16", "--repeats", "1", "--json", str(tmp_path / "t.json")], capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     rows = json.loads((tmp_path / "t.json").read_text())["rows"]

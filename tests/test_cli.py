@@ -334,3 +334,24 @@ def test_ctrl_c_at_any_moment_is_one_line_exit_130_within_5_s(tmp_path, command,
         else:
             assert err.strip() == "warptex: interrupted; no files were written", (delay, err[-2000:])
             assert after == before, f"the previous files changed ({delay} s in)"
+
+
+def _without_torch(code: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    """Run ``code`` in a Python where ``import torch`` fails, as on a machine without PyTorch."""
+    return subprocess.run([sys.executable, "-c", "import sys; sys.modules['torch'] = None\n" + code], cwd=ROOT, capture_output=True, text=True,
+                          env={**os.environ, **(env or {})}, timeout=300)
+
+
+def test_without_pytorch_the_bridge_and_a_torchrun_fit_say_how_to_install_it(tmp_path):
+    """Issue 50 item 9: ``import warptex.torch`` said only "No module named 'torch'", and a fit
+    started by torchrun printed its "needs PyTorch" line, then a traceback (``Job.close`` imported
+    torch again). Both now say it in one line, with an install command that works (the package
+    index has no warptex, so not ``pip install 'warptex[torch]'``)."""
+    hint = "pip install torch (without a GPU, the CPU build: pip install torch --index-url https://download.pytorch.org/whl/cpu)"
+    done = _without_torch("import warptex.torch")
+    assert done.returncode == 1 and f"ImportError: warptex.torch needs PyTorch, which is not installed: {hint}" in done.stderr, done.stderr
+    env = {"WORLD_SIZE": "2", "RANK": "0", "LOCAL_RANK": "0", "LOCAL_WORLD_SIZE": "2", "MASTER_ADDR": "127.0.0.1", "MASTER_PORT": "29999"}
+    done = _without_torch(f"from warptex.apps.cli import entry; sys.argv = ['warptex', 'fit', '--iters', '1', '--out', {str(tmp_path / 'out')!r}]; entry()", env)
+    assert done.returncode == 1, done.stderr
+    assert done.stderr.strip().splitlines()[-1] == f"warptex: error: fit: torchrun started 2 processes (WORLD_SIZE=2), which needs PyTorch, not installed: {hint}", done.stderr
+    assert "Traceback" not in done.stderr and not (tmp_path / "out").exists()

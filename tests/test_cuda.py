@@ -245,7 +245,7 @@ def test_fit_runs_on_cuda(tmp_path):
 def test_torch_bridge_on_cuda(scene):
     """warptex.torch on a CUDA tensor (torch's current stream): the CPU's outputs and gradients,
     batched views included."""
-    torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
+    torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
     import warptex.torch as wtt
 
     if OTHER.startswith("cuda") and not torch.cuda.is_available():

@@ -44,7 +44,7 @@ try:
 except ImportError:
     dist, GLOO = None, False
 linux = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="finds torchrun's processes in /proc")
-needs_gloo = pytest.mark.skipif(not GLOO, reason="needs PyTorch with torch.distributed's gloo backend (pip install 'warptex[torch]')")
+needs_gloo = pytest.mark.skipif(not GLOO, reason="needs PyTorch with torch.distributed's gloo backend (pip install torch)")
 
 ROOT = Path(__file__).resolve().parents[1]
 FIT = ["fit", "--iters", "6", "--resolution", "32x40", "--report-every", "0"]

@@ -24,7 +24,7 @@ EXAMPLES = {
 @pytest.mark.parametrize("script", list(EXAMPLES))
 def test_examples_print_only_their_own_lines(script, tmp_path):
     if script == "torch_fit.py":
-        pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
+        pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
     if script in ("stochastic_plane.py", "triplanar_bunny.py") and not SHARED.is_dir():
         pytest.skip(f"{SHARED} not found: this example reads the shared data by default")
     done = subprocess.run([sys.executable, str(REPO / "examples" / script), *EXAMPLES[script], "--out", str(tmp_path)],

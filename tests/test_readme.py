@@ -323,7 +323,7 @@ def test_python_block(block, workdir):
     if any("../shared/" in b.text for b in runs) and not SHARED.is_dir():
         pytest.skip(f"{SHARED} not found: this README block (or one it continues) reads the shared data")
     if any("import torch" in b.text for b in runs):
-        pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
+        pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
     namespace = {"__name__": "__readme__"}
     for before in CONTINUES.get(block.name, []):
         _run_python(by_name[before], namespace)
@@ -452,7 +452,7 @@ TORCHRUN_COMMANDS = [c for c in COMMANDS if c.kind == "torchrun"]
 
 @pytest.mark.parametrize("command", TORCHRUN_COMMANDS, ids=[c.id for c in TORCHRUN_COMMANDS])
 def test_torchrun_command(command, workdir):
-    pytest.importorskip("torch.distributed", reason="PyTorch is not installed (pip install 'warptex[torch]'): torchrun comes with it")
+    pytest.importorskip("torch.distributed", reason="PyTorch is not installed (pip install torch): torchrun comes with it")
     cut = command.argv.index("-m")
     launcher, argv = command.argv[1:cut], _quick(command.argv[cut + 2 :])
     env = {**os.environ, "WARPTEX_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "PYTHONPATH": str(REPO)}
@@ -471,7 +471,7 @@ SCRIPT_FILES = {"examples/fit_splat.py": ("out/fit_example/target.png", "out/fit
 def test_script_command(command, workdir, monkeypatch, capsys):
     script, argv = command.argv[1], command.argv[2:]
     if script == "examples/torch_fit.py":
-        pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
+        pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
     assert script in SCRIPT_QUICK, f"add {script}'s small-run options to SCRIPT_QUICK"
     for option, value in SCRIPT_QUICK[script].items():
         argv = _set_option(argv, option, value)

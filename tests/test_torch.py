@@ -11,7 +11,7 @@ import trimesh
 import pytest
 import warp as wp
 
-torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install 'warptex[torch]')")
+torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
 
 import warptex as wt  # noqa: E402
 import warptex.torch as wtt

@@ -108,6 +108,12 @@ def _constant(values: np.ndarray, device) -> wp.array:
     return arr
 
 
+#: How to install PyTorch, for the errors of what needs it: the package index has no warptex, so
+#: not ``pip install 'warptex[torch]'``; and the CPU build, not the default CUDA one with its ~20
+#: ``nvidia-*`` wheels, for a machine without a GPU.
+TORCH_HINT = "pip install torch (without a GPU, the CPU build: pip install torch --index-url https://download.pytorch.org/whl/cpu)"
+
+
 def check_layer_count(func: str, num_layers: int, maps) -> None:
     """Splat maps (a ``TextureArray``) of ``M`` maps of ``C`` channels hold weights for
     ``(M - 1)·C < L <= M·C`` layers."""

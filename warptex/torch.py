@@ -43,7 +43,8 @@ graph that holds it. Inputs must not be modified in place between the forward an
 (torch's own rule for saved tensors; the Warp views read them in place). A second-order gradient
 (a gradient of the gradient) is not supported.
 
-Requires PyTorch (``pip install "warptex[torch]"``); the rest of warptex never imports it.
+Requires PyTorch (``warptex._validate.TORCH_HINT`` says how to install it); the rest of warptex
+never imports it.
 """
 
 from __future__ import annotations
@@ -51,7 +52,12 @@ from __future__ import annotations
 import functools
 import inspect
 
-import torch
+try:
+    import torch
+except ImportError as err:
+    from warptex._validate import TORCH_HINT
+
+    raise ImportError(f"warptex.torch needs PyTorch, which is not installed: {TORCH_HINT}") from err
 
 from warptex import _torch_op as _op
 from warptex._torch_spec import TECHNIQUES, Technique, gbuffer_tensors, texture_tensor

@@ -72,7 +72,9 @@ class Job:
             import torch
             import torch.distributed as dist
         except ImportError:
-            raise ValueError(f"fit: torchrun started {self.world_size} processes (WORLD_SIZE={self.world_size}), which needs PyTorch: pip install 'warptex[torch]'") from None
+            from warptex._validate import TORCH_HINT
+
+            raise ValueError(f"fit: torchrun started {self.world_size} processes (WORLD_SIZE={self.world_size}), which needs PyTorch, not installed: {TORCH_HINT}") from None
         self.backend = "nccl" if device.is_cuda else "gloo"
         if device.is_cuda:
             torch.cuda.set_device(device.ordinal)
@@ -99,8 +101,12 @@ class Job:
         self._collective(dist.barrier)
 
     def close(self) -> None:
-        """Leave the job, whatever happened (a process group left open aborts the process at exit)."""
-        import torch.distributed as dist
+        """Leave the job, whatever happened (a process group left open aborts the process at exit);
+        nothing to leave where it never started (PyTorch missing: :meth:`start` said so)."""
+        try:
+            import torch.distributed as dist
+        except ImportError:
+            return
 
         if dist.is_initialized():
             dist.destroy_process_group()

@@ -109,7 +109,9 @@ class Reducer:
             import torch
             import torch.distributed as dist
         except ImportError:
-            raise TypeError(f"{func}(): process_group needs PyTorch (pip install 'warptex[torch]')") from None
+            from warptex._validate import TORCH_HINT
+
+            raise TypeError(f"{func}(): process_group needs PyTorch, which is not installed: {TORCH_HINT}") from None
         if not dist.is_available() or not isinstance(group, dist.ProcessGroup):
             raise TypeError(f"{func}(): process_group must be a torch.distributed ProcessGroup (e.g. torch.distributed.group.WORLD), got {type(group).__name__}")
         if not dist.is_initialized():
