@@ -355,3 +355,26 @@ def test_without_pytorch_the_bridge_and_a_torchrun_fit_say_how_to_install_it(tmp
     assert done.returncode == 1, done.stderr
     assert done.stderr.strip().splitlines()[-1] == f"warptex: error: fit: torchrun started 2 processes (WORLD_SIZE=2), which needs PyTorch, not installed: {hint}", done.stderr
     assert "Traceback" not in done.stderr and not (tmp_path / "out").exists()
+
+
+def test_a_mistyped_command_is_named_with_the_one_it_resembles(capsys):
+    """``warptex rendr`` said "unrecognized arguments: rendr" (issue 50 item 14): no command takes
+    a positional argument, so a first word that is not a command is a mistyped one."""
+    for word, said in (("rendr", "unknown command 'rendr'; did you mean 'render'?"), ("bkae", "unknown command 'bkae'; did you mean 'bake'?"), ("xyz", "unknown command 'xyz'")):
+        with pytest.raises(SystemExit) as exit_:
+            main([word, "--out", "unused"])
+        assert exit_.value.code == 2
+        assert capsys.readouterr().err.splitlines()[-1] == f"warptex: error: {said} (commands: render, demo, fit, bake, assets)"
+
+
+def test_a_texture_that_is_not_one_is_refused_naming_its_file(tmp_path, capsys):
+    """A G-buffer EXR passed as ``--texture`` holds infinite depth where nothing was drawn: the
+    error said "Texture(): image contains non-finite texels" without the file (issue 50 item 14)."""
+    assert main(["render", "--resolution", "24x32", "--out", str(tmp_path / "g")]) == 0
+    gbuffer = tmp_path / "g" / "gbuffer.exr"
+    for command in (["render", "--mesh", str(_obj(tmp_path / "tri.obj", "v -1 -1 0\nv 1 -1 0\nv 0 1 0\nf 1 2 3\n")), "--texture", str(gbuffer), *SMALL],
+                    ["bake", "--texture", str(gbuffer), "--size", "64"]):
+        assert main([*command, "--out", str(tmp_path / "out" / "x.glb" if command[0] == "bake" else tmp_path / "out")]) == 1
+        err = capsys.readouterr().err.strip()
+        assert err.startswith(f"warptex: error: Texture.from_file(): {str(gbuffer)!r}: image contains non-finite texels"), err
+    assert not (tmp_path / "out").exists()

@@ -208,7 +208,7 @@ class TextureArray:
         if isinstance(paths, (str, bytes, os.PathLike)):
             raise TypeError(f"{cls._name}.from_files(): paths must be a sequence of paths, got the single path {paths!r}")
         paths = list(paths)
-        images = [io.read_image(p, data=data, channels=channels) for p in paths]
+        images = [cls._checked_file("from_files", p, io.read_image(p, data=data, channels=channels)) for p in paths]
         if not images:
             raise ValueError(f"{cls._name}.from_files(): needs at least one path")
         for p, img in zip(paths[1:], images[1:]):
@@ -218,6 +218,16 @@ class TextureArray:
                     f"'{os.fspath(paths[0])}' is {images[0].shape}; layers must match"
                 )
         return cls(images, mipmaps=mipmaps, requires_grad=requires_grad, device=device)
+
+    @classmethod
+    def _checked_file(cls, func: str, path, image: np.ndarray) -> np.ndarray:
+        """``image``, read from ``path``, checked as a layer: an error names the file (a G-buffer
+        EXR passed as a texture holds NaN where nothing was drawn)."""
+        try:
+            cls._image_to_array("image", image)
+        except ValueError as err:
+            raise ValueError(f"{cls._name}.{func}(): {os.fspath(path)!r}: {str(err).removeprefix(f'{cls._name}(): ')}") from None
+        return image
 
     # -- properties ---------------------------------------------------------------------------------
 
@@ -369,16 +379,18 @@ class Texture(TextureArray):
         *,
         data: bool = False,
         channels=None,
+        layer: str | None = None,
         mipmaps: bool | int = True,
         requires_grad: bool = False,
         device=None,
     ) -> "Texture":
         """Load an image file (PNG/JPG decoded from sRGB unless ``data=True``; EXR as stored).
 
-        ``channels`` selects EXR channels by name, or forces a channel count for PNG/JPG; see
-        :func:`warptex.io.read_image`.
+        ``channels`` selects EXR channels by name, or forces a channel count for PNG/JPG; ``layer``
+        picks a layer of a multi-layer EXR; see :func:`warptex.io.read_image`. An image that is no
+        texture (NaN or infinite texels, too many channels) is refused naming the file.
         """
-        image = io.read_image(path, data=data, channels=channels)
+        image = cls._checked_file("from_file", path, io.read_image(path, data=data, channels=channels, layer=layer))
         return cls(image, mipmaps=mipmaps, requires_grad=requires_grad, device=device)
 
     def level(self, level: int) -> wp.array:

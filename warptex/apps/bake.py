@@ -16,7 +16,6 @@ from pathlib import Path
 
 import numpy as np
 
-from warptex import io
 from warptex._compile import preload
 from warptex._output import check_memory, check_output_folder
 from warptex.apps.render import terrain_material, triplanar_material
@@ -137,15 +136,15 @@ def run_bake(
     if technique == "splat" and mesh_path is None:
         colour = terrain_material(mesh, tiling, seed, sampler, device)
     elif technique == "splat":
-        layers = TextureArray([io.read_image(p, channels=4) for p in layer_paths], device=device)
-        maps = TextureArray(io.read_image(splat_path, data=True, channels=4)[None], mipmaps=False, device=device)
+        layers = TextureArray.from_files(layer_paths, channels=4, device=device)
+        maps = TextureArray.from_files([splat_path], data=True, channels=4, mipmaps=False, device=device)
         colour = functools.partial(splat, layers=layers, splat_maps=maps, tiling=1.0 / 6.0 if tiling is None else tiling, projection="triplanar", height_blend=0.2, sampler=sampler, device=device)
     else:
-        image = io.read_image(texture_path) if texture_path is not None else noise_texture(seed=seed)
+        texture = Texture.from_file(texture_path, device=device) if texture_path is not None else Texture(noise_texture(seed=seed), device=device)
         tiling = 8.0 if tiling is None else float(tiling)
-        colour = triplanar_material(mesh, Texture(image, device=device), tiling, sampler, device, technique=triplanar if technique == "triplanar" else biplanar)
+        colour = triplanar_material(mesh, texture, tiling, sampler, device, technique=triplanar if technique == "triplanar" else biplanar)
         if normal_map_path is not None:
-            maps = Texture(io.read_image(normal_map_path, data=True, channels=3), device=device)
+            maps = Texture.from_file(normal_map_path, data=True, channels=3, device=device)
             mapping = triplanar_normal if technique == "triplanar" else biplanar_normal  # the colour's weights (and default sharpness)
             normal = functools.partial(mapping, normal_map=maps, tiling=colour.keywords["tiling"], stochastic=stochastic, sampler=sampler, device=device)
     colour = functools.partial(colour, stochastic=stochastic) if stochastic else colour

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import difflib
 import os
 import sys
 import warnings
@@ -143,9 +144,12 @@ def main(argv: list[str] | None = None) -> int:
     """Run the command line; the exit status: 0, 1 on an error (one line on stderr, no files
     written), 2 on bad options (argparse), 130 on Ctrl-C."""
     argv = _joined_vectors(list(sys.argv[1:] if argv is None else argv))
+    parser = build_parser()
+    if argv and not argv[0].startswith("-") and argv[0] not in COMMANDS:  # no command takes a positional argument
+        close = difflib.get_close_matches(argv[0], COMMANDS, n=1)
+        parser.error(f"unknown command {argv[0]!r}{f'; did you mean {close[0]!r}?' if close else ''} (commands: {', '.join(COMMANDS)})")
     if not argv or argv[0] not in COMMANDS + ("-h", "--help", "--version"):
         argv.insert(0, "render")  # the default command; its options may be given without naming it
-    parser = build_parser()
     parser.add_argument("--version", action="version", version=version())
     args = parser.parse_args(argv)
     if args.command == "fit":

@@ -221,9 +221,12 @@ def run_render(
         material = terrain_material(mesh, tiling, seed, sampler, device, textures=textures)
     else:
         embedded = _embedded_texture(mesh) if texture_path is None else None
-        image = io.read_image(texture_path, layer=texture_layer) if texture_path is not None else embedded if embedded is not None else noise_texture(seed=seed)
+        if texture_path is not None:
+            texture = Texture.from_file(texture_path, layer=texture_layer, device=device)
+        else:
+            texture = Texture(embedded if embedded is not None else noise_texture(seed=seed), device=device)
         tiling = (1.0 if embedded is not None else 8.0) if tiling is None else float(tiling)
-        material = functools.partial(_albedo, mesh, texture=Texture(image, device=device), tiling=tiling, sampler=sampler, device=device)
+        material = functools.partial(_albedo, mesh, texture=texture, tiling=tiling, sampler=sampler, device=device)
 
     names = ["render.png", "albedo.png", "normals.png", "render.exr", "gbuffer.exr"]
     bar.set_postfix_str("")
