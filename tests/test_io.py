@@ -553,3 +553,20 @@ def test_layer_of_a_png_is_refused(tmp_path):
     write_png(tmp_path / "a.png", np.zeros((2, 2, 3)))
     with pytest.raises(ValueError, match=r"read_image\(\): layer='diffuse' names an EXR layer, but .*a.png' is not an OpenEXR file"):
         read_image(tmp_path / "a.png", layer="diffuse")
+
+
+def test_a_large_png_is_read_and_one_past_memory_is_refused_naming_it(tmp_path, monkeypatch):
+    """Pillow refuses images past ~179 Mpixels as possible decompression bombs, so a valid 16384²
+    texture failed with Pillow's message (issue 50 item 14). Its guard is off while warptex reads
+    (checked here with Pillow's limit lowered to 1,000 pixels): what stands for it is the memory
+    the decoded image needs, checked from the header before decoding."""
+    from warptex import _output
+
+    image = np.random.default_rng(1).random((48, 64, 3)).astype(np.float32)
+    write_png(tmp_path / "big.png", image)
+    monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 1000)
+    np.testing.assert_allclose(read_image(tmp_path / "big.png"), image, atol=0.01)  # 8-bit sRGB steps
+    assert Image.MAX_IMAGE_PIXELS == 1000  # given back
+    monkeypatch.setattr(_output, "_available_memory", lambda: 48 * 64 * 10)
+    with pytest.raises(MemoryError, match=rf"read_image\(\): '.*big.png' \(64x48 pixels\) needs about 0.0 GiB of memory, but 0.0 GiB is available; use a smaller image"):
+        read_image(tmp_path / "big.png")

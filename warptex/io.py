@@ -127,13 +127,29 @@ def read_image(path, *, data: bool = False, channels=None, layer: str | None = N
     if _is_sixteen_bit_colour_png(head):
         image, has_alpha = _read_sixteen_bit_png(path, data)
         return image if channels is None else _convert_channels(image, has_alpha, channels)
+    from warptex._output import check_memory  # here: _output imports this module
+
+    limit = Image.MAX_IMAGE_PIXELS
     try:
+        # Pillow refuses images past ~179 Mpixels as possible decompression bombs (a 16384² texture
+        # is 268): the check of the memory the decoded image needs stands for its guess.
+        Image.MAX_IMAGE_PIXELS = None
         with Image.open(path) as im:
+            check_memory("read_image", f"'{path}' ({im.width}x{im.height} pixels)", _DECODED_BYTES_PER_PIXEL * im.width * im.height, hint="use a smaller image")
             im.load()
             image, has_alpha = _pil_to_array(im, data)
+    except MemoryError:
+        raise
     except Exception as exc:
         raise ValueError(f"read_image(): cannot decode '{path}' as an image: {exc}") from exc
+    finally:
+        Image.MAX_IMAGE_PIXELS = limit
     return image if channels is None else _convert_channels(image, has_alpha, channels)
+
+
+# Bytes a decoded PNG/JPG takes per pixel at most while it is read: Pillow's 8-bit RGBA and the
+# float32 RGBA made of it.
+_DECODED_BYTES_PER_PIXEL = 4 + 16
 
 
 def write_png(path, image, *, data: bool = False, bits: int = 8) -> None:
