@@ -7,6 +7,7 @@ that ``texels``/``update()`` keep the chain consistent, and that files (syntheti
 """
 
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -385,3 +386,26 @@ def test_photo_round_trips_through_png_and_exr(photo, tmp_path):
     for name in ("copy.png", "copy.exr"):
         out = _sample(wt.Texture.from_file(tmp_path / name), _centres(512, 512), filter="bilinear")
         np.testing.assert_array_equal(out.view(np.uint32), img.reshape(-1, 1).view(np.uint32))
+
+
+def test_texture_errors_name_what_the_user_passed(monkeypatch):
+    """Issue 50 item 14: a texture past memory raised NumPy's bare MemoryError part-way; NaN in
+    splat maps was blamed on "TextureArray(): layer 0"; finite float64 UVs past float32's range
+    came back NaN with only NumPy's overflow warning."""
+    from warptex import _output
+
+    monkeypatch.setattr(_output, "_available_memory", lambda: 1 << 20)
+    with pytest.raises(MemoryError, match=r"Texture\(\): a 1x256x256 texture with 9 level\(s\) needs about 0.0 GiB of memory, but 0.0 GiB is available; use a smaller texture, or mipmaps=False"):
+        wt.Texture(np.zeros((256, 256, 4), np.float32))
+    monkeypatch.undo()
+    g = wt.GBuffer.empty((2, 2), uv_sets=("uv0",))
+    maps = np.ones((2, 4, 4, 4), np.float32)
+    maps[1, 2, 3, 0] = np.nan
+    with pytest.raises(ValueError, match=r"^splat\(\): splat_maps: map 1 contains non-finite texels, first nan at \(row, col, channel\) \(2, 3, 0\)$"):
+        wt.splat(g, wt.TextureArray(np.ones((8, 8, 8, 3), np.float32)), maps)
+    texture = wt.Texture(np.ones((4, 4, 3), np.float32))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no NumPy overflow warning either
+        with pytest.raises(ValueError, match=r"^sample\(\): uv holds -1e\+39 at \(1, 0\), beyond float32's range \(about ±3.4e38\), which the kernels compute in$"):
+            wt.sample(texture, np.array([[0.1, 0.5], [-1e39, 0.5]]))
+    np.testing.assert_array_equal(wt.sample(texture, np.array([[0.1, 0.5]])).numpy(), 1.0)  # float64 in range: as before

@@ -55,7 +55,11 @@ def _as_splat_maps(func: str, splat_maps, device) -> TextureArray:
         data = data[None]
     if data.ndim != 4:
         raise ValueError(f"{func}(): splat_maps must be a TextureArray or an array [H, W, C] / [M, H, W, C], got shape {data.shape}")
-    return TextureArray(data, mipmaps=False, device=device)
+    try:
+        return TextureArray(data, mipmaps=False, device=device)
+    except (TypeError, ValueError) as err:  # said of the maps, not of "TextureArray(): layer 0"
+        text = str(err).removeprefix("TextureArray(): ").replace("layer ", "map ", 1)
+        raise type(err)(f"{func}(): splat_maps: {text}") from None
 
 
 def splat(

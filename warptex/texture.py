@@ -9,6 +9,7 @@ import numpy as np
 import warp as wp
 
 from warptex import io
+from warptex._output import check_memory
 from warptex._threads import zero
 from warptex._validate import as_float_array
 from warptex.kernels import sampling as ks
@@ -79,7 +80,12 @@ class TextureArray:
             raise ValueError(f"{self._name}(): mipmaps must be a bool or a positive int, got {mipmaps!r}")
 
         sizes = mip_sizes(height, width, max_levels)
-        padded = np.zeros((sum(num_layers * h * w for h, w in sizes), 4), dtype=np.float32)
+        texels = sum(num_layers * h * w for h, w in sizes)
+        # The chain in NumPy, its copy on the device, and its gradient: checked before any of them
+        # is allocated, rather than NumPy's bare MemoryError part-way.
+        what = f"a {num_layers}x{height}x{width} texture with {len(sizes)} level(s)"
+        check_memory(self._name, what, texels * 16 * (3 if requires_grad else 2), device, hint="use a smaller texture, or mipmaps=False")
+        padded = np.zeros((texels, 4), dtype=np.float32)
         padded[: num_layers * height * width, :channels] = data.reshape(-1, channels)
         self._wrap(wp.array(padded, dtype=wp.vec4, device=device, requires_grad=requires_grad), num_layers, sizes, channels)
         self.update()
