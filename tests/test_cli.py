@@ -378,3 +378,14 @@ def test_a_texture_that_is_not_one_is_refused_naming_its_file(tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert err.startswith(f"warptex: error: Texture.from_file(): {str(gbuffer)!r}: image contains non-finite texels"), err
     assert not (tmp_path / "out").exists()
+
+
+def test_bake_help_gives_the_padding_the_code_uses(capsys):
+    """``bake --help`` said --padding defaults to twice the gutter; bake() uses the gutter (issue 50 item 11)."""
+    import warptex as wt
+
+    with pytest.raises(SystemExit):
+        main(["bake", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "texels between the atlas's charts (default: the gutter)" in text
+    assert "default ``gutter``" in wt.bake.__doc__  # the library says the same

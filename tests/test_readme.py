@@ -210,12 +210,13 @@ def _shape(x):
 
 def _check_using_it(ns, d):
     assert _shape(ns["colour"]) == (1000, 1)  # brick.png is grey: C = 1
+    assert wt.io.read_image(d / "out" / "sampled.png").shape == (64, 64, 1)  # the snippet saves its picture
     assert ns["tex"].grad().shape == (64, 64, 3) and np.abs(ns["tex"].grad()).sum() > 0
     assert ns["uv"].grad.numpy().shape == (1000, 2) and np.isfinite(ns["uv"].grad.numpy()).all()
 
 
 def _check_gbuffers(ns, d):
-    g = wt.load_gbuffer(d / "g.exr")
+    g = wt.load_gbuffer(d / "out" / "g.exr")  # under out/ (ignored by git), not the repository root
     assert g.resolution == (512, 512) and g.mask.numpy().sum() > 1000  # the bunny fills the view
     assert ns["g"].resolution == (512, 512) and ns["g"].uv_sets == {}
 

@@ -69,7 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     bake.add_argument("--splat", default=None, help="RGBA splat map in the mesh's UV0 weighing --layers (4 per map)")
     bake.add_argument("--stochastic", choices=("hash4", "cheap2", "hex"), default=None, help="anti-tiling for the texture or layers (default: none)")
     bake.add_argument("--size", type=count(2), default=2048, help="atlas texels per side (default: %(default)s)")
-    bake.add_argument("--padding", type=count(0), default=None, help="texels between the atlas's charts (default: twice the gutter)")
+    bake.add_argument("--padding", type=count(0), default=None, help="texels between the atlas's charts (default: the gutter)")
     bake.add_argument("--gutter", type=count(0), default=None, help="texels filled around each chart (default: enough for the mips of a 512-pixel view)")
     bake.add_argument("--tiling", type=number(0.0, None), default=None, help="texture repeats across the mesh (default: 8; layers: 1/6 per unit)")
     bake.add_argument("--seed", type=int, default=0, help="terrain and procedural texture seed (default: 0)")
