@@ -391,3 +391,38 @@ def test_a_sigterm_while_a_failed_rank_says_why_does_not_replace_its_line(monkey
     finally:
         signal.signal(signal.SIGTERM, previous)
     assert capsys.readouterr().err == "warptex: error: another rank of the process group died\n"
+
+
+@needs_gloo
+@pytest.mark.skipif(sys.platform == "win32", reason="sends SIGINT")
+def test_ctrl_c_while_a_rank_waits_for_the_others_to_start_stops_it_at_once(tmp_path):
+    """Rank 0 of two, the other never started: it waits in torch.distributed's rendezvous, in
+    native code, for up to 10 minutes, and a Ctrl-C meanwhile was held until then (issue 50
+    item 8). It now ends the rank at once with the one line."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = {**_env(), "WORLD_SIZE": "2", "RANK": "0", "LOCAL_RANK": "0", "LOCAL_WORLD_SIZE": "1", "MASTER_ADDR": "127.0.0.1", "MASTER_PORT": str(port)}
+    rank = subprocess.Popen([sys.executable, "-m", "warptex", "fit", "--iters", "2", "--resolution", "24x32", "--out", str(tmp_path / "out")], cwd=tmp_path, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:  # rank 0 serves the rendezvous's store once it waits there
+            with socket.socket() as s:
+                if s.connect_ex(("127.0.0.1", port)) == 0:
+                    break
+            assert rank.poll() is None, rank.communicate()
+            time.sleep(0.2)
+        else:
+            raise AssertionError("rank 0 never reached the rendezvous")
+        time.sleep(1.0)
+        rank.send_signal(signal.SIGINT)
+        sent = time.monotonic()
+        _, err = rank.communicate(timeout=60)
+    finally:
+        if rank.poll() is None:
+            rank.kill()
+            rank.wait()
+    assert rank.returncode == 130 and time.monotonic() - sent < 5.0, (rank.returncode, time.monotonic() - sent, err[-2000:])
+    assert err.strip().splitlines()[-1] == "warptex: interrupted; no files were written", err[-2000:]
+    assert not (tmp_path / "out").exists()

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import threading
-
 import warp as wp
 
-from warptex._threads import cpu_count
+from warptex._threads import cpu_count, interruptible
 
 
 def preload(kernels, device=None) -> None:
@@ -23,23 +21,9 @@ def preload(kernels, device=None) -> None:
     modules = list({id(k.module): k.module for k in kernels if device.is_cpu or not cpu_only(k)}.values())
     if not modules:
         return
-    # Compiled on a thread of their own, which this one waits for: a Ctrl-C meanwhile is raised
-    # here at once, where Warp's compile pool would first finish every compile under way (seconds
-    # each); what is under way then finishes in the background.
-    done, failures = threading.Event(), []
-
-    def compile_all() -> None:
-        try:
-            wp.force_load(device=device, modules=modules, max_workers=min(len(modules), cpu_count()))
-        except BaseException as err:  # re-raised on the waiting thread
-            failures.append(err)
-        finally:
-            done.set()
-
-    threading.Thread(target=compile_all, name="warptex-preload", daemon=True).start()
-    done.wait()
-    if failures:
-        raise failures[0]
+    # Waited for interruptibly: Warp's compile pool would first finish every compile under way
+    # (seconds each); what is under way then finishes in the background.
+    interruptible("warptex-preload", wp.force_load, device=device, modules=modules, max_workers=min(len(modules), cpu_count()))
 
 
 def precompile(device=None, *, layer_counts=(4,)) -> None:

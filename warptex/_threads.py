@@ -170,6 +170,30 @@ def _after_fork() -> None:  # a forked child has none of the parent's threads
 os.register_at_fork(after_in_child=_after_fork)
 
 
+def interruptible(name: str, call, *args, **kwargs):
+    """``call(*args, **kwargs)``, run on a daemon thread ``name`` while this one waits for it: a
+    Ctrl-C (or SIGTERM's :class:`~warptex.apps.distributed.Terminated`) is raised here at once,
+    where a call that blocks in native code (Warp's compile pool, torch.distributed's rendezvous)
+    would hold it until it returns. The call's own error is raised here; an interrupted call runs
+    on in the background (the command line then ends the process)."""
+    done, result = threading.Event(), []
+
+    def run() -> None:
+        try:
+            result.append((True, call(*args, **kwargs)))
+        except BaseException as err:  # re-raised on the waiting thread
+            result.append((False, err))
+        finally:
+            done.set()
+
+    threading.Thread(target=run, name=name, daemon=True).start()
+    done.wait()
+    ok, value = result[0]
+    if not ok:
+        raise value
+    return value
+
+
 def workers_for(device, count: int, threads: int | None) -> int:
     """Threads a launch of ``count`` pixels is split over: 1 on CUDA and for small launches
     (decided first: a small call does not pay for reading the thread settings)."""

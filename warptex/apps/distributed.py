@@ -28,6 +28,8 @@ from datetime import timedelta
 
 import warp as wp
 
+from warptex._threads import cpu_count, interruptible
+
 #: Seconds the ranks wait for each other while starting and finishing (loading, compiling, writing).
 STARTUP_TIMEOUT = 600.0
 #: Default seconds a rank waits for the others in a collective of the fit.
@@ -81,10 +83,16 @@ class Job:
         signal.signal(signal.SIGTERM, _terminate)
         if not os.environ.get("WARPTEX_NUM_THREADS", "").strip():
             from warptex import set_num_threads
-            from warptex._threads import cpu_count
 
             set_num_threads(max(1, cpu_count() // self.local_world_size))
-        self._collective(dist.init_process_group, self.backend, timeout=timedelta(seconds=STARTUP_TIMEOUT))
+        def join() -> None:
+            if device.is_cuda:  # the current CUDA device is the thread's own
+                torch.cuda.set_device(device.ordinal)
+            self._collective(dist.init_process_group, self.backend, timeout=timedelta(seconds=STARTUP_TIMEOUT))
+
+        # The rendezvous waits in native code for every rank (up to STARTUP_TIMEOUT): waited for
+        # interruptibly, so that a Ctrl-C meanwhile stops the rank at once.
+        interruptible("warptex-rendezvous", join)
 
     def ready(self, timeout: float):
         """Wait for every rank, then return the fit's process group (collective ``timeout`` s)."""
