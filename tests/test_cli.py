@@ -389,3 +389,25 @@ def test_bake_help_gives_the_padding_the_code_uses(capsys):
     text = " ".join(capsys.readouterr().out.split())
     assert "texels between the atlas's charts (default: the gutter)" in text
     assert "default ``gutter``" in wt.bake.__doc__  # the library says the same
+
+
+def test_quiet_turns_the_progress_bar_off(monkeypatch, tmp_path):
+    """render, bake and fit show a progress bar on a terminal (tqdm's choice when ``progress`` is
+    None); ``--quiet`` turns it off (issue 50 item 7)."""
+    from warptex.apps import bake, fit_demo, render
+
+    seen = {}
+
+    def spy(name):
+        def run(out, **kwargs):
+            seen[name] = kwargs["progress"]
+            return []
+        return run
+
+    monkeypatch.setattr(render, "run_render", spy("render"))
+    monkeypatch.setattr(bake, "run_bake", spy("bake"))
+    monkeypatch.setattr(fit_demo, "run_fit", lambda out, **kwargs: (seen.__setitem__("fit", kwargs["progress"]), {"files": []})[1])
+    for quiet in ([], ["--quiet"], ["-q"]):
+        for command in ("render", "bake", "fit"):
+            assert main([command, "--out", str(tmp_path / "x.glb"), *quiet]) == 0
+        assert seen == dict.fromkeys(("render", "bake", "fit"), False if quiet else None)

@@ -41,6 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_filter(render)
     _add_memory(render, "the image", "larger images are made band by band")
     _add_device(render)
+    _add_quiet(render)
     demo = _command(commands, "demo", out=("out", "output folder (default: %(default)s)"), help="render the texture-sampling demo (filters and address modes)",
         description="Sample a texture on a ground plane (nearest, bilinear, trilinear, anisotropic) and show the "
         "address modes; writes demo.png, demo_trilinear.exr and demo_anisotropic.exr into the output folder.")  # fmt: skip
@@ -57,6 +58,7 @@ def build_parser() -> argparse.ArgumentParser:
         "splat_true.png, splat_fitted.png, splat_maps.png, splat_fitted.exr, curve.png and summary.json.",
     )
     add_fit_arguments(fit)
+    _add_quiet(fit)
     bake = _command(commands, "bake", out=("out/asset.glb", "the .glb file to write (default: %(default)s)"), help="bake a mesh's texturing into a UV atlas and export a glTF asset (.glb)",
         description="Texture a mesh as render does (or with the technique named), bake it into the mesh's UV atlas "
         "(its own UVs when usable, else an automatic atlas from xatlas) and write OUT (.glb) with OUT_color.png "
@@ -80,6 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_memory(bake, "the atlas", "larger atlases are baked band by band")
     _add_device(bake)
+    _add_quiet(bake)
     assets = _command(commands, "assets", out=("assets", "output folder (default: %(default)s)"), help="write the sample inputs the README's snippets read (the terrain's layers and splat map)",
         description="Write grass.png, gravel.png, rock.png and snow.png (RGBA: colour, height in alpha) and "
         "splat.png (their weights) of the default terrain into the output folder.")  # fmt: skip
@@ -94,6 +97,15 @@ def _command(commands, name: str, *, help: str, description: str, out: tuple[str
     command = commands.add_parser(name, help=help, description=description)
     command.add_argument("--out", default=out[0], help=out[1])
     return command
+
+
+def _add_quiet(command: argparse.ArgumentParser) -> None:
+    command.add_argument("--quiet", "-q", action="store_true", help="no progress bar (there is none either when stderr is not a terminal)")
+
+
+def _progress(args: argparse.Namespace) -> bool | None:
+    """A command's progress bar: off with --quiet, else on a terminal only (tqdm decides)."""
+    return False if args.quiet else None
 
 
 def _add_filter(command: argparse.ArgumentParser) -> None:
@@ -276,7 +288,7 @@ def _run(args: argparse.Namespace) -> list:
 
         paths = {"mesh_path": args.mesh, "texture_path": args.texture, "layer_paths": args.layers, "splat_path": args.splat, "normal_map_path": args.normal_map}
         options = {k: getattr(args, k) for k in ("technique", "stochastic", "size", "padding", "gutter", "tiling", "seed", "filter", "atlas", "memory", "device")}
-        return run_bake(args.out, **paths, **options)
+        return run_bake(args.out, **paths, **options, progress=_progress(args))
     if args.command == "assets":
         from warptex.apps.assets import run_assets
 
@@ -303,6 +315,7 @@ def _run(args: argparse.Namespace) -> list:
         filter=args.filter,
         memory=args.memory,
         device=args.device,
+        progress=_progress(args),
     )
 
 
@@ -311,7 +324,7 @@ def _fit(args: argparse.Namespace) -> list:
     from warptex.apps.distributed import from_environment
     from warptex.apps.fit_demo import run_fit
 
-    kwargs = fit_arguments(args)
+    kwargs = {**fit_arguments(args), "progress": _progress(args)}
     job = from_environment()
     if job is None:
         summary = run_fit(args.out, **kwargs)
