@@ -195,7 +195,8 @@ def test_the_ducks_mirrored_uvs_are_refused_and_its_atlas_kept_on_reimport(share
     reason = unusable_reason(mesh_uv_sets(duck)["uv0"], np.asarray(duck.vertices, float), np.asarray(duck.faces))
     assert "overlap" in reason  # its two sides share texels: they cannot hold two different bakes
     colour = functools.partial(wt.triplanar, texture=wt.Texture(np.full((4, 4, 3), 0.5, np.float32)), tiling=2.0)
-    baked = wt.bake(duck, colour, size=128)
+    with pytest.warns(UserWarning, match=r"bake\(\): the mesh's own UVs are not used: its UV charts overlap"):  # said, not silent
+        baked = wt.bake(duck, colour, size=128)
     assert baked.layout.source == "xatlas" and "overlap" in baked.layout.reason
     path = wt.export_gltf(baked, tmp_path / "duck.glb")[0]
     again = wt.bake(wt.load_mesh(path), colour, size=128)
@@ -498,6 +499,7 @@ def _gltf_validator() -> Path | None:
 
 
 @pytest.mark.parametrize("mesh", ["icosphere", "bunny.ply", "Duck.glb"])
+@pytest.mark.filterwarnings("ignore:.*own UVs are not used")  # the Duck's mirrored UVs
 def test_the_glb_passes_the_khronos_gltf_validator(mesh, exported, request, tmp_path):
     validator = _gltf_validator()
     if validator is None:
@@ -612,3 +614,22 @@ def test_baked_assets_render_like_their_originals(shared_data, tmp_path):
         assert row["psnr_db"] >= 35.0, (name, row)
         assert row["background_pixels"] <= 5e-4 and row["no_gutter_background_pixels"] >= 0.03, (name, row)
         assert row["normal_mean_deg"] < 2.0 and row["normal_p99_deg"] < 8.0, (name, row)
+
+
+def test_a_mesh_whose_uvs_are_replaced_says_why(tmp_path, capsys):
+    """bake silently threw away the artist's UVs where they could not be baked into (issue 50
+    item 3): it now warns, saying why; a mesh without UVs, which gets an atlas as expected, does not."""
+    import warnings
+
+    path = tmp_path / "over.obj"  # two triangles on the same UVs
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 0 1 1\nvt 0.1 0.1\nvt 0.9 0.1\nvt 0.1 0.9\nf 1/1 2/2 3/3\nf 4/1 5/2 6/3\n")
+    colour = functools.partial(wt.triplanar, texture=wt.Texture(np.ones((8, 8, 3), np.float32)))
+    with pytest.warns(UserWarning, match=r"^bake\(\): the mesh's own UVs are not used: its UV charts overlap \(1 triangles, e\.g\. faces 0 and 1\); it is baked into a new atlas$"):
+        baked = wt.bake(wt.load_mesh(path), colour, size=32)
+    assert baked.layout.source != "mesh"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        wt.bake(trimesh.creation.box(), colour, size=32)  # no UVs: an atlas, without a word
+        wt.bake(wt.load_mesh(path), colour, size=32, force_atlas=True)  # asked for
+    assert cli_main(["bake", "--mesh", str(path), "--size", "32", "--out", str(tmp_path / "o.glb")]) == 0
+    assert "warptex: warning: bake_gltf(): the mesh's own UVs are not used: its UV charts overlap" in capsys.readouterr().err

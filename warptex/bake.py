@@ -19,6 +19,7 @@ takes ``L`` as the level a surface facing the camera reads when the asset fills 
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Callable
 
@@ -354,7 +355,10 @@ def prepare_bake(func: str, mesh, technique, normal, *, size, padding, gutter, v
     _dry_run(func, technique, normal, uv_sets, device)
 
     own = uv_sets.get("uv0")
-    force_atlas = bool(force_atlas) or bool(unusable_reason(own, np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64), device=device))
+    unusable = unusable_reason(own, np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64), device=device)
+    if own is not None and unusable and not force_atlas:  # an artist's UVs, replaced: say why
+        warnings.warn(f"{func}(): the mesh's own UVs are not used: {unusable}; it is baked into a new atlas", UserWarning, stacklevel=3)
+    force_atlas = bool(force_atlas) or bool(unusable)
     fill = ATLAS_FILL if force_atlas else max(float(face_areas(mesh.vertices, mesh.faces, own)[1].sum()), 1e-6)
     gutter = default_gutter(mesh, size, view_size=view_size, uv_fill=fill) if gutter is None else int(gutter)
     layout = unwrap(mesh, size=size, padding=gutter if padding is None else int(padding), force_atlas=force_atlas, atlas=atlas, device=device)
