@@ -633,3 +633,42 @@ def test_a_mesh_whose_uvs_are_replaced_says_why(tmp_path, capsys):
         wt.bake(wt.load_mesh(path), colour, size=32, force_atlas=True)  # asked for
     assert cli_main(["bake", "--mesh", str(path), "--size", "32", "--out", str(tmp_path / "o.glb")]) == 0
     assert "warptex: warning: bake_gltf(): the mesh's own UVs are not used: its UV charts overlap" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("texture", [None, "brick.png"])
+def test_bake_bakes_what_render_shows(shared_data, tmp_path, capsys, texture):
+    """Issue 50 item 2: for a mesh with UVs, render read the texture through them while bake mapped
+    it triplanar (or baked the procedural ground instead of the mesh's own texture). Both now use
+    warptex.apps.render.mesh_material: the baked GLB, rendered again, is the render of the mesh
+    (the Duck; its own texture, or brick.png through its UVs)."""
+    from warptex import io
+
+    duck = shared_data / "meshes" / "Duck.glb"
+    extra = [] if texture is None else ["--texture", str(shared_data / "textures" / texture)]
+    view = ["--resolution", "96x128", "--quiet"]
+    assert cli_main(["bake", "--mesh", str(duck), *extra, "--size", "512", "--quiet", "--out", str(tmp_path / "duck.glb")]) == 0
+    assert "own UVs are not used" in capsys.readouterr().err  # its mirrored UVs: an atlas, through which its UVs are baked
+    assert cli_main(["render", "--mesh", str(duck), *extra, *view, "--out", str(tmp_path / "render")]) == 0
+    assert cli_main(["render", "--mesh", str(tmp_path / "duck.glb"), *view, "--out", str(tmp_path / "baked")]) == 0
+    images = {k: io.read_image(tmp_path / k / "render.png") for k in ("render", "baked")}
+    covered = np.logical_and(*[io.read_image(tmp_path / k / "render.exr", channels=["A"])[..., 0] == 1 for k in ("render", "baked")])
+    assert covered.mean() > 0.1
+    psnr = 10 * np.log10(1.0 / np.mean((images["render"] - images["baked"])[covered] ** 2))
+    assert psnr >= 35.0, psnr
+
+
+def test_a_gltf_keeps_its_vertex_normals(tmp_path):
+    """trimesh flattened a glTF scene without the file's vertex normals, recomputing them split at
+    every UV seam: a baked asset rendered with facets along its atlas seams. load_mesh keeps them,
+    turned by the node's transform."""
+    from warptex.mesh import vertex_normals
+
+    ball = trimesh.creation.uv_sphere(count=[16, 16])  # seams: vertices split where UVs wrap
+    ball = trimesh.Trimesh(ball.vertices, ball.faces, vertex_normals=ball.vertices, process=False)
+    turn = trimesh.transformations.rotation_matrix(0.7, [1, 2, 3]) @ np.diag([2.0, 2.0, 2.0, 1.0])
+    scene = trimesh.Scene()
+    scene.add_geometry(ball, node_name="ball", transform=turn)
+    scene.export(tmp_path / "ball.glb")
+    mesh = wt.load_mesh(tmp_path / "ball.glb")
+    want = mesh.vertices / np.linalg.norm(mesh.vertices, axis=1, keepdims=True)  # a sphere about the origin
+    np.testing.assert_allclose(vertex_normals(mesh), want, atol=1e-5)

@@ -300,3 +300,22 @@ def test_preview_splat_maps_are_finer_and_keep_the_vertex_weights():
     np.testing.assert_allclose(fine.sum(-1), 1.0, atol=1e-5)
     with pytest.raises(ValueError, match=r"terrain_splat_maps\(\): upsample must be an int >= 1"):
         terrain_splat_maps(mesh, (33, 33), upsample=0)
+
+
+def test_render_takes_a_technique_as_bake_does(tmp_path, capsys, shared_data):
+    """``render --technique``: ``uv`` (through the mesh's UVs, the default where it has them),
+    ``triplanar`` or ``biplanar``; the terrain is splat-blended (issue 50 item 2)."""
+    bunny, duck = shared_data / "meshes" / "bunny.ply", shared_data / "meshes" / "Duck.glb"
+    small = ["--resolution", "24x32", "--quiet"]
+    assert main(["render", "--mesh", str(bunny), "--technique", "uv", *small, "--out", str(tmp_path / "a")]) == 1
+    assert "run_render(): technique 'uv' reads the mesh's UVs, and it has none; use triplanar or biplanar" in capsys.readouterr().err
+    assert main(["render", "--technique", "triplanar", *small, "--out", str(tmp_path / "b")]) == 1
+    assert "run_render(): the default terrain is splat-blended; technique 'triplanar' needs a mesh (--mesh)" in capsys.readouterr().err
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+    albedo = {}
+    for technique in ("uv", "triplanar", "biplanar", None):
+        out = tmp_path / str(technique)
+        assert main(["render", "--mesh", str(duck), *(["--technique", technique] if technique else []), *small, "--out", str(out)]) == 0
+        albedo[technique] = io.read_image(out / "albedo.png")
+    np.testing.assert_array_equal(albedo[None], albedo["uv"])  # the default for a mesh with UVs
+    assert np.abs(albedo["uv"] - albedo["triplanar"]).max() > 0.1 and np.abs(albedo["triplanar"] - albedo["biplanar"]).max() > 0.01

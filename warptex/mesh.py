@@ -42,6 +42,8 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
         _no_faces(path)
     if os.path.splitext(path)[1].lower() == ".obj":
         _drop_missing_materials(path, loaded)
+    if os.path.splitext(path)[1].lower() in (".glb", ".gltf"):
+        _keep_gltf_normals(path, loaded)
     if os.path.splitext(path)[1].lower() == ".stl":  # STL stores each triangle's corners apart:
         loaded.merge_vertices()  # shared, they get the smooth vertex normals other formats get
     checked_geometry(f"load_mesh(): {path!r}:", loaded)
@@ -63,6 +65,33 @@ def _drop_missing_materials(path: str, mesh: trimesh.Trimesh) -> None:
     if missing and isinstance(mesh.visual, trimesh.visual.TextureVisuals):
         warnings.warn(f"load_mesh(): {path!r} names {', '.join(missing)}, not found: it is loaded without its material", UserWarning, stacklevel=3)
         mesh.visual = trimesh.visual.TextureVisuals(uv=mesh.visual.uv, material=trimesh.visual.material.SimpleMaterial(image=None))
+
+
+def _keep_gltf_normals(path: str, mesh: trimesh.Trimesh) -> None:
+    """trimesh flattens a glTF scene into one mesh without the file's vertex normals, which are then
+    recomputed, split at every UV seam (a baked asset, whose atlas has many, re-rendered with
+    visible facets). Take them from the scene's meshes instead, turned as their nodes place them,
+    where the flattened vertices are those meshes' vertices in order (else leave the mesh as is)."""
+    scene = trimesh.load(path, process=False)
+    if not isinstance(scene, trimesh.Scene):
+        return
+    vertices, normals = [], []
+    for node in scene.graph.nodes_geometry:
+        transform, name = scene.graph[node]
+        part = scene.geometry[name]
+        stored = getattr(getattr(part, "_cache", None), "cache", {}).get("vertex_normals") if isinstance(part, trimesh.Trimesh) else None
+        if stored is None or np.shape(stored) != np.shape(part.vertices):
+            return
+        vertices.append(trimesh.transform_points(np.asarray(part.vertices, np.float64), transform))
+        turned = np.asarray(stored, np.float64) @ np.linalg.inv(transform[:3, :3])  # the inverse transpose, on rows
+        normals.append(turned / np.maximum(np.linalg.norm(turned, axis=1, keepdims=True), 1e-300))
+    if not vertices:
+        return
+    vertices = np.concatenate(vertices)
+    scale = max(float(np.abs(vertices).max()), 1.0)
+    if vertices.shape != np.shape(mesh.vertices) or not np.allclose(vertices, mesh.vertices, rtol=0.0, atol=1e-6 * scale):
+        return
+    mesh.vertex_normals = np.concatenate(normals)
 
 
 def _directives(path: str, keyword: str) -> list[list[str]]:

@@ -18,34 +18,38 @@ import numpy as np
 
 from warptex._compile import preload
 from warptex._output import check_memory, check_output_folder
-from warptex.apps.render import terrain_material, triplanar_material
+from warptex.apps.render import mesh_material, terrain_material
 from warptex.bake import BAKE_BYTES, BAKE_TEXEL_BYTES
-from warptex.gbuffer import load_mesh
+from warptex.gbuffer import load_mesh, mesh_uv_sets
 from warptex.gltf import bake_gltf
 from warptex.tiles import checked_memory
 from warptex.kernels import bake as kb
 from warptex.kernels import splat as kl
 from warptex.kernels import raster as kr
 from warptex.kernels import sampling as ks
+from warptex.kernels import stochastic_sample as kss
 from warptex.kernels import triplanar as kt
 from warptex.splat import splat
 from warptex.options import Filter, Sampler
 from warptex.scenes import TERRAIN_GRID
-from warptex.scenes.material import noise_texture
 from warptex.scenes.terrain import terrain
 from warptex.texture import Texture, TextureArray
-from warptex.triplanar import biplanar, biplanar_normal, triplanar, triplanar_normal
+from warptex.triplanar import biplanar_normal, triplanar_normal
 from warptex.unwrap import _checked_size
 
-TECHNIQUES = ("triplanar", "biplanar", "splat")
+TECHNIQUES = ("uv", "triplanar", "biplanar", "splat")
 
 
 def _choose_technique(func: str, technique, mesh_path, texture_path, layer_paths, splat_path, normal_map_path) -> str:
     """The technique to bake, with the options checked against it before any work."""
     if (layer_paths is None) != (splat_path is None) and mesh_path is not None:
         raise ValueError(f"{func}(): --layers and --splat go together (layer images and the splat map that weighs them in UV0)")
+    if technique is None and (layer_paths is not None or (mesh_path is None and texture_path is None)):
+        technique = "splat"
+    elif technique is None and normal_map_path is not None:
+        technique = "triplanar"  # a normal map is mapped as a projection
     if technique is None:
-        technique = "splat" if layer_paths is not None or (mesh_path is None and texture_path is None) else "triplanar"
+        return None  # as render textures the mesh: through its UVs where it has them (mesh_material)
     if technique not in TECHNIQUES:
         raise ValueError(f"{func}(): technique must be one of {', '.join(TECHNIQUES)}, got {technique!r}")
     if technique == "splat":
@@ -57,6 +61,8 @@ def _choose_technique(func: str, technique, mesh_path, texture_path, layer_paths
             raise ValueError(f"{func}(): --normal-map works with triplanar and biplanar, not splat")
     elif layer_paths is not None:
         raise ValueError(f"{func}(): --layers and --splat are for technique 'splat', not {technique!r}")
+    elif technique == "uv" and normal_map_path is not None:
+        raise ValueError(f"{func}(): --normal-map works with triplanar and biplanar, not uv")
     return technique
 
 
@@ -65,6 +71,8 @@ def _kernels(technique: str, stochastic, normal_mapped: bool, num_layers: int, d
     used = [kb.chart_kernel, kr.uv_kernel, ks.downsample_kernel]
     if technique == "splat":
         return used + [kl.splat_kernels(capacity=kl.capacity(num_layers), stochastic=stochastic is not None).launched(device)]
+    if technique == "uv":
+        return used + [(kss.stochastic_kernels() if stochastic is not None else ks.sample_kernels(level=False)).launched(device)]
     used.append(kt.triplanar_kernels(normal=False, stochastic=stochastic is not None, faces=False).launched(device))
     if normal_mapped:
         used.append(kt.triplanar_kernels(normal=True, stochastic=stochastic is not None, faces=False).launched(device))
@@ -97,13 +105,15 @@ def run_bake(
     Args:
         out_path: the GLB to write; ``<stem>_color.png`` etc. go beside it.
         mesh_path: a mesh file; ``None``: the procedural terrain with its splat layers.
-        texture_path: the texture for triplanar/biplanar (default: a procedural ground texture).
+        texture_path: the texture (default: the mesh's own, else a procedural ground texture).
         layer_paths, splat_path: layer images (RGBA, height in alpha) and the RGBA splat map in
             UV0 that weighs them (4 layers per map), for ``technique="splat"``.
         normal_map_path: a tangent-space normal map (data), mapped like the texture and baked
             into ``<stem>_normal.png`` and the GLB's normal texture.
-        technique: ``"triplanar"``, ``"biplanar"`` or ``"splat"`` (default: splat for the
-            terrain or with layers, else triplanar).
+        technique: ``"uv"``, ``"triplanar"``, ``"biplanar"`` or ``"splat"`` (default: splat for
+            the terrain or with layers; triplanar with a normal map; else as ``warptex render``
+            textures the mesh, :func:`warptex.apps.render.mesh_material`: through its UVs where it
+            has them, with its own texture where it has one).
         stochastic: anti-tiling for the texture or layers (``"hash4"``, ``"cheap2"``, ``"hex"``).
         size: atlas texels per side. padding, gutter: see :func:`warptex.bake.bake`.
         tiling: as for ``warptex render`` (texture repeats across the mesh's largest extent,
@@ -129,9 +139,11 @@ def run_bake(
     if tiling is not None and not (np.isfinite(tiling) and tiling > 0):
         raise ValueError(f"{func}(): tiling must be a finite number > 0, got {tiling!r}")
     sampler = Sampler(filter=filter)
+    mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
+    if technique is None:  # as render: through the mesh's UVs where it has them
+        technique = "uv" if "uv0" in mesh_uv_sets(mesh) else "triplanar"
     preload(_kernels(technique, stochastic, normal_map_path is not None, len(layer_paths or ()) or 4, device), device)  # compiled side by side on a cold start
 
-    mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
     normal = None
     if technique == "splat" and mesh_path is None:
         colour = terrain_material(mesh, tiling, seed, sampler, device)
@@ -140,9 +152,7 @@ def run_bake(
         maps = TextureArray.from_files([splat_path], data=True, channels=4, mipmaps=False, device=device)
         colour = functools.partial(splat, layers=layers, splat_maps=maps, tiling=1.0 / 6.0 if tiling is None else tiling, projection="triplanar", height_blend=0.2, sampler=sampler, device=device)
     else:
-        texture = Texture.from_file(texture_path, device=device) if texture_path is not None else Texture(noise_texture(seed=seed), device=device)
-        tiling = 8.0 if tiling is None else float(tiling)
-        colour = triplanar_material(mesh, texture, tiling, sampler, device, technique=triplanar if technique == "triplanar" else biplanar)
+        colour, _ = mesh_material(func, mesh, technique, texture_path, None, tiling, seed, sampler, device)
         if normal_map_path is not None:
             maps = Texture.from_file(normal_map_path, data=True, channels=3, device=device)
             mapping = triplanar_normal if technique == "triplanar" else biplanar_normal  # the colour's weights (and default sharpness)

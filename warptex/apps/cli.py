@@ -40,6 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--samples", type=square, default=4, help="stratified samples per pixel, 1, 4, 9, 16... (anti-aliasing; default: 4)")
     _add_filter(render)
     _add_memory(render, "the image", "larger images are made band by band")
+    render.add_argument("--technique", choices=("uv", "triplanar", "biplanar", "splat"), default=None,
+                        help="texturing of a mesh: through its UVs (uv) or projected (default: uv where it has UVs, else triplanar), as bake bakes it; the terrain is splat-blended")
     _add_device(render)
     _add_quiet(render)
     demo = _command(commands, "demo", out=("out", "output folder (default: %(default)s)"), help="render the texture-sampling demo (filters and address modes)",
@@ -64,7 +66,8 @@ def build_parser() -> argparse.ArgumentParser:
         "(its own UVs when usable, else an automatic atlas from xatlas) and write OUT (.glb) with OUT_color.png "
         "(and OUT_normal.png with --normal-map, OUT_alpha.png for layers with height in alpha) beside it.")  # fmt: skip
     bake.add_argument("--mesh", default=None, help="mesh file: OBJ, PLY, STL, GLB/GLTF... (default: procedural terrain)")
-    bake.add_argument("--technique", choices=("triplanar", "biplanar", "splat"), default=None, help="texturing (default: splat for the terrain or with --layers, else triplanar)")
+    bake.add_argument("--technique", choices=("uv", "triplanar", "biplanar", "splat"), default=None,
+                      help="texturing, as render's: through the mesh's UVs (uv) or projected (default: splat for the terrain or with --layers; triplanar with --normal-map; else uv where the mesh has UVs, triplanar where not)")
     bake.add_argument("--texture", default=None, help="texture image for triplanar/biplanar (default: procedural ground)")
     bake.add_argument("--normal-map", default=None, help="tangent-space normal map (OpenGL style), mapped like the texture and baked too")
     bake.add_argument("--layers", nargs="+", default=None, help="splat layer images (RGBA, height in alpha), with --splat")
@@ -304,6 +307,7 @@ def _run(args: argparse.Namespace) -> list:
         mesh_path=args.mesh,
         texture_path=args.texture,
         texture_layer=args.texture_layer,
+        technique=args.technique,
         resolution=args.resolution,
         eye=args.eye,
         target=args.target,

@@ -31,12 +31,13 @@ from warptex.kernels import sampling as ks
 from warptex.kernels import triplanar as kt
 from warptex.camera import checked_resolution, look_at
 from warptex.exr_writer import ExrWriter
-from warptex.gbuffer import GBuffer, load_mesh
+from warptex.gbuffer import GBuffer, load_mesh, mesh_uv_sets
 from warptex.mesh import up_axis
 from warptex.gbuffer_io import GBufferWriter
 from warptex.png import PngWriter
 from warptex.resolve import resolve
 from warptex.sampling import sample
+from warptex.stochastic import stochastic as stochastic_sample
 from warptex._output import check_memory, check_output_folder, output_set
 from warptex.tiles import SAMPLE_BYTES, checked_memory, gbuffer_tiles
 from warptex.apps.shade import SKY, sun_and_sky, to_rgb
@@ -47,7 +48,7 @@ from warptex.texture import Texture, TextureArray
 from warptex.splat import splat
 from warptex.options import Filter, Sampler
 from warptex.scenes.material import LAYER_NAMES, noise_texture, terrain_layers, terrain_splat_maps
-from warptex.triplanar import triplanar
+from warptex.triplanar import biplanar, triplanar
 
 
 #: Memory of a render beside its bands, measured (peak RSS of a 64² render, the default terrain):
@@ -58,13 +59,47 @@ RENDER_BASE_BYTES = 400e6
 DEFAULT_SAMPLES = 4
 
 
-def _albedo(mesh: trimesh.Trimesh, gbuffer: GBuffer, *, texture: Texture, tiling: float, sampler: Sampler, device) -> np.ndarray:
-    """The material colour: UV0 × tiling when the mesh has UVs, else triplanar with ``tiling``
-    repeats across the mesh's largest extent."""
-    if "uv0" in gbuffer.uv_sets:
-        uv, uv_dx, uv_dy = (np.ascontiguousarray(gbuffer.uv_sets["uv0"][k].numpy() * tiling, np.float32) for k in ("uv", "uv_dx", "uv_dy"))
-        return sample(texture, uv, uv_dx=uv_dx, uv_dy=uv_dy, sampler=sampler, device=device)
-    return triplanar_material(mesh, texture, tiling, sampler, device)(gbuffer)
+#: How ``render`` and ``bake`` texture a mesh: through its own UVs, or projected.
+MESH_TECHNIQUES = ("uv", "triplanar", "biplanar")
+
+
+def mesh_material(func: str, mesh: trimesh.Trimesh, technique: str | None, texture_path, texture_layer, tiling: float | None, seed: int, sampler: Sampler, device) -> tuple[Callable[[GBuffer], wp.array], str]:
+    """``(colour of a G-buffer, what was used)``: how ``warptex render`` textures a mesh, and
+    ``warptex bake`` bakes it, the same for the same arguments.
+
+    The texture is ``texture_path``, else the mesh's own (glTF base colour, OBJ ``map_Kd``), else a
+    procedural ground. ``technique``: ``"uv"`` (through UV0 × ``tiling``; default ``tiling`` 1
+    with the mesh's own texture, else 8), ``"triplanar"`` or ``"biplanar"`` (``tiling`` repeats
+    across the mesh's largest extent, default 8); ``None``: ``"uv"`` for a mesh with UVs, else
+    triplanar."""
+    has_uvs = "uv0" in mesh_uv_sets(mesh)
+    if technique is None:
+        technique = "uv" if has_uvs else "triplanar"
+    if technique not in MESH_TECHNIQUES:
+        raise ValueError(f"{func}(): technique must be one of {', '.join(MESH_TECHNIQUES)} for a mesh, got {technique!r}")
+    if technique == "uv" and not has_uvs:
+        raise ValueError(f"{func}(): technique 'uv' reads the mesh's UVs, and it has none; use triplanar or biplanar")
+    embedded = _embedded_texture(mesh) if texture_path is None else None
+    if texture_path is not None:
+        texture, source = Texture.from_file(texture_path, layer=texture_layer, device=device), f"texture {os.fspath(texture_path)!r}"
+    elif embedded is not None:
+        texture, source = Texture(embedded, device=device), "the mesh's own texture"
+    else:
+        texture, source = Texture(noise_texture(seed=seed), device=device), "a procedural ground texture"
+    tiling = (1.0 if embedded is not None and technique == "uv" else 8.0) if tiling is None else float(tiling)
+    if technique == "uv":
+        return functools.partial(_through_uvs, texture=texture, tiling=tiling, sampler=sampler, device=device), f"{source} through the mesh's UVs, tiling {tiling:g}"
+    projection = triplanar if technique == "triplanar" else biplanar
+    return triplanar_material(mesh, texture, tiling, sampler, device, technique=projection), f"{source} mapped {technique}, tiling {tiling:g} across the mesh"
+
+
+def _through_uvs(gbuffer: GBuffer, *, texture: Texture, tiling: float, sampler: Sampler, device, stochastic=None) -> wp.array:
+    """``texture`` at the G-buffer's UV0 × ``tiling`` (with its derivatives: the footprint);
+    with ``stochastic``, anti-tiled (:func:`~warptex.stochastic`)."""
+    uv, uv_dx, uv_dy = (np.ascontiguousarray(gbuffer.uv_sets["uv0"][k].numpy() * tiling, np.float32) for k in ("uv", "uv_dx", "uv_dy"))
+    if stochastic is not None:
+        return stochastic_sample(texture, uv, stochastic, uv_dx=uv_dx, uv_dy=uv_dy, sampler=sampler, device=device)
+    return sample(texture, uv, uv_dx=uv_dx, uv_dy=uv_dy, sampler=sampler, device=device)
 
 
 def triplanar_material(mesh: trimesh.Trimesh, texture: Texture, tiling: float, sampler: Sampler, device, technique=triplanar) -> Callable[[GBuffer], wp.array]:
@@ -134,6 +169,7 @@ def run_render(
     mesh_path=None,
     texture_path=None,
     texture_layer: str | None = None,
+    technique: str | None = None,
     resolution=(512, 512),
     eye=None,
     target=None,
@@ -158,6 +194,9 @@ def run_render(
         mesh_path: a mesh file; ``None`` renders the procedural terrain (:func:`warptex.scenes.terrain.terrain`).
         texture_path: the texture; default: the mesh's embedded texture, else a procedural ground texture.
         texture_layer: the layer of an EXR texture to read (:func:`warptex.io.read_image`'s ``layer``).
+        technique: for a mesh, ``"uv"``, ``"triplanar"`` or ``"biplanar"`` (:func:`mesh_material`;
+            default: through its UVs where it has them, else triplanar), as ``warptex bake`` bakes
+            it; the terrain is always splat-blended (``"splat"``).
         resolution: ``(height, width)``.
         eye, target: camera position and look-at point (default: a three-quarter view framing the mesh).
         up: the world direction shown upward (default: +Y, or -Z looking straight down; see
@@ -188,6 +227,12 @@ def run_render(
     check_output_folder(func, out_dir)
     if texture_layer is not None and texture_path is None:
         raise ValueError(f"{func}(): texture_layer={texture_layer!r} names a layer of the texture file, but no texture_path is given")
+    if technique is not None and mesh_path is None and texture_path is None:
+        if technique != "splat":
+            raise ValueError(f"{func}(): the default terrain is splat-blended; technique {technique!r} needs a mesh (--mesh)")
+        technique = None
+    elif technique is not None and technique not in MESH_TECHNIQUES:
+        raise ValueError(f"{func}(): technique must be one of {', '.join(MESH_TECHNIQUES)} for a mesh, got {technique!r}")
     sampler = Sampler(filter=filter)
     h, w = resolution = checked_resolution(func, resolution)
     if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1 or math.isqrt(int(samples)) ** 2 != samples:
@@ -220,13 +265,7 @@ def run_render(
     if is_terrain:
         material = terrain_material(mesh, tiling, seed, sampler, device, textures=textures)
     else:
-        embedded = _embedded_texture(mesh) if texture_path is None else None
-        if texture_path is not None:
-            texture = Texture.from_file(texture_path, layer=texture_layer, device=device)
-        else:
-            texture = Texture(embedded if embedded is not None else noise_texture(seed=seed), device=device)
-        tiling = (1.0 if embedded is not None else 8.0) if tiling is None else float(tiling)
-        material = functools.partial(_albedo, mesh, texture=texture, tiling=tiling, sampler=sampler, device=device)
+        material, _ = mesh_material(func, mesh, technique, texture_path, texture_layer, tiling, seed, sampler, device)
 
     names = ["render.png", "albedo.png", "normals.png", "render.exr", "gbuffer.exr"]
     bar.set_postfix_str("")
