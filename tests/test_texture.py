@@ -393,8 +393,10 @@ def test_texture_errors_name_what_the_user_passed(monkeypatch):
     splat maps was blamed on "TextureArray(): layer 0"; finite float64 UVs past float32's range
     came back NaN with only NumPy's overflow warning."""
     from warptex import _output
+    from warptex import texture as texture_module
 
     monkeypatch.setattr(_output, "_available_memory", lambda: 1 << 20)
+    monkeypatch.setattr(texture_module, "LARGE_CHAIN_BYTES", 1 << 20)  # checked from 64 MiB: small ones read nothing
     with pytest.raises(MemoryError, match=r"Texture\(\): a 1x256x256 texture with 9 level\(s\) needs about 0.0 GiB of memory, but 0.0 GiB is available; use a smaller texture, or mipmaps=False"):
         wt.Texture(np.zeros((256, 256, 4), np.float32))
     monkeypatch.undo()

@@ -36,6 +36,8 @@ def mip_sizes(height: int, width: int, max_levels: int | None = None) -> list[tu
 
 #: Integer texel dtypes accepted by :class:`Texture` and :class:`TextureArray`, and the value that maps to 1.
 _UNORM_SCALE = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}
+#: Mip chains of this many bytes or more are checked against the memory there is before they are made.
+LARGE_CHAIN_BYTES = 64 << 20
 
 
 class TextureArray:
@@ -81,10 +83,9 @@ class TextureArray:
 
         sizes = mip_sizes(height, width, max_levels)
         texels = sum(num_layers * h * w for h, w in sizes)
-        # The chain in NumPy, its copy on the device, and its gradient: checked before any of them
-        # is allocated, rather than NumPy's bare MemoryError part-way.
-        what = f"a {num_layers}x{height}x{width} texture with {len(sizes)} level(s)"
-        check_memory(self._name, what, texels * 16 * (3 if requires_grad else 2), device, hint="use a smaller texture, or mipmaps=False")
+        if texels * 16 >= LARGE_CHAIN_BYTES:  # the chain, its device copy and gradient, before NumPy's bare MemoryError part-way
+            what, needed = f"a {num_layers}x{height}x{width} texture with {len(sizes)} level(s)", texels * 16 * (3 if requires_grad else 2)
+            check_memory(self._name, what, needed, device, hint="use a smaller texture, or mipmaps=False")
         padded = np.zeros((texels, 4), dtype=np.float32)
         padded[: num_layers * height * width, :channels] = data.reshape(-1, channels)
         self._wrap(wp.array(padded, dtype=wp.vec4, device=device, requires_grad=requires_grad), num_layers, sizes, channels)
@@ -196,16 +197,7 @@ class TextureArray:
         return as_float_array(cls._name, name, arr)
 
     @classmethod
-    def from_files(
-        cls,
-        paths: Sequence[str | os.PathLike],
-        *,
-        data: bool = False,
-        channels=None,
-        mipmaps: bool | int = True,
-        requires_grad: bool = False,
-        device=None,
-    ) -> "TextureArray":
+    def from_files(cls, paths: Sequence[str | os.PathLike], *, data: bool = False, channels=None, mipmaps: bool | int = True, requires_grad: bool = False, device=None) -> "TextureArray":
         """Load one layer per file (PNG/JPG/EXR; see :func:`warptex.io.read_image`).
 
         ``data=True`` keeps PNG/JPG values as they are (normal, splat and height maps) instead of
@@ -227,8 +219,7 @@ class TextureArray:
 
     @classmethod
     def _checked_file(cls, func: str, path, image: np.ndarray) -> np.ndarray:
-        """``image``, read from ``path``, checked as a layer: an error names the file (a G-buffer
-        EXR passed as a texture holds NaN where nothing was drawn)."""
+        """``image``, read from ``path``, checked as a layer, naming the file where it is not one."""
         try:
             cls._image_to_array("image", image)
         except ValueError as err:
@@ -379,17 +370,7 @@ class Texture(TextureArray):
         return cls._image_to_array("image", image)[None]
 
     @classmethod
-    def from_file(
-        cls,
-        path: str | os.PathLike,
-        *,
-        data: bool = False,
-        channels=None,
-        layer: str | None = None,
-        mipmaps: bool | int = True,
-        requires_grad: bool = False,
-        device=None,
-    ) -> "Texture":
+    def from_file(cls, path: str | os.PathLike, *, data: bool = False, channels=None, layer: str | None = None, mipmaps: bool | int = True, requires_grad: bool = False, device=None) -> "Texture":
         """Load an image file (PNG/JPG decoded from sRGB unless ``data=True``; EXR as stored).
 
         ``channels`` selects EXR channels by name, or forces a channel count for PNG/JPG; ``layer``
