@@ -68,7 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
     bake.add_argument("--mesh", default=None, help="mesh file: OBJ, PLY, STL, GLB/GLTF... (default: procedural terrain)")
     bake.add_argument("--technique", choices=("uv", "triplanar", "biplanar", "splat"), default=None,
                       help="texturing, as render's: through the mesh's UVs (uv) or projected (default: splat for the terrain or with --layers; triplanar with --normal-map; else uv where the mesh has UVs, triplanar where not)")
-    bake.add_argument("--texture", default=None, help="texture image for triplanar/biplanar (default: procedural ground)")
+    bake.add_argument("--texture", default=None, help="texture image (default: the mesh's own, else a procedural ground)")
     bake.add_argument("--normal-map", default=None, help="tangent-space normal map (OpenGL style), mapped like the texture and baked too")
     bake.add_argument("--layers", nargs="+", default=None, help="splat layer images (RGBA, height in alpha), with --splat")
     bake.add_argument("--splat", default=None, help="RGBA splat map in the mesh's UV0 weighing --layers (4 per map)")
@@ -76,7 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
     bake.add_argument("--size", type=count(2), default=2048, help="atlas texels per side (default: %(default)s)")
     bake.add_argument("--padding", type=count(0), default=None, help="texels between the atlas's charts (default: the gutter)")
     bake.add_argument("--gutter", type=count(0), default=None, help="texels filled around each chart (default: enough for the mips of a 512-pixel view)")
-    bake.add_argument("--tiling", type=number(0.0, None), default=None, help="texture repeats across the mesh (default: 8; layers: 1/6 per unit)")
+    bake.add_argument("--tiling", type=number(0.0, None), default=None, help="texture repeats, as for render: across UV0 (default 1 with the mesh's own texture, else 8) or across the mesh projected (default 8); layers: per unit (default 1/6)")
     bake.add_argument("--seed", type=int, default=0, help="terrain and procedural texture seed (default: 0)")
     _add_filter(bake)
     bake.add_argument(
