@@ -33,7 +33,8 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
         raise FileNotFoundError(f"load_mesh(): file not found: {path!r}")
     _check_signature(path)
     try:
-        loaded = trimesh.load(path, force="mesh", process=False)
+        scene = trimesh.load(path, force="scene", process=False)  # what force="mesh" flattens; glTF normals are read from it
+        loaded = scene.to_mesh() if hasattr(scene, "to_mesh") else scene.dump(concatenate=True)  # trimesh 5 / 4
     except Exception as err:  # trimesh raises many types for bad files
         raise ValueError(f"load_mesh(): cannot read {path!r} as a mesh: {' '.join(str(err).split())}") from err
     if not isinstance(loaded, trimesh.Trimesh):
@@ -43,7 +44,7 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
     if os.path.splitext(path)[1].lower() == ".obj":
         _drop_missing_materials(path, loaded)
     if os.path.splitext(path)[1].lower() in (".glb", ".gltf"):
-        _keep_gltf_normals(path, loaded)
+        _keep_gltf_normals(scene, loaded)
     if os.path.splitext(path)[1].lower() == ".stl":  # STL stores each triangle's corners apart:
         loaded.merge_vertices()  # shared, they get the smooth vertex normals other formats get
     checked_geometry(f"load_mesh(): {path!r}:", loaded)
@@ -67,14 +68,11 @@ def _drop_missing_materials(path: str, mesh: trimesh.Trimesh) -> None:
         mesh.visual = trimesh.visual.TextureVisuals(uv=mesh.visual.uv, material=trimesh.visual.material.SimpleMaterial(image=None))
 
 
-def _keep_gltf_normals(path: str, mesh: trimesh.Trimesh) -> None:
+def _keep_gltf_normals(scene: trimesh.Scene, mesh: trimesh.Trimesh) -> None:
     """trimesh flattens a glTF scene into one mesh without the file's vertex normals, which are then
     recomputed, split at every UV seam (a baked asset, whose atlas has many, re-rendered with
     visible facets). Take them from the scene's meshes instead, turned as their nodes place them,
     where the flattened vertices are those meshes' vertices in order (else leave the mesh as is)."""
-    scene = trimesh.load(path, process=False)
-    if not isinstance(scene, trimesh.Scene):
-        return
     vertices, normals = [], []
     for node in scene.graph.nodes_geometry:
         transform, name = scene.graph[node]
