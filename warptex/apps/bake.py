@@ -18,9 +18,9 @@ import numpy as np
 
 from warptex._compile import preload
 from warptex._output import check_memory, check_output_folder
-from warptex.apps.render import mesh_material, terrain_material
+from warptex.apps.render import mesh_material, mesh_technique, terrain_material
 from warptex.bake import BAKE_BYTES, BAKE_TEXEL_BYTES
-from warptex.gbuffer import load_mesh, mesh_uv_sets
+from warptex.gbuffer import load_mesh
 from warptex.gltf import bake_gltf
 from warptex.tiles import checked_memory
 from warptex.kernels import bake as kb
@@ -141,7 +141,7 @@ def run_bake(
     sampler = Sampler(filter=filter)
     mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
     if technique is None:  # as render: through the mesh's UVs where it has them
-        technique = "uv" if "uv0" in mesh_uv_sets(mesh) else "triplanar"
+        technique = mesh_technique(func, mesh, None)
     preload(_kernels(technique, stochastic, normal_map_path is not None, len(layer_paths or ()) or 4, device), device)  # compiled side by side on a cold start
 
     normal = None
@@ -152,7 +152,7 @@ def run_bake(
         maps = TextureArray.from_files([splat_path], data=True, channels=4, mipmaps=False, device=device)
         colour = functools.partial(splat, layers=layers, splat_maps=maps, tiling=1.0 / 6.0 if tiling is None else tiling, projection="triplanar", height_blend=0.2, sampler=sampler, device=device)
     else:
-        colour, _ = mesh_material(func, mesh, technique, texture_path, None, tiling, seed, sampler, device)
+        colour = mesh_material(func, mesh, technique, texture_path, None, tiling, seed, sampler, device)
         if normal_map_path is not None:
             maps = Texture.from_file(normal_map_path, data=True, channels=3, device=device)
             mapping = triplanar_normal if technique == "triplanar" else biplanar_normal  # the colour's weights (and default sharpness)

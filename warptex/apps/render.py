@@ -63,15 +63,9 @@ DEFAULT_SAMPLES = 4
 MESH_TECHNIQUES = ("uv", "triplanar", "biplanar")
 
 
-def mesh_material(func: str, mesh: trimesh.Trimesh, technique: str | None, texture_path, texture_layer, tiling: float | None, seed: int, sampler: Sampler, device) -> tuple[Callable[[GBuffer], wp.array], str]:
-    """``(colour of a G-buffer, what was used)``: how ``warptex render`` textures a mesh, and
-    ``warptex bake`` bakes it, the same for the same arguments.
-
-    The texture is ``texture_path``, else the mesh's own (glTF base colour, OBJ ``map_Kd``), else a
-    procedural ground. ``technique``: ``"uv"`` (through UV0 × ``tiling``; default ``tiling`` 1
-    with the mesh's own texture, else 8), ``"triplanar"`` or ``"biplanar"`` (``tiling`` repeats
-    across the mesh's largest extent, default 8); ``None``: ``"uv"`` for a mesh with UVs, else
-    triplanar."""
+def mesh_technique(func: str, mesh: trimesh.Trimesh, technique: str | None) -> str:
+    """How a mesh is textured: ``technique`` checked against it, or (``None``) ``"uv"`` where it
+    has UVs, else ``"triplanar"``."""
     has_uvs = "uv0" in mesh_uv_sets(mesh)
     if technique is None:
         technique = "uv" if has_uvs else "triplanar"
@@ -79,18 +73,27 @@ def mesh_material(func: str, mesh: trimesh.Trimesh, technique: str | None, textu
         raise ValueError(f"{func}(): technique must be one of {', '.join(MESH_TECHNIQUES)} for a mesh, got {technique!r}")
     if technique == "uv" and not has_uvs:
         raise ValueError(f"{func}(): technique 'uv' reads the mesh's UVs, and it has none; use triplanar or biplanar")
+    return technique
+
+
+def mesh_material(func: str, mesh: trimesh.Trimesh, technique: str | None, texture_path, texture_layer, tiling: float | None, seed: int, sampler: Sampler, device) -> Callable[[GBuffer], wp.array]:
+    """The colour of a G-buffer as ``warptex render`` textures a mesh, and ``warptex bake`` bakes
+    it, the same for the same arguments.
+
+    The texture is ``texture_path``, else the mesh's own (glTF base colour, OBJ ``map_Kd``), else a
+    procedural ground. ``technique`` (:func:`mesh_technique`): ``"uv"`` (through UV0 × ``tiling``;
+    default ``tiling`` 1 with the mesh's own texture, else 8), ``"triplanar"`` or ``"biplanar"``
+    (``tiling`` repeats across the mesh's largest extent, default 8)."""
+    technique = mesh_technique(func, mesh, technique)
     embedded = _embedded_texture(mesh) if texture_path is None else None
     if texture_path is not None:
-        texture, source = Texture.from_file(texture_path, layer=texture_layer, device=device), f"texture {os.fspath(texture_path)!r}"
-    elif embedded is not None:
-        texture, source = Texture(embedded, device=device), "the mesh's own texture"
+        texture = Texture.from_file(texture_path, layer=texture_layer, device=device)
     else:
-        texture, source = Texture(noise_texture(seed=seed), device=device), "a procedural ground texture"
+        texture = Texture(embedded if embedded is not None else noise_texture(seed=seed), device=device)
     tiling = (1.0 if embedded is not None and technique == "uv" else 8.0) if tiling is None else float(tiling)
     if technique == "uv":
-        return functools.partial(_through_uvs, texture=texture, tiling=tiling, sampler=sampler, device=device), f"{source} through the mesh's UVs, tiling {tiling:g}"
-    projection = triplanar if technique == "triplanar" else biplanar
-    return triplanar_material(mesh, texture, tiling, sampler, device, technique=projection), f"{source} mapped {technique}, tiling {tiling:g} across the mesh"
+        return functools.partial(_through_uvs, texture=texture, tiling=tiling, sampler=sampler, device=device)
+    return triplanar_material(mesh, texture, tiling, sampler, device, technique=triplanar if technique == "triplanar" else biplanar)
 
 
 def _through_uvs(gbuffer: GBuffer, *, texture: Texture, tiling: float, sampler: Sampler, device, stochastic=None) -> wp.array:
@@ -265,7 +268,7 @@ def run_render(
     if is_terrain:
         material = terrain_material(mesh, tiling, seed, sampler, device, textures=textures)
     else:
-        material, _ = mesh_material(func, mesh, technique, texture_path, texture_layer, tiling, seed, sampler, device)
+        material = mesh_material(func, mesh, technique, texture_path, texture_layer, tiling, seed, sampler, device)
 
     names = ["render.png", "albedo.png", "normals.png", "render.exr", "gbuffer.exr"]
     bar.set_postfix_str("")
