@@ -45,12 +45,12 @@ def as_float_array(func: str, name: str, value) -> np.ndarray:
         raise ValueError(f"{func}(): {name} must be a rectangular array of numbers: {err}") from None
     if arr.dtype == bool or not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
         raise TypeError(f"{func}(): {name} must hold real numbers, got dtype {arr.dtype}")
-    if arr.dtype == np.float32:
-        return arr
+    if arr.dtype == np.float32 or not np.issubdtype(arr.dtype, np.floating) or arr.dtype.itemsize < 4:
+        return arr.astype(np.float32, copy=False)  # integers and halves fit float32's range
     with np.errstate(over="ignore"):  # a finite value past float32's range: said below, not as NumPy's warning
         cast = arr.astype(np.float32)
-    beyond = np.isinf(cast) & np.isfinite(arr)
-    if beyond.any():
+    infinite = np.isinf(cast)
+    if infinite.any() and (beyond := infinite & np.isfinite(arr)).any():  # the second pass only where something overflowed
         where = tuple(int(i) for i in np.argwhere(beyond)[0])
         raise ValueError(f"{func}(): {name} holds {float(arr[where])!r} at {where}, beyond float32's range (about ±3.4e38), which the kernels compute in")
     return cast
