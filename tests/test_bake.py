@@ -549,8 +549,9 @@ def test_export_is_atomic_and_checks_its_arguments(exported, tmp_path, monkeypat
 def test_warptex_bake_writes_the_terrain_asset_and_render_reads_it(tmp_path, capsys):
     out = tmp_path / "terrain" / "asset.glb"
     assert cli_main(["bake", "--size", "128", "--out", str(out)]) == 0
-    wrote = [line.split(" ", 1)[1] for line in capsys.readouterr().out.splitlines()]
-    assert [Path(p).name for p in wrote] == ["asset.glb", "asset_color.png", "asset_alpha.png"]  # splat layers: height in alpha
+    said, *wrote = capsys.readouterr().out.splitlines()
+    assert said.startswith("bake: the default terrain: 4 procedural layers")
+    assert [Path(line.split(" ", 1)[1]).name for line in wrote] == ["asset.glb", "asset_color.png", "asset_alpha.png"]  # splat layers: height in alpha
     mesh, textures = load_gltf(out)
     assert len(mesh.faces) == 2 * (TERRAIN_GRID[0] - 1) * (TERRAIN_GRID[1] - 1) and textures["color"].shape == (128, 128, 3)
     assert cli_main(["render", "--mesh", str(out), "--resolution", "32x32", "--out", str(tmp_path / "render")]) == 0
@@ -624,7 +625,7 @@ def test_a_mesh_whose_uvs_are_replaced_says_why(tmp_path, capsys):
     path = tmp_path / "over.obj"  # two triangles on the same UVs
     path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 0 1 1\nvt 0.1 0.1\nvt 0.9 0.1\nvt 0.1 0.9\nf 1/1 2/2 3/3\nf 4/1 5/2 6/3\n")
     colour = functools.partial(wt.triplanar, texture=wt.Texture(np.ones((8, 8, 3), np.float32)))
-    with pytest.warns(UserWarning, match=r"^bake\(\): the mesh's own UVs are not used: its UV charts overlap \(1 triangles, e\.g\. faces 0 and 1\); it is baked into a new atlas$"):
+    with pytest.warns(UserWarning, match=r"^bake\(\): the mesh's own UVs are not used: its UV charts overlap \(1 triangles, e\.g\. faces 0 and 1\); it is baked into a new atlas \(keep_uvs, --keep-uvs: keep them\)$"):
         baked = wt.bake(wt.load_mesh(path), colour, size=32)
     assert baked.layout.source != "mesh"
     with warnings.catch_warnings():
@@ -655,6 +656,100 @@ def test_bake_bakes_what_render_shows(shared_data, tmp_path, capsys, texture):
     assert covered.mean() > 0.1
     psnr = 10 * np.log10(1.0 / np.mean((images["render"] - images["baked"])[covered] ** 2))
     assert psnr >= 35.0, psnr
+
+
+def _partly_uv_mapped_scene(path: Path) -> Path:
+    """A glTF scene of a textured box with UVs (a body) and a ball beside it without (its windows):
+    trimesh gives the flattened mesh UVs everywhere, the ball's into its packed material."""
+    from PIL import Image
+
+    box = trimesh.creation.box()
+    box = trimesh.Trimesh(box.vertices[box.faces].reshape(-1, 3), np.arange(36).reshape(-1, 3), process=False)  # a chart per face
+    corners = np.array([[0.05, 0.05], [0.45, 0.05], [0.05, 0.45]])
+    box.visual = trimesh.visual.TextureVisuals(uv=(corners[None] + 0.5 * np.stack(np.divmod(np.arange(12) % 4, 2), axis=1)[:, None]).reshape(-1, 2) * [1, 1],
+                                               image=Image.fromarray(np.random.default_rng(0).integers(0, 255, (16, 16, 3), np.uint8)))
+    ball = trimesh.creation.icosphere(subdivisions=2)
+    ball.apply_translation([2.5, 0.0, 0.0])
+    ball.visual = trimesh.visual.TextureVisuals(material=trimesh.visual.material.PBRMaterial(baseColorFactor=[40, 60, 200, 255]))
+    trimesh.Scene([box, ball]).export(path)
+    return path
+
+
+def _ground(path: Path) -> Path:
+    """A texture with detail everywhere (a flat colour would hide how it is mapped)."""
+    from warptex import io
+    from warptex.scenes.material import noise_texture
+
+    io.write_png(path, noise_texture(64, seed=3))
+    return path
+
+
+def test_parts_without_uvs_get_the_texture_projected(tmp_path, capsys):
+    """Issue 50 item 6: the parts of a UV-mapped scene that have no UVs (a truck's windows) got one
+    flat colour with --texture, from the spot of trimesh's packed material their UVs point at. Their
+    faces are known (mesh_uv_faces), get the texture triplanar as a mesh without UVs does, and
+    render says so; bake replaces the UVs (saying why) and bakes what render shows."""
+    from warptex import io
+    from warptex.mesh import mesh_uv_faces
+
+    scene, ground = _partly_uv_mapped_scene(tmp_path / "parts.glb"), _ground(tmp_path / "ground.png")
+    mesh = wt.load_mesh(scene)
+    own = mesh_uv_faces(mesh)
+    assert own.sum() == 12 and (~own).sum() == 320
+    view = ["--resolution", "96x160", "--quiet", "--eye", "1.2,1.2,3.4", "--target", "1.2,0,0"]
+    runs = {"uv": [], "triplanar": ["--technique", "triplanar"]}
+    for name, extra in runs.items():
+        assert cli_main(["render", "--mesh", str(scene), "--texture", str(ground), *view, *extra, "--out", str(tmp_path / name)]) == 0
+    said = capsys.readouterr().out
+    assert "through the mesh's UVs (it has them), 8 repeats across UV0; mapped triplanar, 8 repeats across the mesh, on the 320 faces of its parts without UVs" in said
+    albedo = {name: io.read_image(tmp_path / name / "albedo.png") for name in runs}
+    g = io.read_image(tmp_path / "uv" / "gbuffer.exr", channels=["triangle"])[..., 0].astype(np.int64)
+    ball, box = (g >= 0) & ~own[np.maximum(g, 0)], (g >= 0) & own[np.maximum(g, 0)]
+    assert ball.mean() > 0.05 and box.mean() > 0.05
+    assert albedo["uv"][ball].std(axis=0).min() > 0.03  # textured, not flat
+    np.testing.assert_array_equal(albedo["uv"][ball], albedo["triplanar"][ball])  # as a projected mesh
+    assert np.abs(albedo["uv"][box] - albedo["triplanar"][box]).mean() > 0.02  # the box keeps its UVs
+
+    assert cli_main(["bake", "--mesh", str(scene), "--texture", str(ground), "--size", "512", "--quiet", "--out", str(tmp_path / "parts_baked.glb")]) == 0
+    out = capsys.readouterr()
+    assert "the mesh's own UVs are not used: 320 of its 332 faces have no UVs of their own" in out.err
+    assert "on the 320 faces of its parts without UVs" in out.out
+    assert cli_main(["render", "--mesh", str(tmp_path / "parts_baked.glb"), *view, "--out", str(tmp_path / "baked")]) == 0
+    images = {k: io.read_image(tmp_path / k / "render.png") for k in ("uv", "baked")}
+    covered = np.logical_and(*[io.read_image(tmp_path / k / "render.exr", channels=["A"])[..., 0] == 1 for k in ("uv", "baked")])
+    psnr = 10 * np.log10(1.0 / np.mean((images["uv"] - images["baked"])[covered] ** 2))
+    assert psnr >= 35.0, psnr
+
+
+def test_keep_uvs_bakes_into_the_mesh_uvs_where_they_can_hold_it(tmp_path, capsys):
+    """Issue 50: bake keeps the mesh's UVs where usable, says why it replaces them, and takes
+    --keep-uvs (keep_uvs) to insist: overlapping charts then share texels. UVs that cannot hold a
+    bake at all (none, outside [0, 1]) are refused with the reason, before any file is written."""
+    import warnings
+
+    path = tmp_path / "over.obj"  # two triangles on the same UVs
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 0 1 1\nvt 0.1 0.1\nvt 0.9 0.1\nvt 0.1 0.9\nf 1/1 2/2 3/3\nf 4/1 5/2 6/3\n")
+    colour = functools.partial(wt.triplanar, texture=wt.Texture(np.ones((8, 8, 3), np.float32)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        baked = wt.bake(wt.load_mesh(path), colour, size=32, keep_uvs=True)
+    assert baked.layout.source == "mesh"
+    np.testing.assert_array_equal(baked.layout.uv, mesh_uv_sets(wt.load_mesh(path))["uv0"])
+    with pytest.raises(ValueError, match=r"^unwrap\(\): the mesh's own UVs cannot be kept: the mesh has no UVs$"):
+        wt.bake(trimesh.creation.box(), colour, size=32, keep_uvs=True)
+    with pytest.raises(ValueError, match=r"keep_uvs and force_atlas ask for opposite things"):
+        wt.bake(wt.load_mesh(path), colour, size=32, keep_uvs=True, force_atlas=True)
+    outside = tmp_path / "outside.obj"
+    outside.write_text(path.read_text().replace("vt 0.9 0.1", "vt 1.5 0.1"))
+    out = tmp_path / "o" / "o.glb"
+    assert cli_main(["bake", "--mesh", str(outside), "--keep-uvs", "--size", "32", "--quiet", "--out", str(out)]) == 1
+    assert "cannot be kept: its UVs leave the texture (they span [0.1, 1.5], not inside [0, 1])" in capsys.readouterr().err
+    assert not out.parent.exists()
+    assert cli_main(["bake", "--mesh", str(path), "--keep-uvs", "--size", "32", "--quiet", "--out", str(out)]) == 0
+    said = capsys.readouterr()
+    assert "not used" not in said.err
+    kept, _ = load_gltf(out)
+    np.testing.assert_allclose(mesh_uv_sets(kept)["uv0"][kept.faces], mesh_uv_sets(wt.load_mesh(path))["uv0"][wt.load_mesh(path).faces], atol=1e-6)
 
 
 def test_a_gltf_keeps_its_vertex_normals(tmp_path):

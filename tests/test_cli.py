@@ -280,6 +280,7 @@ def test_ctrl_c_once_the_run_is_over_keeps_its_status(tmp_path):
     for delay in (0.0, 0.05, 0.2):
         child = subprocess.Popen([sys.executable, "-m", "warptex", "render", *SMALL, "--out", str(tmp_path / "out")], cwd=ROOT, stdout=subprocess.PIPE,
                                  stderr=subprocess.PIPE, text=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        assert child.stdout.readline().startswith("render: ")  # what it used, then what it wrote
         assert child.stdout.readline().startswith("wrote ")
         time.sleep(delay)
         child.send_signal(signal.SIGINT)

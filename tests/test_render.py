@@ -319,3 +319,24 @@ def test_render_takes_a_technique_as_bake_does(tmp_path, capsys, shared_data):
         albedo[technique] = io.read_image(out / "albedo.png")
     np.testing.assert_array_equal(albedo[None], albedo["uv"])  # the default for a mesh with UVs
     assert np.abs(albedo["uv"] - albedo["triplanar"]).max() > 0.1 and np.abs(albedo["triplanar"] - albedo["biplanar"]).max() > 0.01
+
+
+def test_render_says_in_one_line_what_it_used(tmp_path, capsys, shared_data):
+    """Issue 50: ``warptex render`` prints one line saying what it used (texture source, mapping and
+    why, tiling, camera position), before the files it wrote; ``bake`` likewise."""
+    duck, brick = shared_data / "meshes" / "Duck.glb", shared_data / "textures" / "brick.png"
+    small = ["--resolution", "24x32", "--quiet"]
+    runs = {
+        "terrain": ([], "render: the default terrain: 4 procedural layers (grass, gravel, rock, snow) splat-blended by height, each mapped triplanar, one repeat per 6 units; camera at -30,34,40"),
+        "duck": (["--mesh", str(duck)], "render: the mesh's own texture through the mesh's UVs (it has them), 1 repeat across UV0; camera at 1.193,2.23,2.987"),
+        "brick": (["--mesh", str(duck), "--texture", str(brick), "--technique", "biplanar", "--tiling", "3", "--eye", "2,1,0"],
+                  f"render: texture {brick}, mapped biplanar (as asked), 3 repeats across the mesh; camera at 2,1,0"),
+        "bunny": (["--mesh", str(shared_data / "meshes" / "bunny.ply")], "render: a procedural ground texture (seed 0), mapped triplanar (it has no UVs), 8 repeats across the mesh; camera at"),
+    }
+    for name, (options, said) in runs.items():
+        assert main(["render", *options, *small, "--out", str(tmp_path / name)]) == 0
+        lines = capsys.readouterr().out.splitlines()
+        assert lines[0].startswith(said), lines[0]
+        assert [line.split()[0] for line in lines[1:]] == ["wrote"] * 5
+    assert main(["bake", "--mesh", str(duck), "--texture", str(brick), "--size", "64", "--quiet", "--out", str(tmp_path / "d.glb")]) == 0
+    assert capsys.readouterr().out.splitlines()[0] == f"bake: texture {brick} through the mesh's UVs (it has them), 8 repeats across UV0"

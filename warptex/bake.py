@@ -35,6 +35,7 @@ from warptex.tiles import Tile, checked_memory, tile_rows
 from warptex.gbuffer import GBuffer, checked_geometry, _gbuffer_device, load_mesh, mesh_uv_sets, vertex_normals, vertex_tangents
 from warptex.kernels import bake as kb
 from warptex.kernels import raster as kr
+from warptex.mesh import mesh_uv_faces
 from warptex.unwrap import ATLAS_FILL, ATLAS_METHODS, UVLayout, bakeable_faces, _checked_size, face_areas, unusable_reason, unwrap
 
 #: Peak memory of a bake, measured (peak RSS, bunny, 512² to 4096²): ~300 MB plus ~400 B per texel
@@ -286,6 +287,7 @@ def bake(
     gutter: int | None = None,
     view_size: int = 512,
     force_atlas: bool = False,
+    keep_uvs: bool = False,
     atlas: str = "auto",
     device=None,
 ) -> Baked:
@@ -311,6 +313,9 @@ def bake(
         gutter: texels filled around each chart; default :func:`default_gutter` for ``view_size``.
         view_size: pixels across which the asset is meant to be seen whole (sets the default gutter).
         force_atlas: make an atlas even when the mesh's UVs are usable.
+        keep_uvs: bake into the mesh's own UVs even where they overlap or parts have none
+            (:func:`~warptex.unwrap.unwrap`); without it such UVs are replaced by an atlas, with a
+            ``UserWarning`` saying why.
         atlas: how an atlas is made: ``"auto"``, ``"xatlas"`` or ``"projection"``
             (:func:`~warptex.unwrap.unwrap`).
         device: Warp device.
@@ -324,14 +329,14 @@ def bake(
             xatlas cannot unwrap. MemoryError: a size past this machine's memory.
     """
     func = "bake"
-    layout, gutter, device = prepare_bake(func, mesh, technique, normal, size=size, padding=padding, gutter=gutter, view_size=view_size, force_atlas=force_atlas, atlas=atlas, device=device, needed=lambda n: BAKE_BYTES[0] + BAKE_BYTES[1] * n * n, hint="use a smaller size, or warptex.bake_gltf, which bakes in bands")
+    layout, gutter, device = prepare_bake(func, mesh, technique, normal, size=size, padding=padding, gutter=gutter, view_size=view_size, force_atlas=force_atlas, keep_uvs=keep_uvs, atlas=atlas, device=device, needed=lambda n: BAKE_BYTES[0] + BAKE_BYTES[1] * n * n, hint="use a smaller size, or warptex.bake_gltf, which bakes in bands")
     g, coverage = texture_gbuffer(layout, size, gutter=gutter, device=device)
     color = technique(g) if technique is not None else None
     normal_map = tangent_space(g, normal(g)) if normal is not None else None
     return Baked(layout, g, coverage, color, normal_map, gutter)
 
 
-def prepare_bake(func: str, mesh, technique, normal, *, size, padding, gutter, view_size, force_atlas, atlas, device, needed: Callable[[int], float], hint: str) -> tuple[UVLayout, int, wp.context.Device]:
+def prepare_bake(func: str, mesh, technique, normal, *, size, padding, gutter, view_size, force_atlas, keep_uvs=False, atlas, device, needed: Callable[[int], float], hint: str) -> tuple[UVLayout, int, wp.context.Device]:
     """What a bake checks and makes before its texels: ``(layout, gutter, device)``. Every
     argument is checked (``needed(size)``: the bytes the bake will take, against what is
     available) and the techniques tried on an empty G-buffer before the mesh is unwrapped."""
@@ -355,13 +360,17 @@ def prepare_bake(func: str, mesh, technique, normal, *, size, padding, gutter, v
     _dry_run(func, technique, normal, uv_sets, device)
 
     own = uv_sets.get("uv0")
-    unusable = unusable_reason(own, np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64), device=device)
+    vertices, faces = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
+    if keep_uvs:  # refused by unwrap where they cannot be, before any texel is made
+        unusable = ""
+    else:
+        unusable = unusable_reason(own, vertices, faces, own_faces=mesh_uv_faces(mesh), device=device)
     if own is not None and unusable and not force_atlas:  # an artist's UVs, replaced: say why
-        warnings.warn(f"{func}(): the mesh's own UVs are not used: {unusable}; it is baked into a new atlas", UserWarning, stacklevel=3)
+        warnings.warn(f"{func}(): the mesh's own UVs are not used: {unusable}; it is baked into a new atlas (keep_uvs, --keep-uvs: keep them)", UserWarning, stacklevel=3)
     force_atlas = bool(force_atlas) or bool(unusable)
-    fill = ATLAS_FILL if force_atlas else max(float(face_areas(mesh.vertices, mesh.faces, own)[1].sum()), 1e-6)
+    fill = ATLAS_FILL if force_atlas or own is None else max(float(face_areas(mesh.vertices, mesh.faces, own)[1].sum()), 1e-6)
     gutter = default_gutter(mesh, size, view_size=view_size, uv_fill=fill) if gutter is None else int(gutter)
-    layout = unwrap(mesh, size=size, padding=gutter if padding is None else int(padding), force_atlas=force_atlas, atlas=atlas, device=device)
+    layout = unwrap(mesh, size=size, padding=gutter if padding is None else int(padding), force_atlas=force_atlas, keep_uvs=keep_uvs, atlas=atlas, device=device)
     return layout, gutter, device
 
 

@@ -94,6 +94,7 @@ def bake_gltf(
     gutter: int | None = None,
     view_size: int = 512,
     force_atlas: bool = False,
+    keep_uvs: bool = False,
     atlas: str = "auto",
     memory: int | None = None,
     progress: bool | None = None,
@@ -106,7 +107,7 @@ def bake_gltf(
     ``export_gltf(bake(...))`` writes for the same arguments, byte for byte.
 
     Args:
-        mesh, technique, normal, size, padding, gutter, view_size, force_atlas, atlas, device:
+        mesh, technique, normal, size, padding, gutter, view_size, force_atlas, keep_uvs, atlas, device:
             as for :func:`~warptex.bake`.
         path: the ``.glb`` to write; the textures go beside it (:func:`export_gltf`).
         memory: bytes a band's work may take (default :data:`warptex.tiles.DEFAULT_MEMORY`).
@@ -121,7 +122,7 @@ def bake_gltf(
     path = checked_glb_path(func, path)
     memory = checked_memory(func, memory)
     layout, gutter, device = prepare_bake(
-        func, mesh, technique, normal, size=size, padding=padding, gutter=gutter, view_size=view_size, force_atlas=force_atlas, atlas=atlas, device=device,
+        func, mesh, technique, normal, size=size, padding=padding, gutter=gutter, view_size=view_size, force_atlas=force_atlas, keep_uvs=keep_uvs, atlas=atlas, device=device,
         needed=lambda n: BAKE_BYTES[0] + min(memory, BAKE_TEXEL_BYTES * n * n), hint="use a smaller memory budget (--memory)",
     )
     tiles = texture_gbuffer_tiles(layout, size, gutter=gutter, memory=memory, device=device)

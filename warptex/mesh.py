@@ -43,8 +43,11 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
         _no_faces(path)
     if os.path.splitext(path)[1].lower() == ".obj":
         _drop_missing_materials(path, loaded)
-    if os.path.splitext(path)[1].lower() in (".glb", ".gltf"):
-        _keep_gltf_normals(scene, loaded)
+    parts = _flattened_parts(scene, loaded)
+    if parts and os.path.splitext(path)[1].lower() in (".glb", ".gltf"):
+        _keep_gltf_normals(parts, loaded)
+    if parts:
+        _mark_faces_without_uvs(parts, loaded)
     if os.path.splitext(path)[1].lower() == ".stl":  # STL stores each triangle's corners apart:
         loaded.merge_vertices()  # shared, they get the smooth vertex normals other formats get
     checked_geometry(f"load_mesh(): {path!r}:", loaded)
@@ -68,28 +71,68 @@ def _drop_missing_materials(path: str, mesh: trimesh.Trimesh) -> None:
         mesh.visual = trimesh.visual.TextureVisuals(uv=mesh.visual.uv, material=trimesh.visual.material.SimpleMaterial(image=None))
 
 
-def _keep_gltf_normals(scene: trimesh.Scene, mesh: trimesh.Trimesh) -> None:
-    """trimesh flattens a glTF scene into one mesh without the file's vertex normals, which are then
-    recomputed, split at every UV seam (a baked asset, whose atlas has many, re-rendered with
-    visible facets). Take them from the scene's meshes instead, turned as their nodes place them,
-    where the flattened vertices are those meshes' vertices in order (else leave the mesh as is)."""
-    vertices, normals = [], []
+def _flattened_parts(scene, mesh: trimesh.Trimesh) -> list[tuple[np.ndarray, trimesh.Trimesh]] | None:
+    """The scene's meshes with their node transforms, ``[(transform, part)]``, in the order the
+    flattened ``mesh`` holds their vertices and faces; ``None`` where it does not (a scene with
+    other geometry, or flattened otherwise)."""
+    if not isinstance(scene, trimesh.Scene):
+        return None
+    parts = []
     for node in scene.graph.nodes_geometry:
         transform, name = scene.graph[node]
         part = scene.geometry[name]
-        stored = getattr(getattr(part, "_cache", None), "cache", {}).get("vertex_normals") if isinstance(part, trimesh.Trimesh) else None
-        if stored is None or np.shape(stored) != np.shape(part.vertices):
-            return
-        vertices.append(trimesh.transform_points(np.asarray(part.vertices, np.float64), transform))
-        turned = np.asarray(stored, np.float64) @ np.linalg.inv(transform[:3, :3])  # the inverse transpose, on rows
-        normals.append(turned / np.maximum(np.linalg.norm(turned, axis=1, keepdims=True), 1e-300))
-    if not vertices:
-        return
-    vertices = np.concatenate(vertices)
+        if not isinstance(part, trimesh.Trimesh):
+            return None
+        parts.append((transform, part))
+    if not parts or sum(len(p.faces) for _, p in parts) != len(mesh.faces):
+        return None
+    vertices = np.concatenate([trimesh.transform_points(np.asarray(p.vertices, np.float64), t) for t, p in parts])
+    if not np.isfinite(vertices).all():  # reported by the checks that follow
+        return None
     scale = max(float(np.abs(vertices).max()), 1.0)
     if vertices.shape != np.shape(mesh.vertices) or not np.allclose(vertices, mesh.vertices, rtol=0.0, atol=1e-6 * scale):
-        return
+        return None
+    return parts
+
+
+def _keep_gltf_normals(parts: list[tuple[np.ndarray, trimesh.Trimesh]], mesh: trimesh.Trimesh) -> None:
+    """trimesh flattens a glTF scene into one mesh without the file's vertex normals, which are then
+    recomputed, split at every UV seam (a baked asset, whose atlas has many, re-rendered with
+    visible facets). Take them from the scene's meshes instead (:func:`_flattened_parts`), turned
+    as their nodes place them."""
+    normals = []
+    for transform, part in parts:
+        stored = getattr(getattr(part, "_cache", None), "cache", {}).get("vertex_normals")
+        if stored is None or np.shape(stored) != np.shape(part.vertices):
+            return
+        turned = np.asarray(stored, np.float64) @ np.linalg.inv(transform[:3, :3])  # the inverse transpose, on rows
+        normals.append(turned / np.maximum(np.linalg.norm(turned, axis=1, keepdims=True), 1e-300))
     mesh.vertex_normals = np.concatenate(normals)
+
+
+#: ``mesh.metadata`` key of a loaded scene's faces whose UV0 are their own (:func:`mesh_uv_faces`).
+OWN_UV_FACES = "warptex_own_uv_faces"
+
+
+def _mark_faces_without_uvs(parts: list[tuple[np.ndarray, trimesh.Trimesh]], mesh: trimesh.Trimesh) -> None:
+    """A scene some of whose parts have UVs (a truck's body) and some none (its windows): trimesh
+    gives the flattened mesh UVs everywhere, those of the parts without pointing at one spot of its
+    packed material. Keep which faces have UVs of their own (:func:`mesh_uv_faces`)."""
+    own = np.concatenate([np.full(len(p.faces), getattr(p.visual, "uv", None) is not None and len(p.visual.uv) == len(p.vertices)) for _, p in parts])
+    if not own.all() and "uv0" in mesh_uv_sets(mesh):
+        mesh.metadata[OWN_UV_FACES] = own
+
+
+def mesh_uv_faces(mesh: trimesh.Trimesh) -> np.ndarray:
+    """Which faces ``[F]`` (bool) have UV0 coordinates of their own: none without UV0; in a loaded
+    scene (:func:`load_mesh`), those of its parts that had UVs (trimesh gives the others UVs into
+    its packed material, which hold their flat colour and nothing of a texture); else all."""
+    if "uv0" not in mesh_uv_sets(mesh):
+        return np.zeros(len(mesh.faces), bool)
+    own = mesh.metadata.get(OWN_UV_FACES)
+    if own is None or np.shape(own) != (len(mesh.faces),):
+        return np.ones(len(mesh.faces), bool)
+    return np.asarray(own, bool)
 
 
 def _directives(path: str, keyword: str) -> list[list[str]]:

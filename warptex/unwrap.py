@@ -27,6 +27,7 @@ import warp as wp
 
 from warptex.charts import projected_atlas
 from warptex.gbuffer import checked_geometry, mesh_uv_sets, vertex_normals, vertex_tangents
+from warptex.mesh import mesh_uv_faces
 from warptex.kernels import bake as kb
 
 # Two UV triangles overlap when they penetrate by more than this (UV units, 1/50 of a texel at
@@ -93,9 +94,29 @@ def _checked_size(func: str, size) -> int:
     return int(size)
 
 
-def unusable_reason(uv: np.ndarray | None, vertices: np.ndarray, faces: np.ndarray, *, device=None) -> str:
+def unusable_reason(uv: np.ndarray | None, vertices: np.ndarray, faces: np.ndarray, *, own_faces: np.ndarray | None = None, device=None) -> str:
     """Why the UV set ``uv`` ``[V, 2]`` cannot be baked into (``""`` if it can): missing, outside
-    ``[0, 1]``, or two triangles overlapping (named by their face indices)."""
+    ``[0, 1]`` (:func:`unkeepable_reason`), faces with area that have no UVs of their own
+    (``own_faces``, bool ``[F]``: :func:`warptex.mesh.mesh_uv_faces`), or two triangles
+    overlapping (named by their face indices)."""
+    reason = unkeepable_reason(uv, vertices, faces)
+    if reason:
+        return reason
+    has_area = _has_area(vertices, faces)
+    if own_faces is not None:
+        without = np.flatnonzero(has_area & ~np.asarray(own_faces, bool))
+        if len(without):
+            return f"{len(without)} of its {len(faces)} faces have no UVs of their own (parts without texture coordinates, e.g. face {without[0]})"
+    found = overlapping_faces(np.asarray(uv, np.float64), faces, has_area, device=device)
+    hits = np.flatnonzero(found >= 0)
+    if len(hits):
+        return f"its UV charts overlap ({len(hits)} triangles, e.g. faces {hits[0]} and {found[hits[0]]})"
+    return ""
+
+
+def unkeepable_reason(uv: np.ndarray | None, vertices: np.ndarray, faces: np.ndarray) -> str:
+    """Why the UV set ``uv`` cannot be baked into even on request (``""`` if it can, overlapping or
+    not): missing, not finite, outside ``[0, 1]``, or no triangle with UV area."""
     if uv is None:
         return "the mesh has no UVs"
     uv = np.asarray(uv, np.float64)
@@ -104,13 +125,8 @@ def unusable_reason(uv: np.ndarray | None, vertices: np.ndarray, faces: np.ndarr
     used = uv[np.unique(faces)]
     if used.min() < 0.0 or used.max() > 1.0:
         return f"its UVs leave the texture (they span [{used.min():.3g}, {used.max():.3g}], not inside [0, 1])"
-    has_area = _has_area(vertices, faces)
     if len(bakeable_faces(vertices, faces, uv)) == 0:
         return "every UV triangle has zero area"
-    found = overlapping_faces(uv, faces, has_area, device=device)
-    hits = np.flatnonzero(found >= 0)
-    if len(hits):
-        return f"its UV charts overlap ({len(hits)} triangles, e.g. faces {hits[0]} and {found[hits[0]]})"
     return ""
 
 
@@ -136,7 +152,7 @@ def overlapping_faces(uv: np.ndarray, faces: np.ndarray, has_area: np.ndarray, *
     return found
 
 
-def unwrap(mesh: trimesh.Trimesh, *, size: int = 2048, padding: int = 8, force_atlas: bool = False, atlas: str = "auto", device=None) -> UVLayout:
+def unwrap(mesh: trimesh.Trimesh, *, size: int = 2048, padding: int = 8, force_atlas: bool = False, keep_uvs: bool = False, atlas: str = "auto", device=None) -> UVLayout:
     """The UV layout to bake ``mesh`` into: its first UV set (``"uv0"``) when usable (see the
     module docstring), else (or with ``force_atlas``) an automatic atlas.
 
@@ -145,6 +161,9 @@ def unwrap(mesh: trimesh.Trimesh, *, size: int = 2048, padding: int = 8, force_a
         size: texels per side of the texture the atlas is made for.
         padding: texels between the atlas's charts (the gutters live there), ``>= 0``.
         force_atlas: make an atlas even when the mesh's UVs are usable.
+        keep_uvs: keep the mesh's UVs even where charts overlap (their triangles then share
+            texels) or parts have none of their own; refused where they cannot hold a bake at
+            all (:func:`unkeepable_reason`: missing, outside ``[0, 1]``).
         atlas: how an atlas is made: ``"xatlas"`` (few seams, little stretch; a minute for
             80 000 faces), ``"projection"`` (charts projected along six axes,
             :mod:`warptex.charts`: seconds for a million faces), or ``"auto"`` (default): xatlas
@@ -170,10 +189,17 @@ def unwrap(mesh: trimesh.Trimesh, *, size: int = 2048, padding: int = 8, force_a
     # A vertex of zero-area faces only has no normal; glTF wants unit ones, and no face with area
     # can show it: any unit vector does.
     normals[np.linalg.norm(normals, axis=1) == 0] = (0.0, 0.0, 1.0)
-    reason = unusable_reason(mesh_uv_sets(mesh).get("uv0"), vertices, faces, device=device) or ("an atlas was asked for" if force_atlas else "")
+    own = mesh_uv_sets(mesh).get("uv0")
+    if keep_uvs:
+        if force_atlas:
+            raise ValueError(f"{func}(): keep_uvs and force_atlas ask for opposite things; pass one")
+        reason = unkeepable_reason(own, vertices, faces)
+        if reason:
+            raise ValueError(f"{func}(): the mesh's own UVs cannot be kept: {reason}")
+    else:
+        reason = unusable_reason(own, vertices, faces, own_faces=mesh_uv_faces(mesh), device=device) or ("an atlas was asked for" if force_atlas else "")
     if not reason:
-        uv = mesh_uv_sets(mesh)["uv0"]
-        return UVLayout(vertices, faces, uv, normals, np.arange(len(vertices)), "mesh", mesh=mesh)
+        return UVLayout(vertices, faces, own, normals, np.arange(len(vertices)), "mesh", mesh=mesh)
     vertex_map, new_faces, uv, source, note = _atlas(func, vertices, faces, size, int(padding), atlas, device)
     return UVLayout(vertices[vertex_map], new_faces, uv, normals[vertex_map], vertex_map, source, reason, int(padding), mesh, note)
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from warptex._compile import preload
 from warptex._output import check_memory, check_output_folder
-from warptex.apps.render import mesh_material, mesh_technique, terrain_material
+from warptex.apps.render import mesh_material, mesh_technique, terrain_material, terrain_used
 from warptex.bake import BAKE_BYTES, BAKE_TEXEL_BYTES
 from warptex.gbuffer import load_mesh
 from warptex.gltf import bake_gltf
@@ -96,8 +96,10 @@ def run_bake(
     seed: int = 0,
     filter: Filter | str = Filter.ANISOTROPIC,
     atlas: str = "auto",
+    keep_uvs: bool = False,
     memory: int | None = None,
     progress: bool | None = None,
+    report=None,
     device=None,
 ) -> list[Path]:
     """Bake a mesh's texturing and write ``out_path`` (``.glb``) and its textures beside it.
@@ -120,9 +122,12 @@ def run_bake(
             default 8; layers: repeats per world unit, default 1/6).
         seed: terrain and procedural texture seed. filter: the texture filter.
         atlas: how a mesh without usable UVs is unwrapped (:func:`warptex.unwrap`).
+        keep_uvs: bake into the mesh's own UVs even where they overlap or parts have none
+            (else they are replaced by an atlas, with a warning saying why).
         memory: bytes a band of the atlas may take (:func:`warptex.bake_gltf`, which bakes in
             bands: memory stays near this whatever the size). progress: a progress bar (``None``:
-            on a terminal). device: Warp device.
+            on a terminal). report: called once, before the bake, with a line saying what it
+            bakes (texture, mapping and why, tiling; ``warptex bake`` prints it). device: Warp device.
 
     Returns:
         The paths written, the GLB first.
@@ -140,6 +145,7 @@ def run_bake(
         raise ValueError(f"{func}(): tiling must be a finite number > 0, got {tiling!r}")
     sampler = Sampler(filter=filter)
     mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
+    chosen = technique
     if technique is None:  # as render: through the mesh's UVs where it has them
         technique = mesh_technique(func, mesh, None)
     preload(_kernels(technique, stochastic, normal_map_path is not None, len(layer_paths or ()) or 4, device), device)  # compiled side by side on a cold start
@@ -147,15 +153,20 @@ def run_bake(
     normal = None
     if technique == "splat" and mesh_path is None:
         colour = terrain_material(mesh, tiling, seed, sampler, device)
+        used = terrain_used(colour.keywords["tiling"])
     elif technique == "splat":
         layers = TextureArray.from_files(layer_paths, channels=4, device=device)
         maps = TextureArray.from_files([splat_path], data=True, channels=4, mipmaps=False, device=device)
         colour = functools.partial(splat, layers=layers, splat_maps=maps, tiling=1.0 / 6.0 if tiling is None else tiling, projection="triplanar", height_blend=0.2, sampler=sampler, device=device)
+        used = f"{len(layer_paths)} layers splat-blended by height by {splat_path} in UV0, each mapped triplanar, {colour.keywords['tiling']:.4g} repeats per unit"
     else:
-        colour = mesh_material(func, mesh, technique, texture_path, None, tiling, seed, sampler, device)
+        colour, used = mesh_material(func, mesh, chosen, texture_path, None, tiling, seed, sampler, device)
         if normal_map_path is not None:
             maps = Texture.from_file(normal_map_path, data=True, channels=3, device=device)
             mapping = triplanar_normal if technique == "triplanar" else biplanar_normal  # the colour's weights (and default sharpness)
             normal = functools.partial(mapping, normal_map=maps, tiling=colour.keywords["tiling"], stochastic=stochastic, sampler=sampler, device=device)
+            used += f"; normal map {normal_map_path}, mapped alike"
     colour = functools.partial(colour, stochastic=stochastic) if stochastic else colour
-    return bake_gltf(mesh, out_path, colour, normal=normal, size=size, padding=padding, gutter=gutter, atlas=atlas, memory=memory, progress=progress, device=device)
+    if report is not None:
+        report(f"{used}{f'; anti-tiled ({stochastic})' if stochastic else ''}")
+    return bake_gltf(mesh, out_path, colour, normal=normal, size=size, padding=padding, gutter=gutter, atlas=atlas, keep_uvs=keep_uvs, memory=memory, progress=progress, device=device)

@@ -83,6 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--atlas", choices=("auto", "xatlas", "projection"), default="auto",
         help="how a mesh without usable UVs is unwrapped: xatlas (few seams), projection (charts along six axes, for large scans), or auto: xatlas up to 50,000 faces (default: auto)",
     )
+    bake.add_argument("--keep-uvs", action="store_true", help="bake into the mesh's own UVs even where charts overlap (they then share texels) or parts have none; without it such UVs are replaced by an atlas, with a warning saying why")
     _add_memory(bake, "the atlas", "larger atlases are baked band by band")
     _add_device(bake)
     _add_quiet(bake)
@@ -109,6 +110,17 @@ def _add_quiet(command: argparse.ArgumentParser) -> None:
 def _progress(args: argparse.Namespace) -> bool | None:
     """A command's progress bar: off with --quiet, else on a terminal only (tqdm decides)."""
     return False if args.quiet else None
+
+
+def _reporter(command: str):
+    """How a command prints the line saying what it used: on stdout, above its progress bar."""
+
+    def report(line: str) -> None:
+        from tqdm import tqdm
+
+        tqdm.write(f"{command}: {line}", file=sys.stdout)
+
+    return report
 
 
 def _add_filter(command: argparse.ArgumentParser) -> None:
@@ -290,8 +302,8 @@ def _run(args: argparse.Namespace) -> list:
         from warptex.apps.bake import run_bake
 
         paths = {"mesh_path": args.mesh, "texture_path": args.texture, "layer_paths": args.layers, "splat_path": args.splat, "normal_map_path": args.normal_map}
-        options = {k: getattr(args, k) for k in ("technique", "stochastic", "size", "padding", "gutter", "tiling", "seed", "filter", "atlas", "memory", "device")}
-        return run_bake(args.out, **paths, **options, progress=_progress(args))
+        options = {k: getattr(args, k) for k in ("technique", "stochastic", "size", "padding", "gutter", "tiling", "seed", "filter", "atlas", "keep_uvs", "memory", "device")}
+        return run_bake(args.out, **paths, **options, progress=_progress(args), report=_reporter("bake"))
     if args.command == "assets":
         from warptex.apps.assets import run_assets
 
@@ -320,6 +332,7 @@ def _run(args: argparse.Namespace) -> list:
         memory=args.memory,
         device=args.device,
         progress=_progress(args),
+        report=_reporter("render"),
     )
 
 

@@ -31,8 +31,8 @@ from warptex.kernels import sampling as ks
 from warptex.kernels import triplanar as kt
 from warptex.camera import checked_resolution, look_at
 from warptex.exr_writer import ExrWriter
-from warptex.gbuffer import GBuffer, load_mesh, mesh_uv_sets
-from warptex.mesh import up_axis
+from warptex.gbuffer import GBuffer, load_mesh
+from warptex.mesh import mesh_uv_faces, up_axis
 from warptex.gbuffer_io import GBufferWriter
 from warptex.png import PngWriter
 from warptex.resolve import resolve
@@ -65,8 +65,9 @@ MESH_TECHNIQUES = ("uv", "triplanar", "biplanar")
 
 def mesh_technique(func: str, mesh: trimesh.Trimesh, technique: str | None) -> str:
     """How a mesh is textured: ``technique`` checked against it, or (``None``) ``"uv"`` where it
-    has UVs, else ``"triplanar"``."""
-    has_uvs = "uv0" in mesh_uv_sets(mesh)
+    has UVs (on some of its faces at least, :func:`~warptex.mesh.mesh_uv_faces`), else
+    ``"triplanar"``."""
+    has_uvs = bool(mesh_uv_faces(mesh).any())
     if technique is None:
         technique = "uv" if has_uvs else "triplanar"
     if technique not in MESH_TECHNIQUES:
@@ -76,33 +77,58 @@ def mesh_technique(func: str, mesh: trimesh.Trimesh, technique: str | None) -> s
     return technique
 
 
-def mesh_material(func: str, mesh: trimesh.Trimesh, technique: str | None, texture_path, texture_layer, tiling: float | None, seed: int, sampler: Sampler, device) -> Callable[[GBuffer], wp.array]:
+def mesh_material(func: str, mesh: trimesh.Trimesh, technique: str | None, texture_path, texture_layer, tiling: float | None, seed: int, sampler: Sampler, device) -> tuple[Callable[[GBuffer], wp.array], str]:
     """The colour of a G-buffer as ``warptex render`` textures a mesh, and ``warptex bake`` bakes
-    it, the same for the same arguments.
+    it, the same for the same arguments; and what it used, in words (the line ``render`` and
+    ``bake`` print).
 
     The texture is ``texture_path``, else the mesh's own (glTF base colour, OBJ ``map_Kd``), else a
     procedural ground. ``technique`` (:func:`mesh_technique`): ``"uv"`` (through UV0 × ``tiling``;
     default ``tiling`` 1 with the mesh's own texture, else 8), ``"triplanar"`` or ``"biplanar"``
-    (``tiling`` repeats across the mesh's largest extent, default 8)."""
+    (``tiling`` repeats across the mesh's largest extent, default 8). Through UVs, the faces of
+    parts that have none (:func:`~warptex.mesh.mesh_uv_faces`) get the texture triplanar, 8
+    repeats across the mesh, unless it is the mesh's own (which holds their flat colour)."""
+    chosen = technique
     technique = mesh_technique(func, mesh, technique)
     embedded = _embedded_texture(mesh) if texture_path is None else None
     if texture_path is not None:
         texture = Texture.from_file(texture_path, layer=texture_layer, device=device)
+        source = f"texture {os.fspath(texture_path)}"
     else:
         texture = Texture(embedded if embedded is not None else noise_texture(seed=seed), device=device)
+        source = "the mesh's own texture" if embedded is not None else f"a procedural ground texture (seed {seed})"
+    why = "as asked" if chosen is not None else "it has them" if technique == "uv" else "it has no UVs"
     tiling = (1.0 if embedded is not None and technique == "uv" else 8.0) if tiling is None else float(tiling)
-    if technique == "uv":
-        return functools.partial(_through_uvs, texture=texture, tiling=tiling, sampler=sampler, device=device)
-    return triplanar_material(mesh, texture, tiling, sampler, device, technique=triplanar if technique == "triplanar" else biplanar)
+    if technique != "uv":
+        used = f"{source}, mapped {technique} ({why}), {_repeats(tiling)} across the mesh"
+        return triplanar_material(mesh, texture, tiling, sampler, device, technique=triplanar if technique == "triplanar" else biplanar), used
+    used = f"{source} through the mesh's UVs ({why}), {_repeats(tiling)} across UV0"
+    own = mesh_uv_faces(mesh)
+    if own.all() or embedded is not None:
+        return functools.partial(_through_uvs, texture=texture, tiling=tiling, sampler=sampler, device=device), used
+    used += f"; mapped triplanar, {_repeats(8.0)} across the mesh, on the {int((~own).sum())} faces of its parts without UVs"
+    fallback = triplanar_material(mesh, texture, 8.0, sampler, device)
+    return functools.partial(_through_uvs, texture=texture, tiling=tiling, sampler=sampler, device=device, fallback=(own, fallback)), used
 
 
-def _through_uvs(gbuffer: GBuffer, *, texture: Texture, tiling: float, sampler: Sampler, device, stochastic=None) -> wp.array:
+def _through_uvs(gbuffer: GBuffer, *, texture: Texture, tiling: float, sampler: Sampler, device, stochastic=None, fallback=None) -> wp.array:
     """``texture`` at the G-buffer's UV0 × ``tiling`` (with its derivatives: the footprint);
-    with ``stochastic``, anti-tiled (:func:`~warptex.stochastic`)."""
+    with ``stochastic``, anti-tiled (:func:`~warptex.stochastic`). ``fallback``: ``(own, material)``,
+    the mesh's faces with UVs of their own (bool ``[F]``) and the material of the others' pixels."""
     uv, uv_dx, uv_dy = (np.ascontiguousarray(gbuffer.uv_sets["uv0"][k].numpy() * tiling, np.float32) for k in ("uv", "uv_dx", "uv_dy"))
     if stochastic is not None:
-        return stochastic_sample(texture, uv, stochastic, uv_dx=uv_dx, uv_dy=uv_dy, sampler=sampler, device=device)
-    return sample(texture, uv, uv_dx=uv_dx, uv_dy=uv_dy, sampler=sampler, device=device)
+        out = stochastic_sample(texture, uv, stochastic, uv_dx=uv_dx, uv_dy=uv_dy, sampler=sampler, device=device)
+    else:
+        out = sample(texture, uv, uv_dx=uv_dx, uv_dy=uv_dy, sampler=sampler, device=device)
+    if fallback is None:
+        return out
+    own, material = fallback
+    triangle = gbuffer.triangle.numpy()
+    without = (triangle >= 0) & ~own[np.maximum(triangle, 0)]
+    if not without.any():
+        return out
+    projected = (material(gbuffer) if stochastic is None else material(gbuffer, stochastic=stochastic)).numpy()
+    return wp.array(np.where(without[..., None], projected, out.numpy()), dtype=wp.float32, device=out.device)
 
 
 def triplanar_material(mesh: trimesh.Trimesh, texture: Texture, tiling: float, sampler: Sampler, device, technique=triplanar) -> Callable[[GBuffer], wp.array]:
@@ -130,6 +156,19 @@ def terrain_material(mesh: trimesh.Trimesh, tiling: float | None, seed: int, sam
     layers, maps = terrain_textures(mesh, seed, device) if textures is None else textures
     tiling = 1.0 / 6.0 if tiling is None else float(tiling)
     return functools.partial(splat, layers=layers, splat_maps=maps, tiling=tiling, projection="triplanar", height_blend=0.2, sampler=sampler, device=device)
+
+
+def terrain_used(tiling: float) -> str:
+    """What the default terrain's material uses, in words (:func:`terrain_material`)."""
+    return f"the default terrain: {len(LAYER_NAMES)} procedural layers ({', '.join(LAYER_NAMES)}) splat-blended by height, each mapped triplanar, {_per_unit(tiling)}"
+
+
+def _per_unit(tiling: float) -> str:
+    return f"one repeat per {1.0 / tiling:.4g} units" if tiling < 1.0 else f"{_repeats(tiling)} per unit"
+
+
+def _repeats(tiling: float) -> str:
+    return f"{tiling:.4g} repeat{'' if tiling == 1.0 else 's'}"
 
 
 #: Passes of terrain_normal_grid's [1, 2, 1] filter over the preview terrain's vertex normals.
@@ -184,6 +223,7 @@ def run_render(
     filter: Filter | str = Filter.ANISOTROPIC,
     memory: int | None = None,
     progress: bool | None = None,
+    report: Callable[[str], None] | None = None,
     device=None,
 ) -> list[Path]:
     """Render a mesh and write ``render.png``, ``albedo.png``, ``normals.png``, ``render.exr`` and ``gbuffer.exr``.
@@ -219,6 +259,8 @@ def run_render(
         memory: bytes a band's work may take (default :data:`warptex.tiles.DEFAULT_MEMORY`,
             256 MiB); the job takes about this plus the textures and ~300 MB of code.
         progress: show a progress bar (``None``: only on a terminal).
+        report: called once, before the image is made, with a line saying what the render uses:
+            texture, mapping and why, tiling, camera position (``warptex render`` prints it).
         device: Warp device.
 
     Returns:
@@ -267,8 +309,11 @@ def run_render(
         textures = textures.result() if textures is not None else None
     if is_terrain:
         material = terrain_material(mesh, tiling, seed, sampler, device, textures=textures)
+        used = terrain_used(material.keywords["tiling"])
     else:
-        material = mesh_material(func, mesh, technique, texture_path, texture_layer, tiling, seed, sampler, device)
+        material, used = mesh_material(func, mesh, technique, texture_path, texture_layer, tiling, seed, sampler, device)
+    if report is not None:
+        report(f"{used}; camera at {','.join(f'{x:.4g}' for x in np.asarray(camera.eye, np.float64))}")
 
     names = ["render.png", "albedo.png", "normals.png", "render.exr", "gbuffer.exr"]
     bar.set_postfix_str("")
