@@ -519,6 +519,34 @@ def test_cli_fits_a_users_target_and_gbuffer(tmp_path, capsys):
     assert not (out / "splat_true.png").exists()
 
 
+def test_a_target_against_the_g_buffer_of_another_view_is_warned_about(tmp_path, capsys):
+    """Issue 50 item 14: fitting a target against the wrong, same-size G-buffer ran for minutes
+    without a word. A target is far sharper along its own G-buffer's silhouette than elsewhere
+    (silhouette_contrast); one of another view is not, and the fit says so before it starts."""
+    import warnings
+
+    from warptex.apps.fit_demo import user_problem
+    from warptex.fit.objective import LINED_UP_CONTRAST, silhouette_contrast
+
+    views = {"a": "-30,34,40", "b": "-20,30,45", "c": "30,20,-40"}
+    for name, eye in views.items():
+        assert cli_main(["render", "--out", str(tmp_path / name), "--resolution", "64x80", "--quiet", "--eye", eye]) == 0
+    capsys.readouterr()
+    image = {k: io.read_image(tmp_path / k / "albedo.png") for k in views}
+    mask = {k: io.read_image(tmp_path / k / "gbuffer.exr", channels=["mask"])[..., 0] for k in views}
+    for k in views:
+        for m in views:
+            contrast = silhouette_contrast(image[k], mask[m])
+            assert (contrast > 2 * LINED_UP_CONTRAST) if k == m else (contrast < LINED_UP_CONTRAST), (k, m, contrast)
+    assert silhouette_contrast(image["a"], np.ones((64, 80))) is None  # no silhouette: nothing to tell
+    options = {"layers": None, "tiling": None, "options": {"sampler": wt.Sampler(), "projection": "triplanar", "height_blend": 0.2}, "device": "cpu"}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        user_problem("run_fit", [tmp_path / k / "albedo.png" for k in views], [tmp_path / k / "gbuffer.exr" for k in views], **options)
+    with pytest.warns(UserWarning, match=r"run_fit\(\): the target '.*b/albedo.png' does not seem to show the view of its G-buffer '.*c/gbuffer.exr'"):
+        user_problem("run_fit", [tmp_path / "a" / "albedo.png", tmp_path / "b" / "albedo.png"], [tmp_path / "a" / "gbuffer.exr", tmp_path / "c" / "gbuffer.exr"], **options)
+
+
 @pytest.mark.parametrize("count", [2, 3, 5])
 def test_the_synthetic_fit_takes_any_number_of_layers(tmp_path, count):
     """``warptex fit --layers`` with other than the terrain's four layers fitted, then failed at

@@ -568,5 +568,5 @@ def test_a_large_png_is_read_and_one_past_memory_is_refused_naming_it(tmp_path, 
     np.testing.assert_allclose(read_image(tmp_path / "big.png"), image, atol=0.01)  # 8-bit sRGB steps
     assert Image.MAX_IMAGE_PIXELS == 1000  # given back
     monkeypatch.setattr(_output, "_available_memory", lambda: 48 * 64 * 10)
-    with pytest.raises(MemoryError, match=rf"read_image\(\): '.*big.png' \(64x48 pixels\) needs about 0.0 GiB of memory, but 0.0 GiB is available; use a smaller image"):
+    with pytest.raises(MemoryError, match=r"read_image\(\): '.*big.png' \(64x48 pixels\) needs about 0.0 GiB of memory, but 0.0 GiB is available; use a smaller image"):
         read_image(tmp_path / "big.png")

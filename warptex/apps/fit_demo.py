@@ -13,6 +13,7 @@ default scene unless you change them.
 from __future__ import annotations
 
 import os
+import warnings
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,6 +24,7 @@ import warp as wp
 from warptex import io
 from warptex.camera import checked_resolution
 from warptex.fit import FitView, SplatParameters, check_inputs, default_stages, fit_splat, psnr, render_views, shard
+from warptex.fit.objective import LINED_UP_CONTRAST, silhouette_contrast
 from warptex.apps.fit_report import heat_image, legend, splat_coverage, weights_image, write_curve, write_json
 from warptex.raster import rasterize
 from warptex.gbuffer_io import load_gbuffer
@@ -254,6 +256,12 @@ def user_problem(func: str, targets, gbuffers, *, layers, tiling, options: dict,
     gbufs = [load_gbuffer(p, device=device) for p in gbuffers]
     images = [io.read_image(p) for p in targets]
     images = [img[..., :3] if img.shape[-1] >= 3 else img[..., :1] for img in images]
+    for target, gbuffer, image, g in zip(targets, gbuffers, images, gbufs):
+        contrast = silhouette_contrast(image, g.mask.numpy()) if image.shape[:2] == tuple(g.resolution[-2:]) else None
+        if contrast is not None and contrast < LINED_UP_CONTRAST:
+            warnings.warn(f"{func}(): the target {os.fspath(target)!r} does not seem to show the view of its G-buffer {os.fspath(gbuffer)!r}: it is no sharper along "
+                          f"the G-buffer's silhouette than elsewhere ({contrast:.1f}x its mean contrast; a matching pair gives 7x or more). Check that each "
+                          "target has its own G-buffer, in the same order", UserWarning, stacklevel=3)  # fmt: skip
     layer_tex, names = _layers(func, layers, options, 0, device)
     return Problem([FitView(g, t) for g, t in zip(gbufs, images)], layer_tex, names, options, TRUE_TILING if tiling is None else float(tiling))
 
