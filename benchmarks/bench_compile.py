@@ -218,7 +218,7 @@ def run(args, report=print) -> dict:
 
 
 def markdown(result: dict) -> str:
-    """The tables for the README."""
+    """The tables for the docs (docs/performance.md)."""
     targets = result["targets"]
     head = ["CPU" if t == "cpu" else f"sm_{t}" for t in targets]
     lines = ["| module | " + " | ".join(f"{h} compile (s)" for h in head) + " |", "|---|" + "---:|" * len(targets)]
@@ -239,7 +239,7 @@ def main(argv=None) -> int:
     p.add_argument("--arch", nargs="+", type=int, default=[90], help="CUDA architectures to compile for ahead of time (default: 90)")
     p.add_argument("--no-cuda", action="store_true", help="CPU compile times only")
     p.add_argument("--json", type=Path, help="write the results here")
-    p.add_argument("--markdown", action="store_true", help="print the README tables at the end")
+    p.add_argument("--markdown", action="store_true", help="print the docs' tables (docs/performance.md) at the end")
     args = p.parse_args(argv)
     result = run(args)
     if args.markdown:

@@ -123,7 +123,7 @@ def fit(out_dir="out/torch_fit", *, iters: int = 240, resolution=(192, 256), vie
         return value + ENTROPY * weight_entropy(weights) if rank == 0 else value
 
     steps = 0
-    bar = tqdm(total=iters, desc="torch fit", unit="it", disable=not progress or rank != 0)
+    bar = tqdm(total=iters, desc="torch fit", unit="it", disable=None if progress and rank == 0 else True)  # None: only on a terminal
     for stage in default_stages(iters):
         g, target = views_at(gbuffers, targets, stage.stride)
         with torch.no_grad():

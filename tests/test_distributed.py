@@ -139,7 +139,7 @@ def test_torchrun_two_ranks_fit_the_default_problem_as_one_process_does(tmp_path
 
 @needs_gloo
 def test_two_torchrun_nodes_meet_at_a_rendezvous_endpoint(tmp_path, monkeypatch):
-    # What the README says for several machines, with both "machines" here: one torchrun per node,
+    # What the docs say for several machines (docs/processes.md), with both "machines" here: one torchrun per node,
     # the same c10d rendezvous endpoint and id.
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

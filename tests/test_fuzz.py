@@ -595,7 +595,7 @@ def test_hex_taps(uv, seed, contrast, rotation):
        method=st.sampled_from(["sample", "hash4", "cheap2", "hex"]), on_tape=st.booleans())  # fmt: skip
 def test_sample_gradients(data, n, lod_kind, sampler, seed, special, method, on_tape):
     """Backward passes of ``sample``/``stochastic``: gradients to the texels, the UVs and per-UV
-    LODs/derivatives are finite, and zero for non-finite UVs (README), whatever the UVs."""
+    LODs/derivatives are finite, and zero for non-finite UVs (docs/library.md), whatever the UVs."""
     if method != "sample" and sampler.address not in (wt.Address.WRAP, wt.Address.MIRROR):
         sampler = sampler.replace(address="wrap")
     if mips_may_overflow(data):

@@ -196,8 +196,8 @@ def gbuffer_tensors(gbuffer: GBuffer) -> dict[str, torch.Tensor]:
     ``vec3`` fields, ``(H, W)`` for scalars; and, where they are not the defaults, ``"origin"``
     (float64 ``(3,)``, the world point the positions are relative to) and ``"samples"`` (int64
     ``(1,)``, samples per image pixel), so that a camera-relative or supersampled G-buffer keeps what
-    it is. Every function here takes this dict as its G-buffer, which keeps Warp out of
-    ``torch.compile``d code."""
+    it is. Every function here takes this dict as its G-buffer, which keeps Warp out of code that
+    ``torch.compile`` compiles."""
     if not isinstance(gbuffer, GBuffer):
         raise TypeError(f"warptex.torch.gbuffer_tensors(): gbuffer must be a GBuffer, got {type(gbuffer).__name__}")
     out = {name: wp.to_torch(getattr(gbuffer, name), requires_grad=False) for name in FIELDS}

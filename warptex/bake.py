@@ -90,7 +90,7 @@ def default_gutter(mesh: trimesh.Trimesh, size: int, *, view_size: int = 512, uv
 
 
 def texture_gbuffer(layout: UVLayout, size: int, *, gutter: int = 8, rows=None, device=None) -> tuple[GBuffer, wp.array]:
-    """The texture-space G-buffer of ``layout`` at ``size``² texels (module docstring).
+    """The texture-space G-buffer of ``layout`` of ``size`` × ``size`` texels (module docstring).
 
     Args:
         layout: from :func:`~warptex.unwrap.unwrap`.

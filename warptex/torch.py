@@ -22,7 +22,7 @@ The functions take the native functions' arguments (:func:`warptex.sample`, :fun
   ``height_blend``, the atlas ``weights``) are tensors or plain numbers;
 - the **G-buffer** is a :class:`~warptex.GBuffer` (e.g. :meth:`GBuffer.from_arrays
   <warptex.GBuffer.from_arrays>` of another renderer's tensors), or the dict of tensors that
-  :func:`gbuffer_tensors` makes of one (the form to pass inside ``torch.compile``d code). Its
+  :func:`gbuffer_tensors` makes of one (the form to pass inside code that ``torch.compile`` compiles). Its
   arrays are read in place and receive no gradients;
 - options (:class:`~warptex.Sampler`, :class:`~warptex.Stochastic`, enums, strings) as natively.
 

@@ -1,4 +1,4 @@
-"""``warptex assets``: the sample inputs the README's snippets read, made from the procedural
+"""``warptex assets``: the sample inputs the docs' snippets read, made from the procedural
 scenes that ship with warptex (nothing is downloaded): the default terrain's four layers and its
 splat map.
 

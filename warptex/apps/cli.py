@@ -87,7 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_memory(bake, "the atlas", "larger atlases are baked band by band")
     _add_device(bake)
     _add_quiet(bake)
-    assets = _command(commands, "assets", out=("assets", "output folder (default: %(default)s)"), help="write the sample inputs the README's snippets read (the terrain's layers and splat map)",
+    assets = _command(commands, "assets", out=("assets", "output folder (default: %(default)s)"), help="write the sample inputs the docs' snippets read (the terrain's layers and splat map)",
         description="Write grass.png, gravel.png, rock.png and snow.png (RGBA: colour, height in alpha) and "
         "splat.png (their weights) of the default terrain into the output folder.")  # fmt: skip
     assets.add_argument("--seed", type=int, default=0, help="terrain and layer seed (default: 0)")

@@ -1,12 +1,14 @@
-"""Every code block of README.md runs, so the README cannot rot.
+"""Every code block of README.md and of the docs (``docs/*.md``) runs, so they cannot rot.
 
-The README is parsed here: each ```python block is executed (in a fresh namespace, or after the
+The pages are parsed here, the README first, then the docs pages by name (a block's name is its
+section's heading, unique across the pages): each ```python block is executed (in a fresh namespace, or after the
 blocks it continues, see ``CONTINUES``), and each ``warptex ...`` (or ``python examples/...``)
 command of a ```sh block is run through the CLI's ``main(argv)`` (``torchrun ... -m warptex`` in
 its own processes), with small-size options
 swapped in so the whole module stays fast. Install steps (``python3 -m venv``, ``pip install``,
-``git clone``) and the test run itself (``pytest``) are the only commands not run. Every block
-and command runs in its own copy of a folder made only by the README's own commands (``out/`` is
+``git clone``), the test run itself (``pytest``) and the docs build (``sphinx-build``, which CI
+runs) are the only commands not run. Every block and command runs in its own copy of a folder made
+only by the docs' own commands (``out/`` is
 ``warptex render --out out`` at a small size, ``assets/`` is ``warptex assets --out assets``),
 with ``../shared`` beside it as beside the repository: a snippet that reads a file nobody has
 fails here (issue 34 found ``rock.png``, ``snow.png`` and ``splat.png`` named but made nowhere);
@@ -36,11 +38,12 @@ from warptex.apps.cli import main as cli_main
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"
+PAGES = [README, *sorted((REPO / "docs").glob("*.md"))]
 SHARED = REPO.parent / "shared"
 
 # Fenced blocks per info string: a new block must be added here, and so gets a test.
-EXPECTED_BLOCKS = {"python": 14, "sh": 5, "": 1}
-EXPECTED_COMMANDS = {"warptex": 14, "python": 2, "skipped": 5, "torchrun": 1}
+EXPECTED_BLOCKS = {"python": 15, "sh": 10, "": 1, "text": 1}
+EXPECTED_COMMANDS = {"warptex": 17, "python": 2, "skipped": 15, "torchrun": 1}
 
 # Python blocks that continue earlier ones (by "<section> #<n>"): they run after those, in one namespace.
 CONTINUES = {
@@ -61,6 +64,7 @@ QUICK_RESOLUTION = "48x64"  # of `warptex render` and `warptex demo`, and of the
 
 @dataclass
 class Block:
+    page: str  # its file, relative to the repository
     section: str
     number: int  # 1, 2... within its section
     lang: str
@@ -76,21 +80,25 @@ class Block:
         return next((ln.strip() for ln in self.text.splitlines() if ln.strip()), "")
 
 
-def readme_blocks() -> list[Block]:
-    blocks, section, counts, open_block = [], "(top)", {}, None
-    for i, line in enumerate(README.read_text(encoding="utf-8").splitlines(), start=1):
-        if open_block is not None:
-            if line.strip() == "```":
-                blocks.append(Block(section, counts[section], open_block[0], open_block[1], "\n".join(open_block[2])))
-                open_block = None
-            else:
-                open_block[2].append(line)
-        elif line.startswith("```"):
-            counts[section] = counts.get(section, 0) + 1
-            open_block = (line[3:].strip().lower(), i, [])
-        elif line.startswith("#"):
-            section = line.lstrip("#").strip()
-    assert open_block is None, f"README.md: the block opened at line {open_block[1]} is never closed"
+def page_blocks() -> list[Block]:
+    """The fenced blocks of every page; Sphinx directives (```{toctree}, ```{eval-rst}) are not code."""
+    blocks, counts = [], {}
+    for page in PAGES:
+        name, section, open_block = str(page.relative_to(REPO)), f"(top of {page.name})", None
+        for i, line in enumerate(page.read_text(encoding="utf-8").splitlines(), start=1):
+            if open_block is not None:
+                if line.strip() == "```":
+                    if not open_block[0].startswith("{"):
+                        blocks.append(Block(name, section, counts[section], open_block[0], open_block[1], "\n".join(open_block[2])))
+                    open_block = None
+                else:
+                    open_block[2].append(line)
+            elif line.startswith("```"):
+                counts[section] = counts.get(section, 0) + 1
+                open_block = (line[3:].strip().lower(), i, [])
+            elif line.startswith("#"):
+                section = line.lstrip("#").strip()
+        assert open_block is None, f"{name}: the block opened at line {open_block[1]} is never closed"
     return blocks
 
 
@@ -115,14 +123,14 @@ def _command_kind(argv: list[str]) -> str:
         return "warptex"
     if exe == "torchrun" and "-m" in argv and argv[argv.index("-m") + 1 :][:1] == ["warptex"]:
         return "torchrun"
-    if any(argv[: len(p)] == p for p in _INSTALL) or exe in ("pip", "pip3", "pytest") or argv[1:3] == ["-m", "pip"]:
+    if any(argv[: len(p)] == p for p in _INSTALL) or exe in ("pip", "pip3", "pytest", "sphinx-build") or argv[1:3] == ["-m", "pip"]:
         return "skipped"  # install steps, and the test suite itself
     if exe in ("python", "python3") and len(argv) > 1 and argv[1].endswith(".py"):
         return "python"
-    raise AssertionError(f"README.md: no rule to test the command {shlex.join(argv)!r}; add one to tests/test_readme.py")
+    raise AssertionError(f"the docs: no rule to test the command {shlex.join(argv)!r}; add one to tests/test_docs.py")
 
 
-def readme_commands() -> list[Command]:
+def page_commands() -> list[Command]:
     commands = []
     for block in BLOCKS:
         if block.lang not in ("sh", "bash", "shell", "console"):
@@ -138,8 +146,8 @@ def readme_commands() -> list[Command]:
     return commands
 
 
-BLOCKS = readme_blocks()
-COMMANDS = readme_commands()
+BLOCKS = page_blocks()
+COMMANDS = page_commands()
 PYTHON_BLOCKS = [b for b in BLOCKS if b.lang == "python"]
 
 
@@ -147,14 +155,15 @@ def test_every_block_and_command_is_accounted_for():
     found = {}
     for b in BLOCKS:
         found[b.lang] = found.get(b.lang, 0) + 1
-    assert found == EXPECTED_BLOCKS, "README.md's code blocks changed: update EXPECTED_BLOCKS (and make sure the new ones run here)"
+    assert found == EXPECTED_BLOCKS, "the docs' code blocks changed: update EXPECTED_BLOCKS (and make sure the new ones run here)"
     kinds = {}
     for c in COMMANDS:
         kinds[c.kind] = kinds.get(c.kind, 0) + 1
-    assert kinds == EXPECTED_COMMANDS, "README.md's shell commands changed: update EXPECTED_COMMANDS"
+    assert kinds == EXPECTED_COMMANDS, "the docs' shell commands changed: update EXPECTED_COMMANDS"
     names = {b.name for b in PYTHON_BLOCKS}
+    assert len(names) == len(PYTHON_BLOCKS), "two pages' Python blocks share a section name: rename a heading"
     for name in [*CONTINUES, *(n for deps in CONTINUES.values() for n in deps), *(q[0] for q in PYTHON_QUICK)]:
-        assert name in names, f"tests/test_readme.py names a README block {name!r} that no longer exists"
+        assert name in names, f"tests/test_docs.py names a block {name!r} that no longer exists"
     # Text blocks are the layout listing only.
     assert all(b.section == "Layout" for b in BLOCKS if b.lang == "")
 
@@ -201,11 +210,17 @@ def _source(block: Block) -> str:
 
 
 def _run_python(block: Block, namespace: dict) -> None:
-    exec(compile(_source(block), f"README.md:{block.line} ({block.name})", "exec"), namespace)  # noqa: S102 (the README is ours)
+    exec(compile(_source(block), f"{block.page}:{block.line} ({block.name})", "exec"), namespace)  # noqa: S102 (the docs are ours)
 
 
 def _shape(x):
     return tuple(x.shape)
+
+
+def _check_first_look(ns, d):
+    assert _shape(ns["colour"]) == (256, 256, 1)
+    image = wt.io.read_image(d / "out" / "bunny_brick.png")
+    assert image.shape == (256, 256, 1) and image.std() > 0.05  # the bunny in bricks, on black
 
 
 def _check_using_it(ns, d):
@@ -300,6 +315,7 @@ def _check_fit(ns, d):
 
 
 CHECKS = {
+    "A first look #1": _check_first_look,
     "Using it #2": _check_using_it,
     "PyTorch #1": _check_torch,
     "G-buffers #1": _check_gbuffers,
@@ -322,14 +338,14 @@ def test_python_block(block, workdir):
     by_name = {b.name: b for b in PYTHON_BLOCKS}
     runs = [by_name[before] for before in CONTINUES.get(block.name, [])] + [block]  # a block continues the ones before it
     if any("../shared/" in b.text for b in runs) and not SHARED.is_dir():
-        pytest.skip(f"{SHARED} not found: this README block (or one it continues) reads the shared data")
+        pytest.skip(f"{SHARED} not found: this block (or one it continues) reads the shared data")
     if any("import torch" in b.text for b in runs):
         pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
     namespace = {"__name__": "__readme__"}
     for before in CONTINUES.get(block.name, []):
         _run_python(by_name[before], namespace)
     _run_python(block, namespace)
-    assert block.name in CHECKS, f"add a check of what README block {block.name!r} promises to CHECKS"
+    assert block.name in CHECKS, f"add a check of what the block {block.name!r} of {block.page} promises to CHECKS"
     CHECKS[block.name](namespace, workdir)
 
 
@@ -367,7 +383,7 @@ def _shared_paths(argv: list[str]) -> list[str]:
         if word.startswith("../shared/"):
             path = SHARED / word[len("../shared/") :]
             if not path.exists():
-                pytest.skip(f"{path} not found: this README command needs the shared data folder")
+                pytest.skip(f"{path} not found: this command of the docs needs the shared data folder")
             word = str(path)
         out.append(word)
     return out
@@ -409,25 +425,25 @@ def _check_outputs(argv: list[str], folder: Path, printed: str) -> None:
     wrote = {Path(line[len("wrote ") :]).name for line in printed.splitlines() if line.startswith("wrote ")}
     if command == "bake":
         for name in (out.name, f"{out.stem}_color.png"):
-            assert (out.parent / name).is_file() and name in wrote, f"README promises {name} from warptex {shlex.join(argv)}"
+            assert (out.parent / name).is_file() and name in wrote, f"the docs promise {name} from warptex {shlex.join(argv)}"
         assert wt.io.read_image(out.parent / f"{out.stem}_color.png").shape == (256, 256, 3)
     elif command == "assets":
         for name in ASSET_NAMES:
-            assert (out / name).is_file() and name in wrote, f"README promises {name} from warptex {shlex.join(argv)}"
+            assert (out / name).is_file() and name in wrote, f"the docs promise {name} from warptex {shlex.join(argv)}"
         assert wt.io.read_image(out / "grass.png").shape == (256, 256, 4)  # colour + height in alpha
     elif command == "render":
         for name in RENDER_FILES:
-            assert (out / name).is_file() and name in wrote, f"README promises {name} from warptex {shlex.join(argv)}"
+            assert (out / name).is_file() and name in wrote, f"the docs promise {name} from warptex {shlex.join(argv)}"
         h, w = (int(v) for v in QUICK_RESOLUTION.split("x"))
         assert wt.io.read_image(out / "render.png").shape == (h, w, 3)
         assert wt.load_gbuffer(out / "gbuffer.exr").resolution == (h, w)
     elif command == "demo":
         for name in DEMO_FILES:
-            assert (out / name).is_file() and name in wrote, f"README promises {name} from warptex {shlex.join(argv)}"
+            assert (out / name).is_file() and name in wrote, f"the docs promise {name} from warptex {shlex.join(argv)}"
     else:
         synthetic = "--target" not in argv
         for name in FIT_FILES + (FIT_SYNTHETIC_FILES if synthetic else ()):
-            assert (out / name).is_file() and name in wrote, f"README promises {name} from warptex {shlex.join(argv)}"
+            assert (out / name).is_file() and name in wrote, f"the docs promise {name} from warptex {shlex.join(argv)}"
         summary = json.loads((out / "summary.json").read_text())
         assert summary["iterations"] == 3 and summary["mode"] == ("synthetic" if synthetic else "user")
         assert "fit: 3 iterations" in printed
