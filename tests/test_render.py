@@ -150,6 +150,30 @@ def test_an_obj_materials_map_kd_is_its_texture(tmp_path):
     np.testing.assert_allclose(albedo[covered].mean(axis=0), [0.8, 0.1, 0.05], atol=0.02)
 
 
+def test_a_map_kd_with_spaces_or_options_in_its_line_is_found(tmp_path):
+    """trimesh's fuze.obj names ``map_Kd fuze uv.jpg``: the check for missing material files took
+    the last word ('uv.jpg') for the file, warned it missing and dropped the mesh's texture. The
+    file name is the rest of the line after any options (``-bm 1``), spaces and all."""
+    import warnings
+
+    from warptex.gbuffer import load_mesh
+
+    path = _quad_with_material(tmp_path, (0.8, 0.1, 0.05))
+    (tmp_path / "kd.png").rename(tmp_path / "my kd.png")
+    (tmp_path / "quad.mtl").write_text("newmtl paint\nKd 1 1 1\nmap_Kd my kd.png\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        mesh = load_mesh(path)
+    assert mesh.visual.material.image is not None
+    (tmp_path / "quad.mtl").write_text("newmtl paint\nKd 1 1 1\nmap_Kd -bm 1 -clamp on my kd.png\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_mesh(path)  # found: not reported missing (trimesh itself may not read past the options)
+    (tmp_path / "my kd.png").unlink()
+    with pytest.warns(UserWarning, match=r"names the image 'my kd.png' of 'quad.mtl', not found"):
+        load_mesh(path)
+
+
 @pytest.mark.parametrize("missing", ["quad.mtl", "kd.png"])
 def test_an_obj_whose_material_is_missing_says_so_and_is_not_flat_grey(tmp_path, capsys, missing):
     """trimesh gives an OBJ whose MTL file (or its map_Kd image) is missing a placeholder: a flat

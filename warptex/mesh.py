@@ -60,12 +60,18 @@ def _drop_missing_materials(path: str, mesh: trimesh.Trimesh) -> None:
     own texture. Warn, naming the missing file, and keep the UVs without a material."""
     folder = os.path.dirname(path)
     missing = []
-    for library in (name for names in _directives(path, "mtllib") for name in names):
-        library_path = os.path.join(folder, library)
-        if not os.path.isfile(library_path):
-            missing.append(f"its material file {library!r}")
-            continue
-        missing += [f"the image {image!r} of {library!r}" for *_, image in _directives(library_path, "map_Kd") if not os.path.isfile(os.path.join(folder, image))]
+    for words in _directives(path, "mtllib"):
+        whole = " ".join(words)  # one name with spaces, or several names
+        libraries = [whole] if os.path.isfile(os.path.join(folder, whole)) else words
+        for library in libraries:
+            library_path = os.path.join(folder, library)
+            if not os.path.isfile(library_path):
+                missing.append(f"its material file {library!r}")
+                continue
+            for image in _directives(library_path, "map_Kd"):
+                # The file name comes last, after options such as "-bm 1", and may hold spaces.
+                if not any(os.path.isfile(os.path.join(folder, " ".join(image[k:]))) for k in range(len(image))):
+                    missing.append(f"the image {_image_name(image)!r} of {library!r}")
     if missing and isinstance(mesh.visual, trimesh.visual.TextureVisuals):
         warnings.warn(f"load_mesh(): {path!r} names {', '.join(missing)}, not found: it is loaded without its material", UserWarning, stacklevel=3)
         mesh.visual = trimesh.visual.TextureVisuals(uv=mesh.visual.uv, material=trimesh.visual.material.SimpleMaterial(image=None))
@@ -133,6 +139,28 @@ def mesh_uv_faces(mesh: trimesh.Trimesh) -> np.ndarray:
     if own is None or np.shape(own) != (len(mesh.faces),):
         return np.ones(len(mesh.faces), bool)
     return np.asarray(own, bool)
+
+
+def _image_name(words: list[str]) -> str:
+    """The file an MTL texture line (``map_Kd -clamp on -o 0 0 my file.png``) names: what follows
+    its options, which take one word each, or up to three numbers (``-o``, ``-s``, ``-t``, ``-mm``)."""
+    k = 0
+    while k < len(words) - 1 and words[k].startswith("-"):
+        k += 1
+        if words[k - 1] in ("-o", "-s", "-t", "-mm"):
+            while k < len(words) - 1 and _is_number(words[k]):
+                k += 1
+        else:
+            k += 1
+    return " ".join(words[k:])
+
+
+def _is_number(word: str) -> bool:
+    try:
+        float(word)
+    except ValueError:
+        return False
+    return True
 
 
 def _directives(path: str, keyword: str) -> list[list[str]]:
