@@ -545,3 +545,40 @@ def test_bad_gbuffer_array_is_named():
     g.normal = wp.zeros((1, 3), dtype=wp.vec3)
     with pytest.raises(ValueError, match=r"gbuffer.normal must be a contiguous wp.array of vec3f with shape \(1, 2\)"):
         triplanar(g, _images()[1]["a"])
+
+
+@pytest.mark.parametrize("func", [triplanar, biplanar])
+def test_kept_launch_arguments_follow_their_inputs(func):
+    """Issue 51: colour mapping keeps its packed Warp structs per texture and options (and the
+    G-buffer's surface arrays with the G-buffer), so that a small call does not pack them again.
+    A kept call gives the bits of a fresh one; a change of options, of the G-buffer's arrays or
+    origin, or of the texels in place, is seen; a texture that is dropped takes its entry along."""
+    import gc
+    import sys
+    import weakref
+
+    rng = np.random.default_rng(5)
+    normals = rng.normal(size=(40, 3))
+    g = _gbuffer(normals, positions=rng.random((40, 3)))
+    module = sys.modules["warptex.triplanar"]
+    texels = rng.random((16, 16, 4)).astype(np.float32)
+    tex = wt.Texture(texels)
+    first = func(g, tex, tiling=3.0).numpy()
+    assert len(module._ARGS.get(tex, {})) == 1
+    np.testing.assert_array_equal(func(g, tex, tiling=3.0).numpy(), first)  # kept: the same bits
+    fresh = func(g, wt.Texture(texels), tiling=3.0).numpy()
+    np.testing.assert_array_equal(fresh, first)
+    assert not np.array_equal(func(g, tex, tiling=2.0).numpy(), first)  # another option set
+    assert len(module._ARGS[tex]) == 2
+    moved = _gbuffer(normals, positions=rng.random((40, 3)))
+    g.position = moved.position  # a G-buffer array replaced
+    np.testing.assert_array_equal(func(g, tex, tiling=3.0).numpy(), func(moved, wt.Texture(texels), tiling=3.0).numpy())
+    g.origin = np.array([0.25, 0.0, 0.5])  # another origin: packed anew
+    np.testing.assert_array_equal(func(g, tex, tiling=3.0).numpy(), func(g, wt.Texture(texels), tiling=3.0, sharpness=4.0 if func is triplanar else 8.0).numpy())
+    tex.view.texels.fill_(wp.vec4(0.5, 0.5, 0.5, 0.5))  # every level's texels, in place
+    assert np.allclose(func(g, tex, tiling=3.0, sampler=wt.Sampler(filter="bilinear")).numpy()[g.mask.numpy() > 0], 0.5)  # texels changed in place
+    gone = weakref.ref(tex)
+    del tex
+    gc.collect()
+    assert gone() is None  # the kept arguments did not keep the texture
+    assert all(t is not None for t in module._ARGS.keys())

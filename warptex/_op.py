@@ -30,7 +30,7 @@ import warp as wp
 from warptex._launch import GENERATED, Target, launch, output, scatter
 from warptex._memory import empty
 from warptex._pack import empty_array
-from warptex._warp import active_tape, scalar_type, struct_arrays, struct_fields, struct_like
+from warptex._warp import active_tape, scalar_type, struct_array_values, struct_arrays, struct_fields, struct_like
 from warptex.kernels.family import PIXELS, Kernels, Staged, lanes_for, one_pixel_kernels, thread_flag  # noqa: F401 (one_pixel_kernels: re-exported)
 from warptex.kernels.texels import TextureView
 
@@ -58,6 +58,16 @@ def differentiable(value, path: str = ""):
     elif wp.types.is_struct(value):
         for dotted, array in struct_arrays(value, _FLOATS):
             yield (f"{path}.{dotted}" if path else dotted), array
+
+
+def _requiring_grad(*values) -> list:
+    """The float arrays in ``values`` (structs, read by one getter per struct type, or anything
+    :func:`differentiable` walks) that require gradients, in :func:`differentiable`'s order."""
+    found = []
+    for value in values:
+        arrays = struct_array_values(value, _FLOATS) if wp.types.is_struct(value) else [a for _, a in differentiable(value)]
+        found += [a for a in arrays if a.requires_grad]
+    return found
 
 
 def resolve(inputs: dict, path: str) -> wp.array | None:
@@ -94,7 +104,7 @@ def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linea
         the output, requiring gradients when any differentiable input does.
     """
     inputs = {"args": args, "pixels": pixels}
-    wanted = [a for _, a in differentiable(inputs) if a.requires_grad]
+    wanted = _requiring_grad(args, pixels)
     if isinstance(out, wp.array):
         result = out
         if wanted and not result.requires_grad and active_tape() is not None:

@@ -23,7 +23,7 @@ import numpy as np
 import warp as wp
 
 from warptex._validate import as_device_array, as_float, as_float_array, param_array
-from warptex._warp import field_type
+from warptex._warp import active_tape, field_type
 from warptex.histogram import GAUSSIAN_MEAN, LUT_RANGE
 from warptex.kernels import projection as kp
 from warptex.kernels import sampling as ksa
@@ -262,6 +262,24 @@ def reshaped(array: wp.array, shape: tuple) -> wp.array:
     """``array`` with ``shape``: itself where it has it already (a new view costs a call ~30 us of
     Python on cold caches, as the one a lookup's 1-D UVs and output made)."""
     return array if array.shape == shape else array.reshape(shape)
+
+
+def surface_pixels(func: str, gbuffer, device) -> kp.SurfacePixels:
+    """The G-buffer's surface arrays as the kernels read them (flat), checked
+    (:meth:`~warptex.GBuffer.require`) and kept with the G-buffer while its arrays stay the same
+    objects (whose shapes and types cannot change). Not under a recording tape: a recorded launch
+    keeps its struct for the backward pass, which no later call may share."""
+    names = ("position", "position_dx", "position_dy", "normal", "mask")
+    arrays = tuple(getattr(gbuffer, name, None) for name in names)
+    kept = gbuffer.__dict__.get("_surface_pixels")
+    if kept is not None and all(a is b for a, b in zip(kept[0], arrays)) and active_tape() is None:
+        return kept[1]
+    gbuffer.require(func, *names)
+    count = gbuffer.pixel_count
+    pixels = struct_of(kp.SurfacePixels, device, **{name: a.reshape((count,)) for name, a in zip(names, arrays)})
+    if active_tape() is None:
+        gbuffer.__dict__["_surface_pixels"] = (arrays, pixels)  # views of its own arrays: nothing outlives it
+    return pixels
 
 
 def struct_of(struct_t, device, **fields):

@@ -79,6 +79,12 @@ def struct_arrays(value, scalars: tuple | None = None) -> list[tuple[str, Any]]:
     return list(zip(paths, read(value))) if read is not None else []
 
 
+def struct_array_values(value, scalars: tuple | None = None) -> tuple:
+    """The arrays of :func:`struct_arrays`, without their paths."""
+    read = _reader(value._cls, scalars)[1]
+    return read(value) if read is not None else ()
+
+
 @functools.lru_cache(maxsize=None)
 def _reader(struct_t, scalars: tuple | None) -> tuple:
     paths = tuple(dotted for dotted, _ in _paths(struct_t, scalars))

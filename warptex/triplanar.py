@@ -15,13 +15,14 @@ does into the textures' texels.
 from __future__ import annotations
 
 import enum
+import weakref
 from typing import Sequence
 
 import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import footprints, out_array, projection_args, sampler_args, stochastic_args, struct_of
+from warptex._pack import footprints, out_array, projection_args, sampler_args, stochastic_args, surface_pixels
 from warptex._validate import as_enum, as_float, warn_renamed
 from warptex.gbuffer import GBuffer, _gbuffer_device
 from warptex.kernels import faces as kf
@@ -133,7 +134,7 @@ def triplanar(
     setup = _Setup(
         "triplanar", kp.WEIGHTS_TRIPLANAR, gbuffer, texture, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix,
         textures_per_axis=textures_per_axis, textures_per_face=textures_per_face, layer=layer, space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device,
-        out=out,
+        out=out, cached=True,
     )  # fmt: skip
     return setup.launch(setup.channels)
 
@@ -157,7 +158,7 @@ def biplanar(gbuffer: GBuffer, texture: TextureArray | None = None, *, sharpness
     Returns:
         As :func:`triplanar`.
     """
-    setup = _Setup("biplanar", kp.WEIGHTS_BIPLANAR, gbuffer, texture, sharpness=sharpness, **_Setup.options("biplanar", "triplanar", options))
+    setup = _Setup("biplanar", kp.WEIGHTS_BIPLANAR, gbuffer, texture, sharpness=sharpness, **_Setup.options("biplanar", "triplanar", options), cached=True)
     return setup.launch(setup.channels)
 
 
@@ -277,10 +278,17 @@ class _Setup:
 
     def __init__(
         self, func, weights, gbuffer, texture, *, tiling=1.0, sharpness=4.0, offsets=None, mirror_fix=True, textures_per_axis=None, textures_per_face=None,
-        layer=0, space=Space.WORLD, object_to_world=None, stochastic=None, sampler=None, device=None, out=None,
+        layer=0, space=Space.WORLD, object_to_world=None, stochastic=None, sampler=None, device=None, out=None, cached=False,
     ):  # fmt: skip
         device = _gbuffer_device(func, gbuffer, device)
-        gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask")
+        self.func, self.gbuffer, self.device, self.out = func, gbuffer, device, out
+        self.count = gbuffer.pixel_count
+        self.pixels = surface_pixels(func, gbuffer, device)
+        key = _args_key(weights, gbuffer, texture, tiling, sharpness, offsets, mirror_fix, textures_per_axis, textures_per_face, layer, space, object_to_world, stochastic, sampler, device) if cached else None
+        found = _ARGS.get(texture, {}).get(key) if key is not None else None
+        if found is not None and found[0] is texture.view:  # the same texture, options and origin: checked and packed before
+            _, self.args, self.channels, self.stochastic, self.faces, self.linear = found
+            return
         textures = _textures(func, texture, textures_per_axis, textures_per_face, layer, device)
         object_to_world = _object_to_world(func, space, object_to_world)
         proj = projection_args(func, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=weights, object_to_world=object_to_world,
@@ -296,12 +304,15 @@ class _Setup:
         for name, t in zip(kf.FACE_FIELDS, textures):  # into the struct's own faces (assigning a struct copies it field by field)
             setattr(self.args.faces, name, t.view)
         self.args.layer, self.args.proj, self.args.smp, self.args.stoch = layer, proj, sampler_args(func, sampler, has_lod=True), stoch
-        self.func, self.gbuffer, self.device, self.channels, self.out = func, gbuffer, device, textures[0].channels, out
+        self.channels = textures[0].channels
         self.stochastic = stoch.method != METHOD_NONE
         self.faces = any(textures[2 * a] is not textures[2 * a + 1] for a in range(3))  # a face of some axis differs from its opposite
-        self.count = gbuffer.pixel_count
-        self.pixels = struct_of(kp.SurfacePixels, device, **{name: getattr(gbuffer, name).reshape((self.count,)) for name in ("position", "position_dx", "position_dy", "normal", "mask")})
         self.linear = stoch.histogram == 0  # the histogram blend is not linear in the texels
+        if key is not None and option.histogram is None:
+            kept = _ARGS.setdefault(texture, {})
+            if len(kept) >= ARGS_PER_TEXTURE:
+                kept.pop(next(iter(kept)))  # the oldest
+            kept[key] = (texture.view, self.args, self.channels, self.stochastic, self.faces, self.linear)
 
     def launch(self, channels: int, normal_map: kt.NormalMapArgs | None = None) -> wp.array:
         """Run colour mapping (or, given ``normal_map``, normal mapping) into a new ``(H, W, channels)``
@@ -313,6 +324,30 @@ class _Setup:
         result = run(kernels, self.count, args=self.args, pixels=self.pixels, out=((self.count, channels), float) if into is None else into, device=self.device,
                      linear=self.linear, covered=self.pixels.mask, footprints=footprints(self.args.smp, self.args.stoch, lookups=3))
         return self.out if into is not None else result.reshape((*self.gbuffer.resolution, channels))
+
+
+#: Packed launch arguments of colour mapping kept per texture (the newest few option sets): a small
+#: call (a loop's, a pixel's) otherwise spends most of its time packing the same Warp structs again.
+#: Kept by the texture weakly: an entry holds the texture's own arrays and the options' tiny ones.
+_ARGS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+ARGS_PER_TEXTURE = 8
+
+
+def _args_key(weights, gbuffer, texture, tiling, sharpness, offsets, mirror_fix, per_axis, per_face, layer, space, object_to_world, stochastic, sampler, device):
+    """The key of a colour mapping's packed arguments, or ``None`` where they are not kept: one
+    texture, options given as plain values (an array option may receive gradients, and may change
+    in place), and hashable option objects."""
+    plain = (int, float)
+    if per_axis is not None or per_face is not None or object_to_world is not None or offsets is not None or not isinstance(texture, TextureArray):
+        return None
+    if not all(type(v) in plain or isinstance(v, (np.floating, np.integer)) for v in (tiling, sharpness, layer)) or isinstance(layer, bool):
+        return None
+    try:
+        key = (weights, float(tiling), float(sharpness), bool(mirror_fix), int(layer), space, stochastic, sampler, tuple(gbuffer.origin.tolist()), str(device))
+        hash(key)
+    except TypeError:  # an unhashable option: packed anew each call
+        return None
+    return key
 
 
 def _textures(func, texture, per_axis, per_face, layer, device) -> list[TextureArray]:
