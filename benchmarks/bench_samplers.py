@@ -30,10 +30,10 @@ another would put that drift into their ratio.
     python benchmarks/bench_samplers.py --call-cost          # what a small call costs, against torch
 
 ``--call-cost`` times what a call costs when it computes little: ``sample`` (bilinear, a 256² RGBA
-texture) on 1, 1,024 and 65,536 random UVs, into a new output and into ``out=``, forward and
-forward+backward (gradients to every texel), against torch ``grid_sample`` on the same data (a
-UV array or tensor kept between calls, as a loop keeps it). Each figure is the median of many
-calls, taken in interleaved rounds.
+texture) on 1, 1,024 and 65,536 random UVs, into a new output and into ``out=``, and through the
+PyTorch bridge (``warptex.torch.sample`` on tensors), forward and forward+backward (gradients to
+every texel), against torch ``grid_sample`` on the same data (a UV array or tensor kept between
+calls, as a loop keeps it). Each figure is the median of many calls, taken in interleaved rounds.
 
 On a CUDA device, warptex runs one launch per call (no CPU threads), the peers are torch on the same
 device and Dr.Jit's CUDA backend (NumPy is skipped), and every timed call ends by waiting for the GPU.
@@ -371,6 +371,8 @@ def call_cost(args, report) -> list[dict]:
     """Median seconds per call of ``sample`` and torch ``grid_sample`` (module docstring)."""
     import torch
 
+    import warptex.torch as wtt
+
     device = wp.get_device(args.device)
     torch_device = "cuda" if device.is_cuda else "cpu"
     if device.is_cuda:
@@ -380,6 +382,7 @@ def call_cost(args, report) -> list[dict]:
     tex = wt.Texture(image, mipmaps=False, requires_grad=True, device=device)
     # grid_sample's y = -1 is the image's first (top) row; warptex's v = 0 its bottom one
     timg = torch.tensor(image, device=torch_device).permute(2, 0, 1)[None].contiguous().requires_grad_(True)
+    ttex = torch.tensor(image, device=torch_device, requires_grad=True)  # the bridge's [H, W, C] texture
     sampler = wt.Sampler(filter="bilinear", address="clamp")
 
     def sync() -> None:
@@ -410,20 +413,33 @@ def call_cost(args, report) -> list[dict]:
             timg.grad = None
             torch.nn.functional.grid_sample(timg, grid, mode="bilinear", padding_mode="border", align_corners=False).sum().backward()
 
+        tuv = torch.tensor(uv_np, device=torch_device)
+
+        def bridge_forward():
+            with torch.no_grad():
+                return wtt.sample(ttex, tuv, sampler=sampler)
+
+        def bridge_backward():
+            ttex.grad = None
+            wtt.sample(ttex, tuv, sampler=sampler).sum().backward()
+
         with torch.no_grad():
             ours, theirs = wt.sample(tex, uv, sampler=sampler).numpy(), torch_forward()[0, :, 0].T.cpu().numpy()
         diff = float(np.abs(ours - theirs).max())
+        bridged = float(np.abs(bridge_forward().cpu().numpy() - ours).max())
         figures = {
             ("forward", "warptex"): lambda: wt.sample(tex, uv, sampler=sampler),
             ("forward", "warptex out="): lambda: wt.sample(tex, uv, sampler=sampler, out=out),
+            ("forward", "warptex.torch"): bridge_forward,
             ("forward", "torch"): torch_forward,
             ("forward+backward", "warptex"): ours_backward,
             ("forward+backward", "warptex out="): lambda: ours_backward(out),
+            ("forward+backward", "warptex.torch"): bridge_backward,
             ("forward+backward", "torch"): torch_backward,
         }
         median = interleaved_median(figures, sync, rounds=args.repeats, calls=args.calls)
         for (pass_, impl), seconds in median.items():
-            rows.append({"samples": n, "pass": pass_, "impl": impl, "seconds": seconds, "max_abs_diff": diff if impl == "torch" else 0.0})
+            rows.append({"samples": n, "pass": pass_, "impl": impl, "seconds": seconds, "max_abs_diff": {"torch": diff, "warptex.torch": bridged}.get(impl, 0.0)})
     report(format_call_cost(rows))
     report(f"max |warptex - torch| over the outputs: {max(r['max_abs_diff'] for r in rows):.2e}")
     return rows
@@ -448,15 +464,16 @@ def interleaved_median(figures: dict, sync, rounds: int, calls: int) -> dict:
 
 def format_call_cost(rows: list[dict]) -> str:
     """The call-cost table: microseconds per call, and each warptex figure over torch's."""
-    lines = ["call cost (median us per call; warptex / torch in brackets):", f"{'samples':>8} {'pass':<17} {'warptex':>16} {'warptex out=':>16} {'torch':>9}"]
+    ours = ("warptex", "warptex out=", "warptex.torch")
+    lines = ["call cost (median us per call; warptex / torch in brackets):", f"{'samples':>8} {'pass':<17} " + " ".join(f"{i:>16}" for i in ours) + f" {'torch':>9}"]
     for n in CALL_SAMPLES:
         for pass_ in ("forward", "forward+backward"):
             got = {r["impl"]: r["seconds"] for r in rows if r["samples"] == n and r["pass"] == pass_}
             if not got:
                 continue
             torch_s = got["torch"]
-            cells = [f"{got[i] * 1e6:8.1f} ({got[i] / torch_s:5.2f}x)" for i in ("warptex", "warptex out=")]
-            lines.append(f"{n:>8} {pass_:<17} {cells[0]:>16} {cells[1]:>16} {torch_s * 1e6:9.1f}")
+            cells = [f"{got[i] * 1e6:8.1f} ({got[i] / torch_s:5.2f}x)" for i in ours]
+            lines.append(f"{n:>8} {pass_:<17} " + " ".join(f"{c:>16}" for c in cells) + f" {torch_s * 1e6:9.1f}")
     return "\n".join(lines)
 
 
@@ -518,7 +535,7 @@ def parse(argv=None):
     p.add_argument("--techniques", nargs="+", default=list(TECHNIQUES), choices=TECHNIQUES)
     p.add_argument("--peers", nargs="*", default=list(peers.BACKENDS), choices=peers.BACKENDS)
     p.add_argument("--no-scaling", action="store_true", help="skip the pixel-count and texture-size sweeps")
-    p.add_argument("--call-cost", action="store_true", help="only the cost of small calls: sample() on 1, 1,024 and 65,536 UVs against torch")
+    p.add_argument("--call-cost", action="store_true", help="only the cost of small calls: sample() (natively and through warptex.torch) on 1, 1,024 and 65,536 UVs against torch")
     p.add_argument("--calls", type=int, default=None, help="--call-cost: timed calls per figure and round (default 200, quick 20)")
     args = p.parse_args(argv)
     wp.config.quiet = True

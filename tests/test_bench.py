@@ -50,12 +50,12 @@ def test_call_cost_rows_time_small_calls_against_torch(tmp_path):
     result = subprocess.run([sys.executable, str(BENCH), "--call-cost", "--quick", "--calls", "2", "--json", str(tmp_path / "c.json")], capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     rows = json.loads((tmp_path / "c.json").read_text())["call_cost"]
-    impls = ("warptex", "warptex out=", "torch")
+    impls = ("warptex", "warptex out=", "warptex.torch", "torch")
     assert {(r["samples"], r["pass"], r["impl"]) for r in rows} == {(n, p, i) for n in (1, 1024, 65536) for p in ("forward", "forward+backward") for i in impls}
     assert all(r["seconds"] > 0 and r["max_abs_diff"] < 1e-5 for r in rows)  # torch computes what warptex computes
     table = result.stdout[result.stdout.index("call cost") :].splitlines()
     for r in rows:
-        if r["impl"] == "warptex":
+        if r["impl"] in ("warptex", "warptex.torch"):
             torch_s = next(t["seconds"] for t in rows if t["impl"] == "torch" and t["samples"] == r["samples"] and t["pass"] == r["pass"])
             line = next(line for line in table if line.split()[:2] == [str(r["samples"]), r["pass"]])
             assert f"({r['seconds'] / torch_s:5.2f}x)" in line, (line, r)

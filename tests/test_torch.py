@@ -469,3 +469,33 @@ def test_sample_without_a_lod_builds_mips_only_where_its_sampler_reads_them(monk
         tape.backward(grads={native: wp.array(weights, dtype=float)})
         np.testing.assert_array_equal(image.grad.numpy(), tex.texels.grad.numpy()[..., :3])
         assert np.abs(image.grad.numpy()).max() > 0
+
+
+@pytest.mark.parametrize("layout", ["rgba", "rgb", "strided", "float64"])
+def test_a_level_0_texture_is_read_in_place_or_copied_with_the_same_bits(layout, rng):
+    """Issue 51: a call that reads level 0 only (bilinear, no LOD) of a contiguous float32 RGBA
+    tensor wraps the tensor itself rather than a zeroed copy (most of a small call's time); other
+    layouts are copied as before. Outputs and texel gradients are the native call's bits either
+    way, and the tensor is left as it was."""
+    image = rng.random((16, 12, 4), dtype=np.float32)
+    channels = 3 if layout == "rgb" else 4
+    if layout == "strided":
+        base = torch.tensor(np.ascontiguousarray(image.transpose(1, 0, 2))).permute(1, 0, 2)  # (16, 12, 4), not contiguous
+    else:
+        base = torch.tensor(image[..., :channels], dtype=torch.float64 if layout == "float64" else torch.float32)
+    texture = base.detach().clone() if layout != "strided" else base.detach()
+    texture.requires_grad_(True)
+    before = texture.detach().clone()
+    uv = rng.random((200, 2), dtype=np.float32)
+    sampler = wt.Sampler(filter="bilinear", address="clamp")
+    out = wtt.sample(texture, torch.tensor(uv), sampler=sampler)
+    weights = torch.tensor(rng.random(out.shape, dtype=np.float32))
+    (out * weights).sum().backward()
+    native_tex = wt.Texture(image[..., :channels], mipmaps=False, requires_grad=True)
+    tape = wp.Tape()
+    with tape:
+        native = wt.sample(native_tex, uv, sampler=sampler)
+    tape.backward(grads={native: wp.array(weights.numpy(), dtype=float)})
+    np.testing.assert_array_equal(out.detach().numpy(), native.numpy())
+    np.testing.assert_array_equal(texture.grad.float().numpy(), native_tex.grad()[..., :channels])
+    assert torch.equal(texture.detach(), before)

@@ -11,6 +11,7 @@ tensor saved in the graph; its finaliser forgets the tape).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import threading
 import weakref
@@ -185,7 +186,7 @@ def _reads_mips(s: dict) -> bool:
     if sampler is None:
         return False
     try:
-        smp = sampler_args(s["technique"], Sampler(**sampler["$sampler"]), has_lod=False)
+        smp = sampler_args(s["technique"], _sampler(sampler["$sampler"]), has_lod=False)
     except (TypeError, ValueError, KeyError):  # the native call says what is wrong
         return True
     return mip_levels(0.0, smp, num_levels=1 << 16) != (0, 0.0)
@@ -203,12 +204,23 @@ def _decode(value, tensors: list[torch.Tensor], want: set, grads: dict, device, 
     if "$gbuffer" in value:
         return _decode_gbuffer(value["$gbuffer"], tensors)
     if "$sampler" in value:
-        return Sampler(**_decode(value["$sampler"], tensors, want, grads, device, mips))
+        return _sampler(value["$sampler"])
     if "$stochastic" in value:
         return Stochastic(**_decode(value["$stochastic"], tensors, want, grads, device, mips))
     if "$histogram" in value:
         return Histogram(**_decode(value["$histogram"], tensors, want, grads, device, mips))
     return {k: _decode(v, tensors, want, grads, device, mips) for k, v in value.items()}
+
+
+@functools.lru_cache(maxsize=64)
+def _sampler_from(fields: tuple) -> Sampler:
+    return Sampler(**dict(fields))
+
+
+def _sampler(fields: dict) -> Sampler:
+    """The :class:`Sampler` a spec names (its fields are literals: numbers, strings, lists): made
+    once per distinct one, as making one checks and packs it (a fifth of a small call's time)."""
+    return _sampler_from(tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in fields.items()))
 
 
 def _decode_tensor(role: str, i: int, tensors, want, grads, device, mips: bool = True):
@@ -276,7 +288,8 @@ def native_texture(values, dims: int) -> TextureArray:
 
 def _texture_around(t: torch.Tensor, *, mipmaps: bool, index, grads: dict, device) -> TextureArray:
     """A :class:`Texture` (``t`` ``[H, W, C]``) or :class:`TextureArray` (``[L, H, W, C]``) whose
-    chain is a torch buffer holding ``t`` at level 0, its mips built here (on the active tape);
+    chain is a torch buffer holding ``t`` at level 0, its mips built here (on the active tape), or
+    ``t`` itself where that is the whole chain (no mips, 4 float32 channels, contiguous);
     with ``index``, gradient buffers whose level 0 ``grads[index]`` returns shaped like ``t``.
 
     On the CPU the buffers are filled and read through NumPy, not torch: torch runs CPU tensor ops
@@ -289,11 +302,14 @@ def _texture_around(t: torch.Tensor, *, mipmaps: bool, index, grads: dict, devic
     texels = sum(num_layers * h * w for h, w in sizes)
     count = num_layers * height * width
     cpu = t.device.type == "cpu"
-    chain = _zeros((texels, 4), t.device)
-    if cpu:
-        chain.numpy()[:count, :channels] = layers.detach().numpy().reshape(count, channels)
+    if texels == count and channels == 4 and layers.dtype == torch.float32 and layers.is_contiguous():
+        chain = layers.detach().reshape(count, 4)  # level 0 alone, as the chain stores it: the tensor itself, read only
     else:
-        chain[:count, :channels] = layers.detach().reshape(count, channels)
+        chain = _zeros((texels, 4), t.device)
+        if cpu:
+            chain.numpy()[:count, :channels] = layers.detach().numpy().reshape(count, channels)
+        else:
+            chain[:count, :channels] = layers.detach().reshape(count, channels)
     grad = None
     if index is not None:
         grad = _zeros((texels, 4), t.device)
