@@ -560,16 +560,16 @@ def test_kept_launch_arguments_follow_their_inputs(func):
     rng = np.random.default_rng(5)
     normals = rng.normal(size=(40, 3))
     g = _gbuffer(normals, positions=rng.random((40, 3)))
-    module = sys.modules["warptex.triplanar"]
+    kept = sys.modules["warptex._pack"]._packed
     texels = rng.random((16, 16, 4)).astype(np.float32)
     tex = wt.Texture(texels)
     first = func(g, tex, tiling=3.0).numpy()
-    assert len(module._ARGS.get(tex, {})) == 1
+    assert len(kept.get(tex, {})) == 1
     np.testing.assert_array_equal(func(g, tex, tiling=3.0).numpy(), first)  # kept: the same bits
     fresh = func(g, wt.Texture(texels), tiling=3.0).numpy()
     np.testing.assert_array_equal(fresh, first)
     assert not np.array_equal(func(g, tex, tiling=2.0).numpy(), first)  # another option set
-    assert len(module._ARGS[tex]) == 2
+    assert len(kept[tex]) == 2
     moved = _gbuffer(normals, positions=rng.random((40, 3)))
     g.position = moved.position  # a G-buffer array replaced
     np.testing.assert_array_equal(func(g, tex, tiling=3.0).numpy(), func(moved, wt.Texture(texels), tiling=3.0).numpy())
@@ -581,4 +581,4 @@ def test_kept_launch_arguments_follow_their_inputs(func):
     del tex
     gc.collect()
     assert gone() is None  # the kept arguments did not keep the texture
-    assert all(t is not None for t in module._ARGS.keys())
+    assert all(t is not None for t in kept.keys())

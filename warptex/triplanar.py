@@ -15,14 +15,13 @@ does into the textures' texels.
 from __future__ import annotations
 
 import enum
-import weakref
 from typing import Sequence
 
 import numpy as np
 import warp as wp
 
 from warptex._op import run
-from warptex._pack import footprints, out_array, projection_args, sampler_args, stochastic_args, surface_pixels
+from warptex._pack import footprints, out_array, packed, projection_args, sampler_args, stochastic_args, surface_pixels
 from warptex._validate import as_enum, as_float, warn_renamed
 from warptex.gbuffer import GBuffer, _gbuffer_device
 from warptex.kernels import faces as kf
@@ -284,35 +283,12 @@ class _Setup:
         self.func, self.gbuffer, self.device, self.out = func, gbuffer, device, out
         self.count = gbuffer.pixel_count
         self.pixels = surface_pixels(func, gbuffer, device)
-        key = _args_key(weights, gbuffer, texture, tiling, sharpness, offsets, mirror_fix, textures_per_axis, textures_per_face, layer, space, object_to_world, stochastic, sampler, device) if cached else None
-        found = _ARGS.get(texture, {}).get(key) if key is not None else None
-        if found is not None and found[0] is texture.view:  # the same texture, options and origin: checked and packed before
-            _, self.args, self.channels, self.stochastic, self.faces, self.linear = found
-            return
-        textures = _textures(func, texture, textures_per_axis, textures_per_face, layer, device)
-        object_to_world = _object_to_world(func, space, object_to_world)
-        proj = projection_args(func, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=weights, object_to_world=object_to_world,
-                               origin=gbuffer.origin, address=_as_sampler(func, sampler).address, device=device)  # fmt: skip
-        option, sampler = _as_stochastic(func, stochastic), _as_sampler(func, sampler)
-        if option.histogram is not None and not all(t is textures[0] for t in textures):
-            raise ValueError(f"{func}(): a stochastic histogram needs one texture for every projection (textures_per_axis or textures_per_face differ)")
-        stoch, sampled = stochastic_args(func, option, textures[0], sampler)
-        if sampled is not textures[0]:  # a histogram: every projection reads its Gaussianised texture
-            textures = [sampled] * len(textures)
-
-        self.args = kt.TriplanarArgs()
-        for name, t in zip(kf.FACE_FIELDS, textures):  # into the struct's own faces (assigning a struct copies it field by field)
-            setattr(self.args.faces, name, t.view)
-        self.args.layer, self.args.proj, self.args.smp, self.args.stoch = layer, proj, sampler_args(func, sampler, has_lod=True), stoch
-        self.channels = textures[0].channels
-        self.stochastic = stoch.method != METHOD_NONE
-        self.faces = any(textures[2 * a] is not textures[2 * a + 1] for a in range(3))  # a face of some axis differs from its opposite
-        self.linear = stoch.histogram == 0  # the histogram blend is not linear in the texels
-        if key is not None and option.histogram is None:
-            kept = _ARGS.setdefault(texture, {})
-            if len(kept) >= ARGS_PER_TEXTURE:
-                kept.pop(next(iter(kept)))  # the oldest
-            kept[key] = (texture.view, self.args, self.channels, self.stochastic, self.faces, self.linear)
+        options = {"tiling": tiling, "sharpness": sharpness, "offsets": offsets, "mirror_fix": mirror_fix, "textures_per_axis": textures_per_axis, "textures_per_face": textures_per_face,
+                   "layer": layer, "space": space, "object_to_world": object_to_world, "stochastic": stochastic, "sampler": sampler}  # fmt: skip
+        key = _args_key(weights, gbuffer, texture, device, **options) if cached else None
+        build = lambda: _packed_args(func, weights, gbuffer, texture, device, **options)  # noqa: E731
+        # The same texture, options and origin: checked and packed by an earlier call.
+        self.args, self.channels, self.stochastic, self.faces, self.linear = build() if key is None else packed(texture, key, build)
 
     def launch(self, channels: int, normal_map: kt.NormalMapArgs | None = None) -> wp.array:
         """Run colour mapping (or, given ``normal_map``, normal mapping) into a new ``(H, W, channels)``
@@ -326,24 +302,39 @@ class _Setup:
         return self.out if into is not None else result.reshape((*self.gbuffer.resolution, channels))
 
 
-#: Packed launch arguments of colour mapping kept per texture (the newest few option sets): a small
-#: call (a loop's, a pixel's) otherwise spends most of its time packing the same Warp structs again.
-#: Kept by the texture weakly: an entry holds the texture's own arrays and the options' tiny ones.
-_ARGS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-ARGS_PER_TEXTURE = 8
+def _packed_args(func, weights, gbuffer, texture, device, *, tiling, sharpness, offsets, mirror_fix, textures_per_axis, textures_per_face, layer, space,
+                 object_to_world, stochastic, sampler) -> tuple:  # fmt: skip
+    """``(args, channels, stochastic, faces, linear)``: the checked options packed for the kernels."""
+    textures = _textures(func, texture, textures_per_axis, textures_per_face, layer, device)
+    object_to_world = _object_to_world(func, space, object_to_world)
+    proj = projection_args(func, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=weights, object_to_world=object_to_world,
+                           origin=gbuffer.origin, address=_as_sampler(func, sampler).address, device=device)  # fmt: skip
+    option, sampler = _as_stochastic(func, stochastic), _as_sampler(func, sampler)
+    if option.histogram is not None and not all(t is textures[0] for t in textures):
+        raise ValueError(f"{func}(): a stochastic histogram needs one texture for every projection (textures_per_axis or textures_per_face differ)")
+    stoch, sampled = stochastic_args(func, option, textures[0], sampler)
+    if sampled is not textures[0]:  # a histogram: every projection reads its Gaussianised texture
+        textures = [sampled] * len(textures)
+    args = kt.TriplanarArgs()
+    for name, t in zip(kf.FACE_FIELDS, textures):  # into the struct's own faces (assigning a struct copies it field by field)
+        setattr(args.faces, name, t.view)
+    args.layer, args.proj, args.smp, args.stoch = layer, proj, sampler_args(func, sampler, has_lod=True), stoch
+    faces = any(textures[2 * a] is not textures[2 * a + 1] for a in range(3))  # a face of some axis differs from its opposite
+    return args, textures[0].channels, stoch.method != METHOD_NONE, faces, stoch.histogram == 0  # a histogram blend is not linear in the texels
 
 
-def _args_key(weights, gbuffer, texture, tiling, sharpness, offsets, mirror_fix, per_axis, per_face, layer, space, object_to_world, stochastic, sampler, device):
-    """The key of a colour mapping's packed arguments, or ``None`` where they are not kept: one
-    texture, options given as plain values (an array option may receive gradients, and may change
-    in place), and hashable option objects."""
-    plain = (int, float)
-    if per_axis is not None or per_face is not None or object_to_world is not None or offsets is not None or not isinstance(texture, TextureArray):
+def _args_key(weights, gbuffer, texture, device, *, tiling, sharpness, offsets, mirror_fix, textures_per_axis, textures_per_face, layer, space, object_to_world, stochastic, sampler):
+    """The key under which colour mapping's packed arguments are kept with the texture
+    (``warptex._pack.packed``: a small call otherwise spends most of its time packing the same Warp
+    structs again), or ``None`` where they are not kept: one texture, options given as plain values
+    (an array option may receive gradients, and may change in place), no histogram, hashable
+    option objects."""
+    if textures_per_axis is not None or textures_per_face is not None or object_to_world is not None or offsets is not None or not isinstance(texture, TextureArray):
         return None
-    if not all(type(v) in plain or isinstance(v, (np.floating, np.integer)) for v in (tiling, sharpness, layer)) or isinstance(layer, bool):
+    if not all(type(v) in (int, float) or isinstance(v, (np.floating, np.integer)) for v in (tiling, sharpness, layer)) or getattr(stochastic, "histogram", None) is not None:
         return None
     try:
-        key = (weights, float(tiling), float(sharpness), bool(mirror_fix), int(layer), space, stochastic, sampler, tuple(gbuffer.origin.tolist()), str(device))
+        key = ("triplanar", weights, float(tiling), float(sharpness), bool(mirror_fix), int(layer), space, stochastic, sampler, tuple(gbuffer.origin.tolist()), str(device))
         hash(key)
     except TypeError:  # an unhashable option: packed anew each call
         return None
