@@ -13,8 +13,8 @@ default scene unless you change them.
 from __future__ import annotations
 
 import os
-import warnings
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
