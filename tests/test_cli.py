@@ -412,3 +412,33 @@ def test_quiet_turns_the_progress_bar_off(monkeypatch, tmp_path):
         for command in ("render", "bake", "fit"):
             assert main([command, "--out", str(tmp_path / "x.glb"), *quiet]) == 0
         assert seen == dict.fromkeys(("render", "bake", "fit"), False if quiet else None)
+
+
+def test_ctrl_c_while_tqdm_makes_its_lock_is_the_one_line(tmp_path):
+    """tqdm makes its write lock on first use, importing multiprocessing with its thread lock held.
+    A Ctrl-C there, in the line saying what a bake uses (``tqdm.write``), left tqdm without a lock
+    and the run ended with tqdm's AttributeError (exit 1) instead of the one line and 130. The lock
+    is now made while start-up defers Ctrl-C. Here making it is slowed down, and the signal sent
+    while it is made."""
+    import signal
+
+    mesh = _obj(tmp_path / "tri.obj", "v -1 -1 0\nv 1 -1 0\nv 0 1 0\nf 1 2 3\n")
+    child_code = (
+        "import sys, time\n"
+        "import tqdm.std as std\n"
+        "made = std.TqdmDefaultWriteLock.create_mp_lock.__func__\n"
+        "def slow(cls):\n"
+        "    sys.stderr.write('making the lock\\n'); sys.stderr.flush(); time.sleep(2.0); made(cls)\n"
+        "std.TqdmDefaultWriteLock.create_mp_lock = classmethod(slow)\n"
+        "from warptex.apps.cli import entry\n"
+        f"sys.argv = ['warptex', 'bake', '--mesh', {str(mesh)!r}, '--size', '32', '--out', {str(tmp_path / 'o' / 'a.glb')!r}]\n"
+        "entry()\n"
+    )
+    child = subprocess.Popen([sys.executable, "-c", child_code], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    assert child.stderr.readline().strip() == "making the lock"
+    child.send_signal(signal.SIGINT)
+    _, err = child.communicate(timeout=120)
+    assert child.returncode == 130, err[-2000:]
+    assert err.strip().splitlines()[-1] == "warptex: interrupted; no files were written", err[-2000:]
+    assert not (tmp_path / "o").exists()

@@ -190,8 +190,14 @@ def main(argv: list[str] | None = None) -> int:
         # would swallow the KeyboardInterrupt and fail later with another error.
         with interrupts_deferred():
             import trimesh  # noqa: F401
+            from tqdm import tqdm
 
             from warptex import _output
+
+            # tqdm makes its write lock on first use, importing multiprocessing with its thread lock
+            # held: a Ctrl-C there (the first progress bar, or the line saying what a job uses)
+            # left tqdm without a lock, and the run ended with its AttributeError, not the one line.
+            tqdm.get_lock()
         written = _output.commits()
         with warnings.catch_warnings():
             warnings.showwarning = _show_warning
