@@ -41,14 +41,15 @@ def load_mesh(path: str | os.PathLike) -> trimesh.Trimesh:
         raise ValueError(f"load_mesh(): {path!r} holds no triangle mesh (got {type(loaded).__name__})")
     if len(loaded.faces) == 0:
         _no_faces(path)
-    if os.path.splitext(path)[1].lower() == ".obj":
+    extension = os.path.splitext(path)[1].lower()
+    if extension == ".obj":
         _drop_missing_materials(path, loaded)
     parts = _flattened_parts(scene, loaded)
-    if parts and os.path.splitext(path)[1].lower() in (".glb", ".gltf"):
+    if parts and extension in (".glb", ".gltf"):
         _keep_gltf_normals(parts, loaded)
     if parts:
         _mark_faces_without_uvs(parts, loaded)
-    if os.path.splitext(path)[1].lower() == ".stl":  # STL stores each triangle's corners apart:
+    if extension == ".stl":  # STL stores each triangle's corners apart:
         loaded.merge_vertices()  # shared, they get the smooth vertex normals other formats get
     checked_geometry(f"load_mesh(): {path!r}:", loaded)
     return loaded

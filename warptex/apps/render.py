@@ -63,6 +63,12 @@ DEFAULT_SAMPLES = 4
 MESH_TECHNIQUES = ("uv", "triplanar", "biplanar")
 
 
+def checked_technique_name(func: str, technique: str) -> None:
+    """A ``ValueError`` unless ``technique`` is one of :data:`MESH_TECHNIQUES`."""
+    if technique not in MESH_TECHNIQUES:
+        raise ValueError(f"{func}(): technique must be one of {', '.join(MESH_TECHNIQUES)} for a mesh, got {technique!r}")
+
+
 def mesh_technique(func: str, mesh: trimesh.Trimesh, technique: str | None) -> str:
     """How a mesh is textured: ``technique`` checked against it, or (``None``) ``"uv"`` where it
     has UVs (on some of its faces at least, :func:`~warptex.mesh.mesh_uv_faces`), else
@@ -70,8 +76,7 @@ def mesh_technique(func: str, mesh: trimesh.Trimesh, technique: str | None) -> s
     has_uvs = bool(mesh_uv_faces(mesh).any())
     if technique is None:
         technique = "uv" if has_uvs else "triplanar"
-    if technique not in MESH_TECHNIQUES:
-        raise ValueError(f"{func}(): technique must be one of {', '.join(MESH_TECHNIQUES)} for a mesh, got {technique!r}")
+    checked_technique_name(func, technique)
     if technique == "uv" and not has_uvs:
         raise ValueError(f"{func}(): technique 'uv' reads the mesh's UVs, and it has none; use triplanar or biplanar")
     return technique
@@ -276,8 +281,8 @@ def run_render(
         if technique != "splat":
             raise ValueError(f"{func}(): the default terrain is splat-blended; technique {technique!r} needs a mesh (--mesh)")
         technique = None
-    elif technique is not None and technique not in MESH_TECHNIQUES:
-        raise ValueError(f"{func}(): technique must be one of {', '.join(MESH_TECHNIQUES)} for a mesh, got {technique!r}")
+    elif technique is not None:  # before the mesh is loaded
+        checked_technique_name(func, technique)
     sampler = Sampler(filter=filter)
     h, w = resolution = checked_resolution(func, resolution)
     if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 1 or math.isqrt(int(samples)) ** 2 != samples:
