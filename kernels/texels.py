@@ -1,7 +1,9 @@
 """Textures as kernels see them: storage, samplers, address modes, texel fetch, channel I/O.
 
 Texture storage (see :class:`TextureView`): the texels of all layers and all mip levels live in
-one flat ``wp.array`` of ``vec4`` (unused channels are zero), level by level. Inside level ``k``,
+one flat buffer of four channels a texel (unused channels are zero), level by level: a
+``wp.array`` of ``vec4`` for float32 textures, half vectors or packed 8-bit codes for the compact
+formats (``FORMAT_*``), read through :func:`stored_texel`. Inside level ``k``,
 the layers follow each other, each stored row-major with row 0 at the *top* of the image::
 
     index(layer, k, row, col) = level_offset[k] + (layer * h_k + row) * w_k + col
@@ -20,6 +22,8 @@ Every technique addresses and fetches texels through the ``@wp.func`` blocks her
 from typing import Any
 
 import warp as wp
+
+from . import out_of_line
 
 # Filter modes (mirrored by ``warptex.Filter``).
 FILTER_NEAREST = wp.constant(0)
@@ -40,6 +44,15 @@ LOD_PER_SAMPLE = wp.constant(2)  # an array of LODs
 LOD_DERIVATIVES = wp.constant(3)  # from screen-space UV derivatives
 
 
+# Texel formats (``warptex.Format``): how :class:`TextureView` stores its texels.
+FORMAT_FLOAT32 = wp.constant(0)  # vec4 of float32, in ``texels``
+FORMAT_FLOAT16 = wp.constant(1)  # vec4 of float16, at ``packed``
+FORMAT_8BIT = wp.constant(2)  # four 8-bit codes in a uint32 (channel c in bits 8c..8c+7), at
+# ``packed``, decoded by the table at ``decode``: channel c's code k is decode[256 c + k] (srgb8)
+FORMAT_UNORM8 = wp.constant(3)  # FORMAT_8BIT whose table is k / 255 in every channel (unorm8): the
+# lanes divide instead of looking up (float32(k) / 255 is the table's value for every k)
+
+
 # The largest finite float32: |x| <= FLOAT_MAX is false exactly for NaN and infinities.
 FLOAT_MAX = wp.constant(3.4028234663852886e38)
 
@@ -54,6 +67,13 @@ class TextureView:
     level_height: wp.array(dtype=wp.int32)
     num_levels: wp.int32
     num_layers: wp.int32
+    # Other formats than FORMAT_FLOAT32 (``texels`` then only carries their gradient): where their
+    # texels are, and FORMAT_8BIT's decode table (4 x 256 float32). Addresses rather than arrays:
+    # every array field of the struct is code in each adjoint a generated-adjoint kernel takes of it
+    # (three more arrays made ``warptex.adjoint.triplanar`` compile 24 -> 36 s for sm_90).
+    texel_format: wp.int32
+    packed: wp.uint64  # vec4h (FORMAT_FLOAT16) or uint32 (FORMAT_8BIT) per texel
+    decode: wp.uint64
 
 
 # Entries of a texel gradient per tile of :class:`TexelGrad`: 2**10 vec4 entries, 16 KB.
@@ -185,8 +205,49 @@ def texel(tex: TextureView, start: wp.int32, w: wp.int32, xi: wp.int32, yi: wp.i
     ``start``, or the border colour where either index is ``-1``."""
     value = smp.border
     if xi >= 0 and yi >= 0:
-        value = tex.texels[start + yi * w + xi]
+        value = stored_texel(tex, start + yi * w + xi)
     return value
+
+
+@wp.func
+def stored_texel(tex: TextureView, index: wp.int32) -> wp.vec4:
+    """Entry ``index`` of the texel chain, decoded to float32 from the texture's format: a texel is
+    decoded before it is filtered, as GPUs filter sRGB textures."""
+    value = wp.vec4(0.0)
+    if tex.texel_format == FORMAT_FLOAT32:
+        value = tex.texels[index]
+    else:
+        value = packed_texel(tex.texel_format, tex.packed, tex.decode, index)
+    return value
+
+
+@out_of_line
+def packed_texel(texel_format: wp.int32, packed: wp.uint64, decode: wp.uint64, index: wp.int32) -> wp.vec4:
+    """:func:`stored_texel` of a texture not stored as float32. 8-bit texels are decoded per channel
+    by the texture's table (the exact sRGB curve for sRGB colour), half floats converted exactly.
+    Out of line, on the view's scalars (not the struct, which a call would copy): one copy a
+    module, not one a texel read."""
+    value = wp.vec4(0.0)
+    if texel_format == FORMAT_FLOAT16:
+        h = wp.array(ptr=packed, shape=(index + 1,), dtype=wp.vec4h)[index]
+        value = wp.vec4(float(h[0]), float(h[1]), float(h[2]), float(h[3]))
+    else:
+        p = wp.array(ptr=packed, shape=(index + 1,), dtype=wp.uint32)[index]
+        table = wp.array(ptr=decode, shape=(1024,), dtype=float)
+        value = wp.vec4(
+            table[int(p & wp.uint32(255))],
+            table[256 + int((p >> wp.uint32(8)) & wp.uint32(255))],
+            table[512 + int((p >> wp.uint32(16)) & wp.uint32(255))],
+            table[768 + int(p >> wp.uint32(24))],
+        )
+    return value
+
+
+@wp.func_grad(packed_texel)
+def adj_packed_texel(texel_format: wp.int32, packed: wp.uint64, decode: wp.uint64, index: wp.int32, adj_ret: wp.vec4):
+    """No gradient here: a compact format's texels take theirs from the hand-written gradients
+    only (``warptex._op`` refuses Warp's generated adjoint for them)."""
+    pass
 
 
 @wp.func

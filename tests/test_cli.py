@@ -88,7 +88,7 @@ def test_a_truncated_exr_texture_is_a_clear_error(tmp_path, capsys):
     mesh = _obj(tmp_path / "tri.obj", "v 0 0 0\nv 1 0 0\nv 0 0 1\nf 1 3 2\n")
     assert main(["--out", str(tmp_path / "out"), "--mesh", str(mesh), "--texture", str(cut), *SMALL]) == 1
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith(f"warptex: error: read_image(): cannot decode '{cut}'"), err
+    assert len(err) == 1 and err[0].startswith(f"warptex: error: read_texels(): cannot decode '{cut}'"), err  # what from_file reads with
     assert not (tmp_path / "out").exists()
 
 

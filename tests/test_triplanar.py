@@ -59,7 +59,7 @@ def _images():
 
 @functools.lru_cache(maxsize=None)
 def _brick():
-    tex = wt.Texture.from_file(SHARED_DATA / "textures" / "brick.png")
+    tex = wt.Texture.from_file(SHARED_DATA / "textures" / "brick.png", format="float32")  # float mips, as the reference's
     return tex.numpy(), tex
 
 

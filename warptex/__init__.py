@@ -2,7 +2,8 @@
 
 The library:
 
-- textures: :class:`Texture`, :class:`TextureArray` (differentiable mip chains, :func:`mip_sizes`);
+- textures: :class:`Texture`, :class:`TextureArray` (differentiable mip chains, :func:`mip_sizes`), stored
+  in a :class:`Format` (float32, float16, 8-bit unorm or sRGB);
 - options every technique takes: :class:`Sampler` (with :class:`Filter`, :class:`Address`) and
   :class:`Stochastic` (with :class:`Method`);
 - the techniques: :func:`sample`, :func:`stochastic` (with :func:`prepare_histogram`,
@@ -76,7 +77,7 @@ _NAMES = {
     "LayerProjection": "splat", "splat": "splat",
     "Address": "options", "Filter": "options", "Method": "options", "Sampler": "options", "Stochastic": "options",
     "resolve": "resolve", "sample": "sampling", "hex_taps": "stochastic", "stochastic": "stochastic",
-    "Texture": "texture", "TextureArray": "texture", "mip_sizes": "texture",
+    "Format": "formats", "Texture": "texture", "TextureArray": "texture", "mip_sizes": "texture",
     "Tile": "tiles", "gbuffer_tiles": "tiles",
     "Blend": "triplanar", "Space": "triplanar", "biplanar": "triplanar", "biplanar_normal": "triplanar", "triplanar": "triplanar", "triplanar_normal": "triplanar",
     "UVLayout": "unwrap", "unwrap": "unwrap",
@@ -117,6 +118,7 @@ __all__ = [
     "Blend",
     "Camera",
     "Filter",
+    "Format",
     "GBuffer",
     "Histogram",
     "Method",

@@ -95,7 +95,8 @@ def _channel_names(path: str, func: str) -> tuple[str, ...]:
         raise ValueError(f"{func}(): cannot decode '{path}' as an OpenEXR image: {exc}") from None
 
 
-def _read_exr(path: str, channels, layer, func: str) -> tuple[np.ndarray, tuple[str, ...]]:
+def _read_exr(path: str, channels, layer, func: str, keep_half: bool = False) -> tuple[np.ndarray, tuple[str, ...]]:
+    """:func:`read_exr` for ``func``; ``keep_half``: channels that are all half-float stay float16."""
     if layer is not None and not isinstance(layer, str):
         raise TypeError(f"{func}(): layer must be a str such as 'diffuse', got {type(layer).__name__}")
     if channels is not None:
@@ -131,7 +132,8 @@ def _read_exr(path: str, channels, layer, func: str) -> tuple[np.ndarray, tuple[
     if len({p.shape for p in planes}) > 1:
         sizes = ", ".join(f"{name!r}: {p.shape}" for name, p in zip(channels, planes))
         raise ValueError(f"{func}(): channels of '{path}' differ in size (subsampled?): {sizes}")
-    return np.stack([p.astype(np.float32, copy=False) for p in planes], axis=-1), channels
+    dtype = np.float16 if keep_half and all(p.dtype == np.float16 for p in planes) else np.float32
+    return np.stack([p.astype(dtype, copy=False) for p in planes], axis=-1), channels
 
 
 def _default_exr_channels(available: Mapping, layer: str | None, path: str, func: str) -> tuple[str, ...]:

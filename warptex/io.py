@@ -28,6 +28,7 @@ __all__ = [
     "srgb_to_linear",
     "linear_to_srgb",
     "read_image",
+    "read_texels",
     "read_exr",
     "exr_channel_names",
     "exr_layers",
@@ -115,17 +116,42 @@ def read_image(path, *, data: bool = False, channels=None, layer: str | None = N
             and no default one needs ``layer``).
         TypeError: If ``channels`` has the wrong type for the file format.
     """
-    path = _checked_input_path(path, "read_image")
+    return _read(path, data, channels, layer, "read_image", keep=False)
+
+
+def read_texels(path, *, data: bool = False, channels=None, layer: str | None = None) -> np.ndarray:
+    """Read an image file as :func:`read_image` does, in the file's own precision where a texture
+    can keep it (``Texture.from_file`` stores it so):
+
+    - an 8-bit PNG/JPG (or other 8-bit Pillow image): its ``uint8`` codes as stored, sRGB-encoded
+      colour unless ``data=True`` says the file holds data. :func:`read_image` returns
+      ``srgb_to_linear(codes / 255)`` (``codes / 255`` for data) of the same codes, alpha
+      ``codes / 255``; ``channels`` that ask for Rec.709 luminance of an RGB file give that, in
+      float32, since luminance is computed after decoding;
+    - an EXR whose channels read are all half-float: ``float16``;
+    - anything else (16-bit and float files): ``read_image``'s float32.
+
+    Args, Raises: as :func:`read_image`.
+
+    Returns:
+        ``uint8``, ``float16`` or ``float32`` array shaped [H, W, C].
+    """
+    return _read(path, data, channels, layer, "read_texels", keep=True)
+
+
+def _read(path, data: bool, channels, layer, func: str, keep: bool) -> np.ndarray:
+    """``read_image`` (``keep=False``) or ``read_texels`` (``keep=True``)."""
+    path = _checked_input_path(path, func)
     with open(path, "rb") as f:
         head = f.read(26)
     if head[:4] == EXR_MAGIC:
-        return _read_exr(path, channels, layer, "read_image")[0]
+        return _read_exr(path, channels, layer, func, keep_half=keep)[0]
     if layer is not None:
-        raise ValueError(f"read_image(): layer={layer!r} names an EXR layer, but '{path}' is not an OpenEXR file")
+        raise ValueError(f"{func}(): layer={layer!r} names an EXR layer, but '{path}' is not an OpenEXR file")
     if channels is not None:
-        channels = _channel_count(channels)
+        channels = _channel_count(channels, func)
     if _is_sixteen_bit_colour_png(head):
-        image, has_alpha = _read_sixteen_bit_png(path, data)
+        image, has_alpha = _read_sixteen_bit_png(path, data, func)
         return image if channels is None else _convert_channels(image, has_alpha, channels)
     from warptex._output import check_memory  # here: _output imports this module
 
@@ -135,16 +161,26 @@ def read_image(path, *, data: bool = False, channels=None, layer: str | None = N
         # is 268): the check of the memory the decoded image needs stands for its guess.
         Image.MAX_IMAGE_PIXELS = None
         with Image.open(path) as im:
-            check_memory("read_image", f"'{path}' ({im.width}x{im.height} pixels)", _DECODED_BYTES_PER_PIXEL * im.width * im.height, hint="use a smaller image")
+            check_memory(func, f"'{path}' ({im.width}x{im.height} pixels)", _DECODED_BYTES_PER_PIXEL * im.width * im.height, hint="use a smaller image")
             im.load()
-            image, has_alpha = _pil_to_array(im, data)
+            codes, maxval = _pil_codes(im)
     except MemoryError:
         raise
     except Exception as exc:
-        raise ValueError(f"read_image(): cannot decode '{path}' as an image: {exc}") from exc
+        raise ValueError(f"{func}(): cannot decode '{path}' as an image: {exc}") from exc
     finally:
         Image.MAX_IMAGE_PIXELS = limit
+    has_alpha = codes.dtype != np.float32 and codes.shape[-1] in (2, 4)
+    if keep and codes.dtype == np.uint8 and (channels is None or _codes_convertible(codes.shape[-1], has_alpha, channels)):
+        return codes if channels is None else _convert_channels(codes, has_alpha, channels)
+    image = codes if codes.dtype == np.float32 else _codes_to_linear(codes, maxval, data)[0]
     return image if channels is None else _convert_channels(image, has_alpha, channels)
+
+
+def _codes_convertible(count: int, has_alpha: bool, channels: int) -> bool:
+    """Whether :func:`_convert_channels` to ``channels`` takes no luminance of ``count`` channels
+    (the one conversion that needs decoded values)."""
+    return not ((count - has_alpha) == 3 and channels < 3)
 
 
 # Bytes a decoded PNG/JPG takes per pixel at most while it is read: Pillow's 8-bit RGBA and the
@@ -194,17 +230,17 @@ def _is_sixteen_bit_colour_png(head: bytes) -> bool:
     return len(head) == 26 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR" and head[24] == 16 and head[25] in (2, 4, 6)
 
 
-def _read_sixteen_bit_png(path: str, data: bool) -> tuple[np.ndarray, bool]:
+def _read_sixteen_bit_png(path: str, data: bool, func: str) -> tuple[np.ndarray, bool]:
     import imagecodecs
 
     try:
         with open(path, "rb") as f:
             codes = imagecodecs.png_decode(f.read())
     except Exception as exc:
-        raise ValueError(f"read_image(): cannot decode '{path}' as an image: {exc}") from exc
+        raise ValueError(f"{func}(): cannot decode '{path}' as an image: {exc}") from exc
     codes = codes.reshape(codes.shape[0], codes.shape[1], -1)
     if codes.dtype != np.uint16 or codes.shape[-1] not in (2, 3, 4) or codes.size == 0:
-        raise ValueError(f"read_image(): cannot decode '{path}' as a 16-bit PNG: got {codes.dtype} {codes.shape}")
+        raise ValueError(f"{func}(): cannot decode '{path}' as a 16-bit PNG: got {codes.dtype} {codes.shape}")
     return _codes_to_linear(codes, 65535, data)
 
 
@@ -220,28 +256,27 @@ def _codes_to_linear(codes: np.ndarray, maxval: int, data: bool) -> tuple[np.nda
     return image, has_alpha
 
 
-def _pil_to_array(im: Image.Image, data: bool) -> tuple[np.ndarray, bool]:
-    """Decode a loaded Pillow image to float32 [H, W, C]; also return whether the last channel is alpha."""
+def _pil_codes(im: Image.Image) -> tuple[np.ndarray, int]:
+    """A loaded Pillow image's integer codes ``[H, W, C]`` and the code of 1 (float32 values and 1
+    for mode ``F``)."""
     if im.mode == "F":
-        return np.asarray(im, dtype=np.float32)[..., None], False
+        return np.asarray(im, dtype=np.float32)[..., None], 1
     if im.mode in _SIXTEEN_BIT_MODES:
-        codes, maxval = np.clip(np.asarray(im), 0, 65535).astype(np.uint16)[..., None], 65535
-    else:
-        target = _PIL_MODE_MAP.get(im.mode, "RGB")
-        if im.mode == "P":
-            target = "RGBA" if "transparency" in im.info else "RGB"
-        if im.mode != target:
-            im = im.convert(target)
-        codes, maxval = np.asarray(im).reshape(im.height, im.width, -1), 255
-    return _codes_to_linear(codes, maxval, data)
+        return np.clip(np.asarray(im), 0, 65535).astype(np.uint16)[..., None], 65535
+    target = _PIL_MODE_MAP.get(im.mode, "RGB")
+    if im.mode == "P":
+        target = "RGBA" if "transparency" in im.info else "RGB"
+    if im.mode != target:
+        im = im.convert(target)
+    return np.asarray(im).reshape(im.height, im.width, -1), 255
 
 
-def _channel_count(channels) -> int:
+def _channel_count(channels, func: str) -> int:
     if isinstance(channels, bool) or not isinstance(channels, (int, np.integer)):
-        raise TypeError("read_image(): channels for a non-EXR image must be an int 1-4, "
+        raise TypeError(f"{func}(): channels for a non-EXR image must be an int 1-4, "
                         f"got {type(channels).__name__}")
     if not 1 <= channels <= 4:
-        raise ValueError(f"read_image(): channels must be 1-4, got {channels}")
+        raise ValueError(f"{func}(): channels must be 1-4, got {channels}")
     return int(channels)
 
 
@@ -253,7 +288,7 @@ def _convert_channels(image: np.ndarray, has_alpha: bool, channels: int) -> np.n
         colour = np.repeat(colour, 3, axis=-1)
     if channels in (1, 3):
         return np.ascontiguousarray(colour)
-    alpha = image[..., -1:] if has_alpha else np.ones_like(colour[..., :1])
+    alpha = image[..., -1:] if has_alpha else np.full_like(colour[..., :1], 255 if image.dtype == np.uint8 else 1)
     return np.concatenate([colour, alpha], axis=-1)
 
 

@@ -8,12 +8,13 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
-from warptex import io
+from warptex import formats
 from warptex._output import check_memory
 from warptex._threads import zero
-from warptex._validate import as_float_array
+from warptex.formats import Format
 from warptex.kernels import sampling as ks
 from warptex.kernels import texels as kx
+from warptex.texture_input import file_images, image_array, layers_array
 
 
 def mip_sizes(height: int, width: int, max_levels: int | None = None) -> list[tuple[int, int]]:
@@ -34,8 +35,7 @@ def mip_sizes(height: int, width: int, max_levels: int | None = None) -> list[tu
     return sizes
 
 
-#: Integer texel dtypes accepted by :class:`Texture` and :class:`TextureArray`, and the value that maps to 1.
-_UNORM_SCALE = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}
+
 #: Mip chains of this many bytes or more are checked against the memory there is before they are made.
 LARGE_CHAIN_BYTES = 64 << 20
 
@@ -43,8 +43,9 @@ LARGE_CHAIN_BYTES = 64 << 20
 class TextureArray:
     """``L`` texture layers of one size and channel count, each with its own mip chain.
 
-    Texels are float32, linear, 1–4 channels, stored on a Warp device as one flat ``vec4`` buffer
-    (layout in :mod:`warptex.kernels.sampling`). Level 0 of every layer is exposed as
+    Texels are linear, 1–4 channels, stored on a Warp device in a :class:`Format` (``format=``;
+    float32 by default) as one flat buffer of four channels a texel (layout in
+    :mod:`warptex.kernels.texels`). For float32 textures: Level 0 of every layer is exposed as
     :attr:`texels`, a ``wp.array`` of ``vec4`` shaped ``(L, H, W)`` that *is* the start of that
     buffer: optimise it directly, then call :meth:`update` to rebuild the coarser levels.
 
@@ -59,18 +60,22 @@ class TextureArray:
             level-0 texels, copied: gradients do not flow back to it), or a :class:`TextureArray`
             (copied); ``1 <= C <= 4``. Float values are used as given (finite, linear); ``uint8``
             and ``uint16`` values are scaled to ``[0, 1]`` (divided by 255 and 65535, as
-            :func:`warptex.io.read_image` decodes 8- and 16-bit data); other integer dtypes raise
-            ``TypeError``.
+            :func:`warptex.io.read_image` decodes 8- and 16-bit data), except that ``uint8``
+            values for an 8-bit ``format`` are the codes it stores (sRGB-encoded for ``srgb8``);
+            other integer dtypes raise ``TypeError``.
+        format: how the texels are stored (:class:`Format` or its name): ``float32`` (default),
+            ``float16``, ``unorm8`` or ``srgb8``.
         mipmaps: ``True`` for the full chain down to ``1 × 1``, ``False`` for level 0 only, or an
             int: the maximum number of levels.
-        requires_grad: allocate gradient buffers for the texels.
+        requires_grad: allocate gradient buffers for the texels (float32, whatever the format).
         device: Warp device (``None``: Warp's default device).
     """
 
     _name = "TextureArray"
 
-    def __init__(self, layers, *, mipmaps: bool | int = True, requires_grad: bool = False, device=None):
-        data = self._layers_to_array(layers)
+    def __init__(self, layers, *, format: Format | str = Format.FLOAT32, mipmaps: bool | int = True, requires_grad: bool = False, device=None):
+        fmt = formats.texture_format(format, self._name)
+        data = self._layers_to_array(layers, fmt)
         num_layers, height, width, channels = data.shape
         if isinstance(mipmaps, (bool, np.bool_)):
             max_levels = None if mipmaps else 1
@@ -80,16 +85,24 @@ class TextureArray:
             max_levels = int(mipmaps)
         else:
             raise ValueError(f"{self._name}(): mipmaps must be a bool or a positive int, got {mipmaps!r}")
+        if fmt is Format.FLOAT16 and data.dtype != np.uint8 and np.abs(data).max() > np.finfo(np.float16).max:
+            at = tuple(int(i) for i in np.argwhere(np.abs(data) > np.finfo(np.float16).max)[0])
+            raise ValueError(f"{self._name}(): a float16 texture holds values up to 65504; texel {data[at]} at (layer, row, col, channel) {at} is beyond that")
 
         sizes = mip_sizes(height, width, max_levels)
         texels = sum(num_layers * h * w for h, w in sizes)
-        if texels * 16 >= LARGE_CHAIN_BYTES:  # the chain, its device copy and gradient, before NumPy's bare MemoryError part-way
-            what, needed = f"a {num_layers}x{height}x{width} texture with {len(sizes)} level(s)", texels * 16 * (3 if requires_grad else 2)
-            check_memory(self._name, what, needed, device, hint="use a smaller texture, or mipmaps=False")
-        padded = np.zeros((texels, 4), dtype=np.float32)
-        padded[: num_layers * height * width, :channels] = data.reshape(-1, channels)
-        self._wrap(wp.array(padded, dtype=wp.vec4, device=device, requires_grad=requires_grad), num_layers, sizes, channels)
-        self.update()
+        stored = texels * formats.TEXEL_BYTES[fmt]
+        if stored + texels * 16 * requires_grad >= LARGE_CHAIN_BYTES:  # the chain, its host copy and gradient, before NumPy's bare MemoryError part-way
+            what = f"a {num_layers}x{height}x{width} {fmt.value} texture with {len(sizes)} level(s)"
+            check_memory(self._name, what, 2 * stored + texels * 16 * requires_grad, device, hint="use a smaller texture, a compact format, or mipmaps=False")
+        if fmt is Format.FLOAT32:
+            padded = np.zeros((texels, 4), dtype=np.float32)
+            padded[: num_layers * height * width, :channels] = data.reshape(-1, channels)
+            self._wrap(wp.array(padded, dtype=wp.vec4, device=device, requires_grad=requires_grad), num_layers, sizes, channels)
+            self.update()
+            return
+        store = formats.store_array(formats.packed(formats.mip_chain(formats.stored(data, fmt, channels), fmt, channels, sizes), fmt), fmt, device)
+        self._wrap(formats.gradient_carrier(texels, requires_grad, store.device), num_layers, sizes, channels, fmt, store)
 
     @classmethod
     def around(cls, chain: wp.array, num_layers: int, sizes: Sequence[tuple[int, int]], channels: int) -> "TextureArray":
@@ -106,11 +119,15 @@ class TextureArray:
         texture._wrap(chain, num_layers, [tuple(s) for s in sizes], channels)
         return texture
 
-    def _wrap(self, chain: wp.array, num_layers: int, sizes: list[tuple[int, int]], channels: int) -> None:
+    def _wrap(self, chain: wp.array, num_layers: int, sizes: list[tuple[int, int]], channels: int, fmt: Format = Format.FLOAT32, store: wp.array | None = None) -> None:
+        """Hold the chain: ``chain`` the float32 texels (``FLOAT32``), or else the carrier of their
+        gradient (:func:`_gradient_carrier`), and ``store`` the texels as ``fmt`` packs them."""
         self._device = chain.device
         self._channels = channels
         self._sizes = sizes
         self._chain = chain
+        self._format = fmt
+        self._store = store
         self._offsets = [int(o) for o in np.cumsum([0] + [num_layers * h * w for h, w in sizes])[:-1]]
         view = kx.TextureView()
         view.texels = self._chain
@@ -119,112 +136,41 @@ class TextureArray:
         view.level_width = wp.array([w for _, w in self._sizes], dtype=wp.int32, device=self._device)
         view.num_levels = len(self._sizes)
         view.num_layers = num_layers
+        view.texel_format = formats.KERNEL_FORMAT[fmt]
+        self._decode = wp.array(formats.decode_table(fmt, channels), dtype=float, device=self._device) if fmt in formats.EIGHT_BIT else None
+        view.packed = wp.uint64(store.ptr if store is not None else 0)  # the arrays live as long as the texture
+        view.decode = wp.uint64(self._decode.ptr if self._decode is not None else 0)
         self._view = view
 
     # -- construction -----------------------------------------------------------------------------
 
     @classmethod
-    def _layers_to_array(cls, layers) -> np.ndarray:
-        """Validate ``layers`` and return them as a float32 ``[L, H, W, C]`` array."""
-        if isinstance(layers, TextureArray):
-            if isinstance(layers, Texture):
-                return layers.numpy(0)[None]
-            return layers.numpy(0)
-        if isinstance(layers, (list, tuple)):
-            if not layers:
-                raise ValueError(f"{cls._name}(): needs at least one layer, got an empty sequence")
-            arrays = []
-            for i, x in enumerate(layers):
-                if isinstance(x, TextureArray) and not isinstance(x, Texture):
-                    raise TypeError(
-                        f"{cls._name}(): layer {i} is a {type(x).__name__} of {x.num_layers} layers; pass "
-                        "Textures or [H, W, C] arrays (a TextureArray's layers: its .numpy())"
-                    )
-                arrays.append(x.numpy(0) if isinstance(x, Texture) else cls._image_to_array(f"layer {i}", x))
-            for i, a in enumerate(arrays[1:], start=1):
-                if a.shape != arrays[0].shape:
-                    raise ValueError(
-                        f"{cls._name}(): all layers must have the same (H, W, C); layer 0 is "
-                        f"{arrays[0].shape} but layer {i} is {a.shape}"
-                    )
-            return np.stack(arrays)
-        data = cls._texel_values("layers", layers)
-        if data.ndim == 3:
-            data = data[..., None]
-        if data.ndim != 4:
-            raise ValueError(f"{cls._name}(): layers must have shape (L, H, W, C) or (L, H, W), got {data.shape}")
-        if data.shape[0] == 0:
-            raise ValueError(f"{cls._name}(): needs at least one layer, got shape {data.shape}")
-        return np.stack([cls._image_to_array(f"layer {i}", x) for i, x in enumerate(data)])
+    def _layers_to_array(cls, layers, fmt: Format = Format.FLOAT32) -> np.ndarray:
+        """``layers`` validated as ``[L, H, W, C]`` texels (:func:`warptex.texture_input.layers_array`)."""
+        return layers_array(cls._name, layers, fmt)
 
     @classmethod
-    def _image_to_array(cls, name: str, image) -> np.ndarray:
-        """Validate one ``[H, W]`` or ``[H, W, C]`` image and return it as float32 ``[H, W, C]``."""
-        data = cls._texel_values(name, image)
-        if data.ndim == 2:
-            data = data[..., None]
-        if data.ndim != 3:
-            raise ValueError(f"{cls._name}(): {name} must have shape (H, W, C) or (H, W), got {data.shape}")
-        h, w, c = data.shape
-        if h == 0 or w == 0:
-            raise ValueError(f"{cls._name}(): {name} must not be empty, got shape {data.shape}")
-        if not 1 <= c <= 4:
-            raise ValueError(f"{cls._name}(): {name} must have 1 to 4 channels, got {c} (shape {data.shape})")
-        finite = np.isfinite(data)
-        if not finite.all():
-            where = tuple(int(i) for i in np.argwhere(~finite)[0])
-            raise ValueError(
-                f"{cls._name}(): {name} contains non-finite texels, first {data[where]} at (row, col, channel) {where}"
-            )
-        return np.ascontiguousarray(data, dtype=np.float32)
-
-    @classmethod
-    def _texel_values(cls, name: str, value) -> np.ndarray:
-        """``value`` as float32: floats as given, ``uint8``/``uint16`` scaled to ``[0, 1]`` (like
-        :func:`warptex.io.read_image`), other integer dtypes refused (their range is ambiguous)."""
-        try:
-            arr = np.asarray(value)
-        except (ValueError, TypeError) as err:  # ragged nesting
-            raise ValueError(f"{cls._name}(): {name} must be a rectangular array of numbers, got {type(value).__name__}: {err}") from None
-        if np.issubdtype(arr.dtype, np.integer):
-            scale = _UNORM_SCALE.get(arr.dtype)
-            if scale is None:
-                raise TypeError(
-                    f"{cls._name}(): {name} has integer dtype {arr.dtype}; pass floats (linear, usually in [0, 1]), "
-                    "or uint8 / uint16, which are divided by 255 / 65535"
-                )
-            return (arr / scale).astype(np.float32)
-        return as_float_array(cls._name, name, arr)
-
-    @classmethod
-    def from_files(cls, paths: Sequence[str | os.PathLike], *, data: bool = False, channels=None, mipmaps: bool | int = True, requires_grad: bool = False, device=None) -> "TextureArray":
+    def from_files(cls, paths: Sequence[str | os.PathLike], *, data: bool = False, channels=None, format: Format | str | None = None, mipmaps: bool | int = True, requires_grad: bool = False, device=None) -> "TextureArray":
         """Load one layer per file (PNG/JPG/EXR; see :func:`warptex.io.read_image`).
 
         ``data=True`` keeps PNG/JPG values as they are (normal, splat and height maps) instead of
-        decoding sRGB. Files of different sizes or channel counts raise ``ValueError`` naming both.
+        decoding sRGB. ``format=None`` keeps the files' precision (:meth:`Texture.from_file`) where
+        they all share it, else stores float32. Files of different sizes or channel counts raise
+        ``ValueError`` naming both.
         """
         if isinstance(paths, (str, bytes, os.PathLike)):
             raise TypeError(f"{cls._name}.from_files(): paths must be a sequence of paths, got the single path {paths!r}")
         paths = list(paths)
-        images = [cls._checked_file("from_files", p, io.read_image(p, data=data, channels=channels)) for p in paths]
-        if not images:
+        if not paths:
             raise ValueError(f"{cls._name}.from_files(): needs at least one path")
+        images, fmt = file_images(cls._name, "from_files", paths, data=data, channels=channels, format=format)
         for p, img in zip(paths[1:], images[1:]):
             if img.shape != images[0].shape:
                 raise ValueError(
                     f"{cls._name}.from_files(): '{os.fspath(p)}' is {img.shape} (H, W, C) but "
                     f"'{os.fspath(paths[0])}' is {images[0].shape}; layers must match"
                 )
-        return cls(images, mipmaps=mipmaps, requires_grad=requires_grad, device=device)
-
-    @classmethod
-    def _checked_file(cls, func: str, path, image: np.ndarray) -> np.ndarray:
-        """``image``, read from ``path``, checked as a layer, naming the file where it is not one."""
-        try:
-            cls._image_to_array("image", image)
-        except ValueError as err:
-            raise ValueError(f"{cls._name}.{func}(): {os.fspath(path)!r}: {str(err).removeprefix(f'{cls._name}(): ')}") from None
-        return image
+        return cls(images, format=fmt, mipmaps=mipmaps, requires_grad=requires_grad, device=device)
 
     # -- properties ---------------------------------------------------------------------------------
 
@@ -243,6 +189,19 @@ class TextureArray:
     @property
     def channels(self) -> int:
         return self._channels
+
+    @property
+    def format(self) -> Format:
+        """How the texels are stored (:class:`Format`)."""
+        return self._format
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes the texels of every level take on the device, with an 8-bit format's decode table
+        (gradients not counted: float32, 16 bytes a texel, where ``requires_grad``)."""
+        if self._format is Format.FLOAT32:
+            return self._chain.capacity
+        return self._store.capacity + (self._decode.capacity if self._decode is not None else 0)
 
     @property
     def num_levels(self) -> int:
@@ -269,7 +228,7 @@ class TextureArray:
     @property
     def texels(self) -> wp.array:
         """Level 0: ``wp.array`` of ``vec4``, shape ``(L, H, W)`` (``(H, W)`` for a :class:`Texture`),
-        aliasing the start of the chain."""
+        aliasing the start of the chain. ``FLOAT32`` textures only (others: :meth:`numpy`, :meth:`assign`)."""
         return self.level(0)
 
     def level(self, level: int) -> wp.array:
@@ -277,8 +236,14 @@ class TextureArray:
 
         Writing to a coarse level directly (rather than through :meth:`update`) is allowed, e.g.
         for hand-made mips; its gradient (``.grad``) is the view of that level's gradient.
+        ``FLOAT32`` textures only: other formats pack their texels (:meth:`numpy` decodes them).
         """
         self._check_level("level", level)
+        if self._format is not Format.FLOAT32:
+            raise TypeError(
+                f"{self._name}.level(): a {self._format.value} texture stores packed texels, not float32 vec4s; "
+                "read them with numpy(), set level 0 with assign(), or make the texture with format='float32'"
+            )
         return self._level_array(self._chain, level)
 
     # -- operations -------------------------------------------------------------------------------
@@ -287,8 +252,15 @@ class TextureArray:
         """Rebuild levels 1.. from level 0 with the box filter.
 
         Call it after changing :attr:`texels`. Inside a ``wp.Tape`` the launches are recorded, so
-        gradients reaching coarse levels flow back to level 0 in the backward pass.
+        gradients reaching coarse levels flow back to level 0 in the backward pass. Textures of
+        other formats than ``FLOAT32`` rebuild on the host (decoded, filtered in linear space,
+        encoded), unrecorded: their gradients stay on the level they reach.
         """
+        if self._format is not Format.FLOAT32:
+            if self.num_levels > 1:
+                levels = formats.mip_chain(self._stored_level(0), self._format, self._channels, self._sizes)
+                self._store[self._offsets[1] :].assign(formats.packed(levels[1:], self._format))
+            return
         for k in range(self.num_levels - 1):
             h, w = self._sizes[k + 1]
             wp.launch(
@@ -300,9 +272,37 @@ class TextureArray:
             )
 
     def numpy(self, level: int = 0) -> np.ndarray:
-        """Texels of ``level`` as float32 ``[L, h, w, C]``."""
+        """Texels of ``level`` as float32 ``[L, h, w, C]`` (decoded: as sampling reads them)."""
         self._check_level("numpy", level)
+        if self._format is not Format.FLOAT32:
+            return formats.decode(self._stored_level(level), self._format, self._channels)
         return self._level_numpy(self._chain, level)
+
+    def assign(self, values) -> None:
+        """Set level 0 to ``values`` and rebuild the coarser levels (:meth:`update`).
+
+        ``values`` is what the constructor takes for this texture, of its size and channel count:
+        ``[L, H, W, C]`` (``[H, W, C]`` for a :class:`Texture`) floats, linear, stored in this
+        texture's format (an 8-bit one clips to ``[0, 1]`` and rounds), or a texture (its level 0).
+        This is how a fit keeps a float32 master copy and stores it compactly: step the master with
+        :meth:`grad`, then ``assign`` it.
+        """
+        data = self._layers_to_array(values, self._format)
+        want = (self.num_layers, self.height, self.width, self._channels)
+        if data.shape != want:
+            raise ValueError(f"{self._name}.assign(): values must be shaped {want[1:] if isinstance(self, Texture) else want}, got {data.shape[1:] if isinstance(self, Texture) else data.shape}")
+        count = self.num_layers * self.height * self.width
+        if self._format is Format.FLOAT32:
+            self._chain[:count].assign(formats.encode(data.reshape(-1, self._channels), Format.FLOAT32, self._channels).reshape(-1, 4))
+        else:
+            self._store[:count].assign(formats.packed([formats.stored(data, self._format, self._channels)], self._format))
+        self.update()
+
+    def _stored_level(self, level: int) -> np.ndarray:
+        """Level ``level`` as the store holds it, ``[L, h, w, 4]`` (uint8 codes or float16)."""
+        h, w = self._sizes[level]
+        start = self._offsets[level]
+        return formats.unpacked(self._store[start : start + self.num_layers * h * w].numpy(), self._format).reshape(self.num_layers, h, w, 4)
 
     def grad(self, level: int = 0) -> np.ndarray | None:
         """Gradient with respect to the texels of ``level``, float32 ``[L, h, w, C]`` (``None`` without grads)."""
@@ -337,12 +337,12 @@ class TextureArray:
     def __repr__(self) -> str:
         return (
             f"{type(self).__name__}(layers={self.num_layers}, size={self.height}x{self.width}, "
-            f"channels={self.channels}, levels={self.num_levels}, device={self.device})"
+            f"channels={self.channels}, format={self._format.value}, levels={self.num_levels}, device={self.device})"
         )
 
 
 class Texture(TextureArray):
-    """One image (1–4 channels, float32 linear) with an optional mip chain.
+    """One image (1–4 channels, linear, stored in a :class:`Format`) with an optional mip chain.
 
     A :class:`TextureArray` with a single layer; the array accessors drop the layer axis, so
     :meth:`numpy` and :meth:`grad` return ``[h, w, C]`` and :attr:`texels` has shape ``(H, W)``.
@@ -351,8 +351,10 @@ class Texture(TextureArray):
         image: ``[H, W, C]`` or ``[H, W]`` array, ``1 <= C <= 4``. Float values are used as given
             (finite, linear); ``uint8`` and ``uint16`` values are scaled to ``[0, 1]`` (divided by
             255 and 65535, as :func:`warptex.io.read_image` decodes 8- and 16-bit data, without
-            its sRGB decoding); other integer dtypes raise ``TypeError``. A :class:`Texture` is
-            copied (level 0).
+            its sRGB decoding), or, for an 8-bit ``format``, the codes it stores; other integer
+            dtypes raise ``TypeError``. A :class:`Texture` is copied (level 0).
+        format: how the texels are stored (:class:`Format`): ``float32`` (default), ``float16``,
+            ``unorm8`` or ``srgb8``.
         mipmaps: ``True`` for the full chain, ``False`` for level 0 only, or the maximum number of levels.
         requires_grad: allocate gradient buffers for the texels.
         device: Warp device (``None``: Warp's default device).
@@ -360,25 +362,29 @@ class Texture(TextureArray):
 
     _name = "Texture"
 
-    def __init__(self, image, *, mipmaps: bool | int = True, requires_grad: bool = False, device=None):
-        super().__init__(image, mipmaps=mipmaps, requires_grad=requires_grad, device=device)
+    def __init__(self, image, *, format: Format | str = Format.FLOAT32, mipmaps: bool | int = True, requires_grad: bool = False, device=None):
+        super().__init__(image, format=format, mipmaps=mipmaps, requires_grad=requires_grad, device=device)
 
     @classmethod
-    def _layers_to_array(cls, image) -> np.ndarray:
-        if isinstance(image, Texture):
-            return image.numpy(0)[None]
-        return cls._image_to_array("image", image)[None]
+    def _layers_to_array(cls, image, fmt: Format = Format.FLOAT32) -> np.ndarray:
+        return image.numpy(0)[None] if isinstance(image, Texture) else image_array(cls._name, "image", image, fmt)[None]
 
     @classmethod
-    def from_file(cls, path: str | os.PathLike, *, data: bool = False, channels=None, layer: str | None = None, mipmaps: bool | int = True, requires_grad: bool = False, device=None) -> "Texture":
+    def from_file(cls, path: str | os.PathLike, *, data: bool = False, channels=None, layer: str | None = None, format: Format | str | None = None, mipmaps: bool | int = True, requires_grad: bool = False, device=None) -> "Texture":
         """Load an image file (PNG/JPG decoded from sRGB unless ``data=True``; EXR as stored).
 
         ``channels`` selects EXR channels by name, or forces a channel count for PNG/JPG; ``layer``
         picks a layer of a multi-layer EXR; see :func:`warptex.io.read_image`. An image that is no
         texture (NaN or infinite texels, too many channels) is refused naming the file.
+
+        ``format=None`` keeps the file's precision (:func:`warptex.io.read_texels`): an 8-bit
+        PNG/JPG is stored ``SRGB8`` (``UNORM8`` with ``data=True``), a half EXR ``FLOAT16``, the
+        rest ``FLOAT32``. The texels sample as :func:`warptex.io.read_image`'s values of the file
+        do, in a quarter (8-bit) or half the memory; their mips differ by the rounding of the
+        stored format. Another ``format`` converts.
         """
-        image = cls._checked_file("from_file", path, io.read_image(path, data=data, channels=channels, layer=layer))
-        return cls(image, mipmaps=mipmaps, requires_grad=requires_grad, device=device)
+        (image,), fmt = file_images(cls._name, "from_file", [path], data=data, channels=channels, layer=layer, format=format)
+        return cls(image, format=fmt, mipmaps=mipmaps, requires_grad=requires_grad, device=device)
 
     def level(self, level: int) -> wp.array:
         """Mip ``level`` as a ``wp.array`` of ``vec4`` shaped ``(h, w)``: a view into the chain."""

@@ -19,6 +19,26 @@ typedef wp::mat_t<14, WT_L, float> wt_lane_taps;    // lanes.lane_taps
 
 constexpr float wt_float_max = 3.4028234663852886e38f;
 
+// Entry `index` of a texture's texel chain, decoded to float32 from its format.
+// twin: texels.stored_texel
+template <class Tex> WT_INLINE wt_f4 wt_stored_texel(const Tex& tex, long long index) {
+    wt_f4 t;
+    if (tex.texel_format == WT_FLOAT32) {
+        __builtin_memcpy(&t, (const char*)tex.texels.data + index * tex.texels.strides[0], 16);
+    } else if (tex.texel_format == WT_FLOAT16) {
+        typedef _Float16 wt_h4 __attribute__((ext_vector_type(4)));
+        wt_h4 h;
+        __builtin_memcpy(&h, (const char*)tex.packed + index * 8, 8);
+        t = __builtin_convertvector(h, wt_f4);  // exact: every half is a float
+    } else {
+        unsigned int p;
+        __builtin_memcpy(&p, (const char*)tex.packed + index * 4, 4);
+        const float* d = (const float*)tex.decode;
+        t = (wt_f4){d[p & 255u], d[256u + ((p >> 8) & 255u)], d[512u + ((p >> 16) & 255u)], d[768u + (p >> 24)]};
+    }
+    return t;
+}
+
 // twin: texels.reduce_coord
 WT_INLINE float wt_reduce(float x, const int address) {
     if (address == WT_WRAP) return x - wp::floor(x);

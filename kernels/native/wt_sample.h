@@ -5,6 +5,25 @@
 #include "wt_core.h"
 #include "wt_footprint.h"
 
+// The texels at index[l] of a unorm8 texture (the border colour where a border-mode read is not
+// inside), decoded into a vector per channel: ch[c][l] is stored_texel(tex, index[l])[c], the code
+// divided by 255 (its table's value for every code). sRGB's table lookups, per lane and channel,
+// measured faster through wt_stored_texel and the transpose.
+// twin: texels.stored_texel
+template <class Tex> WT_INLINE void wt_unorm8_channels(const Tex& tex, const int* index, const bool* inside,
+                                                       const int address, const wt_f4& border, wt_vf* ch) {
+    const unsigned int* packed = (const unsigned int*)tex.packed;
+    unsigned int p[WT_L];
+    for (int l = 0; l < WT_L; ++l) p[l] = packed[address != WT_BORDER || inside[l] ? index[l] : 0];
+    wt_vi P;
+    __builtin_memcpy(&P, p, sizeof(P));
+    for (int c = 0; c < 4; ++c) ch[c] = __builtin_convertvector((P >> (8 * c)) & 255, wt_vf) / 255.0f;
+    if (address == WT_BORDER)
+        for (int c = 0; c < 4; ++c)
+            for (int l = 0; l < WT_L; ++l)
+                if (!inside[l]) ch[c][l] = border[c];
+}
+
 // res[l] = filters.sample_levels(tex, layer[l], (u[l], v[l]), level[l], fraction[l], smp) for every
 // lane, the address mode a constant (wt_sample_levels_any compiles it once per mode: a mode tested
 // per texel measured slower). Each level read is cut in two: every lane's addresses and weights,
@@ -13,16 +32,10 @@
 template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int address, const Tex& tex, const Smp& smp,
                                                                 const float* u, const float* v, const int* level,
                                                                 const float* fraction, const int* layer, wt_f4* res) {
-    const char* tb = (const char*)tex.texels.data;
-    const long long ts = tex.texels.strides[0];
     const wt_f4 border = {smp.border.c[0], smp.border.c[1], smp.border.c[2], smp.border.c[3]};
     auto load = [&](int index, bool inside) __attribute__((always_inline)) -> wt_f4 {  // texels.texel
-        wt_f4 t;
-        if (address != WT_BORDER) {  // only the border mode reads outside
-            __builtin_memcpy(&t, tb + (long long)index * ts, 16);
-            return t;
-        }
-        __builtin_memcpy(&t, tb + (inside ? (long long)index : 0) * ts, 16);
+        if (address != WT_BORDER) return wt_stored_texel(tex, index);  // only the border mode reads outside
+        const wt_f4 t = wt_stored_texel(tex, inside ? (long long)index : 0);
         return inside ? t : border;
     };
     float ru[WT_L], rv[WT_L];
@@ -76,6 +89,10 @@ template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int addres
         // filters.sample_bilinear, and the blend of filters.sample_levels, a channel of 16 pixels at a time
         wt_vf taps[4][4], FX, FY;
         for (int k = 0; k < 4; ++k) {
+            if (tex.texel_format == WT_UNORM8) {  // a channel of every lane's codes at a time, no transpose
+                wt_unorm8_channels(tex, index[k], inside[k], address, border, taps[k]);
+                continue;
+            }
             wt_f4 t[WT_L];
             _Pragma("clang loop unroll(full)") for (int l = 0; l < WT_L; ++l) t[l] = load(index[k][l], inside[k][l]);
             wt_channels(t, taps[k]);

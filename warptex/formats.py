@@ -1,0 +1,196 @@
+"""Texel formats: how a texture stores its texels (:class:`Format`), and the host side of the
+compact ones: 8-bit decode tables, encoding and decoding, and mip levels built in linear space.
+Kernels read every format through :func:`warptex.kernels.texels.stored_texel`."""
+
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+import warp as wp
+
+from warptex import io
+from warptex.kernels import texels as kx
+
+
+class Format(str, enum.Enum):
+    """How a texture stores its texels (``format=`` of :class:`Texture` and :class:`TextureArray`).
+
+    Every technique reads every format: a texel is decoded to float32 when it is read, before it is
+    filtered, and filtering is float32 arithmetic, so a texture of any format samples as the
+    float32 texture of its decoded texels does (bit for bit).
+
+    - ``FLOAT32``: 16 bytes a texel, values as given.
+    - ``FLOAT16``: IEEE half floats, 8 bytes a texel (HDR maps; half EXR files load as it).
+    - ``UNORM8``: 8-bit codes ``k`` meaning ``k / 255``, 4 bytes a texel, whatever the channel
+      count: data such as normal, height and splat maps.
+    - ``SRGB8``: 8-bit codes whose colour channels are sRGB-encoded, decoded with the exact
+      IEC 61966-2-1 curve (alpha, the last of 2 or 4 channels, is ``k / 255``), as GPUs read
+      ``SRGB8_ALPHA8``: colour photos and game textures. Mips are box-filtered in linear space and
+      encoded back.
+
+    Floats stored as 8 bits are clipped to ``[0, 1]`` and rounded to the nearest code (sRGB
+    colour after encoding). Mips of the three compact formats are built on the host from level
+    0's decoded texels; their gradients land in a float32 gradient (:meth:`TextureArray.grad`).
+    """
+
+    FLOAT32 = "float32"
+    FLOAT16 = "float16"
+    UNORM8 = "unorm8"
+    SRGB8 = "srgb8"
+
+
+#: Bytes a texel takes in each format.
+TEXEL_BYTES = {Format.FLOAT32: 16, Format.FLOAT16: 8, Format.UNORM8: 4, Format.SRGB8: 4}
+EIGHT_BIT = (Format.UNORM8, Format.SRGB8)
+KERNEL_FORMAT = {Format.FLOAT32: kx.FORMAT_FLOAT32, Format.FLOAT16: kx.FORMAT_FLOAT16, Format.UNORM8: kx.FORMAT_UNORM8, Format.SRGB8: kx.FORMAT_8BIT}
+#: Rows of a coarser level built at a time from an 8-bit or half level (bounds the host memory a mip chain takes).
+_MIP_BAND_ROWS = 256
+
+
+def texture_format(value, func: str) -> Format:
+    """``value`` (a :class:`Format` or its name) as a :class:`Format`."""
+    try:
+        return Format(value.lower() if isinstance(value, str) else value)
+    except (ValueError, AttributeError):
+        raise ValueError(f"{func}(): format must be one of {[f.value for f in Format]}, got {value!r}") from None
+
+
+def colour_channels(channels: int) -> int:
+    """How many of ``channels`` are colour (the rest, of 2 or 4, is alpha)."""
+    return channels - 1 if channels in (2, 4) else channels
+
+
+def decode_table(fmt: Format, channels: int) -> np.ndarray:
+    """The float32 values of the 8-bit codes of ``fmt``: ``table[256 c + k]`` is channel ``c``'s code
+    ``k``. ``k / 255`` is rounded to float32 once, and sRGB colour is ``io.srgb_to_linear(k / 255)``,
+    as :func:`warptex.io.read_image` decodes 8-bit files, so a texture made from a file holds the
+    values ``read_image`` returns."""
+    unorm = (np.arange(256, dtype=np.float64) / 255).astype(np.float32)
+    table = np.tile(unorm, 4)
+    if fmt is Format.SRGB8:
+        srgb = io.srgb_to_linear(np.arange(256, dtype=np.float64) / 255)
+        for c in range(colour_channels(channels)):
+            table[256 * c : 256 * (c + 1)] = srgb
+    return table
+
+
+def encode(values: np.ndarray, fmt: Format, channels: int) -> np.ndarray:
+    """Float texels ``[..., C]`` (linear) as ``fmt`` stores them: ``[..., 4]`` of float32, float16
+    or uint8 codes (unused channels zero). 8-bit values are clipped to ``[0, 1]`` and rounded to
+    the nearest code, sRGB colour after encoding."""
+    shape = values.shape[:-1] + (4,)
+    if fmt is Format.FLOAT32 or fmt is Format.FLOAT16:
+        out = np.zeros(shape, dtype=np.float32 if fmt is Format.FLOAT32 else np.float16)
+        out[..., : values.shape[-1]] = values
+        return out
+    out = np.zeros(shape, dtype=np.uint8)
+    colour = colour_channels(channels) if fmt is Format.SRGB8 else 0
+    if colour:
+        out[..., :colour] = np.rint(io.linear_to_srgb(values[..., :colour]).astype(np.float64) * 255)
+    if values.shape[-1] > colour:
+        out[..., colour : values.shape[-1]] = np.rint(np.clip(values[..., colour:], 0.0, 1.0).astype(np.float64) * 255)
+    return out
+
+
+def decode(stored: np.ndarray, fmt: Format, channels: int) -> np.ndarray:
+    """Stored texels ``[..., 4]`` of ``fmt`` (uint8 codes for 8-bit formats) as float32 ``[..., C]``."""
+    if fmt in EIGHT_BIT:
+        table = decode_table(fmt, channels).reshape(4, 256)
+        return np.stack([table[c][stored[..., c]] for c in range(channels)], axis=-1)
+    return stored[..., :channels].astype(np.float32)
+
+
+def _box_weights(n0: int, n1: int) -> tuple[np.ndarray, np.ndarray]:
+    """The box filter from ``n0`` texels to ``n1`` along one axis, as ``downsample_kernel`` weighs
+    it: coarse texel ``j`` is ``sum_t weight[j, t] * fine[index[j, t]]``, the fine texels its cell
+    ``[j n0 / n1, (j + 1) n0 / n1)`` overlaps, each by the overlap times ``n1 / n0``."""
+    lo = np.arange(n1, dtype=np.float64) * n0 / n1
+    hi = np.arange(1, n1 + 1, dtype=np.float64) * n0 / n1
+    taps = int(np.max(np.ceil(hi) - np.floor(lo)))
+    index = np.floor(lo).astype(np.int64)[:, None] + np.arange(taps)[None, :]
+    weight = np.clip(np.minimum(hi[:, None], index + 1.0) - np.maximum(lo[:, None], index), 0.0, None) * (n1 / n0)
+    return np.minimum(index, n0 - 1), weight
+
+
+def coarser_level(stored: np.ndarray, fmt: Format, channels: int, size: tuple[int, int]) -> np.ndarray:
+    """The next mip level of ``stored`` (``[L, h, w, 4]`` as ``fmt`` stores it), of ``size``: its
+    texels decoded, box-filtered in linear space, encoded back; a band of rows at a time, so that
+    the float copy is a band's."""
+    (ry, wy), (rx, wx) = _box_weights(stored.shape[1], size[0]), _box_weights(stored.shape[2], size[1])
+    out = np.empty((stored.shape[0],) + tuple(size) + (4,), dtype=stored.dtype)
+    for j0 in range(0, size[0], _MIP_BAND_ROWS):
+        j1 = min(size[0], j0 + _MIP_BAND_ROWS)
+        first = int(ry[j0:j1].min())
+        fine = decode(stored[:, first : int(ry[j0:j1].max()) + 1], fmt, channels)
+        rows = sum(fine[:, ry[j0:j1, t] - first].astype(np.float64) * wy[j0:j1, t, None, None] for t in range(ry.shape[1]))
+        out[:, j0:j1] = encode(sum(rows[:, :, rx[:, t]] * wx[:, t, None] for t in range(rx.shape[1])), fmt, channels)
+    return out
+
+
+def stored(data: np.ndarray, fmt: Format, channels: int) -> np.ndarray:
+    """``data`` (``[..., C]`` float texels, or uint8 codes of an 8-bit ``fmt``) as ``fmt`` stores it,
+    ``[..., 4]``."""
+    if data.dtype == np.uint8:
+        out = np.zeros(data.shape[:-1] + (4,), dtype=np.uint8)
+        out[..., :channels] = data
+        return out
+    return encode(data, fmt, channels)
+
+
+def mip_chain(level0: np.ndarray, fmt: Format, channels: int, sizes: list[tuple[int, int]]) -> list[np.ndarray]:
+    """Every level of ``sizes``, stored as ``fmt`` stores them, from ``level0`` (stored): each the
+    :func:`coarser_level` of the one before."""
+    levels = [level0]
+    for size in sizes[1:]:
+        levels.append(coarser_level(levels[-1], fmt, channels, size))
+    return levels
+
+
+def packed(levels: list[np.ndarray], fmt: Format) -> np.ndarray:
+    """Stored levels one after another, as a compact texture's store holds them: a uint32 per texel
+    (8-bit) or ``[n, 4]`` float16."""
+    flat = np.concatenate([x.reshape(-1, 4) for x in levels])
+    return flat.view(np.uint32).reshape(-1) if fmt in EIGHT_BIT else flat
+
+
+def store_array(flat: np.ndarray, fmt: Format, device) -> wp.array:
+    """The device array of a compact texture's store, from :func:`packed` texels."""
+    return wp.array(flat, dtype=wp.uint32 if fmt in EIGHT_BIT else wp.vec4h, device=device)
+
+
+def unpacked(raw: np.ndarray, fmt: Format) -> np.ndarray:
+    """Texels of a compact store (its ``.numpy()``) as ``[n, 4]`` uint8 codes or float16."""
+    return raw.view(np.uint8).reshape(-1, 4) if fmt in EIGHT_BIT else raw.reshape(-1, 4)
+
+
+def file_format(image: np.ndarray, data: bool) -> Format:
+    """The format that keeps an image of :func:`warptex.io.read_texels` as precise as its file."""
+    if image.dtype == np.uint8:
+        return Format.UNORM8 if data else Format.SRGB8
+    return Format.FLOAT16 if image.dtype == np.float16 else Format.FLOAT32
+
+
+def as_format(image: np.ndarray, data: bool, fmt: Format) -> np.ndarray:
+    """An image of :func:`warptex.io.read_texels` as a texture of ``fmt`` takes it: a file's 8-bit
+    codes as they are for its own format, else decoded to the linear floats they stand for."""
+    kept = file_format(image, data)
+    if image.dtype == np.uint8 and fmt is not kept:
+        return decode(image, kept, image.shape[-1])
+    return image
+
+
+def gradient_carrier(count: int, requires_grad: bool, device) -> wp.array:
+    """What the view's ``texels`` holds for a texture not stored as float32. Kernels read its texels
+    from the packed store, never from here; the backward machinery finds a texture's texel gradient
+    as ``view.texels.grad`` (``wp.Tape.get_adjoint``, the hand-written gradients). So with
+    ``requires_grad`` this is a ``vec4`` array of the chain's length whose ``.grad`` is a float32
+    gradient of every level; it aliases that gradient's memory rather than hold a float32 copy of
+    the texels, and is never read. Without, it is empty."""
+    if not requires_grad:
+        return wp.empty(0, dtype=wp.vec4, device=device)
+    grad = wp.zeros(count, dtype=wp.vec4, device=device)
+    carrier = wp.array(ptr=grad.ptr, shape=(count,), dtype=wp.vec4, device=device)
+    carrier.grad = grad
+    carrier.warptex_carrier = True  # warptex._op refuses Warp's generated adjoint for it (which reads no packed texels)
+    return carrier
