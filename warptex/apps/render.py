@@ -22,7 +22,6 @@ import numpy as np
 import trimesh
 import warp as wp
 
-from warptex import io
 from warptex._compile import preload
 from warptex._memory import trim
 from warptex.kernels import splat as kl
@@ -100,7 +99,7 @@ def mesh_material(func: str, mesh: trimesh.Trimesh, technique: str | None, textu
         texture = Texture.from_file(texture_path, layer=texture_layer, device=device)
         source = f"texture {os.fspath(texture_path)}"
     else:
-        texture = Texture(embedded if embedded is not None else noise_texture(seed=seed), device=device)
+        texture = Texture(embedded, format="srgb8", device=device) if embedded is not None else Texture(noise_texture(seed=seed), device=device)
         source = "the mesh's own texture" if embedded is not None else f"a procedural ground texture (seed {seed})"
     why = "as asked" if chosen is not None else "it has them" if technique == "uv" else "it has no UVs"
     tiling = (1.0 if embedded is not None and technique == "uv" else 8.0) if tiling is None else float(tiling)
@@ -191,15 +190,15 @@ def _smooth_normals(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
 
 
 def _embedded_texture(mesh: trimesh.Trimesh) -> np.ndarray | None:
-    """The mesh's colour texture (sRGB-decoded): glTF's base colour, or an OBJ material's
-    ``map_Kd``; ``None`` without one."""
+    """The mesh's colour texture as 8-bit sRGB codes (an ``srgb8`` texture's): glTF's base colour,
+    or an OBJ material's ``map_Kd``; ``None`` without one."""
     material = getattr(mesh.visual, "material", None)
     image = getattr(material, "baseColorTexture", None)
     if image is None:
         image = getattr(material, "image", None)
     if image is None:
         return None
-    return io.srgb_to_linear(np.asarray(image.convert("RGB"), np.float32) / 255.0)
+    return np.asarray(image.convert("RGB"))
 
 
 def _kernels(terrain: bool, device) -> list:
