@@ -29,6 +29,11 @@ another would put that drift into their ratio.
     python benchmarks/bench_samplers.py --device cuda:0      # on a GPU: torch and Dr.Jit on CUDA too
     python benchmarks/bench_samplers.py --call-cost          # what a small call costs, against torch
 
+``--formats float32 unorm8 float16`` adds rows of warptex reading its textures (and splat layers) in
+those texel formats (``warptex.Format``), timed in the same interleaved rounds as float32's: the
+same techniques on compact texels. Splat maps stay float32. A format's texels are its encoding of
+the float32 texture's, so its outputs differ from the peers' by that rounding. Peers read float32.
+
 ``--call-cost`` times what a call costs when it computes little: ``sample`` (bilinear, a 256² RGBA
 texture) on 1, 1,024 and 65,536 random UVs, into a new output and into ``out=``, and through the
 PyTorch bridge (``warptex.torch.sample`` on tensors), forward and forward+backward (gradients to
@@ -165,8 +170,18 @@ def _nothing() -> None:
     pass
 
 
-def warptex_runs(technique: str, data: dict, objs: dict, device=None):
-    """``(forward, forward_backward)`` callables of warptex for ``technique``."""
+def in_format(t, fmt: str):
+    """Texture ``t`` with its level 0 stored in ``fmt`` (float32: ``t`` itself); compact formats
+    build their own mips from it."""
+    if fmt == "float32":
+        return t
+    return type(t)(t.numpy(0), format=fmt, mipmaps=t.num_levels > 1, device=t.device)
+
+
+def warptex_runs(technique: str, data: dict, objs: dict, device=None, fmt: str = "float32"):
+    """``(forward, forward_backward)`` callables of warptex for ``technique``, its textures (not
+    splat maps) stored in ``fmt``."""
+    objs = {k: in_format(v, fmt) if k in ("texture", "layers") else v for k, v in objs.items()}
 
     # Inputs as Warp arrays up front, as the peers convert theirs in prepare(), untimed.
     data = dict(data)
@@ -195,9 +210,9 @@ def warptex_runs(technique: str, data: dict, objs: dict, device=None):
 
 
 def with_grad(t):
-    """A copy of texture ``t`` (same texels, same mip chain) that receives gradients."""
+    """A copy of texture ``t`` (same texels and format, same mip chain) that receives gradients."""
     level0 = t.numpy(0)
-    return type(t)(level0, mipmaps=t.num_levels > 1, requires_grad=True, device=t.device)
+    return type(t)(level0, format=t.format, mipmaps=t.num_levels > 1, requires_grad=True, device=t.device)
 
 
 def measure_technique(technique: str, scene: str, args, tex, cache, backends: dict, report) -> list[dict]:
@@ -224,12 +239,28 @@ def measure_technique(technique: str, scene: str, args, tex, cache, backends: di
         runs["warptex", "forward", threads] = (forward, wp.synchronize, setup)
         runs["warptex", "forward+backward", threads] = (forward_backward, wp.synchronize, setup)
     peer_threads = None if cuda else args.threads
+    extras = {}
+    for fmt in args.formats:  # compact texels, on the peers' thread count
+        if fmt == "float32":
+            continue
+        impl, setup = f"warptex {fmt}", (lambda: wt.set_num_threads(peer_threads))
+        setup()
+        compact, compact_backward = warptex_runs(technique, data, objs, args.device, fmt)
+        out = compact().numpy()
+        extras[impl, "forward", peer_threads] = {"format": fmt, "max_abs_diff": float(np.nanmax(np.abs(out.reshape(reference[peer_threads].shape) - reference[peer_threads]))) if out.size else 0.0}
+        runs[impl, "forward", peer_threads] = (compact, wp.synchronize, setup)
+        try:
+            compact_backward()
+        except ValueError as err:  # a gradient only Warp's generated adjoint takes: float32 textures only
+            report(f"  {impl} forward+backward: skipped ({err})")
+        else:
+            extras[impl, "forward+backward", peer_threads] = {"format": fmt}
+            runs[impl, "forward+backward", peer_threads] = (compact_backward, wp.synchronize, setup)
     single_vs_all = max((float(np.nanmax(np.abs(r - reference[thread_counts[0]]))) if r.size else 0.0) for r in reference.values())
 
     expected = reference[peer_threads]
     if "mask" in data:
         expected = expected[data["mask"] > 0] if expected.shape[0] == data["mask"].shape[0] else expected
-    extras = {}
     for backend, table in backends.items():
         peer = table.get(technique)
         if peer is None:
@@ -282,7 +313,7 @@ def format_peer_summary(records: list[dict]) -> str:
     """One table of every technique and scene: warptex's forward and forward+backward times on the
     peers' thread count, and each peer's time over warptex's in the same run (below 1: the peer
     is faster); "" without peers."""
-    impls = sorted({r["impl"] for r in records} - {"warptex"})
+    impls = sorted({r["impl"] for r in records if not r["impl"].startswith("warptex")})
     if not impls:
         return ""
     peer_threads = {(r["technique"], r["scene"]): r["threads"] for r in records if r["impl"] != "warptex"}
@@ -298,6 +329,25 @@ def format_peer_summary(records: list[dict]) -> str:
             ratios = [time.get((technique, scene, impl, p)) for p in ("forward", "forward+backward")]
             cells.append(" / ".join("  -  " if t is None else f"{t / b:5.2f}" for t, b in zip(ratios, base)))
         lines.append(f"  {technique:16s} {scene:8s} {base[0] * 1e3:7.1f} / {base[1] * 1e3:7.1f}  " + "  ".join(f"{c:>13s}" for c in cells))
+    return "\n".join(lines)
+
+
+def format_format_summary(records: list[dict]) -> str:
+    """Each compact format's speed-up over float32 textures (float32 time ÷ format time, same run;
+    above 1: the format is faster), forward / forward+backward; "" without ``--formats``."""
+    formats = sorted({r["format"] for r in records if "format" in r})
+    if not formats:
+        return ""
+    time = {(r["technique"], r["scene"], r.get("format", "float32"), r["pass"], r["threads"]): r["seconds"] for r in records if r["impl"].startswith("warptex")}
+    rows = sorted({(r["technique"], r["scene"], r["threads"]) for r in records if "format" in r}, key=lambda k: (k[0], k[1]))
+    lines = ["texel formats against float32 (float32 time ÷ format time, same run; above 1: faster), forward / forward+backward:",
+             f"  {'technique':16s} {'scene':8s} " + "  ".join(f"{f:>13s}" for f in formats)]  # fmt: skip
+    for technique, scene, threads in rows:
+        cells = []
+        for f in formats:
+            pair = [(time.get((technique, scene, "float32", p, threads)), time.get((technique, scene, f, p, threads))) for p in ("forward", "forward+backward")]
+            cells.append(" / ".join("  -  " if None in (a, b) else f"{a / b:5.2f}" for a, b in pair))
+        lines.append(f"  {technique:16s} {scene:8s} " + "  ".join(f"{c:>13s}" for c in cells))
     return "\n".join(lines)
 
 
@@ -516,7 +566,7 @@ def run(args) -> dict:
         result["scaling"] = scaling(args, backends, report)
         plot_scaling(args.out / "scaling.png", result["scaling"], args.threads if not wp.get_device(args.device).is_cuda else args.device)
         report(f"plot: {args.out / 'scaling.png'}")
-    for summary in (format_peer_summary(records), format_thread_scaling(records)):
+    for summary in (format_peer_summary(records), format_format_summary(records), format_thread_scaling(records)):
         if summary:
             report(summary)
     return result
@@ -535,6 +585,8 @@ def parse(argv=None):
     p.add_argument("--techniques", nargs="+", default=list(TECHNIQUES), choices=TECHNIQUES)
     p.add_argument("--peers", nargs="*", default=list(peers.BACKENDS), choices=peers.BACKENDS)
     p.add_argument("--no-scaling", action="store_true", help="skip the pixel-count and texture-size sweeps")
+    p.add_argument("--formats", nargs="+", default=["float32"], choices=[f.value for f in wt.Format], metavar="FORMAT",
+                   help="texel formats of warptex's textures, rows for each (float32 float16 unorm8 srgb8; default float32)")
     p.add_argument("--call-cost", action="store_true", help="only the cost of small calls: sample() (natively and through warptex.torch) on 1, 1,024 and 65,536 UVs against torch")
     p.add_argument("--calls", type=int, default=None, help="--call-cost: timed calls per figure and round (default 200, quick 20)")
     args = p.parse_args(argv)

@@ -45,6 +45,29 @@ def test_quick_benchmark_writes_json_and_plot(tmp_path):
 
 
 @pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/ is not part of this checkout")
+def test_formats_add_rows_of_compact_texels_in_the_same_rounds(tmp_path):
+    result = subprocess.run(
+        [sys.executable, str(BENCH), "--quick", "--threads", "2", "--peers", "--no-scaling", "--techniques", "bilinear", "splat4", "--formats", "float32", "unorm8", "float16", "--json", str(tmp_path / "r.json")],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    records = json.loads((tmp_path / "r.json").read_text())["records"]
+    for technique in ("bilinear", "splat4"):
+        for fmt in ("unorm8", "float16"):
+            mine = [r for r in records if r["technique"] == technique and r.get("format") == fmt]
+            assert {(r["scene"], r["pass"]) for r in mine} >= {("sphere", "forward"), ("sphere", "forward+backward")}
+            assert all(r["impl"] == f"warptex {fmt}" and r["threads"] == 2 and r["seconds"] > 0 for r in mine)
+            assert all(r["max_abs_diff"] < 0.02 for r in mine if r["pass"] == "forward")  # 8-bit and half rounding of the same texels
+    table = result.stdout[result.stdout.index("texel formats against float32") :].splitlines()
+    f32 = {r["pass"]: r["seconds"] for r in records if r["technique"] == "bilinear" and r["scene"] == "sphere" and r["impl"] == "warptex" and r["threads"] == 2}
+    u8 = {r["pass"]: r["seconds"] for r in records if r["technique"] == "bilinear" and r["scene"] == "sphere" and r.get("format") == "unorm8"}
+    row = next(line for line in table if line.split()[:2] == ["bilinear", "sphere"])
+    assert row.rstrip().endswith(" / ".join(f"{f32[p] / u8[p]:5.2f}" for p in ("forward", "forward+backward")).strip()), row
+
+
+@pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/ is not part of this checkout")
 def test_call_cost_rows_time_small_calls_against_torch(tmp_path):
     pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
     result = subprocess.run([sys.executable, str(BENCH), "--call-cost", "--quick", "--calls", "2", "--json", str(tmp_path / "c.json")], capture_output=True, text=True, timeout=600)
