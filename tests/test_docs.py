@@ -42,7 +42,7 @@ PAGES = [README, *sorted((REPO / "docs").glob("*.md"))]
 SHARED = REPO.parent / "shared"
 
 # Fenced blocks per info string: a new block must be added here, and so gets a test.
-EXPECTED_BLOCKS = {"python": 15, "sh": 10, "": 1, "text": 1}
+EXPECTED_BLOCKS = {"python": 16, "sh": 10, "": 1, "text": 1}
 EXPECTED_COMMANDS = {"warptex": 17, "python": 2, "skipped": 15, "torchrun": 1}
 
 # Python blocks that continue earlier ones (by "<section> #<n>"): they run after those, in one namespace.
@@ -309,6 +309,11 @@ def _check_bake_torch(ns, d):
     assert ns["texture"].grad.abs().sum() > 0 and ns["tiling"].grad != 0
 
 
+def _check_formats(ns, d):
+    assert ns["stored"].format.value == "srgb8" and ns["stored"].nbytes <= 0.26 * wt.Texture(ns["master"], mipmaps=False).nbytes
+    assert ns["error"] < 0.1  # from 0.33: the stored 8-bit texture came close to the photo
+
+
 def _check_fit(ns, d):
     assert np.isfinite(ns["result"].final_psnr) and len(ns["result"].history["psnr"]) >= 3
     assert ns["params"].weights().shape == (129, 129, 4)
@@ -317,6 +322,7 @@ def _check_fit(ns, d):
 CHECKS = {
     "A first look #1": _check_first_look,
     "Using it #2": _check_using_it,
+    "Texel formats #1": _check_formats,
     "PyTorch #1": _check_torch,
     "G-buffers #1": _check_gbuffers,
     "G-buffers #2": _check_supersampled,
