@@ -285,3 +285,23 @@ def test_a_real_texture_as_srgb8_samples_as_read_image_does(shared_data, rng):
     uv = rng.uniform(-1, 2, (4000, 2)).astype(np.float32)
     _same_bits(wt.sample(tex, uv).numpy(), wt.sample(wt.Texture(io.read_image(path), mipmaps=False), uv).numpy())
     assert tex.nbytes <= 0.26 * wt.Texture(io.read_image(path), mipmaps=False).nbytes
+
+
+@pytest.mark.parametrize("fmt", COMPACT)
+def test_a_tiling_gradient_reads_a_compact_texture_as_its_float_twin(rng, fmt):
+    """The fit's path: Warp's generated adjoint differentiates the tiling through texels it only
+    reads (the layers are not fitted), as the float twin's texels."""
+    gbuffer = wt.rasterize(terrain(resolution=(65, 65)), terrain_camera((48, 64)))
+    tex = wt.Texture(_values(rng, (32, 32, 4), fmt), format=fmt)
+    weights = rng.normal(size=gbuffer.resolution + (4,)).astype(np.float32)
+    grads = []
+    for t in (tex, float_twin(tex)):
+        tiling = wp.array([2.0], dtype=float, requires_grad=True)
+        tape = wp.Tape()
+        with tape:
+            out = wt.triplanar(gbuffer, t, tiling=tiling)
+        out.grad.assign(weights)
+        tape.backward()
+        grads.append(tiling.grad.numpy().copy())
+    _same_bits(grads[0], grads[1])
+    assert grads[0][0] != 0.0
