@@ -10,6 +10,7 @@ import numpy as np
 import warp as wp
 
 from warptex import io
+from warptex.png import codes
 from warptex.kernels import texels as kx
 
 
@@ -63,33 +64,22 @@ def colour_channels(channels: int) -> int:
 
 def decode_table(fmt: Format, channels: int) -> np.ndarray:
     """The float32 values of the 8-bit codes of ``fmt``: ``table[256 c + k]`` is channel ``c``'s code
-    ``k``. ``k / 255`` is rounded to float32 once, and sRGB colour is ``io.srgb_to_linear(k / 255)``,
-    as :func:`warptex.io.read_image` decodes 8-bit files, so a texture made from a file holds the
-    values ``read_image`` returns."""
-    unorm = (np.arange(256, dtype=np.float64) / 255).astype(np.float32)
+    ``k``, the value :func:`warptex.io.read_image` decodes it to (:func:`warptex.io.code_values`:
+    sRGB colour for ``SRGB8``), so a texture made from a file holds the values ``read_image`` returns."""
+    unorm, srgb = io.code_values(255)
     table = np.tile(unorm, 4)
     if fmt is Format.SRGB8:
-        srgb = io.srgb_to_linear(np.arange(256, dtype=np.float64) / 255)
         for c in range(colour_channels(channels)):
             table[256 * c : 256 * (c + 1)] = srgb
     return table
 
 
-def encode(values: np.ndarray, fmt: Format, channels: int) -> np.ndarray:
+def encode(values: np.ndarray, fmt: Format) -> np.ndarray:
     """Float texels ``[..., C]`` (linear) as ``fmt`` stores them: ``[..., 4]`` of float32, float16
-    or uint8 codes (unused channels zero). 8-bit values are clipped to ``[0, 1]`` and rounded to
-    the nearest code, sRGB colour after encoding."""
-    shape = values.shape[:-1] + (4,)
-    if fmt is Format.FLOAT32 or fmt is Format.FLOAT16:
-        out = np.zeros(shape, dtype=np.float32 if fmt is Format.FLOAT32 else np.float16)
-        out[..., : values.shape[-1]] = values
-        return out
-    out = np.zeros(shape, dtype=np.uint8)
-    colour = colour_channels(channels) if fmt is Format.SRGB8 else 0
-    if colour:
-        out[..., :colour] = np.rint(io.linear_to_srgb(values[..., :colour]).astype(np.float64) * 255)
-    if values.shape[-1] > colour:
-        out[..., colour : values.shape[-1]] = np.rint(np.clip(values[..., colour:], 0.0, 1.0).astype(np.float64) * 255)
+    or uint8 codes (unused channels zero). 8-bit codes are what a PNG of the values holds
+    (:func:`warptex.png.codes`: clipped to ``[0, 1]``, sRGB colour encoded, rounded)."""
+    out = np.zeros(values.shape[:-1] + (4,), dtype={Format.FLOAT32: np.float32, Format.FLOAT16: np.float16}.get(fmt, np.uint8))
+    out[..., : values.shape[-1]] = values if fmt not in EIGHT_BIT else codes(values, data=fmt is Format.UNORM8, bits=8)
     return out
 
 
@@ -124,7 +114,7 @@ def coarser_level(stored: np.ndarray, fmt: Format, channels: int, size: tuple[in
         first = int(ry[j0:j1].min())
         fine = decode(stored[:, first : int(ry[j0:j1].max()) + 1], fmt, channels)
         rows = sum(fine[:, ry[j0:j1, t] - first].astype(np.float64) * wy[j0:j1, t, None, None] for t in range(ry.shape[1]))
-        out[:, j0:j1] = encode(sum(rows[:, :, rx[:, t]] * wx[:, t, None] for t in range(rx.shape[1])), fmt, channels)
+        out[:, j0:j1] = encode(sum(rows[:, :, rx[:, t]] * wx[:, t, None] for t in range(rx.shape[1])), fmt)
     return out
 
 
@@ -135,7 +125,7 @@ def stored(data: np.ndarray, fmt: Format, channels: int) -> np.ndarray:
         out = np.zeros(data.shape[:-1] + (4,), dtype=np.uint8)
         out[..., :channels] = data
         return out
-    return encode(data, fmt, channels)
+    return encode(data, fmt)
 
 
 def mip_chain(level0: np.ndarray, fmt: Format, channels: int, sizes: list[tuple[int, int]]) -> list[np.ndarray]:

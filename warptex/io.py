@@ -244,13 +244,19 @@ def _read_sixteen_bit_png(path: str, data: bool, func: str) -> tuple[np.ndarray,
     return _codes_to_linear(codes, 65535, data)
 
 
+def code_values(maxval: int) -> tuple[np.ndarray, np.ndarray]:
+    """The float32 value of every integer code ``0..maxval``: ``(code / maxval, srgb_to_linear(code /
+    maxval))``, each rounded to float32 once. What files decode to, and 8-bit textures too."""
+    scale = np.arange(maxval + 1, dtype=np.float64) / maxval
+    return scale.astype(np.float32), srgb_to_linear(scale)
+
+
 def _codes_to_linear(codes: np.ndarray, maxval: int, data: bool) -> tuple[np.ndarray, bool]:
     """Integer codes ``[H, W, C]`` to float32 in [0, 1], colour sRGB-decoded unless ``data``; also
     whether the last channel is alpha (2 or 4 channels)."""
     has_alpha = codes.shape[-1] in (2, 4)
-    scale = np.arange(maxval + 1, dtype=np.float64) / maxval
-    linear_lut = scale.astype(np.float32)
-    image = (linear_lut if data else srgb_to_linear(scale))[codes]
+    linear_lut, srgb_lut = code_values(maxval)
+    image = (linear_lut if data else srgb_lut)[codes]
     if has_alpha:
         image[..., -1] = linear_lut[codes[..., -1]]
     return image, has_alpha

@@ -91,10 +91,10 @@ class TextureArray:
 
         sizes = mip_sizes(height, width, max_levels)
         texels = sum(num_layers * h * w for h, w in sizes)
-        stored = texels * formats.TEXEL_BYTES[fmt]
-        if stored + texels * 16 * requires_grad >= LARGE_CHAIN_BYTES:  # the chain, its host copy and gradient, before NumPy's bare MemoryError part-way
+        nbytes = texels * formats.TEXEL_BYTES[fmt]
+        if nbytes + texels * 16 * requires_grad >= LARGE_CHAIN_BYTES:  # the chain, its host copy and gradient, before NumPy's bare MemoryError part-way
             what = f"a {num_layers}x{height}x{width} {fmt.value} texture with {len(sizes)} level(s)"
-            check_memory(self._name, what, 2 * stored + texels * 16 * requires_grad, device, hint="use a smaller texture, a compact format, or mipmaps=False")
+            check_memory(self._name, what, 2 * nbytes + texels * 16 * requires_grad, device, hint="use a smaller texture, a compact format, or mipmaps=False")
         if fmt is Format.FLOAT32:
             padded = np.zeros((texels, 4), dtype=np.float32)
             padded[: num_layers * height * width, :channels] = data.reshape(-1, channels)
@@ -293,7 +293,7 @@ class TextureArray:
             raise ValueError(f"{self._name}.assign(): values must be shaped {want[1:] if isinstance(self, Texture) else want}, got {data.shape[1:] if isinstance(self, Texture) else data.shape}")
         count = self.num_layers * self.height * self.width
         if self._format is Format.FLOAT32:
-            self._chain[:count].assign(formats.encode(data.reshape(-1, self._channels), Format.FLOAT32, self._channels).reshape(-1, 4))
+            self._chain[:count].assign(formats.encode(data.reshape(-1, self._channels), Format.FLOAT32).reshape(-1, 4))
         else:
             self._store[:count].assign(formats.packed([formats.stored(data, self._format, self._channels)], self._format))
         self.update()
