@@ -32,7 +32,18 @@ another would put that drift into their ratio.
 ``--formats float32 unorm8 float16`` adds rows of warptex reading its textures (and splat layers) in
 those texel formats (``warptex.Format``), timed in the same interleaved rounds as float32's: the
 same techniques on compact texels. Splat maps stay float32. A format's texels are its encoding of
-the float32 texture's, so its outputs differ from the peers' by that rounding. Peers read float32.
+the float32 texture's, so its outputs differ from the peers' by that rounding. Peers that store half
+textures natively add float16 rows compared with warptex's float16 rows: Dr.Jit's ``Texture2f16``
+(the CPU and CUDA), torch's half tensors (CUDA only: its CPU half ``grid_sample`` is broken, see
+``peers/torch_peer.py``).
+
+``--limit`` times a yardstick beside the peers: a plain C loop of the bilinear lookup
+(``peers/limit_peer.py``), compiled at run time with the system's C compiler (``-O3 -march=native
+-fopenmp``) and skipped, with the reason, without one. It is the hardware's pace, not a peer.
+
+``--runs 3`` times every row in 3 runs of ``--repeats`` interleaved rounds. Each figure is still
+the fastest call of all; each ratio in the summaries becomes its spread over the runs (the lowest
+and highest of the runs' ratios), so a ratio that swings across a bar between runs shows it.
 
 ``--call-cost`` times what a call costs when it computes little: ``sample`` (bilinear, a 256² RGBA
 texture) on 1, 1,024 and 65,536 random UVs, into a new output and into ``out=``, and through the
@@ -239,15 +250,15 @@ def measure_technique(technique: str, scene: str, args, tex, cache, backends: di
         runs["warptex", "forward", threads] = (forward, wp.synchronize, setup)
         runs["warptex", "forward+backward", threads] = (forward_backward, wp.synchronize, setup)
     peer_threads = None if cuda else args.threads
-    extras = {}
+    extras, compact_out = {}, {}
     for fmt in args.formats:  # compact texels, on the peers' thread count
         if fmt == "float32":
             continue
         impl, setup = f"warptex {fmt}", (lambda: wt.set_num_threads(peer_threads))
         setup()
         compact, compact_backward = warptex_runs(technique, data, objs, args.device, fmt)
-        out = compact().numpy()
-        extras[impl, "forward", peer_threads] = {"format": fmt, "max_abs_diff": float(np.nanmax(np.abs(out.reshape(reference[peer_threads].shape) - reference[peer_threads]))) if out.size else 0.0}
+        compact_out[fmt] = out = compact().numpy().reshape(reference[peer_threads].shape)
+        extras[impl, "forward", peer_threads] = {"format": fmt, "max_abs_diff": float(np.nanmax(np.abs(out - reference[peer_threads]))) if out.size else 0.0}
         runs[impl, "forward", peer_threads] = (compact, wp.synchronize, setup)
         try:
             compact_backward()
@@ -258,9 +269,9 @@ def measure_technique(technique: str, scene: str, args, tex, cache, backends: di
             runs[impl, "forward+backward", peer_threads] = (compact_backward, wp.synchronize, setup)
     single_vs_all = max((float(np.nanmax(np.abs(r - reference[thread_counts[0]]))) if r.size else 0.0) for r in reference.values())
 
-    expected = reference[peer_threads]
-    if "mask" in data:
-        expected = expected[data["mask"] > 0] if expected.shape[0] == data["mask"].shape[0] else expected
+    def covered(out):
+        return out[data["mask"] > 0] if "mask" in data and out.shape[0] == data["mask"].shape[0] else out
+
     for backend, table in backends.items():
         peer = table.get(technique)
         if peer is None:
@@ -268,23 +279,29 @@ def measure_technique(technique: str, scene: str, args, tex, cache, backends: di
         if not cuda:
             peers.set_threads(backend, args.threads)
         sync = lambda backend=backend: peers.synchronize(backend)  # noqa: E731
-        try:
-            state = peer.prepare(data)
-            out = np.asarray(peer.output(peer.forward(state)), np.float32)
-            got = out[data["mask"] > 0] if "mask" in data and out.shape[0] == data["mask"].shape[0] else out
-            diff = float(np.nanmax(np.abs(got - expected))) if got.size else 0.0
-            runs[backend, "forward", peer_threads] = (lambda peer=peer, state=state: peer.forward(state), sync, _nothing)
-            extras[backend, "forward", peer_threads] = {"max_abs_diff": diff, "note": peer.note}
-            if peer.forward_backward is not None:
-                peer.forward_backward(state)  # a peer that cannot hold the gradients fails here, untimed
-                runs[backend, "forward+backward", peer_threads] = (lambda peer=peer, state=state: peer.forward_backward(state), sync, _nothing)
-                extras[backend, "forward+backward", peer_threads] = {"note": peer.note}
-        except MemoryError as err:  # a peer that cannot hold the scene is reported, not fatal
-            report(f"  {backend}: skipped ({err})")
-            for key in [k for k in runs if k[0] == backend]:
-                del runs[key]
-    for key, seconds in interleaved_best(runs, args.repeats).items():
-        record(*key, seconds, **extras.get(key, {}))
+        # float32, and the compact formats the peer stores natively (compared with warptex's rows of that format)
+        for fmt in ["float32", *(f for f in compact_out if f in peer.formats)]:
+            impl = backend if fmt == "float32" else f"{backend} {fmt}"
+            tag = {} if fmt == "float32" else {"format": fmt}
+            try:
+                state = peer.prepare(data if fmt == "float32" else {**data, "format": fmt})
+                got = covered(np.asarray(peer.output(peer.forward(state)), np.float32))
+                expected = covered(reference[peer_threads] if fmt == "float32" else compact_out[fmt])
+                diff = float(np.nanmax(np.abs(got - expected))) if got.size else 0.0
+                runs[impl, "forward", peer_threads] = (lambda peer=peer, state=state: peer.forward(state), sync, _nothing)
+                extras[impl, "forward", peer_threads] = {"max_abs_diff": diff, "note": peer.note, **tag}
+                if peer.forward_backward is not None:
+                    peer.forward_backward(state)  # a peer that cannot hold the gradients fails here, untimed
+                    runs[impl, "forward+backward", peer_threads] = (lambda peer=peer, state=state: peer.forward_backward(state), sync, _nothing)
+                    extras[impl, "forward+backward", peer_threads] = {"note": peer.note, **tag}
+            except MemoryError as err:  # a peer that cannot hold the scene is reported, not fatal
+                report(f"  {impl}: skipped ({err})")
+                for key in [k for k in runs if k[0] == impl]:
+                    del runs[key]
+    per_run = [interleaved_best(runs, args.repeats) for _ in range(args.runs)]
+    for key in runs:
+        spread = {"run_seconds": [r[key] for r in per_run]} if args.runs > 1 else {}
+        record(*key, min(r[key] for r in per_run), **extras.get(key, {}), **spread)
     wt.set_num_threads(peer_threads)
     report(format_rows(records, single_vs_all))
     for rec in records:
@@ -309,26 +326,44 @@ def format_thread_scaling(records: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def base_impl(record: dict) -> str:
+    """The warptex row a record is compared with: warptex in the record's texel format."""
+    return f"warptex {record['format']}" if "format" in record and not record["impl"].startswith("warptex") else "warptex"
+
+
+def ratio_cell(num: dict | None, den: dict | None) -> str:
+    """``num``'s time over ``den``'s: the ratio of their best times, or, where both were timed in
+    several runs (``--runs``), the spread of the runs' ratios, ``min–max``."""
+    if num is None or den is None:
+        return "  -  "
+    if "run_seconds" in num and "run_seconds" in den:
+        ratios = [a / b for a, b in zip(num["run_seconds"], den["run_seconds"])]
+        return f"{min(ratios):.2f}–{max(ratios):.2f}"
+    return f"{num['seconds'] / den['seconds']:5.2f}"
+
+
 def format_peer_summary(records: list[dict]) -> str:
     """One table of every technique and scene: warptex's forward and forward+backward times on the
     peers' thread count, and each peer's time over warptex's in the same run (below 1: the peer
-    is faster); "" without peers."""
+    is faster; a peer's float16 row over warptex's float16 row); "" without peers."""
     impls = sorted({r["impl"] for r in records if not r["impl"].startswith("warptex")})
     if not impls:
         return ""
-    peer_threads = {(r["technique"], r["scene"]): r["threads"] for r in records if r["impl"] != "warptex"}
-    time = {(r["technique"], r["scene"], r["impl"], r["pass"]): r["seconds"] for r in records if r["threads"] == peer_threads.get((r["technique"], r["scene"]), "none")}
+    peer_threads = {(r["technique"], r["scene"]): r["threads"] for r in records if not r["impl"].startswith("warptex")}
+    rec = {(r["technique"], r["scene"], r["impl"], r["pass"]): r for r in records if r["threads"] == peer_threads.get((r["technique"], r["scene"]), "none")}
+    bases = {r["impl"]: base_impl(r) for r in records}
+    width = max(13, *(len(i) for i in impls))
     lines = ["peers against warptex (peer time ÷ warptex time, same run; below 1: the peer is faster), forward / forward+backward:",
-             f"  {'technique':16s} {'scene':8s} {'warptex ms':>17s}  " + "  ".join(f"{impl:>13s}" for impl in impls)]  # fmt: skip
+             f"  {'technique':16s} {'scene':8s} {'warptex ms':>17s}  " + "  ".join(f"{impl:>{width}s}" for impl in impls)]  # fmt: skip
     for technique, scene in peer_threads:
-        base = [time.get((technique, scene, "warptex", p)) for p in ("forward", "forward+backward")]
+        base = [rec.get((technique, scene, "warptex", p)) for p in ("forward", "forward+backward")]
         if None in base:
             continue
         cells = []
         for impl in impls:
-            ratios = [time.get((technique, scene, impl, p)) for p in ("forward", "forward+backward")]
-            cells.append(" / ".join("  -  " if t is None else f"{t / b:5.2f}" for t, b in zip(ratios, base)))
-        lines.append(f"  {technique:16s} {scene:8s} {base[0] * 1e3:7.1f} / {base[1] * 1e3:7.1f}  " + "  ".join(f"{c:>13s}" for c in cells))
+            pair = [(rec.get((technique, scene, impl, p)), rec.get((technique, scene, bases.get(impl, "warptex"), p))) for p in ("forward", "forward+backward")]
+            cells.append(" / ".join(ratio_cell(a, b) for a, b in pair))
+        lines.append(f"  {technique:16s} {scene:8s} {base[0]['seconds'] * 1e3:7.1f} / {base[1]['seconds'] * 1e3:7.1f}  " + "  ".join(f"{c:>{width}s}" for c in cells))
     return "\n".join(lines)
 
 
@@ -338,15 +373,15 @@ def format_format_summary(records: list[dict]) -> str:
     formats = sorted({r["format"] for r in records if "format" in r})
     if not formats:
         return ""
-    time = {(r["technique"], r["scene"], r.get("format", "float32"), r["pass"], r["threads"]): r["seconds"] for r in records if r["impl"].startswith("warptex")}
+    rec = {(r["technique"], r["scene"], r.get("format", "float32"), r["pass"], r["threads"]): r for r in records if r["impl"].startswith("warptex")}
     rows = sorted({(r["technique"], r["scene"], r["threads"]) for r in records if "format" in r}, key=lambda k: (k[0], k[1]))
     lines = ["texel formats against float32 (float32 time ÷ format time, same run; above 1: faster), forward / forward+backward:",
              f"  {'technique':16s} {'scene':8s} " + "  ".join(f"{f:>13s}" for f in formats)]  # fmt: skip
     for technique, scene, threads in rows:
         cells = []
         for f in formats:
-            pair = [(time.get((technique, scene, "float32", p, threads)), time.get((technique, scene, f, p, threads))) for p in ("forward", "forward+backward")]
-            cells.append(" / ".join("  -  " if None in (a, b) else f"{a / b:5.2f}" for a, b in pair))
+            pair = [(rec.get((technique, scene, "float32", p, threads)), rec.get((technique, scene, f, p, threads))) for p in ("forward", "forward+backward")]
+            cells.append(" / ".join(ratio_cell(a, b) for a, b in pair))
         lines.append(f"  {technique:16s} {scene:8s} " + "  ".join(f"{c:>13s}" for c in cells))
     return "\n".join(lines)
 
@@ -354,16 +389,16 @@ def format_format_summary(records: list[dict]) -> str:
 def format_rows(records: list[dict], threaded_diff: float) -> str:
     """One block per technique: each implementation's figures and its time ratio to warptex."""
     first = records[0]
-    base = {(r["pass"], r["threads"]): r["seconds"] for r in records if r["impl"] == "warptex"}
+    base = {(r["impl"], r["pass"], r["threads"]): r["seconds"] for r in records if r["impl"].startswith("warptex")}
     threaded = "" if first["threads"] is None else f"; threaded vs 1 thread max diff {threaded_diff:.1e}"
     lines = [f"{first['technique']} on {first['scene']} ({first['samples']:,} samples on {first['device']}{threaded})"]
     for r in records:
-        ratio = r["seconds"] / base[(r["pass"], r["threads"])]
+        ratio = r["seconds"] / base[(base_impl(r), r["pass"], r["threads"])]
         diff = f"  diff {r['max_abs_diff']:.1e}" if "max_abs_diff" in r else ""
         where = "  GPU " if r["threads"] is None else f"{r['threads']:2d} thr"
         lines.append(
-            f"  {r['impl']:8s} {r['pass']:16s} {where}  {r['seconds'] * 1e3:9.2f} ms  {r['msamples_per_s']:8.2f} Ms/s  "
-            f"{r['nominal_taps_per_s'] / 1e9:6.2f} Gtap/s  {'x' + format(ratio, '.2f') + ' warptex time' if r['impl'] != 'warptex' else ''}{diff}"
+            f"  {r['impl']:14s} {r['pass']:16s} {where}  {r['seconds'] * 1e3:9.2f} ms  {r['msamples_per_s']:8.2f} Ms/s  "
+            f"{r['nominal_taps_per_s'] / 1e9:6.2f} Gtap/s  {'x' + format(ratio, '.2f') + ' ' + base_impl(r) + ' time' if r['impl'] != 'warptex' else ''}{diff}"
         )
     return "\n".join(lines)
 
@@ -546,13 +581,17 @@ def run(args) -> dict:
                 "call_cost": call_cost(args, report)}  # fmt: skip
 
     backends, skipped = {}, {}
-    for backend in args.peers:
+    for backend in args.peers + (["limit"] if args.limit else []):
         try:
             peers.set_device(backend, args.device)
             backends[backend] = peers.load(backend)
         except peers.PeerUnavailable as why:
             skipped[backend] = str(why)
             report(f"peer {backend}: skipped ({why})")
+    for fmt in args.formats:
+        without = [b for b, table in backends.items() if fmt != "float32" and not any(fmt in peer.formats for peer in table.values())]
+        if without:
+            report(f"{fmt} rows: none of {', '.join(without)} (not stored natively on {args.device}; peers/<name>_peer.py says why)")
     tex = texture(args.texture_size, device=args.device)
     cache, records = {}, []
     for technique in args.techniques:
@@ -584,6 +623,8 @@ def parse(argv=None):
     p.add_argument("--repeats", type=int, default=None, help="timed runs per figure (default 5, quick 1)")
     p.add_argument("--techniques", nargs="+", default=list(TECHNIQUES), choices=TECHNIQUES)
     p.add_argument("--peers", nargs="*", default=list(peers.BACKENDS), choices=peers.BACKENDS)
+    p.add_argument("--limit", action="store_true", help="time a plain C loop of the bilinear lookup beside the peers (peers/limit_peer.py): the hardware's pace")
+    p.add_argument("--runs", type=int, default=1, help="time every row in this many runs of --repeats interleaved rounds; the summaries give each ratio's spread over the runs (min–max)")
     p.add_argument("--no-scaling", action="store_true", help="skip the pixel-count and texture-size sweeps")
     p.add_argument("--formats", nargs="+", default=["float32"], choices=[f.value for f in wt.Format], metavar="FORMAT",
                    help="texel formats of warptex's textures, rows for each (float32 float16 unorm8 srgb8; default float32)")
@@ -599,6 +640,8 @@ def parse(argv=None):
     args.threads = args.threads or wt.get_num_threads()
     if args.threads < 1 or any(n < 1 for n in args.thread_counts or ()):
         p.error("--threads and --thread-counts must be >= 1")
+    if args.runs < 1:
+        p.error("--runs must be >= 1")
     doubling = [] if args.quick else [2**k for k in range(1, args.threads.bit_length()) if 2**k < args.threads]
     args.thread_counts = sorted({1, args.threads, *(args.thread_counts if args.thread_counts is not None else doubling)})
     args.repeats = args.repeats or (1 if args.quick else 5)

@@ -68,6 +68,35 @@ def test_formats_add_rows_of_compact_texels_in_the_same_rounds(tmp_path):
 
 
 @pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/ is not part of this checkout")
+def test_limit_and_runs_give_the_c_loop_and_each_ratio_spread(tmp_path):
+    """--limit times the plain C loop beside the peers; --runs 2 times every row twice, and the
+    summary gives each ratio as the lowest and highest of the runs' ratios."""
+    result = subprocess.run(
+        [sys.executable, str(BENCH), "--quick", "--threads", "2", "--peers", "numpy", "--limit", "--runs", "2", "--no-scaling", "--techniques", "bilinear", "--json", str(tmp_path / "r.json")],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    records = json.loads((tmp_path / "r.json").read_text())["records"]
+    assert all(len(r["run_seconds"]) == 2 and r["seconds"] == min(r["run_seconds"]) for r in records)
+    if "peer limit: skipped" in result.stdout:
+        pytest.skip("no C compiler with OpenMP here: " + result.stdout.split("peer limit: skipped", 1)[1].splitlines()[0])
+    limit = [r for r in records if r["impl"] == "limit"]
+    assert {(r["scene"], r["pass"]) for r in limit} == {("sphere", "forward"), ("random", "forward")}
+    assert all(r["max_abs_diff"] < 1e-5 for r in limit)
+    table = result.stdout[result.stdout.index("peers against warptex") :].splitlines()
+    impls = table[1].split()[4:]  # technique, scene, "warptex", "ms", then the peers' columns
+    for scene in ("sphere", "random"):
+        mine = next(r for r in records if r["scene"] == scene and r["impl"] == "warptex" and r["pass"] == "forward" and r["threads"] == 2)
+        ref = next(r for r in limit if r["scene"] == scene)
+        ratios = [a / b for a, b in zip(ref["run_seconds"], mine["run_seconds"])]
+        row = next(line for line in table if line.split()[:2] == ["bilinear", scene])
+        cells = row.split()[5:]  # after "technique scene ms / ms": a "fwd / fwd+bwd" triple per column
+        assert cells[3 * impls.index("limit") :][:3] == [f"{min(ratios):.2f}–{max(ratios):.2f}", "/", "-"], row
+
+
+@pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/ is not part of this checkout")
 def test_call_cost_rows_time_small_calls_against_torch(tmp_path):
     pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
     result = subprocess.run([sys.executable, str(BENCH), "--call-cost", "--quick", "--calls", "2", "--json", str(tmp_path / "c.json")], capture_output=True, text=True, timeout=600)

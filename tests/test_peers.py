@@ -83,23 +83,28 @@ def _uv(technique, count=3000):
     return uv, (None if technique == "bilinear" else lod)
 
 
-def _textures(images, requires_grad=False):
+def _textures(images, requires_grad=False, fmt="float32"):
+    """Warptex textures of ``images``; textures and layers in ``fmt`` (maps stay float32)."""
     out = {}
     for name, img in images.items():
         if name == "layers":
-            out[name] = wt.TextureArray(img, requires_grad=requires_grad)
+            out[name] = wt.TextureArray(img, requires_grad=requires_grad, format=fmt)
         elif name == "maps":
             out[name] = wt.TextureArray(img, mipmaps=False, requires_grad=requires_grad)
         else:
-            out[name] = wt.Texture(img, requires_grad=requires_grad)
+            out[name] = wt.Texture(img, requires_grad=requires_grad, format=fmt)
     return out
 
 
 @functools.lru_cache(maxsize=None)
-def case(technique):
-    """``(data, warptex output (N, C), warptex gradients {name: [per level]})`` of a technique."""
+def case(technique, fmt="float32"):
+    """``(data, warptex output (N, C), warptex gradients {name: [per level]})`` of a technique, its
+    textures stored in ``fmt`` (the data's levels are their decoded texels, ``data["format"]`` the
+    format a peer is to store them in)."""
     images, opts = _source(technique)
-    texs = _textures(images, requires_grad=True)
+    texs = _textures(images, requires_grad=True, fmt=fmt)
+    if fmt != "float32":
+        opts = {**opts, "format": fmt}
     if technique in common.GBUFFER_TECHNIQUES:
         g = _terrain() if technique in common.SPLAT_LAYERS else _sphere()
         data = common.gbuffer_data(g, texture=texs.get("texture"), layers=texs.get("layers"), maps=texs.get("maps"), **opts)
@@ -112,7 +117,8 @@ def case(technique):
     with tape:
         out = common.warptex_forward(technique, data, **call)
     out.grad.fill_(1.0)
-    tape.backward()
+    if technique != "hex" or fmt == "float32":  # hex's histogram blend takes float32 textures' gradients only
+        tape.backward()
     grads = {name: [t.grad(k) for k in range(t.num_levels)] for name, t in texs.items()}
     return data, out.numpy().reshape(-1, out.shape[-1]), grads
 
@@ -192,3 +198,36 @@ def test_every_backend_lists_every_technique_or_says_why_not():
             assert set(peers.load(backend)) == set(TECHNIQUES)
         else:
             assert reason.startswith(backend)  # e.g. "torch is not installed (...)"
+
+
+@pytest.mark.parametrize("technique", TECHNIQUES)
+def test_drjit_half_peer_reads_the_texels_of_warptex_float16(technique):
+    """``data["format"] = "float16"``: Dr.Jit's ``Texture2f16`` on the texels of warptex's float16
+    textures computes warptex's float16 output (the benchmark's float16 peer rows)."""
+    peer = _load("drjit")[technique]
+    assert "float16" in peer.formats
+    data, want, _ = case(technique, "float16")
+    got = peer.output(peer.forward(peer.prepare(data)))
+    assert np.abs(want).max() > 0.1
+    np.testing.assert_allclose(got, want, atol=FORWARD_ATOL["drjit"], rtol=0)
+
+
+def test_torch_peer_stores_half_textures_on_cuda_only():
+    """torch 2.13's CPU half ``grid_sample`` is wrong from 256² images up (peers/torch_peer.py), so
+    the CPU peer offers float32 alone and the benchmark has no torch float16 rows there."""
+    assert all(peer.formats == ("float32",) for peer in _load("torch").values())
+
+
+def test_limit_loop_computes_warptex_bilinear():
+    """``bench_samplers.py --limit``: the plain C loop reads what warptex's bilinear reads, wrapped
+    UVs of both signs, on one thread and on several."""
+    reason = peers.unavailable("limit")
+    if reason is not None:
+        pytest.skip(f"the C loop cannot be built here: {reason}")
+    peer = peers.load("limit")["bilinear"]
+    data, want, _ = case("bilinear")
+    assert data["uv"].min() < 0 < 1 < data["uv"].max()
+    for threads in (1, 3):
+        peers.set_threads("limit", threads)
+        got = peer.output(peer.forward(peer.prepare(data)))
+        np.testing.assert_allclose(got, want, atol=1e-5, rtol=0)

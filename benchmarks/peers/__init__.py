@@ -36,6 +36,9 @@ its own leaf, as in warptex when the chain is built outside the ``wp.Tape``
 :func:`common.warptex_forward` is the warptex call each technique corresponds to. Modules:
 ``numpy_peer``, ``torch_peer``, ``drjit_peer`` (sampling core, triplanar family, splat) and their
 ``*_stochastic`` companions (hash4, cheap2, hex); torch and drjit are imported only by theirs.
+
+``limit`` (``limit_peer``) is not a peer but a yardstick: a plain C loop of the bilinear lookup,
+compiled at run time, that ``bench_samplers.py --limit`` times beside the peers.
 """
 
 from __future__ import annotations
@@ -66,6 +69,9 @@ class Peer:
         grads: ``grads -> {texture name: [per-level float32 NumPy arrays]}``.
         note: how the peer is built, in a few words (every peer computes warptex's result; a
             difference in semantics would be stated here).
+        formats: the texel formats its textures can be stored in (``data["format"]``, see
+            :func:`common.texel_format`): float32, and float16 for torch's half tensors and
+            Dr.Jit's ``Texture2f16``.
     """
 
     backend: str
@@ -76,14 +82,16 @@ class Peer:
     output: Callable[[Any], Any]
     grads: Callable[[Any], dict] | None
     note: str = ""
+    formats: tuple[str, ...] = ("float32",)
 
 
-_MODULES = {"numpy": "numpy_peer", "torch": "torch_peer", "drjit": "drjit_peer"}
+REFERENCES = ("limit",)  # yardsticks, not peers a user would pick
+_MODULES = {"numpy": "numpy_peer", "torch": "torch_peer", "drjit": "drjit_peer", "limit": "limit_peer"}
 
 
 def _module(backend: str):
     if backend not in _MODULES:
-        raise ValueError(f"peers.load(): backend must be one of {BACKENDS}, got {backend!r}")
+        raise ValueError(f"peers.load(): backend must be one of {BACKENDS + REFERENCES}, got {backend!r}")
     module = importlib.import_module(f"{__name__}.{_MODULES[backend]}")
     if module.UNAVAILABLE:
         raise PeerUnavailable(module.UNAVAILABLE)
@@ -108,7 +116,7 @@ def set_device(backend: str, device: str) -> None:
     """Run ``backend``'s peers on ``device`` (``"cpu"`` or ``"cuda:N"``): torch on that device, Dr.Jit
     on its LLVM or CUDA backend; ``PeerUnavailable`` (with the reason) where the backend cannot."""
     if backend not in _MODULES:
-        raise ValueError(f"peers.set_device(): backend must be one of {BACKENDS}, got {backend!r}")
+        raise ValueError(f"peers.set_device(): backend must be one of {BACKENDS + REFERENCES}, got {backend!r}")
     module = importlib.import_module(f"{__name__}.{_MODULES[backend]}")
     if not module.IMPORTED:
         raise PeerUnavailable(module.UNAVAILABLE)

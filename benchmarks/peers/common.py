@@ -25,6 +25,12 @@ GBUFFER_TECHNIQUES = ("triplanar", "biplanar", "triplanar_normal", "splat4", "sp
 SPLAT_LAYERS = {"splat4": 4, "splat8": 8}
 
 
+def texel_format(data: dict) -> str:
+    """The texel format the peer's textures (and splat layers; maps stay float32) are to be stored
+    in: ``data["format"]``, ``"float32"`` by default, ``"float16"`` where :attr:`Peer.formats` has it."""
+    return data.get("format", "float32")
+
+
 def options(data: dict, technique: str) -> dict:
     """The options of ``technique``: ``data``'s values over :data:`DEFAULTS`."""
     return {k: data.get(k, v) for k, v in DEFAULTS.get(technique, {}).items()}

@@ -21,14 +21,14 @@ from __future__ import annotations
 import numpy as np
 
 from . import Peer, PeerUnavailable, common
-from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options
+from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options, texel_format
 
 MIN_LLVM = 17  # 15.0.6 and 16.0.6 fail as described below; 19.1.7 works
 
 IMPORTED = False
 try:
     import drjit as dr
-    from drjit.llvm.ad import Array2f, Float, TensorXf, Texture2f, UInt32
+    from drjit.llvm.ad import Array2f, Float, TensorXf, TensorXf16, Texture2f, Texture2f16, UInt32
 except ImportError as err:  # the peers are optional
     dr = None
     UNAVAILABLE = f"drjit is not installed ({err})"
@@ -60,7 +60,7 @@ if IMPORTED:
 
 def set_device(device: str) -> None:
     """The LLVM backend on the CPU, the CUDA backend on a GPU (the types of both modules rebound)."""
-    global Array2f, Float, TensorXf, Texture2f, UInt32, UNAVAILABLE
+    global Array2f, Float, TensorXf, TensorXf16, Texture2f, Texture2f16, UInt32, UNAVAILABLE
     from . import drjit_stochastic
 
     if device == "cpu":
@@ -74,6 +74,7 @@ def set_device(device: str) -> None:
         import drjit.cuda.ad as backend
         UNAVAILABLE = None
     Array2f, Float, TensorXf, Texture2f, UInt32 = backend.Array2f, backend.Float, backend.TensorXf, backend.Texture2f, backend.UInt32
+    TensorXf16, Texture2f16 = backend.TensorXf16, backend.Texture2f16
     drjit_stochastic.Float, drjit_stochastic.Float64, drjit_stochastic.Int32, drjit_stochastic.UInt32 = backend.Float, backend.Float64, backend.Int32, backend.UInt32
 
 
@@ -93,15 +94,17 @@ def set_threads(count: int) -> None:
 
 
 class Chain:
-    """One ``Texture2f`` per mip level of one image; ``tensors`` are the AD leaves when trained."""
+    """One ``Texture2f`` per mip level of one image; ``tensors`` are the AD leaves when trained.
+    ``half``: ``Texture2f16`` on half texels instead (lookups still return float32)."""
 
-    def __init__(self, levels, *, grad: bool, wrap_mode=None):
-        self.tensors = [TensorXf(np.ascontiguousarray(a, np.float32)) for a in levels]
+    def __init__(self, levels, *, grad: bool, wrap_mode=None, half: bool = False):
+        tensor, texture = (TensorXf16, Texture2f16) if half else (TensorXf, Texture2f)
+        self.tensors = [tensor(np.ascontiguousarray(a, np.float16 if half else np.float32)) for a in levels]
         if grad:
             for t in self.tensors:
                 dr.enable_grad(t)
         mode = dr.WrapMode.Repeat if wrap_mode is None else wrap_mode
-        self.textures = [Texture2f(t, filter_mode=dr.FilterMode.Linear, wrap_mode=mode) for t in self.tensors]
+        self.textures = [texture(t, filter_mode=dr.FilterMode.Linear, wrap_mode=mode) for t in self.tensors]
         self.size = (levels[0].shape[1], levels[0].shape[0])
         self.channels = levels[0].shape[2]
         self.top = len(levels) - 1
@@ -121,11 +124,11 @@ class Chain:
         return target
 
 
-def _chains(levels, grad, layered=False, wrap_mode=None):
+def _chains(levels, grad, layered=False, half=False):
     """A :class:`Chain` (or, for ``(L, h, w, C)`` levels, one per layer)."""
     if not layered:
-        return Chain(levels, grad=grad, wrap_mode=wrap_mode)
-    return [Chain([lv[j] for lv in levels], grad=grad, wrap_mode=wrap_mode) for j in range(levels[0].shape[0])]
+        return Chain(levels, grad=grad, half=half)
+    return [Chain([lv[j] for lv in levels], grad=grad, half=half) for j in range(levels[0].shape[0])]
 
 
 def wrap(u):
@@ -179,15 +182,16 @@ def _prepare(technique):
         state = {k: _columns(data[k]) for k in ("uv", "lod", "uv_dx", "uv_dy", "position", "normal", "position_dx", "position_dy", "mask") if k in data}
         state["options"] = options(data, technique)
         state["lod_kind"] = "none" if technique == "bilinear" else lod_kind(data)
+        half = texel_format(data) == "float16"  # textures and layers; splat maps stay float32
         for mode, grad in (("infer", False), ("train", True)):
             if technique in SPLAT_LAYERS:
                 maps = np.asarray(data["maps"], np.float32)
                 state[mode] = {
-                    "layers": _chains(data["layer_levels"], grad, layered=True),
+                    "layers": _chains(data["layer_levels"], grad, layered=True, half=half),
                     "maps": [Chain([m], grad=grad, wrap_mode=dr.WrapMode.Clamp) for m in maps],
                 }
             else:
-                state[mode] = {"texture": _chains(data["levels"][:1] if technique == "bilinear" else data["levels"], grad)}
+                state[mode] = {"texture": _chains(data["levels"][:1] if technique == "bilinear" else data["levels"], grad, half=half)}
         if technique in SPLAT_LAYERS:
             state["tiling"] = [float(t) for t in layer_tiling(data, len(data["layer_levels"][0]))]
         return state
@@ -374,7 +378,7 @@ def _make(technique, body):
         return result
 
     note = "drjit.llvm.ad.Texture2f per mip level, level pair per lane by dr.switch; dr.eval + sync in the call"
-    return Peer("drjit", technique, _prepare(technique), forward, forward_backward, output, grads, note)
+    return Peer("drjit", technique, _prepare(technique), forward, forward_backward, output, grads, note, ("float32", "float16"))
 
 
 def peers() -> dict[str, Peer]:

@@ -14,6 +14,11 @@ How warptex's sampling maps onto ``grid_sample`` (``align_corners=False``, bilin
   with weight ``1 - f`` or ``f``, and results are accumulated with ``index_add``. Each sample is
   read on its two levels only, as in a trilinear texture unit.
 - Zero-weight projections, layers and taps are skipped (rows compressed), as the kernels do.
+- Half textures (``data["format"] = "float16"``): half tensors and a half grid (``grid_sample``
+  takes one dtype), on CUDA only. On the CPU, torch 2.13's half ``grid_sample`` (added by
+  pytorch PR #134812) is wrong from 256² images up: measured here, 42 of 1,000 random reads of a
+  256² RGBA image came back NaN or huge, and the benchmark's scenes aborted the process with heap
+  corruption. So on the CPU the peer stores float32 only.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import Peer, PeerUnavailable, common
-from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options
+from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options, texel_format
 
 try:
     import torch
@@ -70,13 +75,13 @@ def _numpy(t) -> np.ndarray:
 # -- textures and the sampling core ---------------------------------------------------------------
 
 
-def _leaves(levels):
-    """Each level ``(h, w, C)`` or ``(L, h, w, C)`` as an ``(L, C, h, w)`` float32 tensor."""
+def _leaves(levels, dtype=None):
+    """Each level ``(h, w, C)`` or ``(L, h, w, C)`` as an ``(L, C, h, w)`` tensor (float32, or ``dtype``)."""
     out = []
     for a in levels:
         a = np.asarray(a, np.float32)
         a = a[None] if a.ndim == 3 else a
-        out.append(_tensor(a.transpose(0, 3, 1, 2)))
+        out.append(_tensor(a.transpose(0, 3, 1, 2)).to(dtype or torch.float32))
     return out
 
 
@@ -96,14 +101,16 @@ def grid_sample_points(image, grid):
     says. The points are split into one batch per thread over the same image (an ``expand``, no
     copy), as a user who wants all cores would write it: that measured 1.5–2× faster on two
     threads than one batch, forward and backward.
+
+    A half image takes a half grid (``grid_sample`` wants one dtype); its reads come back float32.
     """
     n = grid.shape[0]
     parts = max(1, min(torch.get_num_threads(), n // SPLIT_POINTS))
     pad = (-n) % parts
     if pad:
         grid = torch.cat([grid, grid[:pad]])
-    out = F.grid_sample(image.expand(parts, -1, -1, -1), grid.view(parts, 1, -1, 2), mode="bilinear", padding_mode="border", align_corners=False)
-    return out[:, :, 0].permute(0, 2, 1).reshape(-1, image.shape[1])[:n]
+    out = F.grid_sample(image.expand(parts, -1, -1, -1), grid.to(image.dtype).view(parts, 1, -1, 2), mode="bilinear", padding_mode="border", align_corners=False)
+    return out[:, :, 0].permute(0, 2, 1).reshape(-1, image.shape[1])[:n].float()
 
 
 def read_level(padded, u, v, layer=0):
@@ -165,9 +172,11 @@ def _prepare(technique):
         state["lod_kind"] = "none" if technique == "bilinear" else lod_kind(data)
         names = {"layers": "layer_levels", "maps": "maps"} if technique in SPLAT_LAYERS else {"texture": "levels"}
         state["leaves"] = {}
+        half = texel_format(data) == "float16"  # textures and layers as half tensors; maps stay float32
         for name, key in names.items():
             levels = [data[key]] if key == "maps" else data[key][:1] if technique == "bilinear" else data[key]
-            state["leaves"][name] = [t.requires_grad_(True) for t in _leaves(levels)]
+            dtype = torch.float16 if half and name != "maps" else None
+            state["leaves"][name] = [t.requires_grad_(True) for t in _leaves(levels, dtype)]
         if technique in SPLAT_LAYERS:
             state["tiling"] = [float(t) for t in layer_tiling(data, len(data["layer_levels"][0]))]
         with torch.no_grad():  # inference reads textures padded once
@@ -336,10 +345,11 @@ def _make(technique, body):
         return out, {n: [torch.zeros_like(t) if t.grad is None else t.grad for t in v] for n, v in leaves.items()}
 
     def grads(g):
-        return {n: [_numpy(t).transpose(0, 2, 3, 1)[0 if n == "texture" else slice(None)].copy() for t in v] for n, v in g.items()}
+        return {n: [_numpy(t).transpose(0, 2, 3, 1)[0 if n == "texture" else slice(None)].astype(np.float32) for t in v] for n, v in g.items()}
 
     note = "F.grid_sample, one call per mip level read (samples grouped by level, split into one batch per thread), wrap by circular padding"
-    return Peer("torch", technique, _prepare(technique), forward, forward_backward, lambda r: _numpy(r).astype(np.float32), grads, note)
+    formats = ("float32",) if DEVICE == "cpu" else ("float32", "float16")  # see the module docstring
+    return Peer("torch", technique, _prepare(technique), forward, forward_backward, lambda r: _numpy(r).astype(np.float32), grads, note, formats)
 
 
 def peers() -> dict[str, Peer]:
