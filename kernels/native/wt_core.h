@@ -205,9 +205,12 @@ WT_INLINE void wt_rows_of_channels(const wt_vf* ch, wt_f4* t) {
 
 // The size (w, h) and offset of each lane's level k[l] of tex; read once where every lane reads
 // one level, as neighbouring pixels mostly do (per lane, the reads are AVX-512 gathers).
+// Whether every lane reads one level is asked of the whole vector: a loop over k[1..] compiled to
+// loads straddling the vector stores that had just written k, a store-forwarding stall per call.
 template <class Tex> WT_INLINE void wt_level_sizes(const Tex& tex, const int* k, int* w, int* h, int* start) {
-    bool one = true;
-    for (int l = 0; l < WT_L; ++l) one &= k[l] == k[0];
+    wt_vi K;
+    __builtin_memcpy(&K, k, sizeof(K));
+    const bool one = !__builtin_reduce_or(K ^ k[0]);
     if (one) {
         const int w0 = wt_int(tex.level_width, k[0]), h0 = wt_int(tex.level_height, k[0]),
                   start0 = wt_int(tex.level_offset, k[0]);
