@@ -86,8 +86,8 @@ def encode(values: np.ndarray, fmt: Format) -> np.ndarray:
 def decode(stored: np.ndarray, fmt: Format, channels: int) -> np.ndarray:
     """Stored texels ``[..., 4]`` of ``fmt`` (uint8 codes for 8-bit formats) as float32 ``[..., C]``."""
     if fmt in EIGHT_BIT:
-        table = decode_table(fmt, channels).reshape(4, 256)
-        return np.stack([table[c][stored[..., c]] for c in range(channels)], axis=-1)
+        offsets = np.arange(channels, dtype=np.uint16) * 256  # channel c's codes index table[256 c:]
+        return decode_table(fmt, channels)[stored[..., :channels] + offsets]
     return stored[..., :channels].astype(np.float32)
 
 
@@ -108,13 +108,16 @@ def coarser_level(stored: np.ndarray, fmt: Format, channels: int, size: tuple[in
     texels decoded, box-filtered in linear space, encoded back; a band of rows at a time, so that
     the float copy is a band's."""
     (ry, wy), (rx, wx) = _box_weights(stored.shape[1], size[0]), _box_weights(stored.shape[2], size[1])
+    # Halving an axis (a power-of-two chain's every level) reads its taps t as every second texel
+    # from t: the same texels and weights (0.5) as the index arrays, without gathering them.
+    halve_y, halve_x = stored.shape[1] == 2 * size[0], stored.shape[2] == 2 * size[1]
     out = np.empty((stored.shape[0],) + tuple(size) + (4,), dtype=stored.dtype)
     for j0 in range(0, size[0], _MIP_BAND_ROWS):
         j1 = min(size[0], j0 + _MIP_BAND_ROWS)
         first = int(ry[j0:j1].min())
         fine = decode(stored[:, first : int(ry[j0:j1].max()) + 1], fmt, channels)
-        rows = sum(fine[:, ry[j0:j1, t] - first].astype(np.float64) * wy[j0:j1, t, None, None] for t in range(ry.shape[1]))
-        out[:, j0:j1] = encode(sum(rows[:, :, rx[:, t]] * wx[:, t, None] for t in range(rx.shape[1])), fmt)
+        rows = sum((fine[:, t::2] if halve_y else fine[:, ry[j0:j1, t] - first]).astype(np.float64) * wy[j0:j1, t, None, None] for t in range(ry.shape[1]))
+        out[:, j0:j1] = encode(sum((rows[:, :, t::2] if halve_x else rows[:, :, rx[:, t]]) * wx[:, t, None] for t in range(rx.shape[1])), fmt)
     return out
 
 
