@@ -352,9 +352,7 @@ def format_peer_summary(records: list[dict]) -> str:
     peer_threads = {(r["technique"], r["scene"]): r["threads"] for r in records if not r["impl"].startswith("warptex")}
     rec = {(r["technique"], r["scene"], r["impl"], r["pass"]): r for r in records if r["threads"] == peer_threads.get((r["technique"], r["scene"]), "none")}
     bases = {r["impl"]: base_impl(r) for r in records}
-    width = max(13, *(len(i) for i in impls))
-    lines = ["peers against warptex (peer time ÷ warptex time, same run; below 1: the peer is faster), forward / forward+backward:",
-             f"  {'technique':16s} {'scene':8s} {'warptex ms':>17s}  " + "  ".join(f"{impl:>{width}s}" for impl in impls)]  # fmt: skip
+    rows = []
     for technique, scene in peer_threads:
         base = [rec.get((technique, scene, "warptex", p)) for p in ("forward", "forward+backward")]
         if None in base:
@@ -363,7 +361,11 @@ def format_peer_summary(records: list[dict]) -> str:
         for impl in impls:
             pair = [(rec.get((technique, scene, impl, p)), rec.get((technique, scene, bases.get(impl, "warptex"), p))) for p in ("forward", "forward+backward")]
             cells.append(" / ".join(ratio_cell(a, b) for a, b in pair))
-        lines.append(f"  {technique:16s} {scene:8s} {base[0]['seconds'] * 1e3:7.1f} / {base[1]['seconds'] * 1e3:7.1f}  " + "  ".join(f"{c:>{width}s}" for c in cells))
+        rows.append((f"  {technique:16s} {scene:8s} {base[0]['seconds'] * 1e3:7.1f} / {base[1]['seconds'] * 1e3:7.1f}  ", cells))
+    width = max([13, *(len(i) for i in impls), *(len(c) for _, cells in rows for c in cells)])
+    lines = ["peers against warptex (peer time ÷ warptex time, same run; below 1: the peer is faster), forward / forward+backward:",
+             f"  {'technique':16s} {'scene':8s} {'warptex ms':>17s}  " + "  ".join(f"{impl:>{width}s}" for impl in impls)]  # fmt: skip
+    lines += [head + "  ".join(f"{c:>{width}s}" for c in cells) for head, cells in rows]
     return "\n".join(lines)
 
 
@@ -375,14 +377,17 @@ def format_format_summary(records: list[dict]) -> str:
         return ""
     rec = {(r["technique"], r["scene"], r.get("format", "float32"), r["pass"], r["threads"]): r for r in records if r["impl"].startswith("warptex")}
     rows = sorted({(r["technique"], r["scene"], r["threads"]) for r in records if "format" in r}, key=lambda k: (k[0], k[1]))
-    lines = ["texel formats against float32 (float32 time ÷ format time, same run; above 1: faster), forward / forward+backward:",
-             f"  {'technique':16s} {'scene':8s} " + "  ".join(f"{f:>13s}" for f in formats)]  # fmt: skip
+    table = []
     for technique, scene, threads in rows:
         cells = []
         for f in formats:
             pair = [(rec.get((technique, scene, "float32", p, threads)), rec.get((technique, scene, f, p, threads))) for p in ("forward", "forward+backward")]
             cells.append(" / ".join(ratio_cell(a, b) for a, b in pair))
-        lines.append(f"  {technique:16s} {scene:8s} " + "  ".join(f"{c:>13s}" for c in cells))
+        table.append((f"  {technique:16s} {scene:8s} ", cells))
+    width = max([13, *(len(c) for _, cells in table for c in cells)])
+    lines = ["texel formats against float32 (float32 time ÷ format time, same run; above 1: faster), forward / forward+backward:",
+             f"  {'technique':16s} {'scene':8s} " + "  ".join(f"{f:>{width}s}" for f in formats)]  # fmt: skip
+    lines += [head + "  ".join(f"{c:>{width}s}" for c in cells) for head, cells in table]
     return "\n".join(lines)
 
 
