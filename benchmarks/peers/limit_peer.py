@@ -66,13 +66,14 @@ def _compile() -> tuple[ctypes.CDLL | None, str | None]:
     cc = shutil.which(os.environ.get("CC", "cc"))
     if cc is None:
         return None, f"no C compiler ({os.environ.get('CC', 'cc')!r} is not on PATH)"
-    folder = Path(tempfile.mkdtemp(prefix="warptex-limit-"))
-    (folder / "limit.c").write_text(SOURCE)
-    done = subprocess.run([cc, *FLAGS, "limit.c", "-o", "limit.so", "-lm"], cwd=folder, capture_output=True, text=True)
-    if done.returncode != 0:
-        errors = [line for line in done.stderr.splitlines() if "error" in line] or done.stderr.strip().splitlines() or ["?"]
-        return None, f"{Path(cc).name} {' '.join(FLAGS)} failed: {errors[0].strip()}"
-    lib = ctypes.CDLL(str(folder / "limit.so"))
+    with tempfile.TemporaryDirectory(prefix="warptex-limit-") as tmp:  # the loaded library outlives its file
+        folder = Path(tmp)
+        (folder / "limit.c").write_text(SOURCE)
+        done = subprocess.run([cc, *FLAGS, "limit.c", "-o", "limit.so", "-lm"], cwd=folder, capture_output=True, text=True)
+        if done.returncode != 0:
+            errors = [line for line in done.stderr.splitlines() if "error" in line] or done.stderr.strip().splitlines() or ["?"]
+            return None, f"{Path(cc).name} {' '.join(FLAGS)} failed: {errors[0].strip()}"
+        lib = ctypes.CDLL(str(folder / "limit.so"))
     f32 = ctypes.POINTER(ctypes.c_float)
     lib.bilinear_wrap.argtypes = (f32, ctypes.c_int, ctypes.c_int, ctypes.c_int, f32, ctypes.c_int64, f32, ctypes.c_int)
     lib.bilinear_wrap.restype = None
