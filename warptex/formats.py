@@ -10,7 +10,7 @@ import numpy as np
 import warp as wp
 
 from warptex import io
-from warptex.png import codes
+from warptex.png import codes, colour_channels
 from warptex.kernels import texels as kx
 
 
@@ -55,11 +55,6 @@ def texture_format(value, func: str) -> Format:
         return Format(value.lower() if isinstance(value, str) else value)
     except (ValueError, AttributeError):
         raise ValueError(f"{func}(): format must be one of {[f.value for f in Format]}, got {value!r}") from None
-
-
-def colour_channels(channels: int) -> int:
-    """How many of ``channels`` are colour (the rest, of 2 or 4, is alpha)."""
-    return channels - 1 if channels in (2, 4) else channels
 
 
 def decode_table(fmt: Format, channels: int) -> np.ndarray:

@@ -40,8 +40,7 @@ def codes(values: np.ndarray, *, data: bool = False, bits: int = 8) -> np.ndarra
     unless ``data`` (alpha never: channel 2 of 2 and 4 of 4), rounded to ``uint8``/``uint16``.
     NaN must be refused before (it has no code)."""
     values = np.clip(np.asarray(values, np.float32), 0.0, 1.0)
-    n = values.shape[-1]
-    colour = 0 if data else n - 1 if n in (2, 4) else n
+    colour = 0 if data else colour_channels(values.shape[-1])
     maxval, dtype = (255, np.uint8) if bits == 8 else (65535, np.uint16)
     if bits == 8 and colour:
         out = np.empty(values.shape, dtype)
@@ -51,6 +50,11 @@ def codes(values: np.ndarray, *, data: bool = False, bits: int = 8) -> np.ndarra
     if colour:
         values[..., :colour] = _srgb(values[..., :colour])
     return np.rint(values * maxval).astype(dtype)
+
+
+def colour_channels(channels: int) -> int:
+    """How many of ``channels`` are colour (the rest, of 2 or 4, is alpha)."""
+    return channels - 1 if channels in (2, 4) else channels
 
 
 def _srgb(values: np.ndarray) -> np.ndarray:
