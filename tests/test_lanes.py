@@ -763,6 +763,35 @@ def test_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter
     assert threads > 1 or (("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched) == takes
 
 
+@pytest.mark.parametrize("threads", [1, 3])
+@pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear"])
+@pytest.mark.parametrize("case", ["uv", "uv, height channel", "uv, not normalized, tiling per layer", "triplanar", "triplanar, no heights"])
+def test_splat_tiling_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter, threads):
+    """The tiling's gradient (the fit's), one tiling for every layer or one each: the lane takes each
+    layer's slope and adds each pixel's layers into the tiling in the one-pixel kernel's order, so the
+    tiling's gradient and the texels' are the same bits."""
+    g = _splat_gbuffer(rng, 3000)
+    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True)
+    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False, requires_grad=True)
+    kw = dict(SPLAT_CASES[case])
+    tiling = wp.array(np.atleast_1d(np.asarray(kw.pop("tiling", 1.7), dtype=np.float32)), dtype=float, requires_grad=True)
+    smp = wt.Sampler(filter=filter, address="mirror", lod_bias=-0.4)
+    weights = rng.normal(size=(3000, 4)).astype(np.float32)
+    previous = wt.get_num_threads()
+    wt.set_num_threads(threads)
+    try:
+        both = []
+        for one_pixel in (False, True):
+            tiling.grad.zero_()
+            both.append(_texel_grads(lambda: wt.splat(g, layers, maps, tiling=tiling, sampler=smp, **kw), [layers, maps], weights, one_pixel) + [tiling.grad.numpy().copy()])
+    finally:
+        wt.set_num_threads(previous)
+    for a, b in zip(*both):
+        _same_bits(a, b)
+    assert filter == "nearest" or np.all(both[0][-1] != 0.0)  # every tiling was reached (a nearest read has no slope)
+    assert threads > 1 or ("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched
+
+
 def test_splat_gradient_lanes_read_the_colours_their_own_forward_kept(rng, launched, monkeypatch):
     """A splat recorded with gradients keeps its layers' colours for its backward lane
     (``SplatPixels.saved``): two of one size on one tape each read their own, and one recorded after

@@ -27,11 +27,11 @@ from .. import inlined, specialised
 from ..native import cpu_snippet
 from ..projection import SurfacePixels
 from ..splat_blend import blend_functions
-from ..splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerReads, SplatArgs, SplatParams, layer_textures, map_count, pick, surface_weights
+from ..splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerPoint, LayerReads, SplatArgs, SplatParams, layer_textures, map_count, pick, read_layer_slope, surface_weights
 from ..texels import FILTER_ANISOTROPIC, TexelGrad, TextureView, read_channels, write_channels
 from . import LANES, lane_colours, lane_floats, lane_ints
 from .sample import accumulate_footprint_lane
-from .splat_blend import GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, weights_lane8
+from .splat_blend import GRAD_HEIGHT, GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, weights_lane8
 
 # Per lane pixel (row): its projections' triplanar weights.
 _lane_vec3 = wp.types.matrix(shape=(LANES, 3), dtype=float)
@@ -58,11 +58,11 @@ def lanes_take(args: SplatArgs) -> bool:
 
 def grad_lanes_take(args: SplatArgs) -> bool:
     """Whether the texel-gradient lane body takes a launch with ``args`` (``Kernels.grad_lanes_take``):
-    :func:`lanes_take`, a one-tap filter, no height layers (which may be the colour layers themselves)
-    and no tiling gradient (which takes each read's slope). Its layers then add into texels of their
-    own, so it adds layer by layer and every texel still gets the one-pixel body's sums in its order."""
+    :func:`lanes_take`, a one-tap filter and no height layers (which may be the colour layers
+    themselves). Its layers then add into texels of their own, so it adds layer by layer and every
+    texel still gets the one-pixel body's sums in its order."""
     params = args.reads.params
-    return lanes_take(args) and args.reads.smp.filter != FILTER_ANISOTROPIC and params.height_mode != HEIGHT_ARRAY and not params.tiling.requires_grad
+    return lanes_take(args) and args.reads.smp.filter != FILTER_ANISOTROPIC and params.height_mode != HEIGHT_ARRAY
 
 
 def lane_saved(args: SplatArgs) -> int:
@@ -209,18 +209,59 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                     colour = f.blend(w1, c, hv, params)
                 write_channels(out, base + l, colour)
 
+    def read_slopes(args: SplatArgs, pixels: pixels_t, base: wp.int32, count: wp.int32, w1s: lane_weights_t, tri_w: _lane_vec3):
+        """Rows ``l * cap + j``: ``read_layer_slope``'s slope of each weighted layer ``j`` at covered lane
+        pixel ``l`` (the colour's derivative along the layer's tiling), pixel by pixel; its value
+        replaces the colour the forward lane kept (the same bits, but for the sign of a zero: the
+        one-pixel gradient blends the values read with the slopes)."""
+        params = args.reads.params
+        slopes = lane_layers_t()
+        for l in range(count):
+            i = base + l
+            if pixels.surface.mask[i] != 0.0:
+                pt = LayerPoint()  # splat.layer_point
+                pt.uv0 = pixels.uv0[i]
+                pt.uv0_dx = pixels.uv0_dx[i]
+                pt.uv0_dy = pixels.uv0_dy[i]
+                pt.p = pixels.surface.position[i]
+                pt.n = pixels.surface.normal[i]
+                pt.dpdx = pixels.surface.position_dx[i]
+                pt.dpdy = pixels.surface.position_dy[i]
+                pt.tri_w = wp.vec3(tri_w[l, 0], tri_w[l, 1], tri_w[l, 2])
+                for j in range(params.num_layers):
+                    if w1s[l, j] > 0.0:
+                        value, slope = read_layer_slope(args.layers, j, args.reads, pt)
+                        slopes[l * cap + j] = slope
+                        for c in range(4):
+                            pixels.saved[i, 4 * j + c] = value[c]
+        return slopes
+
+    read_slopes = inlined(specialised(read_slopes, f"splat{cap}_read_slopes"), module=module)
+
     def grad_lane(args: SplatArgs, pixels: pixels_t, base: wp.int32, grads: grads_t, adj: wp.array2d(dtype=float)):
         """Launched only where :func:`grad_lanes_take` holds (the one-pixel kernel runs the rest), after
-        a forward lane that kept each pixel's layer colours in ``pixels.saved`` (``_op`` sees to both)."""
+        a forward lane that kept each pixel's layer colours in ``pixels.saved`` (``_op`` sees to both).
+        With the tiling's gradient, each layer's read is taken again pixel by pixel with its slope
+        (:func:`read_slopes`), and each pixel's layers add ``dot(gc, dc) + ghv · dhv`` (``dhv`` is 0:
+        the lanes take no height layers) into the tiling, in pixel and layer order."""
         count = wp.min(adj.shape[0] - base, LANES)
         params = args.reads.params
         rs, w1s, tri_w = lane_weights(args, pixels, base, count)
+        tiling_grads = grads.tiling.shape[0] > 0
+        slopes = lane_layers_t()
+        if tiling_grads:
+            slopes = read_slopes(args, pixels, base, count, w1s, tri_w)
+        ghvs = lane_weights_t()  # each pixel's layers' heights' gradients, for the tiling's
         if wp.static(cap == 8):  # the blend and weights backwards for the whole lane, and each pixel's splat maps' adds
             back = blend_backward_lane8(params, pixels.surface, base, count, w1s, rs, adj, pixels.saved, args.maps, grads.maps, args.map_smp, pixels.uv0)
             if grads.transition.shape[0] > 0 and params.height_mode != HEIGHT_NONE:
                 for l in range(count):
                     if pixels.surface.mask[base + l] != 0.0:
                         wp.atomic_add(grads.transition, 0, back[GRAD_TRANSITION + l // 4, l % 4])
+            if tiling_grads:
+                for l in range(count):
+                    for j in range(params.num_layers):
+                        ghvs[l, j] = back[GRAD_HEIGHT + (l * 8 + j) // 4, (l * 8 + j) % 4]
         else:
             back = lane_layers_t()  # rows l * cap + j: the gradient of layer j's colour at pixel l
             for l in range(count):  # each pixel's blend and weights backwards, and its splat maps' adds, in pixel order
@@ -242,6 +283,14 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                     f.scatter_maps(args.maps, grads.maps, pixels.uv0[i], args.map_smp, f.weights_backward(r, w0, total, gw1, params), params)
                     for j in range(params.num_layers):
                         back[l * cap + j] = gc[j]
+                        ghvs[l, j] = ghv[j]
+        if tiling_grads:  # each pixel's layers' adds into the tiling, in pixel order (scatter's)
+            dhv = float(0.0)
+            for l in range(count):
+                if pixels.surface.mask[base + l] != 0.0:
+                    for j in range(params.num_layers):
+                        if w1s[l, j] > 0.0:
+                            wp.atomic_add(grads.tiling, wp.min(j, grads.tiling.shape[0] - 1), wp.dot(back[l * cap + j], slopes[l * cap + j]) + ghvs[l, j] * dhv)
         if grads.layers.texels.shape[0] > 0:
             for j in range(params.num_layers):  # each layer's adds: without face layers, layers add into texels of their own
                 weighted = lane_floats()

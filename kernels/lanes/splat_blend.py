@@ -18,9 +18,12 @@ from ..texels import SamplerArgs, TexelGrad, TextureView
 from . import LANES, lane_colours, lane_floats
 
 #: What :func:`blend_backward_lane8` gives: rows ``8 l + j``, the gradient of layer ``j``'s colour at
-#: lane pixel ``l``; entry ``l % 4`` of row ``GRAD_TRANSITION + l // 4``, its transition's.
-lane_grads = wp.types.matrix(shape=(LANES * 8 + LANES // 4, 4), dtype=float)
+#: lane pixel ``l``; entry ``l % 4`` of row ``GRAD_TRANSITION + l // 4``, its transition's; entry
+#: ``(8 l + j) % 4`` of row ``GRAD_HEIGHT + (8 l + j) // 4``, its height's (``blend_backward``'s
+#: ``ghv``, which the tiling's gradient reads).
+lane_grads = wp.types.matrix(shape=(LANES * 8 + LANES // 4 + LANES * 2, 4), dtype=float)
 GRAD_TRANSITION = wp.constant(LANES * 8)
+GRAD_HEIGHT = wp.constant(LANES * 8 + LANES // 4)
 
 
 @wp.func_native(cpu_snippet("return wt_map_values_lane8(params, m, texels, covered, rs);\n", "return {};\n"))
@@ -53,10 +56,10 @@ def blend_backward_lane8(params: SplatParams, surface: SurfacePixels, base: wp.i
     """For each covered lane pixel ``l`` (pixel ``base + l``), with its weights and raw splat values
     as :func:`blend_lane8` and ``weights_lane8`` take them, the colours its forward lane kept (row
     ``base + l`` of ``saved``, ``SplatPixels.saved``; heights from their height channel) and its
-    output gradient ``adj[base + l]``: ``splat_blend.blend_backward``'s colours' and transition's
-    gradients (the heights' added into the colours' height channel) and ``weights_backward``'s raw
-    values' gradient; the colours' and transition's laid out as :data:`lane_grads` says (0 for the
-    other pixels), the raw values' added into the splat maps' texels (``grad_maps``; nothing when it
-    is empty) at the pixel's UV0 where it is finite, in pixel order (``splat_blend.scatter_maps``),
-    in the same call, so that they never leave it."""
+    output gradient ``adj[base + l]``: ``splat_blend.blend_backward``'s colours', transition's and
+    heights' gradients (the heights' also added into the colours' height channel) and
+    ``weights_backward``'s raw values' gradient; the colours', transition's and heights' laid out
+    as :data:`lane_grads` says (0 for the other pixels), the raw values' added into the splat maps'
+    texels (``grad_maps``; nothing when it is empty) at the pixel's UV0 where it is finite, in pixel
+    order (``splat_blend.scatter_maps``), in the same call, so that they never leave it."""
     ...

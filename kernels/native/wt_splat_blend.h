@@ -12,8 +12,11 @@
 typedef wp::mat_t<WT_L, 8, float> wt_lane_weights8;  // a row of 8 layers' values per lane pixel
 typedef wp::vec_t<8, float> wt_v8;
 // What the blend's gradient gives: rows 8 l + j, the gradient of layer j's colour at lane pixel l;
-// entry l % 4 of row 8 WT_L + l / 4, its transition's (lanes.splat_blend.lane_grads).
-typedef wp::mat_t<WT_L * 8 + WT_L / 4, 4, float> wt_lane_grads8;
+// entry l % 4 of row 8 WT_L + l / 4, its transition's; entry (8 l + j) % 4 of row
+// 8 WT_L + WT_L / 4 + (8 l + j) / 4, its height's (lanes.splat_blend.lane_grads).
+#define WT_GRAD_TRANSITION (WT_L * 8)
+#define WT_GRAD_HEIGHT (WT_L * 8 + WT_L / 4)
+typedef wp::mat_t<WT_L * 8 + WT_L / 4 + WT_L * 2, 4, float> wt_lane_grads8;
 
 // splat_blend.map_values for a lane: map m's texels (row l: covered pixel l's read) as the raw splat
 // values of the layers whose weights its channels hold.
@@ -92,8 +95,8 @@ WT_INLINE wt_lane_colours wt_blend_lane8(const Params& params, const Surface& su
 // weights and raw splat values, the colours its forward lane kept (row base + l of saved; heights
 // from their height channel) and its output gradient adj[base + l]: splat_blend.blend_backward's
 // colours' and transition's gradients (the heights' added into the colours' height channel) and
-// weights_backward's raw values' gradient; the colours' and transition's as wt_lane_grads8 lays
-// them out, the raw values' added into the splat maps' texels (grad_maps; nothing when it is empty)
+// weights_backward's raw values' gradient; the colours', transition's and heights' as
+// wt_lane_grads8 lays them out, the raw values' added into the splat maps' texels (grad_maps; nothing when it is empty)
 // at the pixel's UV0 where it is finite, in pixel order (splat_blend.scatter_maps), three maps at a
 // time: each map is its own array layer, so every texel still gets its adds in pixel order.
 // twin: splat_blend.blend_functions:blend_backward
@@ -166,6 +169,7 @@ WT_INLINE wt_lane_grads8 wt_blend_backward_lane8(const Params& params, const Sur
             for (int j = 0; j < n; ++j) {
                 gw1.c[j] = gw1.c[j] + gh.c[j] * hv.c[j];
                 const float ghv = gh.c[j] * w1.c[j];
+                out.data[WT_GRAD_HEIGHT + (l * 8 + j) / 4][(l * 8 + j) % 4] = ghv;
                 if (params.height_mode == WT_HEIGHT_CHANNEL)
                     gc[j].c[params.height_channel] = gc[j].c[params.height_channel] + ghv;
             }
@@ -184,7 +188,7 @@ WT_INLINE wt_lane_grads8 wt_blend_backward_lane8(const Params& params, const Sur
             for (int k = 0; k < 4; ++k) out.data[l * 8 + j][k] = gc[j].c[k];
             raw[l][j] = j < n && r.c[j] > 0.0f ? gw0.c[j] : 0.0f;
         }
-        out.data[WT_L * 8 + l / 4][l % 4] = g_t;
+        out.data[WT_GRAD_TRANSITION + l / 4][l % 4] = g_t;
     }
     // splat_blend.scatter_maps for the lane: each covered pixel's raw values' gradient added into the
     // splat maps at its UV0 (level 0, every map m of the pixel before the next pixel's).
