@@ -743,7 +743,8 @@ def test_triplanar_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, 
 def test_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter, threads):
     """The layers' and the splat maps' texel gradients: the same bits through the lane kernels, whose
     layers add layer by layer (each into texels of its own), as pixel by pixel; the cases they do not
-    take (height layers, face layers, the anisotropic filter) launch the one-pixel kernel."""
+    take (height layers, face layers) launch the one-pixel kernel. The anisotropic filter's reads of
+    several taps add pixel by pixel, their taps in order."""
     g = _splat_gbuffer(rng, 3000)
     layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True)
     maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False, requires_grad=True)
@@ -759,23 +760,30 @@ def test_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter
         _same_grads(lambda: wt.splat(g, layers, maps, sampler=smp, **kw), textures, rng, 4, 3000)
     finally:
         wt.set_num_threads(previous)
-    takes = filter != "anisotropic" and case not in ("world xz, height array", "triplanar, face layers")  # splat_lanes.grad_lanes_take
+    takes = case not in ("world xz, height array", "triplanar, face layers")  # splat_lanes.grad_lanes_take
     assert threads > 1 or (("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched) == takes
 
 
+# The tiling-gradient cases' address modes and layers' texel formats (one each, to keep the test short).
+_TILING_CASES = {"uv": ("wrap", "float32"), "uv, height channel": ("clamp", "unorm8"), "uv, not normalized, tiling per layer": ("border", "float32"),
+                 "triplanar": ("mirror", "float16"), "triplanar, no heights": ("wrap", "srgb8")}  # fmt: skip
+
+
 @pytest.mark.parametrize("threads", [1, 3])
-@pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear"])
+@pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
 @pytest.mark.parametrize("case", ["uv", "uv, height channel", "uv, not normalized, tiling per layer", "triplanar", "triplanar, no heights"])
 def test_splat_tiling_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter, threads):
-    """The tiling's gradient (the fit's), one tiling for every layer or one each: the lane takes each
-    layer's slope and adds each pixel's layers into the tiling in the one-pixel kernel's order, so the
-    tiling's gradient and the texels' are the same bits."""
+    """The tiling's gradient (the fit's), one tiling for every layer or one each, in every address
+    mode and texel format: the lane reads each layer's slope (``layer_slopes_lane``) and adds each
+    pixel's layers into the tiling in the one-pixel kernel's order, so the tiling's gradient and the
+    texels' are the same bits."""
+    address, texel_format = _TILING_CASES[case]
     g = _splat_gbuffer(rng, 3000)
-    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True)
+    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True, format=texel_format)
     maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False, requires_grad=True)
     kw = dict(SPLAT_CASES[case])
     tiling = wp.array(np.atleast_1d(np.asarray(kw.pop("tiling", 1.7), dtype=np.float32)), dtype=float, requires_grad=True)
-    smp = wt.Sampler(filter=filter, address="mirror", lod_bias=-0.4)
+    smp = wt.Sampler(filter=filter, address=address, lod_bias=-0.4, border=(0.1, 0.2, 0.3, 0.4), max_aniso=24)
     weights = rng.normal(size=(3000, 4)).astype(np.float32)
     previous = wt.get_num_threads()
     wt.set_num_threads(threads)

@@ -27,8 +27,8 @@ from .. import inlined, specialised
 from ..native import cpu_snippet
 from ..projection import SurfacePixels
 from ..splat_blend import blend_functions
-from ..splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerPoint, LayerReads, SplatArgs, SplatParams, layer_textures, map_count, pick, read_layer_slope, surface_weights
-from ..texels import FILTER_ANISOTROPIC, TexelGrad, TextureView, read_channels, write_channels
+from ..splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerReads, SplatArgs, SplatParams, layer_textures, map_count, pick, surface_weights
+from ..texels import TexelGrad, TextureView, read_channels, write_channels
 from . import LANES, lane_colours, lane_floats, lane_ints
 from .sample import accumulate_footprint_lane
 from .splat_blend import GRAD_HEIGHT, GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, weights_lane8
@@ -58,11 +58,10 @@ def lanes_take(args: SplatArgs) -> bool:
 
 def grad_lanes_take(args: SplatArgs) -> bool:
     """Whether the texel-gradient lane body takes a launch with ``args`` (``Kernels.grad_lanes_take``):
-    :func:`lanes_take`, a one-tap filter and no height layers (which may be the colour layers
-    themselves). Its layers then add into texels of their own, so it adds layer by layer and every
-    texel still gets the one-pixel body's sums in its order."""
-    params = args.reads.params
-    return lanes_take(args) and args.reads.smp.filter != FILTER_ANISOTROPIC and params.height_mode != HEIGHT_ARRAY
+    :func:`lanes_take` and no height layers (which may be the colour layers themselves). Its layers
+    then add into texels of their own, so it adds layer by layer and every texel still gets the
+    one-pixel body's sums in its order."""
+    return lanes_take(args) and args.reads.params.height_mode != HEIGHT_ARRAY
 
 
 def lane_saved(args: SplatArgs) -> int:
@@ -81,6 +80,19 @@ def layer_blend_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted:
     ...
 
 
+@wp.func_native(cpu_snippet("return wt_layer_slopes_lane(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, saved);\n", "return {};\n"))
+def layer_slopes_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
+                      uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3,
+                      saved: wp.array2d(dtype=float)) -> lane_colours:  # fmt: skip
+    """Row ``l``: ``read_layer_slope``'s slope of layer ``j`` of ``tex`` at lane pixel ``l`` (the
+    derivative of its colour along the layer's tiling; 0 where ``weighted[l]`` is not positive), for
+    the tiling's gradient. Its value replaces the colour the forward lane kept (``saved``'s row
+    ``base + l``, columns ``4 j .. 4 j + 3``), as the one-pixel gradient blends the values read with
+    the slopes: they may differ from the forward's in the last bit (a footprint of several taps is
+    divided by its taps, where the forward multiplies by their reciprocal) or the sign of a zero."""
+    ...
+
+
 @wp.func_native(cpu_snippet("wt_scatter_layer_lane(tex, grad, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, g);\n"))
 def scatter_layer_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2),
                        uv0_dx: wp.array(dtype=wp.vec2), uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32,
@@ -88,7 +100,8 @@ def scatter_layer_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, j: 
     """``scatter_layer`` of the gradients ``g[l]`` of layer ``j``'s reads of ``tex`` (``wt_layer_reads``,
     as :func:`layer_values_lane` reads them) into ``grad``, pixel by pixel and read by read:
     ``w · g`` per projection where triplanar (``scatter_projections``), ``g`` itself for the one
-    read of the other projections (``.scatter.scatter_lod_lanes``)."""
+    read of the other projections (``.scatter.scatter_lod_lanes``); a read of several taps (the
+    anisotropic filter's) pixel by pixel, its taps in order (``scatter.scatter_taps``)."""
     ...
 
 
@@ -209,48 +222,25 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                     colour = f.blend(w1, c, hv, params)
                 write_channels(out, base + l, colour)
 
-    def read_slopes(args: SplatArgs, pixels: pixels_t, base: wp.int32, count: wp.int32, w1s: lane_weights_t, tri_w: _lane_vec3):
-        """Rows ``l * cap + j``: ``read_layer_slope``'s slope of each weighted layer ``j`` at covered lane
-        pixel ``l`` (the colour's derivative along the layer's tiling), pixel by pixel; its value
-        replaces the colour the forward lane kept (the same bits, but for the sign of a zero: the
-        one-pixel gradient blends the values read with the slopes)."""
-        params = args.reads.params
-        slopes = lane_layers_t()
-        for l in range(count):
-            i = base + l
-            if pixels.surface.mask[i] != 0.0:
-                pt = LayerPoint()  # splat.layer_point
-                pt.uv0 = pixels.uv0[i]
-                pt.uv0_dx = pixels.uv0_dx[i]
-                pt.uv0_dy = pixels.uv0_dy[i]
-                pt.p = pixels.surface.position[i]
-                pt.n = pixels.surface.normal[i]
-                pt.dpdx = pixels.surface.position_dx[i]
-                pt.dpdy = pixels.surface.position_dy[i]
-                pt.tri_w = wp.vec3(tri_w[l, 0], tri_w[l, 1], tri_w[l, 2])
-                for j in range(params.num_layers):
-                    if w1s[l, j] > 0.0:
-                        value, slope = read_layer_slope(args.layers, j, args.reads, pt)
-                        slopes[l * cap + j] = slope
-                        for c in range(4):
-                            pixels.saved[i, 4 * j + c] = value[c]
-        return slopes
-
-    read_slopes = inlined(specialised(read_slopes, f"splat{cap}_read_slopes"), module=module)
-
     def grad_lane(args: SplatArgs, pixels: pixels_t, base: wp.int32, grads: grads_t, adj: wp.array2d(dtype=float)):
         """Launched only where :func:`grad_lanes_take` holds (the one-pixel kernel runs the rest), after
         a forward lane that kept each pixel's layer colours in ``pixels.saved`` (``_op`` sees to both).
-        With the tiling's gradient, each layer's read is taken again pixel by pixel with its slope
-        (:func:`read_slopes`), and each pixel's layers add ``dot(gc, dc) + ghv · dhv`` (``dhv`` is 0:
-        the lanes take no height layers) into the tiling, in pixel and layer order."""
+        With the tiling's gradient, each layer is read again with its slope (:func:`layer_slopes_lane`),
+        and each pixel's layers add ``dot(gc, dc) + ghv · dhv`` (``dhv`` is 0: the lanes take no height
+        layers) into the tiling, in pixel and layer order."""
         count = wp.min(adj.shape[0] - base, LANES)
         params = args.reads.params
         rs, w1s, tri_w = lane_weights(args, pixels, base, count)
         tiling_grads = grads.tiling.shape[0] > 0
-        slopes = lane_layers_t()
+        slopes = lane_layers_t()  # rows l * cap + j: layer j's slope along its tiling at pixel l
         if tiling_grads:
-            slopes = read_slopes(args, pixels, base, count, w1s, tri_w)
+            for j in range(params.num_layers):
+                weighted = lane_floats()
+                for l in range(LANES):  # unrolled (w1s is 0 past count)
+                    weighted[l] = w1s[l, j]
+                slope = layer_slopes_lane(args.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, pixels.saved)
+                for l in range(count):
+                    slopes[l * cap + j] = slope[l]
         ghvs = lane_weights_t()  # each pixel's layers' heights' gradients, for the tiling's
         if wp.static(cap == 8):  # the blend and weights backwards for the whole lane, and each pixel's splat maps' adds
             back = blend_backward_lane8(params, pixels.surface, base, count, w1s, rs, adj, pixels.saved, args.maps, grads.maps, args.map_smp, pixels.uv0)

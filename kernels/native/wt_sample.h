@@ -24,14 +24,25 @@ template <class Tex> WT_INLINE void wt_unorm8_channels(const Tex& tex, const int
                 if (!inside[l]) ch[c][l] = border[c];
 }
 
+// What wt_sample_levels also gives where its caller asks (filters.sample_lod_derivatives' d/du,
+// d/dv and d/dlod of each lane's filtered value; d/dlod where the biased LOD of each lane, lod, is
+// inside the sampler's clamp): rows per lane pixel, or null.
+struct wt_level_slopes {
+    const float* lod;
+    wt_f4 *du, *dv, *dlod;
+};
+
 // res[l] = filters.sample_levels(tex, layer[l], (u[l], v[l]), level[l], fraction[l], smp) for every
 // lane, the address mode a constant (wt_sample_levels_any compiles it once per mode: a mode tested
 // per texel measured slower). Each level read is cut in two: every lane's addresses and weights,
-// then every lane's loads, so that the loads are in flight together.
+// then every lane's loads, so that the loads are in flight together. With slopes (not null), also
+// the value's derivatives as filters.sample_lod_derivatives takes them (the same value, bit for
+// bit): bilinear_derivatives of each level read, blended as the values are; 0 for nearest.
 // twin: filters.sample_levels
 template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int address, const Tex& tex, const Smp& smp,
                                                                 const float* u, const float* v, const int* level,
-                                                                const float* fraction, const int* layer, wt_f4* res) {
+                                                                const float* fraction, const int* layer, wt_f4* res,
+                                                                const wt_level_slopes* slopes = nullptr) {
     const wt_f4 border = {smp.border.c[0], smp.border.c[1], smp.border.c[2], smp.border.c[3]};
     auto load = [&](int index, bool inside) __attribute__((always_inline)) -> wt_f4 {  // texels.texel
         if (address != WT_BORDER) return wt_stored_texel(tex, index);  // only the border mode reads outside
@@ -58,10 +69,13 @@ template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int addres
             inside[0][l] = address != WT_BORDER || (x >= 0 && y >= 0);  // only the border mode reads outside
         }
         for (int l = 0; l < WT_L; ++l) res[l] = load(index[0][l], inside[0][l]);
+        if (slopes)
+            for (int l = 0; l < WT_L; ++l) slopes->du[l] = slopes->dv[l] = slopes->dlod[l] = 0.0f;
         return;
     }
     float fx[WT_L], fy[WT_L];
     wt_vf R[4];                                           // the result's channels
+    wt_vf DU[4], DV[4], DLOD[4];                          // with slopes: their channels
     for (int pass = 0; pass < (blend ? 2 : 1); ++pass) {  // the level, then (trilinear) the next one
         int read[WT_L];
         for (int l = 0; l < WT_L; ++l) read[l] = pass == 0 || fraction[l] <= 0.0f ? level[l] : level[l] + 1;
@@ -100,39 +114,73 @@ template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int addres
         __builtin_memcpy(&FX, fx, sizeof(FX));
         __builtin_memcpy(&FY, fy, sizeof(FY));
         const wt_vf GX = 1.0f - FX, GY = 1.0f - FY;
+        wt_vf F, W, H;  // with slopes: the fraction, the level's size
+        wt_vi clamped;  // and where the biased LOD is inside the sampler's clamp
+        if (slopes) {
+            __builtin_memcpy(&F, fraction, sizeof(F));
+            int sizes[2][WT_L], inside_clamp[WT_L];
+            for (int l = 0; l < WT_L; ++l) {
+                sizes[0][l] = lw[l], sizes[1][l] = lh[l];
+                const float biased = slopes->lod[l] + smp.lod_bias;
+                inside_clamp[l] = biased >= smp.min_lod && biased < smp.max_lod ? -1 : 0;
+            }
+            wt_vi SW, SH;
+            __builtin_memcpy(&SW, sizes[0], sizeof(SW));
+            __builtin_memcpy(&SH, sizes[1], sizeof(SH));
+            __builtin_memcpy(&clamped, inside_clamp, sizeof(clamped));
+            W = __builtin_convertvector(SW, wt_vf), H = __builtin_convertvector(SH, wt_vf);
+        }
         for (int c = 0; c < 4; ++c) {
             const wt_vf top = taps[0][c] * GX + taps[1][c] * FX;
             const wt_vf bottom = taps[2][c] * GX + taps[3][c] * FX;
             const wt_vf value = top * GY + bottom * FY;
+            const wt_vf fine = pass == 0 ? value : R[c];  // pass 1: the finer level's value
             if (pass == 0) {
                 R[c] = value;
             } else {
-                wt_vf F;
                 __builtin_memcpy(&F, fraction, sizeof(F));
                 R[c] = wt_sel(F > 0.0f, R[c] * (1.0f - F) + value * F, R[c]);
+            }
+            if (!slopes) continue;
+            const wt_vf du =
+                ((taps[1][c] - taps[0][c]) * GY + (taps[3][c] - taps[2][c]) * FY) * W;  // bilinear_derivatives
+            const wt_vf dv = (bottom - top) * -H;
+            if (pass == 0) {
+                DU[c] = du, DV[c] = dv, DLOD[c] = 0.0f;
+            } else {  // sample_lod_derivatives' blend of two levels, where a lane reads two
+                const wt_vi two = F > 0.0f;
+                DLOD[c] = wt_sel(two & clamped, value - fine, DLOD[c]);
+                DU[c] = wt_sel(two, DU[c] * (1.0f - F) + du * F, DU[c]);
+                DV[c] = wt_sel(two, DV[c] * (1.0f - F) + dv * F, DV[c]);
             }
         }
     }
     wt_rows_of_channels(R, res);
+    if (slopes) {
+        wt_rows_of_channels(DU, slopes->du);
+        wt_rows_of_channels(DV, slopes->dv);
+        wt_rows_of_channels(DLOD, slopes->dlod);
+    }
 }
 
 // wt_sample_levels with the address mode a constant, once per mode.
 // twin: filters.sample_levels
-template <class Tex, class Smp>
-WT_INLINE void wt_sample_levels_any(const Tex& tex, const Smp& smp, const float* u, const float* v, const int* level,
-                                    const float* fraction, const int* layer, wt_f4* res) {
+template <class Tex, class Smp> WT_INLINE void wt_sample_levels_any(const Tex& tex, const Smp& smp, const float* u,
+                                                                    const float* v, const int* level,
+                                                                    const float* fraction, const int* layer, wt_f4* res,
+                                                                    const wt_level_slopes* slopes = nullptr) {
     switch (smp.address) {
     case WT_WRAP:
-        wt_sample_levels(WT_WRAP, tex, smp, u, v, level, fraction, layer, res);
+        wt_sample_levels(WT_WRAP, tex, smp, u, v, level, fraction, layer, res, slopes);
         break;
     case WT_CLAMP:
-        wt_sample_levels(WT_CLAMP, tex, smp, u, v, level, fraction, layer, res);
+        wt_sample_levels(WT_CLAMP, tex, smp, u, v, level, fraction, layer, res, slopes);
         break;
     case WT_MIRROR:
-        wt_sample_levels(WT_MIRROR, tex, smp, u, v, level, fraction, layer, res);
+        wt_sample_levels(WT_MIRROR, tex, smp, u, v, level, fraction, layer, res, slopes);
         break;
     default:
-        wt_sample_levels(WT_BORDER, tex, smp, u, v, level, fraction, layer, res);
+        wt_sample_levels(WT_BORDER, tex, smp, u, v, level, fraction, layer, res, slopes);
         break;
     }
 }

@@ -226,6 +226,41 @@ WT_INLINE void wt_scatter_lod(const Tex* const* texs, const Grad* const* grads, 
     wt_scatter_lod_of(texs, grads, smp, nreads, layers, at, weigh, gr, 0);
 }
 
+// scatter.scatter_footprint of one pixel's read: g added into the texels of the footprint's taps
+// (u + du · s, v + dv · s) at s = k + 1/2 - taps / 2, each tap's share g · (1 / taps), in tap order
+// (scatter_taps); a one-tap footprint's g at (u, v) itself (scatter_lod). The taps go 16 at a time
+// through wt_scatter_levels as the lanes of one read, which adds them in lane order: the pixel's
+// order. A tap whose UV or LOD is not finite adds nothing.
+// twin: scatter.scatter_footprint
+template <class Tex, class Grad, class Smp>
+WT_INLINE void wt_scatter_footprint_pixel(const Tex& tex, const Grad& grad, const Smp& smp, int layer, float u, float v,
+                                          float lod, float du, float dv, float taps, const wt_f4 g) {
+    const bool one = taps == 1.0f;
+    const int n = one ? 1 : (int)taps;  // footprint.footprint_taps
+    const wt_f4 share = one ? g : g * (1.0f / taps);
+    const Tex* texs[1] = {&tex};
+    const Grad* grads[1] = {&grad};
+    for (int first = 0; first < n; first += WT_L) {
+        float us[1][WT_L], vs[1][WT_L], fractions[1][WT_L];
+        int levels[1][WT_L], layers[1][WT_L];
+        bool active[1][WT_L];
+        wt_f4 gs[1][WT_L];
+        for (int l = 0; l < WT_L; ++l) {
+            const float s = (float)(first + l) + 0.5f - 0.5f * taps;
+            const float tu = one ? u : u + du * s, tv = one ? v : v + dv * s;  // footprint.footprint_uv
+            const bool ok = first + l < n && __builtin_fabsf(tu) <= wt_float_max &&
+                            __builtin_fabsf(tv) <= wt_float_max && __builtin_fabsf(lod) <= wt_float_max;
+            active[0][l] = ok;
+            us[0][l] = ok ? tu : 0.0f;
+            vs[0][l] = ok ? tv : 0.0f;
+            wt_mip_levels(tex, smp, ok ? lod : 0.0f, levels[0][l], fractions[0][l]);
+            layers[0][l] = layer;
+            gs[0][l] = share;
+        }
+        wt_scatter_levels_any(1, texs, grads, smp, us, vs, levels, fractions, layers, active, gs);
+    }
+}
+
 // lanes.scatter.scatter_levels_lane: scatter.scatter_levels of the gradient adj[i] for the lane's
 // pixels i = base .. whose uv[i] is finite, their layer, one level for all.
 // twin: scatter.scatter_levels

@@ -58,6 +58,148 @@ WT_INLINE wt_lane_reads wt_layer_reads(const Tex& tex, const Reads& reads, int j
     return out;
 }
 
+// filters.sample_footprint_derivatives of each read lane (weight[l] > 0): (value, d/du, d/dv,
+// d/dlod, d/dspread) of its footprint's taps, each tap's sample_lod_derivatives at
+// footprint.footprint_uv summed in tap order from 0, then divided by the taps. Lanes past their
+// taps, not read, or not finite read (0, 0) at level 0; a tap not finite gives a NaN value and zero
+// derivatives. Rows of the lanes not read are left as they are.
+// twin: filters.sample_footprint_derivatives
+template <class Tex, class Smp> WT_INLINE void wt_footprint_slopes(const Tex& tex, const Smp& smp, int layer,
+                                                                   const float* u, const float* v, const float* lod,
+                                                                   const float* du, const float* dv, const float* taps,
+                                                                   const float* weight, wt_f4* value, wt_f4* d_u,
+                                                                   wt_f4* d_v, wt_f4* d_lod, wt_f4* d_spread) {
+    float us[WT_L], vs[WT_L], fractions[WT_L], lods[WT_L];
+    int levels[WT_L], layers[WT_L];
+    bool read[WT_L];
+    int most = 0;  // the most taps of a read lane
+    for (int l = 0; l < WT_L; ++l) {
+        read[l] = weight[l] > 0.0f;
+        layers[l] = layer;
+        lods[l] = read[l] ? lod[l] : 0.0f;
+        wt_mip_levels(tex, smp, lods[l], levels[l], fractions[l]);
+        const int n = read[l] ? (int)taps[l] : 0;  // footprint.footprint_taps
+        most = n > most ? n : most;
+        const wt_f4 zero = 0.0f;
+        if (read[l]) value[l] = d_u[l] = d_v[l] = d_lod[l] = d_spread[l] = zero;
+    }
+    for (int k = 0; k < most; ++k) {
+        bool tap[WT_L], finite[WT_L];
+        float offset[WT_L];
+        for (int l = 0; l < WT_L; ++l) {
+            offset[l] = (float)k + 0.5f - 0.5f * taps[l];
+            const float tu = u[l] + du[l] * offset[l];  // footprint.footprint_uv, for one tap too
+            const float tv = v[l] + dv[l] * offset[l];
+            tap[l] = read[l] && k < (int)taps[l];
+            finite[l] = __builtin_fabsf(tu) <= wt_float_max && __builtin_fabsf(tv) <= wt_float_max &&
+                        __builtin_fabsf(lods[l]) <= wt_float_max;  // texels.finite_uv_lod
+            const bool ok = tap[l] && finite[l];
+            us[l] = ok ? tu : 0.0f;
+            vs[l] = ok ? tv : 0.0f;
+        }
+        wt_f4 result[WT_L], r_u[WT_L], r_v[WT_L], r_lod[WT_L];
+        const wt_level_slopes slopes = {lods, r_u, r_v, r_lod};
+        wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layers, result, &slopes);
+        const wt_f4 nan4 = __builtin_nanf(""), zero = 0.0f;
+        for (int l = 0; l < WT_L; ++l) {
+            if (!tap[l]) continue;
+            const wt_f4 tap_u = finite[l] ? r_u[l] : zero, tap_v = finite[l] ? r_v[l] : zero;
+            value[l] = value[l] + (finite[l] ? result[l] : nan4);
+            d_u[l] = d_u[l] + tap_u;
+            d_v[l] = d_v[l] + tap_v;
+            d_lod[l] = d_lod[l] + (finite[l] ? r_lod[l] : zero);
+            d_spread[l] = d_spread[l] + (tap_u * du[l] + tap_v * dv[l]) * offset[l];
+        }
+    }
+    for (int l = 0; l < WT_L; ++l) {
+        if (!read[l]) continue;
+        value[l] = value[l] / taps[l], d_u[l] = d_u[l] / taps[l], d_v[l] = d_v[l] / taps[l];
+        d_lod[l] = d_lod[l] / taps[l], d_spread[l] = d_spread[l] / taps[l];
+    }
+}
+
+// footprint.lod_scale_slope: d lod / d s of the footprint of UV derivatives (dx0, dx1), (dy0, dy1)
+// scaled by s, at s = scale, on a level-0 image of width × height texels.
+// twin: footprint.lod_scale_slope
+WT_INLINE float wt_lod_scale_slope(float width, float height, float dx0, float dx1, float dy0, float dy1, float scale) {
+    const float a0 = (dx0 * scale) * width, a1 = (dx1 * scale) * height;
+    const float b0 = (dy0 * scale) * width, b1 = (dy1 * scale) * height;
+    const float rho2 = wp::max(a0 * a0 + a1 * a1, b0 * b0 + b1 * b1);
+    return rho2 > (float)1.0e-30 && rho2 < wt_float_max ? 1.0f / (scale * (float)0.6931471805599453) : 0.0f;
+}
+
+// lanes.splat.layer_slopes_lane: splat_layers.read_layer_slope of layer j of tex at each lane pixel
+// l with weighted[l] > 0 (no face layers, plain sampling): per read k of wt_layer_reads with a
+// positive weight w, value += w · v and slope += w · (d/du · du/dt + d/dv · dv/dt + d/dlod ·
+// dlod/dt + d/dspread / t), of the read's wt_footprint_slopes and layer_read_slopes' UV and LOD
+// slopes along the tiling t. Row l of the result: the slope (0 for the other pixels); the value is
+// stored in saved's row base + l, columns 4 j .. 4 j + 3 (SplatPixels.saved), where the blend's
+// gradient reads it.
+// twin: splat_layers.read_layer_slope
+template <class Tex, class Reads, class Floats, class UV, class Surface, class TriW, class Saved>
+WT_INLINE wt_lane_colours wt_layer_slopes_lane(const Tex& tex, const Reads& reads, int j, const Floats& weighted,
+                                               const UV& uv0, const UV& uv0_dx, const UV& uv0_dy,
+                                               const Surface& surface, int base, int count, const TriW& tri_w,
+                                               const Saved& saved) {
+    const auto& params = reads.params;
+    const auto& proj = reads.proj;
+    const float t = wt_float(params.tiling, wp::min(j, params.tiling.shape[0] - 1));  // layer_tiling
+    const wt_lane_reads at =
+        wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
+    const int triplanar = params.projection == WT_PROJECT_TRIPLANAR;
+    const float width = (float)wt_int(tex.level_width, 0), height = (float)wt_int(tex.level_height, 0);
+    wt_row p[3], n[3], dx[3], dy[3];  // the lane's point: UV0 and its derivatives, or its surface
+    if (params.projection == WT_PROJECT_UV) {
+        wt_rows(uv0, base, count, 2, p);
+        wt_rows(uv0_dx, base, count, 2, dx);
+        wt_rows(uv0_dy, base, count, 2, dy);
+    } else {
+        wt_rows(surface.position, base, count, 3, p);
+        wt_rows(surface.normal, base, count, 3, n);
+        wt_rows(surface.position_dx, base, count, 3, dx);
+        wt_rows(surface.position_dy, base, count, 3, dy);
+    }
+    const float o[3] = {(float)proj.origin.c[0], (float)proj.origin.c[1], (float)proj.origin.c[2]};
+    wt_f4 value[WT_L], slope[WT_L];
+    for (int l = 0; l < WT_L; ++l) value[l] = slope[l] = 0.0f;
+    for (int k = 0; k < (triplanar ? 3 : 1); ++k) {
+        wt_f4 v[WT_L], d_u[WT_L], d_v[WT_L], d_lod[WT_L], d_spread[WT_L];
+        const float* weight = at.data[9 + k];
+        wt_footprint_slopes(tex, reads.smp, j, at.data[k], at.data[3 + k], at.data[6 + k], at.data[12 + k],
+                            at.data[15 + k], at.data[18 + k], weight, v, d_u, d_v, d_lod, d_spread);
+        const int axis = params.projection == WT_PROJECT_WORLD_XZ ? 1 : k;
+        const int c0 = axis == 0 ? 2 : 0, c1 = axis == 1 ? 2 : 1;  // projection.plane_coords
+        for (int l = 0; l < count; ++l) {
+            if (!(weight[l] > 0.0f)) continue;
+            float uv_slope0 = p[0][l], uv_slope1 = p[1][l], lod_slope;  // splat_layers.layer_read_slopes
+            if (params.projection == WT_PROJECT_UV) {
+                lod_slope = wt_lod_scale_slope(width, height, dx[0][l], dx[1][l], dy[0][l], dy[1][l], t);
+            } else {
+                const float normal = params.projection == WT_PROJECT_WORLD_XZ ? 1.0f : n[axis][l];
+                float s = 1.0f;  // projection.u_sign
+                if (proj.mirror_fix != 0)
+                    s = axis == 2 ? (normal < 0.0f ? -1.0f : 1.0f) : -(normal < 0.0f ? -1.0f : 1.0f);
+                uv_slope0 = (p[c0][l] + o[c0]) * s;  // projection.slope_coords
+                uv_slope1 = p[c1][l] + o[c1];
+                lod_slope = wt_lod_scale_slope(width, height, dx[c0][l], dx[c1][l], dy[c0][l], dy[c1][l], t);
+            }
+            value[l] = value[l] + weight[l] * v[l];
+            slope[l] = slope[l] +
+                       weight[l] * (d_u[l] * uv_slope0 + d_v[l] * uv_slope1 + d_lod[l] * lod_slope + d_spread[l] / t);
+        }
+    }
+    wt_lane_colours out;
+    for (int l = 0; l < count; ++l) {
+        if (!(weighted.c[l] > 0.0f)) continue;
+        float* row = (float*)((char*)saved.data + (long long)(base + l) * saved.strides[0]);
+        for (int c = 0; c < 4; ++c) {
+            *(float*)((char*)row + (long long)(4 * j + c) * saved.strides[1]) = value[l][c];
+            out.data[l][c] = slope[l][c];
+        }
+    }
+    return out;
+}
+
 // lanes.splat.layer_values_lane: row l, layer j of tex read at lane pixel l over the footprints of
 // wt_layer_reads' reads as read_layer reads them (per projection value += w · sample where
 // triplanar, value = sample for the one read of the other projections; 0 where weighted[l] is not
@@ -104,7 +246,8 @@ WT_INLINE wt_lane_colours wt_layer_blend_lane(const Tex& tex, const Reads& reads
 
 // lanes.splat.scatter_layer_lane: splat_layers.scatter_layer of the gradients g[l] of layer j's
 // reads of tex (wt_layer_reads) into grad, pixel by pixel and read by read: w · g per projection
-// where triplanar, g itself for the one read of the other projections.
+// where triplanar, g itself for the one read of the other projections. Where a read has several
+// taps (the anisotropic filter), pixel by pixel, each read's taps 16 at a time.
 // twin: splat_layers._layer_reads:scatter_layer
 template <class Tex, class Grad, class Reads, class Floats, class UV, class Surface, class TriW>
 WT_INLINE void wt_scatter_layer_lane(const Tex& tex, const Grad& grad, const Reads& reads, int j,
@@ -117,7 +260,24 @@ WT_INLINE void wt_scatter_layer_lane(const Tex& tex, const Grad& grad, const Rea
     const Grad* grads[3] = {&grad, &grad, &grad};
     const int triplanar =
         reads.params.projection == WT_PROJECT_TRIPLANAR;  // w · g per projection, else g for the one read
-    wt_scatter_lod(texs, grads, reads.smp, triplanar ? 3 : 1, layer,
-                   wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w),
-                   triplanar, g);
+    const int nreads = triplanar ? 3 : 1;
+    const wt_lane_reads at =
+        wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
+    bool several = false;  // a read of several taps (the anisotropic filter's)
+    for (int k = 0; k < nreads; ++k)
+        for (int l = 0; l < WT_L; ++l) several |= at.data[9 + k][l] > 0.0f && at.data[18 + k][l] != 1.0f;
+    if (!several) {
+        wt_scatter_lod(texs, grads, reads.smp, nreads, layer, at, triplanar, g);
+        return;
+    }
+    for (int l = 0; l < count; ++l) {  // pixel by pixel, read by read, each read's taps in order
+        for (int k = 0; k < nreads; ++k) {
+            const float w = at.data[9 + k][l];
+            if (!(w > 0.0f)) continue;
+            const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
+            wt_scatter_footprint_pixel(tex, grad, reads.smp, j, at.data[k][l], at.data[3 + k][l], at.data[6 + k][l],
+                                       at.data[12 + k][l], at.data[15 + k][l], at.data[18 + k][l],
+                                       triplanar ? w * gl : gl);
+        }
+    }
 }
