@@ -774,9 +774,9 @@ _TILING_CASES = {"uv": ("wrap", "float32"), "uv, height channel": ("clamp", "uno
 @pytest.mark.parametrize("case", ["uv", "uv, height channel", "uv, not normalized, tiling per layer", "triplanar", "triplanar, no heights"])
 def test_splat_tiling_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter, threads):
     """The tiling's gradient (the fit's), one tiling for every layer or one each, in every address
-    mode and texel format: the lane reads each layer's slope (``layer_slopes_lane``) and adds each
-    pixel's layers into the tiling in the one-pixel kernel's order, so the tiling's gradient and the
-    texels' are the same bits."""
+    mode and texel format: the forward lane keeps each layer's slope from its own taps
+    (``lane_saved``), and the gradient lane adds each pixel's layers into the tiling in the one-pixel
+    kernel's order, so the output, the tiling's gradient and the texels' are the same bits."""
     address, texel_format = _TILING_CASES[case]
     g = _splat_gbuffer(rng, 3000)
     layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True, format=texel_format)
@@ -791,10 +791,12 @@ def test_splat_tiling_gradient_lanes_add_the_one_pixel_sums(rng, launched, case,
         both = []
         for one_pixel in (False, True):
             tiling.grad.zero_()
-            both.append(_texel_grads(lambda: wt.splat(g, layers, maps, tiling=tiling, sampler=smp, **kw), [layers, maps], weights, one_pixel) + [tiling.grad.numpy().copy()])
+            outs = []
+            grads = _texel_grads(lambda: outs.append(wt.splat(g, layers, maps, tiling=tiling, sampler=smp, **kw)) or outs[-1], [layers, maps], weights, one_pixel)
+            both.append([outs[0].numpy()] + grads + [tiling.grad.numpy().copy()])
     finally:
         wt.set_num_threads(previous)
-    for a, b in zip(*both):
+    for a, b in zip(*both):  # the forward (which keeps the slopes from its own taps), the texels' and the tiling's gradients
         _same_bits(a, b)
     assert filter == "nearest" or np.all(both[0][-1] != 0.0)  # every tiling was reached (a nearest read has no slope)
     assert threads > 1 or ("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched

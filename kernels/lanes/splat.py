@@ -8,11 +8,12 @@ their footprints (``wt_accumulate_footprint``), projection by projection in the 
 ``read_layer`` adds them; then the blend. Without height blending the blend is a weighted sum in
 the layers' order, added a layer at a time inside that call (:func:`layer_blend_lane`). Where the
 forward ran on a tape, its lane keeps each pixel's layer colours (``SplatPixels.saved``,
-``Kernels.lane_saved``), and the gradient's lane body, which runs only after such a forward, reads
-them. It takes each pixel's blend and weights backwards and adds into its splat maps in pixel
-order, then adds each layer's gradient into its texels by :func:`scatter_layer_lane`, layer by layer: a
-layer's reads touch texels of its own array layer only, so every texel gets the one-pixel body's
-sums in its order, and the outputs and gradients are the one-pixel kernels' bits. Face layers,
+``Kernels.lane_saved``), and where the tiling needs its gradient, their slopes along it, from the
+same taps; the gradient's lane body, which runs only after such a forward, reads them. It takes
+each pixel's blend and weights backwards and adds into its splat maps and the tiling in pixel
+order, then adds each layer's gradient into its texels by :func:`scatter_layer_lane`, layer by
+layer: a layer's reads touch texels of its own array layer only, so every texel gets the one-pixel
+body's sums in its order, and the outputs and gradients are the one-pixel kernels' bits. Face layers,
 and for the gradient the cases :func:`grad_lanes_take` names, run the one-pixel kernels
 (``Kernels.lanes_take``). In the kernels of up to 8 layers the weights, the blend and the blend
 and weights backwards are native code for the whole lane (:mod:`.splat_blend`); beyond, the
@@ -45,7 +46,12 @@ def layer_values_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted
     ``wt_layer_reads``' reads as ``read_layer`` reads it (0 where
     ``weighted[l]`` is not positive); one native call rather than a read per projection. Where
     ``keep`` and ``saved`` is not empty, also stored in ``saved``'s row ``base + l``, columns
-    ``4 j .. 4 j + 3`` (``SplatPixels.saved``)."""
+    ``4 j .. 4 j + 3`` (``SplatPixels.saved``). Where ``saved`` has 8 columns a layer (the tiling
+    needs its gradient: :func:`lane_saved`), the same taps also give ``read_layer_slope``'s value and
+    slope along the layer's tiling, kept in columns ``4 j ..`` and ``4 (L + j) ..`` (``L`` layers)
+    for the gradient lane: that value may differ from the forward's in the last bit (a footprint of
+    several taps is divided by its taps, where the forward multiplies by their reciprocal) or the
+    sign of a zero, and the one-pixel gradient blends the values it reads with the slopes."""
     ...
 
 
@@ -66,8 +72,12 @@ def grad_lanes_take(args: SplatArgs) -> bool:
 
 def lane_saved(args: SplatArgs) -> int:
     """Floats a pixel keeps for the texel-gradient lane (``Kernels.lane_saved``): its layers'
-    colours, 4 a layer. Sampling the layers again was a fifth of a splat's forward and backward."""
-    return 4 * args.reads.params.num_layers
+    colours, 4 a layer, and where the tiling needs its gradient, their slopes along it, 4 more
+    (:func:`layer_values_lane`). Sampling the layers again was a fifth of a splat's forward and
+    backward; with the slopes, which the forward takes from its own taps, it was 60% of it (the
+    fit's view: anisotropic, triplanar layers)."""
+    params = args.reads.params
+    return (8 if params.tiling.requires_grad else 4) * params.num_layers
 
 
 @wp.func_native(cpu_snippet("return wt_layer_blend_lane(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, keep, saved, colour);\n", "return {};\n"))
@@ -77,19 +87,6 @@ def layer_blend_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted:
     """``colour`` plus layer ``j`` (:func:`layer_values_lane`, the same arguments) weighted by
     ``weighted``, row by row: ``splat_blend.blend``'s sum without height blending, a layer at a
     time, so that the lane's colours are never held for all layers at once."""
-    ...
-
-
-@wp.func_native(cpu_snippet("return wt_layer_slopes_lane(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, saved);\n", "return {};\n"))
-def layer_slopes_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
-                      uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3,
-                      saved: wp.array2d(dtype=float)) -> lane_colours:  # fmt: skip
-    """Row ``l``: ``read_layer_slope``'s slope of layer ``j`` of ``tex`` at lane pixel ``l`` (the
-    derivative of its colour along the layer's tiling; 0 where ``weighted[l]`` is not positive), for
-    the tiling's gradient. Its value replaces the colour the forward lane kept (``saved``'s row
-    ``base + l``, columns ``4 j .. 4 j + 3``), as the one-pixel gradient blends the values read with
-    the slopes: they may differ from the forward's in the last bit (a footprint of several taps is
-    divided by its taps, where the forward multiplies by their reciprocal) or the sign of a zero."""
     ...
 
 
@@ -225,22 +222,13 @@ def lane_bodies(cap: int, pixels_t, grads_t):
     def grad_lane(args: SplatArgs, pixels: pixels_t, base: wp.int32, grads: grads_t, adj: wp.array2d(dtype=float)):
         """Launched only where :func:`grad_lanes_take` holds (the one-pixel kernel runs the rest), after
         a forward lane that kept each pixel's layer colours in ``pixels.saved`` (``_op`` sees to both).
-        With the tiling's gradient, each layer is read again with its slope (:func:`layer_slopes_lane`),
-        and each pixel's layers add ``dot(gc, dc) + ghv · dhv`` (``dhv`` is 0: the lanes take no height
-        layers) into the tiling, in pixel and layer order."""
+        With the tiling's gradient, each pixel's layers add ``dot(gc, dc) + ghv · dhv`` into the tiling,
+        in pixel and layer order, of the slopes ``dc`` the forward kept (:func:`lane_saved`; ``dhv`` is
+        0: the lanes take no height layers)."""
         count = wp.min(adj.shape[0] - base, LANES)
         params = args.reads.params
         rs, w1s, tri_w = lane_weights(args, pixels, base, count)
         tiling_grads = grads.tiling.shape[0] > 0
-        slopes = lane_layers_t()  # rows l * cap + j: layer j's slope along its tiling at pixel l
-        if tiling_grads:
-            for j in range(params.num_layers):
-                weighted = lane_floats()
-                for l in range(LANES):  # unrolled (w1s is 0 past count)
-                    weighted[l] = w1s[l, j]
-                slope = layer_slopes_lane(args.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, pixels.saved)
-                for l in range(count):
-                    slopes[l * cap + j] = slope[l]
         ghvs = lane_weights_t()  # each pixel's layers' heights' gradients, for the tiling's
         if wp.static(cap == 8):  # the blend and weights backwards for the whole lane, and each pixel's splat maps' adds
             back = blend_backward_lane8(params, pixels.surface, base, count, w1s, rs, adj, pixels.saved, args.maps, grads.maps, args.map_smp, pixels.uv0)
@@ -274,13 +262,16 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                     for j in range(params.num_layers):
                         back[l * cap + j] = gc[j]
                         ghvs[l, j] = ghv[j]
-        if tiling_grads:  # each pixel's layers' adds into the tiling, in pixel order (scatter's)
+        if tiling_grads:  # each pixel's layers' adds into the tiling, in pixel order (scatter's), of the slopes the forward kept
             dhv = float(0.0)
             for l in range(count):
-                if pixels.surface.mask[base + l] != 0.0:
+                i = base + l
+                if pixels.surface.mask[i] != 0.0:
                     for j in range(params.num_layers):
                         if w1s[l, j] > 0.0:
-                            wp.atomic_add(grads.tiling, wp.min(j, grads.tiling.shape[0] - 1), wp.dot(back[l * cap + j], slopes[l * cap + j]) + ghvs[l, j] * dhv)
+                            k = 4 * (params.num_layers + j)
+                            dc = wp.vec4(pixels.saved[i, k], pixels.saved[i, k + 1], pixels.saved[i, k + 2], pixels.saved[i, k + 3])
+                            wp.atomic_add(grads.tiling, wp.min(j, grads.tiling.shape[0] - 1), wp.dot(back[l * cap + j], dc) + ghvs[l, j] * dhv)
         if grads.layers.texels.shape[0] > 0:
             for j in range(params.num_layers):  # each layer's adds: without face layers, layers add into texels of their own
                 weighted = lane_floats()

@@ -60,15 +60,18 @@ WT_INLINE wt_lane_reads wt_layer_reads(const Tex& tex, const Reads& reads, int j
 
 // filters.sample_footprint_derivatives of each read lane (weight[l] > 0): (value, d/du, d/dv,
 // d/dlod, d/dspread) of its footprint's taps, each tap's sample_lod_derivatives at
-// footprint.footprint_uv summed in tap order from 0, then divided by the taps. Lanes past their
-// taps, not read, or not finite read (0, 0) at level 0; a tap not finite gives a NaN value and zero
-// derivatives. Rows of the lanes not read are left as they are.
+// footprint.footprint_uv summed in tap order from 0, then divided by the taps; and from the same
+// taps, forward[l], filters.sample_footprint's value (a one-tap footprint's sample itself, else the
+// sum times 1 / taps: wt_accumulate_footprint's). Lanes past their taps, not read, or not finite
+// read (0, 0) at level 0; a tap not finite gives a NaN value and zero derivatives. A one-tap
+// footprint's step is 0 (wt_footprint), so footprint_uv reads at its UV as sample_footprint does.
+// Rows of the lanes not read are left as they are.
 // twin: filters.sample_footprint_derivatives
-template <class Tex, class Smp> WT_INLINE void wt_footprint_slopes(const Tex& tex, const Smp& smp, int layer,
-                                                                   const float* u, const float* v, const float* lod,
-                                                                   const float* du, const float* dv, const float* taps,
-                                                                   const float* weight, wt_f4* value, wt_f4* d_u,
-                                                                   wt_f4* d_v, wt_f4* d_lod, wt_f4* d_spread) {
+template <class Tex, class Smp>
+WT_INLINE void wt_footprint_slopes(const Tex& tex, const Smp& smp, int layer, const float* u, const float* v,
+                                   const float* lod, const float* du, const float* dv, const float* taps,
+                                   const float* weight, wt_f4* forward, wt_f4* value, wt_f4* d_u, wt_f4* d_v,
+                                   wt_f4* d_lod, wt_f4* d_spread) {
     float us[WT_L], vs[WT_L], fractions[WT_L], lods[WT_L];
     int levels[WT_L], layers[WT_L];
     bool read[WT_L];
@@ -104,7 +107,9 @@ template <class Tex, class Smp> WT_INLINE void wt_footprint_slopes(const Tex& te
         for (int l = 0; l < WT_L; ++l) {
             if (!tap[l]) continue;
             const wt_f4 tap_u = finite[l] ? r_u[l] : zero, tap_v = finite[l] ? r_v[l] : zero;
-            value[l] = value[l] + (finite[l] ? result[l] : nan4);
+            const wt_f4 r = finite[l] ? result[l] : nan4;
+            if (k == 0) forward[l] = r;
+            value[l] = value[l] + r;
             d_u[l] = d_u[l] + tap_u;
             d_v[l] = d_v[l] + tap_v;
             d_lod[l] = d_lod[l] + (finite[l] ? r_lod[l] : zero);
@@ -113,6 +118,7 @@ template <class Tex, class Smp> WT_INLINE void wt_footprint_slopes(const Tex& te
     }
     for (int l = 0; l < WT_L; ++l) {
         if (!read[l]) continue;
+        if (taps[l] != 1.0f) forward[l] = value[l] * (1.0f / taps[l]);
         value[l] = value[l] / taps[l], d_u[l] = d_u[l] / taps[l], d_v[l] = d_v[l] / taps[l];
         d_lod[l] = d_lod[l] / taps[l], d_spread[l] = d_spread[l] / taps[l];
     }
@@ -128,19 +134,22 @@ WT_INLINE float wt_lod_scale_slope(float width, float height, float dx0, float d
     return rho2 > (float)1.0e-30 && rho2 < wt_float_max ? 1.0f / (scale * (float)0.6931471805599453) : 0.0f;
 }
 
-// lanes.splat.layer_slopes_lane: splat_layers.read_layer_slope of layer j of tex at each lane pixel
-// l with weighted[l] > 0 (no face layers, plain sampling): per read k of wt_layer_reads with a
-// positive weight w, value += w · v and slope += w · (d/du · du/dt + d/dv · dv/dt + d/dlod ·
-// dlod/dt + d/dspread / t), of the read's wt_footprint_slopes and layer_read_slopes' UV and LOD
-// slopes along the tiling t. Row l of the result: the slope (0 for the other pixels); the value is
-// stored in saved's row base + l, columns 4 j .. 4 j + 3 (SplatPixels.saved), where the blend's
-// gradient reads it.
+// wt_layer_values_lane's value where the tiling needs its gradient, and what that gradient reads,
+// kept from the same taps: splat_layers.read_layer_slope of layer j of tex at each lane pixel l
+// with weighted[l] > 0 (no face layers, plain sampling). Per read k of wt_layer_reads with a
+// positive weight w: value += w · v and slope += w · (d/du · du/dt + d/dv · dv/dt + d/dlod · dlod/dt
+// + d/dspread / t), of the read's wt_footprint_slopes and layer_read_slopes' UV and LOD slopes along
+// the tiling t. The value and the slope go into saved's row base + l, columns 4 j .. 4 j + 3 and
+// 4 (L + j) .. 4 (L + j) + 3 (L layers): the gradient's blend reads the values read with the
+// slopes, which may differ from the forward's in the last bit (a footprint of several taps is
+// divided by its taps, where the forward multiplies by their reciprocal) or the sign of a zero.
+// Row l of the result: read_layer's value (wt_layer_values_lane's).
 // twin: splat_layers.read_layer_slope
 template <class Tex, class Reads, class Floats, class UV, class Surface, class TriW, class Saved>
-WT_INLINE wt_lane_colours wt_layer_slopes_lane(const Tex& tex, const Reads& reads, int j, const Floats& weighted,
-                                               const UV& uv0, const UV& uv0_dx, const UV& uv0_dy,
-                                               const Surface& surface, int base, int count, const TriW& tri_w,
-                                               const Saved& saved) {
+WT_INLINE wt_lane_colours wt_layer_values_slopes(const Tex& tex, const Reads& reads, int j, const Floats& weighted,
+                                                 const UV& uv0, const UV& uv0_dx, const UV& uv0_dy,
+                                                 const Surface& surface, int base, int count, const TriW& tri_w,
+                                                 const Saved& saved) {
     const auto& params = reads.params;
     const auto& proj = reads.proj;
     const float t = wt_float(params.tiling, wp::min(j, params.tiling.shape[0] - 1));  // layer_tiling
@@ -161,12 +170,13 @@ WT_INLINE wt_lane_colours wt_layer_slopes_lane(const Tex& tex, const Reads& read
     }
     const float o[3] = {(float)proj.origin.c[0], (float)proj.origin.c[1], (float)proj.origin.c[2]};
     wt_f4 value[WT_L], slope[WT_L];
+    wt_lane_colours out;  // read_layer's: += w · sample per projection where triplanar, the one read's sample where not
     for (int l = 0; l < WT_L; ++l) value[l] = slope[l] = 0.0f;
     for (int k = 0; k < (triplanar ? 3 : 1); ++k) {
-        wt_f4 v[WT_L], d_u[WT_L], d_v[WT_L], d_lod[WT_L], d_spread[WT_L];
+        wt_f4 f[WT_L], v[WT_L], d_u[WT_L], d_v[WT_L], d_lod[WT_L], d_spread[WT_L];
         const float* weight = at.data[9 + k];
         wt_footprint_slopes(tex, reads.smp, j, at.data[k], at.data[3 + k], at.data[6 + k], at.data[12 + k],
-                            at.data[15 + k], at.data[18 + k], weight, v, d_u, d_v, d_lod, d_spread);
+                            at.data[15 + k], at.data[18 + k], weight, f, v, d_u, d_v, d_lod, d_spread);
         const int axis = params.projection == WT_PROJECT_WORLD_XZ ? 1 : k;
         const int c0 = axis == 0 ? 2 : 0, c1 = axis == 1 ? 2 : 1;  // projection.plane_coords
         for (int l = 0; l < count; ++l) {
@@ -183,18 +193,18 @@ WT_INLINE wt_lane_colours wt_layer_slopes_lane(const Tex& tex, const Reads& read
                 uv_slope1 = p[c1][l] + o[c1];
                 lod_slope = wt_lod_scale_slope(width, height, dx[c0][l], dx[c1][l], dy[c0][l], dy[c1][l], t);
             }
+            for (int c = 0; c < 4; ++c) out.data[l][c] = triplanar ? out.data[l][c] + weight[l] * f[l][c] : f[l][c];
             value[l] = value[l] + weight[l] * v[l];
             slope[l] = slope[l] +
                        weight[l] * (d_u[l] * uv_slope0 + d_v[l] * uv_slope1 + d_lod[l] * lod_slope + d_spread[l] / t);
         }
     }
-    wt_lane_colours out;
     for (int l = 0; l < count; ++l) {
         if (!(weighted.c[l] > 0.0f)) continue;
-        float* row = (float*)((char*)saved.data + (long long)(base + l) * saved.strides[0]);
+        char* row = (char*)saved.data + (long long)(base + l) * saved.strides[0];
         for (int c = 0; c < 4; ++c) {
-            *(float*)((char*)row + (long long)(4 * j + c) * saved.strides[1]) = value[l][c];
-            out.data[l][c] = slope[l][c];
+            *(float*)(row + (long long)(4 * j + c) * saved.strides[1]) = value[l][c];
+            *(float*)(row + (long long)(4 * (params.num_layers + j) + c) * saved.strides[1]) = slope[l][c];
         }
     }
     return out;
@@ -204,13 +214,16 @@ WT_INLINE wt_lane_colours wt_layer_slopes_lane(const Tex& tex, const Reads& read
 // wt_layer_reads' reads as read_layer reads them (per projection value += w · sample where
 // triplanar, value = sample for the one read of the other projections; 0 where weighted[l] is not
 // positive). Where keep and saved is not empty, also stored in saved's row base + l, columns 4 j ..
-// 4 j + 3 (SplatPixels.saved).
+// 4 j + 3 (SplatPixels.saved); where saved has columns for the tiling's slopes too (8 a layer),
+// wt_layer_values_slopes keeps them.
 // twin: splat_layers._layer_reads:read_layer
 template <class Tex, class Reads, class Floats, class UV, class Surface, class TriW, class Saved>
 WT_INLINE wt_lane_colours wt_layer_values_lane(const Tex& tex, const Reads& reads, int j, const Floats& weighted,
                                                const UV& uv0, const UV& uv0_dx, const UV& uv0_dy,
                                                const Surface& surface, int base, int count, const TriW& tri_w, int keep,
                                                const Saved& saved) {
+    if (keep && saved.shape[0] > 0 && saved.shape[1] >= 8 * reads.params.num_layers)  // the tiling's slopes too
+        return wt_layer_values_slopes(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, saved);
     int layer[WT_L];
     for (int l = 0; l < WT_L; ++l) layer[l] = j;
     const Tex* texs[3] = {&tex, &tex, &tex};
