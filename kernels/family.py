@@ -104,6 +104,9 @@ class Kernels:
             ``pixels.saved`` for ``texel_grad_lanes`` to read instead of recomputing them; where it
             is set, ``texel_grad_lanes`` runs only after ``lanes`` ran the launch and kept them.
             ``None``: nothing is kept.
+        kept_lanes: ``lanes`` for a forward that keeps what ``texel_grad_lanes`` reads, where
+            keeping it needs code a forward alone does not (in the gradient's module, so that only
+            jobs that take gradients compile it); ``None``: ``lanes`` keeps it.
     """
 
     forward: Any
@@ -116,6 +119,7 @@ class Kernels:
     lanes_take: Callable[[Any], bool] | None = None
     grad_lanes_take: Callable[[Any], bool] | None = None
     lane_saved: Callable[[Any], int] | None = None
+    kept_lanes: Any = None
 
     def launched(self, device, grad: bool = False):
         """The kernel a forward launch (``grad``: a hand-written gradient) runs on ``device``, as
@@ -124,7 +128,7 @@ class Kernels:
 
     def all(self) -> list:
         """Every Warp kernel of this configuration, the staged steps' included."""
-        kernels = [k for k in (self.forward, self.texel_grad, self.adjoint, self.lanes, self.texel_grad_lanes) if k is not None]
+        kernels = [k for k in (self.forward, self.texel_grad, self.adjoint, self.lanes, self.texel_grad_lanes, self.kept_lanes) if k is not None]
         if self.staged is not None:
             kernels += self.staged.first.all() + self.staged.then.all()
         return kernels

@@ -367,10 +367,11 @@ def splat_kernels(*, capacity: int, stochastic: bool) -> Kernels:
     forward, texel_grad, _ = pixel_kernels(f"splat{capacity}" + ("_stochastic" if stochastic else ""), module=module, args=SplatArgs, pixels=SplatPixels, out=wp.array2d(dtype=float),
                                            body=body, scatter=scatter_body, grads=SplatGrads)  # fmt: skip
     grads = ("args.layers", "args.heights", "args.maps", "args.reads.params.transition", None if stochastic else "args.reads.params.tiling")
-    lanes = grad_lanes = None
+    lanes = grad_lanes = kept_lanes = None
     if not stochastic:
-        lane, grad_lane = lane_bodies(capacity, SplatPixels, SplatGrads)
+        lane, kept_lane, grad_lane = lane_bodies(capacity, SplatPixels, SplatGrads)
         lanes = lane_kernel(lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), module=module, name=f"splat{capacity}_lanes", covered=splat_covered)
+        kept_lanes = lane_kernel(kept_lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), module=module + ".grad", name=f"splat{capacity}_kept_lanes", covered=splat_covered)
         grad_lanes = lane_kernel(grad_lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), grads_t=SplatGrads, module=module + ".grad", name=f"splat{capacity}_texel_grad_lanes", covered=splat_covered)
     return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity), lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=lanes_take, grad_lanes_take=grad_lanes_take,
-                   lane_saved=None if stochastic else lane_saved)  # fmt: skip
+                   lane_saved=None if stochastic else lane_saved, kept_lanes=kept_lanes)  # fmt: skip

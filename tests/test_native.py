@@ -19,7 +19,7 @@ from warptex.kernels.texels import read_channels
 FUNCTION = type(read_channels)  # Warp's @wp.func type (its module path differs across releases)
 HEADERS = sorted(native.folder().glob("*.h"))
 TWIN = re.compile(r"//\s*twin:\s*(\S+)")
-DEFINED = re.compile(r"\b(wt_\w+)\s*\(")
+DEFINED = re.compile(r"\b(wt_\w+)\s*(?:<[^<>()]*>)?\s*\(")  # a call, its template arguments given or not
 
 
 def _twins(text: str) -> list[str]:

@@ -146,6 +146,7 @@ def _run_path(kernels: Kernels, path: str, count: int, inputs: dict, result, dev
         if kernels.lane_saved is not None and grad_lanes is not None:  # a gradient lane that reads what the forward lane keeps:
             # held by the recorded pass alone; once it is gone, a kept block for the next (warptex._memory)
             inputs["pixels"].saved = empty((count, kernels.lane_saved(inputs["args"])), float, device)
+            lanes = kernels.kept_lanes or lanes
         launch(kernels.forward, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, lanes=lanes, **cut,
                backward=_texel_gradient(kernels, count, inputs, result, device, cut, touched, grad_lanes))  # fmt: skip
     elif kernels.adjoint is not None:

@@ -38,20 +38,33 @@ from .splat_blend import GRAD_HEIGHT, GRAD_TRANSITION, blend_backward_lane8, ble
 _lane_vec3 = wp.types.matrix(shape=(LANES, 3), dtype=float)
 
 
-@wp.func_native(cpu_snippet("return wt_layer_values_lane(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, keep, saved);\n", "return {};\n"))
+_VALUES = "return wt_layer_values_lane<{}>(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, keep, saved);\n"
+_BLEND = "return wt_layer_blend_lane<{}>(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, keep, saved, colour);\n"
+
+
+@wp.func_native(cpu_snippet(_VALUES.format("false"), "return {};\n"))
 def layer_values_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
                       uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3, keep: wp.int32,
                       saved: wp.array2d(dtype=float)) -> lane_colours:  # fmt: skip
     """Row ``l``: layer ``j`` of ``tex`` read at lane pixel ``l`` over the footprints of
-    ``wt_layer_reads``' reads as ``read_layer`` reads it (0 where
-    ``weighted[l]`` is not positive); one native call rather than a read per projection. Where
-    ``keep`` and ``saved`` is not empty, also stored in ``saved``'s row ``base + l``, columns
-    ``4 j .. 4 j + 3`` (``SplatPixels.saved``). Where ``saved`` has 8 columns a layer (the tiling
-    needs its gradient: :func:`lane_saved`), the same taps also give ``read_layer_slope``'s value and
-    slope along the layer's tiling, kept in columns ``4 j ..`` and ``4 (L + j) ..`` (``L`` layers)
-    for the gradient lane: that value may differ from the forward's in the last bit (a footprint of
-    several taps is divided by its taps, where the forward multiplies by their reciprocal) or the
-    sign of a zero, and the one-pixel gradient blends the values it reads with the slopes."""
+    ``wt_layer_reads``' reads as ``read_layer`` reads it (0 where ``weighted[l]`` is not positive);
+    one native call rather than a read per projection. Where ``keep`` and ``saved`` is not empty,
+    also stored in ``saved``'s row ``base + l``, columns ``4 j .. 4 j + 3`` (``SplatPixels.saved``)."""
+    ...
+
+
+@wp.func_native(cpu_snippet(_VALUES.format("true"), "return {};\n"))
+def layer_values_kept_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
+                           uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3, keep: wp.int32,
+                           saved: wp.array2d(dtype=float)) -> lane_colours:  # fmt: skip
+    """:func:`layer_values_lane` for the forward lane that keeps what the gradient lane reads
+    (``Kernels.kept_lanes``): where ``saved`` has 8 columns a layer (the tiling needs its gradient:
+    :func:`lane_saved`), the same taps also give ``read_layer_slope``'s value and slope along the
+    layer's tiling, kept in columns ``4 j ..`` and ``4 (L + j) ..`` (``L`` layers). That value may
+    differ from the forward's in the last bit (a footprint of several taps is divided by its taps,
+    where the forward multiplies by their reciprocal) or the sign of a zero, and the one-pixel
+    gradient blends the values it reads with the slopes. Only this one compiles the slopes' code
+    (``wt_layer_values_slopes``: 4 s more of a render's cold compile, which never needs it)."""
     ...
 
 
@@ -73,20 +86,28 @@ def grad_lanes_take(args: SplatArgs) -> bool:
 def lane_saved(args: SplatArgs) -> int:
     """Floats a pixel keeps for the texel-gradient lane (``Kernels.lane_saved``): its layers'
     colours, 4 a layer, and where the tiling needs its gradient, their slopes along it, 4 more
-    (:func:`layer_values_lane`). Sampling the layers again was a fifth of a splat's forward and
+    (:func:`layer_values_kept_lane`). Sampling the layers again was a fifth of a splat's forward and
     backward; with the slopes, which the forward takes from its own taps, it was 60% of it (the
     fit's view: anisotropic, triplanar layers)."""
     params = args.reads.params
     return (8 if params.tiling.requires_grad else 4) * params.num_layers
 
 
-@wp.func_native(cpu_snippet("return wt_layer_blend_lane(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, keep, saved, colour);\n", "return {};\n"))
+@wp.func_native(cpu_snippet(_BLEND.format("false"), "return {};\n"))
 def layer_blend_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
                      uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3, keep: wp.int32,
                      saved: wp.array2d(dtype=float), colour: lane_colours) -> lane_colours:  # fmt: skip
     """``colour`` plus layer ``j`` (:func:`layer_values_lane`, the same arguments) weighted by
     ``weighted``, row by row: ``splat_blend.blend``'s sum without height blending, a layer at a
     time, so that the lane's colours are never held for all layers at once."""
+    ...
+
+
+@wp.func_native(cpu_snippet(_BLEND.format("true"), "return {};\n"))
+def layer_blend_kept_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
+                          uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3, keep: wp.int32,
+                          saved: wp.array2d(dtype=float), colour: lane_colours) -> lane_colours:  # fmt: skip
+    """:func:`layer_blend_lane` of :func:`layer_values_kept_lane`."""
     ...
 
 
@@ -104,8 +125,10 @@ def scatter_layer_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, j: 
 
 @functools.cache
 def lane_bodies(cap: int, pixels_t, grads_t):
-    """``(lane, grad_lane)``: the lane bodies of the plain splat of ``cap`` layers, forward and texel
-    gradient (``pixels_t``, ``grads_t``: :class:`~.splat.SplatPixels`, :class:`~.splat.SplatGrads`)."""
+    """``(lane, kept_lane, grad_lane)``: the lane bodies of the plain splat of ``cap`` layers: the
+    forward, the forward that keeps what the gradient lane reads (``Kernels.kept_lanes``), and the
+    texel gradient (``pixels_t``, ``grads_t``: :class:`~.splat.SplatPixels`,
+    :class:`~.splat.SplatGrads`)."""
     f = blend_functions(cap)
     weights_t, colours_t = f.weights_t, f.colours_t
     lane_weights_t = wp.types.matrix(shape=(LANES, cap), dtype=float)
@@ -152,30 +175,6 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                         tri_w[l, e] = tw[e]
         return rs, w1s, tri_w
 
-    def lane_layers(args: SplatArgs, pixels: pixels_t, base: wp.int32, count: wp.int32, w1s: lane_weights_t, tri_w: _lane_vec3):
-        """``(colours, heights)``: read_layers for each lane pixel, layer by layer, each layer's reads
-        and its texels' for the whole lane (:func:`layer_values_lane`); for each texture a layer reads
-        (its colour, and its separate height: ``pick``) one call, compiled once."""
-        params = args.reads.params
-        colours = lane_layers_t()
-        heights = lane_weights_t()
-        for j in range(params.num_layers):  # read_layers: every weighted layer, lane by lane
-            weighted = lane_floats()
-            for l in range(count):
-                weighted[l] = w1s[l, j]
-            for t in range(layer_textures(params)):
-                tex = pick(args.layers, args.heights, t)
-                value = layer_values_lane(tex, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, wp.where(t == 0, 1, 0), pixels.saved)
-                for l in range(count):
-                    if w1s[l, j] > 0.0:
-                        if t == 0:
-                            colours[l * cap + j] = value[l]
-                            if params.height_mode == HEIGHT_CHANNEL:
-                                heights[l, j] = value[l, params.height_channel]
-                        else:
-                            heights[l, j] = value[l, 0]
-        return colours, heights
-
     def pixel_layers(w1s: lane_weights_t, colours: lane_layers_t, heights: lane_weights_t, l: wp.int32, params: SplatParams):
         """``(w1, c, hv)``: lane pixel ``l``'s weights, colours and heights, as the one-pixel body holds them."""
         w1 = weights_t()
@@ -189,35 +188,68 @@ def lane_bodies(cap: int, pixels_t, grads_t):
         return w1, c, hv
 
     lane_weights = inlined(specialised(lane_weights, f"splat{cap}_lane_weights"), module=module)
-    lane_layers = inlined(specialised(lane_layers, f"splat{cap}_lane_layers"), module=module)
     pixel_layers = inlined(specialised(pixel_layers, f"splat{cap}_pixel_layers"), module=module)
 
-    def lane(args: SplatArgs, pixels: pixels_t, base: wp.int32, out: wp.array2d(dtype=float)):
-        count = wp.min(out.shape[0] - base, LANES)
-        params = args.reads.params
-        rs, w1s, tri_w = lane_weights(args, pixels, base, count)
-        if params.height_mode == HEIGHT_NONE:  # the blend a layer at a time
-            blended = lane_colours()
-            for j in range(params.num_layers):
+    def forward_lane(kept: bool):
+        """The forward lane body, plain or (``kept``) the one that keeps, where asked, the tiling's
+        slopes for the gradient lane (:func:`layer_values_kept_lane`)."""
+        values_lane, blend_lane = (layer_values_kept_lane, layer_blend_kept_lane) if kept else (layer_values_lane, layer_blend_lane)
+        suffix = "_kept" if kept else ""
+
+        def lane_layers(args: SplatArgs, pixels: pixels_t, base: wp.int32, count: wp.int32, w1s: lane_weights_t, tri_w: _lane_vec3):
+            """``(colours, heights)``: read_layers for each lane pixel, layer by layer, each layer's reads
+            and its texels' for the whole lane (``layer_values_lane``); for each texture a layer reads
+            (its colour, and its separate height: ``pick``) one call, compiled once."""
+            params = args.reads.params
+            colours = lane_layers_t()
+            heights = lane_weights_t()
+            for j in range(params.num_layers):  # read_layers: every weighted layer, lane by lane
                 weighted = lane_floats()
-                for l in range(LANES):  # unrolled (w1s is 0 past count)
+                for l in range(count):
                     weighted[l] = w1s[l, j]
-                blended = layer_blend_lane(args.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, 1, pixels.saved, blended)
-            for l in range(count):
-                write_channels(out, base + l, wp.where(pixels.surface.mask[base + l] != 0.0, blended[l], wp.vec4(0.0)))
-            return
-        colours, heights = lane_layers(args, pixels, base, count, w1s, tri_w)
-        if wp.static(cap == 8):  # the blend for the whole lane
-            colour = blend_lane8(params, pixels.surface, base, count, w1s, colours, heights)
-            for l in range(count):
-                write_channels(out, base + l, colour[l])
-        else:
-            for l in range(count):  # each pixel's blend
-                colour = wp.vec4(0.0)
-                if pixels.surface.mask[base + l] != 0.0:
-                    w1, c, hv = pixel_layers(w1s, colours, heights, l, params)
-                    colour = f.blend(w1, c, hv, params)
-                write_channels(out, base + l, colour)
+                for t in range(layer_textures(params)):
+                    tex = pick(args.layers, args.heights, t)
+                    value = values_lane(tex, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, wp.where(t == 0, 1, 0), pixels.saved)
+                    for l in range(count):
+                        if w1s[l, j] > 0.0:
+                            if t == 0:
+                                colours[l * cap + j] = value[l]
+                                if params.height_mode == HEIGHT_CHANNEL:
+                                    heights[l, j] = value[l, params.height_channel]
+                            else:
+                                heights[l, j] = value[l, 0]
+            return colours, heights
+
+        lane_layers = inlined(specialised(lane_layers, f"splat{cap}_lane_layers{suffix}"), module=module)
+
+        def lane(args: SplatArgs, pixels: pixels_t, base: wp.int32, out: wp.array2d(dtype=float)):
+            count = wp.min(out.shape[0] - base, LANES)
+            params = args.reads.params
+            rs, w1s, tri_w = lane_weights(args, pixels, base, count)
+            if params.height_mode == HEIGHT_NONE:  # the blend a layer at a time
+                blended = lane_colours()
+                for j in range(params.num_layers):
+                    weighted = lane_floats()
+                    for l in range(LANES):  # unrolled (w1s is 0 past count)
+                        weighted[l] = w1s[l, j]
+                    blended = blend_lane(args.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, 1, pixels.saved, blended)
+                for l in range(count):
+                    write_channels(out, base + l, wp.where(pixels.surface.mask[base + l] != 0.0, blended[l], wp.vec4(0.0)))
+                return
+            colours, heights = lane_layers(args, pixels, base, count, w1s, tri_w)
+            if wp.static(cap == 8):  # the blend for the whole lane
+                colour = blend_lane8(params, pixels.surface, base, count, w1s, colours, heights)
+                for l in range(count):
+                    write_channels(out, base + l, colour[l])
+            else:
+                for l in range(count):  # each pixel's blend
+                    colour = wp.vec4(0.0)
+                    if pixels.surface.mask[base + l] != 0.0:
+                        w1, c, hv = pixel_layers(w1s, colours, heights, l, params)
+                        colour = f.blend(w1, c, hv, params)
+                    write_channels(out, base + l, colour)
+
+        return inlined(specialised(lane, f"splat{cap}_lane{suffix}"), module=module)
 
     def grad_lane(args: SplatArgs, pixels: pixels_t, base: wp.int32, grads: grads_t, adj: wp.array2d(dtype=float)):
         """Launched only where :func:`grad_lanes_take` holds (the one-pixel kernel runs the rest), after
@@ -281,4 +313,4 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                     g[l] = back[l * cap + j]
                 scatter_layer_lane(args.layers, grads.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, g)
 
-    return inlined(specialised(lane, f"splat{cap}_lane"), module=module), inlined(specialised(grad_lane, f"splat{cap}_grad_lane"), module=module)
+    return forward_lane(False), forward_lane(True), inlined(specialised(grad_lane, f"splat{cap}_grad_lane"), module=module)

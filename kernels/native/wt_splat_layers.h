@@ -214,16 +214,19 @@ WT_INLINE wt_lane_colours wt_layer_values_slopes(const Tex& tex, const Reads& re
 // wt_layer_reads' reads as read_layer reads them (per projection value += w · sample where
 // triplanar, value = sample for the one read of the other projections; 0 where weighted[l] is not
 // positive). Where keep and saved is not empty, also stored in saved's row base + l, columns 4 j ..
-// 4 j + 3 (SplatPixels.saved); where saved has columns for the tiling's slopes too (8 a layer),
-// wt_layer_values_slopes keeps them.
+// 4 j + 3 (SplatPixels.saved); with Kept (the forward lane that keeps what the gradient lane reads),
+// where saved has columns for the tiling's slopes too (8 a layer), wt_layer_values_slopes keeps
+// them. Without Kept, the slopes' code is not compiled (a forward that keeps nothing: a render).
 // twin: splat_layers._layer_reads:read_layer
-template <class Tex, class Reads, class Floats, class UV, class Surface, class TriW, class Saved>
+template <bool Kept, class Tex, class Reads, class Floats, class UV, class Surface, class TriW, class Saved>
 WT_INLINE wt_lane_colours wt_layer_values_lane(const Tex& tex, const Reads& reads, int j, const Floats& weighted,
                                                const UV& uv0, const UV& uv0_dx, const UV& uv0_dy,
                                                const Surface& surface, int base, int count, const TriW& tri_w, int keep,
                                                const Saved& saved) {
-    if (keep && saved.shape[0] > 0 && saved.shape[1] >= 8 * reads.params.num_layers)  // the tiling's slopes too
-        return wt_layer_values_slopes(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, saved);
+    if constexpr (Kept)
+        if (keep && saved.shape[0] > 0 && saved.shape[1] >= 8 * reads.params.num_layers)  // the tiling's slopes too
+            return wt_layer_values_slopes(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w,
+                                          saved);
     int layer[WT_L];
     for (int l = 0; l < WT_L; ++l) layer[l] = j;
     const Tex* texs[3] = {&tex, &tex, &tex};
@@ -244,13 +247,13 @@ WT_INLINE wt_lane_colours wt_layer_values_lane(const Tex& tex, const Reads& read
 
 // lanes.splat.layer_blend_lane: colour plus layer j (wt_layer_values_lane) weighted by weighted,
 // row by row: splat_blend.blend's sum without height blending, a layer at a time.
-template <class Tex, class Reads, class Floats, class UV, class Surface, class TriW, class Saved>
+template <bool Kept, class Tex, class Reads, class Floats, class UV, class Surface, class TriW, class Saved>
 WT_INLINE wt_lane_colours wt_layer_blend_lane(const Tex& tex, const Reads& reads, int j, const Floats& weighted,
                                               const UV& uv0, const UV& uv0_dx, const UV& uv0_dy, const Surface& surface,
                                               int base, int count, const TriW& tri_w, int keep, const Saved& saved,
                                               const wt_lane_colours& colour) {
-    const wt_lane_colours value =
-        wt_layer_values_lane(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, keep, saved);
+    const wt_lane_colours value = wt_layer_values_lane<Kept>(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface,
+                                                             base, count, tri_w, keep, saved);
     wt_lane_colours out = colour;
     for (int l = 0; l < WT_L; ++l)
         for (int c = 0; c < 4; ++c) out.data[l][c] = out.data[l][c] + weighted.c[l] * value.data[l][c];
