@@ -764,24 +764,30 @@ def test_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter
     assert threads > 1 or (("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched) == takes
 
 
-# The tiling-gradient cases' address modes and layers' texel formats (one each, to keep the test short).
-_TILING_CASES = {"uv": ("wrap", "float32"), "uv, height channel": ("clamp", "unorm8"), "uv, not normalized, tiling per layer": ("border", "float32"),
-                 "triplanar": ("mirror", "float16"), "triplanar, no heights": ("wrap", "srgb8")}  # fmt: skip
+# The tiling-gradient cases: the splat's options, an address mode and the layers' texel format (one each, to keep the test short).
+_TILING_CASES = {
+    "uv": (SPLAT_CASES["uv"], "wrap", "float32"),
+    "uv, height channel": (SPLAT_CASES["uv, height channel"], "clamp", "unorm8"),
+    "uv, not normalized, tiling per layer": (SPLAT_CASES["uv, not normalized, tiling per layer"], "border", "float32"),
+    "world xz, height channel": ({"projection": "world_xz", "height_blend": 0.3, "tiling": [0.8, 1.2, 1.9, 0.6, 2.2]}, "mirror", "float32"),
+    "triplanar": (SPLAT_CASES["triplanar"], "mirror", "float16"),
+    "triplanar, no heights": (SPLAT_CASES["triplanar, no heights"], "wrap", "srgb8"),
+}
 
 
 @pytest.mark.parametrize("threads", [1, 3])
 @pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
-@pytest.mark.parametrize("case", ["uv", "uv, height channel", "uv, not normalized, tiling per layer", "triplanar", "triplanar, no heights"])
+@pytest.mark.parametrize("case", list(_TILING_CASES))
 def test_splat_tiling_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter, threads):
-    """The tiling's gradient (the fit's), one tiling for every layer or one each, in every address
-    mode and texel format: the forward lane keeps each layer's slope from its own taps
+    """The tiling's gradient (the fit's), one tiling for every layer or one each, in every projection,
+    address mode and texel format: the forward lane keeps each layer's slope from its own taps
     (``lane_saved``), and the gradient lane adds each pixel's layers into the tiling in the one-pixel
     kernel's order, so the output, the tiling's gradient and the texels' are the same bits."""
-    address, texel_format = _TILING_CASES[case]
+    options, address, texel_format = _TILING_CASES[case]
     g = _splat_gbuffer(rng, 3000)
     layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True, format=texel_format)
     maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False, requires_grad=True)
-    kw = dict(SPLAT_CASES[case])
+    kw = dict(options)
     tiling = wp.array(np.atleast_1d(np.asarray(kw.pop("tiling", 1.7), dtype=np.float32)), dtype=float, requires_grad=True)
     smp = wt.Sampler(filter=filter, address=address, lod_bias=-0.4, border=(0.1, 0.2, 0.3, 0.4), max_aniso=24)
     weights = rng.normal(size=(3000, 4)).astype(np.float32)
