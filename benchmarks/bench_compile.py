@@ -179,9 +179,14 @@ def measure_module(name: str, target: str) -> dict:
 # -- report ---------------------------------------------------------------------------------------------
 
 
-def _on_gpu(module: str) -> str:
-    """The module a GPU compiles where the CPU compiles ``module`` (a lane module: its one-pixel kernels')."""
-    return module.removesuffix(LANES_SUFFIX)
+def _on_gpu(module: str) -> list[str]:
+    """The modules a GPU compiles where the CPU compiles ``module``: a lane module's one-pixel
+    kernels'; a gradient's lane module also holds the forward lane that keeps what the gradient
+    reads (``Kernels.kept_lanes``), which the forward's module stands for on a GPU."""
+    one_pixel = module.removesuffix(LANES_SUFFIX)
+    if module != one_pixel and one_pixel.endswith(".grad"):
+        return [one_pixel, one_pixel.removesuffix(".grad")]
+    return [one_pixel]
 
 
 def run(args, report=print) -> dict:
@@ -196,7 +201,8 @@ def run(args, report=print) -> dict:
     for j in jobs.values():
         for m in j["modules"]:
             wanted.setdefault(m, set()).add("cpu")
-            wanted.setdefault(_on_gpu(m), set()).update(targets[1:])
+            for gpu in _on_gpu(m):
+                wanted.setdefault(gpu, set()).update(targets[1:])
     table, start_up = {}, {}
     for name in sorted(wanted):
         table[name] = {}
@@ -213,7 +219,10 @@ def run(args, report=print) -> dict:
             start_up.setdefault(target, []).append(r["start_up"])
         report(f"module {name:32s} " + "  ".join(f"{'CPU' if t == 'cpu' else 'sm_' + t} " + (f"{table[name][t]:6.1f} s" if t in table[name] else "     -  ") for t in targets))
     start = {t: min(v) for t, v in start_up.items()}
-    totals = {name: {t: sum(table[m if t == "cpu" else _on_gpu(m)][t] for m in j["modules"]) for t in targets} for name, j in jobs.items()}
+    def job_modules(job: dict, target: str) -> set:
+        return set(job["modules"]) if target == "cpu" else {gpu for m in job["modules"] for gpu in _on_gpu(m)}
+
+    totals = {name: {t: sum(table[m][t] for m in job_modules(j, t)) for t in targets} for name, j in jobs.items()}
     return {"jobs": jobs, "modules": table, "start_up": start, "totals": totals, "targets": targets}
 
 
