@@ -8,3 +8,5 @@
 #endif
 
 #define WT_INLINE static inline __attribute__((always_inline))
+// A function compiled once, out of line, that many inlined callers share.
+#define WT_OUTLINE static __attribute__((noinline))

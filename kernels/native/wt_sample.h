@@ -163,12 +163,14 @@ template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int addres
     }
 }
 
-// wt_sample_levels with the address mode a constant, once per mode.
+// wt_sample_levels with the address mode a constant, once per mode. Out of line: the four modes'
+// bodies are the bulk of every lane module's code, and a module's many reads call this one copy
+// (inlined at each, they multiplied its compile time, for no measured speed).
 // twin: filters.sample_levels
-template <class Tex, class Smp> WT_INLINE void wt_sample_levels_any(const Tex& tex, const Smp& smp, const float* u,
-                                                                    const float* v, const int* level,
-                                                                    const float* fraction, const int* layer, wt_f4* res,
-                                                                    const wt_level_slopes* slopes = nullptr) {
+template <class Tex, class Smp>
+WT_OUTLINE void wt_sample_levels_any(const Tex& tex, const Smp& smp, const float* u, const float* v, const int* level,
+                                     const float* fraction, const int* layer, wt_f4* res,
+                                     const wt_level_slopes* slopes = nullptr) {
     switch (smp.address) {
     case WT_WRAP:
         wt_sample_levels(WT_WRAP, tex, smp, u, v, level, fraction, layer, res, slopes);
