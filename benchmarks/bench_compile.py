@@ -9,8 +9,9 @@ measures that cold start, every measurement in a fresh process with a fresh temp
   technique's forward and forward+backward on a small G-buffer), timed cold (wall clock of the
   whole process), with the Warp modules each one compiled;
 - **modules**: every module those jobs compile, its CPU compile time (after Warp's one-time
-  compiler start-up in the process, reported on its own row) and its ahead-of-time compile time for
-  an sm_90 GPU (``wp.compile_aot_module``; NVRTC runs without a GPU or driver, in one thread, so
+  compiler start-up in the process, reported on its own row; with Warp 1.19 that includes the
+  precompiled header of Warp's own headers, which each compiling thread of a job builds once) and
+  its ahead-of-time compile time for an sm_90 GPU (``wp.compile_aot_module``; NVRTC runs without a GPU or driver, in one thread, so
   this machine's figure is what a GPU user waits for);
 - each job's totals: the sum of its modules' CPU and sm_90 compile times. The CPU's lane kernels
   live in CPU-only modules (``warptex.splat8.lanes``...); where a CPU job compiles one, the same job
@@ -133,7 +134,12 @@ import warp as wp
 wp.config.quiet = True
 name, target = sys.argv[1], sys.argv[2]
 
-@wp.kernel(module="warptex_bench_compile_warm_up")
+from warptex.kernels import native
+
+# warptex's build options (its headers' folder): Warp 1.19 builds a precompiled header of its own
+# headers per thread and per set of options, once, before the first module; with other options the
+# measured module would build it again.
+@wp.kernel(module=native.use("warptex_bench_compile_warm_up"))
 def warm_up(a: wp.array(dtype=float)):
     a[0] = 1.0
 
@@ -147,7 +153,7 @@ def build(name):
 
 t = time.perf_counter()
 if target == "cpu":
-    wp.load_module("warptex_bench_compile_warm_up", device="cpu")  # Warp's one-time compiler start-up
+    wp.load_module("warptex_bench_compile_warm_up", device="cpu")  # Warp's one-time compiler start-up, its precompiled header
     start_up = time.perf_counter() - t
     build(name)
     t = time.perf_counter()
@@ -219,6 +225,8 @@ def run(args, report=print) -> dict:
             start_up.setdefault(target, []).append(r["start_up"])
         report(f"module {name:32s} " + "  ".join(f"{'CPU' if t == 'cpu' else 'sm_' + t} " + (f"{table[name][t]:6.1f} s" if t in table[name] else "     -  ") for t in targets))
     start = {t: min(v) for t, v in start_up.items()}
+    report("start-up (once per process)              " + "  ".join(f"{'CPU' if t == 'cpu' else 'sm_' + t} {start[t]:6.1f} s" for t in targets if t in start))
+
     def job_modules(job: dict, target: str) -> set:
         return set(job["modules"]) if target == "cpu" else {gpu for m in job["modules"] for gpu in _on_gpu(m)}
 
