@@ -11,8 +11,8 @@ measures that cold start, every measurement in a fresh process with a fresh temp
 - **modules**: every module those jobs compile, its CPU compile time (after Warp's one-time
   compiler start-up in the process, reported on its own row; with Warp 1.19 that includes the
   precompiled header of Warp's own headers, which each compiling thread of a job builds once) and
-  its ahead-of-time compile time for an sm_90 GPU (``wp.compile_aot_module``; NVRTC runs without a GPU or driver, in one thread, so
-  this machine's figure is what a GPU user waits for);
+  its ahead-of-time compile time for an sm_90 GPU (``wp.compile_aot_module``; NVRTC runs without
+  a GPU or driver, in one thread, so this machine's figure is what a GPU user waits for);
 - each job's totals: the sum of its modules' CPU and sm_90 compile times. The CPU's lane kernels
   live in CPU-only modules (``warptex.splat8.lanes``...); where a CPU job compiles one, the same job
   on a GPU compiles the one-pixel module it stands for (``warptex.splat8``), and its sm_90 figures
