@@ -183,7 +183,7 @@ def main(argv: list[str] | None = None) -> int:
         check_fit_options(parser.commands["fit"], args)
     written = None  # output sets moved into place before the run (Ctrl-C may come after the job's own)
     try:
-        from warptex._interrupts import interrupts_deferred
+        from warptex._interrupts import interrupts_deferred, interrupts_ignored
 
         # The libraries' imports finish before a Ctrl-C is raised: one cut inside would leave a
         # module half made, and trimesh catches BaseException around its optional imports, so it
@@ -201,7 +201,9 @@ def main(argv: list[str] | None = None) -> int:
         written = _output.commits()
         with warnings.catch_warnings():
             warnings.showwarning = _show_warning
-            for path in _run(args):
+            paths = _run(args)
+        with interrupts_ignored():  # the files are written: a Ctrl-C while their names print comes after the run
+            for path in paths:
                 print(f"wrote {path}")
     except BaseException as err:
         status = _reported(err, written)
