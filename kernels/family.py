@@ -154,6 +154,11 @@ def one_pixel_kernels(enabled: bool = True):
     return thread_flag(_ONE_PIXEL, enabled)
 
 
+def one_pixel_active() -> bool:
+    """Whether this thread is within :func:`one_pixel_kernels`."""
+    return getattr(_ONE_PIXEL, "value", False)
+
+
 def lanes_for(kernels: Kernels, device, args=None, grad: bool = False):
     """The one place that decides whether a launch runs lanes: ``kernels``' lane kernel (of the
     hand-written gradient with ``grad``) where the launch on ``device`` runs it, else ``None`` (the

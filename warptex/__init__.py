@@ -79,7 +79,7 @@ _NAMES = {
     "resolve": "resolve", "sample": "sampling", "hex_taps": "stochastic", "stochastic": "stochastic",
     "Format": "formats", "Texture": "texture", "TextureArray": "texture", "mip_sizes": "texture",
     "Tile": "tiles", "gbuffer_tiles": "tiles",
-    "Blend": "triplanar", "Space": "triplanar", "biplanar": "triplanar", "biplanar_normal": "triplanar", "triplanar": "triplanar", "triplanar_normal": "triplanar",
+    "Blend": "options", "Space": "options", "biplanar": "triplanar", "biplanar_normal": "triplanar", "triplanar": "triplanar", "triplanar_normal": "triplanar",
     "UVLayout": "unwrap", "unwrap": "unwrap",
 }
 

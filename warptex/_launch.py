@@ -32,6 +32,7 @@ from typing import Iterator, NamedTuple
 
 import warp as wp
 
+from warptex import _plan
 from warptex._accumulate import Copy, private, run_ordered, slot_count, with_private_grads
 from warptex._memory import empty
 from warptex._pack import empty_array
@@ -129,6 +130,8 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
             wp.launch(kernel, dim=-(-count // per_index), inputs=[args, pixels, 0], outputs=[out], device=device, record_tape=True)
         else:
             replay(kernel, -(-count // per_index), (args, pixels, 0, out), device)
+            if not recorded:  # a call kept for its next one on the same objects (warptex._plan)
+                _plan.launched(kernel, -(-count // per_index), (args, pixels, 0, out), device, count=count, zeroes=not fills)
     else:
         split = Split(count, workers, covered)
 

@@ -264,12 +264,16 @@ def reshaped(array: wp.array, shape: tuple) -> wp.array:
     return array if array.shape == shape else array.reshape(shape)
 
 
+#: The G-buffer arrays a projection reads (:func:`surface_pixels`).
+SURFACE = ("position", "position_dx", "position_dy", "normal", "mask")
+
+
 def surface_pixels(func: str, gbuffer, device) -> kp.SurfacePixels:
     """The G-buffer's surface arrays as the kernels read them (flat), checked
     (:meth:`~warptex.GBuffer.require`) and kept with the G-buffer while its arrays stay the same
     objects (whose shapes and types cannot change). Not under a recording tape: a recorded launch
     keeps its struct for the backward pass, which no later call may share."""
-    names = ("position", "position_dx", "position_dy", "normal", "mask")
+    names = SURFACE
     arrays = tuple(getattr(gbuffer, name, None) for name in names)
     kept = gbuffer.__dict__.get("_surface_pixels")
     if kept is not None and all(a is b for a, b in zip(kept[0], arrays)) and active_tape() is None:

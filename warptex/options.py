@@ -1,5 +1,6 @@
 """The option objects every technique takes: :class:`Sampler` (filtering and addressing, with
-:class:`Filter` and :class:`Address`) and :class:`Stochastic` (anti-tiling, with :class:`Method`).
+:class:`Filter` and :class:`Address`) and :class:`Stochastic` (anti-tiling, with :class:`Method`);
+and the projections' :class:`Space` and normal mapping's :class:`Blend`.
 
 Every technique (:func:`~warptex.sample`, :func:`~warptex.stochastic`, :func:`~warptex.triplanar`,
 :func:`~warptex.biplanar`, :func:`~warptex.triplanar_normal`, :func:`~warptex.splat`,
@@ -258,3 +259,28 @@ def __getattr__(name: str):
     from warptex._validate import renamed_attribute
 
     return renamed_attribute(__name__, name, _RENAMED, globals())
+
+
+class Space(str, enum.Enum):
+    """Which coordinates are projected.
+
+    - ``WORLD``: the G-buffer's world-space positions and normals.
+    - ``OBJECT``: object space, given the object's ``object_to_world`` 4×4 matrix: the texture
+      then moves with the object.
+    """
+
+    WORLD = "world"
+    OBJECT = "object"
+
+
+class Blend(str, enum.Enum):
+    """How a projected tangent-space normal is combined with the surface normal.
+
+    - ``WHITEOUT``: ``(t.xy + n.xy, t.z · n.z)``, keeps detail on curved surfaces (the default).
+    - ``UDN``: ``(t.xy + n.xy, n.z)``, cheaper, flattens strong detail slightly.
+    - ``RNM``: reoriented normal mapping, rotates the map onto the surface normal exactly.
+    """
+
+    WHITEOUT = "whiteout"
+    UDN = "udn"
+    RNM = "rnm"

@@ -7,6 +7,7 @@ from typing import NamedTuple
 import numpy as np
 import warp as wp
 
+from warptex import _plan
 from warptex._op import run
 from warptex._pack import footprints, lod_inputs, mip_levels, out_array, packed, reshaped, resolve_layer, sample_args, struct_of, vec2_array
 from warptex._validate import resolve_device
@@ -46,6 +47,9 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
         ``uv``, and a per-UV ``lod`` or ``uv_dx``/``uv_dy`` arrays. Call ``.numpy()`` for NumPy.
     """
     func = "sample"
+    plan = _plan_key(texture, uv, lod, uv_dx, uv_dy, layer, sampler, device, out)
+    if _plan.rerun(plan, (texture, uv, out)):  # this call's inputs again: its launch again
+        return out
     if not isinstance(texture, TextureArray):
         raise TypeError(f"{func}(): texture must be a Texture or TextureArray, got {type(texture).__name__}")
     device = resolve_device(func, device, texture.device)
@@ -59,9 +63,27 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
     key = ("sample", sampler, lod_source, constant_lod, constant_layer)
     setup = packed(texture, key, lambda: _setup(func, texture, sampler, lod_source, constant_lod, constant_layer))
     pixels = struct_of(ks.SamplePixels, device, uv=reshaped(uv, (count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
-    result = run(setup.kernels, count, args=setup.args, pixels=pixels, out=((count, texture.channels), float) if into is None else into,
-                 device=device, footprints=setup.footprints, touched=setup.touched)
+    with _plan.recording(plan, (texture, uv, out), out=2, hold=(setup,)):
+        result = run(setup.kernels, count, args=setup.args, pixels=pixels, out=((count, texture.channels), float) if into is None else into,
+                     device=device, footprints=setup.footprints, touched=setup.touched)
     return out if into is not None else reshaped(result, (*(() if single else shape), texture.channels))
+
+
+def _plan_key(texture, uv, lod, uv_dx, uv_dy, layer, sampler, device, out) -> tuple | None:
+    """The key of a call that a plan can repeat (``warptex._plan``): ``out=``, a UV array, a
+    constant LOD and layer (plain numbers), no derivatives, and no recording tape; else ``None``."""
+    if (
+        type(out) is not wp.array
+        or type(uv) is not wp.array
+        or uv_dx is not None
+        or uv_dy is not None
+        or type(lod) not in (type(None), int, float)
+        or type(layer) not in (type(None), int)
+        or not (sampler is None or type(sampler) is Sampler)
+        or not _plan.usable()
+    ):
+        return None
+    return ("sample", lod, layer, sampler, device)
 
 
 class _Setup(NamedTuple):

@@ -14,14 +14,15 @@ does into the textures' texels.
 
 from __future__ import annotations
 
-import enum
+import inspect
 from typing import Sequence
 
 import numpy as np
 import warp as wp
 
+from warptex import _plan
 from warptex._op import run
-from warptex._pack import footprints, out_array, packed, projection_args, sampler_args, stochastic_args, surface_pixels
+from warptex._pack import SURFACE, footprints, out_array, packed, projection_args, sampler_args, stochastic_args, surface_pixels
 from warptex._validate import as_enum, as_float, warn_renamed
 from warptex.gbuffer import GBuffer, _gbuffer_device
 from warptex.kernels import faces as kf
@@ -29,33 +30,8 @@ from warptex.kernels import normals as kn
 from warptex.kernels import projection as kp
 from warptex.kernels import triplanar as kt
 from warptex.kernels.stochastic import METHOD_NONE
-from warptex.options import Sampler, Stochastic, _as_sampler, _as_stochastic
+from warptex.options import Blend, Sampler, Space, Stochastic, _as_sampler, _as_stochastic
 from warptex.texture import TextureArray
-
-
-class Space(str, enum.Enum):
-    """Which coordinates are projected.
-
-    - ``WORLD``: the G-buffer's world-space positions and normals.
-    - ``OBJECT``: object space, given the object's ``object_to_world`` 4×4 matrix: the texture
-      then moves with the object.
-    """
-
-    WORLD = "world"
-    OBJECT = "object"
-
-
-class Blend(str, enum.Enum):
-    """How a projected tangent-space normal is combined with the surface normal.
-
-    - ``WHITEOUT``: ``(t.xy + n.xy, t.z · n.z)``, keeps detail on curved surfaces (the default).
-    - ``UDN``: ``(t.xy + n.xy, n.z)``, cheaper, flattens strong detail slightly.
-    - ``RNM``: reoriented normal mapping, rotates the map onto the surface normal exactly.
-    """
-
-    WHITEOUT = "whiteout"
-    UDN = "udn"
-    RNM = "rnm"
 
 
 _BLEND_IDS = {Blend.WHITEOUT: kn.BLEND_WHITEOUT, Blend.UDN: kn.BLEND_UDN, Blend.RNM: kn.BLEND_RNM}
@@ -130,12 +106,10 @@ def triplanar(
         or non-finite. Recorded on the active ``wp.Tape``: gradients reach the texels,
         ``tiling``, ``sharpness`` and ``offsets`` when those are arrays that require them.
     """
-    setup = _Setup(
-        "triplanar", kp.WEIGHTS_TRIPLANAR, gbuffer, texture, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix,
-        textures_per_axis=textures_per_axis, textures_per_face=textures_per_face, layer=layer, space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device,
-        out=out, cached=True,
+    return _colour(
+        "triplanar", kp.WEIGHTS_TRIPLANAR, gbuffer, texture, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, textures_per_axis=textures_per_axis,
+        textures_per_face=textures_per_face, layer=layer, space=space, object_to_world=object_to_world, stochastic=stochastic, sampler=sampler, device=device, out=out,
     )  # fmt: skip
-    return setup.launch(setup.channels)
 
 
 def biplanar(gbuffer: GBuffer, texture: TextureArray | None = None, *, sharpness=8.0, **options) -> wp.array:
@@ -157,8 +131,21 @@ def biplanar(gbuffer: GBuffer, texture: TextureArray | None = None, *, sharpness
     Returns:
         As :func:`triplanar`.
     """
-    setup = _Setup("biplanar", kp.WEIGHTS_BIPLANAR, gbuffer, texture, sharpness=sharpness, **_Setup.options("biplanar", "triplanar", options), cached=True)
-    return setup.launch(setup.channels)
+    options = {**_Setup.DEFAULTS, **_Setup.options("biplanar", "triplanar", options)}
+    return _colour("biplanar", kp.WEIGHTS_BIPLANAR, gbuffer, texture, sharpness=sharpness, **options)
+
+
+def _colour(func, weights, gbuffer, texture, *, device, out, **options) -> wp.array:
+    """Colour mapping, every option given: a small call repeated on the same objects reruns its launch (``warptex._plan``)."""
+    device = _gbuffer_device(func, gbuffer, device)
+    key = _args_key(weights, gbuffer, texture, device, **options)
+    plan = key if type(out) is wp.array and _plan.usable() else None
+    objects = (gbuffer, texture, out, *(getattr(gbuffer, name) for name in SURFACE)) if plan is not None else ()
+    if _plan.rerun(plan, objects):
+        return out
+    setup = _Setup(func, weights, gbuffer, texture, **options, device=device, out=out, key=key)
+    with _plan.recording(plan, objects, out=2, hold=(setup.args,)):
+        return setup.launch(setup.channels)
 
 
 def triplanar_normal(
@@ -266,6 +253,7 @@ class _Setup:
 
     #: The keyword options every projection function takes (``biplanar``'s ``**options``).
     OPTIONS = ("tiling", "offsets", "mirror_fix", "textures_per_axis", "textures_per_face", "layer", "space", "object_to_world", "stochastic", "sampler", "device", "out")
+    DEFAULTS = {name: inspect.signature(triplanar).parameters[name].default for name in OPTIONS}  #: triplanar()'s
 
     @staticmethod
     def options(func: str, like: str, options: dict) -> dict:
@@ -277,7 +265,7 @@ class _Setup:
 
     def __init__(
         self, func, weights, gbuffer, texture, *, tiling=1.0, sharpness=4.0, offsets=None, mirror_fix=True, textures_per_axis=None, textures_per_face=None,
-        layer=0, space=Space.WORLD, object_to_world=None, stochastic=None, sampler=None, device=None, out=None, cached=False,
+        layer=0, space=Space.WORLD, object_to_world=None, stochastic=None, sampler=None, device=None, out=None, key=None,
     ):  # fmt: skip
         device = _gbuffer_device(func, gbuffer, device)
         self.func, self.gbuffer, self.device, self.out = func, gbuffer, device, out
@@ -285,9 +273,8 @@ class _Setup:
         self.pixels = surface_pixels(func, gbuffer, device)
         options = {"tiling": tiling, "sharpness": sharpness, "offsets": offsets, "mirror_fix": mirror_fix, "textures_per_axis": textures_per_axis, "textures_per_face": textures_per_face,
                    "layer": layer, "space": space, "object_to_world": object_to_world, "stochastic": stochastic, "sampler": sampler}  # fmt: skip
-        key = _args_key(weights, gbuffer, texture, device, **options) if cached else None
         build = lambda: _packed_args(func, weights, gbuffer, texture, device, **options)  # noqa: E731
-        # The same texture, options and origin: checked and packed by an earlier call.
+        # key (_args_key): the same texture, options and origin, checked and packed by an earlier call.
         self.args, self.channels, self.stochastic, self.faces, self.linear = build() if key is None else packed(texture, key, build)
 
     def launch(self, channels: int, normal_map: kt.NormalMapArgs | None = None) -> wp.array:
@@ -331,7 +318,8 @@ def _args_key(weights, gbuffer, texture, device, *, tiling, sharpness, offsets, 
     option objects."""
     if textures_per_axis is not None or textures_per_face is not None or object_to_world is not None or offsets is not None or not isinstance(texture, TextureArray):
         return None
-    if not all(type(v) in (int, float) or isinstance(v, (np.floating, np.integer)) for v in (tiling, sharpness, layer)) or getattr(stochastic, "histogram", None) is not None:
+    plain = all(type(v) in (int, float) or isinstance(v, (np.floating, np.integer)) for v in (tiling, sharpness)) and (type(layer) is int or isinstance(layer, np.integer))
+    if not plain or getattr(stochastic, "histogram", None) is not None:  # (a float layer is refused, by a call that packs anew)
         return None
     try:
         key = ("triplanar", weights, float(tiling), float(sharpness), bool(mirror_fix), int(layer), space, stochastic, sampler, tuple(gbuffer.origin.tolist()), str(device))

@@ -1,0 +1,187 @@
+"""Kept plans (``warptex._plan``): a repeated small call on the same objects runs the launch its
+earlier call made, with the same bits, reads its inputs' current contents, never outlives an
+object it names, and stays out of the way of tapes, ``one_pixel_kernels`` and bad input."""
+
+import gc
+import weakref
+
+import numpy as np
+import pytest
+import warp as wp
+
+import warptex as wt
+from warptex import _plan
+from warptex._threads import MIN_PIXELS_PER_THREAD
+from warptex.kernels.family import one_pixel_kernels
+
+
+def _plans() -> dict:
+    return _plan._local.__dict__.get("plans", {})
+
+
+def _kept(texture, uv, out, **options) -> bool:
+    """Whether the next ``sample`` of these objects and options would run a kept plan."""
+    from warptex.sampling import _plan_key
+
+    key = _plan_key(texture, uv, options.get("lod"), None, None, options.get("layer"), options.get("sampler"), None, out)
+    return key is not None and _plan.recall(key, (texture, uv, out)) is not None
+
+
+@pytest.fixture
+def inputs():
+    rng = np.random.default_rng(11)
+    texture = wt.Texture(rng.random((64, 48, 4), dtype=np.float32))
+    uv = wp.array(rng.random((300, 2), dtype=np.float32) * 3 - 1, dtype=wp.vec2)
+    return texture, uv, rng
+
+
+@pytest.mark.parametrize(
+    ("sampler", "lod"), [(None, None), (None, 1.5), (wt.Sampler(filter="nearest", address="mirror"), None), (wt.Sampler(filter="trilinear", address="clamp"), 0.7)]
+)
+def test_a_kept_plan_gives_the_calls_bits(inputs, sampler, lod):
+    texture, uv, _ = inputs
+    want = wt.sample(texture, uv, sampler=sampler, lod=lod).numpy()
+    out = wp.full((300, 4), np.nan, dtype=wp.float32)
+    for call in range(4):
+        assert _kept(texture, uv, out, sampler=sampler, lod=lod) == (call >= 2)  # made by the second call, run from the third
+        out.fill_(np.nan)
+        assert wt.sample(texture, uv, sampler=sampler, lod=lod, out=out) is out
+        np.testing.assert_array_equal(out.numpy(), want)
+
+
+def test_a_plan_reads_its_inputs_current_contents(inputs):
+    texture, uv, rng = inputs
+    out = wp.empty((300, 4), dtype=wp.float32)
+    for _ in range(3):
+        wt.sample(texture, uv, out=out)
+    assert _kept(texture, uv, out)
+    uv.assign(rng.random((300, 2), dtype=np.float32))  # new UVs, same array
+    texels = rng.random((64, 48, 4), dtype=np.float32)
+    texture.texels.assign(texels)
+    texture.update()
+    wt.sample(texture, uv, out=out)
+    fresh = wt.Texture(texels)
+    np.testing.assert_array_equal(out.numpy(), wt.sample(fresh, uv.numpy()).numpy())
+
+
+def test_other_objects_or_options_are_not_served_by_a_plan(inputs):
+    texture, uv, _ = inputs
+    out = wp.empty((300, 4), dtype=wp.float32)
+    for _ in range(3):
+        wt.sample(texture, uv, out=out)
+    other = wp.empty((300, 4), dtype=wp.float32)
+    assert not _kept(texture, uv, other)
+    assert not _kept(texture, uv, out, lod=2.0)
+    assert not _kept(texture, wp.clone(uv), out)
+    np.testing.assert_array_equal(wt.sample(texture, uv, lod=2.0, out=out).numpy(), wt.sample(texture, uv, lod=2.0).numpy())
+
+
+def test_a_plan_goes_with_any_of_its_objects(inputs):
+    _, uv, rng = inputs
+    texture = wt.Texture(rng.random((64, 48, 4), dtype=np.float32))
+    out = wp.empty((300, 4), dtype=wp.float32)
+    for _ in range(3):
+        wt.sample(texture, uv, out=out)
+    before = len(_plans())
+    texels = weakref.ref(texture.texels)
+    del texture
+    gc.collect()
+    assert len(_plans()) == before - 1
+    assert texels() is None  # the plan held the texture's arrays through its structs: not past the texture
+    for _ in range(3):
+        wt.sample(wt.Texture(rng.random((8, 8, 4), dtype=np.float32)), uv, out=out)  # a texture of one call
+    del uv, out
+    gc.collect()
+    assert len(_plans()) == before - 1
+
+
+def test_plans_are_bounded_and_not_made_for_one_off_arrays(inputs):
+    texture, _, rng = inputs
+    out = wp.empty((8, 4), dtype=wp.float32)
+    kept = [wp.array(rng.random((8, 2), dtype=np.float32), dtype=wp.vec2) for _ in range(_plan.MAX_PLANS + 5)]
+    for uv in kept:
+        for _ in range(3):
+            wt.sample(texture, uv, out=out)
+    assert len(_plans()) <= _plan.MAX_PLANS
+    assert sum(p.cmd is not None for p in _plans().values()) >= _plan.MAX_PLANS - 1
+    for _ in range(5):  # new UVs every call: seen once each, never planned
+        wt.sample(texture, wp.array(rng.random((8, 2), dtype=np.float32), dtype=wp.vec2), out=out)
+    assert all(r() is not None for p in _plans().values() for r in p.refs)
+
+
+def test_a_call_split_over_threads_is_not_kept(inputs):
+    texture, _, rng = inputs
+    count = 4 * MIN_PIXELS_PER_THREAD
+    uv = wp.array(rng.random((count, 2), dtype=np.float32), dtype=wp.vec2)
+    out = wp.empty((count, 4), dtype=wp.float32)
+    for _ in range(3):
+        wt.sample(texture, uv, out=out)
+    assert not _kept(texture, uv, out)
+
+
+def test_no_plan_is_run_or_made_under_a_tape_or_one_pixel_kernels(inputs):
+    texture, uv, _ = inputs
+    out = wp.empty((300, 4), dtype=wp.float32, requires_grad=True)
+    out.grad = None
+    for _ in range(3):
+        wt.sample(texture, uv, out=out)
+    assert _kept(texture, uv, out)
+    with one_pixel_kernels():
+        assert not _kept(texture, uv, out)
+    out.grad = wp.full((300, 4), 7.0, dtype=wp.float32)
+    wt.sample(texture, uv, out=out)  # as a new output's, the buffer's gradient is zeroed
+    assert _kept(texture, uv, out) and not out.grad.numpy().any()
+
+    fitted = wt.Texture(texture.texels.numpy(), requires_grad=True)
+    tape = wp.Tape()
+    with tape:
+        assert not _kept(texture, uv, out)
+        for _ in range(3):
+            wt.sample(fitted, uv, out=out)
+    assert not _kept(fitted, uv, out)
+    tape.backward(grads={out: wp.ones((300, 4), dtype=wp.float32)})
+    want = wp.Tape()
+    fresh = wt.Texture(texture.texels.numpy(), requires_grad=True)
+    with want:
+        result = wt.sample(fresh, uv)
+    want.backward(grads={result: wp.ones((300, 4), dtype=wp.float32)})
+    assert np.abs(fresh.grad(0)).sum() > 0
+    np.testing.assert_allclose(fitted.grad(0), 3 * fresh.grad(0), rtol=1e-5, atol=1e-6)  # three recorded calls, each counted
+
+
+def test_errors_are_unchanged_after_a_plan(inputs):
+    texture, uv, _ = inputs
+    out = wp.empty((300, 4), dtype=wp.float32)
+    with pytest.raises(Exception) as before:
+        wt.sample(texture, uv, out=out, layer=True)
+    for _ in range(3):
+        wt.sample(texture, uv, out=out, layer=1 - 1)
+    assert _kept(texture, uv, out, layer=0)
+    with pytest.raises(type(before.value)) as after:
+        wt.sample(texture, uv, out=out, layer=True)  # True == 1: a key that compared by value would hit
+    assert str(after.value) == str(before.value)
+
+
+@pytest.mark.parametrize("func", ["triplanar", "biplanar"])
+def test_a_projections_plan_follows_its_g_buffer(func):
+    """Colour mapping's plans: the same bits, and none once a G-buffer array or its origin is replaced."""
+    rng = np.random.default_rng(5)
+    g = wt.GBuffer.empty((6, 5))
+    g.position.assign(rng.random((6, 5, 3), dtype=np.float32))
+    g.normal.assign(rng.normal(size=(6, 5, 3)).astype(np.float32))
+    g.mask.fill_(1)
+    texture = wt.Texture(rng.random((16, 16, 4), dtype=np.float32))
+    call = getattr(wt, func)
+    want = call(g, texture, tiling=1.5).numpy()
+    out = wp.empty((6, 5, 4), dtype=wp.float32)
+    for _ in range(3):
+        np.testing.assert_array_equal(call(g, texture, tiling=1.5, out=out).numpy(), want)
+    assert sum(p.cmd is not None for p in _plans().values()) >= 1
+    g.normal = wp.array(rng.normal(size=(6, 5, 3)).astype(np.float32), dtype=wp.vec3)  # a new array: the plan does not apply
+    fresh = call(g, texture, tiling=1.5).numpy()
+    assert not np.array_equal(fresh, want)
+    np.testing.assert_array_equal(call(g, texture, tiling=1.5, out=out).numpy(), fresh)
+    g.origin = np.array([0.25, 0.0, 0.0])
+    np.testing.assert_array_equal(call(g, texture, tiling=1.5, out=out).numpy(), call(g, texture, tiling=1.5).numpy())
+    with pytest.raises(ValueError, match="layer must be an int"):  # a float layer equals an int one as a key, and is refused
+        call(g, texture, tiling=1.5, layer=0.0, out=out)

@@ -1,0 +1,132 @@
+"""A small call kept ready for the next call on the same objects: what a loop's call costs.
+
+A loop that samples the same inputs into the same ``out=`` (an optimiser's step, a per-frame
+lookup) paid for its checks, its argument structs and Warp's launch setup on every call: a
+1,024-UV :func:`~warptex.sample` spent ~90 us of Python around ~11 us of kernel.
+
+A technique whose call qualifies (``out=`` given, inputs that are objects or plain values, no
+recording ``wp.Tape``, see :func:`usable`) asks :func:`rerun` to run a plan kept under the call's
+key and its objects, the very ones (compared by identity: the arrays' shapes and types, and a
+texture's storage, cannot change): the same launch as before, on their current contents.
+Otherwise the call runs as usual within :func:`recording`; its second call with the same objects
+keeps the launch it made (``warptex._launch.launch`` reports it through :func:`launched`), so a
+loop that passes new arrays every call never pays for plans it would not reuse. Only a call that
+made exactly one launch, on one thread (a small call on the CPU: a large one is split over the
+threads), is kept. Errors are unchanged: a plan is only made by a call that passed every check,
+and a hit repeats that call's inputs (keys compare plain values of their exact types: a
+``layer=True`` that a call refuses never matches a ``layer=1``).
+
+A plan holds its objects weakly and goes when one of them does; it holds the packed argument
+structs it names (``hold``) strongly, which hold a texture's arrays but not the texture. At most
+:data:`MAX_PLANS` are kept per thread, the oldest going first.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import weakref
+
+import warp as wp
+
+from warptex._threads import MIN_PIXELS_PER_THREAD
+from warptex._warp import active_tape
+from warptex.kernels.family import one_pixel_active
+
+#: Plans kept per thread.
+MAX_PLANS = 32
+
+_local = threading.local()
+
+
+class _Plan:
+    """A call's objects (weakly), what it holds, and its launch (``None`` once seen, not yet kept)."""
+
+    __slots__ = ("refs", "hold", "cmd", "out", "zero")
+
+    def run(self, objects: tuple) -> None:
+        out = objects[self.out]
+        if self.zero:  # a one-pixel kernel's output is zeroed first, as launch() zeroes it
+            out.zero_()
+        if out.grad is not None:  # and a new output's gradient
+            out.grad.zero_()
+        self.cmd.launch()
+
+
+def usable() -> bool:
+    """Whether plans may be recalled and kept on this thread now: not while a ``wp.Tape`` records
+    (a recorded call keeps its own structs for its backward pass) nor within
+    ``one_pixel_kernels`` (a plan runs the kernel it was made with)."""
+    return active_tape() is None and not one_pixel_active()
+
+
+def recall(key: tuple, objects: tuple) -> _Plan | None:
+    """The plan kept for ``key`` (a hashable tuple of the call's plain values) on these very
+    ``objects``, or ``None``."""
+    plans = getattr(_local, "plans", None)
+    plan = plans.get((key, *map(id, objects))) if plans else None
+    if plan is None or plan.cmd is None or not all(r() is o for r, o in zip(plan.refs, objects)):
+        return None
+    return plan
+
+
+def rerun(key: tuple | None, objects: tuple) -> bool:
+    """Run the plan kept for ``key`` on ``objects`` (:func:`recall`) where there is one; whether
+    there was. ``key=None``: the call does not qualify."""
+    plan = recall(key, objects) if key is not None else None
+    if plan is not None:
+        plan.run(objects)
+    return plan is not None
+
+
+@contextlib.contextmanager
+def recording(key: tuple | None, objects: tuple, *, out: int, hold=()):
+    """Run the block (a call's usual path) and, where this is the second call on ``key`` and
+    ``objects`` and the block made one launch (:func:`launched`), keep that launch for
+    :func:`recall`. ``key=None``: the call does not qualify; nothing is kept. ``out``: which of
+    ``objects`` is the output array; ``hold``: what the plan keeps alive (the packed structs)."""
+    if key is None or not usable() or getattr(_local, "capture", None) is not None:  # (a call within a recorded one: not kept)
+        yield
+        return
+    plans = _local.__dict__.setdefault("plans", {})
+    full = (key, *map(id, objects))
+    seen = plans.get(full)
+    if seen is None or not all(r() is o for r, o in zip(seen.refs, objects)):
+        _remember(plans, full, objects, hold)  # first sighting: nothing recorded
+        yield
+        return
+    _local.capture = capture = []
+    try:
+        yield
+    finally:
+        _local.capture = None
+    if len(capture) == 1 and capture[0] is not None and seen.cmd is None:
+        seen.cmd, seen.zero = capture[0]
+        seen.out = out
+
+
+def _remember(plans: dict, full: tuple, objects: tuple, hold) -> None:
+    plan = _Plan()
+    drop = lambda _ref, plans=plans, full=full: plans.pop(full, None)  # noqa: E731 (an object went: so does its plan)
+    plan.refs, plan.hold, plan.cmd, plan.out, plan.zero = tuple(weakref.ref(o, drop) for o in objects), tuple(hold), None, 0, False
+    plans.pop(full, None)
+    while len(plans) >= MAX_PLANS:
+        plans.pop(next(iter(plans)), None)
+    plans[full] = plan
+
+
+def launched(kernel, dim: int, params: tuple, device, *, count: int, zeroes: bool) -> None:
+    """``warptex._launch.launch`` made an unsplit, unrecorded launch of ``count`` pixels (after
+    zeroing its output where ``zeroes``, and its output's gradient where it has one): within
+    :func:`recording`'s second call, its own kept copy (a ``wp.Launch`` holding addresses only).
+    Not kept: a CPU launch large enough to be split over threads (a plan runs on one), or more
+    than one launch."""
+    capture = getattr(_local, "capture", None)
+    if capture is None:
+        return
+    if device.is_cpu and count >= 2 * MIN_PIXELS_PER_THREAD:
+        capture.append(None)
+        return
+    cmd = wp.launch(kernel, dim=dim, inputs=list(params), device=device, record_cmd=True)
+    cmd.fwd_args = None  # addresses only: the plan keeps no array alive
+    capture.append((cmd, zeroes))
