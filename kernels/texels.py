@@ -19,6 +19,7 @@ Every technique addresses and fetches texels through the ``@wp.func`` blocks her
 :mod:`.scatter`.
 """
 
+import functools
 from typing import Any
 
 import warp as wp
@@ -74,6 +75,25 @@ class TextureView:
     texel_format: wp.int32
     packed: wp.uint64  # vec4h (FORMAT_FLOAT16) or uint32 (FORMAT_8BIT) per texel
     decode: wp.uint64
+
+
+def level_table(sizes: tuple, num_layers: int, device) -> tuple:
+    """``(offsets, level_offset, level_height, level_width)`` of a :class:`TextureView` whose
+    levels have ``sizes`` ``((h, w), ...)``: each level's first entry (a tuple), then the same and
+    the levels' sizes as int32 arrays on ``device``. Shared by the textures of that shape (kernels
+    only read them): making the three arrays was ~0.1 ms of every texture, and the PyTorch bridge
+    wraps its tensors in a new texture every call."""
+    return _level_table(sizes, num_layers, device.alias)  # (a Warp device is not hashable: its name is)
+
+
+@functools.lru_cache(maxsize=256)
+def _level_table(sizes: tuple, num_layers: int, device: str) -> tuple:
+    offsets, start = [], 0
+    for h, w in sizes:
+        offsets.append(start)
+        start += int(num_layers * h * w)
+    table = [offsets, [int(h) for h, _ in sizes], [int(w) for _, w in sizes]]
+    return (tuple(offsets), *(wp.array(values, dtype=wp.int32, device=device) for values in table))
 
 
 # Entries of a texel gradient per tile of :class:`TexelGrad`: 2**10 vec4 entries, 16 KB.

@@ -128,12 +128,9 @@ class TextureArray:
         self._chain = chain
         self._format = fmt
         self._store = store
-        self._offsets = [int(o) for o in np.cumsum([0] + [num_layers * h * w for h, w in sizes])[:-1]]
         view = kx.TextureView()
         view.texels = self._chain
-        view.level_offset = wp.array(self._offsets, dtype=wp.int32, device=self._device)
-        view.level_height = wp.array([h for h, _ in self._sizes], dtype=wp.int32, device=self._device)
-        view.level_width = wp.array([w for _, w in self._sizes], dtype=wp.int32, device=self._device)
+        self._offsets, view.level_offset, view.level_height, view.level_width = kx.level_table(tuple(sizes), num_layers, self._device)
         view.num_levels = len(self._sizes)
         view.num_layers = num_layers
         view.texel_format = formats.KERNEL_FORMAT[fmt]
