@@ -306,6 +306,25 @@ def test_retain_graph_gives_the_same_gradients_twice(rng):
     np.testing.assert_array_equal(uv.grad.numpy(), first[1].numpy())
 
 
+def test_a_gradient_handed_to_torch_is_never_written_again(rng):
+    """An RGBA texture read at level 0 gets its gradient buffer as it is, no copy: a second
+    backward of the same graph, or a second call on the texture in one graph, adds through new
+    buffers, so each one torch holds keeps its values."""
+    texture, uv, uv2 = _t(rng, 8, 8, 4), _t(rng, 50, 2), _t(rng, 30, 2)
+    out = wtt.sample(texture, uv)
+    out.sum().backward(retain_graph=True)
+    first = texture.grad.clone()
+    assert first.abs().sum() > 0
+    out.sum().backward()  # accumulates into .grad: the first buffer plus a new one
+    np.testing.assert_array_equal(texture.grad.numpy(), 2 * first.numpy())
+    texture.grad = None
+    wtt.sample(texture, uv2).sum().backward()
+    second = texture.grad.clone()
+    texture.grad = None
+    (wtt.sample(texture, uv).sum() + wtt.sample(texture, uv2).sum()).backward()
+    np.testing.assert_allclose(texture.grad.numpy(), first.numpy() + second.numpy(), rtol=1e-6, atol=1e-7)
+
+
 def test_no_tape_is_kept_without_gradients_and_a_graph_frees_its_tape(rng):
     texture, uv = _t(rng, 8, 8, 3), _t(rng, 50, 2)
     gc.collect()

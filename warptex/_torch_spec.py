@@ -70,6 +70,8 @@ def _literal(value) -> str:
     """``value`` (dicts, lists, strings, numbers, ``None``) as a Python literal for
     ``ast.literal_eval``. Written out here because ``torch.compile`` traces this code, and it cannot
     trace ``json.dumps`` (a C encoder) or ``repr`` of containers."""
+    if isinstance(value, _Written):
+        return value
     if isinstance(value, dict):
         return "{" + ", ".join(_literal(k) + ": " + _literal(v) for k, v in value.items()) + "}"
     if isinstance(value, (list, tuple)):
@@ -79,6 +81,17 @@ def _literal(value) -> str:
     if value is None or isinstance(value, (bool, int, float, str)):
         return repr(value)
     raise TypeError(f"warptex.torch: cannot pass {type(value).__name__} to the op")
+
+
+class _Written(str):
+    """A part of a spec already written as a literal (:func:`_sampler_literal`)."""
+
+
+@functools.lru_cache(maxsize=64)
+def _sampler_literal(sampler: Sampler) -> _Written:
+    """A sampler's part of a spec, written once per distinct sampler: walking its fields was a
+    fifth of a small bridge call's spec."""
+    return _Written(_literal({"$sampler": {f.name: _encode("", "sampler", getattr(sampler, f.name), []) for f in dataclasses.fields(sampler)}}))
 
 
 @functools.lru_cache(maxsize=256)
@@ -118,8 +131,8 @@ def _encode(func: str, role: str, value, tensors: list):
         return _encode(func, role, gbuffer_tensors(value), tensors)
     if isinstance(value, dict) and role == "gbuffer":
         return {"$gbuffer": {k: _encode(func, f"gbuffer.{k}", v, tensors) for k, v in value.items()}}
-    if isinstance(value, Sampler):
-        return {"$sampler": {f.name: _encode(func, role, getattr(value, f.name), tensors) for f in dataclasses.fields(value)}}
+    if isinstance(value, Sampler):  # (torch.compile traces the function itself: it warns at a cache)
+        return (_sampler_literal.__wrapped__ if torch.compiler.is_compiling() else _sampler_literal)(value)
     if isinstance(value, Stochastic):
         return {"$stochastic": {f.name: _encode(func, f.name, getattr(value, f.name), tensors) for f in dataclasses.fields(value)}}
     if isinstance(value, Histogram):

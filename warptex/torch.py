@@ -34,8 +34,10 @@ its own tensor's dtype. Gradients flow through torch autograd to every different
 (:func:`prepare_histogram`). Outputs are the native call's bit for bit, gradients the native backward
 pass's (to float rounding; tests/test_torch.py).
 
-How it runs. Each call is one ``torch.library`` custom op (``warptex::technique``), so autograd and
-``torch.compile`` see a single opaque node. Its forward runs the native function on zero-copy Warp
+How it runs. Each call is one autograd node: in code that ``torch.compile`` compiles, the
+``torch.library`` custom op ``warptex::technique``, which it sees as a single opaque node; in eager
+mode the same forward and backward as a ``torch.autograd.Function``, without the op's dispatch
+(~0.3 ms of a 1,024-UV call). Its forward runs the native function on zero-copy Warp
 views of the tensors (on torch's current CUDA stream), under a ``wp.Tape`` when a gradient will be
 needed; the tape is kept for the backward op (``warptex::technique_backward``), which runs it once
 per ``backward()`` and returns the gradients as new tensors. The tape lives as long as the autograd
