@@ -49,7 +49,8 @@ and highest of the runs' ratios), so a ratio that swings across a bar between ru
 texture) on 1, 1,024 and 65,536 random UVs, into a new output and into ``out=``, and through the
 PyTorch bridge (``warptex.torch.sample`` on tensors), forward and forward+backward (gradients to
 every texel), against torch ``grid_sample`` on the same data (a UV array or tensor kept between
-calls, as a loop keeps it). Each figure is the median of many calls, taken in interleaved rounds.
+calls, as a loop keeps it); and ``triplanar`` and ``biplanar`` of that texture over a 1-pixel
+G-buffer. Each figure is the median of many calls, taken in interleaved rounds.
 
 On a CUDA device, warptex runs one launch per call (no CPU threads), the peers are torch on the same
 device and Dr.Jit's CUDA backend (NumPy is skipped), and every timed call ends by waiting for the GPU.
@@ -529,9 +530,26 @@ def call_cost(args, report) -> list[dict]:
         }
         median = interleaved_median(figures, sync, rounds=args.repeats, calls=args.calls)
         for (pass_, impl), seconds in median.items():
-            rows.append({"samples": n, "pass": pass_, "impl": impl, "seconds": seconds, "max_abs_diff": {"torch": diff, "warptex.torch": bridged}.get(impl, 0.0)})
+            rows.append({"technique": "sample", "samples": n, "pass": pass_, "impl": impl, "seconds": seconds,
+                         "max_abs_diff": {"torch": diff, "warptex.torch": bridged}.get(impl, 0.0)})  # fmt: skip
     report(format_call_cost(rows))
     report(f"max |warptex - torch| over the outputs: {max(r['max_abs_diff'] for r in rows):.2e}")
+    rows += _one_pixel_projections(args, tex, sync, report)
+    return rows
+
+
+def _one_pixel_projections(args, tex, sync, report) -> list[dict]:
+    """Forward calls of ``triplanar`` and ``biplanar`` over a 1-pixel G-buffer, into a new output
+    and into ``out=`` (no peer computes this)."""
+    g = wt.GBuffer.empty((1, 1), device=tex.device)
+    g.position.assign(np.float32([[[0.3, 0.7, 0.2]]]))
+    g.normal.assign(np.float32([[[0.3, 0.8, 0.5]]]))
+    g.mask.fill_(1)
+    out = wp.empty((1, 1, 4), dtype=wp.float32, device=tex.device)
+    figures = {(f, into): (lambda f=f, into=into: getattr(wt, f)(g, tex, tiling=2.0, out=out if into else None)) for f in ("triplanar", "biplanar") for into in (False, True)}
+    median = interleaved_median(figures, sync, rounds=args.repeats, calls=args.calls)
+    rows = [{"technique": f, "samples": 1, "pass": "forward", "impl": "warptex out=" if into else "warptex", "seconds": s, "max_abs_diff": 0.0} for (f, into), s in median.items()]
+    report("1-pixel calls (median us): " + ", ".join(f"{r['technique']} {r['impl']} {r['seconds'] * 1e6:.1f}" for r in rows))
     return rows
 
 

@@ -102,6 +102,10 @@ def test_call_cost_rows_time_small_calls_against_torch(tmp_path):
     result = subprocess.run([sys.executable, str(BENCH), "--call-cost", "--quick", "--calls", "2", "--json", str(tmp_path / "c.json")], capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     rows = json.loads((tmp_path / "c.json").read_text())["call_cost"]
+    projections = [r for r in rows if r["technique"] != "sample"]
+    assert {(r["technique"], r["impl"]) for r in projections} == {(f, i) for f in ("triplanar", "biplanar") for i in ("warptex", "warptex out=")}
+    assert all(r["seconds"] > 0 for r in projections) and "1-pixel calls (median us): triplanar" in result.stdout
+    rows = [r for r in rows if r["technique"] == "sample"]
     impls = ("warptex", "warptex out=", "warptex.torch", "torch")
     assert {(r["samples"], r["pass"], r["impl"]) for r in rows} == {(n, p, i) for n in (1, 1024, 65536) for p in ("forward", "forward+backward") for i in impls}
     assert all(r["seconds"] > 0 and r["max_abs_diff"] < 1e-5 for r in rows)  # torch computes what warptex computes
