@@ -224,6 +224,43 @@ def test_splat_atlas_matches_the_cpu(scene):
     _compare(*_on_both(run))
 
 
+DETERMINISM_CASES = {
+    "sample trilinear": lambda g, tex, layers, maps, uv: wt.sample(tex, uv, lod=1.3, sampler=wt.Sampler(filter="trilinear")),
+    "triplanar": lambda g, tex, layers, maps, uv: wt.triplanar(g, tex, tiling=0.4),
+    "biplanar hash4": lambda g, tex, layers, maps, uv: wt.biplanar(g, tex, tiling=0.4, stochastic="hash4"),
+    "splat": lambda g, tex, layers, maps, uv: wt.splat(g, layers, maps, projection="world_xz", tiling=0.3, height_blend=0.2),
+}
+
+
+@pytest.mark.parametrize("case", DETERMINISM_CASES)
+def test_texel_gradients_are_the_same_bits_every_run(scene, case, request):
+    """Five backward passes of one call give the texels the same gradients, bit for bit (issue 51).
+    The CPU adds in a fixed order (fixed chunks, private copies added in chunk order). On CUDA the
+    backward still adds with float atomics, whose order changes from run to run: expected to fail
+    there until a deterministic CUDA backward lands (it has not been run on a GPU yet)."""
+    if OTHER.startswith("cuda"):  # run, and reported as an expected failure (or an unexpected pass)
+        request.applymarker(pytest.mark.xfail(reason="the CUDA backward adds texel gradients with float atomics (issue 51, item 4)", strict=False))
+
+    def run(device):
+        g = scene["gbuffer"].to(device)
+        tex = wt.Texture(scene["image"], requires_grad=True, device=device)
+        layers = wt.TextureArray(scene["layers"], requires_grad=True, device=device)
+        maps = wt.TextureArray(scene["maps"], mipmaps=False, device=device)
+        uv = wp.array(scene["uv"], dtype=wp.vec2, device=device)
+        tape = wp.Tape()
+        with tape:
+            out = DETERMINISM_CASES[case](g, tex, layers, maps, uv)
+        out.grad.assign(scene["weights"].reshape(-1, 4)[: out.shape[0]] if out.ndim == 2 else scene["weights"][..., : out.shape[-1]])
+        tape.backward()
+        read = layers if case == "splat" else tex
+        return np.concatenate([read.grad(k).ravel() for k in range(read.num_levels)])
+
+    first = run(OTHER)
+    assert np.abs(first).sum() > 0
+    for _ in range(4):
+        np.testing.assert_array_equal(run(OTHER), first)
+
+
 def _cli(*args, cwd):
     result = subprocess.run([sys.executable, "-m", "warptex", *args, "--device", OTHER], capture_output=True, text=True, cwd=cwd, timeout=1800)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
