@@ -49,6 +49,16 @@ def test_a_kept_plan_gives_the_calls_bits(inputs, sampler, lod):
         np.testing.assert_array_equal(out.numpy(), want)
 
 
+@pytest.mark.parametrize("device", [None, "cpu", wp.get_device("cpu")])
+def test_a_call_naming_its_device_is_kept_too(inputs, device):
+    texture, uv, _ = inputs
+    out = wp.empty((300, 4), dtype=wp.float32)
+    for _ in range(3):
+        wt.sample(texture, uv, device=device, out=out)
+    np.testing.assert_array_equal(out.numpy(), wt.sample(texture, uv).numpy())
+    assert sum(p.cmd is not None for p in _plans().values()) >= 1
+
+
 def test_a_plan_reads_its_inputs_current_contents(inputs):
     texture, uv, rng = inputs
     out = wp.empty((300, 4), dtype=wp.float32)

@@ -83,7 +83,7 @@ def _plan_key(texture, uv, lod, uv_dx, uv_dy, layer, sampler, device, out) -> tu
         or not _plan.usable()
     ):
         return None
-    return ("sample", lod, layer, sampler, device)
+    return ("sample", lod, layer, sampler, None if device is None else str(device))  # (a Warp device is not hashable)
 
 
 class _Setup(NamedTuple):
