@@ -21,9 +21,9 @@ def _plans() -> dict:
 
 def _kept(texture, uv, out, **options) -> bool:
     """Whether the next ``sample`` of these objects and options would run a kept plan."""
-    from warptex.sampling import _plan_key
+    from warptex.sampling import plan_key
 
-    key = _plan_key(texture, uv, options.get("lod"), None, None, options.get("layer"), options.get("sampler"), None, out)
+    key = plan_key("sample", texture, uv, options.get("lod"), None, None, options.get("layer"), options.get("sampler"), None, out)
     return key is not None and _plan.recall(key, (texture, uv, out)) is not None
 
 
@@ -57,6 +57,20 @@ def test_a_call_naming_its_device_is_kept_too(inputs, device):
         wt.sample(texture, uv, device=device, out=out)
     np.testing.assert_array_equal(out.numpy(), wt.sample(texture, uv).numpy())
     assert sum(p.cmd is not None for p in _plans().values()) >= 1
+
+
+@pytest.mark.parametrize("option", ["hash4", wt.Method.CHEAP2, wt.Stochastic("hex", seed=3, rotation=0.4), "histogram"])
+def test_stochastic_calls_are_kept_but_not_with_a_histogram(inputs, option):
+    texture, uv, _ = inputs
+    if option == "histogram":
+        option = wt.Stochastic("hex", histogram=wt.prepare_histogram(texture))
+    want = wt.stochastic(texture, uv, option).numpy()
+    out = wp.full((300, 4), np.nan, dtype=wp.float32)
+    for _ in range(3):
+        out.fill_(np.nan)
+        np.testing.assert_array_equal(wt.stochastic(texture, uv, option, out=out).numpy(), want)
+    kept = [p for key, p in _plans().items() if key[0][0] == "stochastic" and key[1:] == (id(texture), id(uv), id(out)) and p.cmd is not None]
+    assert len(kept) == (0 if isinstance(option, wt.Stochastic) and option.histogram is not None else 1)
 
 
 def test_a_plan_reads_its_inputs_current_contents(inputs):

@@ -47,7 +47,7 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
         ``uv``, and a per-UV ``lod`` or ``uv_dx``/``uv_dy`` arrays. Call ``.numpy()`` for NumPy.
     """
     func = "sample"
-    plan = _plan_key(texture, uv, lod, uv_dx, uv_dy, layer, sampler, device, out)
+    plan = plan_key(func, texture, uv, lod, uv_dx, uv_dy, layer, sampler, device, out)
     if _plan.rerun(plan, (texture, uv, out)):  # this call's inputs again: its launch again
         return out
     if not isinstance(texture, TextureArray):
@@ -69,9 +69,11 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
     return out if into is not None else reshaped(result, (*(() if single else shape), texture.channels))
 
 
-def _plan_key(texture, uv, lod, uv_dx, uv_dy, layer, sampler, device, out) -> tuple | None:
-    """The key of a call that a plan can repeat (``warptex._plan``): ``out=``, a UV array, a
-    constant LOD and layer (plain numbers), no derivatives, and no recording tape; else ``None``."""
+def plan_key(func: str, texture, uv, lod, uv_dx, uv_dy, layer, sampler, device, out, *options) -> tuple | None:
+    """The key of a call of :func:`sample` or :func:`~warptex.stochastic` that a plan can repeat
+    (``warptex._plan``): ``out=``, a UV array, a constant LOD and layer (plain numbers), no
+    derivatives, and no recording tape; else ``None``. ``options``: the function's other
+    options, hashable."""
     if (
         type(out) is not wp.array
         or type(uv) is not wp.array
@@ -83,7 +85,11 @@ def _plan_key(texture, uv, lod, uv_dx, uv_dy, layer, sampler, device, out) -> tu
         or not _plan.usable()
     ):
         return None
-    return ("sample", lod, layer, sampler, None if device is None else str(device))  # (a Warp device is not hashable)
+    try:
+        hash(options)
+    except TypeError:  # an option that holds arrays: no plan
+        return None
+    return (func, lod, layer, sampler, None if device is None else str(device), *options)  # (a Warp device is not hashable)
 
 
 class _Setup(NamedTuple):
