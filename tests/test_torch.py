@@ -307,15 +307,15 @@ def test_retain_graph_gives_the_same_gradients_twice(rng):
 
 
 def test_a_gradient_handed_to_torch_is_never_written_again(rng):
-    """An RGBA texture read at level 0 gets its gradient buffer as it is, no copy: a second
-    backward of the same graph, or a second call on the texture in one graph, adds through new
-    buffers, so each one torch holds keeps its values."""
+    """An RGBA texture read at level 0 gets its gradient buffer as it is, no copy. A second
+    backward of the same graph adds into that buffer again, returns a copy and gives the buffer
+    back as torch held it; a second call on the texture in one graph has a buffer of its own."""
     texture, uv, uv2 = _t(rng, 8, 8, 4), _t(rng, 50, 2), _t(rng, 30, 2)
     out = wtt.sample(texture, uv)
     out.sum().backward(retain_graph=True)
     first = texture.grad.clone()
     assert first.abs().sum() > 0
-    out.sum().backward()  # accumulates into .grad: the first buffer plus a new one
+    out.sum().backward()  # accumulates into .grad, which is the first backward's buffer
     np.testing.assert_array_equal(texture.grad.numpy(), 2 * first.numpy())
     texture.grad = None
     wtt.sample(texture, uv2).sum().backward()
