@@ -129,9 +129,10 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
         if generated and len(chunks) == 2:  # Warp records the launch's own adjoint on the tape
             wp.launch(kernel, dim=-(-count // per_index), inputs=[args, pixels, 0], outputs=[out], device=device, record_tape=True)
         else:
-            replay(kernel, -(-count // per_index), (args, pixels, 0, out), device)
+            dim, params = -(-count // per_index), (args, pixels, 0, out)
+            replay(kernel, dim, params, device)
             if not recorded:  # a call kept for its next one on the same objects (warptex._plan)
-                _plan.launched(kernel, -(-count // per_index), (args, pixels, 0, out), device, count=count, zeroes=not fills)
+                _plan.launched(kernel, dim, params, device, count=count, zeroes=not fills)
     else:
         split = Split(count, workers, covered)
 

@@ -273,14 +273,13 @@ def surface_pixels(func: str, gbuffer, device) -> kp.SurfacePixels:
     (:meth:`~warptex.GBuffer.require`) and kept with the G-buffer while its arrays stay the same
     objects (whose shapes and types cannot change). Not under a recording tape: a recorded launch
     keeps its struct for the backward pass, which no later call may share."""
-    names = SURFACE
-    arrays = tuple(getattr(gbuffer, name, None) for name in names)
+    arrays = tuple(getattr(gbuffer, name, None) for name in SURFACE)
     kept = gbuffer.__dict__.get("_surface_pixels")
     if kept is not None and all(a is b for a, b in zip(kept[0], arrays)) and active_tape() is None:
         return kept[1]
-    gbuffer.require(func, *names)
+    gbuffer.require(func, *SURFACE)
     count = gbuffer.pixel_count
-    pixels = struct_of(kp.SurfacePixels, device, **{name: a.reshape((count,)) for name, a in zip(names, arrays)})
+    pixels = struct_of(kp.SurfacePixels, device, **{name: a.reshape((count,)) for name, a in zip(SURFACE, arrays)})
     if active_tape() is None:
         gbuffer.__dict__["_surface_pixels"] = (arrays, pixels)  # views of its own arrays: nothing outlives it
     return pixels

@@ -29,7 +29,7 @@ import weakref
 
 import warp as wp
 
-from warptex._threads import MIN_PIXELS_PER_THREAD
+from warptex._threads import never_split
 from warptex._warp import active_tape
 from warptex.kernels.family import one_pixel_active
 
@@ -43,6 +43,10 @@ class _Plan:
     """A call's objects (weakly), what it holds, and its launch (``None`` once seen, not yet kept)."""
 
     __slots__ = ("refs", "hold", "cmd", "out", "zero")
+
+    def holds(self, objects: tuple) -> bool:
+        """Whether this plan's objects are these very ``objects`` (ids can be reused)."""
+        return all(r() is o for r, o in zip(self.refs, objects))
 
     def run(self, objects: tuple) -> None:
         out = objects[self.out]
@@ -65,7 +69,7 @@ def recall(key: tuple, objects: tuple) -> _Plan | None:
     ``objects``, or ``None``."""
     plans = getattr(_local, "plans", None)
     plan = plans.get((key, *map(id, objects))) if plans else None
-    if plan is None or plan.cmd is None or not all(r() is o for r, o in zip(plan.refs, objects)):
+    if plan is None or plan.cmd is None or not plan.holds(objects):
         return None
     return plan
 
@@ -91,7 +95,7 @@ def recording(key: tuple | None, objects: tuple, *, out: int, hold=()):
     plans = _local.__dict__.setdefault("plans", {})
     full = (key, *map(id, objects))
     seen = plans.get(full)
-    if seen is None or not all(r() is o for r, o in zip(seen.refs, objects)):
+    if seen is None or not seen.holds(objects):
         _remember(plans, full, objects, hold)  # first sighting: nothing recorded
         yield
         return
@@ -124,7 +128,7 @@ def launched(kernel, dim: int, params: tuple, device, *, count: int, zeroes: boo
     capture = getattr(_local, "capture", None)
     if capture is None:
         return
-    if device.is_cpu and count >= 2 * MIN_PIXELS_PER_THREAD:
+    if not never_split(device, count):
         capture.append(None)
         return
     cmd = wp.launch(kernel, dim=dim, inputs=list(params), device=device, record_cmd=True)

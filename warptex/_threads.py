@@ -194,10 +194,16 @@ def interruptible(name: str, call, *args, **kwargs):
     return value
 
 
+def never_split(device, count: int) -> bool:
+    """Whether a launch of ``count`` pixels runs unsplit whatever the thread settings: on CUDA,
+    and a small launch on the CPU."""
+    return device.is_cuda or count < 2 * MIN_PIXELS_PER_THREAD
+
+
 def workers_for(device, count: int, threads: int | None) -> int:
     """Threads a launch of ``count`` pixels is split over: 1 on CUDA and for small launches
     (decided first: a small call does not pay for reading the thread settings)."""
-    if device.is_cuda or count < 2 * MIN_PIXELS_PER_THREAD:
+    if never_split(device, count):
         return 1
     threads = get_num_threads() if threads is None else threads
     return max(1, min(threads, count // MIN_PIXELS_PER_THREAD))

@@ -158,14 +158,19 @@ def _setup_context(ctx, inputs, output):
     ctx.save_for_backward(output[1], *tensors)
 
 
-def _backward(ctx, grads):
+def _input_grads(ctx, grad, backward) -> list:
+    """The gradient of each input tensor of a call (``None`` where the spec wants none), from
+    ``backward(token, grad, spec, tensors)`` (the op, or :func:`_backward_pass` itself)."""
     token, *tensors = ctx.saved_tensors
-    grad = grads[0]
     want = set(parse(ctx.spec)["grad"])
     if grad is None or not want:
-        return None, [None] * len(tensors)
-    result = torch.ops.warptex.technique_backward(token, grad.contiguous(), ctx.spec, tensors)
-    return None, [r if i in want else None for i, r in enumerate(result)]
+        return [None] * len(tensors)
+    result = backward(token, grad.contiguous(), ctx.spec, tensors)
+    return [r if i in want else None for i, r in enumerate(result)]
+
+
+def _backward(ctx, grads):
+    return None, _input_grads(ctx, grads[0], torch.ops.warptex.technique_backward)
 
 
 _technique.register_autograd(_backward, setup_context=_setup_context)
@@ -184,12 +189,7 @@ class _Eager(torch.autograd.Function):
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx, grad):
-        token, *tensors = ctx.saved_tensors
-        want = set(parse(ctx.spec)["grad"])
-        if grad is None or not want:
-            return (None,) * (1 + len(tensors))
-        result = _backward_pass(token, grad.contiguous(), ctx.spec, tensors)
-        return (None, *[r if i in want else None for i, r in enumerate(result)])
+        return (None, *_input_grads(ctx, grad, _backward_pass))
 
 
 def _as_out(grad: torch.Tensor, out: wp.array) -> wp.array:
@@ -356,13 +356,11 @@ def _texture_around(t: torch.Tensor, *, mipmaps: bool, index, grads: dict, devic
             chain[:count, :channels] = layers.detach().reshape(count, channels)
     grad = _zeros((texels, 4), t.device) if index is not None else None
     array = wp.from_torch(chain, dtype=wp.vec4, grad=grad)
-    if index is None:
-        pass
-    elif texels == count and channels == 4:  # the buffer is the gradient, shaped as t: handed to torch as it is
+    if index is not None and texels == count and channels == 4:  # the buffer is the gradient, shaped as t: handed to torch as it is
         grads[index] = _Handed(grad, t.shape)
-    elif cpu:
+    elif index is not None and cpu:
         grads[index] = lambda: torch.from_numpy(grad.numpy()[:count, :channels].reshape(t.shape).copy())
-    else:
+    elif index is not None:
         grads[index] = lambda: grad[:count, :channels].reshape(t.shape).clone()
     texture = (Texture if t.dim() == 3 else TextureArray).around(array, num_layers, sizes, channels)
     texture.update()
