@@ -33,9 +33,78 @@ def mark_rows(tiles: wp.array(dtype=wp.int32), start: wp.int32, w: wp.int32, j: 
 
 @wp.func
 def scatter_texel(grad: TexelGrad, start: wp.int32, w: wp.int32, xi: wp.int32, yi: wp.int32, g: wp.vec4):
-    """Add ``g`` to the gradient of the texel :func:`texel` reads (nothing for the border colour)."""
+    """Add ``g`` to the gradient of the texel :func:`texel` reads (nothing for the border colour):
+    with a float atomic, or in fixed point where ``grad`` says so (:func:`exact_texel`)."""
     if xi >= 0 and yi >= 0:
-        wp.atomic_add(grad.texels, start + yi * w + xi, g)
+        if grad.exponents.shape[0] > 0:
+            exact_texel(grad.exponents, grad.fixed, start + yi * w + xi, g)
+        else:
+            wp.atomic_add(grad.texels, start + yi * w + xi, g)
+
+
+# A deterministic texel gradient on CUDA (warptex._accumulate.exact_sums): float atomics add in
+# whatever order the threads reach them, so their sums change in the last bits from run to run.
+# Integer addition is associative: the contributions are added as int64 in fixed point, each
+# texel with a power-of-two scale 2**e, so that neither the order nor the thread count can change
+# a bit. Two passes of the same gradient kernel: the first counts each texel's contributions (n)
+# and keeps the largest |component| m (as its float bits, which order as the values do for
+# x >= 0); the second adds rint(contribution * 2**e), with e chosen so that each term is below
+# 2**62 / n: the int64 sum cannot overflow. Each contribution is then exact to m * 2**(c - 62),
+# c = ceil(log2(n)): the sum is the exact sum of contributions rounded far below float32's step.
+FINITE_LIMIT = wp.constant(0x7F800000)  # the float bits of +inf: larger bits are not finite
+NOT_FINITE = wp.constant(-(1 << 20))  # an exponent that marks a texel some non-finite contribution reached
+
+
+@out_of_line
+def exact_texel(exponents: wp.array(dtype=wp.int32), fixed: wp.array(dtype=wp.int64), index: wp.int32, g: wp.vec4):
+    """One pass of the fixed-point sum (see above) for the contribution ``g`` to texel ``index``:
+    ``exponents`` holds two int32 per texel, ``fixed`` four int64 (empty: the first pass)."""
+    if fixed.shape[0] == 0:  # the first pass: the count, and the largest |component| as float bits
+        m = wp.max(wp.max(wp.abs(g[0]), wp.abs(g[1])), wp.max(wp.abs(g[2]), wp.abs(g[3])))
+        bits = FINITE_LIMIT
+        if wp.isfinite(g):
+            bits = wp.cast(m, wp.int32)
+        wp.atomic_max(exponents, 2 * index, bits)
+        wp.atomic_add(exponents, 2 * index + 1, 1)
+    else:
+        e = exponents[2 * index]
+        if e != NOT_FINITE:
+            scale = wp.cast((e + 127) << 23, float)  # 2**e, exactly
+            for c in range(4):
+                wp.atomic_add(fixed, 4 * index + c, wp.int64(wp.rint(g[c] * scale)))
+
+
+@wp.kernel(enable_backward=False)
+def exact_exponents(exponents: wp.array(dtype=wp.int32)):
+    """Between the passes: each texel's largest |contribution| m (float bits, biased exponent
+    ``b``: m < 2**(b - 126)) and count n replaced by the exponent ``e = 62 - c - (b - 126)``,
+    ``c = ceil(log2(n))``, within float32's normal range: n terms below 2**(62 - c) each."""
+    i = wp.tid()
+    bits = exponents[2 * i]
+    n = exponents[2 * i + 1]
+    c = wp.int32(31)  # n < 0: 2**31 or more contributions (the count wrapped)
+    if n >= 0:
+        c = wp.int32(0)
+        while c < 31 and (1 << c) < n:
+            c += 1
+    if bits >= FINITE_LIMIT:
+        exponents[2 * i] = NOT_FINITE
+    else:
+        exponents[2 * i] = wp.clamp(62 - c + 126 - (bits >> 23), -126, 126)
+
+
+@wp.kernel(enable_backward=False)
+def add_exact(texels: wp.array(dtype=wp.vec4), exponents: wp.array(dtype=wp.int32), fixed: wp.array(dtype=wp.int64)):
+    """After the passes: each texel's fixed-point sum, scaled back by ``2**-e`` (exact), added into
+    its gradient with one float add (NaN where a contribution was not finite)."""
+    i = wp.tid()
+    e = exponents[2 * i]
+    if e == NOT_FINITE:
+        texels[i] = wp.vec4(wp.nan)
+    elif fixed[4 * i] != wp.int64(0) or fixed[4 * i + 1] != wp.int64(0) or fixed[4 * i + 2] != wp.int64(0) or fixed[4 * i + 3] != wp.int64(0):
+        inverse = wp.cast((127 - e) << 23, float)  # 2**-e, exactly
+        s = wp.vec4(float(fixed[4 * i]), float(fixed[4 * i + 1]), float(fixed[4 * i + 2]), float(fixed[4 * i + 3]))
+        texels[i] = texels[i] + s * inverse
 
 
 @wp.func

@@ -110,10 +110,18 @@ class TexelGrad:
     nothing was added from tile ``t`` on (other marks may still reach over it).
 
     On the CPU, the chunks of a backward pass past the first add into private copies of a
-    gradient, and only the tiles a copy marked are added into the real one (``warptex._accumulate``)."""
+    gradient, and only the tiles a copy marked are added into the real one (``warptex._accumulate``).
+
+    On CUDA, where one launch adds with atomics, a deterministic backward sums in fixed point
+    instead (:func:`~warptex.kernels.scatter.exact_texel`): ``exponents`` (two per texel; empty:
+    plain float atomics into ``texels``) and ``fixed`` (four int64 per texel; empty: the first
+    pass, which only bounds each texel's contributions). ``texels`` then only says the gradient is
+    needed: :func:`~warptex.kernels.scatter.add_exact` adds the sums in afterwards."""
 
     texels: wp.array(dtype=wp.vec4)
     tiles: wp.array(dtype=wp.int32)
+    exponents: wp.array(dtype=wp.int32)
+    fixed: wp.array(dtype=wp.int64)
 
 
 @wp.struct

@@ -233,13 +233,11 @@ DETERMINISM_CASES = {
 
 
 @pytest.mark.parametrize("case", DETERMINISM_CASES)
-def test_texel_gradients_are_the_same_bits_every_run(scene, case, request):
+def test_texel_gradients_are_the_same_bits_every_run(scene, case):
     """Five backward passes of one call give the texels the same gradients, bit for bit (issue 51).
-    The CPU adds in a fixed order (fixed chunks, private copies added in chunk order). On CUDA the
-    backward still adds with float atomics, whose order changes from run to run: expected to fail
-    there until a deterministic CUDA backward lands (it has not been run on a GPU yet)."""
-    if OTHER.startswith("cuda"):  # run, and reported as an expected failure (or an unexpected pass)
-        request.applymarker(pytest.mark.xfail(reason="the CUDA backward adds texel gradients with float atomics (issue 51, item 4)", strict=False))
+    The CPU adds in a fixed order (fixed chunks, private copies added in chunk order); CUDA sums
+    texel gradients in fixed point, an integer sum that the order the threads add in cannot change
+    (``warptex._accumulate.exact_sums``; tests/test_exact_sums.py runs it on the CPU)."""
 
     def run(device):
         g = scene["gbuffer"].to(device)

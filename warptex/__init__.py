@@ -67,6 +67,7 @@ _find_kernels_of_a_checkout()
 _NAMES = {
     "fit": None, "io": None,
     "precompile": "_compile", "get_num_threads": "_threads", "set_num_threads": "_threads", "init_quietly": "_warp",
+    "get_deterministic_gradients": "_accumulate", "set_deterministic_gradients": "_accumulate",
     "Atlas": "atlas", "export_index_maps": "atlas", "pack_atlas": "atlas", "splat_atlas": "atlas",
     "Baked": "bake", "bake": "bake", "tangent_space": "bake", "texture_gbuffer": "bake", "texture_gbuffer_tiles": "bake",
     "Camera": "camera", "look_at": "camera", "orthographic": "camera",
@@ -138,6 +139,7 @@ __all__ = [
     "export_index_maps",
     "fit",
     "gbuffer_tiles",
+    "get_deterministic_gradients",
     "get_num_threads",
     "hex_taps",
     "init_quietly",
@@ -154,6 +156,7 @@ __all__ = [
     "resolve",
     "sample",
     "save_gbuffer",
+    "set_deterministic_gradients",
     "set_num_threads",
     "splat",
     "splat_atlas",

@@ -19,6 +19,11 @@ next pass (allocating them afresh cost more than the whole backward of a small i
 ~0.5 ms per MB here, against ~0.07 ms per MB to zero an array in place). Texel-gradient slots mark
 the tiles they add into (:class:`~warptex.kernels.texels.TexelGrad`), and only those are added in
 and zeroed: a chunk whose pixels read a part of a texture pays for that part only.
+
+On CUDA a backward pass is one launch, whose threads add with atomics in an order that changes
+from run to run. There warptex's hand-written texel gradients are summed in fixed point instead
+(:func:`exact_sums`, the kernels in :mod:`warptex.kernels.scatter`), an order-free integer sum:
+the same bits every run, unless :func:`set_deterministic_gradients` turned it off.
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ import warp as wp
 
 from warptex._threads import cpu_count, side_by_side
 from warptex._warp import map_arrays
+from warptex.kernels.scatter import add_exact, exact_exponents
 from warptex.kernels.texels import TILE_SHIFT
 
 # Elements an accumulator is added and zeroed in at a time (256 KB of floats: in cache between the two).
@@ -204,3 +210,58 @@ def run_ordered(chunks: int, workers: int, work, copies_of, entries: dict | None
                 _private_arrays.pop(real, None)
         raise
     assert order.next_add == chunks, "warptex internal error: a chunk's gradient was not added in"
+
+
+# Whether CUDA's hand-written texel gradients are summed in fixed point (see the module docstring).
+_deterministic = True
+
+# The devices those sums run on: CUDA. Tests add the CPU, where one launch runs the same kernels.
+EXACT_DEVICES = {"cuda"}
+
+
+def set_deterministic_gradients(enabled: bool) -> None:
+    """Whether texel gradients on CUDA are the same bits every run (the default, ``True``), summed
+    in fixed point by two passes of the gradient kernel, or added with float atomics (``False``:
+    one pass, whose last bits change from run to run). On the CPU gradients are the same bits at
+    any thread count either way. Gradients from Warp's generated adjoints (a call that also wants
+    UV, tiling or offset gradients) and the scalar tiling and transition gradients of ``splat``
+    are added with float atomics on CUDA regardless (docs/performance.md says how and what it costs)."""
+    global _deterministic
+    if not isinstance(enabled, bool):
+        raise TypeError(f"set_deterministic_gradients() takes True or False, not {enabled!r}")
+    _deterministic = enabled
+
+
+def get_deterministic_gradients() -> bool:
+    """Whether texel gradients on CUDA are summed deterministically (:func:`set_deterministic_gradients`)."""
+    return _deterministic
+
+
+class Exact(NamedTuple):
+    """A texel gradient's fixed-point sum: two int32 per texel (its largest contribution's float
+    bits, then its exponent; how many contributions it has) and four int64 (the sum)."""
+
+    exponents: wp.array
+    fixed: wp.array
+
+
+def exact_sums(device, texel_grads: list[wp.array]) -> dict[int, Exact] | None:
+    """Zeroed fixed-point sums for the texel gradients ``texel_grads`` (by id), where a backward
+    pass on ``device`` sums them exactly (CUDA, unless turned off); ``None`` where it adds with
+    float atomics or in fixed chunks (the CPU)."""
+    if not _deterministic or not texel_grads or ("cuda" if device.is_cuda else "cpu") not in EXACT_DEVICES:
+        return None
+    return {id(g): Exact(wp.zeros(2 * g.shape[0], dtype=wp.int32, device=device), wp.zeros(4 * g.shape[0], dtype=wp.int64, device=device)) for g in texel_grads}
+
+
+def set_exponents(sums: dict[int, Exact], texel_grads: list[wp.array]) -> None:
+    """Between the two passes: each texel's exponent, from its contributions' count and largest
+    magnitude (the first pass)."""
+    for g in texel_grads:
+        wp.launch(exact_exponents, dim=g.shape[0], inputs=[sums[id(g)].exponents], device=g.device, record_tape=False)
+
+
+def add_sums(sums: dict[int, Exact], texel_grads: list[wp.array]) -> None:
+    """After the second pass: each fixed-point sum added into its gradient."""
+    for g in texel_grads:
+        wp.launch(add_exact, dim=g.shape[0], inputs=[g, sums[id(g)].exponents, sums[id(g)].fixed], device=g.device, record_tape=False)

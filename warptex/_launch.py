@@ -33,7 +33,7 @@ from typing import Iterator, NamedTuple
 import warp as wp
 
 from warptex import _plan
-from warptex._accumulate import Copy, private, run_ordered, slot_count, with_private_grads
+from warptex._accumulate import Copy, add_sums, exact_sums, private, run_ordered, set_exponents, slot_count, with_private_grads
 from warptex._memory import empty
 from warptex._pack import empty_array
 from warptex._threads import Split, cpu_count, grad_bounds, workers_for
@@ -253,10 +253,14 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
     device = wp.get_device(device)
     _check_rows(count, pixels, adj, *[t.grad for t in grads if t.per_pixel and t.grad is not None])
     grads_t = next(a.type for a in kernel.adj.args if a.label == "grads")
-    kernel, per_index = _with_lanes(kernel, lanes)
     texel = [t.grad for (name, ftype), t in zip(grads_t.vars.items(), grads) if t.grad is not None and not t.per_pixel and ftype.type is TexelGrad]
     plain = [t.grad for (name, ftype), t in zip(grads_t.vars.items(), grads) if t.grad is not None and not t.per_pixel and ftype.type is not TexelGrad]
     shared = list({id(g): g for g in texel + plain}.values())  # one texture may feed several fields
+    sums = exact_sums(device, list({id(g): g for g in texel}.values()))
+    if sums is not None:  # CUDA: texels summed in fixed point, by the scalar kernel (warptex._accumulate)
+        _scatter_exact(kernel, count, args=args, pixels=pixels, grads_t=grads_t, grads=grads, adj=adj, sums=sums, device=device)
+        return
+    kernel, per_index = _with_lanes(kernel, lanes)
     bounds = grad_bounds(count, covered, sum(_nbytes(g) for g in shared), footprints) if device.is_cpu else [0, count]  # CUDA: one launch, atomics
     chunks = len(bounds) - 1
     if chunks == 1:
@@ -279,19 +283,35 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
     run_ordered(chunks, workers, run, slots.__getitem__, entries)
 
 
-def _grads_struct(grads_t, grads: list[Target], copies: dict, device):
+def _scatter_exact(kernel, count: int, *, args, pixels, grads_t, grads: list[Target], adj, sums: dict, device) -> None:
+    """:func:`scatter`'s deterministic CUDA backward: two launches of ``kernel`` over every pixel,
+    the first bounding each texel's contributions (texel targets only: nothing else is added
+    into), the second adding them in fixed point, then the sums added into the texel gradients."""
+    texel = list({id(t.grad): t.grad for t in grads if t.grad is not None and id(t.grad) in sums}.values())
+    bound = _grads_struct(grads_t, [t if t.grad is not None and id(t.grad) in sums else Target(None) for t in grads], {}, device, sums, first_pass=True)
+    wp.launch(kernel, dim=count, inputs=[args, pixels, 0, bound, adj], device=device, record_tape=False)
+    set_exponents(sums, texel)
+    wp.launch(kernel, dim=count, inputs=[args, pixels, 0, _grads_struct(grads_t, grads, {}, device, sums), adj], device=device, record_tape=False)
+    add_sums(sums, texel)
+
+
+def _grads_struct(grads_t, grads: list[Target], copies: dict, device, sums: dict | None = None, first_pass: bool = False):
     """A ``grads_t`` struct of ``grads``: each shared target replaced by its copy in ``copies`` (by
-    id) where it has one; ``TexelGrad`` fields with the copy's tiles (the real gradient untracked);
-    empty arrays where a target is not needed. Per-pixel targets are whole: a chunk's pixels add
-    into their own rows only."""
+    id) where it has one; ``TexelGrad`` fields with the copy's tiles (the real gradient untracked)
+    or, where ``sums`` has one for the gradient, its fixed-point sum (``first_pass``: without the
+    int64 sums, as the bounding pass takes it); empty arrays where a target is not needed.
+    Per-pixel targets are whole: a chunk's pixels add into their own rows only."""
     value = grads_t()
     for (name, field), target in zip(grads_t.vars.items(), grads):
         ftype = field.type
         if ftype is TexelGrad:
             g = TexelGrad()
             copy = copies.get(id(target.grad)) if target.grad is not None else None
+            exact = sums.get(id(target.grad)) if sums and target.grad is not None else None
             g.texels = copy.array if copy is not None else target.grad if target.grad is not None else empty_array(wp.vec4, 1, device)
             g.tiles = copy.tiles if copy is not None and copy.tiles is not None else empty_array(wp.int32, 1, device)
+            g.exponents = exact.exponents if exact is not None else empty_array(wp.int32, 1, device)
+            g.fixed = exact.fixed if exact is not None and not first_pass else empty_array(wp.int64, 1, device)
             setattr(value, name, g)
         else:
             copy = copies.get(id(target.grad)) if target.grad is not None else None
