@@ -310,8 +310,9 @@ def _grads_struct(grads_t, grads: list[Target], copies: dict, device, sums: dict
             exact = sums.get(id(target.grad)) if sums and target.grad is not None else None
             g.texels = copy.array if copy is not None else target.grad if target.grad is not None else empty_array(wp.vec4, 1, device)
             g.tiles = copy.tiles if copy is not None and copy.tiles is not None else empty_array(wp.int32, 1, device)
-            g.exponents = exact.exponents if exact is not None else empty_array(wp.int32, 1, device)
-            g.fixed = exact.fixed if exact is not None and not first_pass else empty_array(wp.int64, 1, device)
+            if exact is not None:  # else left unset: empty (each field set costs a small call ~1 us)
+                g.exponents = exact.exponents
+                g.fixed = exact.fixed if not first_pass else empty_array(wp.int64, 1, device)
             setattr(value, name, g)
         else:
             copy = copies.get(id(target.grad)) if target.grad is not None else None
