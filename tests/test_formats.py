@@ -202,6 +202,38 @@ def test_texel_gradients_land_in_float32_as_the_float_twins_do(rng, fmt, filter)
             np.testing.assert_allclose(grads[0][0][row, col, c], fd, rtol=2e-3, atol=2e-4)
 
 
+@pytest.mark.parametrize("fmt", COMPACT)
+def test_update_on_the_tape_carries_coarse_gradients_to_level_0_as_float32_does(rng, fmt):
+    """A compact texture's mips are built on the host; ``update()`` inside the tape records their
+    backward pass, which carries every level's gradient to level 0 (and clears it), bit for bit as
+    a float32 texture's recorded box-filter launches do."""
+    tex = wt.Texture(_values(rng, (13, 10, 3), fmt), format=fmt, requires_grad=True)
+    twin = wt.Texture(tex.numpy(0), requires_grad=True)
+    uv = rng.uniform(-1, 2, (400, 2)).astype(np.float32)
+    lod = rng.uniform(0, 3.5, 400).astype(np.float32)
+    weights = rng.normal(size=(400, 3)).astype(np.float32)
+    grads = []
+    for t in (tex, twin):
+        tape = wp.Tape()
+        with tape:
+            t.update()
+            out = wt.sample(t, uv, lod=lod, sampler=wt.Sampler(filter="trilinear"))
+        tape.backward(grads={out: wp.array(weights, dtype=float)})
+        grads.append([t.grad(k) for k in range(t.num_levels)])
+        assert all(not g.any() for g in grads[-1][1:]), "the coarse levels' gradients were carried down"
+        tape.zero()
+        assert not t.grad(0).any()
+    _same_bits(grads[0][0], grads[1][0])
+    assert tex.num_levels == 4 and np.abs(grads[0][0]).sum() > 0
+
+    # outside a tape (or without update() on it) each level keeps its own gradient, as before
+    tape = wp.Tape()
+    with tape:
+        out = wt.sample(tex, uv, lod=lod, sampler=wt.Sampler(filter="trilinear"))
+    tape.backward(grads={out: wp.array(weights, dtype=float)})
+    assert tex.grad(2).any()
+
+
 def test_a_gradient_only_warps_generated_adjoint_gives_is_refused_for_a_compact_texture(rng):
     tex = wt.Texture(rng.integers(0, 256, (8, 8, 4), dtype=np.uint8), format="srgb8", requires_grad=True)
     uv = rng.uniform(0, 1, (10, 2)).astype(np.float32)

@@ -182,3 +182,26 @@ def gradient_carrier(count: int, requires_grad: bool, device) -> wp.array:
     carrier.grad = grad
     carrier.warptex_carrier = True  # warptex._op refuses Warp's generated adjoint for it (which reads no packed texels)
     return carrier
+
+
+def carry_mip_gradients(view, chain: wp.array, sizes: list[tuple[int, int]], num_layers: int) -> None:
+    """Inside a ``wp.Tape``: record the backward pass of a mip chain built on the host (a texture
+    not stored as float32), as the float32 one records its box-filter launches. It runs the same
+    kernel's adjoint, coarsest level first, so each level's gradient is carried down to level 0
+    (the encoding of each level taken as exact) and cleared, as a float32 chain's is.
+
+    ``chain`` is the gradient carrier (:func:`gradient_carrier`): the adjoint reads the view's
+    texels only to replay a sum that it does not keep, and writes nothing but gradients."""
+    from warptex._warp import active_tape
+    from warptex.kernels.sampling import downsample_kernel
+
+    tape = active_tape()
+    if tape is None or chain.grad is None or len(sizes) < 2:
+        return
+
+    def backward() -> None:
+        for k in reversed(range(len(sizes) - 1)):
+            h, w = sizes[k + 1]
+            wp.launch(downsample_kernel, dim=(num_layers, h, w), inputs=[view, k], outputs=[chain], adj_inputs=[view, 0], adj_outputs=[chain.grad], adjoint=True, device=chain.device)
+
+    tape.record_func(backward=backward, arrays=[chain])

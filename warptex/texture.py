@@ -251,12 +251,13 @@ class TextureArray:
         Call it after changing :attr:`texels`. Inside a ``wp.Tape`` the launches are recorded, so
         gradients reaching coarse levels flow back to level 0 in the backward pass. Textures of
         other formats than ``FLOAT32`` rebuild on the host (decoded, filtered in linear space,
-        encoded), unrecorded: their gradients stay on the level they reach.
+        encoded); inside a tape their gradients are carried down the same way (the encoding taken as exact).
         """
         if self._format is not Format.FLOAT32:
             if self.num_levels > 1:
                 levels = formats.mip_chain(self._stored_level(0), self._format, self._channels, self._sizes)
                 self._store[self._offsets[1] :].assign(formats.packed(levels[1:], self._format))
+                formats.carry_mip_gradients(self._view, self._chain, self._sizes, self.num_layers)
             return
         for k in range(self.num_levels - 1):
             h, w = self._sizes[k + 1]
