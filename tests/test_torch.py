@@ -423,6 +423,8 @@ def test_opcheck(rng):
         (lambda t, uv, g: wtt.stochastic(t, uv, wt.Stochastic(method="hex", histogram=wt.prepare_histogram(wt.Texture(np.ones((4, 4, 3)))))), TypeError, "warptex.torch.prepare_histogram"),
         (lambda t, uv, g: wtt.triplanar(g, t.detach().numpy()), TypeError, r"warptex.torch.triplanar\(\): texture must be a torch tensor, got a NumPy array"),
         (lambda t, uv, g: wtt.sample(t, uv.detach().numpy()), TypeError, r"warptex.torch.sample\(\): uv must be a torch tensor, got a NumPy array"),
+        (lambda t, uv, g: wtt.sample(torch.zeros(8, 8, 3, dtype=torch.int32), uv), TypeError, "texture has integer dtype torch.int32; pass floats"),
+        (lambda t, uv, g: wtt.sample(torch.zeros(8, 8, 3, dtype=torch.bool), uv), TypeError, "texture has integer dtype torch.bool"),
     ],
 )
 def test_bad_input_raises(call, error, match, gbuffer, rng):
@@ -518,3 +520,16 @@ def test_a_level_0_texture_is_read_in_place_or_copied_with_the_same_bits(layout,
     np.testing.assert_array_equal(out.detach().numpy(), native.numpy())
     np.testing.assert_array_equal(texture.grad.float().numpy(), native_tex.grad()[..., :channels])
     assert torch.equal(texture.detach(), before)
+
+
+@pytest.mark.parametrize("dtype", ["uint8", "uint16"])
+def test_integer_textures_are_read_as_the_native_textures_read_them(dtype, gbuffer, rng):
+    """A uint8 (uint16) texture tensor holds codes, divided by 255 (65535) as ``wt.Texture`` divides
+    a NumPy array of them: the same outputs, bit for bit, in sample and triplanar."""
+    if not hasattr(torch, dtype):
+        pytest.skip(f"this PyTorch has no torch.{dtype}")
+    codes = rng.integers(0, 256 if dtype == "uint8" else 65536, (16, 12, 3)).astype(dtype)
+    uv = rng.random((200, 2), dtype=np.float32)
+    tensor = torch.from_numpy(codes.astype(np.int64)).to(getattr(torch, dtype))
+    np.testing.assert_array_equal(wtt.sample(tensor, torch.tensor(uv)).numpy(), wt.sample(wt.Texture(codes), uv).numpy())
+    np.testing.assert_array_equal(wtt.triplanar(gbuffer, tensor, tiling=0.3).numpy(), wt.triplanar(gbuffer, wt.Texture(codes), tiling=0.3).numpy())

@@ -156,6 +156,8 @@ def _role_tensor(func: str, role: str, t: torch.Tensor) -> torch.Tensor:
         return t.to(torch.int32).contiguous()
     if role.startswith("gbuffer."):  # read in place, no gradient (its dtype is checked when decoded)
         return t.detach().contiguous()
+    if (role in TEXTURES or role == "histogram") and not t.is_floating_point():
+        t = _unorm(func, role, t)
     if role in DIFFERENTIABLE:
         t = t.to(torch.float32).contiguous()
     elif role.startswith("histogram."):  # the transform's LUT, basis, centre: float32 data
@@ -169,6 +171,16 @@ def _role_tensor(func: str, role: str, t: torch.Tensor) -> torch.Tensor:
     if role in TEXTURES or role == "histogram":
         texture_tensor(func, role, t)
     return t
+
+
+def _unorm(func: str, role: str, t: torch.Tensor) -> torch.Tensor:
+    """An integer texture tensor as the native textures read integer arrays
+    (:func:`warptex.texture_input.texel_values`): uint8 / uint16 divided by 255 / 65535 (in float64,
+    then rounded, as NumPy does there), other integer dtypes refused."""
+    scale = {torch.uint8: 255.0, getattr(torch, "uint16", torch.uint8): 65535.0}.get(t.dtype) if t.dtype != torch.bool else None
+    if scale is None:
+        raise TypeError(f"{func}(): {role} has integer dtype {t.dtype}; pass floats (linear, usually in [0, 1]), or uint8 / uint16, which are divided by 255 / 65535")
+    return (t.to(torch.float64) / scale).to(torch.float32)
 
 
 def texture_tensor(func: str, role: str, t) -> torch.Tensor:

@@ -15,7 +15,8 @@ The functions take the native functions' arguments (:func:`warptex.sample`, :fun
 :func:`~warptex.splat`, :func:`~warptex.splat_atlas`), with torch tensors where those take arrays:
 
 - **textures** are float tensors, ``[H, W, C]`` for one texture or ``[L, H, W, C]`` for a texture
-  array (``1 <= C <= 4``, linear). Their mip chain is built inside the op, on the tape, so the
+  array (``1 <= C <= 4``, linear), or uint8 / uint16 tensors of codes, divided by 255 / 65535 as
+  :class:`~warptex.Texture` divides such arrays (read as float32 texels). Their mip chain is built inside the op, on the tape, so the
   gradients of every level a sample reads reach the tensor with no extra step;
 - **per-sample inputs** (``uv``, ``uv_dx``, ``uv_dy``: ``(..., 2)``; ``lod``: uv's sample shape;
   ``layer``: int, uv's sample shape) and **parameters** (``tiling``, ``sharpness``, ``offsets``,
