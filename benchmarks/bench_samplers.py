@@ -49,8 +49,8 @@ and highest of the runs' ratios), so a ratio that swings across a bar between ru
 texture) on 1, 1,024 and 65,536 random UVs, into a new output and into ``out=``, and through the
 PyTorch bridge (``warptex.torch.sample`` on tensors), forward and forward+backward (gradients to
 every texel), against torch ``grid_sample`` on the same data (a UV array or tensor kept between
-calls, as a loop keeps it); and ``triplanar`` and ``biplanar`` of that texture over a 1-pixel
-G-buffer. Each figure is the median of many calls, taken in interleaved rounds.
+calls, as a loop keeps it); and ``triplanar``, ``biplanar`` and ``splat`` (four layers of that
+texture) over a 1-pixel G-buffer. Each figure is the median of many calls, taken in interleaved rounds.
 
 On a CUDA device, warptex runs one launch per call (no CPU threads), the peers are torch on the same
 device and Dr.Jit's CUDA backend (NumPy is skipped), and every timed call ends by waiting for the GPU.
@@ -539,14 +539,19 @@ def call_cost(args, report) -> list[dict]:
 
 
 def _one_pixel_projections(args, tex, sync, report) -> list[dict]:
-    """Forward calls of ``triplanar`` and ``biplanar`` over a 1-pixel G-buffer, into a new output
-    and into ``out=`` (no peer computes this)."""
-    g = wt.GBuffer.empty((1, 1), device=tex.device)
+    """Forward calls of ``triplanar``, ``biplanar`` and ``splat`` (four layers of ``tex``, world_xz)
+    over a 1-pixel G-buffer, into a new output and into ``out=`` (no peer computes this)."""
+    g = wt.GBuffer.empty((1, 1), uv_sets=("uv0",), device=tex.device)
     g.position.assign(np.float32([[[0.3, 0.7, 0.2]]]))
     g.normal.assign(np.float32([[[0.3, 0.8, 0.5]]]))
+    g.uv_sets["uv0"]["uv"].assign(np.float32([[[0.4, 0.6]]]))
     g.mask.fill_(1)
     out = wp.empty((1, 1, 4), dtype=wp.float32, device=tex.device)
-    figures = {(f, into): (lambda f=f, into=into: getattr(wt, f)(g, tex, tiling=2.0, out=out if into else None)) for f in ("triplanar", "biplanar") for into in (False, True)}
+    layers = wt.TextureArray([tex] * 4, device=tex.device)
+    maps = wt.TextureArray(np.full((1, 4, 4, 4), 0.25, np.float32), mipmaps=False, device=tex.device)
+    calls = {"triplanar": lambda into: wt.triplanar(g, tex, tiling=2.0, out=into), "biplanar": lambda into: wt.biplanar(g, tex, tiling=2.0, out=into),
+             "splat": lambda into: wt.splat(g, layers, maps, tiling=2.0, projection="world_xz", out=into)}  # fmt: skip
+    figures = {(f, into): (lambda f=f, into=into: calls[f](out if into else None)) for f in calls for into in (False, True)}
     median = interleaved_median(figures, sync, rounds=args.repeats, calls=args.calls)
     rows = [{"technique": f, "samples": 1, "pass": "forward", "impl": "warptex out=" if into else "warptex", "seconds": s, "max_abs_diff": 0.0} for (f, into), s in median.items()]
     report("1-pixel calls (median us): " + ", ".join(f"{r['technique']} {r['impl']} {r['seconds'] * 1e6:.1f}" for r in rows))

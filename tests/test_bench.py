@@ -103,7 +103,7 @@ def test_call_cost_rows_time_small_calls_against_torch(tmp_path):
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     rows = json.loads((tmp_path / "c.json").read_text())["call_cost"]
     projections = [r for r in rows if r["technique"] != "sample"]
-    assert {(r["technique"], r["impl"]) for r in projections} == {(f, i) for f in ("triplanar", "biplanar") for i in ("warptex", "warptex out=")}
+    assert {(r["technique"], r["impl"]) for r in projections} == {(f, i) for f in ("triplanar", "biplanar", "splat") for i in ("warptex", "warptex out=")}
     assert all(r["seconds"] > 0 for r in projections) and "1-pixel calls (median us): triplanar" in result.stdout
     rows = [r for r in rows if r["technique"] == "sample"]
     impls = ("warptex", "warptex out=", "warptex.torch", "torch")

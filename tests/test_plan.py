@@ -209,3 +209,73 @@ def test_a_projections_plan_follows_its_g_buffer(func):
     np.testing.assert_array_equal(call(g, texture, tiling=1.5, out=out).numpy(), call(g, texture, tiling=1.5).numpy())
     with pytest.raises(ValueError, match="layer must be an int"):  # a float layer equals an int one as a key, and is refused
         call(g, texture, tiling=1.5, layer=0.0, out=out)
+
+
+def _splat_scene(rng):
+    g = wt.GBuffer.empty((6, 5), uv_sets=("uv0",))
+    g.position.assign(rng.random((6, 5, 3), dtype=np.float32))
+    g.normal.assign(rng.normal(size=(6, 5, 3)).astype(np.float32))
+    g.mask.fill_(1)
+    for name, scale in (("uv", 1.0), ("uv_dx", 0.02), ("uv_dy", 0.01)):
+        g.uv_sets["uv0"][name].assign(rng.random((6, 5, 2), dtype=np.float32) * scale)
+    layers = wt.TextureArray(rng.random((4, 16, 16, 4), dtype=np.float32))
+    maps = wt.TextureArray(rng.random((1, 8, 8, 4), dtype=np.float32), mipmaps=False)
+    return g, layers, maps
+
+
+@pytest.mark.parametrize("options", [{}, {"projection": "triplanar", "height_blend": 0.2}, {"stochastic": "hash4", "tiling": 2}, {"heights": "own"}])
+def test_a_splat_plan_gives_the_calls_bits_and_reads_current_contents(options):
+    rng = np.random.default_rng(8)
+    g, layers, maps = _splat_scene(rng)
+    if options.get("heights") == "own":
+        options = {"height_blend": 0.3, "heights": wt.TextureArray(rng.random((4, 8, 8, 1), dtype=np.float32))}
+    out = wp.empty((6, 5, 4), dtype=wp.float32)
+    want = wt.splat(g, layers, maps, **options).numpy()
+    for _ in range(3):
+        out.fill_(np.nan)
+        assert wt.splat(g, layers, maps, **options, out=out) is out
+        np.testing.assert_array_equal(out.numpy(), want)
+    assert sum(p.cmd is not None for key, p in _plans().items() if key[0][0] == "splat" and key[1:4] == (id(g), id(layers), id(out))) == 1
+    maps.assign(rng.random((1, 8, 8, 4), dtype=np.float32))  # in place: the plan reads the new weights
+    np.testing.assert_array_equal(wt.splat(g, layers, maps, **options, out=out).numpy(), wt.splat(g, layers, maps, **options).numpy())
+    other = wt.TextureArray(rng.random((1, 8, 8, 4), dtype=np.float32), mipmaps=False)  # another object: not served by the plan
+    np.testing.assert_array_equal(wt.splat(g, layers, other, **options, out=out).numpy(), wt.splat(g, layers, other, **options).numpy())
+
+
+def test_a_splat_plan_keeps_the_errors_and_follows_its_g_buffer():
+    rng = np.random.default_rng(9)
+    g, layers, maps = _splat_scene(rng)
+    out = wp.empty((6, 5, 4), dtype=wp.float32)
+    with pytest.raises(ValueError) as before:
+        wt.splat(g, layers, maps, height_blend=0.2, height_channel=True, out=out)
+    for _ in range(3):
+        wt.splat(g, layers, maps, height_blend=0.2, height_channel=1, out=out)
+    with pytest.raises(ValueError) as after:  # True == 1: a key that compared by value would hit
+        wt.splat(g, layers, maps, height_blend=0.2, height_channel=True, out=out)
+    assert str(after.value) == str(before.value)
+    g.uv_sets["uv0"]["uv"] = wp.array(rng.random((6, 5, 2), dtype=np.float32), dtype=wp.vec2)  # a new array: the plan does not apply
+    np.testing.assert_array_equal(wt.splat(g, layers, maps, height_blend=0.2, height_channel=1, out=out).numpy(), wt.splat(g, layers, maps, height_blend=0.2, height_channel=1).numpy())
+
+
+def test_splats_packed_arguments_go_with_their_maps():
+    """A splat into a new output reuses the arguments an earlier call packed for the same layers,
+    maps and options; they hold the maps' arrays, so they go when the maps do, and a new maps
+    object (an id may be reused) is packed anew."""
+    from warptex import _pack
+
+    rng = np.random.default_rng(10)
+    g, layers, maps = _splat_scene(rng)
+    data = [rng.random((1, 8, 8, 4), dtype=np.float32) for _ in range(3)]
+    maps = wt.TextureArray(data[0], mipmaps=False)
+    first = wt.splat(g, layers, maps).numpy()
+    np.testing.assert_array_equal(wt.splat(g, layers, maps).numpy(), first)
+    assert len(_pack._packed.get(layers, {})) == 1
+    held = weakref.ref(maps.view.texels)
+    del maps
+    gc.collect()
+    assert not _pack._packed.get(layers) and held() is None, "the packed arguments went with the maps, and held none of their arrays"
+    for values in data[1:]:
+        maps = wt.TextureArray(values, mipmaps=False)
+        fresh = wt.splat(g, wt.TextureArray(layers.numpy(0)), maps).numpy()  # other layers: nothing kept applies
+        np.testing.assert_array_equal(wt.splat(g, layers, maps).numpy(), fresh)
+        del maps

@@ -328,6 +328,14 @@ def packed(owner, key, build):
     return value
 
 
+def forget(owner, key) -> None:
+    """Drop what :func:`packed` keeps for ``owner`` under ``key`` (an object its key names went)."""
+    with _packed_lock:
+        table = _packed.get(owner)
+        if table is not None:
+            table.pop(key, None)
+
+
 _empties: dict = {}
 
 

@@ -6,13 +6,15 @@ Formulas: :mod:`warptex.kernels.splat_layers` and :mod:`warptex.kernels.splat`. 
 from __future__ import annotations
 
 import enum
+import weakref
 from typing import Sequence
 
 import numpy as np
 import warp as wp
 
+from warptex import _plan
 from warptex._op import run
-from warptex._pack import MAP_SAMPLER, footprints, empty_array, out_array, projection_args, sampler_args, stochastic_args, struct_of
+from warptex._pack import MAP_SAMPLER, SURFACE, footprints, empty_array, forget, out_array, packed, projection_args, sampler_args, stochastic_args, struct_of
 from warptex._validate import as_enum, as_on_device, check_layer_count, param_array, warn_renamed
 from warptex.gbuffer import GBuffer, _gbuffer_device
 from warptex.kernels import projection as kp
@@ -145,12 +147,40 @@ def splat(
         warn_renamed("splat(face_layers=...)", "splat(layers_per_face=...), named as triplanar's textures_per_face")
         layers_per_face = face_layers
     device = _gbuffer_device(func, gbuffer, device)
+    options = {"tiling": tiling, "projection": projection, "normalize": normalize, "height_blend": height_blend, "height_channel": height_channel, "sharpness": sharpness,
+               "offsets": offsets, "mirror_fix": mirror_fix, "layers_per_face": layers_per_face, "stochastic": stochastic, "sampler": sampler}  # fmt: skip
+    key = _args_key(gbuffer, layers, splat_maps, heights, uv_set=uv_set, device=device, **options)
+    # A small call repeated on the same objects into the same out= reruns its launch (warptex._plan).
+    plan = key if type(out) is wp.array and _plan.usable() else None
+    objects = (gbuffer, layers, out, splat_maps, *(() if heights is None else (heights,)), *(getattr(gbuffer, n) for n in SURFACE), *gbuffer.uv_sets.get(uv_set, {}).values()) if plan else ()
+    if _plan.rerun(plan, objects):
+        return out
     as_on_device(func, "layers", layers, TextureArray, "a TextureArray", device)
     maps = _as_splat_maps(func, splat_maps, device)
-    num_layers = layers.num_layers
-    check_layer_count(func, num_layers, maps)
+    check_layer_count(func, layers.num_layers, maps)
     gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask", f"{uv_set}.uv", f"{uv_set}.uv_dx", f"{uv_set}.uv_dy")
+    build = lambda: _packed_args(func, gbuffer.origin, layers, maps, heights, device, **options)  # noqa: E731
+    # key: the same layers, maps, heights, options and origin, checked and packed by an earlier call.
+    args, footprint, stochastic_on, linear = build() if key is None else packed(layers, _with_textures(key, layers, maps, heights), build)
 
+    into = out_array(func, out, (*gbuffer.resolution, layers.channels), device)
+    count = gbuffer.pixel_count
+    uvs = gbuffer.uv_sets[uv_set]
+    pixels = struct_of(kl.SplatPixels, device, uv0=uvs["uv"].reshape((count,)), uv0_dx=uvs["uv_dx"].reshape((count,)), uv0_dy=uvs["uv_dy"].reshape((count,)), saved=None)
+    surface = struct_of(pixels.surface, device, **{name: getattr(gbuffer, name).reshape((count,)) for name in ("position", "position_dx", "position_dy", "normal", "mask")})
+    kernels = kl.splat_kernels(capacity=kl.capacity(layers.num_layers), stochastic=stochastic_on)
+    with _plan.recording(plan, objects, out=2, hold=(args,)):
+        result = run(kernels, count, args=args, pixels=pixels, out=((count, layers.channels), float) if into is None else into, device=device, linear=linear, covered=surface.mask,
+                     footprints=footprint)
+    return out if into is not None else result.reshape((*gbuffer.resolution, layers.channels))
+
+
+def _packed_args(func, origin, layers, maps, heights, device, *, tiling, projection, normalize, height_blend, height_channel, sharpness, offsets, mirror_fix, layers_per_face,
+                 stochastic, sampler) -> tuple:  # fmt: skip
+    """``(args, footprints, stochastic, linear)``: the checked options packed for the kernels,
+    the footprints a pixel reads (``warptex._pack.footprints``), whether the stochastic kernels
+    run, and whether the blend is linear in the texels (a histogram's is not)."""
+    num_layers = layers.num_layers
     args = ksl.SplatArgs()
     reads = args.reads  # filled in place: assigning a struct copies it field by field (Python time per call)
     params = reads.params
@@ -196,24 +226,50 @@ def splat(
     params.face_layers = _face_layers(func, layers_per_face, num_layers, params.projection, device)
 
     reads.proj = projection_args(func, tiling=1.0, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=kp.WEIGHTS_TRIPLANAR,
-                                 origin=gbuffer.origin, address=sampler.address, device=device)  # fmt: skip
+                                 origin=origin, address=sampler.address, device=device)  # fmt: skip
     reads.smp = sampler_args(func, sampler, has_lod=True)
     args.layers, args.heights, args.maps = layers_read.view, height_tex.view, maps.view
     args.map_smp, args.stoch, args.height_stoch = sampler_args(func, MAP_SAMPLER, has_lod=False), stoch, height_stoch
 
-    into = out_array(func, out, (*gbuffer.resolution, layers.channels), device)
-    count = gbuffer.pixel_count
-    uvs = gbuffer.uv_sets[uv_set]
-    pixels = struct_of(kl.SplatPixels, device, uv0=uvs["uv"].reshape((count,)), uv0_dx=uvs["uv_dx"].reshape((count,)), uv0_dy=uvs["uv_dy"].reshape((count,)), saved=None)
-    surface = struct_of(pixels.surface, device, **{name: getattr(gbuffer, name).reshape((count,)) for name in ("position", "position_dx", "position_dy", "normal", "mask")})
-    kernels = kl.splat_kernels(capacity=kl.capacity(num_layers), stochastic=stoch.method != kst.METHOD_NONE)
     linear = stoch.histogram == 0 and height_stoch.histogram == 0  # the histogram blend is not linear in the texels
     # A layer's lookup costs about two footprints: its share of the blend (weights, heights,
     # normalising) as much as its filtering (44 ns a footprint in a splat's backward against 20 for bilinear).
     lookups = 2 * num_layers * (3 if params.projection == ksl.PROJECT_TRIPLANAR else 1)
-    result = run(kernels, count, args=args, pixels=pixels, out=((count, layers.channels), float) if into is None else into, device=device, linear=linear, covered=surface.mask,
-                 footprints=footprints(reads.smp, stoch, lookups=lookups))
-    return out if into is not None else result.reshape((*gbuffer.resolution, layers.channels))
+    return args, footprints(reads.smp, stoch, lookups=lookups), stoch.method != kst.METHOD_NONE, linear
+
+
+def _with_textures(key: tuple, layers: TextureArray, maps: TextureArray, heights: TextureArray | None) -> tuple:
+    """``key`` with the maps and heights, held weakly: what is packed under it holds their arrays,
+    so it is dropped when either goes (``warptex._pack.forget``) rather than keep them alive."""
+    owner = weakref.ref(layers)
+
+    def gone(_ref) -> None:
+        if owner() is not None:
+            forget(owner(), full)
+
+    full = (*key, weakref.ref(maps, gone), None if heights is None else weakref.ref(heights, gone))
+    return full
+
+
+def _args_key(gbuffer, layers, splat_maps, heights, *, tiling, projection, normalize, height_blend, height_channel, uv_set, sharpness, offsets, mirror_fix, layers_per_face,
+              stochastic, sampler, device) -> tuple | None:  # fmt: skip
+    """The key of a call's packed arguments (``warptex._pack.packed``, with the maps and heights)
+    and plan (``warptex._plan``), or ``None`` where they are not kept: textures given as such,
+    options as plain values of their exact types (an array option may receive gradients and may
+    change in place; a ``True`` that a call refuses never matches a ``1``), no offsets, layers
+    per face or histogram, hashable option objects."""
+    if not isinstance(layers, TextureArray) or not isinstance(splat_maps, TextureArray) or offsets is not None or layers_per_face is not None:
+        return None
+    numbers = (tiling, sharpness) if height_blend is None else (tiling, sharpness, height_blend)
+    if not all(type(v) in (int, float) or isinstance(v, (np.floating, np.integer)) for v in numbers) or getattr(stochastic, "histogram", None) is not None:
+        return None
+    try:
+        key = ("splat", *((type(v), v) for v in (tiling, sharpness, height_blend, height_channel, projection, uv_set, normalize, mirror_fix)), heights is None, stochastic, sampler,
+               tuple(gbuffer.origin.tolist()), str(device))  # fmt: skip
+        hash(key)
+    except TypeError:  # an unhashable option: no plan
+        return None
+    return key
 
 
 FACE_NAMES = ("+x", "-x", "+y", "-y", "+z", "-z")
