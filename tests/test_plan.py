@@ -279,3 +279,25 @@ def test_splats_packed_arguments_go_with_their_maps():
         fresh = wt.splat(g, wt.TextureArray(layers.numpy(0)), maps).numpy()  # other layers: nothing kept applies
         np.testing.assert_array_equal(wt.splat(g, layers, maps).numpy(), fresh)
         del maps
+
+
+def test_normal_mappings_packed_arguments_follow_its_options():
+    """triplanar_normal and biplanar_normal reuse the arguments an earlier call packed for the same
+    normal map and options; the normal map's own options (blend, strength, flip_green) are part
+    of what is kept, so a call that changes one is packed anew, and a refused call stays refused."""
+    rng = np.random.default_rng(12)
+    g = wt.GBuffer.empty((6, 5))
+    g.position.assign(rng.random((6, 5, 3), dtype=np.float32))
+    g.normal.assign(rng.normal(size=(6, 5, 3)).astype(np.float32))
+    g.mask.fill_(1)
+    image = rng.random((16, 16, 3), dtype=np.float32)
+    normal_map = wt.Texture(image)
+    variants = [{}, {"strength": 0.5}, {"flip_green": True}, {"blend": "rnm"}, {"strength": 0.5, "blend": "udn"}, {}]
+    for func in (wt.triplanar_normal, wt.biplanar_normal):
+        for options in variants:
+            for _ in range(2):
+                np.testing.assert_array_equal(func(g, normal_map, tiling=1.5, **options).numpy(), func(g, wt.Texture(image), tiling=1.5, **options).numpy())
+    grey = wt.Texture(image[..., :1])
+    for _ in range(2):
+        with pytest.raises(ValueError, match="a normal map needs 2 to 4 channels, got 1"):
+            wt.triplanar_normal(g, grey)

@@ -240,12 +240,12 @@ def _normal_mapping(func, weights, gbuffer, normal_map, *, blend, strength, flip
     option = _as_stochastic(func, stochastic)
     if option.mirror or option.rotation:
         raise ValueError(f"{func}(): stochastic mirror and rotation would turn a normal map's slopes without its tangent frame; use neither")
-    setup = _Setup(func, weights, gbuffer, normal_map, stochastic=option, **options)
-    if setup.channels < 2:
-        raise ValueError(f"{func}(): a normal map needs 2 to 4 channels, got {setup.channels}")
-    normal_map = kt.NormalMapArgs()
-    normal_map.channels, normal_map.strength, normal_map.flip_green, normal_map.blend = setup.channels, strength, int(bool(flip_green)), blend_id
-    return setup.launch(3, normal_map)
+    normal = (blend_id, strength, bool(flip_green))
+    full = {**_Setup.DEFAULTS, **options, "stochastic": option}
+    device = _gbuffer_device(func, gbuffer, full.pop("device"))
+    key = _args_key(weights, gbuffer, normal_map, device, **{k: v for k, v in full.items() if k != "out"})
+    setup = _Setup(func, weights, gbuffer, normal_map, **full, device=device, key=None if key is None else (*key, "normal", *normal), normal=normal)
+    return setup.launch(3)
 
 
 class _Setup:
@@ -265,7 +265,7 @@ class _Setup:
 
     def __init__(
         self, func, weights, gbuffer, texture, *, tiling=1.0, sharpness=4.0, offsets=None, mirror_fix=True, textures_per_axis=None, textures_per_face=None,
-        layer=0, space=Space.WORLD, object_to_world=None, stochastic=None, sampler=None, device=None, out=None, key=None,
+        layer=0, space=Space.WORLD, object_to_world=None, stochastic=None, sampler=None, device=None, out=None, key=None, normal=None,
     ):  # fmt: skip
         device = _gbuffer_device(func, gbuffer, device)
         self.func, self.gbuffer, self.device, self.out = func, gbuffer, device, out
@@ -273,25 +273,25 @@ class _Setup:
         self.pixels = surface_pixels(func, gbuffer, device)
         options = {"tiling": tiling, "sharpness": sharpness, "offsets": offsets, "mirror_fix": mirror_fix, "textures_per_axis": textures_per_axis, "textures_per_face": textures_per_face,
                    "layer": layer, "space": space, "object_to_world": object_to_world, "stochastic": stochastic, "sampler": sampler}  # fmt: skip
-        build = lambda: _packed_args(func, weights, gbuffer, texture, device, **options)  # noqa: E731
-        # key (_args_key): the same texture, options and origin, checked and packed by an earlier call.
+        build = lambda: _packed_args(func, weights, gbuffer, texture, device, normal=normal, **options)  # noqa: E731
+        # key (_args_key, with normal's values): the same texture, options and origin, checked and packed by an earlier call.
         self.args, self.channels, self.stochastic, self.faces, self.linear = build() if key is None else packed(texture, key, build)
+        self.normal = normal is not None
 
-    def launch(self, channels: int, normal_map: kt.NormalMapArgs | None = None) -> wp.array:
-        """Run colour mapping (or, given ``normal_map``, normal mapping) into a new ``(H, W, channels)``
-        array, or the caller's ``out``."""
+    def launch(self, channels: int) -> wp.array:
+        """Run colour mapping (or normal mapping, where the setup has a normal map's options) into a
+        new ``(H, W, channels)`` array, or the caller's ``out``."""
         into = out_array(self.func, self.out, (*self.gbuffer.resolution, channels), self.device)
-        if normal_map is not None:
-            self.args.normal_map = normal_map
-        kernels = kt.triplanar_kernels(normal=normal_map is not None, stochastic=self.stochastic, faces=self.faces)
+        kernels = kt.triplanar_kernels(normal=self.normal, stochastic=self.stochastic, faces=self.faces)
         result = run(kernels, self.count, args=self.args, pixels=self.pixels, out=((self.count, channels), float) if into is None else into, device=self.device,
                      linear=self.linear, covered=self.pixels.mask, footprints=footprints(self.args.smp, self.args.stoch, lookups=3))
         return self.out if into is not None else result.reshape((*self.gbuffer.resolution, channels))
 
 
 def _packed_args(func, weights, gbuffer, texture, device, *, tiling, sharpness, offsets, mirror_fix, textures_per_axis, textures_per_face, layer, space,
-                 object_to_world, stochastic, sampler) -> tuple:  # fmt: skip
-    """``(args, channels, stochastic, faces, linear)``: the checked options packed for the kernels."""
+                 object_to_world, stochastic, sampler, normal=None) -> tuple:  # fmt: skip
+    """``(args, channels, stochastic, faces, linear)``: the checked options packed for the kernels
+    (with ``normal``, ``(blend, strength, flip_green)``: a normal map's)."""
     textures = _textures(func, texture, textures_per_axis, textures_per_face, layer, device)
     object_to_world = _object_to_world(func, space, object_to_world)
     proj = projection_args(func, tiling=tiling, sharpness=sharpness, offsets=offsets, mirror_fix=mirror_fix, weights=weights, object_to_world=object_to_world,
@@ -306,6 +306,11 @@ def _packed_args(func, weights, gbuffer, texture, device, *, tiling, sharpness, 
     for name, t in zip(kf.FACE_FIELDS, textures):  # into the struct's own faces (assigning a struct copies it field by field)
         setattr(args.faces, name, t.view)
     args.layer, args.proj, args.smp, args.stoch = layer, proj, sampler_args(func, sampler, has_lod=True), stoch
+    if normal is not None:
+        if textures[0].channels < 2:
+            raise ValueError(f"{func}(): a normal map needs 2 to 4 channels, got {textures[0].channels}")
+        nm = args.normal_map
+        nm.channels, (nm.blend, nm.strength, nm.flip_green) = textures[0].channels, (normal[0], normal[1], int(normal[2]))
     faces = any(textures[2 * a] is not textures[2 * a + 1] for a in range(3))  # a face of some axis differs from its opposite
     return args, textures[0].channels, stoch.method != METHOD_NONE, faces, stoch.histogram == 0  # a histogram blend is not linear in the texels
 
