@@ -259,6 +259,56 @@ def test_texel_gradients_are_the_same_bits_every_run(scene, case):
         np.testing.assert_array_equal(run(OTHER), first)
 
 
+def test_a_small_call_is_captured_in_a_cuda_graph(scene):
+    """Issue 51: a call into out= is capturable (``wp.ScopedCapture``): the graph's replay fills
+    out= as the call does. Not yet run on a GPU (none was lent to the session that wrote it)."""
+    if not OTHER.startswith("cuda"):
+        pytest.skip("CUDA graphs need a CUDA device")
+    tex = wt.Texture(scene["image"], device=OTHER)
+    uv = wp.array(scene["uv"], dtype=wp.vec2, device=OTHER)
+    out = wp.empty((uv.shape[0], 4), dtype=wp.float32, device=OTHER)
+    g = scene["gbuffer"].to(OTHER)
+    colour = wp.empty((*g.resolution, 4), dtype=wp.float32, device=OTHER)
+    for _ in range(2):  # modules loaded and arguments packed outside the capture
+        wt.sample(tex, uv, out=out)
+        wt.triplanar(g, tex, tiling=0.4, out=colour)
+    with wp.ScopedCapture(device=OTHER) as capture:
+        wt.sample(tex, uv, out=out)
+        wt.triplanar(g, tex, tiling=0.4, out=colour)
+    out.zero_()
+    colour.zero_()
+    wp.capture_launch(capture.graph)
+    np.testing.assert_array_equal(out.numpy(), wt.sample(tex, uv).numpy())
+    np.testing.assert_array_equal(colour.numpy(), wt.triplanar(g, tex, tiling=0.4).numpy())
+
+
+def test_the_torch_bridge_in_a_torch_cuda_graph(scene):
+    """Issue 51: warptex.torch inside ``torch.cuda.graph``: replaying the graph recomputes the
+    output from the static input tensors' current contents. Not yet run on a GPU."""
+    torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
+    import warptex.torch as wtt
+
+    if not OTHER.startswith("cuda") or not torch.cuda.is_available():
+        pytest.skip("torch CUDA graphs need a CUDA device and a CUDA build of PyTorch")
+    tdev = wp.device_to_torch(OTHER)
+    texture = torch.tensor(scene["image"], device=tdev)
+    uv = torch.tensor(scene["uv"], device=tdev)
+    side = torch.cuda.Stream()
+    side.wait_stream(torch.cuda.current_stream())
+    with torch.cuda.stream(side):  # warm-up on a side stream, as torch's CUDA graph docs ask
+        for _ in range(3):
+            wtt.sample(texture, uv)
+    torch.cuda.current_stream().wait_stream(side)
+    graph = torch.cuda.CUDAGraph()
+    with torch.cuda.graph(graph):
+        static_out = wtt.sample(texture, uv)
+    uv.copy_(torch.tensor(scene["uv"][::-1].copy(), device=tdev))
+    graph.replay()
+    torch.cuda.synchronize()
+    native = wt.sample(wt.Texture(scene["image"], device=OTHER), wp.array(scene["uv"][::-1].copy(), dtype=wp.vec2, device=OTHER))
+    np.testing.assert_array_equal(static_out.cpu().numpy(), native.numpy())
+
+
 def _cli(*args, cwd):
     result = subprocess.run([sys.executable, "-m", "warptex", *args, "--device", OTHER], capture_output=True, text=True, cwd=cwd, timeout=1800)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
