@@ -309,8 +309,8 @@ def _packed_args(func, weights, gbuffer, texture, device, *, tiling, sharpness, 
     if normal is not None:
         if textures[0].channels < 2:
             raise ValueError(f"{func}(): a normal map needs 2 to 4 channels, got {textures[0].channels}")
-        nm = args.normal_map
-        nm.channels, (nm.blend, nm.strength, nm.flip_green) = textures[0].channels, (normal[0], normal[1], int(normal[2]))
+        nm = args.normal_map  # filled in place, as args.faces
+        nm.channels, nm.blend, nm.strength, nm.flip_green = textures[0].channels, normal[0], normal[1], int(normal[2])
     faces = any(textures[2 * a] is not textures[2 * a + 1] for a in range(3))  # a face of some axis differs from its opposite
     return args, textures[0].channels, stoch.method != METHOD_NONE, faces, stoch.histogram == 0  # a histogram blend is not linear in the texels
 
