@@ -67,16 +67,13 @@ def _layers(seed=10, count=4):
     return wt.TextureArray(_image(seed, (count, 32, 32, 4)), requires_grad=True)
 
 
-def _uv(order, *values):
-    return [v[order] for v in values]
-
-
 # Each technique, where only textures want gradients (warptex's hand-written texel gradients):
-# order (an index array over N UVs, or None/"reverse" for the G-buffer) -> (output, textures).
+# order -> (output, textures); the order is an index array over the N UVs, or, for the G-buffer
+# techniques, whether the G-buffer's pixels are reversed.
 CASES = {
-    "sample, bilinear": lambda o: (lambda t: (wt.sample(t, *_uv(o, UV)), [t]))(_tex()),
-    "sample, trilinear, per-sample LOD": lambda o: (lambda t: (wt.sample(t, *_uv(o, UV), lod=_uv(o, LOD)[0], sampler=wt.Sampler(filter="trilinear")), [t]))(_tex()),
-    "sample, anisotropic": lambda o: (lambda t: (wt.sample(t, *_uv(o, UV), uv_dx=DX[o], uv_dy=DY[o], sampler=wt.Sampler(filter="anisotropic")), [t]))(_tex()),
+    "sample, bilinear": lambda o: (lambda t: (wt.sample(t, UV[o]), [t]))(_tex()),
+    "sample, trilinear, per-sample LOD": lambda o: (lambda t: (wt.sample(t, UV[o], lod=LOD[o], sampler=wt.Sampler(filter="trilinear")), [t]))(_tex()),
+    "sample, anisotropic": lambda o: (lambda t: (wt.sample(t, UV[o], uv_dx=DX[o], uv_dy=DY[o], sampler=wt.Sampler(filter="anisotropic")), [t]))(_tex()),
     "stochastic hash4": lambda o: (lambda t: (wt.stochastic(t, UV[o], "hash4", lod=LOD[o]), [t]))(_tex()),
     "stochastic hex": lambda o: (lambda t: (wt.stochastic(t, UV[o], "hex", lod=LOD[o]), [t]))(_tex()),
     "triplanar": lambda r: (lambda t: (wt.triplanar(_sphere(r), t, tiling=3.0), [t]))(_tex()),
