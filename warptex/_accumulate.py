@@ -224,8 +224,8 @@ def set_deterministic_gradients(enabled: bool) -> None:
     in fixed point by two passes of the gradient kernel, or added with float atomics (``False``:
     one pass, whose last bits change from run to run). On the CPU gradients are the same bits at
     any thread count either way. Gradients from Warp's generated adjoints (a call that also wants
-    UV, tiling or offset gradients) and the scalar tiling and transition gradients of ``splat``
-    are added with float atomics on CUDA regardless (docs/performance.md says how and what it costs)."""
+    UV, tiling or offset gradients; ``splat_atlas``; the histogram-preserving hex blend) and the
+    scalar tiling and transition gradients of ``splat`` are added with float atomics on CUDA regardless (docs/performance.md says how and what it costs)."""
     global _deterministic
     if not isinstance(enabled, bool):
         raise TypeError(f"set_deterministic_gradients() takes True or False, not {enabled!r}")
