@@ -83,8 +83,12 @@ CASES = {
     "splat, triplanar, height blend": lambda r: (lambda ls, m: (wt.splat(_sphere(r), ls, m, tiling=2.0, projection="triplanar", height_blend=0.3), [ls, m]))(
         _layers(), wt.TextureArray(MAPS, mipmaps=False, requires_grad=True)
     ),
+    "splat, uv, hash4": lambda r: (lambda ls, m: (wt.splat(_sphere(r), ls, m, tiling=3.0, stochastic="hash4"), [ls, m]))(
+        _layers(), wt.TextureArray(MAPS, mipmaps=False, requires_grad=True)
+    ),
+    "stochastic cheap2": lambda o: (lambda t: (wt.stochastic(t, UV[o], "cheap2", lod=1.2), [t]))(_tex()),
 }
-ON_UVS = {"sample, bilinear", "sample, trilinear, per-sample LOD", "sample, anisotropic", "stochastic hash4", "stochastic hex"}
+ON_UVS = {"sample, bilinear", "sample, trilinear, per-sample LOD", "sample, anisotropic", "stochastic hash4", "stochastic hex", "stochastic cheap2"}
 
 
 def _gradients(case: str, reverse: bool, weights_seed: int = 20, nan_at: int | None = None) -> list[np.ndarray]:
