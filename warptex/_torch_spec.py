@@ -173,11 +173,15 @@ def _role_tensor(func: str, role: str, t: torch.Tensor) -> torch.Tensor:
     return t
 
 
+# What integer texture tensors are divided by (torch.uint16 is new in PyTorch 2.3).
+_UNORM_SCALES = {torch.uint8: 255.0, **({torch.uint16: 65535.0} if hasattr(torch, "uint16") else {})}
+
+
 def _unorm(func: str, role: str, t: torch.Tensor) -> torch.Tensor:
     """An integer texture tensor as the native textures read integer arrays
     (:func:`warptex.texture_input.texel_values`): uint8 / uint16 divided by 255 / 65535 (in float64,
     then rounded, as NumPy does there), other integer dtypes refused."""
-    scale = {torch.uint8: 255.0, getattr(torch, "uint16", torch.uint8): 65535.0}.get(t.dtype) if t.dtype != torch.bool else None
+    scale = _UNORM_SCALES.get(t.dtype)
     if scale is None:
         raise TypeError(f"{func}(): {role} has integer dtype {t.dtype}; pass floats (linear, usually in [0, 1]), or uint8 / uint16, which are divided by 255 / 65535")
     return (t.to(torch.float64) / scale).to(torch.float32)
