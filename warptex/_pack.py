@@ -310,12 +310,17 @@ _packed_lock = threading.Lock()
 MAX_PACKED_PER_OWNER = 16
 
 
-def packed(owner, key, build):
+def packed(owner, key, build, *, weakly=()):
     """``build()``, made once per ``owner`` and hashable ``key`` while ``owner`` lives, and shared.
 
     ``key`` must name everything ``build`` reads beside ``owner``'s fixed state (a texture's view
     never changes), and what it returns is never changed afterwards: kernels only read their
-    argument structs. ``build``'s errors are raised each call (nothing is kept)."""
+    argument structs. ``weakly``: other objects ``build`` reads (``None`` for one not given),
+    named in the key by weak reference: what ``build`` returns may hold their arrays, so the
+    entry is dropped when any of them goes rather than keep them alive (a loop that makes new
+    splat maps each call). ``build``'s errors are raised each call (nothing is kept)."""
+    if weakly:
+        key = _weak_key(owner, key, weakly)
     table = _packed.get(owner)
     value = None if table is None else table.get(key)
     if value is None:
@@ -328,12 +333,19 @@ def packed(owner, key, build):
     return value
 
 
-def forget(owner, key) -> None:
-    """Drop what :func:`packed` keeps for ``owner`` under ``key`` (an object its key names went)."""
-    with _packed_lock:
-        table = _packed.get(owner)
+def _weak_key(owner, key: tuple, objects) -> tuple:
+    """``key`` with ``objects`` by weak reference (equal while their objects live, as the objects
+    are), each dropping the entry stored under the key when its object goes."""
+    owner_ref = weakref.ref(owner)
+
+    def gone(_ref) -> None:
+        table = _packed.get(owner_ref()) if owner_ref() is not None else None
         if table is not None:
-            table.pop(key, None)
+            with _packed_lock:
+                table.pop(full, None)
+
+    full = (*key, *(None if o is None else weakref.ref(o, gone) for o in objects))
+    return full
 
 
 _empties: dict = {}

@@ -6,7 +6,6 @@ Formulas: :mod:`warptex.kernels.splat_layers` and :mod:`warptex.kernels.splat`. 
 from __future__ import annotations
 
 import enum
-import weakref
 from typing import Sequence
 
 import numpy as np
@@ -14,7 +13,7 @@ import warp as wp
 
 from warptex import _plan
 from warptex._op import run
-from warptex._pack import MAP_SAMPLER, SURFACE, footprints, empty_array, forget, out_array, packed, projection_args, sampler_args, stochastic_args, struct_of
+from warptex._pack import MAP_SAMPLER, SURFACE, footprints, empty_array, out_array, packed, projection_args, sampler_args, stochastic_args, struct_of
 from warptex._validate import as_enum, as_on_device, check_layer_count, param_array, warn_renamed
 from warptex.gbuffer import GBuffer, _gbuffer_device
 from warptex.kernels import projection as kp
@@ -161,7 +160,7 @@ def splat(
     gbuffer.require(func, "position", "position_dx", "position_dy", "normal", "mask", f"{uv_set}.uv", f"{uv_set}.uv_dx", f"{uv_set}.uv_dy")
     build = lambda: _packed_args(func, gbuffer.origin, layers, maps, heights, device, **options)  # noqa: E731
     # key: the same layers, maps, heights, options and origin, checked and packed by an earlier call.
-    args, footprint, stochastic_on, linear = build() if key is None else packed(layers, _with_textures(key, layers, maps, heights), build)
+    args, footprint, stochastic_on, linear = build() if key is None else packed(layers, key, build, weakly=(maps, heights))
 
     into = out_array(func, out, (*gbuffer.resolution, layers.channels), device)
     count = gbuffer.pixel_count
@@ -238,23 +237,10 @@ def _packed_args(func, origin, layers, maps, heights, device, *, tiling, project
     return args, footprints(reads.smp, stoch, lookups=lookups), stoch.method != kst.METHOD_NONE, linear
 
 
-def _with_textures(key: tuple, layers: TextureArray, maps: TextureArray, heights: TextureArray | None) -> tuple:
-    """``key`` with the maps and heights, held weakly: what is packed under it holds their arrays,
-    so it is dropped when either goes (``warptex._pack.forget``) rather than keep them alive."""
-    owner = weakref.ref(layers)
-
-    def gone(_ref) -> None:
-        if owner() is not None:
-            forget(owner(), full)
-
-    full = (*key, weakref.ref(maps, gone), None if heights is None else weakref.ref(heights, gone))
-    return full
-
-
 def _args_key(gbuffer, layers, splat_maps, heights, *, tiling, projection, normalize, height_blend, height_channel, uv_set, sharpness, offsets, mirror_fix, layers_per_face,
               stochastic, sampler, device) -> tuple | None:  # fmt: skip
-    """The key of a call's packed arguments (``warptex._pack.packed``, with the maps and heights)
-    and plan (``warptex._plan``), or ``None`` where they are not kept: textures given as such,
+    """The key of a call's packed arguments (``warptex._pack.packed``, which adds the maps and
+    heights weakly) and plan (``warptex._plan``), or ``None`` where they are not kept: textures given as such,
     options as plain values of their exact types (an array option may receive gradients and may
     change in place; a ``True`` that a call refuses never matches a ``1``), no offsets, layers
     per face or histogram, hashable option objects."""
