@@ -34,7 +34,7 @@ def exact_on_cpu(monkeypatch):
     monkeypatch.setattr(_accumulate, "EXACT_DEVICES", {"cuda", "cpu"})
     finished = []
     add_sums = _accumulate.add_sums
-    monkeypatch.setattr(_launch, "add_sums", lambda sums, grads: (finished.extend(grads), add_sums(sums, grads)))
+    monkeypatch.setattr(_launch, "add_sums", lambda sums: (finished.extend(s.grad for s in sums.values()), add_sums(sums)))
     return finished
 
 

@@ -238,9 +238,10 @@ def get_deterministic_gradients() -> bool:
 
 
 class Exact(NamedTuple):
-    """A texel gradient's fixed-point sum: two int32 per texel (its largest contribution's float
-    bits, then its exponent; how many contributions it has) and four int64 (the sum)."""
+    """A texel gradient ``grad``'s fixed-point sum: two int32 per texel (its largest contribution's
+    float bits, then its exponent; how many contributions it has) and four int64 (the sum)."""
 
+    grad: wp.array
     exponents: wp.array
     fixed: wp.array
 
@@ -251,17 +252,17 @@ def exact_sums(device, texel_grads: list[wp.array]) -> dict[int, Exact] | None:
     float atomics or in fixed chunks (the CPU)."""
     if not _deterministic or not texel_grads or ("cuda" if device.is_cuda else "cpu") not in EXACT_DEVICES:
         return None
-    return {id(g): Exact(wp.zeros(2 * g.shape[0], dtype=wp.int32, device=device), wp.zeros(4 * g.shape[0], dtype=wp.int64, device=device)) for g in texel_grads}
+    return {id(g): Exact(g, wp.zeros(2 * g.shape[0], dtype=wp.int32, device=device), wp.zeros(4 * g.shape[0], dtype=wp.int64, device=device)) for g in texel_grads}
 
 
-def set_exponents(sums: dict[int, Exact], texel_grads: list[wp.array]) -> None:
+def set_exponents(sums: dict[int, Exact]) -> None:
     """Between the two passes: each texel's exponent, from its contributions' count and largest
     magnitude (the first pass)."""
-    for g in texel_grads:
-        wp.launch(exact_exponents, dim=g.shape[0], inputs=[sums[id(g)].exponents], device=g.device, record_tape=False)
+    for s in sums.values():
+        wp.launch(exact_exponents, dim=s.grad.shape[0], inputs=[s.exponents], device=s.grad.device, record_tape=False)
 
 
-def add_sums(sums: dict[int, Exact], texel_grads: list[wp.array]) -> None:
+def add_sums(sums: dict[int, Exact]) -> None:
     """After the second pass: each fixed-point sum added into its gradient."""
-    for g in texel_grads:
-        wp.launch(add_exact, dim=g.shape[0], inputs=[g, sums[id(g)].exponents, sums[id(g)].fixed], device=g.device, record_tape=False)
+    for s in sums.values():
+        wp.launch(add_exact, dim=s.grad.shape[0], inputs=[s.grad, s.exponents, s.fixed], device=s.grad.device, record_tape=False)

@@ -287,12 +287,11 @@ def _scatter_exact(kernel, count: int, *, args, pixels, grads_t, grads: list[Tar
     """:func:`scatter`'s deterministic CUDA backward: two launches of ``kernel`` over every pixel,
     the first bounding each texel's contributions (texel targets only: nothing else is added
     into), the second adding them in fixed point, then the sums added into the texel gradients."""
-    texel = list({id(t.grad): t.grad for t in grads if t.grad is not None and id(t.grad) in sums}.values())
     bound = _grads_struct(grads_t, [t if t.grad is not None and id(t.grad) in sums else Target(None) for t in grads], {}, device, sums, first_pass=True)
     wp.launch(kernel, dim=count, inputs=[args, pixels, 0, bound, adj], device=device, record_tape=False)
-    set_exponents(sums, texel)
+    set_exponents(sums)
     wp.launch(kernel, dim=count, inputs=[args, pixels, 0, _grads_struct(grads_t, grads, {}, device, sums), adj], device=device, record_tape=False)
-    add_sums(sums, texel)
+    add_sums(sums)
 
 
 def _grads_struct(grads_t, grads: list[Target], copies: dict, device, sums: dict | None = None, first_pass: bool = False):
