@@ -11,7 +11,9 @@ import warp as wp
 
 from warptex import io
 from warptex.png import codes, colour_channels
+from warptex._warp import active_tape
 from warptex.kernels import texels as kx
+from warptex.kernels.sampling import downsample_kernel
 
 
 class Format(str, enum.Enum):
@@ -192,9 +194,6 @@ def carry_mip_gradients(view, chain: wp.array, sizes: list[tuple[int, int]], num
 
     ``chain`` is the gradient carrier (:func:`gradient_carrier`): the adjoint reads the view's
     texels only to replay a sum that it does not keep, and writes nothing but gradients."""
-    from warptex._warp import active_tape
-    from warptex.kernels.sampling import downsample_kernel
-
     tape = active_tape()
     if tape is None or chain.grad is None or len(sizes) < 2:
         return
