@@ -33,8 +33,9 @@ def interrupts_deferred() -> Iterator[None]:
 def interrupts_ignored() -> Iterator[None]:
     """Within the block, SIGINT and SIGTERM are dropped. For the report of a run that already
     failed: torchrun sends SIGTERM to every rank once one fails, which may be while this rank is
-    saying why it failed. Only the main thread can change a signal's handler; elsewhere nothing
-    changes."""
+    saying why it failed. A handler the block installs itself is kept: that is how a block hands a
+    signal on with no moment in between in which the old handler is back. Only the main thread can
+    change a signal's handler; elsewhere nothing changes."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -43,4 +44,5 @@ def interrupts_ignored() -> Iterator[None]:
         yield
     finally:
         for number, handler in kept.items():
-            signal.signal(number, handler)
+            if signal.getsignal(number) is signal.SIG_IGN:
+                signal.signal(number, handler)

@@ -167,9 +167,12 @@ def version() -> str:
     return f"warptex {ours} (warp-lang {warp}, Python {sys.version.split()[0]})"
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, *, process: bool = False) -> int:
     """Run the command line; the exit status: 0, 1 on an error (one line on stderr, no files
-    written), 2 on bad options (argparse), 130 on Ctrl-C."""
+    written), 2 on bad options (argparse), 130 on Ctrl-C. ``process``: this is the process's
+    entry (:func:`entry`): once the files are written and named, a Ctrl-C ends the process at once
+    with status 0, set while Ctrl-C is still ignored so that no moment is left in which it would
+    raise into a run that is over."""
     argv = _joined_vectors(list(sys.argv[1:] if argv is None else argv))
     parser = build_parser()
     if argv and not argv[0].startswith("-") and argv[0] not in COMMANDS:  # no command takes a positional argument
@@ -205,6 +208,8 @@ def main(argv: list[str] | None = None) -> int:
         with interrupts_ignored():  # the files are written: a Ctrl-C while their names print comes after the run
             for path in paths:
                 print(f"wrote {path}")
+            if process:
+                _exit_on_interrupt(0)
     except BaseException as err:
         status = _reported(err, written)
         if status is None:
@@ -266,14 +271,22 @@ def entry() -> None:
     import atexit
     import signal
 
-    status = main()
+    status = main(process=True)
     sys.stdout.flush()
     sys.stderr.flush()
     if status == 130:
         os._exit(status)
-    signal.signal(signal.SIGINT, lambda number, frame: os._exit(status))
+    _exit_on_interrupt(status)
     atexit.register(signal.signal, signal.SIGINT, signal.SIG_IGN)  # runs after other threads are joined
     sys.exit(status)
+
+
+def _exit_on_interrupt(status: int) -> None:
+    """From now on a Ctrl-C ends the process at once with ``status`` (the run is over)."""
+    import signal
+
+    sys.stdout.flush()
+    signal.signal(signal.SIGINT, lambda number, frame: os._exit(status))
 
 
 VECTOR_OPTIONS = ("--eye", "--target", "--up")
