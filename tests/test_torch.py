@@ -5,6 +5,7 @@ compile under ``torch.compile``, and bad input raises clearly."""
 from __future__ import annotations
 
 import gc
+import weakref
 
 import numpy as np
 import trimesh
@@ -325,6 +326,75 @@ def test_a_gradient_handed_to_torch_is_never_written_again(rng):
     np.testing.assert_allclose(texture.grad.numpy(), first.numpy() + second.numpy(), rtol=1e-6, atol=1e-7)
 
 
+@pytest.mark.parametrize("layout", ["rgba-level-0", "rgb-mips"])
+def test_a_loop_on_one_texture_tensor_reuses_its_texture_and_follows_its_values(layout, monkeypatch, rng):
+    """The bridge keeps the texture it made around a tensor for the tensor's next calls
+    (issue 51): a loop that changes the tensor in place between steps (an optimiser's step) reads
+    its new values every step, each step's gradient is the native call's, a gradient the user
+    still holds is never written again, and the kept textures go with the tensor."""
+    import warptex._torch_texture as kept_textures
+
+    made = []
+    real = kept_textures._kept_texture
+
+    def spy(*args, **kwargs):
+        kept = real(*args, **kwargs)
+        made.append(kept.texture)
+        return kept
+
+    monkeypatch.setattr(kept_textures, "_kept_texture", spy)
+    channels, sampler = (4, wt.Sampler(filter="bilinear", address="wrap")) if layout == "rgba-level-0" else (3, wt.Sampler(filter="trilinear"))
+    texture = _t(rng, 16, 12, channels)
+    uv = torch.tensor(rng.random((300, 2), dtype=np.float32) * 3)
+    lod = None if layout == "rgba-level-0" else torch.tensor(rng.random(300, dtype=np.float32) * 3)
+    kept_grads = []
+    for step in range(4):
+        out = wtt.sample(texture, uv, lod=lod, sampler=sampler)
+        weights = torch.tensor(rng.standard_normal(out.shape).astype(np.float32))
+        (out * weights).sum().backward()
+        native_tex = wt.Texture(texture.detach().numpy(), requires_grad=True)
+        tape = wp.Tape()
+        with tape:
+            native_tex.update()  # as the bridge builds its mips: coarse-level gradients reach level 0
+            native = wt.sample(native_tex, uv.numpy(), lod=None if lod is None else wp.array(lod.numpy(), dtype=float), sampler=sampler)
+        tape.backward(grads={native: wp.array(weights.numpy(), dtype=float)})
+        np.testing.assert_array_equal(out.detach().numpy(), native.numpy())
+        np.testing.assert_allclose(texture.grad.numpy(), native_tex.grad(), rtol=1e-6, atol=1e-7)
+        if step == 1:  # the user keeps this step's gradient: the next steps must not touch it
+            kept_grads.append((texture.grad, texture.grad.clone()))
+        texture.grad = None
+        with torch.no_grad():
+            texture.mul_(0.9).add_(0.05)  # in place: same storage, new values
+    # one texture for every step; an RGBA level 0 hands its gradient buffer to torch, so the step
+    # after the gradient the user kept gets a second one
+    assert len({id(t) for t in made}) == (2 if layout == "rgba-level-0" else 1)
+    for held, copy in kept_grads:
+        assert torch.equal(held, copy)
+    ref = weakref.ref(made[0])
+    made.clear()
+    del texture, out
+    gc.collect()
+    assert ref() is None
+
+
+@pytest.mark.parametrize("shape", [(8, 8, 4), (2, 8, 8, 4), (8, 8, 3)])
+@pytest.mark.parametrize("grad", [False, True])
+def test_the_textures_kept_for_a_tensor_keep_nothing_alive(shape, grad, rng):
+    """A texture the bridge keeps for a tensor's next calls goes with the tensor, and keeps neither
+    it nor its storage alive."""
+    texture = _t(rng, *shape, grad=grad)
+    uv = torch.tensor(rng.random((20, 2), dtype=np.float32))
+    out = wtt.sample(texture, uv, layer=1 if len(shape) == 4 else None)
+    if grad:
+        out.sum().backward()
+    storage = texture.untyped_storage()._weak_ref()
+    refs = [weakref.ref(texture)]
+    del texture, out
+    gc.collect()
+    assert refs[0]() is None
+    assert torch.UntypedStorage._expired(storage)
+
+
 def test_no_tape_is_kept_without_gradients_and_a_graph_frees_its_tape(rng):
     texture, uv = _t(rng, 8, 8, 3), _t(rng, 50, 2)
     gc.collect()
@@ -471,8 +541,8 @@ def test_sample_without_a_lod_builds_mips_only_where_its_sampler_reads_them(monk
     coarser level still reads it, as natively."""
     from warptex import _torch_op
 
-    built, around = [], _torch_op._texture_around
-    monkeypatch.setattr(_torch_op, "_texture_around", lambda t, *, mipmaps, **kw: (built.append(mipmaps), around(t, mipmaps=mipmaps, **kw))[1])
+    built, around = [], _torch_op.texture_around
+    monkeypatch.setattr(_torch_op, "texture_around", lambda t, *, mipmaps, **kw: (built.append(mipmaps), around(t, mipmaps=mipmaps, **kw))[1])
     rng = np.random.default_rng(5)
     image = torch.tensor(rng.random((16, 16, 3), dtype=np.float32), requires_grad=True)
     uv = torch.tensor(rng.random((50, 2), dtype=np.float32) * 2)

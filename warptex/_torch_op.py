@@ -6,9 +6,10 @@ run as one ``torch.autograd.Function`` (:class:`_Eager`): an empty op's forward 
 0.4–0.5 ms here, an empty Function's 0.1. The forward runs the native function on zero-copy Warp
 views of the tensors (on torch's current CUDA stream), under a ``wp.Tape`` when a gradient will be
 needed; the tape is kept for the backward (``warptex::technique_backward``), which runs it once per
-``backward()`` and returns the gradients as new tensors (a texture's own buffer where it can,
-:class:`_Handed`). The tape lives as long as the autograd graph that holds it (a token tensor saved
-in the graph; its finaliser forgets the tape).
+``backward()`` and returns the gradients as new tensors (a texture's own buffer where it can:
+``warptex._torch_texture``, which also keeps the textures made around a tensor for its next calls).
+The tape lives as long as the autograd graph that holds it (a token tensor saved in the graph; its
+finaliser forgets the tape and gives the call's kept textures back).
 """
 
 from __future__ import annotations
@@ -20,16 +21,16 @@ import threading
 import weakref
 from typing import Any
 
-import numpy as np
 import torch
 import warp as wp
 
 from warptex._pack import mip_levels, sampler_args
 from warptex._torch_spec import DIFFERENTIABLE, HISTOGRAM, INTS, TECHNIQUES, TEXTURES, VEC2, op_arguments, out_shape, parse
+from warptex._torch_texture import Handed, give_back, texture_around
 from warptex.gbuffer import FIELDS, UV_FIELDS, GBuffer
 from warptex.histogram import Histogram
 from warptex.options import Sampler, Stochastic
-from warptex.texture import Texture, TextureArray, mip_sizes
+from warptex.texture import Texture, TextureArray
 
 
 def call(name: str, args: dict[str, Any]) -> torch.Tensor:
@@ -77,6 +78,18 @@ class _State:
     tape: wp.Tape
     out: wp.array
     grads: dict[int, Any]  # tensor index -> a function returning its gradient (a new tensor)
+    leases: list  # the kept textures the recorded pass reads (warptex._torch_texture), given back with it
+
+
+@dataclasses.dataclass
+class _Decoding:
+    """What :func:`_decode` reads and fills while it turns a spec into native arguments."""
+
+    tensors: list[torch.Tensor]
+    want: set  # the indices of the tensors that get gradients
+    grads: dict[int, Any]  # filled: tensor index -> a function returning its gradient
+    mips: bool  # whether textures need their mips
+    leases: list = dataclasses.field(default_factory=list)  # filled: the kept textures taken (warptex._torch_texture)
 
 
 def _forward(spec: str, tensors: list[torch.Tensor]) -> list[torch.Tensor]:
@@ -84,23 +97,25 @@ def _forward(spec: str, tensors: list[torch.Tensor]) -> list[torch.Tensor]:
     s = parse(spec)
     device = _warp_device(tensors[0].device)
     mips = _reads_mips(spec)
-    with _torch_stream(device):
-        grads: dict[int, Any] = {}
-        want = set(s["grad"])
-        tape = wp.Tape() if want else None
-        if tape is not None:
-            with tape:  # textures are built on the tape too: their mips' gradients reach level 0
-                args = _decode(s["args"], tensors, want, grads, device, mips)
-                out = _run(s["technique"], args)
-        else:
-            args = _decode(s["args"], tensors, want, grads, device, mips)
-            out = _run(s["technique"], args)
-        result = wp.to_torch(out, requires_grad=False)
+    decoding = _Decoding(tensors, set(s["grad"]), {}, mips)
+    tape = wp.Tape() if decoding.want else None
+    try:
+        with _torch_stream(device):
+            if tape is not None:
+                with tape:  # textures are built on the tape too: their mips' gradients reach level 0
+                    out = _run(s["technique"], _decode(s["args"], decoding))
+            else:
+                out = _run(s["technique"], _decode(s["args"], decoding))
+            result = wp.to_torch(out, requires_grad=False)
+    except BaseException:
+        give_back(decoding.leases)
+        raise
     if tape is None:
+        give_back(decoding.leases)
         return [result, torch.zeros(1, dtype=torch.int64)]
     with _states_lock:
         key = next(_tokens)
-        _states[key] = _State(tape, out, grads)
+        _states[key] = _State(tape, out, decoding.grads, decoding.leases)
     token = torch.tensor([key], dtype=torch.int64)
     weakref.finalize(token, _forget, key)
     return [result, token]
@@ -108,7 +123,9 @@ def _forward(spec: str, tensors: list[torch.Tensor]) -> list[torch.Tensor]:
 
 def _forget(key: int) -> None:
     with _states_lock:
-        _states.pop(key, None)
+        state = _states.pop(key, None)
+    if state is not None:
+        give_back(state.leases)
 
 
 @torch.library.custom_op("warptex::technique", mutates_args=())
@@ -131,7 +148,7 @@ def _backward_pass(token: torch.Tensor, grad: torch.Tensor, spec: str, tensors: 
         raise RuntimeError("warptex.torch: the recorded forward pass is gone (was backward() called after the graph was freed?)")
     device = _warp_device(grad.device)
     with _torch_stream(device):
-        handed = [(r, r.buffer.clone()) for r in state.grads.values() if isinstance(r, _Handed) and r.handed]  # torch holds them
+        handed = [(r, r.buffer.clone()) for r in state.grads.values() if isinstance(r, Handed) and r.handed]  # torch holds them
         state.tape.zero()  # a second backward() (retain_graph=True) starts afresh
         wp.copy(state.out.grad, _as_out(grad, state.out))
         state.tape.backward()
@@ -236,24 +253,24 @@ def _reads_mips(spec: str) -> bool:
     return mip_levels(0.0, smp, num_levels=1 << 16) != (0, 0.0)
 
 
-def _decode(value, tensors: list[torch.Tensor], want: set, grads: dict, device, mips: bool = True):
+def _decode(value, d: _Decoding):
     """The native arguments of a spec: tensors as Warp views (or textures built around them, with
-    their mips where ``mips``), with gradient buffers where ``want`` asks, whose readers go into ``grads``."""
+    their mips where ``d.mips``), with gradient buffers where ``d.want`` asks, whose readers go into ``d.grads``."""
     if isinstance(value, list):
-        return [_decode(v, tensors, want, grads, device, mips) for v in value]
+        return [_decode(v, d) for v in value]
     if not isinstance(value, dict):
         return value
     if "$t" in value:
-        return _decode_tensor(value["role"], value["$t"], tensors, want, grads, device, mips)
+        return _decode_tensor(value["role"], value["$t"], d)
     if "$gbuffer" in value:
-        return _decode_gbuffer(value["$gbuffer"], tensors)
+        return _decode_gbuffer(value["$gbuffer"], d.tensors)
     if "$sampler" in value:
         return _sampler(value["$sampler"])
     if "$stochastic" in value:
-        return Stochastic(**_decode(value["$stochastic"], tensors, want, grads, device, mips))
+        return Stochastic(**_decode(value["$stochastic"], d))
     if "$histogram" in value:
-        return Histogram(**_decode(value["$histogram"], tensors, want, grads, device, mips))
-    return {k: _decode(v, tensors, want, grads, device, mips) for k, v in value.items()}
+        return Histogram(**_decode(value["$histogram"], d))
+    return {k: _decode(v, d) for k, v in value.items()}
 
 
 @functools.lru_cache(maxsize=64)
@@ -267,12 +284,12 @@ def _sampler(fields: dict) -> Sampler:
     return _sampler_from(tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in fields.items()))
 
 
-def _decode_tensor(role: str, i: int, tensors, want, grads, device, mips: bool = True):
+def _decode_tensor(role: str, i: int, d: _Decoding):
     # Every Warp view says requires_grad=False or names its gradient buffer: wp.from_torch would
     # otherwise give a tensor that requires gradients a .grad of its own (the user's, in eager mode).
-    t = tensors[i]
+    t, want, grads = d.tensors[i], d.want, d.grads
     if role in TEXTURES or role == "histogram":
-        return _texture_around(t, mipmaps=mips and role != "splat_maps", index=i if i in want else None, grads=grads, device=device)
+        return texture_around(t, mipmaps=d.mips and role != "splat_maps", index=i if i in want else None, grads=grads, leases=d.leases)
     if role in HISTOGRAM:
         return wp.from_torch(t, dtype=HISTOGRAM[role], requires_grad=False)
     if role not in DIFFERENTIABLE and role not in INTS:
@@ -319,65 +336,5 @@ def _gbuffer_array(name: str, t: torch.Tensor, dtype) -> wp.array:
     return wp.from_torch(t, dtype=dtype, requires_grad=False)
 
 
-def _zeros(shape: tuple, device: torch.device) -> torch.Tensor:
-    """float32 zeros on ``device``; on the CPU from NumPy (see :func:`_texture_around`)."""
-    if device.type == "cpu":
-        return torch.from_numpy(np.zeros(shape, np.float32))
-    return torch.zeros(shape, dtype=torch.float32, device=device)
-
-
 def native_texture(values, dims: int) -> TextureArray:
     return Texture(values) if dims == 3 else TextureArray(values)
-
-
-def _texture_around(t: torch.Tensor, *, mipmaps: bool, index, grads: dict, device) -> TextureArray:
-    """A :class:`Texture` (``t`` ``[H, W, C]``) or :class:`TextureArray` (``[L, H, W, C]``) whose
-    chain is a torch buffer holding ``t`` at level 0, its mips built here (on the active tape), or
-    ``t`` itself where that is the whole chain (no mips, 4 float32 channels, contiguous);
-    with ``index``, gradient buffers whose level 0 ``grads[index]`` returns shaped like ``t``.
-
-    On the CPU the buffers are filled and read through NumPy, not torch: torch runs CPU tensor ops
-    on its OpenMP threads, which keep spinning a while after each op, and the Warp launch that
-    followed a torch copy of a 256² texture ran 20% slower on 2 cores (measured:
-    ``benchmarks/bench_torch.py``)."""
-    layers = t.unsqueeze(0) if t.dim() == 3 else t
-    num_layers, height, width, channels = layers.shape
-    sizes = mip_sizes(height, width, None if mipmaps else 1)
-    texels = sum(num_layers * h * w for h, w in sizes)
-    count = num_layers * height * width
-    cpu = t.device.type == "cpu"
-    if texels == count and channels == 4 and layers.dtype == torch.float32 and layers.is_contiguous():
-        chain = layers.detach().reshape(count, 4)  # level 0 alone, as the chain stores it: the tensor itself, read only
-    else:
-        chain = _zeros((texels, 4), t.device)
-        if cpu:
-            chain.numpy()[:count, :channels] = layers.detach().numpy().reshape(count, channels)
-        else:
-            chain[:count, :channels] = layers.detach().reshape(count, channels)
-    grad = _zeros((texels, 4), t.device) if index is not None else None
-    array = wp.from_torch(chain, dtype=wp.vec4, grad=grad)
-    if index is not None and texels == count and channels == 4:  # the buffer is the gradient, shaped as t: handed to torch as it is
-        grads[index] = _Handed(grad, t.shape)
-    elif index is not None and cpu:
-        grads[index] = lambda: torch.from_numpy(grad.numpy()[:count, :channels].reshape(t.shape).copy())
-    elif index is not None:
-        grads[index] = lambda: grad[:count, :channels].reshape(t.shape).clone()
-    texture = (Texture if t.dim() == 3 else TextureArray).around(array, num_layers, sizes, channels)
-    texture.update()
-    return texture
-
-
-class _Handed:
-    """A texture's gradient buffer handed to torch as the gradient itself, with no copy (a 1 MB
-    copy was 5% of a 1,024-UV bridge call). Only the first backward pass hands it out: the
-    recorded launches add into this buffer, so a second pass of the same tape (``retain_graph``)
-    uses it again, returns a copy, and gives the buffer back as torch held it (:func:`_backward_pass`)."""
-
-    def __init__(self, buffer: torch.Tensor, shape):
-        self.buffer, self.shape, self.handed = buffer, tuple(shape), False
-
-    def __call__(self) -> torch.Tensor:
-        if self.handed:
-            return self.buffer.reshape(self.shape).clone()
-        self.handed = True
-        return self.buffer.reshape(self.shape)
