@@ -243,6 +243,35 @@ def test_packed_arguments_are_shared_bounded_and_dropped_with_their_texture(rng)
     assert len(_pack._packed) == owners - 1
 
 
+def test_a_packed_entry_dropped_with_the_last_reference_to_another_entrys_object_does_not_hang():
+    """An entry pushed out of a full table can hold the last reference to an object that another
+    entry's key names weakly; that object's callback, on the same thread, drops its entry too
+    while the table's lock is held (a plain lock hung the texel gradients' kept structs)."""
+    import threading
+
+    from warptex import _pack
+
+    class Owner:
+        pass
+
+    class Held:
+        pass
+
+    owner = Owner()
+
+    def fill():
+        for k in range(2 * _pack.MAX_PACKED_PER_OWNER):
+            held = Held()
+            _pack.packed(owner, ("entry", k), lambda held=held: [held], weakly=[held])  # its value holds what its key names weakly
+            del held
+
+    worker = threading.Thread(target=fill, daemon=True)
+    worker.start()
+    worker.join(timeout=30)
+    assert not worker.is_alive(), "packed() hung"
+    assert len(_pack._packed[owner]) == _pack.MAX_PACKED_PER_OWNER
+
+
 def test_output_keeps_the_uv_shape(rng):
     tex = wt.Texture(_image(rng, 4, 4, 3))
     out = wt.sample(tex, rng.random((5, 6, 2)))

@@ -304,7 +304,9 @@ def struct_of(struct_t, device, **fields):
 # caches between kernels that stream tens of MB (sample() on 256 UVs after a pass over 64 MB:
 # 320-410 us, of which the structs and their field-by-field copies were about half).
 _packed: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-_packed_lock = threading.Lock()
+# Re-entrant: an entry dropped under it can drop the last reference to an array another entry's
+# key holds weakly, whose callback (same thread) takes it again to drop that entry too.
+_packed_lock = threading.RLock()
 #: Entries kept per owner: a fit sweeping an option (a LOD) through many values makes a new one
 #: each call; the oldest goes first.
 MAX_PACKED_PER_OWNER = 16
@@ -339,9 +341,10 @@ def _weak_key(owner, key: tuple, objects) -> tuple:
     owner_ref = weakref.ref(owner)
 
     def gone(_ref) -> None:
-        table = _packed.get(owner_ref()) if owner_ref() is not None else None
+        owner, tables, lock = owner_ref(), _packed, _packed_lock  # (module globals are None at interpreter exit)
+        table = tables.get(owner) if owner is not None and tables is not None else None
         if table is not None:
-            with _packed_lock:
+            with lock:
                 table.pop(full, None)
 
     full = (*key, *(None if o is None else weakref.ref(o, gone) for o in objects))
