@@ -35,7 +35,7 @@ import warp as wp
 from warptex import _plan
 from warptex._accumulate import Copy, add_sums, exact_sums, private, run_ordered, set_exponents, slot_count, with_private_grads
 from warptex._memory import empty
-from warptex._pack import empty_array
+from warptex._pack import empty_array, packed
 from warptex._threads import Split, cpu_count, grad_bounds, workers_for
 from warptex._warp import active_tape, struct_arrays
 from warptex.kernels.lanes import LANES
@@ -263,8 +263,9 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
     kernel, per_index = _with_lanes(kernel, lanes)
     bounds = grad_bounds(count, covered, sum(_nbytes(g) for g in shared), footprints) if device.is_cpu else [0, count]  # CUDA: one launch, atomics
     chunks = len(bounds) - 1
-    if chunks == 1:
-        wp.launch(kernel, dim=-(-count // per_index), inputs=[args, pixels, 0, _grads_struct(grads_t, grads, {}, device), adj], device=device, record_tape=False)
+    if chunks == 1:  # the targets' struct made once while they live (a loop's texture gradient is the same array every call)
+        real = packed(grads_t, ("grads", device.alias, *(t.per_pixel for t in grads)), lambda: _grads_struct(grads_t, grads, {}, device), weakly=[t.grad for t in grads])
+        replay(kernel, -(-count // per_index), (args, pixels, 0, real, adj), device)
         return
     workers = min(workers_for(device, count, threads), chunks, cpu_count())  # fixed chunks: threads past the cores only take turns
     tracked = {id(g) for g in texel} - {id(g) for g in plain}
