@@ -21,12 +21,13 @@ import threading
 import weakref
 from typing import Any
 
+import numpy as np
 import torch
 import warp as wp
 
 from warptex._pack import mip_levels, sampler_args
 from warptex._torch_spec import DIFFERENTIABLE, HISTOGRAM, INTS, TECHNIQUES, TEXTURES, VEC2, op_arguments, out_shape, parse
-from warptex._torch_texture import Handed, give_back, texture_around
+from warptex._torch_texture import Handed, give_back, texture_around, zeros
 from warptex.gbuffer import FIELDS, UV_FIELDS, GBuffer
 from warptex.histogram import Histogram
 from warptex.options import Sampler, Stochastic
@@ -70,13 +71,14 @@ def _tensors(value, role: str | None = None):
 # The recorded tapes, by token, until the token tensor (saved in the autograd graph) dies.
 _states: dict[int, "_State"] = {}
 _tokens = itertools.count(1)
-_states_lock = threading.Lock()
+_states_lock = threading.RLock()  # re-entrant: a token's finaliser (_forget) can run in a collection under it
 
 
 @dataclasses.dataclass
 class _State:
     tape: wp.Tape
-    out: wp.array
+    out: torch.Tensor  # the output's buffer, which the tape's launches write (Warp's generated adjoints replay the forward)
+    out_grad: torch.Tensor  # its gradient, where the tape's backward reads it
     grads: dict[int, Any]  # tensor index -> a function returning its gradient (a new tensor)
     leases: list  # the kept textures the recorded pass reads (warptex._torch_texture), given back with it
 
@@ -103,10 +105,9 @@ def _forward(spec: str, tensors: list[torch.Tensor]) -> list[torch.Tensor]:
         with _torch_stream(device):
             if tape is not None:
                 with tape:  # textures are built on the tape too: their mips' gradients reach level 0
-                    out = _run(s["technique"], _decode(s["args"], decoding))
+                    result, out_grad = _run(s, _decode(s["args"], decoding), tensors, device, gradient=True)
             else:
-                out = _run(s["technique"], _decode(s["args"], decoding))
-            result = wp.to_torch(out, requires_grad=False)
+                result, out_grad = _run(s, _decode(s["args"], decoding), tensors, device, gradient=False)
     except BaseException:
         give_back(decoding.leases)
         raise
@@ -115,7 +116,7 @@ def _forward(spec: str, tensors: list[torch.Tensor]) -> list[torch.Tensor]:
         return [result, torch.zeros(1, dtype=torch.int64)]
     with _states_lock:
         key = next(_tokens)
-        _states[key] = _State(tape, out, decoding.grads, decoding.leases)
+        _states[key] = _State(tape, result.detach(), out_grad, decoding.grads, decoding.leases)  # (an alias: the output itself would hold the graph)
     token = torch.tensor([key], dtype=torch.int64)
     weakref.finalize(token, _forget, key)
     return [result, token]
@@ -150,7 +151,10 @@ def _backward_pass(token: torch.Tensor, grad: torch.Tensor, spec: str, tensors: 
     with _torch_stream(device):
         handed = [(r, r.buffer.clone()) for r in state.grads.values() if isinstance(r, Handed) and r.handed]  # torch holds them
         state.tape.zero()  # a second backward() (retain_graph=True) starts afresh
-        wp.copy(state.out.grad, _as_out(grad, state.out))
+        if grad.device.type == "cpu":  # through NumPy (see warptex._torch_texture.texture_around); any strides
+            np.copyto(state.out_grad.numpy(), grad.detach().numpy())
+        else:
+            state.out_grad.copy_(grad)
         state.tape.backward()
         result = [state.grads[i]() if i in state.grads else t.new_empty(0) for i, t in enumerate(tensors)]
         for reader, held in handed:  # the kernels add where the forward's launches point: these buffers, given back as torch had them
@@ -182,7 +186,7 @@ def _input_grads(ctx, grad, backward) -> list:
     want = set(parse(ctx.spec)["grad"])
     if grad is None or not want:
         return [None] * len(tensors)
-    result = backward(token, grad.contiguous(), ctx.spec, tensors)
+    result = backward(token, grad, ctx.spec, tensors)
     return [r if i in want else None for i, r in enumerate(result)]
 
 
@@ -209,9 +213,10 @@ class _Eager(torch.autograd.Function):
         return (None, *_input_grads(ctx, grad, _backward_pass))
 
 
-def _as_out(grad: torch.Tensor, out: wp.array) -> wp.array:
-    """The output gradient as a Warp array shaped like the op's output ``out``."""
-    return wp.from_torch(grad.to(torch.float32).contiguous(), dtype=out.dtype, requires_grad=False).reshape(out.shape)
+def _view(buffer: torch.Tensor, device) -> wp.array:
+    """A float32 Warp array over the contiguous float32 tensor ``buffer``, shaped as it is, holding no
+    reference to it (the caller keeps it alive): ``wp.from_torch`` took twice as long."""
+    return wp.array(ptr=buffer.data_ptr(), dtype=wp.float32, shape=tuple(buffer.shape), device=device)
 
 
 def _warp_device(device: torch.device):
@@ -226,10 +231,20 @@ def _torch_stream(device):
     return wp.ScopedDevice(device)
 
 
-def _run(name: str, args: dict) -> wp.array:
-    """The native call of technique ``name`` (its positional arguments by name, the rest by keyword)."""
-    technique = TECHNIQUES[name]
-    return technique.native(*[args.pop(k) for k in technique.positional], **args)
+def _run(spec: dict, args: dict, tensors: list[torch.Tensor], device, gradient: bool) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """``(output, its gradient buffer or None)``: the native call of the spec's technique (its
+    positional arguments by name, the rest by keyword) into a new tensor, with a zeroed gradient
+    buffer where ``gradient`` (torch's buffers: ``out=`` of the native call)."""
+    technique = TECHNIQUES[spec["technique"]]
+    shape = out_shape(spec, tensors)
+    result = torch.empty(shape, dtype=torch.float32, device=tensors[0].device)
+    out = _view(result, device)
+    out_grad = None
+    if gradient:
+        out_grad = zeros(shape, result.device)
+        out.grad = _view(out_grad, device)
+    technique.native(*[args.pop(k) for k in technique.positional], **args, out=out)
+    return result, out_grad
 
 
 @functools.lru_cache(maxsize=256)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import threading
+import weakref
 
 import numpy as np
 import torch
@@ -19,7 +20,7 @@ import warp as wp
 from warptex.texture import Texture, TextureArray, mip_sizes
 
 
-def _zeros(shape: tuple, device: torch.device) -> torch.Tensor:
+def zeros(shape: tuple, device: torch.device) -> torch.Tensor:
     """float32 zeros on ``device``; on the CPU from NumPy (see :func:`texture_around`)."""
     if device.type == "cpu":
         return torch.from_numpy(np.zeros(shape, np.float32))
@@ -70,14 +71,15 @@ class _Kept:
     """A texture the bridge made around a tensor (:func:`_kept_texture`): ``chain``, the buffer each
     call copies level 0 into, with room for the mips (``None`` where the tensor itself is the chain),
     ``array`` the Warp view of the chain that the texture holds, ``grad`` its gradient buffer (or
-    ``None``), ``count`` the level-0 texels, and ``shelf`` the list of free ones it goes back to."""
+    ``None``), ``count`` the level-0 texels, and ``shelf`` the list of free ones it goes back to
+    (by weak reference: the shelf holds it while it is free, and no cycle keeps either alive)."""
 
     texture: TextureArray
     chain: torch.Tensor | None
     array: wp.array
     grad: torch.Tensor | None
     count: int
-    shelf: list
+    shelf: weakref.ref
 
     @property
     def nbytes(self) -> int:
@@ -104,7 +106,7 @@ def _holders(buffer: torch.Tensor) -> int:
 # is gone, or at the end of a call that records none. Its gradient buffer is its own, as the
 # packed arguments hold its address (Warp's generated adjoints add into a struct's arrays' .grad).
 _kept: "torch.utils.weak.WeakIdKeyDictionary" = torch.utils.weak.WeakIdKeyDictionary()
-_kept_lock = threading.Lock()
+_kept_lock = threading.RLock()  # re-entrant: a call's finaliser (give_back) can run in a collection under it
 #: Layouts kept per tensor (a tensor whose storage is swapped gets a new one), and free textures per layout.
 MAX_KEPT_LAYOUTS, MAX_KEPT_FREE = 4, 2
 #: The most bytes of buffers a kept texture may hold while no call uses it: past that, making one
@@ -126,7 +128,7 @@ def _kept_texture(t: torch.Tensor, mipmaps: bool, gradient: bool) -> _Kept:
         if shelf is None:
             if len(layouts) >= MAX_KEPT_LAYOUTS:
                 del layouts[next(iter(layouts))]
-            shelf = layouts[layout] = []
+            shelf = layouts[layout] = _Shelf()
         while shelf:
             kept = shelf.pop()
             if kept.free():
@@ -137,13 +139,17 @@ def _kept_texture(t: torch.Tensor, mipmaps: bool, gradient: bool) -> _Kept:
     texels = sum(num_layers * h * w for h, w in sizes)
     count = num_layers * height * width
     in_place = texels == count and channels == 4 and layers.dtype == torch.float32 and layers.is_contiguous()
-    chain = None if in_place else _zeros((texels, 4), t.device)  # in place: level 0 alone, as the chain stores it, read only
-    grad = _zeros((texels, 4), t.device) if gradient else None
+    chain = None if in_place else zeros((texels, 4), t.device)  # in place: level 0 alone, as the chain stores it, read only
+    grad = zeros((texels, 4), t.device) if gradient else None
     array = _view(layers if in_place else chain, texels)
     if grad is not None:
         array.grad = _view(grad, texels)
     texture = (Texture if t.dim() == 3 else TextureArray).around(array, num_layers, sizes, channels)
-    return _Kept(texture, chain, array, grad, count, shelf)
+    return _Kept(texture, chain, array, grad, count, weakref.ref(shelf))
+
+
+class _Shelf(list):
+    """The free textures kept for one layout of a tensor (a list that can be weakly referenced)."""
 
 
 def _view(buffer: torch.Tensor, texels: int) -> wp.array:
@@ -156,8 +162,9 @@ def give_back(leases: list) -> None:
     """Put the textures of ``leases`` back on their shelves (those of at most :data:`MAX_KEPT_BYTES`)."""
     with _kept_lock:
         for kept in leases:
-            if len(kept.shelf) < MAX_KEPT_FREE and kept.nbytes <= MAX_KEPT_BYTES:
-                kept.shelf.append(kept)
+            shelf = kept.shelf()
+            if shelf is not None and len(shelf) < MAX_KEPT_FREE and kept.nbytes <= MAX_KEPT_BYTES:
+                shelf.append(kept)
     leases.clear()
 
 
