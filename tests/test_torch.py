@@ -476,6 +476,36 @@ def test_opcheck(rng):
     torch.library.opcheck(torch.ops.warptex.technique.default, (spec, tensors), test_utils=("test_schema", "test_faketensor", "test_autograd_registration"))
 
 
+def test_a_spec_written_from_its_kept_head_is_the_one_written_out(monkeypatch, rng):
+    """A call whose structure an earlier call had reuses that spec's head (issue 51): the spec is
+    the one written out in full, its tensors are converted and checked as before, and what makes
+    two specs differ still does (a sampler, a float's sign, which tensors want gradients)."""
+    import warptex._torch_spec as ts
+
+    texture, uv, lod = _t(rng, 8, 8, 3), _t(rng, 40, 2), _t(rng, 40)
+    calls = [
+        {"texture": texture, "uv": uv},
+        {"texture": texture.detach(), "uv": uv},
+        {"texture": texture, "uv": uv, "lod": lod, "sampler": wt.Sampler(filter="trilinear")},
+        {"texture": texture, "uv": uv, "lod": 0.0},
+        {"texture": texture, "uv": uv, "lod": -0.0},
+        {"texture": texture.double(), "uv": uv, "layer": None},
+    ]
+    monkeypatch.setattr(ts, "_heads", {})
+    first = [op_arguments("sample", dict(c)) for c in calls]
+    assert len(ts._heads) == len(calls) - 1  # the first two share a head
+    again = [op_arguments("sample", dict(c)) for c in calls]
+    monkeypatch.setattr(ts, "_spec_key", lambda name, args: None)  # written out every time
+    written = [op_arguments("sample", dict(c)) for c in calls]
+    for (s1, t1), (s2, t2), (s3, t3) in zip(first, again, written):
+        assert s1 == s2 == s3
+        assert len(t1) == len(t2) == len(t3) and all(a.dtype == b.dtype == c.dtype and torch.equal(a, c) for a, b, c in zip(t1, t2, t3))
+    assert len({s for s, _ in first}) == len(calls)
+    monkeypatch.undo()
+    with pytest.raises(ValueError, match=r"uv must have shape"):
+        op_arguments("sample", {"texture": texture, "uv": uv[:, :1]})
+
+
 # -- bad input ---------------------------------------------------------------------------------------
 
 
