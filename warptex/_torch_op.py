@@ -90,6 +90,7 @@ class _Decoding:
     tensors: list[torch.Tensor]
     want: set  # the indices of the tensors that get gradients
     grads: dict[int, Any]  # filled: tensor index -> a function returning its gradient
+    device: Any  # the Warp device
     mips: bool  # whether textures need their mips
     leases: list = dataclasses.field(default_factory=list)  # filled: the kept textures taken (warptex._torch_texture)
 
@@ -99,7 +100,7 @@ def _forward(spec: str, tensors: list[torch.Tensor]) -> list[torch.Tensor]:
     s = parse(spec)
     device = _warp_device(tensors[0].device)
     mips = _reads_mips(spec)
-    decoding = _Decoding(tensors, set(s["grad"]), {}, mips)
+    decoding = _Decoding(tensors, set(s["grad"]), {}, device, mips)
     tape = wp.Tape() if decoding.want else None
     try:
         with _torch_stream(device):
@@ -213,10 +214,14 @@ class _Eager(torch.autograd.Function):
         return (None, *_input_grads(ctx, grad, _backward_pass))
 
 
-def _view(buffer: torch.Tensor, device) -> wp.array:
-    """A float32 Warp array over the contiguous float32 tensor ``buffer``, shaped as it is, holding no
-    reference to it (the caller keeps it alive): ``wp.from_torch`` took twice as long."""
-    return wp.array(ptr=buffer.data_ptr(), dtype=wp.float32, shape=tuple(buffer.shape), device=device)
+def _view(buffer: torch.Tensor, device, dtype=wp.float32) -> wp.array:
+    """A Warp array of ``dtype`` (``float32``, ``int32`` or ``vec2``: the tensor's last axis) over the
+    contiguous tensor ``buffer`` of its scalars, holding no reference to it (the caller keeps it
+    alive, as the op's saved tensors and state do): ``wp.from_torch`` took twice as long."""
+    shape = tuple(buffer.shape[:-1]) if dtype == wp.vec2 else tuple(buffer.shape)
+    if buffer.numel() == 0:
+        return wp.empty(shape, dtype=dtype, device=device)
+    return wp.array(ptr=buffer.data_ptr(), dtype=dtype, shape=shape, device=device)
 
 
 def _warp_device(device: torch.device):
@@ -310,11 +315,12 @@ def _decode_tensor(role: str, i: int, d: _Decoding):
     if role not in DIFFERENTIABLE and role not in INTS:
         return t.cpu().numpy()
     dtype = wp.vec2 if role in VEC2 else wp.int32 if role in INTS else wp.float32
-    if i not in want:
-        return wp.from_torch(t, dtype=dtype, requires_grad=False)
-    g = torch.zeros_like(t)
-    grads[i] = g.clone
-    return wp.from_torch(t, dtype=dtype, grad=g)
+    array = _view(t, d.device, dtype)
+    if i in want:
+        g = torch.zeros_like(t)
+        grads[i] = g.clone
+        array.grad = _view(g, d.device, dtype)
+    return array
 
 
 def _decode_gbuffer(fields: dict, tensors) -> GBuffer:
