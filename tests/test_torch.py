@@ -395,6 +395,26 @@ def test_the_textures_kept_for_a_tensor_keep_nothing_alive(shape, grad, rng):
     assert torch.UntypedStorage._expired(storage)
 
 
+def test_a_tensor_whose_storage_is_swapped_is_read_from_its_new_storage(rng):
+    """A kept texture names its tensor's storage: after ``t.data = ...`` (a new storage) the
+    bridge reads the new texels, and their gradients are the native call's."""
+    texture = _t(rng, 8, 8, 4)
+    uv = torch.tensor(rng.random((64, 2), dtype=np.float32))
+    wtt.sample(texture, uv).sum().backward()
+    for _ in range(3):
+        texture.grad = None
+        texture.data = torch.tensor(rng.random((8, 8, 4), dtype=np.float32))
+        out = wtt.sample(texture, uv)
+        out.sum().backward()
+        native_tex = wt.Texture(texture.detach().numpy(), mipmaps=False, requires_grad=True)
+        tape = wp.Tape()
+        with tape:
+            native = wt.sample(native_tex, uv.numpy())
+        tape.backward(grads={native: wp.ones(native.shape, dtype=float)})
+        np.testing.assert_array_equal(out.detach().numpy(), native.numpy())
+        np.testing.assert_allclose(texture.grad.numpy(), native_tex.grad(), rtol=1e-6, atol=1e-7)
+
+
 def test_no_tape_is_kept_without_gradients_and_a_graph_frees_its_tape(rng):
     texture, uv = _t(rng, 8, 8, 3), _t(rng, 50, 2)
     gc.collect()
