@@ -215,10 +215,10 @@ class _Eager(torch.autograd.Function):
 
 
 def _view(buffer: torch.Tensor, device, dtype=wp.float32) -> wp.array:
-    """A Warp array of ``dtype`` (``float32``, ``int32`` or ``vec2``: the tensor's last axis) over the
-    contiguous tensor ``buffer`` of its scalars, holding no reference to it (the caller keeps it
-    alive, as the op's saved tensors and state do): ``wp.from_torch`` took twice as long."""
-    shape = tuple(buffer.shape[:-1]) if dtype == wp.vec2 else tuple(buffer.shape)
+    """A Warp array of ``dtype`` (a scalar, or a vector: the tensor's last axis) over the contiguous
+    tensor ``buffer`` of its scalars, holding no reference to it (the caller keeps it alive, as
+    the op's saved tensors and state do): ``wp.from_torch`` took twice as long."""
+    shape = tuple(buffer.shape[:-1]) if getattr(dtype, "_length_", 1) > 1 else tuple(buffer.shape)
     if buffer.numel() == 0:
         return wp.empty(shape, dtype=dtype, device=device)
     return wp.array(ptr=buffer.data_ptr(), dtype=dtype, shape=shape, device=device)
@@ -283,7 +283,7 @@ def _decode(value, d: _Decoding):
     if "$t" in value:
         return _decode_tensor(value["role"], value["$t"], d)
     if "$gbuffer" in value:
-        return _decode_gbuffer(value["$gbuffer"], d.tensors)
+        return _decode_gbuffer(value["$gbuffer"], d.tensors, d.device)
     if "$sampler" in value:
         return _sampler(value["$sampler"])
     if "$stochastic" in value:
@@ -323,7 +323,7 @@ def _decode_tensor(role: str, i: int, d: _Decoding):
     return array
 
 
-def _decode_gbuffer(fields: dict, tensors) -> GBuffer:
+def _decode_gbuffer(fields: dict, tensors, device) -> GBuffer:
     arrays, sets, extra = {}, {}, {}
     for name, ref in fields.items():
         if not (isinstance(ref, dict) and "$t" in ref):
@@ -337,9 +337,9 @@ def _decode_gbuffer(fields: dict, tensors) -> GBuffer:
             set_name, key = name.split(".", 1)
             if key not in UV_FIELDS:
                 raise ValueError(f"warptex.torch: unknown G-buffer UV field {name!r} (UV fields: {', '.join(UV_FIELDS)})")
-            sets.setdefault(set_name, {})[key] = _gbuffer_array(name, t, UV_FIELDS[key])
+            sets.setdefault(set_name, {})[key] = _gbuffer_array(name, t, UV_FIELDS[key], device)
         elif name in FIELDS:
-            arrays[name] = _gbuffer_array(name, t, FIELDS[name])
+            arrays[name] = _gbuffer_array(name, t, FIELDS[name], device)
         else:
             raise ValueError(f"warptex.torch: unknown G-buffer field {name!r} (fields: {', '.join(FIELDS)}, origin, samples)")
     missing = [name for name in FIELDS if name not in arrays]
@@ -348,13 +348,13 @@ def _decode_gbuffer(fields: dict, tensors) -> GBuffer:
     return GBuffer(**arrays, uv_sets=sets, **extra)
 
 
-def _gbuffer_array(name: str, t: torch.Tensor, dtype) -> wp.array:
+def _gbuffer_array(name: str, t: torch.Tensor, dtype, device) -> wp.array:
     length = getattr(dtype, "_length_", 1)  # vec3: 3; float32, int32: 1
     scalar = torch.int32 if dtype == wp.int32 else torch.float32
     if t.dtype != scalar or t.dim() - (length > 1) not in (2, 3) or (length > 1 and t.shape[-1] != length):
         want = "(H, W) or (V, H, W)" if length == 1 else f"(H, W, {length}) or (V, H, W, {length})"
         raise ValueError(f"warptex.torch: G-buffer field {name!r} must be a {scalar} tensor of shape {want}, got {t.dtype} {tuple(t.shape)}")
-    return wp.from_torch(t, dtype=dtype, requires_grad=False)
+    return _view(t, device, dtype)
 
 
 def native_texture(values, dims: int) -> TextureArray:
