@@ -79,7 +79,7 @@ def test_threaded_launch_gives_the_same_gradients(threads):
         tex = _texture(requires_grad=True)
         tiling = wp.array([3.0], dtype=float, requires_grad=True)
         tape = triplanar_backward(g, tex, tiling, weights)
-        split = [launch for launch in tape.launches if callable(launch)]
+        split = [launch for launch in tape.launches if callable(launch) and launch.__qualname__ != "carry_mip_gradients.<locals>.backward"]  # (the mips' step)
         assert len(split) == 1  # one recorded step runs the adjoints of the chunks (4 of 16 384 pixels: a small texture)
         grads.append((tex.grad(), tiling.grad.numpy()))
     np.testing.assert_array_equal(grads[1][0], grads[0][0])

@@ -26,7 +26,6 @@ CUDA launches are never split: one launch fills the device.
 from __future__ import annotations
 
 import functools
-import threading
 import weakref
 from typing import Iterator, NamedTuple
 
@@ -37,7 +36,7 @@ from warptex._accumulate import Copy, add_sums, exact_sums, private, run_ordered
 from warptex._memory import empty
 from warptex._pack import empty_array, packed
 from warptex._threads import Split, cpu_count, grad_bounds, workers_for
-from warptex._warp import active_tape, struct_arrays
+from warptex._warp import active_tape, replay, struct_arrays
 from warptex.kernels.lanes import LANES
 from warptex.kernels.texels import TexelGrad
 
@@ -145,29 +144,6 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
     if generated and (workers > 1 or len(chunks) > 2):  # else Warp recorded the launch's own adjoint
         backward = functools.partial(_backward, kernel=kernel, bounds=chunks, workers=workers, args=args, pixels=pixels, out=out, device=device)
         tape.record_func(_on(tape, backward), arrays=recorded)
-
-
-_replays = threading.local()
-
-
-def replay(kernel, dim: int, params: tuple, device) -> None:
-    """``wp.launch(kernel, dim, params)``, not recorded on a tape, through a ``wp.Launch`` kept per
-    thread, kernel and device: its parameters are set and it runs. A small call's cost is mostly
-    Python, and ``wp.launch`` resolves the module, hooks and argument types each time (a 1,024-UV
-    lookup: ~9 us of its ~30 us). The kept launch holds no array (its parameters are their
-    addresses only; ``fwd_args``, which Warp keeps for CPU graph capture, is dropped), so nothing
-    is kept alive past the call."""
-    launches = _replays.__dict__.setdefault("launches", {})
-    key = (kernel, device.alias)
-    cmd = launches.get(key)
-    if cmd is None or cmd.kernel is not kernel:
-        cmd = launches[key] = wp.launch(kernel, dim=dim, inputs=list(params), device=device, record_cmd=True)
-    else:
-        cmd.set_dim(dim)
-        for index, value in enumerate(params):
-            cmd.set_param_at_index(index, value)
-    cmd.fwd_args = None
-    cmd.launch()
 
 
 def _with_lanes(kernel, lanes) -> tuple:

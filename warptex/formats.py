@@ -11,7 +11,7 @@ import warp as wp
 
 from warptex import io
 from warptex.png import codes, colour_channels
-from warptex._warp import active_tape
+from warptex._warp import active_tape, replay
 from warptex.kernels import texels as kx
 from warptex.kernels.sampling import downsample_kernel
 
@@ -186,21 +186,39 @@ def gradient_carrier(count: int, requires_grad: bool, device) -> wp.array:
     return carrier
 
 
-def carry_mip_gradients(view, chain: wp.array, sizes: list[tuple[int, int]], num_layers: int) -> None:
-    """Inside a ``wp.Tape``: record the backward pass of a mip chain built on the host (a texture
-    not stored as float32), as the float32 one records its box-filter launches. It runs the same
-    kernel's adjoint, coarsest level first, so each level's gradient is carried down to level 0
-    (the encoding of each level taken as exact) and cleared, as a float32 chain's is.
+def build_mips(view, chain: wp.array, sizes: list[tuple[int, int]], num_layers: int) -> None:
+    """Levels 1.. of a float32 chain from level 0, by the box filter level after level (a kept
+    launch each, ``warptex._warp.replay``); inside a ``wp.Tape``, with their backward pass
+    recorded as one step (:func:`carry_mip_gradients`), not as a launch each: a small texture's
+    levels were most of a call that built its mips on the tape (the torch bridge's)."""
+    for k in range(len(sizes) - 1):
+        h, w = sizes[k + 1]
+        replay(downsample_kernel, (num_layers, h, w), (view, k, chain), chain.device)
+    carry_mip_gradients(view, chain, sizes, num_layers)
 
-    ``chain`` is the gradient carrier (:func:`gradient_carrier`): the adjoint reads the view's
-    texels only to replay a sum that it does not keep, and writes nothing but gradients."""
+
+def carry_mip_gradients(view, chain: wp.array, sizes: list[tuple[int, int]], num_layers: int) -> None:
+    """Inside a ``wp.Tape``: record the backward pass of a mip chain (:func:`build_mips`', or one
+    built on the host for a texture not stored as float32). It runs the box filter's adjoint,
+    coarsest level first, so each level's gradient is carried down to level 0 (a compact
+    encoding of each level taken as exact) and cleared: what Warp's recording of each launch
+    would run, bit for bit.
+
+    For a compact texture ``chain`` is the gradient carrier (:func:`gradient_carrier`), whose
+    texels are its gradient's memory: the adjoint reads the view's texels only to replay a sum that
+    it does not keep, and writes nothing but gradients. A float32 chain's adjoint is a view whose
+    texels are the chain's gradient, as ``wp.Tape.get_adjoint`` makes it."""
     tape = active_tape()
     if tape is None or chain.grad is None or len(sizes) < 2:
         return
 
     def backward() -> None:
+        adj = view
+        if not getattr(chain, "warptex_carrier", False):
+            adj = kx.TextureView()
+            adj.texels = chain.grad
         for k in reversed(range(len(sizes) - 1)):
             h, w = sizes[k + 1]
-            wp.launch(downsample_kernel, dim=(num_layers, h, w), inputs=[view, k], outputs=[chain], adj_inputs=[view, 0], adj_outputs=[chain.grad], adjoint=True, device=chain.device)
+            wp.launch(downsample_kernel, dim=(num_layers, h, w), inputs=[view, k], outputs=[chain], adj_inputs=[adj, 0], adj_outputs=[chain.grad], adjoint=True, device=chain.device)
 
     tape.record_func(backward=backward, arrays=[chain])

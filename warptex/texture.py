@@ -12,7 +12,6 @@ from warptex import formats
 from warptex._output import check_memory
 from warptex._threads import zero
 from warptex.formats import Format
-from warptex.kernels import sampling as ks
 from warptex.kernels import texels as kx
 from warptex.texture_input import file_images, image_array, layers_array
 
@@ -259,15 +258,7 @@ class TextureArray:
                 self._store[self._offsets[1] :].assign(formats.packed(levels[1:], self._format))
                 formats.carry_mip_gradients(self._view, self._chain, self._sizes, self.num_layers)
             return
-        for k in range(self.num_levels - 1):
-            h, w = self._sizes[k + 1]
-            wp.launch(
-                ks.downsample_kernel,
-                dim=(self.num_layers, h, w),
-                inputs=[self._view, k],
-                outputs=[self._chain],
-                device=self._device,
-            )
+        formats.build_mips(self._view, self._chain, self._sizes, self.num_layers)
 
     def numpy(self, level: int = 0) -> np.ndarray:
         """Texels of ``level`` as float32 ``[L, h, w, C]`` (decoded: as sampling reads them)."""
