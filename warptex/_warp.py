@@ -16,6 +16,8 @@ oldest Warp release warptex supports as well):
   :func:`field_type`: a field's declared type.
 - :func:`map_arrays`: a struct (or array) with its arrays replaced, built on the two above.
 - :func:`scalar_type`: the scalar type of a vector or matrix dtype (which arrays can carry gradients).
+- :func:`replay`: a launch through a kept ``wp.Launch`` (``record_cmd=True``), whose ``fwd_args``
+  (what Warp keeps for CPU graph capture, an internal) it drops so that it holds no array.
 
 And :func:`init_quietly` (public as ``warptex.init_quietly``), for the command line and the
 examples: Warp's native library prints a warning to the process's stderr on every start on a
