@@ -14,6 +14,7 @@ finaliser forgets the tape and gives the call's kept textures back).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import itertools
@@ -27,7 +28,7 @@ import warp as wp
 
 from warptex._pack import mip_levels, sampler_args
 from warptex._torch_spec import DIFFERENTIABLE, HISTOGRAM, INTS, TECHNIQUES, TEXTURES, VEC2, op_arguments, out_shape, parse
-from warptex._torch_texture import Handed, give_back, texture_around, zeros
+from warptex._torch_texture import Handed, give_back, texture_around, view, zeros
 from warptex.gbuffer import FIELDS, UV_FIELDS, GBuffer
 from warptex.histogram import Histogram
 from warptex.options import Sampler, Stochastic
@@ -103,12 +104,8 @@ def _forward(spec: str, tensors: list[torch.Tensor]) -> list[torch.Tensor]:
     decoding = _Decoding(tensors, set(s["grad"]), {}, device, mips)
     tape = wp.Tape() if decoding.want else None
     try:
-        with _torch_stream(device):
-            if tape is not None:
-                with tape:  # textures are built on the tape too: their mips' gradients reach level 0
-                    result, out_grad = _run(s, _decode(s["args"], decoding), tensors, device, gradient=True)
-            else:
-                result, out_grad = _run(s, _decode(s["args"], decoding), tensors, device, gradient=False)
+        with _torch_stream(device), tape if tape is not None else contextlib.nullcontext():  # textures are built on the tape too: their mips' gradients reach level 0
+            result, out_grad = _run(s, _decode(s["args"], decoding), tensors, device, gradient=tape is not None)
     except BaseException:
         give_back(decoding.leases)
         raise
@@ -214,16 +211,6 @@ class _Eager(torch.autograd.Function):
         return (None, *_input_grads(ctx, grad, _backward_pass))
 
 
-def _view(buffer: torch.Tensor, device, dtype=wp.float32) -> wp.array:
-    """A Warp array of ``dtype`` (a scalar, or a vector: the tensor's last axis) over the contiguous
-    tensor ``buffer`` of its scalars, holding no reference to it (the caller keeps it alive, as
-    the op's saved tensors and state do): ``wp.from_torch`` took twice as long."""
-    shape = tuple(buffer.shape[:-1]) if getattr(dtype, "_length_", 1) > 1 else tuple(buffer.shape)
-    if buffer.numel() == 0:
-        return wp.empty(shape, dtype=dtype, device=device)
-    return wp.array(ptr=buffer.data_ptr(), dtype=dtype, shape=shape, device=device)
-
-
 def _warp_device(device: torch.device):
     wp.init()  # the Warp device of a torch device needs Warp started (a no-op once it is)
     return wp.device_from_torch(device)
@@ -243,11 +230,11 @@ def _run(spec: dict, args: dict, tensors: list[torch.Tensor], device, gradient: 
     technique = TECHNIQUES[spec["technique"]]
     shape = out_shape(spec, tensors)
     result = torch.empty(shape, dtype=torch.float32, device=tensors[0].device)
-    out = _view(result, device)
+    out = view(result, device)
     out_grad = None
     if gradient:
         out_grad = zeros(shape, result.device)
-        out.grad = _view(out_grad, device)
+        out.grad = view(out_grad, device)
     technique.native(*[args.pop(k) for k in technique.positional], **args, out=out)
     return result, out_grad
 
@@ -315,11 +302,11 @@ def _decode_tensor(role: str, i: int, d: _Decoding):
     if role not in DIFFERENTIABLE and role not in INTS:
         return t.cpu().numpy()
     dtype = wp.vec2 if role in VEC2 else wp.int32 if role in INTS else wp.float32
-    array = _view(t, d.device, dtype)
+    array = view(t, d.device, dtype)
     if i in want:
         g = torch.zeros_like(t)
         grads[i] = g.clone
-        array.grad = _view(g, d.device, dtype)
+        array.grad = view(g, d.device, dtype)
     return array
 
 
@@ -354,7 +341,7 @@ def _gbuffer_array(name: str, t: torch.Tensor, dtype, device) -> wp.array:
     if t.dtype != scalar or t.dim() - (length > 1) not in (2, 3) or (length > 1 and t.shape[-1] != length):
         want = "(H, W) or (V, H, W)" if length == 1 else f"(H, W, {length}) or (V, H, W, {length})"
         raise ValueError(f"warptex.torch: G-buffer field {name!r} must be a {scalar} tensor of shape {want}, got {t.dtype} {tuple(t.shape)}")
-    return _view(t, device, dtype)
+    return view(t, device, dtype)
 
 
 def native_texture(values, dims: int) -> TextureArray:

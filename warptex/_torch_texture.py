@@ -4,7 +4,8 @@ A call's texture tensor is read through a :class:`~warptex.TextureArray` whose c
 itself (level 0 alone, RGBA float32, contiguous) or a buffer level 0 is copied into, its mips built
 on the call's tape. The texture made around a tensor is kept for the tensor's next calls
 (:func:`texture_around`), and its gradient buffer handed to torch as the gradient where it has the
-tensor's shape (:class:`Handed`).
+tensor's shape (:class:`Handed`). :func:`view` and :func:`zeros` are the bridge's tensor buffers
+as Warp reads them, for these textures and the op's other tensors alike.
 """
 
 from __future__ import annotations
@@ -138,9 +139,10 @@ def _kept_texture(t: torch.Tensor, mipmaps: bool, gradient: bool) -> _Kept:
     in_place = texels == count and channels == 4 and layers.dtype == torch.float32 and layers.is_contiguous()
     chain = None if in_place else zeros((texels, 4), t.device)  # in place: level 0 alone, as the chain stores it, read only
     grad = zeros((texels, 4), t.device) if gradient else None
-    array = _view(layers if in_place else chain, texels)
+    device = wp.device_from_torch(t.device)
+    array = view(layers.reshape(texels, 4) if in_place else chain, device, wp.vec4)
     if grad is not None:
-        array.grad = _view(grad, texels)
+        array.grad = view(grad, device, wp.vec4)
     texture = (Texture if t.dim() == 3 else TextureArray).around(array, num_layers, sizes, channels)
     return _Kept(texture, chain, array, grad, count, weakref.ref(shelf))
 
@@ -149,10 +151,15 @@ class _Shelf(list):
     """The free textures kept for one layout of a tensor (a list that can be weakly referenced)."""
 
 
-def _view(buffer: torch.Tensor, texels: int) -> wp.array:
-    """A ``vec4`` Warp array over a contiguous float32 buffer of ``texels`` texels, holding no
-    reference to it (the caller keeps it alive)."""
-    return wp.array(ptr=buffer.data_ptr(), dtype=wp.vec4, shape=(texels,), device=wp.device_from_torch(buffer.device))
+def view(buffer: torch.Tensor, device, dtype=wp.float32) -> wp.array:
+    """A Warp array of ``dtype`` (a scalar, or a vector: the tensor's last axis) over the contiguous
+    tensor ``buffer`` of its scalars, holding no reference to it (the caller keeps it alive: the
+    op's saved tensors and state, a kept texture's buffers): ``wp.from_torch`` took twice as long.
+    Every tensor the bridge hands to Warp goes through here."""
+    shape = tuple(buffer.shape[:-1]) if getattr(dtype, "_length_", 1) > 1 else tuple(buffer.shape)
+    if buffer.numel() == 0:
+        return wp.empty(shape, dtype=dtype, device=device)
+    return wp.array(ptr=buffer.data_ptr(), dtype=dtype, shape=shape, device=device)
 
 
 def give_back(leases: list) -> None:
