@@ -15,6 +15,7 @@ each implementation makes, though not how well the hardware overlaps it.
     python benchmarks/bench_instructions.py                              # every case, warptex
     python benchmarks/bench_instructions.py --cases "bilinear sphere" --peers drjit torch
     python benchmarks/bench_instructions.py --cases "bilinear random" --passes forward --peers drjit --cache-sim
+    python benchmarks/bench_instructions.py --cases "bilinear sphere" --passes forward --formats float32 unorm8
 
 Needs valgrind (Debian's ``valgrind`` package); skips, saying why, without it.
 """
@@ -51,12 +52,12 @@ import warptex as wt
 import peers
 from bench_samplers import scene_data, samples, texture, warptex_runs
 wt.set_num_threads(1)
-technique, scene, impl, passes, repeats = {technique!r}, {scene!r}, {impl!r}, {passes!r}, {repeats}
+technique, scene, impl, passes, repeats, fmt = {technique!r}, {scene!r}, {impl!r}, {passes!r}, {repeats}, {fmt!r}
 sizes = {{"sphere": 512, "terrain": 256, "random": 1 << 18}}
 tex = texture(1024)
 data, objs = scene_data(technique, scene, sizes, tex, {{}})
 if impl == "warptex":
-    forward, forward_backward = warptex_runs(technique, data, objs)
+    forward, forward_backward = warptex_runs(technique, data, objs, fmt=fmt)
     run = forward if passes == "forward" else forward_backward
 else:
     peers.set_device(impl, "cpu")
@@ -88,11 +89,12 @@ def totals(text: str) -> dict[str, int]:
     return {name: int(value) for name, value in zip(names, values)}
 
 
-def count(case: str, impl: str, passes: str, repeats: int, cache_sim: bool = False) -> tuple[dict[str, int], int]:
+def count(case: str, impl: str, passes: str, repeats: int, cache_sim: bool = False, fmt: str = "float32") -> tuple[dict[str, int], int]:
     """``(totals, samples)`` of ``repeats`` calls of ``case`` (after a warm-up call): the event
-    totals (:func:`totals`) and the samples a call takes."""
+    totals (:func:`totals`) and the samples a call takes. warptex reads its textures in texel
+    format ``fmt``; peers always read float32."""
     technique, scene = CASES[case]
-    code = _RUNNER.format(bench=str(HERE), technique=technique, scene=scene, impl=impl, passes=passes, repeats=repeats)
+    code = _RUNNER.format(bench=str(HERE), technique=technique, scene=scene, impl=impl, passes=passes, repeats=repeats, fmt=fmt)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "callgrind.out"
         env = {**os.environ, "WARPTEX_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "PYTHONHASHSEED": "0"}
@@ -104,11 +106,11 @@ def count(case: str, impl: str, passes: str, repeats: int, cache_sim: bool = Fal
         return totals(out.read_text()), samples
 
 
-def per_sample(case: str, impl: str, passes: str, repeats: int, cache_sim: bool = False) -> dict[str, float]:
+def per_sample(case: str, impl: str, passes: str, repeats: int, cache_sim: bool = False, fmt: str = "float32") -> dict[str, float]:
     """Per sample of a call (``repeats`` calls, averaged): ``instructions``, and with ``cache_sim``
     the simulated first-level (``d1_misses``) and last-level (``ll_misses``) data misses, reads and
     writes together."""
-    events, samples = count(case, impl, passes, repeats, cache_sim)
+    events, samples = count(case, impl, passes, repeats, cache_sim, fmt)
     n = repeats * samples
     figures = {"instructions": events["Ir"] / n}
     if cache_sim:
@@ -119,7 +121,7 @@ def per_sample(case: str, impl: str, passes: str, repeats: int, cache_sim: bool 
 
 def format_figures(case: str, passes: str, impl: str, figures: dict[str, float]) -> str:
     """One line of the report."""
-    line = f"{case:20s} {passes:16s} {impl:8s} {figures['instructions']:10.1f} instructions/sample"
+    line = f"{case:20s} {passes:16s} {impl:15s} {figures['instructions']:10.1f} instructions/sample"
     if "d1_misses" in figures:
         line += f"  {figures['d1_misses']:6.2f} D1 misses/sample  {figures['ll_misses']:6.3f} LL misses/sample"
     return line
@@ -131,6 +133,8 @@ def main(argv=None) -> int:
     p.add_argument("--passes", nargs="+", default=["forward", "forward+backward"], choices=["forward", "forward+backward"])
     p.add_argument("--peers", nargs="*", default=[], help="peers to count too (drjit, torch, numpy)")
     p.add_argument("--repeats", type=int, default=2, help="calls counted after the warm-up call (default 2)")
+    p.add_argument("--formats", nargs="+", default=["float32"], choices=["float32", "float16", "unorm8", "srgb8"],
+                   help="texel formats of warptex's textures, a row each (default float32; peers read float32)")
     p.add_argument("--cache-sim", action="store_true", help="also simulate the caches: data misses per sample (slower)")
     p.add_argument("--json", type=Path, help="write the figures here")
     args = p.parse_args(argv)
@@ -142,14 +146,15 @@ def main(argv=None) -> int:
     rows = []
     for case in args.cases:
         for passes in args.passes:
-            for impl in ["warptex", *args.peers]:
+            for impl, fmt in [*(("warptex", f) for f in args.formats), *((peer, "float32") for peer in args.peers)]:
+                name = impl if fmt == "float32" else f"{impl} {fmt}"
                 try:
-                    figures = per_sample(case, impl, passes, args.repeats, args.cache_sim)
+                    figures = per_sample(case, impl, passes, args.repeats, args.cache_sim, fmt)
                 except (RuntimeError, KeyError) as err:
-                    print(f"{case:20s} {passes:16s} {impl:8s} skipped ({str(err).splitlines()[0]})", flush=True)
+                    print(f"{case:20s} {passes:16s} {name:8s} skipped ({str(err).splitlines()[0]})", flush=True)
                     continue
-                rows.append({"case": case, "pass": passes, "impl": impl, **{f"{k}_per_sample": v for k, v in figures.items()}})
-                print(format_figures(case, passes, impl, figures), flush=True)
+                rows.append({"case": case, "pass": passes, "impl": impl, "format": fmt, **{f"{k}_per_sample": v for k, v in figures.items()}})
+                print(format_figures(case, passes, name, figures), flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     return 0

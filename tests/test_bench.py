@@ -189,7 +189,7 @@ def test_instruction_counts_read_callgrind_events_per_sample(monkeypatch):
     simulated = "events: Ir Dr Dw I1mr D1mr D1mw ILmr DLmr DLmw\nsummary: 4000 900 300 7 250 50 7 20 4\n"
     assert bi.totals(plain) == {"Ir": 4000}
     assert bi.totals(simulated) == {"Ir": 4000, "Dr": 900, "Dw": 300, "I1mr": 7, "D1mr": 250, "D1mw": 50, "ILmr": 7, "DLmr": 20, "DLmw": 4}
-    monkeypatch.setattr(bi, "count", lambda case, impl, passes, repeats, cache_sim=False: (bi.totals(simulated if cache_sim else plain), 50))
+    monkeypatch.setattr(bi, "count", lambda case, impl, passes, repeats, cache_sim=False, fmt="float32": (bi.totals(simulated if cache_sim else plain), 50))
     assert bi.per_sample("bilinear random", "warptex", "forward", 2) == {"instructions": 40.0}
     figures = bi.per_sample("bilinear random", "warptex", "forward", 2, cache_sim=True)
     assert figures == {"instructions": 40.0, "d1_misses": 3.0, "ll_misses": 0.24}

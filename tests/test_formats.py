@@ -95,6 +95,22 @@ def test_codes_are_stored_as_given(rng, fmt):
     _same_bits(tex.numpy(0), np.stack([table[c][codes[..., c]] for c in range(4)], axis=-1))
 
 
+@pytest.mark.parametrize("fmt", ["srgb8", "unorm8"])
+def test_every_code_is_read_as_its_tables_value(fmt):
+    """Bilinear reads at texel centres (weights exactly 1 and 0) return the texel itself: a 16 x 16
+    texture whose every channel holds each of the 256 codes once, read through the lanes (unorm8
+    decodes arithmetically there) and the one-pixel kernels (by the table)."""
+    codes = np.stack([(np.arange(256) + 64 * c) % 256 for c in range(4)], axis=-1).astype(np.uint8).reshape(16, 16, 4)
+    tex = wt.Texture(codes, format=fmt, mipmaps=False)
+    j, i = np.mgrid[0:16, 0:16]
+    uv = np.stack([(i + 0.5) / 16, 1 - (j + 0.5) / 16], axis=-1).reshape(-1, 2).astype(np.float32)
+    table = decode_table(wt.Format(fmt), 4).reshape(4, 256)
+    want = np.stack([table[c][codes[..., c]] for c in range(4)], axis=-1).reshape(-1, 4)
+    for one_pixel in (False, True):
+        with one_pixel_kernels(one_pixel):
+            _same_bits(wt.sample(tex, uv, sampler=wt.Sampler(filter="bilinear")).numpy(), want)
+
+
 @pytest.mark.parametrize("fmt", COMPACT)
 @pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
 @pytest.mark.parametrize("address", ADDRESSES)
