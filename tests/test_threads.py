@@ -2,6 +2,7 @@
 accumulators added tile by tile, validation. That gradients are the same bits at any thread count is
 ``test_same_bits.py``'s."""
 
+import ctypes
 import functools
 import gc
 import multiprocessing
@@ -329,15 +330,31 @@ def test_private_copies_are_left_zero_and_dropped_after_a_failure(failing_call, 
     np.testing.assert_array_equal(gradient(), want)
 
 
-def test_zero_grad_clears_a_large_gradient_on_the_threads(threads):
-    """``zero_grad`` of a gradient past PARALLEL_SUM_BYTES is split over the threads; every level is zeroed."""
+def test_zero_grad_clears_a_large_gradient_on_the_threads(threads, monkeypatch):
+    """``zero_grad`` of a gradient past PARALLEL_ZERO_BYTES is cleared in a range per thread (3
+    cuts of a size that no cut divides evenly); every level is zeroed, and nothing past it."""
     threads(3)
-    tex = wt.Texture(np.random.default_rng(6).random((512, 512, 4)).astype(np.float32), requires_grad=True)
+    tex = wt.Texture(np.random.default_rng(6).random((1023, 1025, 4)).astype(np.float32), requires_grad=True)
     grad = tex.view.texels.grad
-    assert grad.size * 16 >= _threads.PARALLEL_SUM_BYTES
+    assert grad.size * 16 >= _threads.PARALLEL_ZERO_BYTES
     grad.fill_(wp.vec4(1.0, 2.0, 3.0, 4.0))
+    cleared, memset = [], ctypes.memset
+    monkeypatch.setattr(ctypes, "memset", lambda ptr, value, size: (cleared.append((ptr, size)), memset(ptr, value, size))[1])
     tex.zero_grad()
+    cleared.sort()
+    assert len(cleared) == 3, "a range per thread"
+    assert cleared[0][0] == grad.ptr and all(a + n == b for (a, n), (b, _) in zip(cleared, cleared[1:])), "ranges that meet"
+    assert cleared[-1][0] + cleared[-1][1] == grad.ptr + grad.size * 16, "and end where the gradient ends"
     np.testing.assert_array_equal(grad.numpy(), 0)
+
+
+def test_zero_grad_of_a_small_gradient_stays_on_one_thread(threads, monkeypatch):
+    threads(2)
+    tex = wt.Texture(np.random.default_rng(6).random((64, 64, 4)).astype(np.float32), requires_grad=True)
+    tex.view.texels.grad.fill_(wp.vec4(1.0, 2.0, 3.0, 4.0))
+    monkeypatch.setattr(_threads, "side_by_side", lambda work, parts: pytest.fail("a small clear is handed out"))
+    tex.zero_grad()
+    np.testing.assert_array_equal(tex.view.texels.grad.numpy(), 0)
 
 
 @pytest.mark.parametrize("workers", [2, 3, 4, 16])

@@ -47,9 +47,12 @@ GRAD_BYTES_PER_FOOTPRINT = 64
 MIN_GRAD_CHUNK_PIXELS = 16384
 GRAD_CHUNK_PIXELS = 1 << 19
 MAX_GRAD_CHUNKS = 16
-# Zeroing arrays smaller than this in all stays on one
-# thread: handing it out costs more.
-PARALLEL_SUM_BYTES = 1 << 20
+# Zeroing arrays smaller than this stays on one thread (Warp's memset). Measured on 2 threads
+# (2026-11-28, best of 30, interleaved): Warp's zero_() against a memset of each half on its own
+# thread took 15 / 46-67 µs at 1 MB, 48 / 77-98 µs at 4 MB, 206-453 / 132-233 µs at 16 MB and
+# 871-874 / 992-1032 µs at 64 MB (the bandwidth's limit either way). NumPy's fill of each half,
+# the clear before, was the slowest at every size (82, 148, 391 and 2140 µs).
+PARALLEL_ZERO_BYTES = 8 << 20
 
 # The pool: threads that take (work, part, done, failures) from _tasks (side_by_side). A plain
 # queue and a lock per part, not concurrent.futures: handing out a part and waiting for it took
@@ -312,16 +315,13 @@ def rows_side_by_side(rows: int, work, device) -> None:
 
 
 def zero(array: wp.array) -> None:
-    """``array.zero_()``; on the CPU, a contiguous array of :data:`PARALLEL_SUM_BYTES` or more is
-    zeroed in ranges on :func:`get_num_threads` threads side by side (one core does not fill the
-    memory bandwidth: a 22 MB texel gradient took 1.8 ms on one thread, 1.2 ms on two here)."""
-    parts = get_num_threads() if array.device.is_cpu and array.is_contiguous and array.size * wp.types.type_size_in_bytes(array.dtype) >= PARALLEL_SUM_BYTES else 1
+    """``array.zero_()``; on the CPU, a contiguous array of :data:`PARALLEL_ZERO_BYTES` or more is
+    cleared by a ``memset`` of a range per thread (:func:`get_num_threads`), side by side (ctypes
+    lets go of the GIL for the call)."""
+    nbytes = array.size * wp.types.type_size_in_bytes(array.dtype)
+    parts = get_num_threads() if array.device.is_cpu and array.is_contiguous and nbytes >= PARALLEL_ZERO_BYTES else 1
     if parts == 1:
         array.zero_()
         return
-    flat = array.numpy().reshape(-1)
-
-    def clear(part: int) -> None:
-        flat[flat.size * part // parts : flat.size * (part + 1) // parts] = 0
-
-    side_by_side(clear, parts)
+    bounds = [nbytes * part // parts // 64 * 64 for part in range(parts)] + [nbytes]  # cache-line aligned cuts
+    side_by_side(lambda part: ctypes.memset(array.ptr + bounds[part], 0, bounds[part + 1] - bounds[part]), parts)
