@@ -621,6 +621,7 @@ def run(args) -> dict:
         if without:
             report(f"{fmt} rows: none of {', '.join(without)} (not stored natively on {args.device}; peers/<name>_peer.py says why)")
     tex = texture(args.texture_size, device=args.device)
+    report(f"texture: {args.texture_size}² RGBA with mips, {tex.nbytes / 2**20:.0f} MB in float32 (--texture-size)")
     cache, records = {}, []
     for technique in args.techniques:
         scenes = ("sphere", "random") if technique in SAMPLE_TECHNIQUES else ("sphere", "terrain")
@@ -654,6 +655,9 @@ def parse(argv=None):
     p.add_argument("--limit", action="store_true", help="time a plain C loop of the bilinear lookup beside the peers (peers/limit_peer.py): the hardware's pace")
     p.add_argument("--runs", type=int, default=1, help="time every row in this many runs of --repeats interleaved rounds; the summaries give each ratio's spread over the runs (min–max)")
     p.add_argument("--no-scaling", action="store_true", help="skip the pixel-count and texture-size sweeps")
+    p.add_argument("--texture-size", type=int, default=None, metavar="N",
+                   help="the rows' texture is N x N RGBA (default 1024: 16 MB in float32, inside this machine's 32 MB L3; "
+                        "2048 puts float32 out of it and 8-bit texels in it; quick 256)")
     p.add_argument("--formats", nargs="+", default=["float32"], choices=[f.value for f in wt.Format], metavar="FORMAT",
                    help="texel formats of warptex's textures, rows for each (float32 float16 unorm8 srgb8; default float32)")
     p.add_argument("--call-cost", action="store_true", help="only the cost of small calls: sample() (natively and through warptex.torch) on 1, 1,024 and 65,536 UVs against torch")
@@ -675,7 +679,9 @@ def parse(argv=None):
     args.repeats = args.repeats or (1 if args.quick else 5)
     args.calls = args.calls or (20 if args.quick else 200)
     args.sizes = {"sphere": 256, "terrain": 128, "random": 1 << 16} if args.quick else {"sphere": 1024, "terrain": 512, "random": 1 << 20}
-    args.texture_size = 256 if args.quick else 1024
+    if args.texture_size is not None and args.texture_size < 2:
+        p.error("--texture-size must be >= 2")
+    args.texture_size = args.texture_size or (256 if args.quick else 1024)
     args.scaling_pixels = [64, 128] if args.quick else [256, 512, 1024, 2048]
     args.scaling_textures = [128, 256] if args.quick else [256, 512, 1024, 2048, 4096]
     return args

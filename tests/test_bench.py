@@ -47,13 +47,15 @@ def test_quick_benchmark_writes_json_and_plot(tmp_path):
 @pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/ is not part of this checkout")
 def test_formats_add_rows_of_compact_texels_in_the_same_rounds(tmp_path):
     result = subprocess.run(
-        [sys.executable, str(BENCH), "--quick", "--threads", "2", "--peers", "--no-scaling", "--techniques", "bilinear", "splat4", "--formats", "float32", "unorm8", "float16", "--json", str(tmp_path / "r.json")],
+        [sys.executable, str(BENCH), "--quick", "--threads", "2", "--peers", "--no-scaling", "--techniques", "bilinear", "splat4", "--formats", "float32", "unorm8", "float16", "--texture-size", "64", "--json", str(tmp_path / "r.json")],
         capture_output=True,
         text=True,
         timeout=600,
     )
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-    records = json.loads((tmp_path / "r.json").read_text())["records"]
+    result_json = json.loads((tmp_path / "r.json").read_text())
+    records = result_json["records"]
+    assert result_json["settings"]["texture_size"] == 64 and "texture: 64² RGBA with mips" in result.stdout
     for technique in ("bilinear", "splat4"):
         for fmt in ("unorm8", "float16"):
             mine = [r for r in records if r["technique"] == technique and r.get("format") == fmt]
