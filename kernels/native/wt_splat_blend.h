@@ -48,7 +48,10 @@ WT_INLINE wt_lane_weights8 wt_weights_lane8(const Params& params, const wt_lane_
         for (int j = 0; j < 8; ++j) w0[j] = j < n ? wp::max(rs.data[l][j], 0.0f) : 0.0f;
         for (int j = 0; j < 8; ++j) sum += w0[j] * 1.0f;
         const float total = wp::max(sum, (float)WT_SPLAT_EPS);
-        for (int j = 0; j < n; ++j) out.data[l][j] = params.normalize != 0 ? w0[j] / total : w0[j];
+        wt_f8 row;  // all 8 entries in one divide (a scalar divide per layer was 2% of a splat); past n, 0 / total = 0
+        __builtin_memcpy(&row, w0, sizeof(row));
+        if (params.normalize != 0) row = row / total;
+        __builtin_memcpy(out.data[l], &row, sizeof(row));
     }
     return out;
 }
