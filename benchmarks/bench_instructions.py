@@ -151,7 +151,7 @@ def main(argv=None) -> int:
                 try:
                     figures = per_sample(case, impl, passes, args.repeats, args.cache_sim, fmt)
                 except (RuntimeError, KeyError) as err:
-                    print(f"{case:20s} {passes:16s} {name:8s} skipped ({str(err).splitlines()[0]})", flush=True)
+                    print(f"{case:20s} {passes:16s} {name:15s} skipped ({str(err).splitlines()[0]})", flush=True)
                     continue
                 rows.append({"case": case, "pass": passes, "impl": impl, "format": fmt, **{f"{k}_per_sample": v for k, v in figures.items()}})
                 print(format_figures(case, passes, name, figures), flush=True)
