@@ -337,6 +337,32 @@ def test_ctrl_c_at_any_moment_is_one_line_exit_130_within_5_s(tmp_path, command,
             assert after == before, f"the previous files changed ({delay} s in)"
 
 
+def test_ctrl_c_while_a_cold_fit_compiles_exits_within_5_s(tmp_path):
+    """On an empty Warp kernel cache, ``warptex fit`` compiles its splat kernels for seconds; a
+    Ctrl-C once that has begun still ends it within 5 s, with its one line and status 130 (the
+    kernels compile in the background, ``warptex._compile.preload``, not in the main thread at
+    their first launch, which heard nothing until the compile was done)."""
+    import signal
+    import time
+
+    cache = tmp_path / "cache"
+    env = {**os.environ, "WARP_CACHE_PATH": str(cache)}
+    child = subprocess.Popen([sys.executable, "-m", "warptex", "fit", "--iters", "40", "--resolution", "64x96", "--out", str(tmp_path / "out")], cwd=ROOT,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    deadline = time.perf_counter() + 120
+    while not any("splat" in p.name and "grad" in p.name for p in cache.glob("*/*")) and child.poll() is None and time.perf_counter() < deadline:
+        time.sleep(0.02)  # until the build of the splat's gradient module (the longest) begins
+    assert child.poll() is None, "the fit ended before its splat kernels compiled"
+    time.sleep(0.2)
+    sent = time.perf_counter()
+    child.send_signal(signal.SIGINT)
+    _, err = child.communicate(timeout=120)
+    waited = time.perf_counter() - sent
+    assert child.returncode == 130, (child.returncode, err[-2000:])
+    assert waited < 5.0, f"exit {waited:.1f} s after Ctrl-C"
+    assert err.strip() == "warptex: interrupted; no files were written", err[-2000:]
+
+
 def _without_torch(code: str, env: dict | None = None) -> subprocess.CompletedProcess:
     """Run ``code`` in a Python where ``import torch`` fails, as on a machine without PyTorch."""
     return subprocess.run([sys.executable, "-c", "import sys; sys.modules['torch'] = None\n" + code], cwd=ROOT, capture_output=True, text=True,

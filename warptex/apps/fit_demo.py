@@ -13,6 +13,7 @@ default scene unless you change them.
 from __future__ import annotations
 
 import os
+import sys
 import time
 import warnings
 from dataclasses import dataclass
@@ -20,8 +21,13 @@ from pathlib import Path
 
 import numpy as np
 import warp as wp
+import warp.optim
 
 from warptex import io
+from warptex._compile import preload
+from warptex.kernels import fit as kfit
+from warptex.kernels import sampling as ks
+from warptex.kernels import splat as kl
 from warptex.camera import checked_resolution
 from warptex.fit import FitView, SplatParameters, check_inputs, default_stages, fit_splat, psnr, render_views, shard
 from warptex.fit.objective import LINED_UP_CONTRAST, silhouette_contrast
@@ -45,6 +51,17 @@ TRUE_TILING = 1.0 / 6.0  # the default scene's layer repeats per world unit
 #: A texel counts as covered when the views' bilinear lookups give it at least this much weight
 #: in all (about one pixel's worth): such a texel's weights change the images.
 COVERED = 1.0
+
+
+def _kernels(num_layers: int, device) -> list:
+    """The kernels a fit runs once its views are rasterised: the splat's forward and the gradient
+    lanes it keeps layers for, the layers' mip chains, the objective's and Adam's steps. Compiled
+    in the main thread at their first launch, a module took the whole of its compile (seconds cold)
+    to hear a Ctrl-C."""
+    kernels = kl.splat_kernels(capacity=kl.capacity(num_layers), stochastic=False)  # the fit samples plainly
+    adam = sys.modules[wp.optim.Adam.__module__]
+    used = [kernels.launched(device), kernels.launched(device, grad=True), kernels.kept_lanes, ks.downsample_kernel, kfit.softmax_kernel]
+    return [k for k in used if k is not None] + [k for k in vars(adam).values() if isinstance(k, wp.Kernel)]
 
 
 def _panels(images, prefix: str) -> np.ndarray:
@@ -159,7 +176,8 @@ def run_fit(
 
     check_inputs(problem.views, problem.layers, params, device=device)  # fit_splat's checks, before anything renders
     mine = problem.views if rank else shard(problem.views, rank=0, world_size=world)
-    initial = render_views(problem.views, problem.layers, params, splat_options=options)  # also compiles the kernels
+    preload(_kernels(problem.layers.num_layers, device), device)  # a cold start compiles them side by side, and Ctrl-C is heard
+    initial = render_views(problem.views, problem.layers, params, splat_options=options)
     group = None if job is None else job.ready(dist_timeout)
     result = fit_splat(mine, problem.layers, params, stages=stages, loss=loss, entropy=entropy, splat_options=options, progress=progress, report_every=report_every, process_group=group, memory=memory, device=device)
     if rank:
