@@ -33,22 +33,24 @@ template <class Tex> WT_INLINE void wt_unorm8_channels(const Tex& tex, const int
 
 // What wt_sample_levels also gives where its caller asks (filters.sample_lod_derivatives' d/du,
 // d/dv and d/dlod of each lane's filtered value; d/dlod where the biased LOD of each lane, lod, is
-// inside the sampler's clamp): rows per lane pixel, or null.
+// inside the sampler's clamp): four channel vectors each (as the value's), or null.
 struct wt_level_slopes {
     const float* lod;
-    wt_f4 *du, *dv, *dlod;
+    wt_vf *du, *dv, *dlod;
 };
 
-// res[l] = filters.sample_levels(tex, layer[l], (u[l], v[l]), level[l], fraction[l], smp) for every
-// lane, the address mode a constant (wt_sample_levels_any compiles it once per mode: a mode tested
-// per texel measured slower). Each level read is cut in two: every lane's addresses and weights,
-// then every lane's loads, so that the loads are in flight together. With slopes (not null), also
-// the value's derivatives as filters.sample_lod_derivatives takes them (the same value, bit for
-// bit): bilinear_derivatives of each level read, blended as the values are; 0 for nearest.
+// res[c][l] = filters.sample_levels(tex, layer[l], (u[l], v[l]), level[l], fraction[l], smp)[c] for
+// every lane and channel: a vector per channel, as the footprint reads sum and blend them (rows
+// were transposed here and straight back there). The address mode is a constant
+// (wt_sample_levels_any compiles it once per mode: a mode tested per texel measured slower). Each
+// level read is cut in two: every lane's addresses and weights, then every lane's loads, so that
+// the loads are in flight together. With slopes (not null), also the value's derivatives as
+// filters.sample_lod_derivatives takes them (the same value, bit for bit): bilinear_derivatives of
+// each level read, blended as the values are; 0 for nearest.
 // twin: filters.sample_levels
 template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int address, const Tex& tex, const Smp& smp,
                                                                 const float* u, const float* v, const int* level,
-                                                                const float* fraction, const int* layer, wt_f4* res,
+                                                                const float* fraction, const int* layer, wt_vf* res,
                                                                 const wt_level_slopes* slopes = nullptr) {
     const wt_f4 border = {smp.border.c[0], smp.border.c[1], smp.border.c[2], smp.border.c[3]};
     auto load = [&](int index, bool inside) __attribute__((always_inline)) -> wt_f4 {  // texels.texel
@@ -75,13 +77,15 @@ template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int addres
             index[0][l] = start + layer[l] * h * w + y * w + x;
             inside[0][l] = address != WT_BORDER || (x >= 0 && y >= 0);  // only the border mode reads outside
         }
-        for (int l = 0; l < WT_L; ++l) res[l] = load(index[0][l], inside[0][l]);
+        wt_f4 rows[WT_L];
+        for (int l = 0; l < WT_L; ++l) rows[l] = load(index[0][l], inside[0][l]);
+        wt_channels(rows, res);
         if (slopes)
-            for (int l = 0; l < WT_L; ++l) slopes->du[l] = slopes->dv[l] = slopes->dlod[l] = 0.0f;
+            for (int c = 0; c < 4; ++c) slopes->du[c] = slopes->dv[c] = slopes->dlod[c] = 0.0f;
         return;
     }
     float fx[WT_L], fy[WT_L];
-    wt_vf R[4];                                           // the result's channels
+    wt_vf* R = res;                                       // the result's channels
     wt_vf DU[4], DV[4], DLOD[4];                          // with slopes: their channels
     for (int pass = 0; pass < (blend ? 2 : 1); ++pass) {  // the level, then (trilinear) the next one
         int read[WT_L];
@@ -162,12 +166,8 @@ template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int addres
             }
         }
     }
-    wt_rows_of_channels(R, res);
-    if (slopes) {
-        wt_rows_of_channels(DU, slopes->du);
-        wt_rows_of_channels(DV, slopes->dv);
-        wt_rows_of_channels(DLOD, slopes->dlod);
-    }
+    if (slopes)
+        for (int c = 0; c < 4; ++c) slopes->du[c] = DU[c], slopes->dv[c] = DV[c], slopes->dlod[c] = DLOD[c];
 }
 
 // wt_sample_levels with the address mode a constant, once per mode. Out of line: the four modes'
@@ -176,7 +176,7 @@ template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int addres
 // twin: filters.sample_levels
 template <class Tex, class Smp>
 WT_OUTLINE void wt_sample_levels_any(const Tex& tex, const Smp& smp, const float* u, const float* v, const int* level,
-                                     const float* fraction, const int* layer, wt_f4* res,
+                                     const float* fraction, const int* layer, wt_vf* res,
                                      const wt_level_slopes* slopes = nullptr) {
     switch (smp.address) {
     case WT_WRAP:
@@ -234,10 +234,8 @@ WT_INLINE void wt_accumulate_footprint(const Tex& tex, const Smp& smp, const int
             us[l] = t && f ? tu : 0.0f;
             vs[l] = t && f ? tv : 0.0f;
         }
-        wt_f4 result[WT_L];
-        wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layer, result);
         wt_vf R[4];
-        wt_channels(result, R);
+        wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layer, R);
         wt_vi TAP, FINITE;
         __builtin_memcpy(&TAP, tap, sizeof(TAP));
         __builtin_memcpy(&FINITE, ok_lod, sizeof(FINITE));
@@ -356,8 +354,10 @@ WT_INLINE void wt_sample_levels_lane(const Tex& tex, const Smp& smp, const UV& u
         for (int l = 0; l < WT_L; ++l)
             layer[l] = wp::clamp(wt_int(layers, base + (l < count ? l : 0)), 0, tex.num_layers - 1);
     }
+    wt_vf channels[4];
     wt_f4 result[WT_L];
-    wt_sample_levels_any(tex, smp, u, v, levels, fractions, layer, result);
+    wt_sample_levels_any(tex, smp, u, v, levels, fractions, layer, channels);
+    wt_rows_of_channels(channels, result);
     const wt_f4 nan4 = __builtin_nanf("");
     for (int l = 0; l < count; ++l) wt_write_row(out, base + l, finite[l] ? result[l] : nan4);
 }

@@ -100,9 +100,14 @@ WT_INLINE void wt_footprint_slopes(const Tex& tex, const Smp& smp, int layer, co
             us[l] = ok ? tu : 0.0f;
             vs[l] = ok ? tv : 0.0f;
         }
+        wt_vf channels[4][4];  // the value, d/du, d/dv, d/dlod
+        const wt_level_slopes slopes = {lods, channels[1], channels[2], channels[3]};
+        wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layers, channels[0], &slopes);
         wt_f4 result[WT_L], r_u[WT_L], r_v[WT_L], r_lod[WT_L];
-        const wt_level_slopes slopes = {lods, r_u, r_v, r_lod};
-        wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layers, result, &slopes);
+        wt_rows_of_channels(channels[0], result);
+        wt_rows_of_channels(channels[1], r_u);
+        wt_rows_of_channels(channels[2], r_v);
+        wt_rows_of_channels(channels[3], r_lod);
         const wt_f4 nan4 = __builtin_nanf(""), zero = 0.0f;
         for (int l = 0; l < WT_L; ++l) {
             if (!tap[l]) continue;
