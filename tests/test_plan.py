@@ -301,3 +301,60 @@ def test_normal_mappings_packed_arguments_follow_its_options():
     for _ in range(2):
         with pytest.raises(ValueError, match="a normal map needs 2 to 4 channels, got 1"):
             wt.triplanar_normal(g, grey)
+
+
+def _new_output_plans() -> list:
+    return [p for p in _plans().values() if p.cmd is not None and p.refs[p.out]() is None]
+
+
+@pytest.mark.parametrize(("sampler", "lod"), [(None, None), (wt.Sampler(filter="nearest", address="border", border=(1, 2, 3, 4)), None), (wt.Sampler(filter="trilinear"), 0.7)])
+@pytest.mark.parametrize("shape", [(300,), (20, 15)])
+def test_a_plan_without_out_makes_a_new_output_each_call(inputs, sampler, lod, shape):
+    """Without ``out=``, a kept plan gives each call a new array, of the call's shape and bits,
+    leaves the arrays of earlier calls as they were, and keeps none of them alive."""
+    texture, uv, _ = inputs
+    uv = uv.reshape(shape)
+    want = wt.sample(texture, uv, sampler=sampler, lod=lod).numpy()
+    results = [wt.sample(texture, uv, sampler=sampler, lod=lod) for _ in range(4)]
+    assert len(_new_output_plans()) == 1
+    assert len({id(r) for r in results}) == 4
+    for r in results:
+        assert r.shape == (*shape, 4) and r.dtype == wp.float32 and not r.requires_grad
+        np.testing.assert_array_equal(r.numpy(), want)
+    held = weakref.ref(results[-1])
+    del results, r
+    gc.collect()
+    assert held() is None  # the plan keeps no output alive
+
+
+def test_a_new_output_plan_keeps_the_outputs_requires_grad(inputs):
+    """A texture that requires gradients gives outputs that do, outside a tape too; a plan's new
+    outputs as well, with zero gradients."""
+    texture, uv, _ = inputs
+    fitted = wt.Texture(texture.texels.numpy(), requires_grad=True)
+    for _ in range(4):
+        r = wt.sample(fitted, uv)
+        assert r.requires_grad and r.grad is not None and not r.grad.numpy().any()
+    assert len(_new_output_plans()) == 1
+    np.testing.assert_array_equal(r.numpy(), wt.sample(texture, uv).numpy())
+
+
+@pytest.mark.parametrize("func", ["triplanar", "biplanar", "splat"])
+def test_projection_and_splat_plans_without_out_give_the_calls_bits(func):
+    """New outputs from a kept plan on a G-buffer with uncovered pixels: the call's shape and bits
+    (0 where uncovered, whichever kernel ran)."""
+    rng = np.random.default_rng(6)
+    g, layers, maps = _splat_scene(rng)
+    mask = np.ones((6, 5), np.float32)
+    mask[2:4, 1:3] = 0.0
+    g.mask.assign(mask)
+    if func == "splat":
+        call = lambda: wt.splat(g, layers, maps, tiling=2)  # noqa: E731
+    else:
+        call = lambda: getattr(wt, func)(g, layers, tiling=1.5, layer=1)  # noqa: E731
+    want = call().numpy()
+    assert not want[2:4, 1:3].any()
+    results = [call() for _ in range(4)]
+    assert len(_new_output_plans()) == 1 and len({id(r) for r in results}) == 4
+    for r in results:
+        np.testing.assert_array_equal(r.numpy(), want)

@@ -1,13 +1,16 @@
 """A small call kept ready for the next call on the same objects: what a loop's call costs.
 
-A loop that samples the same inputs into the same ``out=`` (an optimiser's step, a per-frame
-lookup) paid for its checks, its argument structs and Warp's launch setup on every call: a
-1,024-UV :func:`~warptex.sample` spent ~90 us of Python around ~11 us of kernel.
+A loop that samples the same inputs again and again (an optimiser's step, a per-frame lookup)
+paid for its checks, its argument structs and Warp's launch setup on every call: a 1,024-UV
+:func:`~warptex.sample` spent ~90 us of Python around ~11 us of kernel.
 
-A technique whose call qualifies (``out=`` given, inputs that are objects or plain values, no
-recording ``wp.Tape``, see :func:`usable`) asks :func:`rerun` to run a plan kept under the call's
-key and its objects, the very ones (compared by identity: the arrays' shapes and types, and a
-texture's storage, cannot change): the same launch as before, on their current contents.
+A technique whose call qualifies (inputs that are objects or plain values, no recording
+``wp.Tape``, see :func:`usable`) asks :func:`rerun` to run a plan kept under the call's key and its
+objects, the very ones (compared by identity: the arrays' shapes and types, and a texture's
+storage, cannot change): the same launch as before, on their current contents. With ``out=`` the
+launch writes the caller's buffer; without (``out=None``, one of the objects), the plan makes a new
+output as the call did (its shape, type and ``requires_grad``) and points the launch at it: a new
+array costs ~6 us, where the call's own path cost ~50 us of Python around a 1,024-UV lookup.
 Otherwise the call runs as usual within :func:`recording`; its second call with the same objects
 keeps the launch it made (``warptex._launch.launch`` reports it through :func:`launched`), so a
 loop that passes new arrays every call never pays for plans it would not reuse. Only a call that
@@ -24,17 +27,20 @@ structs it names (``hold``) strongly, which hold a texture's arrays but not the 
 from __future__ import annotations
 
 import contextlib
+import math
 import threading
 import weakref
 
 import warp as wp
 
 from warptex._threads import never_split
-from warptex._warp import active_tape
+from warptex._warp import active_tape, array_struct
 from warptex.kernels.family import one_pixel_active
 
 #: Plans kept per thread.
 MAX_PLANS = 32
+#: The output's place in a launch's parameters, ``kernel(args, pixels, first, out)`` (``warptex._launch.launch``).
+OUT_PARAM = 3
 
 _local = threading.local()
 
@@ -42,19 +48,29 @@ _local = threading.local()
 class _Plan:
     """A call's objects (weakly), what it holds, and its launch (``None`` once seen, not yet kept)."""
 
-    __slots__ = ("refs", "hold", "cmd", "out", "zero")
+    __slots__ = ("refs", "hold", "cmd", "out", "zero", "like")
 
     def holds(self, objects: tuple) -> bool:
         """Whether this plan's objects are these very ``objects`` (ids can be reused)."""
         return all(r() is o for r, o in zip(self.refs, objects))
 
-    def run(self, objects: tuple) -> None:
+    def run(self, objects: tuple, lead: tuple) -> wp.array | None:
+        """Run the launch into the caller's output, or into a new one of shape ``(*lead, C)``; that
+        output, or ``None`` (nothing run) where ``lead`` does not hold the launch's rows."""
         out = objects[self.out]
-        if self.zero:  # a one-pixel kernel's output is zeroed first, as launch() zeroes it
-            out.zero_()
-        if out.grad is not None:  # and a new output's gradient
-            out.grad.zero_()
+        if out is None:  # a new output, as launch() was given one: its rows are the kernel's
+            (rows, channels), dtype, grad = self.like
+            if math.prod(lead) != rows:
+                return None
+            out = (wp.zeros if self.zero else wp.empty)((*lead, channels), dtype=dtype, device=self.cmd.device, requires_grad=grad)
+            self.cmd.set_param_at_index_from_ctype(OUT_PARAM, array_struct(out, (rows, channels)))
+        else:
+            if self.zero:  # a one-pixel kernel's output is zeroed first, as launch() zeroes it
+                out.zero_()
+            if out.grad is not None:  # and a new output's gradient
+                out.grad.zero_()
         self.cmd.launch()
+        return out
 
 
 def usable() -> bool:
@@ -74,13 +90,13 @@ def recall(key: tuple, objects: tuple) -> _Plan | None:
     return plan
 
 
-def rerun(key: tuple | None, objects: tuple) -> bool:
-    """Run the plan kept for ``key`` on ``objects`` (:func:`recall`) where there is one; whether
-    there was. ``key=None``: the call does not qualify."""
+def rerun(key: tuple | None, objects: tuple, lead: tuple = ()) -> wp.array | None:
+    """Run the plan kept for ``key`` on ``objects`` (:func:`recall`) where there is one: the
+    output it wrote (the caller's ``out=``, or a new ``(*lead, C)`` array where ``out`` is
+    ``None``: ``lead`` is the result's shape less its channels), else ``None``. ``key=None``: the
+    call does not qualify."""
     plan = recall(key, objects) if key is not None else None
-    if plan is not None:
-        plan.run(objects)
-    return plan is not None
+    return plan.run(objects, lead) if plan is not None else None
 
 
 @contextlib.contextmanager
@@ -88,7 +104,8 @@ def recording(key: tuple | None, objects: tuple, *, out: int, hold=()):
     """Run the block (a call's usual path) and, where this is the second call on ``key`` and
     ``objects`` and the block made one launch (:func:`launched`), keep that launch for
     :func:`recall`. ``key=None``: the call does not qualify; nothing is kept. ``out``: which of
-    ``objects`` is the output array; ``hold``: what the plan keeps alive (the packed structs)."""
+    ``objects`` is the output array (``None``: the call makes a new one); ``hold``: what the plan
+    keeps alive (the packed structs)."""
     if key is None or not usable() or getattr(_local, "capture", None) is not None:  # (a call within a recorded one: not kept)
         yield
         return
@@ -104,27 +121,33 @@ def recording(key: tuple | None, objects: tuple, *, out: int, hold=()):
         yield
     finally:
         _local.capture = None
-    if len(capture) == 1 and capture[0] is not None and seen.cmd is None:
-        seen.cmd, seen.zero = capture[0]
+    if len(capture) == 1 and capture[0] is not None and seen.cmd is None and (objects[out] is not None or capture[0][2] is not None):
+        seen.cmd, seen.zero, seen.like = capture[0]
         seen.out = out
 
 
 def _remember(plans: dict, full: tuple, objects: tuple, hold) -> None:
     plan = _Plan()
     drop = lambda _ref, plans=plans, full=full: plans.pop(full, None)  # noqa: E731 (an object went: so does its plan)
-    plan.refs, plan.hold, plan.cmd, plan.out, plan.zero = tuple(weakref.ref(o, drop) for o in objects), tuple(hold), None, 0, False
+    refs = tuple(_no_object if o is None else weakref.ref(o, drop) for o in objects)
+    plan.refs, plan.hold, plan.cmd, plan.out, plan.zero, plan.like = refs, tuple(hold), None, 0, False, None
     plans.pop(full, None)
     while len(plans) >= MAX_PLANS:
         plans.pop(next(iter(plans)), None)
     plans[full] = plan
 
 
+def _no_object():  # the "reference" of an object that is None (out=None)
+    return None
+
+
 def launched(kernel, dim: int, params: tuple, device, *, count: int, zeroes: bool) -> None:
     """``warptex._launch.launch`` made an unsplit, unrecorded launch of ``count`` pixels (after
-    zeroing its output where ``zeroes``, and its output's gradient where it has one): within
-    :func:`recording`'s second call, its own kept copy (a ``wp.Launch`` holding addresses only).
-    Not kept: a CPU launch large enough to be split over threads (a plan runs on one), or more
-    than one launch."""
+    zeroing its output where ``zeroes``, and its output's gradient where it has one) with
+    ``params`` ``(args, pixels, first, out)``: within :func:`recording`'s second call, its own
+    kept copy (a ``wp.Launch`` holding addresses only), and the shape, type and ``requires_grad``
+    of its output where that is one array of rows. Not kept: a CPU launch large enough to be
+    split over threads (a plan runs on one), or more than one launch."""
     capture = getattr(_local, "capture", None)
     if capture is None:
         return
@@ -133,4 +156,6 @@ def launched(kernel, dim: int, params: tuple, device, *, count: int, zeroes: boo
         return
     cmd = wp.launch(kernel, dim=dim, inputs=list(params), device=device, record_cmd=True)
     cmd.fwd_args = None  # addresses only: the plan keeps no array alive
-    capture.append((cmd, zeroes))
+    out = params[OUT_PARAM]
+    like = (tuple(out.shape), out.dtype, out.requires_grad) if wp.types.is_array(out) and out.ndim == 2 and out.is_contiguous else None
+    capture.append((cmd, zeroes, like))

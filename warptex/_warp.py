@@ -46,6 +46,19 @@ def _runtime():
     return (src.context if src is not None else wp.context).runtime
 
 
+def array_struct(array: wp.array, shape: tuple) -> Any:
+    """The ctypes struct a kernel's array parameter takes (Warp's ``array_t``) of contiguous
+    ``array`` seen as ``shape`` (as many elements): a launch's parameter without making a view
+    (``wp.Launch.set_param_at_index_from_ctype``)."""
+    src = getattr(wp, "_src", None)
+    struct = (src.types if src is not None else wp.types).array_t
+    strides = [wp.types.type_size_in_bytes(array.dtype)]
+    for n in reversed(shape[1:]):
+        strides.insert(0, strides[0] * n)
+    grad = 0 if array.grad is None else array.grad.ptr
+    return struct(data=array.ptr, grad=grad, ndim=len(shape), shape=tuple(shape), strides=tuple(strides))
+
+
 def active_tape() -> wp.Tape | None:
     """The ``wp.Tape`` being recorded (inside its ``with`` block), or ``None``."""
     return _runtime().tape

@@ -48,8 +48,9 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
     """
     func = "sample"
     plan = plan_key(func, texture, uv, lod, uv_dx, uv_dy, layer, sampler, device, out)
-    if _plan.rerun(plan, (texture, uv, out)):  # this call's inputs again: its launch again
-        return out
+    done = _plan.rerun(plan, (texture, uv, out), uv.shape) if plan is not None else None
+    if done is not None:  # this call's inputs again: its launch again
+        return done
     if not isinstance(texture, TextureArray):
         raise TypeError(f"{func}(): texture must be a Texture or TextureArray, got {type(texture).__name__}")
     device = resolve_device(func, device, texture.device)
@@ -71,11 +72,11 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
 
 def plan_key(func: str, texture, uv, lod, uv_dx, uv_dy, layer, sampler, device, out, *options) -> tuple | None:
     """The key of a call of :func:`sample` or :func:`~warptex.stochastic` that a plan can repeat
-    (``warptex._plan``): ``out=``, a UV array, a constant LOD and layer (plain numbers), no
-    derivatives, and no recording tape; else ``None``. ``options``: the function's other
-    options, hashable."""
+    (``warptex._plan``): a UV array, ``out=`` an array or ``None``, a constant LOD and layer
+    (plain numbers), no derivatives, and no recording tape; else ``None``. ``options``: the
+    function's other options, hashable."""
     if (
-        type(out) is not wp.array
+        not (out is None or type(out) is wp.array)
         or type(uv) is not wp.array
         or uv_dx is not None
         or uv_dy is not None

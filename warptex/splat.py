@@ -149,11 +149,12 @@ def splat(
     options = {"tiling": tiling, "projection": projection, "normalize": normalize, "height_blend": height_blend, "height_channel": height_channel, "sharpness": sharpness,
                "offsets": offsets, "mirror_fix": mirror_fix, "layers_per_face": layers_per_face, "stochastic": stochastic, "sampler": sampler}  # fmt: skip
     key = _args_key(gbuffer, layers, splat_maps, heights, uv_set=uv_set, device=device, **options)
-    # A small call repeated on the same objects into the same out= reruns its launch (warptex._plan).
-    plan = key if type(out) is wp.array and _plan.usable() else None
+    # A small call repeated on the same objects (and the same out=, or none) reruns its launch (warptex._plan).
+    plan = key if (out is None or type(out) is wp.array) and _plan.usable() else None
     objects = (gbuffer, layers, out, splat_maps, *(() if heights is None else (heights,)), *(getattr(gbuffer, n) for n in SURFACE), *gbuffer.uv_sets.get(uv_set, {}).values()) if plan else ()
-    if _plan.rerun(plan, objects):
-        return out
+    done = _plan.rerun(plan, objects, gbuffer.resolution) if plan is not None else None
+    if done is not None:
+        return done
     as_on_device(func, "layers", layers, TextureArray, "a TextureArray", device)
     maps = _as_splat_maps(func, splat_maps, device)
     check_layer_count(func, layers.num_layers, maps)

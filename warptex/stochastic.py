@@ -78,8 +78,9 @@ def stochastic(
     func = "stochastic"
     plain = method is None and (type(stochastic) in (str, Method) or (type(stochastic) is Stochastic and stochastic.histogram is None))
     plan = plan_key(func, texture, uv, lod, uv_dx, uv_dy, layer, sampler, device, out, stochastic) if plain else None
-    if _plan.rerun(plan, (texture, uv, out)):  # this call's inputs again: its launch again
-        return out
+    done = _plan.rerun(plan, (texture, uv, out), uv.shape) if plan is not None else None
+    if done is not None:  # this call's inputs again: its launch again
+        return done
     if not isinstance(texture, TextureArray):
         raise TypeError(f"{func}(): texture must be a Texture or TextureArray, got {type(texture).__name__}")
     device = resolve_device(func, device, texture.device)

@@ -139,10 +139,11 @@ def _colour(func, weights, gbuffer, texture, *, device, out, **options) -> wp.ar
     """Colour mapping, every option given: a small call repeated on the same objects reruns its launch (``warptex._plan``)."""
     device = _gbuffer_device(func, gbuffer, device)
     key = _args_key(weights, gbuffer, texture, device, **options)
-    plan = key if type(out) is wp.array and _plan.usable() else None
+    plan = key if (out is None or type(out) is wp.array) and _plan.usable() else None
     objects = (gbuffer, texture, out, *(getattr(gbuffer, name) for name in SURFACE)) if plan is not None else ()
-    if _plan.rerun(plan, objects):
-        return out
+    done = _plan.rerun(plan, objects, gbuffer.resolution) if plan is not None else None
+    if done is not None:
+        return done
     setup = _Setup(func, weights, gbuffer, texture, **options, device=device, out=out, key=key)
     with _plan.recording(plan, objects, out=2, hold=(setup.args,)):
         return setup.launch(setup.channels)
