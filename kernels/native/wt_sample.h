@@ -357,9 +357,18 @@ WT_INLINE void wt_sample_levels_lane(const Tex& tex, const Smp& smp, const UV& u
     wt_vf channels[4];
     wt_f4 result[WT_L];
     wt_sample_levels_any(tex, smp, u, v, levels, fractions, layer, channels);
+    int ok[WT_L];
+    for (int l = 0; l < WT_L; ++l) ok[l] = finite[l] ? -1 : 0;
+    wt_vi OK;
+    __builtin_memcpy(&OK, ok, sizeof(OK));
+    for (int c = 0; c < 4; ++c) channels[c] = wt_sel(OK, channels[c], (wt_vf)__builtin_nanf(""));
     wt_rows_of_channels(channels, result);
-    const wt_f4 nan4 = __builtin_nanf("");
-    for (int l = 0; l < count; ++l) wt_write_row(out, base + l, finite[l] ? result[l] : nan4);
+    if (count == WT_L && out.shape[1] == 4 && out.strides[1] == 4 &&
+        out.strides[0] == 16) {  // one copy of the lane's rows
+        __builtin_memcpy((char*)out.data + (long long)base * 16, result, sizeof(result));
+        return;
+    }
+    for (int l = 0; l < count; ++l) wt_write_row(out, base + l, result[l]);
 }
 
 // lanes.sample.sample_footprint_lane: out[i] = filters.sample_footprint at uv[i] over the footprint
