@@ -215,11 +215,31 @@ template <class Tex> WT_INLINE void wt_level_sizes(const Tex& tex, const int* k,
         const int w0 = wt_int(tex.level_width, k[0]), h0 = wt_int(tex.level_height, k[0]),
                   start0 = wt_int(tex.level_offset, k[0]);
         for (int l = 0; l < WT_L; ++l) w[l] = w0, h[l] = h0, start[l] = start0;
-    } else {
-        for (int l = 0; l < WT_L; ++l)
-            w[l] = wt_int(tex.level_width, k[l]), h[l] = wt_int(tex.level_height, k[l]),
-            start[l] = wt_int(tex.level_offset, k[l]);
+        return;
     }
+#if defined(__AVX512F__)
+    // Up to 16 levels (a 32768² texture has 16): each table in one register, a lane's entry picked
+    // by a permute (the loop below compiles to gathers, slow on AMD's AVX-512).
+    if (tex.num_levels <= 16 && tex.level_width.strides[0] == 4 && tex.level_height.strides[0] == 4 &&
+        tex.level_offset.strides[0] == 4) {
+        typedef int g16 __attribute__((vector_size(64)));
+        const unsigned short mask = (unsigned short)((1u << tex.num_levels) - 1u);  // no entry past the tables
+        const g16 zero = {}, index = (g16)K;
+        const g16 W = __builtin_ia32_permvarsi512(
+            __builtin_ia32_loaddqusi512_mask((const int*)tex.level_width.data, zero, mask), index);
+        const g16 H = __builtin_ia32_permvarsi512(
+            __builtin_ia32_loaddqusi512_mask((const int*)tex.level_height.data, zero, mask), index);
+        const g16 S = __builtin_ia32_permvarsi512(
+            __builtin_ia32_loaddqusi512_mask((const int*)tex.level_offset.data, zero, mask), index);
+        __builtin_memcpy(w, &W, sizeof(W));
+        __builtin_memcpy(h, &H, sizeof(H));
+        __builtin_memcpy(start, &S, sizeof(S));
+        return;
+    }
+#endif
+    for (int l = 0; l < WT_L; ++l)
+        w[l] = wt_int(tex.level_width, k[l]), h[l] = wt_int(tex.level_height, k[l]),
+        start[l] = wt_int(tex.level_offset, k[l]);
 }
 
 // Whether each of the lane's count pixels is covered (its mask row != 0), as a mask per lane pixel.
