@@ -65,7 +65,9 @@ WT_INLINE wt_lane_reads wt_layer_reads(const Tex& tex, const Reads& reads, int j
 // sum times 1 / taps: wt_accumulate_footprint's). Lanes past their taps, not read, or not finite
 // read (0, 0) at level 0; a tap not finite gives a NaN value and zero derivatives. A one-tap
 // footprint's step is 0 (wt_footprint), so footprint_uv reads at its UV as sample_footprint does.
-// Rows of the lanes not read are left as they are.
+// Rows of the lanes not read are 0. A channel of every lane at a time (per lane pixel, with
+// branches and scalar divides, it was a third of the fit's kept forward outside the texel reads);
+// the operations of each element are the scalar block's, so the bits are.
 // twin: filters.sample_footprint_derivatives
 template <class Tex, class Smp>
 WT_INLINE void wt_footprint_slopes(const Tex& tex, const Smp& smp, int layer, const float* u, const float* v,
@@ -73,29 +75,37 @@ WT_INLINE void wt_footprint_slopes(const Tex& tex, const Smp& smp, int layer, co
                                    const float* weight, wt_f4* forward, wt_f4* value, wt_f4* d_u, wt_f4* d_v,
                                    wt_f4* d_lod, wt_f4* d_spread) {
     float us[WT_L], vs[WT_L], fractions[WT_L], lods[WT_L];
-    int levels[WT_L], layers[WT_L];
-    bool read[WT_L];
+    int levels[WT_L], layers[WT_L], read[WT_L];
     int most = 0;  // the most taps of a read lane
     for (int l = 0; l < WT_L; ++l) {
-        read[l] = weight[l] > 0.0f;
+        read[l] = weight[l] > 0.0f ? -1 : 0;
         layers[l] = layer;
         lods[l] = read[l] ? lod[l] : 0.0f;
         wt_mip_levels(tex, smp, lods[l], levels[l], fractions[l]);
         const int n = read[l] ? (int)taps[l] : 0;  // footprint.footprint_taps
         most = n > most ? n : most;
-        const wt_f4 zero = 0.0f;
-        if (read[l]) value[l] = d_u[l] = d_v[l] = d_lod[l] = d_spread[l] = zero;
     }
+    wt_vf TAPS, DU, DV;
+    __builtin_memcpy(&TAPS, taps, sizeof(TAPS));
+    __builtin_memcpy(&DU, du, sizeof(DU));
+    __builtin_memcpy(&DV, dv, sizeof(DV));
+    wt_vi READ;
+    __builtin_memcpy(&READ, read, sizeof(READ));
+    const wt_vf zero = 0.0f, nan = __builtin_nanf("");
+    wt_vf F[4], V[4], U[4], W[4], L[4], S[4];  // forward, value, d/du, d/dv, d/dlod, d/dspread
+    for (int c = 0; c < 4; ++c) F[c] = V[c] = U[c] = W[c] = L[c] = S[c] = zero;
     for (int k = 0; k < most; ++k) {
-        bool tap[WT_L], finite[WT_L];
         float offset[WT_L];
+        int tap[WT_L], finite[WT_L];
         for (int l = 0; l < WT_L; ++l) {
             offset[l] = (float)k + 0.5f - 0.5f * taps[l];
             const float tu = u[l] + du[l] * offset[l];  // footprint.footprint_uv, for one tap too
             const float tv = v[l] + dv[l] * offset[l];
-            tap[l] = read[l] && k < (int)taps[l];
+            tap[l] = read[l] && k < (int)taps[l] ? -1 : 0;
             finite[l] = __builtin_fabsf(tu) <= wt_float_max && __builtin_fabsf(tv) <= wt_float_max &&
-                        __builtin_fabsf(lods[l]) <= wt_float_max;  // texels.finite_uv_lod
+                                __builtin_fabsf(lods[l]) <= wt_float_max
+                            ? -1
+                            : 0;  // texels.finite_uv_lod
             const bool ok = tap[l] && finite[l];
             us[l] = ok ? tu : 0.0f;
             vs[l] = ok ? tv : 0.0f;
@@ -103,30 +113,36 @@ WT_INLINE void wt_footprint_slopes(const Tex& tex, const Smp& smp, int layer, co
         wt_vf channels[4][4];  // the value, d/du, d/dv, d/dlod
         const wt_level_slopes slopes = {lods, channels[1], channels[2], channels[3]};
         wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layers, channels[0], &slopes);
-        wt_f4 result[WT_L], r_u[WT_L], r_v[WT_L], r_lod[WT_L];
-        wt_rows_of_channels(channels[0], result);
-        wt_rows_of_channels(channels[1], r_u);
-        wt_rows_of_channels(channels[2], r_v);
-        wt_rows_of_channels(channels[3], r_lod);
-        const wt_f4 nan4 = __builtin_nanf(""), zero = 0.0f;
-        for (int l = 0; l < WT_L; ++l) {
-            if (!tap[l]) continue;
-            const wt_f4 tap_u = finite[l] ? r_u[l] : zero, tap_v = finite[l] ? r_v[l] : zero;
-            const wt_f4 r = finite[l] ? result[l] : nan4;
-            if (k == 0) forward[l] = r;
-            value[l] = value[l] + r;
-            d_u[l] = d_u[l] + tap_u;
-            d_v[l] = d_v[l] + tap_v;
-            d_lod[l] = d_lod[l] + (finite[l] ? r_lod[l] : zero);
-            d_spread[l] = d_spread[l] + (tap_u * du[l] + tap_v * dv[l]) * offset[l];
+        wt_vi TAP, FINITE;
+        wt_vf OFFSET;
+        __builtin_memcpy(&TAP, tap, sizeof(TAP));
+        __builtin_memcpy(&FINITE, finite, sizeof(FINITE));
+        __builtin_memcpy(&OFFSET, offset, sizeof(OFFSET));
+        for (int c = 0; c < 4; ++c) {
+            const wt_vf tap_u = wt_sel(FINITE, channels[1][c], zero), tap_v = wt_sel(FINITE, channels[2][c], zero);
+            const wt_vf r = wt_sel(FINITE, channels[0][c], nan);
+            if (k == 0) F[c] = wt_sel(TAP, r, F[c]);
+            V[c] = wt_sel(TAP, V[c] + r, V[c]);
+            U[c] = wt_sel(TAP, U[c] + tap_u, U[c]);
+            W[c] = wt_sel(TAP, W[c] + tap_v, W[c]);
+            L[c] = wt_sel(TAP, L[c] + wt_sel(FINITE, channels[3][c], zero), L[c]);
+            S[c] = wt_sel(TAP, S[c] + (tap_u * DU + tap_v * DV) * OFFSET, S[c]);
         }
     }
-    for (int l = 0; l < WT_L; ++l) {
-        if (!read[l]) continue;
-        if (taps[l] != 1.0f) forward[l] = value[l] * (1.0f / taps[l]);
-        value[l] = value[l] / taps[l], d_u[l] = d_u[l] / taps[l], d_v[l] = d_v[l] / taps[l];
-        d_lod[l] = d_lod[l] / taps[l], d_spread[l] = d_spread[l] / taps[l];
+    const wt_vi SEVERAL = READ & (TAPS != 1.0f);
+    const wt_vf inv = 1.0f / TAPS;  // lanes not read may divide by 0: not kept
+    for (int c = 0; c < 4; ++c) {
+        F[c] = wt_sel(SEVERAL, V[c] * inv, F[c]);
+        V[c] = wt_sel(READ, V[c] / TAPS, zero), U[c] = wt_sel(READ, U[c] / TAPS, zero);
+        W[c] = wt_sel(READ, W[c] / TAPS, zero), L[c] = wt_sel(READ, L[c] / TAPS, zero);
+        S[c] = wt_sel(READ, S[c] / TAPS, zero);
     }
+    wt_rows_of_channels(F, forward);
+    wt_rows_of_channels(V, value);
+    wt_rows_of_channels(U, d_u);
+    wt_rows_of_channels(W, d_v);
+    wt_rows_of_channels(L, d_lod);
+    wt_rows_of_channels(S, d_spread);
 }
 
 // footprint.lod_scale_slope: d lod / d s of the footprint of UV derivatives (dx0, dx1), (dy0, dy1)
