@@ -13,7 +13,7 @@ import warp as wp
 from . import out_of_line
 from .filters import bilinear_taps, nearest_tap
 from .footprint import footprint_taps, footprint_uv, mip_levels
-from .texels import FILTER_NEAREST, TILE_MASK, TILE_SHIFT, SamplerArgs, TexelGrad, TextureView, finite_uv_lod, reduce_coord
+from .texels import FILTER_NEAREST, FINITE_LIMIT, NOT_FINITE, TILE_MASK, TILE_SHIFT, SamplerArgs, TexelGrad, TextureView, exact_texel, finite_uv_lod, reduce_coord
 
 
 @wp.func
@@ -40,38 +40,6 @@ def scatter_texel(grad: TexelGrad, start: wp.int32, w: wp.int32, xi: wp.int32, y
             exact_texel(grad.exponents, grad.fixed, start + yi * w + xi, g)
         else:
             wp.atomic_add(grad.texels, start + yi * w + xi, g)
-
-
-# A deterministic texel gradient on CUDA (warptex._accumulate.exact_sums): float atomics add in
-# whatever order the threads reach them, so their sums change in the last bits from run to run.
-# Integer addition is associative: the contributions are added as int64 in fixed point, each
-# texel with a power-of-two scale 2**e, so that neither the order nor the thread count can change
-# a bit. Two passes of the same gradient kernel: the first counts each texel's contributions (n)
-# and keeps the largest |component| m (as its float bits, which order as the values do for
-# x >= 0); the second adds rint(contribution * 2**e), with e chosen so that each term is below
-# 2**62 / n: the int64 sum cannot overflow. Each contribution is then exact to m * 2**(c - 62),
-# c = ceil(log2(n)): the sum is the exact sum of contributions rounded far below float32's step.
-FINITE_LIMIT = wp.constant(0x7F800000)  # the float bits of +inf: larger bits are not finite
-NOT_FINITE = wp.constant(-(1 << 20))  # an exponent that marks a texel some non-finite contribution reached
-
-
-@out_of_line
-def exact_texel(exponents: wp.array(dtype=wp.int32), fixed: wp.array(dtype=wp.int64), index: wp.int32, g: wp.vec4):
-    """One pass of the fixed-point sum (see above) for the contribution ``g`` to texel ``index``:
-    ``exponents`` holds two int32 per texel, ``fixed`` four int64 (empty: the first pass)."""
-    if fixed.shape[0] == 0:  # the first pass: the count, and the largest |component| as float bits
-        m = wp.max(wp.max(wp.abs(g[0]), wp.abs(g[1])), wp.max(wp.abs(g[2]), wp.abs(g[3])))
-        bits = FINITE_LIMIT
-        if wp.isfinite(g):
-            bits = wp.cast(m, wp.int32)
-        wp.atomic_max(exponents, 2 * index, bits)
-        wp.atomic_add(exponents, 2 * index + 1, 1)
-    else:
-        e = exponents[2 * index]
-        if e != NOT_FINITE:
-            scale = wp.cast((e + 127) << 23, float)  # 2**e, exactly
-            for c in range(4):
-                wp.atomic_add(fixed, 4 * index + c, wp.int64(wp.rint(g[c] * scale)))
 
 
 @wp.kernel(enable_backward=False)

@@ -52,6 +52,9 @@ FORMAT_8BIT = wp.constant(2)  # four 8-bit codes in a uint32 (channel c in bits 
 # ``packed``, decoded by the table at ``decode``: channel c's code k is decode[256 c + k] (srgb8)
 FORMAT_UNORM8 = wp.constant(3)  # FORMAT_8BIT whose table is k / 255 in every channel (unorm8): the
 # lanes divide instead of looking up (float32(k) / 255 is the table's value for every k)
+FORMAT_FLOAT32_PACKED = wp.constant(4)  # float32 vec4 at ``packed``: how a generated adjoint whose texel
+# gradient is summed in fixed point reads a float32 texture (``texels`` empty: Warp's adjoint of
+# an array read would add with float atomics; :func:`adj_packed_texel` adds at ``exact`` instead)
 
 
 # The largest finite float32: |x| <= FLOAT_MAX is false exactly for NaN and infinities.
@@ -73,8 +76,11 @@ class TextureView:
     # every array field of the struct is code in each adjoint a generated-adjoint kernel takes of it
     # (three more arrays made ``warptex.adjoint.triplanar`` compile 24 -> 36 s for sm_90).
     texel_format: wp.int32
-    packed: wp.uint64  # vec4h (FORMAT_FLOAT16) or uint32 (FORMAT_8BIT) per texel
+    packed: wp.uint64  # vec4h (FORMAT_FLOAT16), uint32 (FORMAT_8BIT) or vec4 (FORMAT_FLOAT32_PACKED) per texel
     decode: wp.uint64
+    # 0, or where a generated adjoint sums this texture's gradient in fixed point: two uint64, the
+    # addresses of :func:`exact_texel`'s ``exponents`` and ``fixed`` (0 in the first pass).
+    exact: wp.uint64
 
 
 def level_table(sizes: tuple, num_layers: int, device) -> tuple:
@@ -113,7 +119,7 @@ class TexelGrad:
     gradient, and only the tiles a copy marked are added into the real one (``warptex._accumulate``).
 
     On CUDA, where one launch adds with atomics, a deterministic backward sums in fixed point
-    instead (:func:`~warptex.kernels.scatter.exact_texel`): ``exponents`` (two per texel; empty:
+    instead (:func:`exact_texel`): ``exponents`` (two per texel; empty:
     plain float atomics into ``texels``) and ``fixed`` (four int64 per texel; empty: the first
     pass, which only bounds each texel's contributions). ``texels`` then only says the gradient is
     needed: :func:`~warptex.kernels.scatter.add_exact` adds the sums in afterwards."""
@@ -122,6 +128,39 @@ class TexelGrad:
     tiles: wp.array(dtype=wp.int32)
     exponents: wp.array(dtype=wp.int32)
     fixed: wp.array(dtype=wp.int64)
+
+
+# A deterministic texel gradient on CUDA (warptex._accumulate.exact_sums), for the hand-written
+# gradients (``TexelGrad``) and Warp's generated adjoints (:func:`packed_texel`) alike: float atomics add in
+# whatever order the threads reach them, so their sums change in the last bits from run to run.
+# Integer addition is associative: the contributions are added as int64 in fixed point, each
+# texel with a power-of-two scale 2**e, so that neither the order nor the thread count can change
+# a bit. Two passes of the same gradient kernel (or adjoint): the first counts each texel's contributions (n)
+# and keeps the largest |component| m (as its float bits, which order as the values do for
+# x >= 0); the second adds rint(contribution * 2**e), with e chosen so that each term is below
+# 2**62 / n: the int64 sum cannot overflow. Each contribution is then exact to m * 2**(c - 62),
+# c = ceil(log2(n)): the sum is the exact sum of contributions rounded far below float32's step.
+FINITE_LIMIT = wp.constant(0x7F800000)  # the float bits of +inf: larger bits are not finite
+NOT_FINITE = wp.constant(-(1 << 20))  # an exponent that marks a texel some non-finite contribution reached
+
+
+@out_of_line
+def exact_texel(exponents: wp.array(dtype=wp.int32), fixed: wp.array(dtype=wp.int64), index: wp.int32, g: wp.vec4):
+    """One pass of the fixed-point sum (see above) for the contribution ``g`` to texel ``index``:
+    ``exponents`` holds two int32 per texel, ``fixed`` four int64 (empty: the first pass)."""
+    if fixed.shape[0] == 0:  # the first pass: the count, and the largest |component| as float bits
+        m = wp.max(wp.max(wp.abs(g[0]), wp.abs(g[1])), wp.max(wp.abs(g[2]), wp.abs(g[3])))
+        bits = FINITE_LIMIT
+        if wp.isfinite(g):
+            bits = wp.cast(m, wp.int32)
+        wp.atomic_max(exponents, 2 * index, bits)
+        wp.atomic_add(exponents, 2 * index + 1, 1)
+    else:
+        e = exponents[2 * index]
+        if e != NOT_FINITE:
+            scale = wp.cast((e + 127) << 23, float)  # 2**e, exactly
+            for c in range(4):
+                wp.atomic_add(fixed, 4 * index + c, wp.int64(wp.rint(g[c] * scale)))
 
 
 @wp.struct
@@ -245,18 +284,20 @@ def stored_texel(tex: TextureView, index: wp.int32) -> wp.vec4:
     if tex.texel_format == FORMAT_FLOAT32:
         value = tex.texels[index]
     else:
-        value = packed_texel(tex.texel_format, tex.packed, tex.decode, index)
+        value = packed_texel(tex.texel_format, tex.packed, tex.decode, tex.exact, index)
     return value
 
 
 @out_of_line
-def packed_texel(texel_format: wp.int32, packed: wp.uint64, decode: wp.uint64, index: wp.int32) -> wp.vec4:
+def packed_texel(texel_format: wp.int32, packed: wp.uint64, decode: wp.uint64, exact: wp.uint64, index: wp.int32) -> wp.vec4:
     """:func:`stored_texel` of a texture not stored as float32. 8-bit texels are decoded per channel
     by the texture's table (the exact sRGB curve for sRGB colour), half floats converted exactly.
     Out of line, on the view's scalars (not the struct, which a call would copy): one copy a
     module, not one a texel read."""
     value = wp.vec4(0.0)
-    if texel_format == FORMAT_FLOAT16:
+    if texel_format == FORMAT_FLOAT32_PACKED:
+        value = wp.array(ptr=packed, shape=(index + 1,), dtype=wp.vec4)[index]
+    elif texel_format == FORMAT_FLOAT16:
         h = wp.array(ptr=packed, shape=(index + 1,), dtype=wp.vec4h)[index]
         value = wp.vec4(float(h[0]), float(h[1]), float(h[2]), float(h[3]))
     else:
@@ -272,10 +313,17 @@ def packed_texel(texel_format: wp.int32, packed: wp.uint64, decode: wp.uint64, i
 
 
 @wp.func_grad(packed_texel)
-def adj_packed_texel(texel_format: wp.int32, packed: wp.uint64, decode: wp.uint64, index: wp.int32, adj_ret: wp.vec4):
-    """No gradient here: a compact format's texels take theirs from the hand-written gradients
-    only (``warptex._op`` refuses Warp's generated adjoint for them)."""
-    pass
+def adj_packed_texel(texel_format: wp.int32, packed: wp.uint64, decode: wp.uint64, exact: wp.uint64, index: wp.int32, adj_ret: wp.vec4):
+    """The texel's gradient in fixed point where ``exact`` says so (a float32 texture read by a
+    generated adjoint on CUDA, see :data:`FORMAT_FLOAT32_PACKED`), else none: a compact format's
+    texels take theirs from the hand-written gradients only (``warptex._op`` refuses Warp's
+    generated adjoint for them)."""
+    if exact != wp.uint64(0):
+        at = wp.array(ptr=exact, shape=(2,), dtype=wp.uint64)
+        entries = wp.int32(0)
+        if at[1] != wp.uint64(0):
+            entries = 4 * index + 4
+        exact_texel(wp.array(ptr=at[0], shape=(2 * index + 2,), dtype=wp.int32), wp.array(ptr=at[1], shape=(entries,), dtype=wp.int64), index, adj_ret)
 
 
 @wp.func

@@ -21,6 +21,7 @@ import warp as wp
 
 import reference_triplanar as rt
 import warptex as wt
+from warptex._warp import paused_tape
 from warptex.scenes.terrain import terrain
 from warptex.scenes import terrain_camera
 
@@ -224,11 +225,32 @@ def test_splat_atlas_matches_the_cpu(scene):
     _compare(*_on_both(run))
 
 
+def _histogram(tex, uv):
+    hist = wt.prepare_histogram(tex, requires_grad=True)
+    return wt.stochastic(tex, uv, wt.Stochastic("hex", histogram=hist), lod=1.3), hist.texture
+
+
+def _atlas(g, layers, maps):
+    with paused_tape():  # packed off the tape, so that the atlas keeps its texel gradients
+        atlas = wt.pack_atlas(layers, gutter=4, requires_grad=True)
+    idx, w = wt.export_index_maps(maps.numpy(0), k=2)
+    return wt.splat_atlas(g, atlas, idx, w, tiling=4.0), atlas.texture
+
+
+# Each case: (output, the texture whose gradient is checked). The last four run Warp's generated
+# adjoint (another gradient than texels, a blend not linear in them, no hand-written gradient),
+# whose texel reads add in fixed point too (``warptex._accumulate.exact_views``).
 DETERMINISM_CASES = {
-    "sample trilinear": lambda g, tex, layers, maps, uv: wt.sample(tex, uv, lod=1.3, sampler=wt.Sampler(filter="trilinear")),
-    "triplanar": lambda g, tex, layers, maps, uv: wt.triplanar(g, tex, tiling=0.4),
-    "biplanar hash4": lambda g, tex, layers, maps, uv: wt.biplanar(g, tex, tiling=0.4, stochastic="hash4"),
-    "splat": lambda g, tex, layers, maps, uv: wt.splat(g, layers, maps, projection="world_xz", tiling=0.3, height_blend=0.2),
+    "sample trilinear": lambda g, tex, layers, maps, uv: (wt.sample(tex, uv, lod=1.3, sampler=wt.Sampler(filter="trilinear")), tex),
+    "triplanar": lambda g, tex, layers, maps, uv: (wt.triplanar(g, tex, tiling=0.4), tex),
+    "biplanar hash4": lambda g, tex, layers, maps, uv: (wt.biplanar(g, tex, tiling=0.4, stochastic="hash4"), tex),
+    "splat": lambda g, tex, layers, maps, uv: (wt.splat(g, layers, maps, projection="world_xz", tiling=0.3, height_blend=0.2), layers),
+    "sample trilinear, UV gradients": lambda g, tex, layers, maps, uv: (
+        wt.sample(tex, wp.array(uv.numpy(), dtype=wp.vec2, requires_grad=True, device=uv.device), lod=1.3, sampler=wt.Sampler(filter="trilinear")), tex
+    ),
+    "triplanar, tiling gradient": lambda g, tex, layers, maps, uv: (wt.triplanar(g, tex, tiling=wp.array([0.4], dtype=float, requires_grad=True, device=uv.device)), tex),
+    "hex, histogram-preserving": lambda g, tex, layers, maps, uv: _histogram(tex, uv),
+    "splat_atlas": lambda g, tex, layers, maps, uv: _atlas(g, layers, maps),
 }
 
 
@@ -247,10 +269,9 @@ def test_texel_gradients_are_the_same_bits_every_run(scene, case):
         uv = wp.array(scene["uv"], dtype=wp.vec2, device=device)
         tape = wp.Tape()
         with tape:
-            out = DETERMINISM_CASES[case](g, tex, layers, maps, uv)
-        out.grad.assign(scene["weights"].reshape(-1, 4)[: out.shape[0]] if out.ndim == 2 else scene["weights"][..., : out.shape[-1]])
+            out, read = DETERMINISM_CASES[case](g, tex, layers, maps, uv)
+        out.grad.assign(scene["weights"].reshape(-1, 4)[: out.shape[0], : out.shape[-1]] if out.ndim == 2 else scene["weights"][..., : out.shape[-1]])
         tape.backward()
-        read = layers if case == "splat" else tex
         return np.concatenate([read.grad(k).ravel() for k in range(read.num_levels)])
 
     first = run(OTHER)

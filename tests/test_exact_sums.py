@@ -18,6 +18,8 @@ import warp as wp
 
 import warptex as wt
 from warptex import _accumulate, _launch
+from warptex.atlas import export_index_maps, pack_atlas, splat_atlas
+from warptex._warp import paused_tape
 from warptex.gbuffer import FIELDS
 
 N = 20000
@@ -88,12 +90,46 @@ CASES = {
     ),
     "stochastic cheap2": lambda o: (lambda t: (wt.stochastic(t, UV[o], "cheap2", lod=1.2), [t]))(_tex()),
 }
-ON_UVS = {"sample, bilinear", "sample, trilinear, per-sample LOD", "sample, anisotropic", "stochastic hash4", "stochastic hex", "stochastic cheap2"}
 
 
-def _gradients(case: str, reverse: bool, weights_seed: int = 20, nan_at: int | None = None) -> list[np.ndarray]:
+def _histogram(order):
+    texture = wt.Texture(_image(8))
+    hist = wt.prepare_histogram(texture, requires_grad=True)
+    return wt.stochastic(texture, UV[order], wt.Stochastic("hex", histogram=hist), lod=LOD[order]), [hist.texture]
+
+
+def _atlas(reverse):
+    idx, w = export_index_maps(np.random.default_rng(9).random((2, 5, 4, 4)).astype(np.float32), 3, num_layers=5)
+    with paused_tape():  # packed off the tape, so that the atlas keeps its texel gradients
+        atlas = pack_atlas(_image(12, (5, 16, 16, 4)), gutter=2, requires_grad=True)
+    return splat_atlas(_sphere(reverse), atlas, idx, w, tiling=2.0, sampler=wt.Sampler(filter="trilinear")), [atlas.texture]
+
+
+# The same, where Warp's generated adjoint records the backward pass: another input than texels
+# wants a gradient (UVs, tiling), the blend is not linear in the texels (histogram-preserving), or
+# the technique has no hand-written gradient (the atlas). Their texel reads add in fixed point
+# (warptex._accumulate.exact_views); ``OTHERS`` are their other differentiable inputs.
+OTHERS: dict[str, list] = {}
+GENERATED = {
+    "sample, trilinear, UV gradients": lambda o: (lambda t, uv: (OTHERS.update(case=[uv]), (wt.sample(t, uv, lod=LOD[o], sampler=wt.Sampler(filter="trilinear")), [t]))[1])(
+        _tex(), wp.array(UV[o], dtype=wp.vec2, requires_grad=True)
+    ),
+    "triplanar, tiling gradient": lambda r: (lambda t, tiling: (OTHERS.update(case=[tiling]), (wt.triplanar(_sphere(r), t, tiling=tiling), [t]))[1])(
+        _tex(), wp.array([3.0, 2.0, 2.5], dtype=float, requires_grad=True)
+    ),
+    "stochastic hex, histogram-preserving": _histogram,
+    "splat_atlas": _atlas,
+}
+CASES.update(GENERATED)
+ON_UVS = {"sample, bilinear", "sample, trilinear, per-sample LOD", "sample, anisotropic", "stochastic hash4", "stochastic hex", "stochastic cheap2",
+          "sample, trilinear, UV gradients", "stochastic hex, histogram-preserving"}  # fmt: skip
+
+
+def _gradients(case: str, reverse: bool, weights_seed: int = 20, nan_at: int | None = None, others: bool = False) -> list[np.ndarray]:
     """Every level's texel gradients of ``Σ w · out`` (random ``w``, one per pixel and channel),
-    the pixels met in reverse order where ``reverse``; ``w`` is NaN at pixel ``nan_at``."""
+    the pixels met in reverse order where ``reverse``; ``w`` is NaN at pixel ``nan_at``. With
+    ``others``, the gradients of the case's ``OTHERS`` follow."""
+    OTHERS.clear()
     order = np.arange(N)[::-1].copy() if reverse else np.arange(N)
     tape = wp.Tape()
     with tape:
@@ -106,7 +142,8 @@ def _gradients(case: str, reverse: bool, weights_seed: int = 20, nan_at: int | N
         rows[...] = rows[::-1].copy()
     out.grad.assign(weights)
     tape.backward()
-    return [np.concatenate([t.grad(k).ravel() for k in range(t.num_levels)]) for t in textures]
+    grads = [np.concatenate([t.grad(k).ravel() for k in range(t.num_levels)]) for t in textures]
+    return grads + [a.grad.numpy() for a in OTHERS.get("case", [])] if others else grads
 
 
 @pytest.mark.parametrize("case", CASES)
@@ -126,6 +163,23 @@ def test_they_equal_the_float_sums_to_rounding(case, monkeypatch):
     exact = _gradients(case, reverse=False)
     for got, want in zip(exact, floats):
         np.testing.assert_allclose(got, want, rtol=0, atol=2e-6 * np.abs(want).max())
+
+
+@pytest.mark.parametrize("case", GENERATED)
+def test_generated_adjoints_sum_in_fixed_point_and_keep_their_other_gradients(case, exact_on_cpu, monkeypatch):
+    """Where Warp's generated adjoint runs, its texel reads add in fixed point (the sums ran, and
+    equal the float sums to rounding), and every other gradient is the float path's: added once,
+    not once per pass (UV gradients, per pixel, to the bit)."""
+    exact = _gradients(case, reverse=False, others=True)
+    assert exact_on_cpu, "the fixed-point sums ran"
+    monkeypatch.setattr(_accumulate, "EXACT_DEVICES", {"cuda"})
+    floats = _gradients(case, reverse=False, others=True)
+    assert len(exact) == len(floats)
+    for got, want in zip(exact, floats):
+        assert np.abs(want).sum() > 0
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=2e-6 * np.abs(want).max())
+    if case == "sample, trilinear, UV gradients":
+        np.testing.assert_array_equal(exact[-1], floats[-1])
 
 
 def test_float_sums_depend_on_the_order_the_fixed_point_ones_do_not(exact_on_cpu, monkeypatch):

@@ -21,9 +21,11 @@ the tiles they add into (:class:`~warptex.kernels.texels.TexelGrad`), and only t
 and zeroed: a chunk whose pixels read a part of a texture pays for that part only.
 
 On CUDA a backward pass is one launch, whose threads add with atomics in an order that changes
-from run to run. There warptex's hand-written texel gradients are summed in fixed point instead
-(:func:`exact_sums`, the kernels in :mod:`warptex.kernels.scatter`), an order-free integer sum:
-the same bits every run, unless :func:`set_deterministic_gradients` turned it off.
+from run to run. There texel gradients are summed in fixed point instead (:func:`exact_sums`, the
+kernels in :mod:`warptex.kernels.scatter`), an order-free integer sum: the same bits every run,
+unless :func:`set_deterministic_gradients` turned it off. The hand-written gradients add through
+their ``TexelGrad`` structs; Warp's generated adjoints read the textures through
+:func:`exact_views`, whose texel reads add in fixed point too.
 """
 
 from __future__ import annotations
@@ -36,9 +38,9 @@ import numpy as np
 import warp as wp
 
 from warptex._threads import cpu_count, side_by_side
-from warptex._warp import map_arrays
+from warptex._warp import map_arrays, struct_fields, struct_like
 from warptex.kernels.scatter import add_exact, exact_exponents
-from warptex.kernels.texels import TILE_SHIFT
+from warptex.kernels.texels import FORMAT_FLOAT32, FORMAT_FLOAT32_PACKED, TILE_SHIFT, TextureView
 
 # Elements an accumulator is added and zeroed in at a time (256 KB of floats: in cache between the two).
 SUM_BLOCK = 1 << 16
@@ -223,9 +225,9 @@ def set_deterministic_gradients(enabled: bool) -> None:
     """Whether texel gradients on CUDA are the same bits every run (the default, ``True``), summed
     in fixed point by two passes of the gradient kernel, or added with float atomics (``False``:
     one pass, whose last bits change from run to run). On the CPU gradients are the same bits at
-    any thread count either way. Gradients from Warp's generated adjoints (a call that also wants
-    UV, tiling or offset gradients; ``splat_atlas``; the histogram-preserving hex blend) and the
-    scalar tiling and transition gradients of ``splat`` are added with float atomics on CUDA regardless (docs/performance.md says how and what it costs)."""
+    any thread count either way. Gradients of other inputs than texels on CUDA (UVs are per pixel
+    and keep their bits; the scalar tiling, sharpness, offset and transition gradients are added
+    with float atomics) are not covered (docs/performance.md says how and what it costs)."""
     global _deterministic
     if not isinstance(enabled, bool):
         raise TypeError(f"set_deterministic_gradients() takes True or False, not {enabled!r}")
@@ -266,3 +268,62 @@ def add_sums(sums: dict[int, Exact]) -> None:
     """After the second pass: each fixed-point sum added into its gradient."""
     for s in sums.values():
         wp.launch(add_exact, dim=s.grad.shape[0], inputs=[s.grad, s.exponents, s.fixed], device=s.grad.device, record_tape=False)
+
+
+class ExactViews(NamedTuple):
+    """A generated adjoint's arguments whose texel gradients are summed in fixed point: ``first``
+    and ``second``, the launch's ``args`` for each pass (see :func:`exact_views`), ``sums`` by
+    gradient id, and what the passes' views point at (kept alive while they run)."""
+
+    first: object
+    second: object
+    sums: dict[int, Exact]
+    held: list
+
+
+def exact_views(args, device) -> ExactViews | None:
+    """For Warp's generated adjoint of a launch with ``args`` on ``device``: where texel gradients
+    are summed in fixed point there (:func:`exact_sums`) and some float32 texture in ``args``
+    wants one, ``args`` as each pass reads it, else ``None``.
+
+    Each such :class:`~warptex.kernels.texels.TextureView` reads its texels from their address
+    (``FORMAT_FLOAT32_PACKED``, ``texels`` empty): the adjoint of that read adds its texel's
+    gradient in fixed point (``exact``: the sum's arrays; the first pass without the int64 sums),
+    where Warp's adjoint of an array read would add with float atomics."""
+    views = list(_texture_views(args))
+    grads = {id(v.texels.grad): v.texels.grad for v in views if v.texel_format == FORMAT_FLOAT32 and v.texels.shape[0] > 0 and v.texels.requires_grad}
+    sums = exact_sums(device, list(grads.values()))
+    if sums is None:
+        return None
+    empty = wp.empty(1, dtype=wp.vec4, device=device)
+    headers = {key: [wp.array([s.exponents.ptr, ptr], dtype=wp.uint64, device=device) for ptr in (0, s.fixed.ptr)] for key, s in sums.items()}
+
+    def rewired(value, second: bool):
+        copy = struct_like(value)
+        for name, field in struct_fields(value).items():
+            if wp.types.is_struct(field):
+                key = id(field.texels.grad) if field._cls is TextureView and field.texels is not None else None
+                field = _packed_view(field, empty, headers[key][second]) if key in headers else rewired(field, second)
+            setattr(copy, name, field)
+        return copy
+
+    return ExactViews(rewired(args, False), rewired(args, True), sums, [empty, headers])
+
+
+def _texture_views(value):
+    """Every :class:`~warptex.kernels.texels.TextureView` in the struct ``value`` (nested ones included)."""
+    for field in struct_fields(value).values():
+        if wp.types.is_struct(field):
+            yield from [field] if field._cls is TextureView else _texture_views(field)
+
+
+def _packed_view(view, empty: wp.array, header: wp.array):
+    """``view`` reading its float32 texels from their address, its gradient summed at ``header``."""
+    copy = struct_like(view)
+    for name, field in struct_fields(view).items():
+        setattr(copy, name, field)
+    copy.texels = empty
+    copy.texel_format = FORMAT_FLOAT32_PACKED
+    copy.packed = wp.uint64(view.texels.ptr)
+    copy.exact = wp.uint64(header.ptr)
+    return copy

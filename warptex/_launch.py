@@ -32,11 +32,11 @@ from typing import Iterator, NamedTuple
 import warp as wp
 
 from warptex import _plan
-from warptex._accumulate import Copy, add_sums, exact_sums, private, run_ordered, set_exponents, slot_count, with_private_grads
+from warptex._accumulate import Copy, add_sums, exact_sums, exact_views, private, run_ordered, set_exponents, slot_count, with_private_grads
 from warptex._memory import empty
 from warptex._pack import empty_array, packed
 from warptex._threads import Split, cpu_count, grad_bounds, workers_for
-from warptex._warp import active_tape, replay, struct_arrays
+from warptex._warp import active_tape, map_arrays, replay, struct_arrays, struct_like
 from warptex.kernels.lanes import LANES
 from warptex.kernels.texels import TexelGrad
 
@@ -117,15 +117,16 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
     if recorded and backward is not GENERATED:
         tape.record_func(_on(tape, backward), arrays=recorded)
     generated = bool(recorded) and backward is GENERATED
+    exact = exact_views(args, device) if generated else None  # CUDA: texel gradients summed in fixed point
     workers = workers_for(device, count, threads)
     if workers > 1:
         workers = min(workers, cpu_count())  # threads past the cores would only take turns
-    chunks = grad_bounds(count, covered, _shared_bytes(args), footprints) if generated and device.is_cpu else [0, count]  # CUDA: one launch
+    chunks = grad_bounds(count, covered, _shared_bytes(args), footprints) if generated and device.is_cpu and exact is None else [0, count]  # CUDA: one launch
     kernel, per_index = _with_lanes(kernel, lanes)
     fills = per_index > 1  # a lane kernel writes every entry of its outputs (family.lane_kernel)
     if workers == 1:
         _zero_rows(out, 0, count, fills)
-        if generated and len(chunks) == 2:  # Warp records the launch's own adjoint on the tape
+        if generated and len(chunks) == 2 and exact is None:  # Warp records the launch's own adjoint on the tape
             wp.launch(kernel, dim=-(-count // per_index), inputs=[args, pixels, 0], outputs=[out], device=device, record_tape=True)
         else:
             dim, params = -(-count // per_index), (args, pixels, 0, out)
@@ -141,7 +142,10 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
             wp.launch(kernel, dim=-(-(hi - lo) // per_index), inputs=[args, pixels, lo], outputs=[out], device=device, record_tape=False)
 
         split.run(forward)
-    if generated and (workers > 1 or len(chunks) > 2):  # else Warp recorded the launch's own adjoint
+    if exact is not None:
+        backward = functools.partial(_backward_exact, kernel=kernel, count=count, exact=exact, args=args, pixels=pixels, out=out, device=device)
+        tape.record_func(_on(tape, backward), arrays=recorded)
+    elif generated and (workers > 1 or len(chunks) > 2):  # else Warp recorded the launch's own adjoint
         backward = functools.partial(_backward, kernel=kernel, bounds=chunks, workers=workers, args=args, pixels=pixels, out=out, device=device)
         tape.record_func(_on(tape, backward), arrays=recorded)
 
@@ -191,6 +195,28 @@ def _backward(tape, *, kernel, bounds: list[int], workers: int, args, pixels, ou
         wp.launch(kernel, dim=hi - lo, inputs=[a, pixels, lo], outputs=[out], adj_inputs=[tape.get_adjoint(a), tape.get_adjoint(pixels), 0], adj_outputs=[tape.get_adjoint(out)], device=device, adjoint=True)
 
     run_ordered(chunks, workers, backward, slots.__getitem__)
+
+
+def _backward_exact(tape, *, kernel, count: int, exact, args, pixels, out, device) -> None:
+    """The generated adjoint of a launch, its texel gradients summed in fixed point
+    (``warptex._accumulate.exact_views``): two launches over every pixel, then the sums added into
+    the texel gradients. The first only bounds each texel's contributions: its arrays are views
+    without gradients (Warp adds a struct's array reads into the array's own ``.grad``, whatever
+    adjoint struct the launch is given), and it reads a copy of the output's gradient (Warp zeroes
+    an output gradient it reads from ``.grad``). The second adds everything, as Warp's own would."""
+    tape.get_adjoint(args)  # registers the real gradients with the tape (for tape.zero()), as a recorded launch does
+    first = [map_arrays(exact.first, _bare), map_arrays(pixels, _bare)]
+    wp.launch(kernel, dim=count, inputs=[*first, 0], outputs=[out], adj_inputs=[*map(struct_like, first), 0], adj_outputs=[map_arrays(tape.get_adjoint(out), wp.clone)], device=device, adjoint=True)
+    set_exponents(exact.sums)
+    wp.launch(kernel, dim=count, inputs=[exact.second, pixels, 0], outputs=[out], adj_inputs=[tape.get_adjoint(exact.second), tape.get_adjoint(pixels), 0], adj_outputs=[tape.get_adjoint(out)], device=device, adjoint=True)
+    add_sums(exact.sums)
+
+
+def _bare(array: wp.array) -> wp.array:
+    """``array``, or a view of it without its gradient where it has one."""
+    if not array.requires_grad or not array.ptr:
+        return array
+    return wp.array(ptr=array.ptr, shape=array.shape, strides=array.strides, dtype=array.dtype, device=array.device)
 
 
 class Target(NamedTuple):
