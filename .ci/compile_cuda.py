@@ -8,7 +8,7 @@ printed (the compile bar, 30 s a module on this machine, is measured by
 benchmarks/bench_compile.py, not here: a loaded CI machine would make it flaky). Exits non-zero
 if any module fails to compile.
 
-    python .ci/compile_cuda.py [--arch 90]
+    python .ci/compile_cuda.py [--arch 90] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -23,16 +23,21 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 _CHILD = """
-import json, sys, tempfile, time
+import json, os, shutil, sys, tempfile, time
 import warp as wp
 wp.config.quiet = True
 from warptex.kernels import all_kernels
-name, arch = sys.argv[1], int(sys.argv[2])
+name, arch, keep = sys.argv[1], int(sys.argv[2]), sys.argv[3] if len(sys.argv) > 3 else None
 all_kernels()
 t = time.perf_counter()
 with tempfile.TemporaryDirectory() as d:
     wp.compile_aot_module(name, arch=arch, module_dir=d)
-print(json.dumps({"seconds": time.perf_counter() - t}))
+    seconds = time.perf_counter() - t
+    if keep:  # laid out as Warp's kernel cache: <keep>/<warp version>/<module id>/<module id>.{cu,meta,sm90.cubin}
+        (meta,) = [f for f in os.listdir(d) if f.endswith(".meta")]
+        folder = os.path.join(keep, wp.config.version, meta[: -len(".meta")])
+        shutil.copytree(d, folder, dirs_exist_ok=True)
+print(json.dumps({"seconds": seconds}))
 """
 
 _LIST = """
@@ -47,7 +52,10 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--arch", type=int, default=90, help="the sm architecture (default: %(default)s)")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="modules compiled at once (default: every core)")
+    p.add_argument("--keep", metavar="DIR", help="keep the compiled modules in DIR, laid out as Warp's kernel cache (WARP_CACHE_PATH=DIR on a GPU "
+                                                 "machine then loads them instead of compiling; benchmarks/device_checks.sh)")  # fmt: skip
     args = p.parse_args(argv)
+    keep = [os.path.abspath(args.keep)] if args.keep else []
     with tempfile.TemporaryDirectory(prefix="warptex_aot_") as tmp:
         env = {**os.environ, "WARP_CACHE_PATH": os.path.join(tmp, "cache")}
         listed = subprocess.run([sys.executable, "-c", _LIST], env=env, capture_output=True, text=True, check=True)
@@ -59,7 +67,7 @@ def main(argv=None) -> int:
         def compile_one(name: str):
             started = time.perf_counter()
             cache = os.path.join(tmp, "cache_" + name)
-            result = subprocess.run([sys.executable, script, name, str(args.arch)], env={**env, "WARP_CACHE_PATH": cache}, capture_output=True, text=True, cwd=tmp)
+            result = subprocess.run([sys.executable, script, name, str(args.arch), *keep], env={**env, "WARP_CACHE_PATH": cache}, capture_output=True, text=True, cwd=tmp)
             return name, result, time.perf_counter() - started
 
         failed = []

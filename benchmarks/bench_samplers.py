@@ -41,6 +41,10 @@ textures natively add float16 rows compared with warptex's float16 rows: Dr.Jit'
 (``peers/limit_peer.py``), compiled at run time with the system's C compiler (``-O3 -march=native
 -fopenmp``) and skipped, with the reason, without one. It is the hardware's pace, not a peer.
 
+``--atomics`` (CUDA) adds a forward+backward row of warptex with its texel gradients added by
+float atomics (``set_deterministic_gradients(False)``), in the same interleaved rounds as the
+default fixed-point sums, the same bits every run: what that determinism costs on the device.
+
 ``--runs 3`` times every row in 3 runs of ``--repeats`` interleaved rounds. Each figure is still
 the fastest call of all; each ratio in the summaries becomes its spread over the runs (the lowest
 and highest of the runs' ratios), so a ratio that swings across a bar between runs shows it.
@@ -247,15 +251,19 @@ def measure_technique(technique: str, scene: str, args, tex, cache, backends: di
         wt.set_num_threads(threads)
         out = forward().numpy()
         reference[threads] = out.reshape(-1, out.shape[-1])
-        setup = lambda threads=threads: wt.set_num_threads(threads)
+        setup = lambda threads=threads: (wt.set_num_threads(threads), wt.set_deterministic_gradients(True))
         runs["warptex", "forward", threads] = (forward, wp.synchronize, setup)
         runs["warptex", "forward+backward", threads] = (forward_backward, wp.synchronize, setup)
+    extras = {}
+    if getattr(args, "atomics", False):  # CUDA: texel gradients added with float atomics, against the fixed-point sums above
+        runs["warptex atomics", "forward+backward", None] = (forward_backward, wp.synchronize, lambda: wt.set_deterministic_gradients(False))
+        extras["warptex atomics", "forward+backward", None] = {"gradients": "float atomics"}
     peer_threads = None if cuda else args.threads
-    extras, compact_out = {}, {}
+    compact_out = {}
     for fmt in args.formats:  # compact texels, on the peers' thread count
         if fmt == "float32":
             continue
-        impl, setup = f"warptex {fmt}", (lambda: wt.set_num_threads(peer_threads))
+        impl, setup = f"warptex {fmt}", (lambda: (wt.set_num_threads(peer_threads), wt.set_deterministic_gradients(True)))
         setup()
         compact, compact_backward = warptex_runs(technique, data, objs, args.device, fmt)
         compact_out[fmt] = out = compact().numpy().reshape(reference[peer_threads].shape)
@@ -299,7 +307,10 @@ def measure_technique(technique: str, scene: str, args, tex, cache, backends: di
                 report(f"  {impl}: skipped ({err})")
                 for key in [k for k in runs if k[0] == impl]:
                     del runs[key]
-    per_run = [interleaved_best(runs, args.repeats) for _ in range(args.runs)]
+    try:
+        per_run = [interleaved_best(runs, args.repeats) for _ in range(args.runs)]
+    finally:
+        wt.set_deterministic_gradients(True)
     for key in runs:
         spread = {"run_seconds": [r[key] for r in per_run]} if args.runs > 1 else {}
         record(*key, min(r[key] for r in per_run), **extras.get(key, {}), **spread)
@@ -376,7 +387,7 @@ def format_format_summary(records: list[dict]) -> str:
     formats = sorted({r["format"] for r in records if "format" in r})
     if not formats:
         return ""
-    rec = {(r["technique"], r["scene"], r.get("format", "float32"), r["pass"], r["threads"]): r for r in records if r["impl"].startswith("warptex")}
+    rec = {(r["technique"], r["scene"], r.get("format", "float32"), r["pass"], r["threads"]): r for r in records if r["impl"].startswith("warptex") and "gradients" not in r}
     rows = sorted({(r["technique"], r["scene"], r["threads"]) for r in records if "format" in r}, key=lambda k: (k[0], k[1]))
     table = []
     for technique, scene, threads in rows:
@@ -660,6 +671,8 @@ def parse(argv=None):
                         "2048 puts float32 out of it and 8-bit texels in it; quick 256)")
     p.add_argument("--formats", nargs="+", default=["float32"], choices=[f.value for f in wt.Format], metavar="FORMAT",
                    help="texel formats of warptex's textures, rows for each (float32 float16 unorm8 srgb8; default float32)")
+    p.add_argument("--atomics", action="store_true", help="on CUDA, also time forward+backward with texel gradients added by float atomics "
+                                                          "(set_deterministic_gradients(False)) against the default fixed-point sums")  # fmt: skip
     p.add_argument("--call-cost", action="store_true", help="only the cost of small calls: sample() (natively and through warptex.torch) on 1, 1,024 and 65,536 UVs against torch")
     p.add_argument("--calls", type=int, default=None, help="--call-cost: timed calls per figure and round (default 200, quick 20)")
     args = p.parse_args(argv)
@@ -674,6 +687,8 @@ def parse(argv=None):
         p.error("--threads and --thread-counts must be >= 1")
     if args.runs < 1:
         p.error("--runs must be >= 1")
+    if args.atomics and not wp.get_device(args.device).is_cuda:
+        p.error("--atomics compares CUDA's fixed-point texel gradients with float atomics; on the CPU they are one path: it needs --device cuda:N")
     doubling = [] if args.quick else [2**k for k in range(1, args.threads.bit_length()) if 2**k < args.threads]
     args.thread_counts = sorted({1, args.threads, *(args.thread_counts if args.thread_counts is not None else doubling)})
     args.repeats = args.repeats or (1 if args.quick else 5)

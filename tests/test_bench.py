@@ -197,3 +197,31 @@ def test_instruction_counts_read_callgrind_events_per_sample(monkeypatch):
     assert figures == {"instructions": 40.0, "d1_misses": 3.0, "ll_misses": 0.24}
     line = bi.format_figures("bilinear random", "forward", "warptex", figures)
     assert "40.0 instructions/sample" in line and "3.00 D1 misses/sample" in line and "0.240 LL misses/sample" in line
+
+
+DEVICE_CHECKS = BENCH.parent / "device_checks.sh"
+
+
+@pytest.mark.skipif(not DEVICE_CHECKS.exists(), reason="benchmarks/ is not part of this checkout")
+def test_the_device_checks_script_takes_its_commands():
+    """benchmarks/device_checks.sh runs once on a GPU that a session holds for minutes: a mistake
+    found there costs the run. Here, without one: the script parses, each of its bench_samplers
+    command lines is one the benchmark takes (on the CPU), and ``--atomics`` asks for a GPU."""
+    text = DEVICE_CHECKS.read_text()
+    assert subprocess.run(["bash", "-n", str(DEVICE_CHECKS)], capture_output=True).returncode == 0
+    sys.path.insert(0, str(BENCH.parent))
+    try:
+        import bench_samplers
+    finally:
+        sys.path.remove(str(BENCH.parent))
+    lines = [line.split("benchmarks/bench_samplers.py", 1)[1] for line in text.splitlines() if line.lstrip().startswith("step ") and "bench_samplers.py" in line]
+    assert len(lines) == 3
+    for line in lines:
+        argv = [w.strip('"').replace("$DEVICE", "cpu").replace("$OUT", "out") for w in line.split()]
+        if "--atomics" in argv:
+            with pytest.raises(SystemExit):
+                bench_samplers.parse(argv)
+        else:
+            args = bench_samplers.parse(argv)
+            assert args.device == "cpu" and args.json is not None
+    assert "tests/test_cuda.py" in text
