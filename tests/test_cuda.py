@@ -245,6 +245,15 @@ DETERMINISM_CASES = {
     "triplanar": lambda g, tex, layers, maps, uv: (wt.triplanar(g, tex, tiling=0.4), tex),
     "biplanar hash4": lambda g, tex, layers, maps, uv: (wt.biplanar(g, tex, tiling=0.4, stochastic="hash4"), tex),
     "splat": lambda g, tex, layers, maps, uv: (wt.splat(g, layers, maps, projection="world_xz", tiling=0.3, height_blend=0.2), layers),
+    "sample anisotropic": lambda g, tex, layers, maps, uv: (
+        wt.sample(tex, uv, uv_dx=uv.numpy() * 0.01, uv_dy=uv.numpy()[:, ::-1] * 0.003, sampler=wt.Sampler(filter="anisotropic")), tex
+    ),
+    "stochastic hash4": lambda g, tex, layers, maps, uv: (wt.stochastic(tex, uv, "hash4", lod=1.3), tex),
+    "stochastic cheap2": lambda g, tex, layers, maps, uv: (wt.stochastic(tex, uv, "cheap2", lod=1.3), tex),
+    "stochastic hex": lambda g, tex, layers, maps, uv: (wt.stochastic(tex, uv, "hex", lod=1.3), tex),
+    "triplanar_normal": lambda g, tex, layers, maps, uv: (wt.triplanar_normal(g, tex, tiling=0.4), tex),
+    "biplanar_normal hash4": lambda g, tex, layers, maps, uv: (wt.biplanar_normal(g, tex, tiling=0.4, stochastic="hash4"), tex),
+    "splat triplanar hash4": lambda g, tex, layers, maps, uv: (wt.splat(g, layers, maps, projection="triplanar", tiling=0.3, stochastic="hash4"), layers),
     "sample trilinear, UV gradients": lambda g, tex, layers, maps, uv: (
         wt.sample(tex, wp.array(uv.numpy(), dtype=wp.vec2, requires_grad=True, device=uv.device), lod=1.3, sampler=wt.Sampler(filter="trilinear")), tex
     ),

@@ -89,6 +89,7 @@ CASES = {
         _layers(), wt.TextureArray(MAPS, mipmaps=False, requires_grad=True)
     ),
     "stochastic cheap2": lambda o: (lambda t: (wt.stochastic(t, UV[o], "cheap2", lod=1.2), [t]))(_tex()),
+    "biplanar_normal hash4": lambda r: (lambda t: (wt.biplanar_normal(_sphere(r), t, tiling=3.0, stochastic="hash4"), [t]))(wt.Texture(_image(6, (64, 64, 3)), requires_grad=True)),
 }
 
 
