@@ -17,7 +17,7 @@ import trimesh
 import warp as wp
 
 import warptex as wt
-from warptex import _accumulate, _launch
+from warptex import _accumulate, _launch, _op
 from warptex.atlas import export_index_maps, pack_atlas, splat_atlas
 from warptex._warp import paused_tape
 from warptex.gbuffer import FIELDS
@@ -120,10 +120,36 @@ GENERATED = {
     ),
     "stochastic hex, histogram-preserving": _histogram,
     "splat_atlas": _atlas,
+    "splat, generated adjoint": lambda r: (lambda ls: (_generated(lambda: wt.splat(_sphere(r), ls, wt.TextureArray(MAPS, mipmaps=False), tiling=3.0)), [ls]))(_layers()),
 }
+
+
+def _generated(call):
+    """``call()`` with its backward pass forced onto Warp's generated adjoint (whose output is a
+    struct for ``splat``: the samples its hand-written blend reads)."""
+    with _op.force_generated_adjoint():
+        return call()
 CASES.update(GENERATED)
 ON_UVS = {"sample, bilinear", "sample, trilinear, per-sample LOD", "sample, anisotropic", "stochastic hash4", "stochastic hex", "stochastic cheap2",
           "sample, trilinear, UV gradients", "stochastic hex, histogram-preserving"}  # fmt: skip
+
+
+def test_a_generated_adjoint_backward_twice_adds_twice(exact_on_cpu):
+    """Two backward passes of one tape through a generated adjoint (as torch's ``retain_graph``
+    runs them) add the same gradients twice: each pass sums afresh."""
+    tex, uv = _tex(), wp.array(UV, dtype=wp.vec2, requires_grad=True)
+    tape = wp.Tape()
+    with tape:
+        out = wt.sample(tex, uv, lod=LOD, sampler=wt.Sampler(filter="trilinear"))
+    weights = np.random.default_rng(4).normal(size=out.shape).astype(np.float32)
+    grads = []
+    for _ in range(2):
+        out.grad.assign(weights)
+        tape.backward()
+        grads.append((tex.grad(0).copy(), uv.grad.numpy().copy()))
+    assert len(exact_on_cpu) == 2
+    np.testing.assert_allclose(grads[1][0], 2 * grads[0][0], rtol=1e-6, atol=1e-6 * np.abs(grads[0][0]).max())
+    np.testing.assert_allclose(grads[1][1], 2 * grads[0][1], rtol=1e-6, atol=1e-6 * np.abs(grads[0][1]).max())
 
 
 def _gradients(case: str, reverse: bool, weights_seed: int = 20, nan_at: int | None = None, others: bool = False) -> list[np.ndarray]:

@@ -281,18 +281,26 @@ class ExactViews(NamedTuple):
     held: list
 
 
+def exact_texel_grads(args, device) -> list[wp.array]:
+    """The gradients of the float32 textures in ``args`` that Warp's generated adjoint of a launch
+    on ``device`` sums in fixed point (:func:`exact_views`): those that want one, where texel
+    gradients are summed so there (:func:`exact_sums`); else none."""
+    if not _deterministic or ("cuda" if device.is_cuda else "cpu") not in EXACT_DEVICES:
+        return []
+    views = _texture_views(args)
+    return list({id(v.texels.grad): v.texels.grad for v in views if v.texel_format == FORMAT_FLOAT32 and v.texels.shape[0] > 0 and v.texels.requires_grad}.values())
+
+
 def exact_views(args, device) -> ExactViews | None:
-    """For Warp's generated adjoint of a launch with ``args`` on ``device``: where texel gradients
-    are summed in fixed point there (:func:`exact_sums`) and some float32 texture in ``args``
-    wants one, ``args`` as each pass reads it, else ``None``.
+    """For Warp's generated adjoint of a launch with ``args`` on ``device``: ``args`` as each of
+    its two passes reads it, with new zeroed sums, where it sums texel gradients in fixed point
+    (:func:`exact_texel_grads`), else ``None``.
 
     Each such :class:`~warptex.kernels.texels.TextureView` reads its texels from their address
     (``FORMAT_FLOAT32_PACKED``, ``texels`` empty): the adjoint of that read adds its texel's
     gradient in fixed point (``exact``: the sum's arrays; the first pass without the int64 sums),
     where Warp's adjoint of an array read would add with float atomics."""
-    views = list(_texture_views(args))
-    grads = {id(v.texels.grad): v.texels.grad for v in views if v.texel_format == FORMAT_FLOAT32 and v.texels.shape[0] > 0 and v.texels.requires_grad}
-    sums = exact_sums(device, list(grads.values()))
+    sums = exact_sums(device, exact_texel_grads(args, device))
     if sums is None:
         return None
     empty = wp.empty(1, dtype=wp.vec4, device=device)
@@ -310,11 +318,13 @@ def exact_views(args, device) -> ExactViews | None:
     return ExactViews(rewired(args, False), rewired(args, True), sums, [empty, headers])
 
 
-def _texture_views(value):
+def _texture_views(value) -> list:
     """Every :class:`~warptex.kernels.texels.TextureView` in the struct ``value`` (nested ones included)."""
+    views = []
     for field in struct_fields(value).values():
         if wp.types.is_struct(field):
-            yield from [field] if field._cls is TextureView else _texture_views(field)
+            views += [field] if field._cls is TextureView else _texture_views(field)
+    return views
 
 
 def _packed_view(view, empty: wp.array, header: wp.array):

@@ -32,7 +32,7 @@ from typing import Iterator, NamedTuple
 import warp as wp
 
 from warptex import _plan
-from warptex._accumulate import Copy, add_sums, exact_sums, exact_views, private, run_ordered, set_exponents, slot_count, with_private_grads
+from warptex._accumulate import Copy, add_sums, exact_sums, exact_texel_grads, exact_views, private, run_ordered, set_exponents, slot_count, with_private_grads
 from warptex._memory import empty
 from warptex._pack import empty_array, packed
 from warptex._threads import Split, cpu_count, grad_bounds, workers_for
@@ -117,16 +117,16 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
     if recorded and backward is not GENERATED:
         tape.record_func(_on(tape, backward), arrays=recorded)
     generated = bool(recorded) and backward is GENERATED
-    exact = exact_views(args, device) if generated else None  # CUDA: texel gradients summed in fixed point
+    exact = generated and bool(exact_texel_grads(args, device))  # CUDA: texel gradients summed in fixed point
     workers = workers_for(device, count, threads)
     if workers > 1:
         workers = min(workers, cpu_count())  # threads past the cores would only take turns
-    chunks = grad_bounds(count, covered, _shared_bytes(args), footprints) if generated and device.is_cpu and exact is None else [0, count]  # CUDA: one launch
+    chunks = grad_bounds(count, covered, _shared_bytes(args), footprints) if generated and device.is_cpu and not exact else [0, count]  # CUDA: one launch
     kernel, per_index = _with_lanes(kernel, lanes)
     fills = per_index > 1  # a lane kernel writes every entry of its outputs (family.lane_kernel)
     if workers == 1:
         _zero_rows(out, 0, count, fills)
-        if generated and len(chunks) == 2 and exact is None:  # Warp records the launch's own adjoint on the tape
+        if generated and len(chunks) == 2 and not exact:  # Warp records the launch's own adjoint on the tape
             wp.launch(kernel, dim=-(-count // per_index), inputs=[args, pixels, 0], outputs=[out], device=device, record_tape=True)
         else:
             dim, params = -(-count // per_index), (args, pixels, 0, out)
@@ -142,8 +142,8 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
             wp.launch(kernel, dim=-(-(hi - lo) // per_index), inputs=[args, pixels, lo], outputs=[out], device=device, record_tape=False)
 
         split.run(forward)
-    if exact is not None:
-        backward = functools.partial(_backward_exact, kernel=kernel, count=count, exact=exact, args=args, pixels=pixels, out=out, device=device)
+    if exact:
+        backward = functools.partial(_backward_exact, kernel=kernel, count=count, args=args, pixels=pixels, out=out, device=device)
         tape.record_func(_on(tape, backward), arrays=recorded)
     elif generated and (workers > 1 or len(chunks) > 2):  # else Warp recorded the launch's own adjoint
         backward = functools.partial(_backward, kernel=kernel, bounds=chunks, workers=workers, args=args, pixels=pixels, out=out, device=device)
@@ -197,16 +197,23 @@ def _backward(tape, *, kernel, bounds: list[int], workers: int, args, pixels, ou
     run_ordered(chunks, workers, backward, slots.__getitem__)
 
 
-def _backward_exact(tape, *, kernel, count: int, exact, args, pixels, out, device) -> None:
+def _backward_exact(tape, *, kernel, count: int, args, pixels, out, device) -> None:
     """The generated adjoint of a launch, its texel gradients summed in fixed point
-    (``warptex._accumulate.exact_views``): two launches over every pixel, then the sums added into
-    the texel gradients. The first only bounds each texel's contributions: its arrays are views
-    without gradients (Warp adds a struct's array reads into the array's own ``.grad``, whatever
-    adjoint struct the launch is given), and it reads a copy of the output's gradient (Warp zeroes
-    an output gradient it reads from ``.grad``). The second adds everything, as Warp's own would."""
+    (``warptex._accumulate.exact_views``, new sums each backward pass): two launches over every
+    pixel, then the sums added into the texel gradients (one launch with float atomics where the
+    sums were turned off since the forward pass). The second adds everything, as Warp's own adjoint would. The first only
+    bounds each texel's contributions, so nothing else may change: Warp's adjoint adds a struct's
+    array reads into the array's own ``.grad`` and reads (then zeroes) the gradient of a struct's
+    output array there too, whatever adjoint structs the launch is given. So the first pass reads
+    views of the inputs without gradients, and views of the outputs whose gradients are copies."""
     tape.get_adjoint(args)  # registers the real gradients with the tape (for tape.zero()), as a recorded launch does
-    first = [map_arrays(exact.first, _bare), map_arrays(pixels, _bare)]
-    wp.launch(kernel, dim=count, inputs=[*first, 0], outputs=[out], adj_inputs=[*map(struct_like, first), 0], adj_outputs=[map_arrays(tape.get_adjoint(out), wp.clone)], device=device, adjoint=True)
+    exact = exact_views(args, device)
+    if exact is None:
+        wp.launch(kernel, dim=count, inputs=[args, pixels, 0], outputs=[out], adj_inputs=[tape.get_adjoint(args), tape.get_adjoint(pixels), 0], adj_outputs=[tape.get_adjoint(out)], device=device, adjoint=True)
+        return
+    inputs = [map_arrays(exact.first, _bare), map_arrays(pixels, _bare)]
+    outputs = map_arrays(out, _with_gradient_copy)
+    wp.launch(kernel, dim=count, inputs=[*inputs, 0], outputs=[outputs], adj_inputs=[*map(struct_like, inputs), 0], adj_outputs=[map_arrays(outputs, _gradient)], device=device, adjoint=True)
     set_exponents(exact.sums)
     wp.launch(kernel, dim=count, inputs=[exact.second, pixels, 0], outputs=[out], adj_inputs=[tape.get_adjoint(exact.second), tape.get_adjoint(pixels), 0], adj_outputs=[tape.get_adjoint(out)], device=device, adjoint=True)
     add_sums(exact.sums)
@@ -214,9 +221,21 @@ def _backward_exact(tape, *, kernel, count: int, exact, args, pixels, out, devic
 
 def _bare(array: wp.array) -> wp.array:
     """``array``, or a view of it without its gradient where it has one."""
-    if not array.requires_grad or not array.ptr:
+    if array.grad is None or not array.ptr:
         return array
     return wp.array(ptr=array.ptr, shape=array.shape, strides=array.strides, dtype=array.dtype, device=array.device)
+
+
+def _with_gradient_copy(array: wp.array) -> wp.array:
+    """A view of ``array`` whose gradient is a copy of ``array``'s (none where it has none)."""
+    view = _bare(array)
+    if view is not array:
+        view.grad = wp.clone(array.grad)
+    return view
+
+
+def _gradient(array: wp.array):
+    return array.grad
 
 
 class Target(NamedTuple):
