@@ -7,7 +7,8 @@ rasterisers agree only to rounding (checked on its own here), and on an H100 tha
 normal or a derivative, moved blend weights and mip levels past these tolerances. Skipped, with
 the reason, on a machine without a CUDA device. ``WARPTEX_TEST_DEVICE=cpu`` runs them against the
 CPU itself (a check of the tests, where no GPU is at hand). They last ran on an H100, all passing,
-on 2026-11-26.
+on 2026-11-26; the five-run cases of generated adjoints and the techniques added to them on
+2026-11-29 have run against the CPU only (``benchmarks/device_checks.sh`` runs this file on a GPU).
 """
 
 import json
