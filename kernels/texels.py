@@ -290,8 +290,9 @@ def stored_texel(tex: TextureView, index: wp.int32) -> wp.vec4:
 
 @out_of_line
 def packed_texel(texel_format: wp.int32, packed: wp.uint64, decode: wp.uint64, exact: wp.uint64, index: wp.int32) -> wp.vec4:
-    """:func:`stored_texel` of a texture not stored as float32. 8-bit texels are decoded per channel
-    by the texture's table (the exact sRGB curve for sRGB colour), half floats converted exactly.
+    """:func:`stored_texel` of a texture not read as an array of float32 texels. 8-bit texels are
+    decoded per channel by the texture's table (the exact sRGB curve for sRGB colour), half floats
+    converted exactly, float32 ones (:data:`FORMAT_FLOAT32_PACKED`) read as they are.
     Out of line, on the view's scalars (not the struct, which a call would copy): one copy a
     module, not one a texel read."""
     value = wp.vec4(0.0)
