@@ -11,7 +11,7 @@ import warp as wp
 
 from warptex._validate import as_float_array
 from warptex._warp import active_tape
-from warptex.kernels import resolve as kres
+from warptex.kernels import raster as kr
 
 __all__ = ["resolve"]
 
@@ -65,12 +65,12 @@ def resolve(image, samples, *, device=None) -> wp.array:
     rows = math.prod(shape) // (width * channels)  # the rows of every view, one after the other
     flat = image.reshape((rows, width, channels))
     out = wp.zeros((rows // s, width // s, channels), dtype=float, device=device, requires_grad=image.requires_grad)
-    wp.launch(kres.resolve_kernel, dim=out.shape, inputs=[flat, s], outputs=[out], device=device, record_tape=False)
+    wp.launch(kr.resolve_kernel, dim=out.shape, inputs=[flat, s], outputs=[out], device=device, record_tape=False)
     tape = active_tape()
     if tape is not None and image.requires_grad:
 
         def backward():
-            wp.launch(kres.resolve_adjoint_kernel, dim=flat.shape, inputs=[out.grad, s], outputs=[flat.grad], device=device, record_tape=False)
+            wp.launch(kr.resolve_adjoint_kernel, dim=flat.shape, inputs=[out.grad, s], outputs=[flat.grad], device=device, record_tape=False)
 
         tape.record_func(backward, arrays=[flat, out])
     result = (height // s, width // s) if len(shape) == 2 else (*shape[:-3], height // s, width // s, channels)
