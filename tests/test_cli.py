@@ -1,6 +1,7 @@
 """The command line as a user meets it: a checkout that imports, --version, one-line errors that
 name the input and write nothing, Ctrl-C, atomic output sets."""
 
+import json
 import os
 import subprocess
 import sys
@@ -335,6 +336,81 @@ def test_ctrl_c_at_any_moment_is_one_line_exit_130_within_5_s(tmp_path, command,
         else:
             assert err.strip() == "warptex: interrupted; no files were written", (delay, err[-2000:])
             assert after == before, f"the previous files changed ({delay} s in)"
+
+
+# Run in a child: each Warp module that a launch on the main thread loads (from the kernel cache or
+# by compiling it) is printed. A command preloads its kernels first, on another thread, so that a
+# cold start compiles them side by side and hears a Ctrl-C; any module named here was left out.
+MAIN_THREAD_LOADS = """
+import sys, threading
+try:
+    import warp._src.context as context
+except ImportError:  # Warp before 1.10
+    import warp.context as context
+load = context.Module.load
+def watched(self, device, *args, **kwargs):
+    if not hasattr(self, "execs"):
+        sys.exit("this Warp's modules keep no execs table")
+    before = len(self.execs)
+    loaded = load(self, device, *args, **kwargs)
+    if threading.current_thread() is threading.main_thread() and len(self.execs) > before:
+        print("main-thread load:", self.name, file=sys.stderr)
+    return loaded
+context.Module.load = watched
+from warptex.apps.cli import entry
+sys.argv = ["warptex", *sys.argv[1:]]
+entry()
+"""
+
+
+@pytest.mark.parametrize("command", [
+    ["render", "--resolution", "24x32", "--samples", "4"],
+    ["render", "--mesh", "{mesh}", "--technique", "biplanar", "--resolution", "24x32"],
+    ["bake", "--size", "64", "--out", "{out}/asset.glb"],
+    ["fit", "--iters", "2", "--resolution", "24x32"],
+])
+def test_a_command_loads_no_kernel_module_on_its_main_thread(tmp_path, command):
+    """``warptex fit`` rasterised its views and built its layers' mips before it preloaded its
+    kernels: on a cold start the rasteriser compiled on the main thread for seconds, deaf to
+    Ctrl-C (a CI run's "exit 5.0 s after Ctrl-C"). Every command's kernels are now preloaded before
+    anything launches."""
+    mesh = tmp_path / "box.obj"
+    trimesh.creation.box().export(mesh)
+    out = tmp_path / "out"
+    command = [c.replace("{out}", str(out)).replace("{mesh}", str(mesh)) for c in command]
+    if "--out" not in command:
+        command += ["--out", str(out)]
+    done = subprocess.run([sys.executable, "-c", MAIN_THREAD_LOADS, *command], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    if "keep no execs table" in done.stderr:
+        pytest.skip("this Warp's modules keep no execs table: which thread loads them cannot be seen")
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "main-thread load" not in done.stderr, done.stderr[-2000:]
+
+
+def test_a_command_compiles_the_modules_the_test_session_cached():
+    """A Warp module's hash covers every kernel in it. The resolve kernels lived in the
+    rasteriser's module but in a file of their own, which ``warptex fit`` never imported: its
+    rasteriser hashed differently from ``warptex render``'s and from ``warptex.precompile()``'s,
+    and compiled again on its first run. Each command's modules now hash as they do with every
+    kernel made (this session's :func:`warptex.precompile`)."""
+    from warptex.kernels import all_kernels
+
+    code = """
+import importlib, json, sys
+app = importlib.import_module("warptex.apps." + sys.argv[1])  # that command's module alone, as its process imports
+kernels = {"fit_demo": lambda: app._kernels(4, True, "cpu"), "render": lambda: app._kernels(True, "cpu") + app._kernels(False, "cpu"),
+           "bake": lambda: app._kernels("triplanar", None, False, 4, "cpu")}[sys.argv[1]]()
+print(json.dumps({k.module.name: k.module.hash_module().hex() for k in kernels}))
+"""
+    mine = {k.module.name: k.module for k in all_kernels((4, 8))}
+    if not hasattr(next(iter(mine.values())), "hash_module"):
+        pytest.skip("this Warp's modules have no hash_module()")
+    for command in ("fit_demo", "render", "bake"):
+        done = subprocess.run([sys.executable, "-c", code, command], cwd=ROOT, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr[-2000:]
+        theirs = json.loads(done.stdout.strip().splitlines()[-1])
+        differ = [name for name, digest in theirs.items() if name in mine and mine[name].hash_module().hex() != digest]
+        assert not differ, f"{command}: modules that hash otherwise than with every kernel made: {differ}"
 
 
 def test_ctrl_c_while_a_cold_fit_compiles_exits_within_5_s(tmp_path):

@@ -27,6 +27,7 @@ from warptex import io
 from warptex._compile import preload
 from warptex.kernels import fit as kfit
 from warptex.kernels import sampling as ks
+from warptex.kernels import raster as kr
 from warptex.kernels import splat as kl
 from warptex.camera import checked_resolution
 from warptex.fit import FitView, SplatParameters, check_inputs, default_stages, fit_splat, psnr, render_views, shard
@@ -53,14 +54,15 @@ TRUE_TILING = 1.0 / 6.0  # the default scene's layer repeats per world unit
 COVERED = 1.0
 
 
-def _kernels(num_layers: int, device) -> list:
-    """The kernels a fit runs once its views are rasterised: the splat's forward and the gradient
-    lanes it keeps layers for, the layers' mip chains, the objective's and Adam's steps. Compiled
-    in the main thread at their first launch, a module took the whole of its compile (seconds cold)
-    to hear a Ctrl-C."""
+def _kernels(num_layers: int, synthetic: bool, device) -> list:
+    """The kernels a fit runs: the synthetic scene's rasteriser, the splat's forward and the
+    gradient lanes it keeps layers for, the layers' mip chains, the objective's and Adam's steps.
+    Compiled in the main thread at their first launch, a module took the whole of its compile
+    (seconds cold) to hear a Ctrl-C."""
     kernels = kl.splat_kernels(capacity=kl.capacity(num_layers), stochastic=False)  # the fit samples plainly
     adam = sys.modules[wp.optim.Adam.__module__]
     used = [kernels.launched(device), kernels.launched(device, grad=True), kernels.kept_lanes, ks.downsample_kernel, kfit.softmax_kernel]
+    used += [kr.raster_kernel] if synthetic else []
     return [k for k in used if k is not None] + [k for k in vars(adam).values() if isinstance(k, wp.Kernel)]
 
 
@@ -162,7 +164,12 @@ def run_fit(
     device = wp.get_device(device)
     rank, world = (0, 1) if job is None else (job.rank, job.world_size)
     options = {"projection": projection, "height_blend": height_blend, "sharpness": sharpness, "sampler": Sampler(filter=filter)}
-    if targets is not None or gbuffers is not None:
+    synthetic = targets is None and gbuffers is None
+    # Before anything is loaded or launched (as render and bake do): a cold start compiles every
+    # module side by side, and a Ctrl-C is heard during the compiles. The first compile in a
+    # process also pays the compiler's own start-up, seconds.
+    preload(_kernels(len(layers) if layers is not None else len(LAYER_NAMES), synthetic, device), device)
+    if not synthetic:
         problem = user_problem(func, targets, gbuffers, layers=layers, tiling=tiling, options=options, rank=rank, world_size=world, device=device)
     else:
         problem = synthetic_problem(func, resolution=resolution, views=views, seed=seed, tiling_error=tiling_error, layers=layers, options=options, rank=rank, world_size=world, device=device)
@@ -176,7 +183,6 @@ def run_fit(
 
     check_inputs(problem.views, problem.layers, params, device=device)  # fit_splat's checks, before anything renders
     mine = problem.views if rank else shard(problem.views, rank=0, world_size=world)
-    preload(_kernels(problem.layers.num_layers, device), device)  # a cold start compiles them side by side, and Ctrl-C is heard
     initial = render_views(problem.views, problem.layers, params, splat_options=options)
     group = None if job is None else job.ready(dist_timeout)
     result = fit_splat(mine, problem.layers, params, stages=stages, loss=loss, entropy=entropy, splat_options=options, progress=progress, report_every=report_every, process_group=group, memory=memory, device=device)
