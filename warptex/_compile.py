@@ -23,7 +23,11 @@ def preload(kernels, device=None) -> None:
         return
     # Waited for interruptibly: Warp's compile pool would first finish every compile under way
     # (seconds each); what is under way then finishes in the background.
-    interruptible("warptex-preload", wp.force_load, device=device, modules=modules, max_workers=min(len(modules), cpu_count()))
+    # A CPU launch loads a module's block_dim=1 variant. Given no block_dim, Warp 1.17's force_load
+    # compiled the module's default one (256) there, another hash: every kernel compiled twice, the
+    # second time on the main thread at its first launch.
+    block_dim = 1 if device.is_cpu else None
+    interruptible("warptex-preload", wp.force_load, device=device, modules=modules, block_dim=block_dim, max_workers=min(len(modules), cpu_count()))
 
 
 def precompile(device=None, *, layer_counts=(4,)) -> None:
