@@ -387,7 +387,7 @@ def test_a_command_loads_no_kernel_module_on_its_main_thread(tmp_path, command):
     assert "main-thread load" not in done.stderr, done.stderr[-2000:]
 
 
-def test_a_command_compiles_the_modules_the_test_session_cached():
+def test_a_command_compiles_the_modules_the_test_session_cached(tmp_path):
     """A Warp module's hash covers every kernel in it. The resolve kernels lived in the
     rasteriser's module but in a file of their own, which ``warptex fit`` never imported: its
     rasteriser hashed differently from ``warptex render``'s and from ``warptex.precompile()``'s,
@@ -400,15 +400,21 @@ import importlib, json, sys
 app = importlib.import_module("warptex.apps." + sys.argv[1])  # that command's module alone, as its process imports
 kernels = {"fit_demo": lambda: app._kernels(4, True, "cpu"), "render": lambda: app._kernels(True, "cpu") + app._kernels(False, "cpu"),
            "bake": lambda: app._kernels("triplanar", None, False, 4, "cpu")}[sys.argv[1]]()
-print(json.dumps({k.module.name: k.module.hash_module().hex() for k in kernels}))
+print(json.dumps({"package": __import__("warptex").__file__, "hashes": {k.module.name: k.module.hash_module().hex() for k in kernels}}))
 """
     mine = {k.module.name: k.module for k in all_kernels((4, 8))}
     if not hasattr(next(iter(mine.values())), "hash_module"):
         pytest.skip("this Warp's modules have no hash_module()")
     for command in ("fit_demo", "render", "bake"):
-        done = subprocess.run([sys.executable, "-c", code, command], cwd=ROOT, capture_output=True, text=True, timeout=300)
+        # The copy of warptex this process runs: CI installs one (pip install .) beside the
+        # checkout, and the two copies' modules hash otherwise (their headers' paths are in the
+        # build options).
+        env = {**os.environ, "PYTHONPATH": str(Path(wt.__file__).parents[1])}
+        done = subprocess.run([sys.executable, "-c", code, command], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
         assert done.returncode == 0, done.stderr[-2000:]
-        theirs = json.loads(done.stdout.strip().splitlines()[-1])
+        child = json.loads(done.stdout.strip().splitlines()[-1])
+        assert child["package"] == wt.__file__, "the child imported another copy of warptex"
+        theirs = child["hashes"]
         differ = [name for name, digest in theirs.items() if name in mine and mine[name].hash_module().hex() != digest]
         assert not differ, f"{command}: modules that hash otherwise than with every kernel made: {differ}"
 
