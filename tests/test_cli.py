@@ -405,11 +405,10 @@ print(json.dumps({"package": __import__("warptex").__file__, "hashes": {k.module
     mine = {k.module.name: k.module for k in all_kernels((4, 8))}
     if not hasattr(next(iter(mine.values())), "hash_module"):
         pytest.skip("this Warp's modules have no hash_module()")
+    # The copy of warptex this process runs: CI installs one (pip install .) beside the checkout,
+    # and the two copies' modules hash otherwise (their headers' paths are in the build options).
+    env = {**os.environ, "PYTHONPATH": str(Path(wt.__file__).parents[1])}
     for command in ("fit_demo", "render", "bake"):
-        # The copy of warptex this process runs: CI installs one (pip install .) beside the
-        # checkout, and the two copies' modules hash otherwise (their headers' paths are in the
-        # build options).
-        env = {**os.environ, "PYTHONPATH": str(Path(wt.__file__).parents[1])}
         done = subprocess.run([sys.executable, "-c", code, command], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
         assert done.returncode == 0, done.stderr[-2000:]
         child = json.loads(done.stdout.strip().splitlines()[-1])
