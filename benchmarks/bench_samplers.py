@@ -39,7 +39,10 @@ textures natively add float16 rows compared with warptex's float16 rows: Dr.Jit'
 
 ``--limit`` times a yardstick beside the peers: a plain C loop of the bilinear lookup
 (``peers/limit_peer.py``), compiled at run time with the system's C compiler (``-O3 -march=native
--fopenmp``) and skipped, with the reason, without one. It is the hardware's pace, not a peer.
+-fopenmp``) and skipped, with the reason, without one. It is the hardware's pace, not a peer. It
+also reports the memory the run gets: how long one load waits over working sets of 1 to 128 MB (a
+pointer chase), where that cache ends, and the texture's size in each format. At random UVs that,
+not the L3 the CPU reports, decides whether texels come from cache.
 
 ``--atomics`` (CUDA) adds a forward+backward row of warptex with its texel gradients added by
 float atomics (``set_deterministic_gradients(False)``), in the same interleaved rounds as the
@@ -601,6 +604,22 @@ def format_call_cost(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def memory_seen(args, report) -> dict:
+    """Where the cache this run gets ends (``--limit``: the C loop's pointer chase), reported beside
+    the texture's level 0 in each format: at random UVs, texels inside it are read from cache and
+    texels past it from DRAM, whatever the CPU's L3 is said to be."""
+    from peers import limit_peer
+
+    sizes = [1, 2, 4, 8] if args.quick else [1, 2, 4, 8, 16, 32, 64, 128]
+    latency = limit_peer.load_latency(sizes, steps=1 << 18 if args.quick else 1 << 21)
+    inside, outside = limit_peer.cache_end(latency)
+    report("memory this run gets (a pointer chase, 1 thread; ns per load over N MB): " + " · ".join(f"{mb} MB {ns:.0f}" for mb, ns in latency.items()))
+    where = (f"from cache up to {inside} MB" if inside else "from DRAM at every size") + (f", from DRAM from {outside} MB on" if outside and inside else "")
+    level0 = {name: args.texture_size**2 * size / 2**20 for name, size in (("float32", 16), ("float16", 8), ("8 bits", 4))}  # bytes a texel
+    report(f"  random reads come {where}; the texture's level 0 is " + ", ".join(f"{mb:g} MB in {name}" for name, mb in level0.items()))
+    return {"latency_ns": latency, "cache_inside_mb": inside, "cache_outside_mb": outside, "level0_mb": level0}
+
+
 def run(args) -> dict:
     wp.config.quiet = True
     wp.init()
@@ -633,6 +652,7 @@ def run(args) -> dict:
             report(f"{fmt} rows: none of {', '.join(without)} (not stored natively on {args.device}; peers/<name>_peer.py says why)")
     tex = texture(args.texture_size, device=args.device)
     report(f"texture: {args.texture_size}² RGBA with mips, {tex.nbytes / 2**20:.0f} MB in float32 (--texture-size)")
+    memory = memory_seen(args, report) if "limit" in backends else None
     cache, records = {}, []
     for technique in args.techniques:
         scenes = ("sphere", "random") if technique in SAMPLE_TECHNIQUES else ("sphere", "terrain")
@@ -640,6 +660,8 @@ def run(args) -> dict:
             records += measure_technique(technique, scene, args, tex, cache, backends, report)
     result = {"machine": {"platform": platform.platform(), "cpus": wt.get_num_threads(), "device": wp.get_device(args.device).name, "python": platform.python_version(), "warp": wp.config.version},
               "settings": {k: v for k, v in vars(args).items() if k not in ("json", "out")}, "skipped_peers": skipped, "records": records}  # fmt: skip
+    if memory is not None:
+        result["memory"] = memory
     if not args.no_scaling:
         report("scaling (triplanar forward):")
         result["scaling"] = scaling(args, backends, report)
@@ -663,12 +685,13 @@ def parse(argv=None):
     p.add_argument("--repeats", type=int, default=None, help="timed runs per figure (default 5, quick 1)")
     p.add_argument("--techniques", nargs="+", default=list(TECHNIQUES), choices=TECHNIQUES)
     p.add_argument("--peers", nargs="*", default=list(peers.BACKENDS), choices=peers.BACKENDS)
-    p.add_argument("--limit", action="store_true", help="time a plain C loop of the bilinear lookup beside the peers (peers/limit_peer.py): the hardware's pace")
+    p.add_argument("--limit", action="store_true", help="time a plain C loop of the bilinear lookup beside the peers (peers/limit_peer.py): the hardware's pace; "
+                                                          "and report where the cache this run gets ends (a pointer chase)")
     p.add_argument("--runs", type=int, default=1, help="time every row in this many runs of --repeats interleaved rounds; the summaries give each ratio's spread over the runs (min–max)")
     p.add_argument("--no-scaling", action="store_true", help="skip the pixel-count and texture-size sweeps")
     p.add_argument("--texture-size", type=int, default=None, metavar="N",
-                   help="the rows' texture is N x N RGBA (default 1024: 16 MB in float32, inside this machine's 32 MB L3; "
-                        "2048 puts float32 out of it and 8-bit texels in it; quick 256)")
+                   help="the rows' texture is N x N RGBA (default 1024: 16 MB in float32, 4 MB in 8 bits; 2048: 64 and 16 MB; "
+                        "quick 256). Whether they fit the cache this run gets, --limit measures")
     p.add_argument("--formats", nargs="+", default=["float32"], choices=[f.value for f in wt.Format], metavar="FORMAT",
                    help="texel formats of warptex's textures, rows for each (float32 float16 unorm8 srgb8; default float32)")
     p.add_argument("--atomics", action="store_true", help="on CUDA, also time forward+backward with texel gradients added by float atomics "

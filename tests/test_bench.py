@@ -80,10 +80,20 @@ def test_limit_and_runs_give_the_c_loop_and_each_ratio_spread(tmp_path):
         timeout=600,
     )
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-    records = json.loads((tmp_path / "r.json").read_text())["records"]
+    written = json.loads((tmp_path / "r.json").read_text())
+    records = written["records"]
     assert all(len(r["run_seconds"]) == 2 and r["seconds"] == min(r["run_seconds"]) for r in records)
     if "peer limit: skipped" in result.stdout:
         pytest.skip("no C compiler with OpenMP here: " + result.stdout.split("peer limit: skipped", 1)[1].splitlines()[0])
+    # the memory the run gets: a load's latency per working set, and the first size past the cache
+    # (a load waiting over 3x the fastest size's), beside the texture's level 0 (256² in --quick)
+    memory = written["memory"]
+    latency = {int(mb): ns for mb, ns in memory["latency_ns"].items()}
+    assert list(latency) == [1, 2, 4, 8] and all(ns > 0 for ns in latency.values())
+    past = [mb for mb, ns in latency.items() if ns > 3 * min(latency.values())]
+    assert memory["cache_outside_mb"] == (past[0] if past else None)
+    assert memory["level0_mb"] == {"float32": 1.0, "float16": 0.5, "8 bits": 0.25}
+    assert "memory this run gets" in result.stdout and "the texture's level 0 is 1 MB in float32" in result.stdout
     limit = [r for r in records if r["impl"] == "limit"]
     assert {(r["scene"], r["pass"]) for r in limit} == {("sphere", "forward"), ("random", "forward")}
     assert all(r["max_abs_diff"] < 1e-5 for r in limit)
@@ -225,3 +235,18 @@ def test_the_device_checks_script_takes_its_commands():
             args = bench_samplers.parse(argv)
             assert args.device == "cpu" and args.json is not None
     assert "tests/test_cuda.py" in text
+
+
+@pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/ is not part of this checkout")
+def test_the_formats_yardstick_builds_as_its_header_says(tmp_path):
+    """benchmarks/formats_yardstick.c (issue 48's C loops, cited in docs/performance.md) compiles
+    with the command its header gives, warnings as errors, so the figures stay reproducible."""
+    import shutil
+
+    source = BENCH.parent / "formats_yardstick.c"
+    header = source.read_text().split("*/", 1)[0]
+    assert "gcc -O3 -march=native -fopenmp benchmarks/formats_yardstick.c" in header
+    if shutil.which("gcc") is None:
+        pytest.skip("no gcc on PATH")
+    done = subprocess.run(["gcc", "-O3", "-march=native", "-fopenmp", "-Wall", "-Werror", str(source), "-o", str(tmp_path / "y"), "-lm"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr

@@ -8,6 +8,11 @@ distance to the hardware's pace. It computes warptex's wrap-addressed bilinear r
 
 Only ``bilinear`` and only the CPU. Unavailable (with the reason) when no C compiler with OpenMP is
 found: ``$CC``, else ``cc``.
+
+:func:`load_latency` measures, with the same compiled library, how long one load waits on memory
+for working sets of growing size (a pointer chase): where the cache this process actually gets
+ends. That is what decides whether a texture's texels are read from cache or from DRAM at random
+UVs, and it need not be the L3 the CPU reports (a virtual machine may get a few MB of it).
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from . import Peer, PeerUnavailable
 
 SOURCE = r"""
 #include <math.h>
+#include <omp.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -44,6 +50,27 @@ static inline void lookup(const float *tex, int w, int h, const int c, const flo
         float bottom = r1[i0 * c + k] * (1.0f - fx) + r1[i1 * c + k] * fx;
         out[k] = top * (1.0f - fy) + bottom * fy;
     }
+}
+
+/* Nanoseconds per load of a chase through `lines` 64-byte lines of `buf` (8 int64s each) in one
+   random cycle: each load's address is the previous load's value, so no two are in flight at once. */
+double chase(int64_t *buf, int64_t lines, int64_t steps) {
+    const int64_t S = 8;
+    for (int64_t i = 0; i < lines; ++i) buf[i * S + 1] = i; /* the lines' order, in their second words */
+    uint64_t state = 0x9E3779B97F4A7C15ull;
+    for (int64_t i = lines - 1; i > 0; --i) { /* shuffled (Fisher-Yates, a 64-bit LCG) */
+        state = state * 6364136223846793005ull + 1442695040888963407ull;
+        int64_t j = (int64_t)((state >> 33) % (uint64_t)(i + 1)), t = buf[i * S + 1];
+        buf[i * S + 1] = buf[j * S + 1], buf[j * S + 1] = t;
+    }
+    for (int64_t i = 0; i < lines; ++i) /* each line, in that order, points at the next */
+        buf[buf[i * S + 1] * S] = buf[((i + 1) % lines) * S + 1] * S;
+    int64_t k = 0;
+    for (int64_t i = 0; i < lines; ++i) k = buf[k]; /* one round to warm */
+    double t = omp_get_wtime();
+    for (int64_t i = 0; i < steps; ++i) k = buf[k];
+    t = omp_get_wtime() - t;
+    return k < 0 ? -1.0 : t / (double)steps * 1e9;
 }
 
 void bilinear_wrap(const float *tex, int w, int h, int c, const float *uv, int64_t n, float *out, int threads) {
@@ -77,6 +104,8 @@ def _compile() -> tuple[ctypes.CDLL | None, str | None]:
     f32 = ctypes.POINTER(ctypes.c_float)
     lib.bilinear_wrap.argtypes = (f32, ctypes.c_int, ctypes.c_int, ctypes.c_int, f32, ctypes.c_int64, f32, ctypes.c_int)
     lib.bilinear_wrap.restype = None
+    lib.chase.argtypes = (ctypes.POINTER(ctypes.c_int64), ctypes.c_int64, ctypes.c_int64)
+    lib.chase.restype = ctypes.c_double
     return lib, None
 
 
@@ -113,6 +142,34 @@ def _forward(state):
     h, w, c = tex.shape
     LIB.bilinear_wrap(_pointer(tex), w, h, c, _pointer(uv), len(uv), _pointer(out), _THREADS)
     return out
+
+
+def load_latency(sizes_mb, steps: int = 1 << 21) -> dict[int, float]:
+    """``{MB: nanoseconds}``: how long one load waits on memory when the loads wander at random over
+    that many MB (a pointer chase, one thread, 4 KB pages as NumPy's and Warp's arrays get).
+
+    Raises:
+        PeerUnavailable: without the compiled library (the reason :data:`UNAVAILABLE` gives).
+    """
+    if LIB is None:
+        raise PeerUnavailable(UNAVAILABLE)
+    result = {}
+    for mb in sizes_mb:
+        lines = mb * 2**20 // 64
+        buf = np.empty(lines * 8, np.int64)
+        result[mb] = LIB.chase(buf.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), lines, steps)
+    return result
+
+
+def cache_end(latency: dict[int, float]) -> tuple[int | None, int | None]:
+    """``(largest inside, smallest outside)`` the cache, in MB, from :func:`load_latency`: a working
+    set is outside where its load waits over 3× the smallest's (None where no size is, or all are)."""
+    fastest = min(latency.values())
+    outside = [mb for mb, ns in sorted(latency.items()) if ns > 3 * fastest]
+    if not outside:
+        return max(latency), None
+    inside = [mb for mb in latency if mb < outside[0]]
+    return (max(inside) if inside else None), outside[0]
 
 
 def peers() -> dict[str, Peer]:
