@@ -81,6 +81,7 @@ import peers  # noqa: E402  (benchmarks/peers, next to this file)
 from peers import common  # noqa: E402
 
 import warptex as wt  # noqa: E402
+from warptex.formats import TEXEL_BYTES  # noqa: E402
 from warptex.plot import line_chart  # noqa: E402
 from warptex.scenes import TERRAIN_GRID, terrain_camera  # noqa: E402
 from warptex.scenes.terrain import terrain  # noqa: E402
@@ -615,7 +616,8 @@ def memory_seen(args, report) -> dict:
     inside, outside = limit_peer.cache_end(latency)
     report("memory this run gets (a pointer chase, 1 thread; ns per load over N MB): " + " · ".join(f"{mb} MB {ns:.0f}" for mb, ns in latency.items()))
     where = (f"from cache up to {inside} MB" if inside else "from DRAM at every size") + (f", from DRAM from {outside} MB on" if outside and inside else "")
-    level0 = {name: args.texture_size**2 * size / 2**20 for name, size in (("float32", 16), ("float16", 8), ("8 bits", 4))}  # bytes a texel
+    shown = {"float32": wt.Format.FLOAT32, "float16": wt.Format.FLOAT16, "8 bits": wt.Format.UNORM8}  # srgb8's texels are unorm8's size
+    level0 = {name: args.texture_size**2 * TEXEL_BYTES[fmt] / 2**20 for name, fmt in shown.items()}
     report(f"  random reads come {where}; the texture's level 0 is " + ", ".join(f"{mb:g} MB in {name}" for name, mb in level0.items()))
     return {"latency_ns": latency, "cache_inside_mb": inside, "cache_outside_mb": outside, "level0_mb": level0}
 

@@ -2,6 +2,7 @@
 writes its JSON and plot. Speed itself is measured by the benchmark, never asserted here."""
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -241,8 +242,6 @@ def test_the_device_checks_script_takes_its_commands():
 def test_the_formats_yardstick_builds_as_its_header_says(tmp_path):
     """benchmarks/formats_yardstick.c (issue 48's C loops, cited in docs/performance.md) compiles
     with the command its header gives, warnings as errors, so the figures stay reproducible."""
-    import shutil
-
     source = BENCH.parent / "formats_yardstick.c"
     header = source.read_text().split("*/", 1)[0]
     assert "gcc -O3 -march=native -fopenmp benchmarks/formats_yardstick.c" in header
