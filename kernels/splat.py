@@ -37,7 +37,7 @@ from .native import use
 from .family import Kernels, Staged, family, forward_kernel, lane_covered, lane_kernel, pixel_kernels
 from .projection import SurfacePixels, surface_frame
 from .splat_blend import blend_functions, capacity
-from .lanes.splat import grad_lanes_take, lane_bodies, lane_saved, lanes_take
+from .lanes.splat import grad_lanes_take, lane_bodies, lane_saved, lanes_take, stochastic_grad_lanes_take, stochastic_lane_saved, stochastic_lanes_take
 from .splat_layers import (
     HEIGHT_ARRAY,
     HEIGHT_CHANNEL,
@@ -367,11 +367,13 @@ def splat_kernels(*, capacity: int, stochastic: bool) -> Kernels:
     forward, texel_grad, _ = pixel_kernels(f"splat{capacity}" + ("_stochastic" if stochastic else ""), module=module, args=SplatArgs, pixels=SplatPixels, out=wp.array2d(dtype=float),
                                            body=body, scatter=scatter_body, grads=SplatGrads)  # fmt: skip
     grads = ("args.layers", "args.heights", "args.maps", "args.reads.params.transition", None if stochastic else "args.reads.params.tiling")
-    lanes = grad_lanes = kept_lanes = None
-    if not stochastic:
-        lane, kept_lane, grad_lane = lane_bodies(capacity, SplatPixels, SplatGrads)
-        lanes = lane_kernel(lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), module=module, name=f"splat{capacity}_lanes", covered=splat_covered)
-        kept_lanes = lane_kernel(kept_lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), module=module + ".grad", name=f"splat{capacity}_kept_lanes", covered=splat_covered)
-        grad_lanes = lane_kernel(grad_lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), grads_t=SplatGrads, module=module + ".grad", name=f"splat{capacity}_texel_grad_lanes", covered=splat_covered)
+    name = f"splat{capacity}" + ("_stochastic" if stochastic else "")
+    lane, kept_lane, grad_lane = lane_bodies(capacity, SplatPixels, SplatGrads, stochastic)
+    lanes = lane_kernel(lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), module=module, name=f"{name}_lanes", covered=splat_covered)
+    kept_lanes = None if kept_lane is None else lane_kernel(kept_lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), module=module + ".grad", name=f"{name}_kept_lanes", covered=splat_covered)
+    grad_lanes = lane_kernel(grad_lane, SplatArgs, SplatPixels, wp.array2d(dtype=float), grads_t=SplatGrads, module=module + ".grad", name=f"{name}_texel_grad_lanes", covered=splat_covered)
+    if stochastic:
+        return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity), lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=stochastic_lanes_take,
+                       grad_lanes_take=stochastic_grad_lanes_take, lane_saved=stochastic_lane_saved)  # fmt: skip
     return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity), lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=lanes_take, grad_lanes_take=grad_lanes_take,
-                   lane_saved=None if stochastic else lane_saved, kept_lanes=kept_lanes)  # fmt: skip
+                   lane_saved=lane_saved, kept_lanes=kept_lanes)  # fmt: skip

@@ -550,6 +550,46 @@ def test_splat_lanes_give_the_one_pixel_bits(rng, launched, case, filter):
     assert (("splat8_lanes", -(-1000 // LANES)) in launched) == (case != "triplanar, face layers")  # splat_lanes.lanes_take
 
 
+@pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])
+@pytest.mark.parametrize("filter", ["nearest", "trilinear", "anisotropic"])
+@pytest.mark.parametrize("case", list(SPLAT_CASES))
+def test_stochastic_splat_lanes_give_the_one_pixel_bits(rng, launched, case, filter, method):
+    """A stochastic splat (``lanes.splat.layer_values_stochastic_lane``): each layer's reads, then
+    each read's stochastic taps read tap by tap, as the stochastic triplanar lane reads a
+    projection. The anisotropic filter and face layers run the one-pixel kernels
+    (``stochastic_lanes_take``)."""
+    g = _splat_gbuffer(rng)
+    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32))
+    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False)
+    kw = dict(SPLAT_CASES[case])
+    if kw.pop("heights", False):
+        kw["heights"] = wt.TextureArray(rng.random((5, 48, 24, 1), dtype=np.float32))
+    smp = wt.Sampler(filter=filter, address="mirror", lod_bias=-0.4, max_aniso=3)
+    option = wt.Stochastic(method, rotation=0.5, contrast=2.0) if method == "hex" else wt.Stochastic(method)
+    lanes, scalar = _both(lambda: wt.splat(g, layers, maps, sampler=smp, stochastic=option, **kw))
+    _same_bits(lanes, scalar)
+    assert (np.nan_to_num(lanes) > 0).any(-1).mean() > 0.5  # most pixels blend something
+    takes = case != "triplanar, face layers" and filter != "anisotropic"  # stochastic_lanes_take
+    assert (("splat8_stochastic_lanes", -(-1000 // LANES)) in launched) == takes
+
+
+def test_stochastic_splat_lanes_with_a_histogram_and_in_8_bits(rng, launched):
+    """A histogram-preserving hex blend is not linear: the one-pixel kernels run it. 8-bit layers
+    and more than eight layers (the kernels of 16) take the lanes."""
+    g = _splat_gbuffer(rng, 700)
+    layers = wt.TextureArray(rng.random((3, 32, 32, 4), dtype=np.float32))
+    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (1, 8, 8, 4)).astype(np.float32), mipmaps=False)
+    histogram = wt.prepare_histogram(layers)
+    lanes, scalar = _both(lambda: wt.splat(g, histogram.texture, maps, stochastic=wt.Stochastic("hex", histogram=histogram)))
+    _same_bits(lanes, scalar)
+    assert not any(name.startswith("splat8_stochastic_lanes") for name, _ in launched)
+    eight = wt.TextureArray((rng.random((10, 16, 32, 4)) * 255).astype(np.uint8), format="srgb8")
+    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (3, 8, 8, 4)).astype(np.float32), mipmaps=False)
+    lanes, scalar = _both(lambda: wt.splat(g, eight, maps, height_blend=0.25, stochastic="hash4"))
+    _same_bits(lanes, scalar)
+    assert ("splat16_stochastic_lanes", -(-700 // LANES)) in launched
+
+
 @pytest.mark.parametrize("height_blend", [None, 0.25])
 def test_splat_lanes_of_more_than_eight_layers(rng, launched, height_blend):
     """Ten layers take the kernels of 16, whose lanes weigh and blend each pixel through the scalar
@@ -762,6 +802,32 @@ def test_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter
         wt.set_num_threads(previous)
     takes = case not in ("world xz, height array", "triplanar, face layers")  # splat_lanes.grad_lanes_take
     assert threads > 1 or (("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched) == takes
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+@pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])
+@pytest.mark.parametrize("case", ["uv", "uv, height channel", "world xz, height array", "triplanar", "triplanar, no heights"])
+def test_stochastic_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, method, threads):
+    """The stochastic splat's texel gradients through its lanes: each layer's reads add their
+    shares through their stochastic taps (``scatter_layer_stochastic_lane``), layer by layer, as
+    pixel by pixel; height layers run the one-pixel kernel."""
+    g = _splat_gbuffer(rng, 3000)
+    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True)
+    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False, requires_grad=True)
+    kw = dict(SPLAT_CASES[case])
+    textures = [layers, maps]
+    if kw.pop("heights", False):
+        kw["heights"] = wt.TextureArray(rng.random((5, 48, 24, 1), dtype=np.float32), requires_grad=True)
+        textures.append(kw["heights"])
+    smp = wt.Sampler(filter="trilinear", address="mirror", lod_bias=-0.4)
+    previous = wt.get_num_threads()
+    wt.set_num_threads(threads)
+    try:
+        _same_grads(lambda: wt.splat(g, layers, maps, sampler=smp, stochastic=method, **kw), textures, rng, 4, 3000)
+    finally:
+        wt.set_num_threads(previous)
+    takes = case != "world xz, height array"  # stochastic_grad_lanes_take
+    assert threads > 1 or (("splat8_stochastic_texel_grad_lanes", -(-3000 // LANES)) in launched) == takes
 
 
 # The tiling-gradient cases: the splat's options, an address mode and the layers' texel format (one each, to keep the test short).

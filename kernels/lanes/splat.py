@@ -1,4 +1,4 @@
-"""The plain splat for a lane of pixels on the CPU, forward and texel gradient (:mod:`.`).
+"""The splat for a lane of pixels on the CPU, plain or stochastic, forward and texel gradient (:mod:`.`).
 
 The forward lane body computes what :mod:`warptex.kernels.splat`'s forward body computes for
 :data:`~.LANES` pixels: the splat maps read for the whole lane and the pixels' splat weights;
@@ -18,6 +18,13 @@ and for the gradient the cases :func:`grad_lanes_take` names, run the one-pixel 
 (``Kernels.lanes_take``). In the kernels of up to 8 layers the weights, the blend and the blend
 and weights backwards are native code for the whole lane (:mod:`.splat_blend`); beyond, the
 scalar blocks run pixel by pixel.
+
+The stochastic splat's lanes are the same bodies with each layer read by
+:func:`layer_values_stochastic_lane`: per read, its stochastic taps worked out natively and read tap
+by tap, as the stochastic triplanar lane reads a projection, and added back by
+:func:`scatter_layer_stochastic_lane`. Its forward lane keeps the layers' colours for the gradient
+lane itself (it never takes the tiling's gradient by hand). A histogram's blend and the anisotropic
+filter's footprints run the one-pixel kernels (:func:`stochastic_lanes_take`).
 """
 
 import functools
@@ -29,7 +36,8 @@ from ..native import cpu_snippet
 from ..projection import SurfacePixels
 from ..splat_blend import blend_functions
 from ..splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerReads, SplatArgs, SplatParams, layer_textures, map_count, pick, surface_weights
-from ..texels import TexelGrad, TextureView, read_channels, write_channels
+from ..stochastic import METHOD_NONE, StochasticArgs
+from ..texels import FILTER_ANISOTROPIC, TexelGrad, TextureView, read_channels, write_channels
 from . import LANES, lane_colours, lane_floats, lane_ints
 from .sample import accumulate_footprint_lane
 from .splat_blend import GRAD_HEIGHT, GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, weights_lane8
@@ -83,6 +91,25 @@ def grad_lanes_take(args: SplatArgs) -> bool:
     return lanes_take(args) and args.reads.params.height_mode != HEIGHT_ARRAY
 
 
+def stochastic_lanes_take(args: SplatArgs) -> bool:
+    """:func:`lanes_take` for the stochastic kernels: also a linear blend of one-tap footprints
+    (``stochastic.lane_taps_linear``: no histogram, not the anisotropic filter), which the lanes
+    read tap by tap; the rest runs the one-pixel kernels."""
+    stoch = args.stoch
+    return lanes_take(args) and args.reads.smp.filter != FILTER_ANISOTROPIC and stoch.histogram == 0 and stoch.method != METHOD_NONE
+
+
+def stochastic_grad_lanes_take(args: SplatArgs) -> bool:
+    """:func:`grad_lanes_take` for the stochastic kernels (:func:`stochastic_lanes_take`)."""
+    return stochastic_lanes_take(args) and grad_lanes_take(args)
+
+
+def stochastic_lane_saved(args: SplatArgs) -> int:
+    """:func:`lane_saved` for the stochastic kernels: the layers' colours (they never take the
+    tiling's gradient by hand)."""
+    return 4 * args.reads.params.num_layers
+
+
 def lane_saved(args: SplatArgs) -> int:
     """Floats a pixel keeps for the texel-gradient lane (``Kernels.lane_saved``): its layers'
     colours, 4 a layer, and where the tiling needs its gradient, their slopes along it, 4 more
@@ -111,6 +138,29 @@ def layer_blend_kept_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weig
     ...
 
 
+_STOCHASTIC = "return wt_layer_values_stochastic_lane(tex, reads, stoch, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, keep, saved);\n"
+
+
+@wp.func_native(cpu_snippet(_STOCHASTIC, "return {};\n"))
+def layer_values_stochastic_lane(tex: TextureView, reads: LayerReads, stoch: StochasticArgs, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2),
+                                 uv0_dx: wp.array(dtype=wp.vec2), uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32,
+                                 tri_w: _lane_vec3, keep: wp.int32, saved: wp.array2d(dtype=float)) -> lane_colours:  # fmt: skip
+    """:func:`layer_values_lane` with stochastic sampling (``stoch``; :func:`stochastic_lanes_take`):
+    ``read_layer_stochastic``, each read's taps worked out natively and read tap by tap, as the
+    stochastic triplanar lane reads a projection (``wt_layer_values_stochastic_lane``)."""
+    ...
+
+
+@wp.func_native(cpu_snippet("wt_scatter_layer_stochastic_lane(tex, grad, reads, stoch, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, g);\n"))
+def scatter_layer_stochastic_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, stoch: StochasticArgs, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2),
+                                  uv0_dx: wp.array(dtype=wp.vec2), uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32,
+                                  tri_w: _lane_vec3, g: lane_colours):  # fmt: skip
+    """:func:`scatter_layer_lane` of :func:`layer_values_stochastic_lane`'s reads: each read's share
+    ``w · g`` added through its stochastic taps, pixel by pixel in read and tap order
+    (``scatter_layer_stochastic``)."""
+    ...
+
+
 @wp.func_native(cpu_snippet("wt_scatter_layer_lane(tex, grad, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, g);\n"))
 def scatter_layer_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2),
                        uv0_dx: wp.array(dtype=wp.vec2), uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32,
@@ -124,16 +174,18 @@ def scatter_layer_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, j: 
 
 
 @functools.cache
-def lane_bodies(cap: int, pixels_t, grads_t):
-    """``(lane, kept_lane, grad_lane)``: the lane bodies of the plain splat of ``cap`` layers: the
-    forward, the forward that keeps what the gradient lane reads (``Kernels.kept_lanes``), and the
-    texel gradient (``pixels_t``, ``grads_t``: :class:`~.splat.SplatPixels`,
+def lane_bodies(cap: int, pixels_t, grads_t, stochastic: bool = False):
+    """``(lane, kept_lane, grad_lane)``: the lane bodies of the splat of ``cap`` layers, plain or
+    ``stochastic``: the forward, the forward that keeps what the gradient lane reads
+    (``Kernels.kept_lanes``; ``None`` for the stochastic splat, whose forward lane keeps its
+    colours itself), and the texel gradient (``pixels_t``, ``grads_t``: :class:`~.splat.SplatPixels`,
     :class:`~.splat.SplatGrads`)."""
     f = blend_functions(cap)
     weights_t, colours_t = f.weights_t, f.colours_t
     lane_weights_t = wp.types.matrix(shape=(LANES, cap), dtype=float)
     lane_layers_t = wp.types.matrix(shape=(LANES * cap, 4), dtype=float)  # row l * cap + j
     module = f"warptex.splat{cap}"
+    kind = "_stochastic" if stochastic else ""
 
     def lane_weights(args: SplatArgs, pixels: pixels_t, base: wp.int32, count: wp.int32):
         """``(rs, w1s, tri_w)``: each covered lane pixel's raw splat values and weights (splat_weights,
@@ -187,14 +239,14 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                 hv[j] = heights[l, j]
         return w1, c, hv
 
-    lane_weights = inlined(specialised(lane_weights, f"splat{cap}_lane_weights"), module=module)
-    pixel_layers = inlined(specialised(pixel_layers, f"splat{cap}_pixel_layers"), module=module)
+    lane_weights = inlined(specialised(lane_weights, f"splat{cap}{kind}_lane_weights"), module=module)
+    pixel_layers = inlined(specialised(pixel_layers, f"splat{cap}{kind}_pixel_layers"), module=module)
 
     def forward_lane(kept: bool):
         """The forward lane body, plain or (``kept``) the one that keeps, where asked, the tiling's
         slopes for the gradient lane (:func:`layer_values_kept_lane`)."""
         values_lane, blend_lane = (layer_values_kept_lane, layer_blend_kept_lane) if kept else (layer_values_lane, layer_blend_lane)
-        suffix = "_kept" if kept else ""
+        suffix = kind + ("_kept" if kept else "")
 
         def lane_layers(args: SplatArgs, pixels: pixels_t, base: wp.int32, count: wp.int32, w1s: lane_weights_t, tri_w: _lane_vec3):
             """``(colours, heights)``: read_layers for each lane pixel, layer by layer, each layer's reads
@@ -209,7 +261,13 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                     weighted[l] = w1s[l, j]
                 for t in range(layer_textures(params)):
                     tex = pick(args.layers, args.heights, t)
-                    value = values_lane(tex, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, wp.where(t == 0, 1, 0), pixels.saved)
+                    keep = wp.where(t == 0, 1, 0)
+                    value = lane_colours()
+                    if wp.static(stochastic):
+                        stoch = pick(args.stoch, args.height_stoch, t)
+                        value = layer_values_stochastic_lane(tex, args.reads, stoch, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, keep, pixels.saved)
+                    else:
+                        value = values_lane(tex, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, keep, pixels.saved)
                     for l in range(count):
                         if w1s[l, j] > 0.0:
                             if t == 0:
@@ -232,7 +290,12 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                     weighted = lane_floats()
                     for l in range(LANES):  # unrolled (w1s is 0 past count)
                         weighted[l] = w1s[l, j]
-                    blended = blend_lane(args.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, 1, pixels.saved, blended)
+                    if wp.static(stochastic):  # blend_lane's sum, row by row
+                        value = layer_values_stochastic_lane(args.layers, args.reads, args.stoch, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, 1, pixels.saved)
+                        for l in range(LANES):
+                            blended[l] = blended[l] + weighted[l] * value[l]
+                    else:
+                        blended = blend_lane(args.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, 1, pixels.saved, blended)
                 for l in range(count):
                     write_channels(out, base + l, wp.where(pixels.surface.mask[base + l] != 0.0, blended[l], wp.vec4(0.0)))
                 return
@@ -311,6 +374,9 @@ def lane_bodies(cap: int, pixels_t, grads_t):
                 for l in range(LANES):  # unrolled (w1s and back are 0 past count)
                     weighted[l] = w1s[l, j]
                     g[l] = back[l * cap + j]
-                scatter_layer_lane(args.layers, grads.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, g)
+                if wp.static(stochastic):
+                    scatter_layer_stochastic_lane(args.layers, grads.layers, args.reads, args.stoch, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, g)
+                else:
+                    scatter_layer_lane(args.layers, grads.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, g)
 
-    return forward_lane(False), forward_lane(True), inlined(specialised(grad_lane, f"splat{cap}_grad_lane"), module=module)
+    return forward_lane(False), None if stochastic else forward_lane(True), inlined(specialised(grad_lane, f"splat{cap}{kind}_grad_lane"), module=module)

@@ -7,6 +7,7 @@
 #include "wt_footprint.h"
 #include "wt_projection.h"
 #include "wt_scatter.h"
+#include "wt_taps.h"
 
 // What each lane pixel l (pixel base + l of the launch) with weighted[l] > 0 reads of layer j of tex
 // (no face layers): splat_layers.layer_read's UV, footprint and weight of each read k at the pixel's
@@ -231,6 +232,17 @@ WT_INLINE wt_lane_colours wt_layer_values_slopes(const Tex& tex, const Reads& re
     return out;
 }
 
+// SplatPixels.saved, where it is not empty: row base + l (l < count), columns 4 j .. 4 j + 3, the
+// lane's value of layer j (what the gradient lane's blend reads).
+template <class Saved>
+WT_INLINE void wt_keep_layer(const Saved& saved, int j, int base, int count, const wt_lane_colours& value) {
+    if (saved.shape[0] == 0) return;
+    for (int l = 0; l < count; ++l) {
+        char* row = (char*)saved.data + (long long)(base + l) * saved.strides[0];
+        for (int c = 0; c < 4; ++c) *(float*)(row + (long long)(4 * j + c) * saved.strides[1]) = value.data[l][c];
+    }
+}
+
 // lanes.splat.layer_values_lane: row l, layer j of tex read at lane pixel l over the footprints of
 // wt_layer_reads' reads as read_layer reads them (per projection value += w · sample where
 // triplanar, value = sample for the one read of the other projections; 0 where weighted[l] is not
@@ -256,13 +268,45 @@ WT_INLINE wt_lane_colours wt_layer_values_lane(const Tex& tex, const Reads& read
     wt_accumulate_reads(texs, reads.smp, layer, triplanar ? 3 : 1, triplanar,
                         wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w),
                         value);
-    if (keep && saved.shape[0] > 0) {  // SplatPixels.saved: row base + l, the layer's 4 floats
-        for (int l = 0; l < count; ++l) {
-            float* row = (float*)((char*)saved.data + (long long)(base + l) * saved.strides[0]);
+    if (keep) wt_keep_layer(saved, j, base, count, value);
+    return value;
+}
+
+// lanes.splat.layer_values_stochastic_lane: wt_layer_values_lane with stochastic sampling (stoch, a
+// linear blend of one-tap footprints: stochastic.lane_taps_linear), as read_layer_stochastic reads a
+// layer: per read k of wt_layer_reads with a positive weight w, value += w · sample_stochastic (0
+// to start with, for the one read of the UV and world-XZ projections too: its weight is 1). A read's
+// sample_stochastic is that of the stochastic triplanar lane's projection: its taps
+// (wt_projection_taps_lane), read tap by tap from 0 and added to 0 (`result += value`), NaN where
+// its UV or LOD is not finite. Kept in saved where keep, as wt_layer_values_lane keeps its value.
+// twin: splat_layers._layer_reads:read_layer
+template <class Tex, class Reads, class Stoch, class Floats, class UV, class Surface, class TriW, class Saved>
+WT_INLINE wt_lane_colours wt_layer_values_stochastic_lane(const Tex& tex, const Reads& reads, const Stoch& stoch, int j,
+                                                          const Floats& weighted, const UV& uv0, const UV& uv0_dx,
+                                                          const UV& uv0_dy, const Surface& surface, int base, int count,
+                                                          const TriW& tri_w, int keep, const Saved& saved) {
+    const wt_lane_reads at =
+        wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
+    int layer[WT_L];
+    float zero[WT_L], one[WT_L];
+    for (int l = 0; l < WT_L; ++l) layer[l] = j, zero[l] = 0.0f, one[l] = 1.0f;
+    const float nan = __builtin_nanf("");
+    wt_lane_colours value;
+    for (int k = 0; k < (reads.params.projection == WT_PROJECT_TRIPLANAR ? 3 : 1); ++k) {
+        const wt_lane_taps taps = wt_projection_taps_lane(stoch, at, k, count);
+        wt_lane_colours sampled;
+        for (int t = 0; t < 4; ++t)
+            wt_accumulate_footprint(tex, reads.smp, layer, taps.data[3 * t], taps.data[3 * t + 1], taps.data[12], zero,
+                                    zero, one, taps.data[3 * t + 2], 1, sampled);
+        for (int l = 0; l < WT_L; ++l) {
+            const float w = at.data[9 + k][l];
+            if (!(w > 0.0f)) continue;
+            const bool finite = taps.data[13][l] != 0.0f;
             for (int c = 0; c < 4; ++c)
-                *(float*)((char*)row + (long long)(4 * j + c) * saved.strides[1]) = value.data[l][c];
+                value.data[l][c] = value.data[l][c] + w * (finite ? 0.0f + sampled.data[l][c] : nan);
         }
     }
+    if (keep) wt_keep_layer(saved, j, base, count, value);
     return value;
 }
 
@@ -317,4 +361,31 @@ WT_INLINE void wt_scatter_layer_lane(const Tex& tex, const Grad& grad, const Rea
                                        triplanar ? w * gl : gl);
         }
     }
+}
+
+// lanes.splat.scatter_layer_stochastic_lane: splat_layers.scatter_layer_stochastic of the gradients
+// g[l] of layer j's reads of tex (wt_layer_values_stochastic_lane's): each read k with a positive
+// weight w adds w · g (for the one read of the UV and world-XZ projections too: w is 1) through its
+// stochastic taps into grad, pixel by pixel in read and tap order (wt_scatter_projection_taps_lanes).
+// twin: splat_layers._layer_reads:scatter_layer
+template <class Tex, class Grad, class Reads, class Stoch, class Floats, class UV, class Surface, class TriW>
+WT_INLINE void wt_scatter_layer_stochastic_lane(const Tex& tex, const Grad& grad, const Reads& reads,
+                                                const Stoch& stoch, int j, const Floats& weighted, const UV& uv0,
+                                                const UV& uv0_dx, const UV& uv0_dy, const Surface& surface, int base,
+                                                int count, const TriW& tri_w, const wt_lane_colours& g) {
+    const wt_lane_reads at =
+        wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
+    wt_lane_taps taps[3];  // a read not made: no weight, nothing added
+    wt_lane_colours share[3];
+    for (int k = 0; k < (reads.params.projection == WT_PROJECT_TRIPLANAR ? 3 : 1); ++k) {
+        taps[k] = wt_projection_taps_lane(stoch, at, k, count);
+        for (int l = 0; l < WT_L; ++l)
+            for (int c = 0; c < 4; ++c) share[k].data[l][c] = at.data[9 + k][l] * g.data[l][c];
+    }
+    struct {
+        int c[WT_L];
+    } layers;
+    for (int l = 0; l < WT_L; ++l) layers.c[l] = j;
+    wt_scatter_projection_taps_lanes(tex, tex, tex, grad, grad, grad, reads.smp, layers, taps[0], taps[1], taps[2],
+                                     share[0], share[1], share[2]);
 }
