@@ -11,12 +11,11 @@ from . import inlined, specialised
 from .family import Kernels, family, lane_kernel, pixel_kernels
 from .filters import sample_footprint, sample_footprint_outlined, sample_levels
 from .footprint import point_footprint, texture_footprint
-from .lanes import LANES
 from .lanes.sample import sample_footprint_lane, sample_levels_lane
 from .lanes.scatter import scatter_footprint_lane, scatter_levels_lane
 from .native import use
 from .scatter import scatter_footprint, scatter_levels
-from .texels import FILTER_ANISOTROPIC, LOD_CONSTANT, LOD_DERIVATIVES, LOD_PER_SAMPLE, SamplerArgs, TexelGrad, TextureView, finite_uv_lod, read_channels, resolve_layer, write_channels
+from .texels import LOD_CONSTANT, LOD_DERIVATIVES, LOD_PER_SAMPLE, SamplerArgs, TexelGrad, TextureView, finite_uv_lod, read_channels, resolve_layer, write_channels
 
 MODULE = use("warptex.sample")
 LOD_MODULE = use(MODULE + ".lod")  # the lanes of a LOD per sample: apart from the one-LOD lanes, which every plain lookup compiles
@@ -135,13 +134,9 @@ def sample_lane(args: SampleArgs, pixels: SamplePixels, base: wp.int32, out: wp.
 
 @inlined
 def scatter_sample_lane(args: SampleArgs, pixels: SamplePixels, base: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):
-    """:func:`scatter_sample` for the lane of pixels from ``base`` (:mod:`.lanes`), on the CPU: the
-    anisotropic filter's footprints, which may take several taps, pixel by pixel."""
-    if args.smp.filter == FILTER_ANISOTROPIC:
-        for l in range(wp.min(adj.shape[0] - base, LANES)):
-            scatter_sample(args, pixels, base + l, grads, adj)
-    else:
-        scatter_footprint_lane(args.tex, grads.tex, args.smp, pixels.uv, pixels.uv_dx, pixels.uv_dy, pixels.lods, pixels.layers, args.constant_layer, args.lod_source, args.constant_lod, adj, base)
+    """:func:`scatter_sample` for the lane of pixels from ``base`` (:mod:`.lanes`), on the CPU (the
+    anisotropic filter's footprints of several taps pixel by pixel, inside the native call)."""
+    scatter_footprint_lane(args.tex, grads.tex, args.smp, pixels.uv, pixels.uv_dx, pixels.uv_dy, pixels.lods, pixels.layers, args.constant_layer, args.lod_source, args.constant_lod, adj, base)
 
 
 sample_pixel = _footprint_bodies(sample_footprint, "sample_pixel")

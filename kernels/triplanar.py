@@ -358,11 +358,11 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
                                                scatter=bodies["colour_grad"], grads=FaceGrads)  # fmt: skip
         lanes = grad_lanes = None
         if not stochastic and not faces:
-            colour_lane, colour_grad_lane = lane_bodies(bodies["colour"], bodies["colour_grad"], TriplanarArgs)
+            colour_lane, colour_grad_lane = lane_bodies(TriplanarArgs)
             lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
             grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
         elif not stochastic:
-            colour_lane, colour_grad_lane = face_lane_bodies(bodies["colour_grad"], TriplanarArgs)
+            colour_lane, colour_grad_lane = face_lane_bodies(TriplanarArgs)
             lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
             grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
         elif not faces:
@@ -373,7 +373,7 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
     forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
     lanes = first_lanes = None
     if not stochastic and not faces:  # modules of their own: colour-only jobs do not compile them
-        normal_lane, samples_lane, samples_grad_lane = normal_lane_bodies(bodies["samples_grad"], TriplanarArgs, ProjectionSamples)
+        normal_lane, samples_lane, samples_grad_lane = normal_lane_bodies(TriplanarArgs, ProjectionSamples)
         lanes = lane_kernel(normal_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module + ".normal", name=name + "_normal_lanes", covered=surface_covered)
         first_lanes = {"lanes": lane_kernel(samples_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, module=module + ".normal.grad", name=name + "_samples_lanes"),
                        "texel_grad_lanes": lane_kernel(samples_grad_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, grads_t=FaceGrads, module=module + ".normal.grad", name=name + "_samples_texel_grad_lanes")}  # fmt: skip

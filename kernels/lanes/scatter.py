@@ -37,7 +37,9 @@ def scatter_lod_lanes(tex0: TextureView, tex1: TextureView, tex2: TextureView, g
     pixel ``l``'s share of its gradient ``g[l]`` (``w · g[l]``, ``w`` the read's weight, where
     ``weigh``; ``g[l]`` where not): read ``r`` of ``tex_r`` (layer ``layers[l]``) at its UV and LOD
     in ``reads`` (:data:`~.lane_reads`), into ``grad_r`` (nothing where it is empty), where its
-    weight is positive, pixel by pixel and read by read as the scalar kernels add them."""
+    weight is positive, pixel by pixel and read by read as the scalar kernels add them. Where a
+    read's footprint takes several taps (the anisotropic filter's), the lane's adds go pixel by
+    pixel, read by read, each footprint's taps in order (``scatter.scatter_footprint``)."""
     ...
 
 
@@ -46,8 +48,8 @@ def scatter_footprint_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, 
                            lods: wp.array(dtype=float), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32, lod_source: wp.int32, constant_lod: float,
                            adj: wp.array2d(dtype=float), base: wp.int32):  # fmt: skip
     """:func:`~warptex.kernels.scatter.scatter_footprint` of the gradient ``adj[i]`` for the lane's
-    pixels ``i = base ..`` (:func:`~.sample.sample_footprint_lane`'s reads), one-tap footprints only
-    (every filter but the anisotropic one)."""
+    pixels ``i = base ..`` (:func:`~.sample.sample_footprint_lane`'s reads); where the anisotropic
+    filter's footprints take several taps, pixel by pixel, each footprint's taps in order."""
     ...
 
 

@@ -8,8 +8,9 @@ biplanar weights) comes from :func:`~.projection.triplanar_reads_lane` for the w
 the lane's texture reads from
 :func:`~.projection.accumulate_reads_lane` and its texel-gradient adds from
 :func:`~.scatter.scatter_lod_lanes`, both in the order the scalar bodies take them, so the
-outputs and the gradients are the scalar kernels' bits. The gradient of the anisotropic filter,
-whose footprints may take several taps, goes pixel by pixel through the scalar body.
+outputs and the gradients are the scalar kernels' bits. The anisotropic filter's footprints of
+several taps add pixel by pixel, read by read, each read's taps in order, inside the native call
+(``wt_scatter_footprint_rows``), as the scalar bodies add them.
 """
 
 import functools
@@ -20,7 +21,7 @@ from .. import inlined, specialised
 from ..faces import FaceGrads, FaceTextures, on_axis
 from ..family import lane_covered
 from ..projection import SurfacePixels
-from ..texels import FILTER_ANISOTROPIC, SamplerArgs, pick3, read_channels, write_channels
+from ..texels import SamplerArgs, pick3, read_channels, write_channels
 from . import LANES, lane_colours, lane_floats, lane_ints, lane_reads
 from .normals import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
 from .projection import accumulate_reads_lane, triplanar_reads_lane
@@ -52,9 +53,9 @@ def write_normals(normals: lane_colours, base: wp.int32, count: wp.int32, out: w
 
 
 @functools.cache
-def lane_bodies(colour, colour_grad, args_t):
-    """``(colour_lane, colour_grad_lane)``: the lane bodies of the plain colour body ``colour`` and its
-    texel gradient ``colour_grad`` (one texture per axis), whose arguments are ``args_t``
+def lane_bodies(args_t):
+    """``(colour_lane, colour_grad_lane)``: the lane bodies of plain colour mapping and its texel
+    gradient (one texture per axis), whose arguments are ``args_t``
     (:class:`~.triplanar.TriplanarArgs`)."""
 
     def write_colours(args: args_t, reads: lane_reads, base: wp.int32, count: wp.int32, out: wp.array2d(dtype=float)):
@@ -82,22 +83,17 @@ def lane_bodies(colour, colour_grad, args_t):
 
     def colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
-        if args.smp.filter == FILTER_ANISOTROPIC:
-            for l in range(count):
-                colour_grad(args, pixels, base + l, grads, adj)
-        else:
-            scatter_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0, 0), base, count, grads, adj)
+        scatter_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0, 0), base, count, grads, adj)
 
     return inlined(specialised(colour_lane, "triplanar_colour_lane")), inlined(specialised(colour_grad_lane, "triplanar_colour_grad_lane"))
 
 
 @functools.cache
-def face_lane_bodies(colour_grad, args_t):
+def face_lane_bodies(args_t):
     """``(colour_lane, colour_grad_lane)``: the lane bodies of plain colour mapping with a texture per
-    face (``faces.on_face``), whose pixel texel gradient is ``colour_grad``: the lane's reads on the
-    ``+`` faces and on the ``-`` faces (each pixel's weight on the side its normal looks at), read and
-    added projection by projection, ``+`` then ``-`` (a pixel reads one of the two), in the order
-    of the pixel bodies. The anisotropic filter's gradient goes pixel by pixel."""
+    face (``faces.on_face``): the lane's reads on the ``+`` faces and on the ``-`` faces (each pixel's
+    weight on the side its normal looks at), read and added projection by projection, ``+`` then
+    ``-`` (a pixel reads one of the two), in the order of the pixel bodies."""
 
     def faces_colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
@@ -114,17 +110,13 @@ def face_lane_bodies(colour_grad, args_t):
 
     def faces_colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
-        if args.smp.filter == FILTER_ANISOTROPIC:
-            for l in range(count):
-                colour_grad(args, pixels, base + l, grads, adj)
-        else:
-            f = args.faces
-            plus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 1)
-            minus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 2)
-            g = lane_colours()
-            for l in range(count):
-                g[l] = read_channels(adj, base + l)
-            scatter_face_reads_lanes(f.px, f.nx, f.py, f.ny, f.pz, f.nz, grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, args.smp, lane_ints(args.layer), plus, minus, g)
+        f = args.faces
+        plus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 1)
+        minus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 2)
+        g = lane_colours()
+        for l in range(count):
+            g[l] = read_channels(adj, base + l)
+        scatter_face_reads_lanes(f.px, f.nx, f.py, f.ny, f.pz, f.nz, grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, args.smp, lane_ints(args.layer), plus, minus, g)
 
     return inlined(specialised(faces_colour_lane, "triplanar_faces_colour_lane")), inlined(specialised(faces_colour_grad_lane, "triplanar_faces_colour_grad_lane"))
 
@@ -193,12 +185,11 @@ def stochastic_lane_bodies(colour, colour_grad, args_t):
 
 
 @functools.cache
-def normal_lane_bodies(samples_grad, args_t, samples_t):
+def normal_lane_bodies(args_t, samples_t):
     """``(normal_lane, samples_lane, samples_grad_lane)``: the lane bodies of plain normal mapping
     (one texture per axis) and of the first step of its two-step gradient, which stores each
     projection's sample and the weights (``samples_t``: :class:`~.triplanar.ProjectionSamples`) and
-    adds their texel gradients (the anisotropic filter's pixel by pixel through the body
-    ``samples_grad``). Each reads the projections on the unit normal, as the bodies do
+    adds their texel gradients. Each reads the projections on the unit normal, as the bodies do
     (``triplanar_reads_lane``'s ``unit_normals``); the forward makes the normals from them natively
     (:func:`~.normals.surface_normals_lane`)."""
 
@@ -231,20 +222,16 @@ def normal_lane_bodies(samples_grad, args_t, samples_t):
 
     def samples_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: samples_t):
         count = wp.min(adj.samples.shape[0] - base, LANES)
-        if args.smp.filter == FILTER_ANISOTROPIC:
-            for l in range(count):
-                samples_grad(args, pixels, base + l, grads, adj)
-        else:
-            reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 0)
-            gx = lane_colours()
-            gy = lane_colours()
-            gz = lane_colours()
-            for l in range(count):
-                gx[l] = adj.samples[base + l, 0]
-                gy[l] = adj.samples[base + l, 1]
-                gz[l] = adj.samples[base + l, 2]
-            faces = args.faces
-            scatter_reads_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, lane_ints(args.layer), reads, gx, gy, gz)
+        reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 0)
+        gx = lane_colours()
+        gy = lane_colours()
+        gz = lane_colours()
+        for l in range(count):
+            gx[l] = adj.samples[base + l, 0]
+            gy[l] = adj.samples[base + l, 1]
+            gz[l] = adj.samples[base + l, 2]
+        faces = args.faces
+        scatter_reads_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, lane_ints(args.layer), reads, gx, gy, gz)
 
     return (
         inlined(specialised(normal_lane, "triplanar_normal_lane")),

@@ -206,6 +206,84 @@ WT_INLINE void wt_scatter_rows(const Tex* const* texs, const Grad* const* grads,
     wt_scatter_levels_any(nreads, texs, grads, smp, us, vs, levels, fractions, layer, active, gs);
 }
 
+// Whether a pixel of the lane reads a footprint of several taps (the anisotropic filter's) in one
+// of reads r = 0 .. nreads - 1 (weights w_rows[r], taps taps_rows[r]).
+WT_INLINE bool wt_several_taps(const int nreads, const float* const* w_rows, const float* const* taps_rows) {
+    bool several = false;
+    for (int r = 0; r < nreads; ++r)
+        for (int l = 0; l < WT_L; ++l) several |= w_rows[r][l] > 0.0f && taps_rows[r][l] != 1.0f;
+    return several;
+}
+
+// wt_scatter_rows where reads have footprints of several taps (the anisotropic filter's; footprint
+// rows du, dv, taps too): scatter.scatter_footprint of each read with a positive weight into a
+// gradient that is needed, pixel by pixel, read by read, each footprint's taps in order: tap k of a
+// footprint of n taps at (u + du · s, v + dv · s), s = k + 1/2 - n/2, adds the read's share times
+// 1 / n (a one-tap footprint its share at (u, v) itself); a tap whose UV or LOD is not finite adds
+// nothing. The taps go through wt_scatter_levels 16 at a time, as the lanes of one read, which adds
+// its lanes in order: the reads into one gradient array (a texture shared by projections, or a
+// splat layer's) keep the scalar kernels' order, and reads into other arrays (a texture per axis)
+// add apart, each array's in that order.
+// twin: scatter.scatter_footprint
+template <class Tex, class Grad, class Smp>
+WT_INLINE void wt_scatter_footprint_rows(const Tex* const* texs, const Grad* const* grads, const Smp& smp,
+                                         const int nreads, const int* layers, const float* const* u_rows,
+                                         const float* const* v_rows, const float* const* lod_rows,
+                                         const float* const* du_rows, const float* const* dv_rows,
+                                         const float* const* taps_rows, const float* const* w_rows, const int weigh,
+                                         const wt_lane_colours* const* gr, const int per_read) {
+    bool done[WT_MAX_READS] = {};
+    for (int first = 0; first < nreads; ++first) {
+        if (done[first] || grads[first]->texels.shape[0] == 0) continue;
+        bool group[WT_MAX_READS] = {};  // the reads into the gradient array of read `first`
+        for (int r = first; r < nreads; ++r)
+            group[r] = done[r] = grads[r]->texels.shape[0] > 0 && grads[r]->texels.data == grads[first]->texels.data;
+        const Tex* tex[1] = {texs[first]};
+        const Grad* grad[1] = {grads[first]};
+        float us[1][WT_L], vs[1][WT_L], fractions[1][WT_L];
+        int levels[1][WT_L], layer[1][WT_L];
+        bool active[1][WT_L];
+        wt_f4 gs[1][WT_L];
+        int n = 0;  // taps batched
+        auto flush = [&]() __attribute__((always_inline)) {
+            for (int l = n; l < WT_L; ++l) {
+                us[0][l] = vs[0][l] = fractions[0][l] = 0.0f;
+                levels[0][l] = layer[0][l] = 0;
+                active[0][l] = false;
+            }
+            wt_scatter_levels_any(1, tex, grad, smp, us, vs, levels, fractions, layer, active, gs);
+            n = 0;
+        };
+        for (int l = 0; l < WT_L; ++l) {
+            for (int r = first; r < nreads; ++r) {
+                const float w = w_rows[r][l], lod = lod_rows[r][l];
+                if (!group[r] || !(w > 0.0f) || !(__builtin_fabsf(lod) <= wt_float_max)) continue;
+                const wt_lane_colours& g = *gr[per_read ? r : 0];
+                const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
+                const wt_f4 share = weigh ? w * gl : gl;
+                const float taps = taps_rows[r][l], u = u_rows[r][l], v = v_rows[r][l];
+                const float du = du_rows[r][l], dv = dv_rows[r][l];
+                const bool one = taps == 1.0f;
+                const int count = one ? 1 : (int)taps;  // footprint.footprint_taps
+                const wt_f4 tap_share = one ? share : share * (1.0f / taps);
+                int level;
+                float fraction;
+                wt_mip_levels(*texs[r], smp, lod, level, fraction);
+                const int lr = wp::clamp(layers[l], 0, texs[r]->num_layers - 1);
+                for (int k = 0; k < count; ++k) {
+                    const float s = (float)k + 0.5f - 0.5f * taps;
+                    const float tu = one ? u : u + du * s, tv = one ? v : v + dv * s;  // footprint.footprint_uv
+                    if (!(__builtin_fabsf(tu) <= wt_float_max && __builtin_fabsf(tv) <= wt_float_max)) continue;
+                    us[0][n] = tu, vs[0][n] = tv, levels[0][n] = level, fractions[0][n] = fraction;
+                    layer[0][n] = lr, active[0][n] = true, gs[0][n] = tap_share;
+                    if (++n == WT_L) flush();
+                }
+            }
+        }
+        if (n > 0) flush();
+    }
+}
+
 // wt_scatter_rows of the reads of a lane_reads matrix `at`.
 template <class Tex, class Grad, class Smp>
 WT_INLINE void wt_scatter_lod_of(const Tex* const* texs, const Grad* const* grads, const Smp& smp, const int nreads,
@@ -215,6 +293,13 @@ WT_INLINE void wt_scatter_lod_of(const Tex* const* texs, const Grad* const* grad
     const float* v[3] = {at.data[3], at.data[4], at.data[5]};
     const float* lod[3] = {at.data[6], at.data[7], at.data[8]};
     const float* w[3] = {at.data[9], at.data[10], at.data[11]};
+    const float* taps[3] = {at.data[18], at.data[19], at.data[20]};
+    if (wt_several_taps(nreads, w, taps)) {
+        const float* du[3] = {at.data[12], at.data[13], at.data[14]};
+        const float* dv[3] = {at.data[15], at.data[16], at.data[17]};
+        wt_scatter_footprint_rows(texs, grads, smp, nreads, layers, u, v, lod, du, dv, taps, w, weigh, gr, per_read);
+        return;
+    }
     wt_scatter_rows(texs, grads, smp, nreads, layers, u, v, lod, w, weigh, gr, per_read);
 }
 
@@ -224,41 +309,6 @@ WT_INLINE void wt_scatter_lod(const Tex* const* texs, const Grad* const* grads, 
                               const int* layers, const wt_lane_reads& at, const int weigh, const wt_lane_colours& g) {
     const wt_lane_colours* gr[1] = {&g};
     wt_scatter_lod_of(texs, grads, smp, nreads, layers, at, weigh, gr, 0);
-}
-
-// scatter.scatter_footprint of one pixel's read: g added into the texels of the footprint's taps
-// (u + du · s, v + dv · s) at s = k + 1/2 - taps / 2, each tap's share g · (1 / taps), in tap order
-// (scatter_taps); a one-tap footprint's g at (u, v) itself (scatter_lod). The taps go 16 at a time
-// through wt_scatter_levels as the lanes of one read, which adds them in lane order: the pixel's
-// order. A tap whose UV or LOD is not finite adds nothing.
-// twin: scatter.scatter_footprint
-template <class Tex, class Grad, class Smp>
-WT_INLINE void wt_scatter_footprint_pixel(const Tex& tex, const Grad& grad, const Smp& smp, int layer, float u, float v,
-                                          float lod, float du, float dv, float taps, const wt_f4 g) {
-    const bool one = taps == 1.0f;
-    const int n = one ? 1 : (int)taps;  // footprint.footprint_taps
-    const wt_f4 share = one ? g : g * (1.0f / taps);
-    const Tex* texs[1] = {&tex};
-    const Grad* grads[1] = {&grad};
-    for (int first = 0; first < n; first += WT_L) {
-        float us[1][WT_L], vs[1][WT_L], fractions[1][WT_L];
-        int levels[1][WT_L], layers[1][WT_L];
-        bool active[1][WT_L];
-        wt_f4 gs[1][WT_L];
-        for (int l = 0; l < WT_L; ++l) {
-            const float s = (float)(first + l) + 0.5f - 0.5f * taps;
-            const float tu = one ? u : u + du * s, tv = one ? v : v + dv * s;  // footprint.footprint_uv
-            const bool ok = first + l < n && __builtin_fabsf(tu) <= wt_float_max &&
-                            __builtin_fabsf(tv) <= wt_float_max && __builtin_fabsf(lod) <= wt_float_max;
-            active[0][l] = ok;
-            us[0][l] = ok ? tu : 0.0f;
-            vs[0][l] = ok ? tv : 0.0f;
-            wt_mip_levels(tex, smp, ok ? lod : 0.0f, levels[0][l], fractions[0][l]);
-            layers[0][l] = layer;
-            gs[0][l] = share;
-        }
-        wt_scatter_levels_any(1, texs, grads, smp, us, vs, levels, fractions, layers, active, gs);
-    }
 }
 
 // lanes.scatter.scatter_levels_lane: scatter.scatter_levels of the gradient adj[i] for the lane's
@@ -316,7 +366,7 @@ WT_INLINE void wt_scatter_lod_lanes(const Tex& tex0, const Tex& tex1, const Tex&
 }
 
 // lanes.scatter.scatter_footprint_lane: scatter.scatter_footprint of adj[i] for the lane's pixels
-// i = base .. (wt_sample_reads_of's reads), one-tap footprints only.
+// i = base .. (wt_sample_reads_of's reads; footprints of several taps pixel by pixel: wt_scatter_lod).
 // twin: scatter.scatter_footprint
 template <class Tex, class Grad, class Smp, class UV, class Lods, class Layers, class Adj>
 WT_INLINE void wt_scatter_footprint_lane(const Tex& tex, const Grad& grad, const Smp& smp, const UV& uv,
@@ -365,13 +415,18 @@ WT_INLINE void wt_scatter_face_reads_lanes(const Tex& tex_px, const Tex& tex_nx,
                                            const wt_lane_colours& g) {
     const Tex* texs[6] = {&tex_px, &tex_nx, &tex_py, &tex_ny, &tex_pz, &tex_nz};
     const Grad* grads[6] = {&grad_px, &grad_nx, &grad_py, &grad_ny, &grad_pz, &grad_nz};
-    const float *u[6], *v[6], *lod[6], *w[6];
+    const float *u[6], *v[6], *lod[6], *du[6], *dv[6], *taps[6], *w[6];
     for (int r = 0; r < 6; ++r) {
         const wt_lane_reads& at = r % 2 == 0 ? plus : minus;
         const int axis = r / 2;
         u[r] = at.data[axis], v[r] = at.data[3 + axis], lod[r] = at.data[6 + axis], w[r] = at.data[9 + axis];
+        du[r] = at.data[12 + axis], dv[r] = at.data[15 + axis], taps[r] = at.data[18 + axis];
     }
     const wt_lane_colours* gr[1] = {&g};
+    if (wt_several_taps(6, w, taps)) {
+        wt_scatter_footprint_rows(texs, grads, smp, 6, layers.c, u, v, lod, du, dv, taps, w, 1, gr, 0);
+        return;
+    }
     wt_scatter_rows(texs, grads, smp, 6, layers.c, u, v, lod, w, 1, gr, 0);
 }
 

@@ -327,8 +327,8 @@ WT_INLINE wt_lane_colours wt_layer_blend_lane(const Tex& tex, const Reads& reads
 
 // lanes.splat.scatter_layer_lane: splat_layers.scatter_layer of the gradients g[l] of layer j's
 // reads of tex (wt_layer_reads) into grad, pixel by pixel and read by read: w · g per projection
-// where triplanar, g itself for the one read of the other projections. Where a read has several
-// taps (the anisotropic filter), pixel by pixel, each read's taps 16 at a time.
+// where triplanar, g itself for the one read of the other projections (wt_scatter_lod: where a read
+// has several taps, the anisotropic filter's, pixel by pixel, each read's taps 16 at a time).
 // twin: splat_layers._layer_reads:scatter_layer
 template <class Tex, class Grad, class Reads, class Floats, class UV, class Surface, class TriW>
 WT_INLINE void wt_scatter_layer_lane(const Tex& tex, const Grad& grad, const Reads& reads, int j,
@@ -342,25 +342,9 @@ WT_INLINE void wt_scatter_layer_lane(const Tex& tex, const Grad& grad, const Rea
     const int triplanar =
         reads.params.projection == WT_PROJECT_TRIPLANAR;  // w · g per projection, else g for the one read
     const int nreads = triplanar ? 3 : 1;
-    const wt_lane_reads at =
-        wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
-    bool several = false;  // a read of several taps (the anisotropic filter's)
-    for (int k = 0; k < nreads; ++k)
-        for (int l = 0; l < WT_L; ++l) several |= at.data[9 + k][l] > 0.0f && at.data[18 + k][l] != 1.0f;
-    if (!several) {
-        wt_scatter_lod(texs, grads, reads.smp, nreads, layer, at, triplanar, g);
-        return;
-    }
-    for (int l = 0; l < count; ++l) {  // pixel by pixel, read by read, each read's taps in order
-        for (int k = 0; k < nreads; ++k) {
-            const float w = at.data[9 + k][l];
-            if (!(w > 0.0f)) continue;
-            const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
-            wt_scatter_footprint_pixel(tex, grad, reads.smp, j, at.data[k][l], at.data[3 + k][l], at.data[6 + k][l],
-                                       at.data[12 + k][l], at.data[15 + k][l], at.data[18 + k][l],
-                                       triplanar ? w * gl : gl);
-        }
-    }
+    wt_scatter_lod(texs, grads, reads.smp, nreads, layer,
+                   wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w),
+                   triplanar, g);
 }
 
 // lanes.splat.scatter_layer_stochastic_lane: splat_layers.scatter_layer_stochastic of the gradients
