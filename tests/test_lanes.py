@@ -556,8 +556,8 @@ def test_splat_lanes_give_the_one_pixel_bits(rng, launched, case, filter):
 def test_stochastic_splat_lanes_give_the_one_pixel_bits(rng, launched, case, filter, method):
     """A stochastic splat (``lanes.splat.layer_values_stochastic_lane``): each layer's reads, then
     each read's stochastic taps read tap by tap, as the stochastic triplanar lane reads a
-    projection. The anisotropic filter and face layers run the one-pixel kernels
-    (``stochastic_lanes_take``)."""
+    projection; the anisotropic filter's footprint taps each with their stochastic taps. Face
+    layers run the one-pixel kernels (``stochastic_lanes_take``)."""
     g = _splat_gbuffer(rng)
     layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32))
     maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False)
@@ -569,7 +569,7 @@ def test_stochastic_splat_lanes_give_the_one_pixel_bits(rng, launched, case, fil
     lanes, scalar = _both(lambda: wt.splat(g, layers, maps, sampler=smp, stochastic=option, **kw))
     _same_bits(lanes, scalar)
     assert (np.nan_to_num(lanes) > 0).any(-1).mean() > 0.5  # most pixels blend something
-    takes = case != "triplanar, face layers" and filter != "anisotropic"  # stochastic_lanes_take
+    takes = case != "triplanar, face layers"  # stochastic_lanes_take
     assert (("splat8_stochastic_lanes", -(-1000 // LANES)) in launched) == takes
 
 
@@ -828,6 +828,18 @@ def test_stochastic_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, c
         wt.set_num_threads(previous)
     takes = case != "world xz, height array"  # stochastic_grad_lanes_take
     assert threads > 1 or (("splat8_stochastic_texel_grad_lanes", -(-3000 // LANES)) in launched) == takes
+
+
+def test_stochastic_splat_gradient_of_the_anisotropic_filter_runs_one_pixel(rng, launched):
+    """The anisotropic filter's footprint taps each take stochastic taps: their gradient runs the
+    one-pixel kernel (``stochastic_grad_lanes_take``), after a forward through the lanes."""
+    g = _splat_gbuffer(rng, 1000)
+    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True)
+    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False, requires_grad=True)
+    smp = wt.Sampler(filter="anisotropic", address="mirror", max_aniso=3)
+    _same_grads(lambda: wt.splat(g, layers, maps, sampler=smp, stochastic="hex", **SPLAT_CASES["triplanar"]), [layers, maps], rng, 4, 1000)
+    names = {name for name, _ in launched}
+    assert "splat8_stochastic_lanes" in names and "splat8_stochastic_texel_grad_lanes" not in names
 
 
 # The tiling-gradient cases: the splat's options, an address mode and the layers' texel format (one each, to keep the test short).

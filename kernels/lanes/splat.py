@@ -23,8 +23,9 @@ The stochastic splat's lanes are the same bodies with each layer read by
 :func:`layer_values_stochastic_lane`: per read, its stochastic taps worked out natively and read tap
 by tap, as the stochastic triplanar lane reads a projection, and added back by
 :func:`scatter_layer_stochastic_lane`. Its forward lane keeps the layers' colours for the gradient
-lane itself (it never takes the tiling's gradient by hand). A histogram's blend and the anisotropic
-filter's footprints run the one-pixel kernels (:func:`stochastic_lanes_take`).
+lane itself (it never takes the tiling's gradient by hand). A histogram's blend runs the one-pixel
+kernels (:func:`stochastic_lanes_take`), and so does the gradient of the anisotropic filter's
+footprints, whose taps each take stochastic taps.
 """
 
 import functools
@@ -92,16 +93,16 @@ def grad_lanes_take(args: SplatArgs) -> bool:
 
 
 def stochastic_lanes_take(args: SplatArgs) -> bool:
-    """:func:`lanes_take` for the stochastic kernels: also a linear blend of one-tap footprints
-    (``stochastic.lane_taps_linear``: no histogram, not the anisotropic filter), which the lanes
-    read tap by tap; the rest runs the one-pixel kernels."""
+    """:func:`lanes_take` for the stochastic kernels: also a linear blend (no histogram), which the
+    lanes read tap by tap; the rest runs the one-pixel kernels."""
     stoch = args.stoch
-    return lanes_take(args) and args.reads.smp.filter != FILTER_ANISOTROPIC and stoch.histogram == 0 and stoch.method != METHOD_NONE
+    return lanes_take(args) and stoch.histogram == 0 and stoch.method != METHOD_NONE
 
 
 def stochastic_grad_lanes_take(args: SplatArgs) -> bool:
-    """:func:`grad_lanes_take` for the stochastic kernels (:func:`stochastic_lanes_take`)."""
-    return stochastic_lanes_take(args) and grad_lanes_take(args)
+    """:func:`grad_lanes_take` for the stochastic kernels (:func:`stochastic_lanes_take`), one-tap
+    footprints only (not the anisotropic filter, whose footprint taps each take stochastic taps)."""
+    return stochastic_lanes_take(args) and grad_lanes_take(args) and args.reads.smp.filter != FILTER_ANISOTROPIC
 
 
 def stochastic_lane_saved(args: SplatArgs) -> int:
@@ -146,8 +147,8 @@ def layer_values_stochastic_lane(tex: TextureView, reads: LayerReads, stoch: Sto
                                  uv0_dx: wp.array(dtype=wp.vec2), uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32,
                                  tri_w: _lane_vec3, keep: wp.int32, saved: wp.array2d(dtype=float)) -> lane_colours:  # fmt: skip
     """:func:`layer_values_lane` with stochastic sampling (``stoch``; :func:`stochastic_lanes_take`):
-    ``read_layer_stochastic``, each read's taps worked out natively and read tap by tap, as the
-    stochastic triplanar lane reads a projection (``wt_layer_values_stochastic_lane``)."""
+    ``read_layer_stochastic``, each read's stochastic taps (of each tap of its footprint) worked out
+    natively and read tap by tap (``wt_layer_values_stochastic_lane``)."""
     ...
 
 

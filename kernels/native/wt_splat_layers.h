@@ -273,12 +273,10 @@ WT_INLINE wt_lane_colours wt_layer_values_lane(const Tex& tex, const Reads& read
 }
 
 // lanes.splat.layer_values_stochastic_lane: wt_layer_values_lane with stochastic sampling (stoch, a
-// linear blend of one-tap footprints: stochastic.lane_taps_linear), as read_layer_stochastic reads a
-// layer: per read k of wt_layer_reads with a positive weight w, value += w · sample_stochastic (0
-// to start with, for the one read of the UV and world-XZ projections too: its weight is 1). A read's
-// sample_stochastic is that of the stochastic triplanar lane's projection: its taps
-// (wt_projection_taps_lane), read tap by tap from 0 and added to 0 (`result += value`), NaN where
-// its UV or LOD is not finite. Kept in saved where keep, as wt_layer_values_lane keeps its value.
+// linear blend: no histogram), as read_layer_stochastic reads a layer: per read k of wt_layer_reads
+// with a positive weight w, value += w · sample_stochastic (from 0, for the one read of the UV and
+// world-XZ projections too: its weight is 1), each read's sample_stochastic over its footprint
+// (wt_stochastic_footprint). Kept in saved where keep, as wt_layer_values_lane keeps its value.
 // twin: splat_layers._layer_reads:read_layer
 template <class Tex, class Reads, class Stoch, class Floats, class UV, class Surface, class TriW, class Saved>
 WT_INLINE wt_lane_colours wt_layer_values_stochastic_lane(const Tex& tex, const Reads& reads, const Stoch& stoch, int j,
@@ -288,22 +286,16 @@ WT_INLINE wt_lane_colours wt_layer_values_stochastic_lane(const Tex& tex, const 
     const wt_lane_reads at =
         wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
     int layer[WT_L];
-    float zero[WT_L], one[WT_L];
-    for (int l = 0; l < WT_L; ++l) layer[l] = j, zero[l] = 0.0f, one[l] = 1.0f;
-    const float nan = __builtin_nanf("");
+    for (int l = 0; l < WT_L; ++l) layer[l] = j;
     wt_lane_colours value;
     for (int k = 0; k < (reads.params.projection == WT_PROJECT_TRIPLANAR ? 3 : 1); ++k) {
-        const wt_lane_taps taps = wt_projection_taps_lane(stoch, at, k, count);
         wt_lane_colours sampled;
-        for (int t = 0; t < 4; ++t)
-            wt_accumulate_footprint(tex, reads.smp, layer, taps.data[3 * t], taps.data[3 * t + 1], taps.data[12], zero,
-                                    zero, one, taps.data[3 * t + 2], 1, sampled);
+        wt_stochastic_footprint(tex, reads.smp, stoch, layer, at.data[k], at.data[3 + k], at.data[6 + k],
+                                at.data[12 + k], at.data[15 + k], at.data[18 + k], at.data[9 + k], count, sampled);
         for (int l = 0; l < WT_L; ++l) {
             const float w = at.data[9 + k][l];
             if (!(w > 0.0f)) continue;
-            const bool finite = taps.data[13][l] != 0.0f;
-            for (int c = 0; c < 4; ++c)
-                value.data[l][c] = value.data[l][c] + w * (finite ? 0.0f + sampled.data[l][c] : nan);
+            for (int c = 0; c < 4; ++c) value.data[l][c] = value.data[l][c] + w * sampled.data[l][c];
         }
     }
     if (keep) wt_keep_layer(saved, j, base, count, value);

@@ -203,3 +203,51 @@ WT_INLINE wt_lane_taps wt_projection_taps_lane(const Params& params, const wt_la
             taps.data[3 * k + 2][l] = reads.data[9 + axis][l] > 0.0f ? taps.data[3 * k + 2][l] : 0.0f;
     return taps;
 }
+
+// stochastic.sample_stochastic of each read lane pixel (weight[l] > 0) over its footprint (u, v, lod,
+// du, dv, taps: a lane_reads matrix's rows of one read), as a linear blend (no histogram): per
+// footprint tap j, its UV (footprint.footprint_uv, for a one-tap footprint too), that UV's
+// stochastic taps at the read's LOD (wt_stochastic_taps) read tap by tap from 0, NaN where the UV
+// or the LOD is not finite, added into the result from 0; the result divided by the taps where
+// there are several (footprint.footprint_mean). Rows of the lanes not read are 0.
+// twin: stochastic._sample_stochastic:sample_stochastic
+template <class Tex, class Smp, class Params>
+WT_INLINE void wt_stochastic_footprint(const Tex& tex, const Smp& smp, const Params& params, const int* layers,
+                                       const float* u, const float* v, const float* lod, const float* du,
+                                       const float* dv, const float* taps, const float* weight, int count,
+                                       wt_lane_colours& result) {
+    int most = 0;  // the most taps of a read lane
+    float zero[WT_L], one[WT_L];
+    for (int l = 0; l < WT_L; ++l) {
+        const int n = weight[l] > 0.0f ? (int)taps[l] : 0;  // footprint.footprint_taps
+        most = n > most ? n : most;
+        zero[l] = 0.0f, one[l] = 1.0f;
+        for (int c = 0; c < 4; ++c) result.data[l][c] = 0.0f;
+    }
+    const float nan = __builtin_nanf("");
+    for (int j = 0; j < most; ++j) {
+        float tu[WT_L], tv[WT_L];
+        bool on[WT_L];
+        for (int l = 0; l < WT_L; ++l) {
+            on[l] = weight[l] > 0.0f && j < (int)taps[l];
+            const float s = (float)j + 0.5f - 0.5f * taps[l];
+            tu[l] = on[l] ? u[l] + du[l] * s : 0.0f;  // footprint.footprint_uv
+            tv[l] = on[l] ? v[l] + dv[l] * s : 0.0f;
+        }
+        wt_lane_taps t = wt_stochastic_taps(params, tu, tv, lod, count);
+        for (int k = 0; k < 4; ++k)
+            for (int l = 0; l < WT_L; ++l) t.data[3 * k + 2][l] = on[l] ? t.data[3 * k + 2][l] : 0.0f;
+        wt_lane_colours value;
+        for (int k = 0; k < 4; ++k)
+            wt_accumulate_footprint(tex, smp, layers, t.data[3 * k], t.data[3 * k + 1], t.data[12], zero, zero, one,
+                                    t.data[3 * k + 2], 1, value);
+        for (int l = 0; l < WT_L; ++l) {
+            if (!on[l]) continue;
+            const bool finite = t.data[13][l] != 0.0f;
+            for (int c = 0; c < 4; ++c) result.data[l][c] = result.data[l][c] + (finite ? value.data[l][c] : nan);
+        }
+    }
+    for (int l = 0; l < WT_L; ++l)
+        if (weight[l] > 0.0f && taps[l] != 1.0f)
+            for (int c = 0; c < 4; ++c) result.data[l][c] = result.data[l][c] / taps[l];
+}
