@@ -1,10 +1,12 @@
 """``stochastic``'s CPU lanes (:mod:`.`): a lane's stochastic taps, worked out natively
 (``native/wt_taps.h``: the hash 4-tap, cheap 2-tap and hex rules of :mod:`warptex.kernels.stochastic`,
 operation for operation), for ``stochastic`` (:func:`stochastic_taps_lane`) and for a triplanar
-lane's projections (:func:`projection_taps_lane`); and the lane bodies of ``stochastic``, forward
-and texel gradient (:func:`lane_bodies`), which read those taps one by one with
-:func:`.sample.accumulate_footprint_lane` and add their gradients with
-:func:`.scatter.scatter_taps_lane`.
+lane's projections (:func:`projection_taps_lane`); a lookup over each pixel's footprint, every
+footprint tap's stochastic taps read one by one (:func:`stochastic_footprint_lane`,
+:func:`stochastic_read_lane`: the anisotropic filter's footprints too); and the lane bodies of
+``stochastic``, forward and texel gradient (:func:`lane_bodies`), whose gradient adds the taps'
+shares with :func:`.scatter.scatter_taps_lane` (one-tap footprints; the anisotropic filter's
+gradient goes pixel by pixel through the body).
 """
 
 import functools
@@ -16,8 +18,7 @@ from ..native import cpu_snippet
 from ..sampling import SampleGrads, SamplePixels, sample_layer
 from ..stochastic import METHOD_NONE, StochasticArgs
 from ..texels import FILTER_ANISOTROPIC, SamplerArgs, TextureView, read_channels, write_channels
-from . import LANES, lane_colours, lane_floats, lane_ints, lane_reads, lane_taps
-from .sample import accumulate_footprint_lane
+from . import LANES, lane_colours, lane_ints, lane_reads, lane_taps
 from .scatter import scatter_taps_lane
 
 
@@ -38,12 +39,36 @@ def projection_taps_lane(params: StochasticArgs, reads: lane_reads, axis: wp.int
     ...
 
 
+@wp.func_native(cpu_snippet("return wt_stochastic_footprint_lane(tex, smp, params, uv, uv_dx, uv_dy, lods, layers, constant_layer, lod_source, constant_lod, base);\n", "return {};\n"))
+def stochastic_footprint_lane(tex: TextureView, smp: SamplerArgs, params: StochasticArgs, uv: wp.array(dtype=wp.vec2), uv_dx: wp.array(dtype=wp.vec2), uv_dy: wp.array(dtype=wp.vec2),
+                              lods: wp.array(dtype=float), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32, lod_source: wp.int32, constant_lod: float, base: wp.int32) -> lane_colours:  # fmt: skip
+    """Row ``l``: ``stochastic.sample_stochastic`` (a linear blend: :func:`lane_blend_linear`) of
+    pixel ``base + l`` over its footprint (``sampling.sample_footprint_of``; the anisotropic
+    filter's taps each with their stochastic taps), NaN where its UV or LOD is not finite."""
+    ...
+
+
+@wp.func_native(cpu_snippet("return wt_stochastic_read_lane(tex, smp, params, layers, reads, axis, count);\n", "return {};\n"))
+def stochastic_read_lane(tex: TextureView, smp: SamplerArgs, params: StochasticArgs, layers: lane_ints, reads: lane_reads, axis: wp.int32, count: wp.int32) -> lane_colours:
+    """Row ``l``: ``stochastic.sample_stochastic`` (a linear blend) of read ``axis`` of a triplanar
+    lane's ``reads`` over its footprint, where its weight is positive (NaN where its UV or LOD is
+    not finite), else 0."""
+    ...
+
+
+@wp.func
+def lane_blend_linear(params: StochasticArgs) -> bool:
+    """Whether the forward lanes take a lookup: a linear blend (no histogram) of a stochastic method,
+    over footprints of any filter (:func:`stochastic_footprint_lane`, :func:`stochastic_read_lane`)."""
+    return params.histogram == 0 and params.method != METHOD_NONE
+
+
 @wp.func
 def lane_taps_linear(smp: SamplerArgs, params: StochasticArgs) -> bool:
-    """Whether the lanes take a lookup tap by tap: a linear blend (no histogram) of one-tap
-    footprints (not the anisotropic filter) of a stochastic method (``stochastic``'s lanes, and
-    those of stochastic triplanar)."""
-    return smp.filter != FILTER_ANISOTROPIC and params.histogram == 0 and params.method != METHOD_NONE
+    """Whether the gradient lanes take a lookup tap by tap: :func:`lane_blend_linear` of one-tap
+    footprints (not the anisotropic filter) (``stochastic``'s lanes, and those of stochastic
+    triplanar)."""
+    return smp.filter != FILTER_ANISOTROPIC and lane_blend_linear(params)
 
 
 @functools.cache
@@ -66,28 +91,18 @@ def lane_bodies(pixel, scatter_pixel, args_t):
 
     @inlined
     def stochastic_lane(args: args_t, pixels: SamplePixels, base: wp.int32, out: wp.array2d(dtype=float)):
-        """``pixel`` for the lane of pixels from ``base``: the lane's taps, then read natively,
-        tap by tap, with ``accumulate_footprint_lane`` (``value += w · sample``, as
-        ``sample_stochastic`` blends them, from 0). A histogram's blend (not linear), the
-        anisotropic filter's footprints (several taps, each with its stochastic taps) and plain
-        sampling go pixel by pixel through the body."""
+        """``pixel`` for the lane of pixels from ``base``: each pixel's footprint, each footprint
+        tap's stochastic taps, read natively tap by tap (:func:`stochastic_footprint_lane`). A
+        histogram's blend (not linear) and plain sampling go pixel by pixel through the body."""
         count = wp.min(out.shape[0] - base, LANES)
-        if not lane_taps_linear(args.sample.smp, args.params):
+        if not lane_blend_linear(args.params):
             for l in range(count):
                 pixel(args, pixels, base + l, out)
         else:
             a = args.sample
-            taps, layers = stochastic_lane_taps(args, pixels, base, count)
-            zero = lane_floats()
-            one = lane_floats(1.0)
-            value = lane_colours()
-            for k in range(4):
-                value = accumulate_footprint_lane(a.tex, a.smp, layers, taps[3 * k], taps[3 * k + 1], taps[12], zero, zero, one, taps[3 * k + 2], 1, value)
+            value = stochastic_footprint_lane(a.tex, a.smp, args.params, pixels.uv, pixels.uv_dx, pixels.uv_dy, pixels.lods, pixels.layers, a.constant_layer, a.lod_source, a.constant_lod, base)
             for l in range(count):
-                result = wp.vec4(wp.nan)
-                if taps[13, l] != 0.0:
-                    result = wp.vec4(0.0) + value[l]  # the body's `result += value`, from 0
-                write_channels(out, base + l, result)
+                write_channels(out, base + l, value[l])
 
     @inlined
     def scatter_stochastic_lane(args: args_t, pixels: SamplePixels, base: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):

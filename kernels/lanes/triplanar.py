@@ -22,12 +22,12 @@ from ..faces import FaceGrads, FaceTextures, on_axis
 from ..family import lane_covered
 from ..projection import SurfacePixels
 from ..texels import SamplerArgs, pick3, read_channels, write_channels
-from . import LANES, lane_colours, lane_floats, lane_ints, lane_reads
+from . import LANES, lane_colours, lane_ints, lane_reads
 from .normals import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
 from .projection import accumulate_reads_lane, triplanar_reads_lane
 from .sample import accumulate_footprint_lane
 from .scatter import scatter_face_reads_lanes, scatter_lod_lanes, scatter_projection_taps_lanes, scatter_reads_lanes
-from .stochastic import lane_taps_linear, projection_taps_lane
+from .stochastic import lane_blend_linear, lane_taps_linear, projection_taps_lane, stochastic_read_lane
 
 
 @wp.func
@@ -125,12 +125,12 @@ def face_lane_bodies(args_t):
 def stochastic_lane_bodies(colour, colour_grad, args_t):
     """``(colour_lane, colour_grad_lane)``: the lane bodies of stochastic colour mapping (one texture
     per axis) whose pixel bodies are ``colour`` and its texel gradient ``colour_grad``: the lane's
-    reads, then per projection its stochastic taps worked out natively
-    (:func:`~.stochastic_sample.projection_taps_lane`), read tap by tap (``value += w · sample``
-    from 0, as ``stochastic.sample_stochastic`` blends them; NaN where the UV or LOD is not finite)
-    and added with the projection's weight, in the order of the pixel body; the gradient adds each
-    tap's share of the projection's share (``.scatter.scatter_projection_taps_lanes``). A
-    histogram's blend and the anisotropic filter go pixel by pixel through the pixel bodies."""
+    reads, then per projection ``stochastic.sample_stochastic`` over each pixel's footprint
+    (:func:`~.stochastic.stochastic_read_lane`: each footprint tap's stochastic taps worked out
+    natively and read tap by tap; NaN where the UV or LOD is not finite), added with the
+    projection's weight, in the order of the pixel body; the gradient adds each tap's share of the
+    projection's share (``.scatter.scatter_projection_taps_lanes``). A histogram's blend, and the
+    anisotropic filter's gradient, go pixel by pixel through the pixel bodies."""
 
     def stochastic_colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
@@ -155,29 +155,20 @@ def stochastic_lane_bodies(colour, colour_grad, args_t):
 
     def stochastic_colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
-        if not lane_taps_linear(args.smp, args.stoch):
+        if not lane_blend_linear(args.stoch):
             for l in range(count):
                 colour(args, pixels, base + l, out)
         else:
             faces = args.faces
             reads = triplanar_reads_lane(faces, args.proj, args.smp, pixels, base, count, 0, 0)
             layers = lane_ints(args.layer)
-            zero = lane_floats()
-            one = lane_floats(1.0)
             value = lane_colours()
             for axis in range(3):
-                taps = projection_taps_lane(args.stoch, reads, axis, count)
-                tex = on_axis(faces.px, faces.py, faces.pz, axis)
-                sampled = lane_colours()
-                for k in range(4):
-                    sampled = accumulate_footprint_lane(tex, args.smp, layers, taps[3 * k], taps[3 * k + 1], taps[12], zero, zero, one, taps[3 * k + 2], 1, sampled)
+                sampled = stochastic_read_lane(on_axis(faces.px, faces.py, faces.pz, axis), args.smp, args.stoch, layers, reads, axis, count)
                 for l in range(count):
                     w = reads[9 + axis, l]
                     if w > 0.0:
-                        s = wp.vec4(wp.nan)
-                        if taps[13, l] != 0.0:
-                            s = wp.vec4(0.0) + sampled[l]  # sample_stochastic's `result += value`, from 0
-                        value[l] = value[l] + w * s
+                        value[l] = value[l] + w * sampled[l]
             for l in range(count):
                 write_channels(out, base + l, value[l])
 

@@ -251,3 +251,33 @@ WT_INLINE void wt_stochastic_footprint(const Tex& tex, const Smp& smp, const Par
         if (weight[l] > 0.0f && taps[l] != 1.0f)
             for (int c = 0; c < 4; ++c) result.data[l][c] = result.data[l][c] / taps[l];
 }
+
+// lanes.stochastic.stochastic_footprint_lane: row l, stochastic.sample_stochastic (a linear blend)
+// of pixel base + l over its footprint (sampling.sample_footprint_of, wt_sample_reads_of),
+// wt_stochastic_footprint's: NaN where its UV or LOD is not finite.
+template <class Tex, class Smp, class Params, class UV, class Lods, class Layers>
+WT_INLINE wt_lane_colours wt_stochastic_footprint_lane(const Tex& tex, const Smp& smp, const Params& params,
+                                                       const UV& uv, const UV& uv_dx, const UV& uv_dy, const Lods& lods,
+                                                       const Layers& layers, int constant_layer, int lod_source,
+                                                       float constant_lod, int base) {
+    const wt_sample_reads s =
+        wt_sample_reads_of(tex, smp, uv, uv_dx, uv_dy, lods, layers, constant_layer, lod_source, constant_lod, base);
+    const wt_lane_reads& at = s.reads;
+    wt_lane_colours out;
+    wt_stochastic_footprint(tex, smp, params, s.layer, at.data[0], at.data[3], at.data[6], at.data[12], at.data[15],
+                            at.data[18], at.data[9], s.count, out);
+    return out;
+}
+
+// lanes.stochastic.stochastic_read_lane: row l, stochastic.sample_stochastic (a linear blend) of
+// read `axis` of a triplanar lane's reads (layer layers[l]) over its footprint where its weight
+// is positive (wt_stochastic_footprint's: NaN where its UV or LOD is not finite), else 0.
+template <class Tex, class Smp, class Params, class Ints>
+WT_INLINE wt_lane_colours wt_stochastic_read_lane(const Tex& tex, const Smp& smp, const Params& params,
+                                                  const Ints& layers, const wt_lane_reads& reads, int axis, int count) {
+    wt_lane_colours out;
+    wt_stochastic_footprint(tex, smp, params, layers.c, reads.data[axis], reads.data[3 + axis], reads.data[6 + axis],
+                            reads.data[12 + axis], reads.data[15 + axis], reads.data[18 + axis], reads.data[9 + axis],
+                            count, out);
+    return out;
+}
