@@ -20,9 +20,9 @@ and weights backwards are native code for the whole lane (:mod:`.splat_blend`); 
 scalar blocks run pixel by pixel.
 
 The stochastic splat's lanes are the same bodies with each layer read by
-:func:`layer_values_stochastic_lane`: per read, its stochastic taps worked out natively and read tap
-by tap, as the stochastic triplanar lane reads a projection, and added back by
-:func:`scatter_layer_stochastic_lane`. Its forward lane keeps the layers' colours for the gradient
+:func:`layer_values_stochastic_lane`: per read, each footprint tap's stochastic taps worked out
+natively and read tap by tap (``wt_stochastic_footprint``, as ``stochastic`` and stochastic
+triplanar read theirs), and added back by :func:`scatter_layer_stochastic_lane`. Its forward lane keeps the layers' colours for the gradient
 lane itself (it never takes the tiling's gradient by hand). A histogram's blend runs the one-pixel
 kernels (:func:`stochastic_lanes_take`), and so does the gradient of the anisotropic filter's
 footprints, whose taps each take stochastic taps.
@@ -169,8 +169,9 @@ def scatter_layer_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, j: 
     """``scatter_layer`` of the gradients ``g[l]`` of layer ``j``'s reads of ``tex`` (``wt_layer_reads``,
     as :func:`layer_values_lane` reads them) into ``grad``, pixel by pixel and read by read:
     ``w · g`` per projection where triplanar (``scatter_projections``), ``g`` itself for the one
-    read of the other projections (``.scatter.scatter_lod_lanes``); a read of several taps (the
-    anisotropic filter's) pixel by pixel, its taps in order (``scatter.scatter_taps``)."""
+    read of the other projections (``.scatter.scatter_lod_lanes``); where a read has several taps
+    (the anisotropic filter's), the lane's taps pixel by pixel, read by read, each read's in order
+    (``wt_scatter_footprint_rows``)."""
     ...
 
 

@@ -107,8 +107,9 @@ def lane_bodies(pixel, scatter_pixel, args_t):
     @inlined
     def scatter_stochastic_lane(args: args_t, pixels: SamplePixels, base: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):
         """``scatter_pixel`` for the lane of pixels from ``base``: the lane's taps, then their adds
-        natively (``scatter_taps_lane``), pixel by pixel and tap by tap as the body adds them; what
-        ``stochastic_lane`` takes pixel by pixel, likewise."""
+        natively (``scatter_taps_lane``), pixel by pixel and tap by tap as the body adds them. A
+        histogram's blend, plain sampling and the anisotropic filter's footprints (whose taps each
+        take stochastic taps) go pixel by pixel through the body."""
         count = wp.min(adj.shape[0] - base, LANES)
         if not lane_taps_linear(args.sample.smp, args.params):
             for l in range(count):

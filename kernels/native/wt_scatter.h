@@ -366,7 +366,8 @@ WT_INLINE void wt_scatter_lod_lanes(const Tex& tex0, const Tex& tex1, const Tex&
 }
 
 // lanes.scatter.scatter_footprint_lane: scatter.scatter_footprint of adj[i] for the lane's pixels
-// i = base .. (wt_sample_reads_of's reads; footprints of several taps pixel by pixel: wt_scatter_lod).
+// i = base .. (wt_sample_reads_of's reads; footprints of several taps through wt_scatter_lod's
+// wt_scatter_footprint_rows).
 // twin: scatter.scatter_footprint
 template <class Tex, class Grad, class Smp, class UV, class Lods, class Layers, class Adj>
 WT_INLINE void wt_scatter_footprint_lane(const Tex& tex, const Grad& grad, const Smp& smp, const UV& uv,
