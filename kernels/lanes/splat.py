@@ -264,7 +264,6 @@ def lane_bodies(cap: int, pixels_t, grads_t, stochastic: bool = False):
                 for t in range(layer_textures(params)):
                     tex = pick(args.layers, args.heights, t)
                     keep = wp.where(t == 0, 1, 0)
-                    value = lane_colours()
                     if wp.static(stochastic):
                         stoch = pick(args.stoch, args.height_stoch, t)
                         value = layer_values_stochastic_lane(tex, args.reads, stoch, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, keep, pixels.saved)
