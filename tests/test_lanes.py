@@ -534,15 +534,25 @@ SPLAT_CASES = {
 }
 
 
+def _splat_inputs(rng, case: str, count: int, requires_grad: bool = False):
+    """``(g, layers, maps, options, textures)`` of a splat lane test: :func:`_splat_gbuffer` of
+    ``count`` pixels, five layers, two splat maps, the options of ``SPLAT_CASES[case]`` (with its
+    height layers where it asks for them) and the textures that take gradients."""
+    g = _splat_gbuffer(rng, count)
+    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=requires_grad)
+    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False, requires_grad=requires_grad)
+    kw = dict(SPLAT_CASES[case])
+    textures = [layers, maps]
+    if kw.pop("heights", False):
+        kw["heights"] = wt.TextureArray(rng.random((5, 48, 24, 1), dtype=np.float32), requires_grad=requires_grad)
+        textures.append(kw["heights"])
+    return g, layers, maps, kw, textures
+
+
 @pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
 @pytest.mark.parametrize("case", list(SPLAT_CASES))
 def test_splat_lanes_give_the_one_pixel_bits(rng, launched, case, filter):
-    g = _splat_gbuffer(rng)
-    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32))
-    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False)
-    kw = dict(SPLAT_CASES[case])
-    if kw.pop("heights", False):
-        kw["heights"] = wt.TextureArray(rng.random((5, 48, 24, 1), dtype=np.float32))
+    g, layers, maps, kw, _ = _splat_inputs(rng, case, 1000)
     smp = wt.Sampler(filter=filter, address="mirror", lod_bias=-0.4, max_aniso=3)
     lanes, scalar = _both(lambda: wt.splat(g, layers, maps, sampler=smp, **kw))
     _same_bits(lanes, scalar)
@@ -558,12 +568,7 @@ def test_stochastic_splat_lanes_give_the_one_pixel_bits(rng, launched, case, fil
     each read's stochastic taps read tap by tap, as the stochastic triplanar lane reads a
     projection; the anisotropic filter's footprint taps each with their stochastic taps. Face
     layers run the one-pixel kernels (``stochastic_lanes_take``)."""
-    g = _splat_gbuffer(rng)
-    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32))
-    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False)
-    kw = dict(SPLAT_CASES[case])
-    if kw.pop("heights", False):
-        kw["heights"] = wt.TextureArray(rng.random((5, 48, 24, 1), dtype=np.float32))
+    g, layers, maps, kw, _ = _splat_inputs(rng, case, 1000)
     smp = wt.Sampler(filter=filter, address="mirror", lod_bias=-0.4, max_aniso=3)
     option = wt.Stochastic(method, rotation=0.5, contrast=2.0) if method == "hex" else wt.Stochastic(method)
     lanes, scalar = _both(lambda: wt.splat(g, layers, maps, sampler=smp, stochastic=option, **kw))
@@ -785,14 +790,7 @@ def test_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter
     layers add layer by layer (each into texels of its own), as pixel by pixel; the cases they do not
     take (height layers, face layers) launch the one-pixel kernel. The anisotropic filter's reads of
     several taps add pixel by pixel, their taps in order."""
-    g = _splat_gbuffer(rng, 3000)
-    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True)
-    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False, requires_grad=True)
-    kw = dict(SPLAT_CASES[case])
-    textures = [layers, maps]
-    if kw.pop("heights", False):
-        kw["heights"] = wt.TextureArray(rng.random((5, 48, 24, 1), dtype=np.float32), requires_grad=True)
-        textures.append(kw["heights"])
+    g, layers, maps, kw, textures = _splat_inputs(rng, case, 3000, requires_grad=True)
     smp = wt.Sampler(filter=filter, address="mirror", lod_bias=-0.4, max_aniso=3)
     previous = wt.get_num_threads()
     wt.set_num_threads(threads)
@@ -811,14 +809,7 @@ def test_stochastic_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, c
     """The stochastic splat's texel gradients through its lanes: each layer's reads add their
     shares through their stochastic taps (``scatter_layer_stochastic_lane``), layer by layer, as
     pixel by pixel; height layers run the one-pixel kernel."""
-    g = _splat_gbuffer(rng, 3000)
-    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True)
-    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False, requires_grad=True)
-    kw = dict(SPLAT_CASES[case])
-    textures = [layers, maps]
-    if kw.pop("heights", False):
-        kw["heights"] = wt.TextureArray(rng.random((5, 48, 24, 1), dtype=np.float32), requires_grad=True)
-        textures.append(kw["heights"])
+    g, layers, maps, kw, textures = _splat_inputs(rng, case, 3000, requires_grad=True)
     smp = wt.Sampler(filter="trilinear", address="mirror", lod_bias=-0.4)
     previous = wt.get_num_threads()
     wt.set_num_threads(threads)
