@@ -452,7 +452,7 @@ def test_stochastic_triplanar_gradient_lanes_add_the_one_pixel_sums(rng, launche
     tap of every projection adds its share pixel by pixel, projection by projection and tap by tap
     as the pixel body does, into one texture shared by the three projections (their adds
     interleave in its texels) and into a texture per axis, on 3 threads too; the anisotropic
-    filter's pixel by pixel."""
+    filter's every footprint tap's stochastic taps in order (``scatter_stochastic_reads_lanes``)."""
     g = _hand_gbuffer(rng, 20_000)
     shared = wt.Texture(rng.random((64, 32, 3), dtype=np.float32), requires_grad=True)
     axes = [wt.Texture(rng.random((32 << a, 48, 3), dtype=np.float32), requires_grad=True) for a in range(3)]
@@ -695,7 +695,8 @@ def test_sample_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, lod
 def test_stochastic_gradient_lanes_add_the_one_pixel_sums(rng, launched, method, filter, source, threads):
     """``stochastic.scatter_stochastic_lane``: every tap's share of the gradient added natively,
     pixel by pixel and tap by tap (``lane_scatter.scatter_taps_lane``), the same bits as the
-    one-pixel kernel's, on 3 threads too; the anisotropic filter's pixel by pixel."""
+    one-pixel kernel's, on 3 threads too; the anisotropic filter's (up to 16 footprint taps) every
+    footprint tap's stochastic taps in order (``scatter_stochastic_footprint_lane``)."""
     tex = wt.TextureArray(rng.random((3, 64, 48, 4), dtype=np.float32), requires_grad=True)
     n = 30_011
     uv = _uvs(rng, n)
@@ -804,13 +805,15 @@ def test_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter
 
 @pytest.mark.parametrize("threads", [1, 3])
 @pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])
+@pytest.mark.parametrize("filter", ["trilinear", "anisotropic"])
 @pytest.mark.parametrize("case", ["uv", "uv, height channel", "world xz, height array", "triplanar", "triplanar, no heights"])
-def test_stochastic_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, method, threads):
+def test_stochastic_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter, method, threads):
     """The stochastic splat's texel gradients through its lanes: each layer's reads add their
     shares through their stochastic taps (``scatter_layer_stochastic_lane``), layer by layer, as
-    pixel by pixel; height layers run the one-pixel kernel."""
+    pixel by pixel; the anisotropic filter's through every footprint tap's stochastic taps in
+    order (``wt_scatter_stochastic_rows``); height layers run the one-pixel kernel."""
     g, layers, maps, kw, textures = _splat_inputs(rng, case, 3000, requires_grad=True)
-    smp = wt.Sampler(filter="trilinear", address="mirror", lod_bias=-0.4)
+    smp = wt.Sampler(filter=filter, address="mirror", lod_bias=-0.4, max_aniso=5)
     previous = wt.get_num_threads()
     wt.set_num_threads(threads)
     try:
@@ -819,18 +822,6 @@ def test_stochastic_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, c
         wt.set_num_threads(previous)
     takes = case != "world xz, height array"  # stochastic_grad_lanes_take
     assert threads > 1 or (("splat8_stochastic_texel_grad_lanes", -(-3000 // LANES)) in launched) == takes
-
-
-def test_stochastic_splat_gradient_of_the_anisotropic_filter_runs_one_pixel(rng, launched):
-    """The anisotropic filter's footprint taps each take stochastic taps: their gradient runs the
-    one-pixel kernel (``stochastic_grad_lanes_take``), after a forward through the lanes."""
-    g = _splat_gbuffer(rng, 1000)
-    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True)
-    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False, requires_grad=True)
-    smp = wt.Sampler(filter="anisotropic", address="mirror", max_aniso=3)
-    _same_grads(lambda: wt.splat(g, layers, maps, sampler=smp, stochastic="hex", **SPLAT_CASES["triplanar"]), [layers, maps], rng, 4, 1000)
-    names = {name for name, _ in launched}
-    assert "splat8_stochastic_lanes" in names and "splat8_stochastic_texel_grad_lanes" not in names
 
 
 # The tiling-gradient cases: the splat's options, an address mode and the layers' texel format (one each, to keep the test short).

@@ -22,10 +22,10 @@ scalar blocks run pixel by pixel.
 The stochastic splat's lanes are the same bodies with each layer read by
 :func:`layer_values_stochastic_lane`: per read, each footprint tap's stochastic taps worked out
 natively and read tap by tap (``wt_stochastic_footprint``, as ``stochastic`` and stochastic
-triplanar read theirs), and added back by :func:`scatter_layer_stochastic_lane`. Its forward lane keeps the layers' colours for the gradient
-lane itself (it never takes the tiling's gradient by hand). A histogram's blend runs the one-pixel
-kernels (:func:`stochastic_lanes_take`), and so does the gradient of the anisotropic filter's
-footprints, whose taps each take stochastic taps.
+triplanar read theirs), and added back by :func:`scatter_layer_stochastic_lane` (with the
+anisotropic filter, every footprint tap's stochastic taps in order). Its forward lane keeps the
+layers' colours for the gradient lane itself (it never takes the tiling's gradient by hand). A
+histogram's blend runs the one-pixel kernels (:func:`stochastic_lanes_take`).
 """
 
 import functools
@@ -38,7 +38,7 @@ from ..projection import SurfacePixels
 from ..splat_blend import blend_functions
 from ..splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerReads, SplatArgs, SplatParams, layer_textures, map_count, pick, surface_weights
 from ..stochastic import METHOD_NONE, StochasticArgs
-from ..texels import FILTER_ANISOTROPIC, TexelGrad, TextureView, read_channels, write_channels
+from ..texels import TexelGrad, TextureView, read_channels, write_channels
 from . import LANES, lane_colours, lane_floats, lane_ints
 from .sample import accumulate_footprint_lane
 from .splat_blend import GRAD_HEIGHT, GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, weights_lane8
@@ -100,9 +100,8 @@ def stochastic_lanes_take(args: SplatArgs) -> bool:
 
 
 def stochastic_grad_lanes_take(args: SplatArgs) -> bool:
-    """:func:`grad_lanes_take` for the stochastic kernels (:func:`stochastic_lanes_take`), one-tap
-    footprints only (not the anisotropic filter, whose footprint taps each take stochastic taps)."""
-    return stochastic_lanes_take(args) and grad_lanes_take(args) and args.reads.smp.filter != FILTER_ANISOTROPIC
+    """:func:`grad_lanes_take` for the stochastic kernels (:func:`stochastic_lanes_take`)."""
+    return stochastic_lanes_take(args) and grad_lanes_take(args)
 
 
 def stochastic_lane_saved(args: SplatArgs) -> int:

@@ -5,8 +5,8 @@ lane's projections (:func:`projection_taps_lane`); a lookup over each pixel's fo
 footprint tap's stochastic taps read one by one (:func:`stochastic_footprint_lane`,
 :func:`stochastic_read_lane`: the anisotropic filter's footprints too); and the lane bodies of
 ``stochastic``, forward and texel gradient (:func:`lane_bodies`), whose gradient adds the taps'
-shares with :func:`.scatter.scatter_taps_lane` (one-tap footprints; the anisotropic filter's
-gradient goes pixel by pixel through the body).
+shares with :func:`.scatter.scatter_taps_lane` (one-tap footprints), or with the anisotropic
+filter, every footprint tap's with :func:`scatter_stochastic_footprint_lane`.
 """
 
 import functools
@@ -17,7 +17,7 @@ from .. import inlined
 from ..native import cpu_snippet
 from ..sampling import SampleGrads, SamplePixels, sample_layer
 from ..stochastic import METHOD_NONE, StochasticArgs
-from ..texels import FILTER_ANISOTROPIC, SamplerArgs, TextureView, read_channels, write_channels
+from ..texels import FILTER_ANISOTROPIC, SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
 from . import LANES, lane_colours, lane_ints, lane_reads, lane_taps
 from .scatter import scatter_taps_lane
 
@@ -56,19 +56,32 @@ def stochastic_read_lane(tex: TextureView, smp: SamplerArgs, params: StochasticA
     ...
 
 
+@wp.func_native(cpu_snippet("wt_scatter_stochastic_footprint_lane(tex, grad, smp, params, uv, uv_dx, uv_dy, lods, layers, constant_layer, lod_source, constant_lod, adj, base);\n"))
+def scatter_stochastic_footprint_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, params: StochasticArgs, uv: wp.array(dtype=wp.vec2), uv_dx: wp.array(dtype=wp.vec2),
+                                      uv_dy: wp.array(dtype=wp.vec2), lods: wp.array(dtype=float), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32, lod_source: wp.int32,
+                                      constant_lod: float, adj: wp.array2d(dtype=float), base: wp.int32):  # fmt: skip
+    """``stochastic.scatter_stochastic`` (a linear blend) of the gradient ``adj[i]`` for the lane's
+    pixels ``i = base ..`` over their footprints (:func:`stochastic_footprint_lane`'s reads: the
+    anisotropic filter's too), pixel by pixel, each footprint tap's stochastic taps in order; the
+    footprint taps' stochastic taps worked out natively 8 at a time."""
+    ...
+
+
+@wp.func_native(cpu_snippet("wt_scatter_stochastic_reads_lanes(tex0, tex1, tex2, grad0, grad1, grad2, smp, params, layers, reads, g);\n"))
+def scatter_stochastic_reads_lanes(tex0: TextureView, tex1: TextureView, tex2: TextureView, grad0: TexelGrad, grad1: TexelGrad, grad2: TexelGrad, smp: SamplerArgs, params: StochasticArgs,
+                                   layers: lane_ints, reads: lane_reads, g: lane_colours):  # fmt: skip
+    """``stochastic.scatter_stochastic`` (a linear blend) of a stochastic triplanar lane's three
+    projections over their footprints (the anisotropic filter's too): every lane pixel ``l`` adds
+    each projection's share ``w · g[l]`` into ``grad_a``, where ``w`` is positive, pixel by pixel in
+    projection, footprint tap and stochastic tap order."""
+    ...
+
+
 @wp.func
 def lane_blend_linear(params: StochasticArgs) -> bool:
     """Whether the forward lanes take a lookup: a linear blend (no histogram) of a stochastic method,
     over footprints of any filter (:func:`stochastic_footprint_lane`, :func:`stochastic_read_lane`)."""
     return params.histogram == 0 and params.method != METHOD_NONE
-
-
-@wp.func
-def lane_taps_linear(smp: SamplerArgs, params: StochasticArgs) -> bool:
-    """Whether the gradient lanes take a lookup tap by tap: :func:`lane_blend_linear` of one-tap
-    footprints (not the anisotropic filter) (``stochastic``'s lanes, and those of stochastic
-    triplanar)."""
-    return smp.filter != FILTER_ANISOTROPIC and lane_blend_linear(params)
 
 
 @functools.cache
@@ -107,13 +120,17 @@ def lane_bodies(pixel, scatter_pixel, args_t):
     @inlined
     def scatter_stochastic_lane(args: args_t, pixels: SamplePixels, base: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):
         """``scatter_pixel`` for the lane of pixels from ``base``: the lane's taps, then their adds
-        natively (``scatter_taps_lane``), pixel by pixel and tap by tap as the body adds them. A
-        histogram's blend, plain sampling and the anisotropic filter's footprints (whose taps each
-        take stochastic taps) go pixel by pixel through the body."""
+        natively (``scatter_taps_lane``), pixel by pixel and tap by tap as the body adds them; with
+        the anisotropic filter, every footprint tap's taps in order
+        (:func:`scatter_stochastic_footprint_lane`). A histogram's blend and plain sampling go pixel
+        by pixel through the body."""
         count = wp.min(adj.shape[0] - base, LANES)
-        if not lane_taps_linear(args.sample.smp, args.params):
+        a = args.sample
+        if not lane_blend_linear(args.params):
             for l in range(count):
                 scatter_pixel(args, pixels, base + l, grads, adj)
+        elif a.smp.filter == FILTER_ANISOTROPIC:
+            scatter_stochastic_footprint_lane(a.tex, grads.tex, a.smp, args.params, pixels.uv, pixels.uv_dx, pixels.uv_dy, pixels.lods, pixels.layers, a.constant_layer, a.lod_source, a.constant_lod, adj, base)
         else:
             taps, layers = stochastic_lane_taps(args, pixels, base, count)
             g = lane_colours()

@@ -21,13 +21,13 @@ from .. import inlined, specialised
 from ..faces import FaceGrads, FaceTextures, on_axis
 from ..family import lane_covered
 from ..projection import SurfacePixels
-from ..texels import SamplerArgs, pick3, read_channels, write_channels
+from ..texels import FILTER_ANISOTROPIC, SamplerArgs, pick3, read_channels, write_channels
 from . import LANES, lane_colours, lane_ints, lane_reads
 from .normals import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
 from .projection import accumulate_reads_lane, triplanar_reads_lane
 from .sample import accumulate_footprint_lane
 from .scatter import scatter_face_reads_lanes, scatter_lod_lanes, scatter_projection_taps_lanes, scatter_reads_lanes
-from .stochastic import lane_blend_linear, lane_taps_linear, projection_taps_lane, stochastic_read_lane
+from .stochastic import lane_blend_linear, projection_taps_lane, scatter_stochastic_reads_lanes, stochastic_read_lane
 
 
 @wp.func
@@ -129,14 +129,22 @@ def stochastic_lane_bodies(colour, colour_grad, args_t):
     (:func:`~.stochastic.stochastic_read_lane`: each footprint tap's stochastic taps worked out
     natively and read tap by tap; NaN where the UV or LOD is not finite), added with the
     projection's weight, in the order of the pixel body; the gradient adds each tap's share of the
-    projection's share (``.scatter.scatter_projection_taps_lanes``). A histogram's blend, and the
-    anisotropic filter's gradient, go pixel by pixel through the pixel bodies."""
+    projection's share (``.scatter.scatter_projection_taps_lanes``; with the anisotropic filter,
+    every footprint tap's taps in order: :func:`~.stochastic.scatter_stochastic_reads_lanes`). A
+    histogram's blend goes pixel by pixel through the pixel bodies."""
 
     def stochastic_colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
-        if not lane_taps_linear(args.smp, args.stoch):
+        if not lane_blend_linear(args.stoch):
             for l in range(count):
                 colour_grad(args, pixels, base + l, grads, adj)
+        elif args.smp.filter == FILTER_ANISOTROPIC:
+            faces = args.faces
+            reads = triplanar_reads_lane(faces, args.proj, args.smp, pixels, base, count, 0, 0)
+            gs = lane_colours()
+            for l in range(count):
+                gs[l] = read_channels(adj, base + l)
+            scatter_stochastic_reads_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, args.stoch, lane_ints(args.layer), reads, gs)
         else:
             faces = args.faces
             reads = triplanar_reads_lane(faces, args.proj, args.smp, pixels, base, count, 0, 0)

@@ -215,15 +215,57 @@ WT_INLINE bool wt_several_taps(const int nreads, const float* const* w_rows, con
     return several;
 }
 
+// Taps into one gradient array, batched WT_L at a time through wt_scatter_levels_any as the lanes
+// of one read, which adds its lanes in order: the taps add in the order they are pushed.
+template <class Tex, class Grad, class Smp> struct wt_tap_batch {
+    const Tex* tex[1];
+    const Grad* grad[1];
+    const Smp& smp;
+    wt_lane_f us[1], vs[1], fractions[1];
+    wt_lane_i levels[1], layer[1];
+    wt_lane_b active[1];
+    wt_lane_f4 gs[1];
+    int n = 0;  // taps batched
+    wt_tap_batch(const Tex& t, const Grad& g, const Smp& s) : tex{&t}, grad{&g}, smp(s) {}
+    __attribute__((always_inline)) void push(float u, float v, int level, float fraction, int lr, const wt_f4& g) {
+        us[0][n] = u, vs[0][n] = v, levels[0][n] = level, fractions[0][n] = fraction;
+        layer[0][n] = lr, active[0][n] = true, gs[0][n] = g;
+        if (++n == WT_L) flush();
+    }
+    __attribute__((always_inline)) void flush() {
+        if (n == 0) return;
+        for (int l = n; l < WT_L; ++l) {
+            us[0][l] = vs[0][l] = fractions[0][l] = 0.0f;
+            levels[0][l] = layer[0][l] = 0;
+            active[0][l] = false;
+        }
+        wt_scatter_levels_any(1, tex, grad, smp, us, vs, levels, fractions, layer, active, gs);
+        n = 0;
+    }
+};
+
+// add(first, group) once per gradient array that reads r = 0 .. nreads - 1 add into, where it is
+// needed: read `first` the first into it, group[r] whether read r adds into it.
+template <class Grad, class Add>
+WT_INLINE void wt_each_grad_array(const int nreads, const Grad* const* grads, Add&& add) {
+    bool done[WT_MAX_READS] = {};
+    for (int first = 0; first < nreads; ++first) {
+        if (done[first] || grads[first]->texels.shape[0] == 0) continue;
+        bool group[WT_MAX_READS] = {};
+        for (int r = first; r < nreads; ++r)
+            group[r] = done[r] = grads[r]->texels.shape[0] > 0 && grads[r]->texels.data == grads[first]->texels.data;
+        add(first, group);
+    }
+}
+
 // wt_scatter_rows where reads have footprints of several taps (the anisotropic filter's; footprint
 // rows du, dv, taps too): scatter.scatter_footprint of each read with a positive weight into a
 // gradient that is needed, pixel by pixel, read by read, each footprint's taps in order: tap k of a
 // footprint of n taps at (u + du · s, v + dv · s), s = k + 1/2 - n/2, adds the read's share times
 // 1 / n (a one-tap footprint its share at (u, v) itself); a tap whose UV or LOD is not finite adds
-// nothing. The taps go through wt_scatter_levels 16 at a time, as the lanes of one read, which adds
-// its lanes in order: the reads into one gradient array (a texture shared by projections, or a
-// splat layer's) keep the scalar kernels' order, and reads into other arrays (a texture per axis)
-// add apart, each array's in that order.
+// nothing. The taps of each gradient array go through a wt_tap_batch in that order: the reads into
+// one array (a texture shared by projections, or a splat layer's) keep the scalar kernels' order,
+// and reads into other arrays (a texture per axis) add apart, each array's in that order.
 // twin: scatter.scatter_footprint
 template <class Tex, class Grad, class Smp>
 WT_INLINE void wt_scatter_footprint_rows(const Tex* const* texs, const Grad* const* grads, const Smp& smp,
@@ -232,28 +274,8 @@ WT_INLINE void wt_scatter_footprint_rows(const Tex* const* texs, const Grad* con
                                          const float* const* du_rows, const float* const* dv_rows,
                                          const float* const* taps_rows, const float* const* w_rows, const int weigh,
                                          const wt_lane_colours* const* gr, const int per_read) {
-    bool done[WT_MAX_READS] = {};
-    for (int first = 0; first < nreads; ++first) {
-        if (done[first] || grads[first]->texels.shape[0] == 0) continue;
-        bool group[WT_MAX_READS] = {};  // the reads into the gradient array of read `first`
-        for (int r = first; r < nreads; ++r)
-            group[r] = done[r] = grads[r]->texels.shape[0] > 0 && grads[r]->texels.data == grads[first]->texels.data;
-        const Tex* tex[1] = {texs[first]};
-        const Grad* grad[1] = {grads[first]};
-        float us[1][WT_L], vs[1][WT_L], fractions[1][WT_L];
-        int levels[1][WT_L], layer[1][WT_L];
-        bool active[1][WT_L];
-        wt_f4 gs[1][WT_L];
-        int n = 0;  // taps batched
-        auto flush = [&]() __attribute__((always_inline)) {
-            for (int l = n; l < WT_L; ++l) {
-                us[0][l] = vs[0][l] = fractions[0][l] = 0.0f;
-                levels[0][l] = layer[0][l] = 0;
-                active[0][l] = false;
-            }
-            wt_scatter_levels_any(1, tex, grad, smp, us, vs, levels, fractions, layer, active, gs);
-            n = 0;
-        };
+    wt_each_grad_array(nreads, grads, [&](const int first, const bool* group) __attribute__((always_inline)) {
+        wt_tap_batch<Tex, Grad, Smp> batch(*texs[first], *grads[first], smp);
         for (int l = 0; l < WT_L; ++l) {
             for (int r = first; r < nreads; ++r) {
                 const float w = w_rows[r][l], lod = lod_rows[r][l];
@@ -274,14 +296,12 @@ WT_INLINE void wt_scatter_footprint_rows(const Tex* const* texs, const Grad* con
                     const float s = (float)k + 0.5f - 0.5f * taps;
                     const float tu = one ? u : u + du * s, tv = one ? v : v + dv * s;  // footprint.footprint_uv
                     if (!(__builtin_fabsf(tu) <= wt_float_max && __builtin_fabsf(tv) <= wt_float_max)) continue;
-                    us[0][n] = tu, vs[0][n] = tv, levels[0][n] = level, fractions[0][n] = fraction;
-                    layer[0][n] = lr, active[0][n] = true, gs[0][n] = tap_share;
-                    if (++n == WT_L) flush();
+                    batch.push(tu, tv, level, fraction, lr, tap_share);
                 }
             }
         }
-        if (n > 0) flush();
-    }
+        batch.flush();
+    });
 }
 
 // wt_scatter_rows of the reads of a lane_reads matrix `at`.
@@ -365,6 +385,18 @@ WT_INLINE void wt_scatter_lod_lanes(const Tex& tex0, const Tex& tex1, const Tex&
     wt_scatter_lod(texs, grads, smp, count, layers.c, reads, weigh, g);
 }
 
+// texels.read_channels of the output gradients adj[i] of the lane's pixels i = base .. base + count
+// - 1 (the lane's tail repeats pixel base).
+template <class Adj> WT_INLINE wt_lane_colours wt_adj_lane(const Adj& adj, int base, int count) {
+    wt_lane_colours g;
+    for (int l = 0; l < WT_L; ++l) {
+        const char* row = (const char*)adj.data + (long long)(base + (l < count ? l : 0)) * adj.strides[0];
+        for (int c = 0; c < 4; ++c)
+            g.data[l][c] = c < adj.shape[1] ? *(const float*)(row + (long long)c * adj.strides[1]) : 0.0f;
+    }
+    return g;
+}
+
 // lanes.scatter.scatter_footprint_lane: scatter.scatter_footprint of adj[i] for the lane's pixels
 // i = base .. (wt_sample_reads_of's reads; footprints of several taps through wt_scatter_lod's
 // wt_scatter_footprint_rows).
@@ -376,15 +408,9 @@ WT_INLINE void wt_scatter_footprint_lane(const Tex& tex, const Grad& grad, const
                                          int base) {
     const wt_sample_reads s =
         wt_sample_reads_of(tex, smp, uv, uv_dx, uv_dy, lods, layers, constant_layer, lod_source, constant_lod, base);
-    wt_lane_colours g;  // texels.read_channels of the lane's output gradients
-    for (int l = 0; l < WT_L; ++l) {
-        const char* row = (const char*)adj.data + (long long)(base + (l < s.count ? l : 0)) * adj.strides[0];
-        for (int c = 0; c < 4; ++c)
-            g.data[l][c] = c < adj.shape[1] ? *(const float*)(row + (long long)c * adj.strides[1]) : 0.0f;
-    }
     const Tex* texs[1] = {&tex};
     const Grad* grads[1] = {&grad};
-    wt_scatter_lod(texs, grads, smp, 1, s.layer, s.reads, 0, g);
+    wt_scatter_lod(texs, grads, smp, 1, s.layer, s.reads, 0, wt_adj_lane(adj, base, s.count));
 }
 
 // lanes.scatter.scatter_taps_lane: stochastic.scatter_stochastic of one-tap footprints: tap k of

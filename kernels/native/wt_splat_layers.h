@@ -342,7 +342,8 @@ WT_INLINE void wt_scatter_layer_lane(const Tex& tex, const Grad& grad, const Rea
 // lanes.splat.scatter_layer_stochastic_lane: splat_layers.scatter_layer_stochastic of the gradients
 // g[l] of layer j's reads of tex (wt_layer_values_stochastic_lane's): each read k with a positive
 // weight w adds w · g (for the one read of the UV and world-XZ projections too: w is 1) through its
-// stochastic taps into grad, pixel by pixel in read and tap order (wt_scatter_projection_taps_lanes).
+// stochastic taps into grad, pixel by pixel in read and tap order (wt_scatter_projection_taps_lanes;
+// with the anisotropic filter, wt_scatter_stochastic_of: every footprint tap's taps in order).
 // twin: splat_layers._layer_reads:scatter_layer
 template <class Tex, class Grad, class Reads, class Stoch, class Floats, class UV, class Surface, class TriW>
 WT_INLINE void wt_scatter_layer_stochastic_lane(const Tex& tex, const Grad& grad, const Reads& reads,
@@ -351,17 +352,24 @@ WT_INLINE void wt_scatter_layer_stochastic_lane(const Tex& tex, const Grad& grad
                                                 int count, const TriW& tri_w, const wt_lane_colours& g) {
     const wt_lane_reads at =
         wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
-    wt_lane_taps taps[3];  // a read not made: no weight, nothing added
-    wt_lane_colours share[3];
-    for (int k = 0; k < (reads.params.projection == WT_PROJECT_TRIPLANAR ? 3 : 1); ++k) {
-        taps[k] = wt_projection_taps_lane(stoch, at, k, count);
-        for (int l = 0; l < WT_L; ++l)
-            for (int c = 0; c < 4; ++c) share[k].data[l][c] = at.data[9 + k][l] * g.data[l][c];
-    }
+    const int nreads = reads.params.projection == WT_PROJECT_TRIPLANAR ? 3 : 1;
     struct {
         int c[WT_L];
     } layers;
     for (int l = 0; l < WT_L; ++l) layers.c[l] = j;
+    if (reads.smp.filter == WT_ANISOTROPIC) {  // every footprint tap's stochastic taps, in order
+        const Tex* texs[3] = {&tex, &tex, &tex};
+        const Grad* grads[3] = {&grad, &grad, &grad};
+        wt_scatter_stochastic_of(texs, grads, reads.smp, stoch, nreads, layers.c, at, 1, g);
+        return;
+    }
+    wt_lane_taps taps[3];  // a read not made: no weight, nothing added
+    wt_lane_colours share[3];
+    for (int k = 0; k < nreads; ++k) {
+        taps[k] = wt_projection_taps_lane(stoch, at, k, count);
+        for (int l = 0; l < WT_L; ++l)
+            for (int c = 0; c < 4; ++c) share[k].data[l][c] = at.data[9 + k][l] * g.data[l][c];
+    }
     wt_scatter_projection_taps_lanes(tex, tex, tex, grad, grad, grad, reads.smp, layers, taps[0], taps[1], taps[2],
                                      share[0], share[1], share[2]);
 }

@@ -9,6 +9,7 @@
 #include "wt_config.h"
 #include "wt_core.h"
 #include "wt_sample.h"
+#include "wt_scatter.h"
 
 // The four hashes of (a, b, c, d) as floats in [0, 1).
 // twin: hashing.hash4_unit
@@ -280,4 +281,110 @@ WT_INLINE wt_lane_colours wt_stochastic_read_lane(const Tex& tex, const Smp& smp
                             reads.data[12 + axis], reads.data[15 + axis], reads.data[18 + axis], reads.data[9 + axis],
                             count, out);
     return out;
+}
+
+// wt_scatter_footprint_rows for stochastic lookups (stochastic.scatter_stochastic; a linear blend):
+// each read with a positive weight and a finite LOD, pixel by pixel and read by read, into a
+// gradient that is needed, adds its share (w · g[l] where weigh, g[l] where not) divided by its
+// footprint's taps where several (footprint.footprint_mean) through each footprint tap in order: at
+// the tap's UV (footprint.footprint_uv, for one tap too), where finite, that UV's stochastic taps at
+// the read's LOD in order, each with a positive weight w_k adding w_k times that share. The
+// footprint taps go through wt_stochastic_taps WT_L at a time in that order, and their stochastic
+// taps through a wt_tap_batch per gradient array: every texel gets the scalar kernel's sums in its
+// order, and no footprint's taps need holding (up to 64 per read).
+// twin: stochastic.scatter_stochastic
+template <class Tex, class Grad, class Smp, class Params>
+WT_INLINE void wt_scatter_stochastic_rows(const Tex* const* texs, const Grad* const* grads, const Smp& smp,
+                                          const Params& params, const int nreads, const int* layers,
+                                          const float* const* u_rows, const float* const* v_rows,
+                                          const float* const* lod_rows, const float* const* du_rows,
+                                          const float* const* dv_rows, const float* const* taps_rows,
+                                          const float* const* w_rows, const int weigh, const wt_lane_colours& g) {
+    wt_each_grad_array(nreads, grads, [&](const int first, const bool* group) __attribute__((always_inline)) {
+        wt_tap_batch<Tex, Grad, Smp> batch(*texs[first], *grads[first], smp);
+        float fu[WT_L], fv[WT_L], flod[WT_L], fraction[WT_L];  // footprint taps waiting for their taps
+        int level[WT_L], lr[WT_L];
+        wt_f4 share[WT_L];
+        int m = 0;
+        auto drain = [&]() __attribute__((always_inline)) {
+            for (int q = m; q < WT_L; ++q) fu[q] = fv[q] = flod[q] = 0.0f;
+            const wt_lane_taps t = wt_stochastic_taps(params, fu, fv, flod, m);
+            for (int q = 0; q < m; ++q) {
+                if (t.data[13][q] == 0.0f) continue;  // texels.finite_uv_lod of the footprint tap
+                for (int k = 0; k < 4; ++k) {
+                    const float w = t.data[3 * k + 2][q], tu = t.data[3 * k][q], tv = t.data[3 * k + 1][q];
+                    if (!(w > 0.0f) || !(__builtin_fabsf(tu) <= wt_float_max && __builtin_fabsf(tv) <= wt_float_max))
+                        continue;  // scatter.scatter_lod adds nothing
+                    batch.push(tu, tv, level[q], fraction[q], lr[q], w * share[q]);
+                }
+            }
+            m = 0;
+        };
+        for (int l = 0; l < WT_L; ++l) {
+            for (int r = first; r < nreads; ++r) {
+                const float w = w_rows[r][l], lod = lod_rows[r][l];
+                if (!group[r] || !(w > 0.0f) || !(__builtin_fabsf(lod) <= wt_float_max)) continue;
+                const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
+                const wt_f4 read_share = weigh ? w * gl : gl;
+                const float taps = taps_rows[r][l], u = u_rows[r][l], v = v_rows[r][l];
+                const float du = du_rows[r][l], dv = dv_rows[r][l];
+                const wt_f4 tap_share = taps != 1.0f ? read_share / taps : read_share;  // footprint.footprint_mean
+                int read_level;
+                float read_fraction;
+                wt_mip_levels(*texs[r], smp, lod, read_level, read_fraction);
+                const int read_layer = wp::clamp(layers[l], 0, texs[r]->num_layers - 1);
+                for (int j = 0; j < (int)taps; ++j) {  // footprint.footprint_taps
+                    const float s = (float)j + 0.5f - 0.5f * taps;
+                    fu[m] = u + du * s, fv[m] = v + dv * s, flod[m] = lod;  // footprint.footprint_uv
+                    level[m] = read_level, fraction[m] = read_fraction, lr[m] = read_layer, share[m] = tap_share;
+                    if (++m == WT_L) drain();
+                }
+            }
+        }
+        if (m > 0) drain();
+        batch.flush();
+    });
+}
+
+// wt_scatter_stochastic_rows of the reads r = 0 .. nreads - 1 of a lane_reads matrix `at`.
+template <class Tex, class Grad, class Smp, class Params>
+WT_INLINE void wt_scatter_stochastic_of(const Tex* const* texs, const Grad* const* grads, const Smp& smp,
+                                        const Params& params, const int nreads, const int* layers,
+                                        const wt_lane_reads& at, const int weigh, const wt_lane_colours& g) {
+    const float *u[3], *v[3], *lod[3], *w[3], *du[3], *dv[3], *taps[3];
+    for (int r = 0; r < 3; ++r) {
+        u[r] = at.data[r], v[r] = at.data[3 + r], lod[r] = at.data[6 + r], w[r] = at.data[9 + r];
+        du[r] = at.data[12 + r], dv[r] = at.data[15 + r], taps[r] = at.data[18 + r];
+    }
+    wt_scatter_stochastic_rows(texs, grads, smp, params, nreads, layers, u, v, lod, du, dv, taps, w, weigh, g);
+}
+
+// lanes.stochastic.scatter_stochastic_footprint_lane: stochastic.scatter_stochastic of adj[i] for
+// the lane's pixels i = base .. over their footprints (wt_sample_reads_of's reads), every filter's.
+// twin: stochastic.scatter_stochastic
+template <class Tex, class Grad, class Smp, class Params, class UV, class Lods, class Layers, class Adj>
+WT_INLINE void wt_scatter_stochastic_footprint_lane(const Tex& tex, const Grad& grad, const Smp& smp,
+                                                    const Params& params, const UV& uv, const UV& uv_dx,
+                                                    const UV& uv_dy, const Lods& lods, const Layers& layers,
+                                                    int constant_layer, int lod_source, float constant_lod,
+                                                    const Adj& adj, int base) {
+    const wt_sample_reads s =
+        wt_sample_reads_of(tex, smp, uv, uv_dx, uv_dy, lods, layers, constant_layer, lod_source, constant_lod, base);
+    const Tex* texs[1] = {&tex};
+    const Grad* grads[1] = {&grad};
+    wt_scatter_stochastic_of(texs, grads, smp, params, 1, s.layer, s.reads, 0, wt_adj_lane(adj, base, s.count));
+}
+
+// lanes.stochastic.scatter_stochastic_reads_lanes: stochastic.scatter_stochastic of a stochastic
+// triplanar lane's three projections over their footprints, every filter's: each projection's share
+// w · g[l] into grad_a (a texture per axis), pixel by pixel in projection and tap order.
+// twin: stochastic.scatter_stochastic
+template <class Tex, class Grad, class Smp, class Params, class Ints>
+WT_INLINE void wt_scatter_stochastic_reads_lanes(const Tex& tex0, const Tex& tex1, const Tex& tex2, const Grad& grad0,
+                                                 const Grad& grad1, const Grad& grad2, const Smp& smp,
+                                                 const Params& params, const Ints& layers, const wt_lane_reads& reads,
+                                                 const wt_lane_colours& g) {
+    const Tex* texs[3] = {&tex0, &tex1, &tex2};
+    const Grad* grads[3] = {&grad0, &grad1, &grad2};
+    wt_scatter_stochastic_of(texs, grads, smp, params, 3, layers.c, reads, 1, g);
 }
