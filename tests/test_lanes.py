@@ -426,7 +426,8 @@ def test_stochastic_triplanar_lanes_give_the_one_pixel_bits(rng, launched, metho
     """Stochastic triplanar and biplanar colour (``triplanar_lanes.stochastic_lane_body``): each
     projection's taps from its read (``stochastic_sample.projection_taps_lane``), read tap by tap and
     weighted in the pixel body's order; non-finite positions and normals, mirrored taps, rotated hex
-    taps, a contrast, object space; the anisotropic filter and a histogram's blend pixel by pixel."""
+    taps, a contrast, object space; the anisotropic filter's footprint taps each with their
+    stochastic taps; a histogram's blend pixel by pixel."""
     g = _hand_gbuffer(rng)
     tex = wt.Texture(rng.random((64, 32, 3), dtype=np.float32))
     smp = wt.Sampler(filter=filter, address="mirror", max_aniso=4)

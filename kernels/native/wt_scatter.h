@@ -232,7 +232,7 @@ template <class Tex, class Grad, class Smp> struct wt_tap_batch {
         layer[0][n] = lr, active[0][n] = true, gs[0][n] = g;
         if (++n == WT_L) flush();
     }
-    __attribute__((always_inline)) void flush() {
+    __attribute__((noinline)) void flush() {  // one copy of the four address modes' adds per batch type
         if (n == 0) return;
         for (int l = n; l < WT_L; ++l) {
             us[0][l] = vs[0][l] = fractions[0][l] = 0.0f;
