@@ -387,6 +387,29 @@ def test_triplanar_normal_lanes_give_the_one_pixel_bits(rng, launched, filter, c
     assert ("triplanar_normal_lanes", -(-1000 // LANES)) in launched
 
 
+@pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])
+@pytest.mark.parametrize("filter", ["nearest", "trilinear", "anisotropic"])
+def test_stochastic_triplanar_normal_lanes_give_the_one_pixel_bits(rng, launched, method, filter):
+    """Normal mapping with a stochastic method (``triplanar_lanes.normal_lane_bodies`` with pixel
+    bodies): each projection's sample read over its footprint through its stochastic taps, as
+    stochastic colour reads it, then the normal made natively; a seed, a blend and a contrast,
+    object space; a histogram's blend pixel by pixel."""
+    g = _hand_gbuffer(rng)
+    tex = wt.Texture(rng.random((64, 32, 3), dtype=np.float32))
+    smp = wt.Sampler(filter=filter, address="mirror", max_aniso=4)
+    placement = np.array([[0.0, 0.8, 0.0, 0.3], [-0.8, 0.0, 0.0, 0.0], [0.0, 0.0, 1.5, -0.2], [0.0, 0.0, 0.0, 1.0]], np.float32)
+    option = wt.Stochastic(method, seed=7, blend=(0.1, 0.3), contrast=2.5)  # (no mirror nor rotation: normal mapping refuses them)
+    for blend, kw in (("rnm", {"sharpness": 3.0}), ("whiteout", {"sharpness": 0.0, "space": "object", "object_to_world": placement, "tiling": (1.5, 2.0, 0.75)})):
+        lanes, scalar = _both(lambda: wt.triplanar_normal(g, tex, blend=blend, sampler=smp, stochastic=option, **kw))
+        _same_bits(lanes, scalar)
+        assert (np.abs(np.nan_to_num(lanes)).sum(-1) > 0.5).mean() > 0.5
+    assert ("triplanar_stochastic_normal_lanes", -(-1000 // LANES)) in launched
+    if method == "hex" and filter == "trilinear":
+        histogram = wt.prepare_histogram(tex)
+        lanes, scalar = _both(lambda: wt.triplanar_normal(g, histogram.texture, sampler=smp, stochastic=wt.Stochastic("hex", histogram=histogram)))
+        _same_bits(lanes, scalar)
+
+
 @pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
 def test_face_lanes_give_the_one_pixel_bits(rng, launched, filter):
     """A texture per face (``triplanar_lanes.face_lane_bodies``): each projection read on the + and
@@ -740,6 +763,31 @@ def test_triplanar_normal_gradient_lanes_add_the_one_pixel_sums(rng, launched, f
     names = {name for name, _ in launched}
     assert {"triplanar_samples_lanes", "triplanar_samples_texel_grad_lanes", "triplanar_samples_forward", "triplanar_samples_texel_grad"} <= names
     assert {"triplanar_normal_blend_lanes", "triplanar_normal_blend_texel_grad_lanes", "triplanar_normal_blend_forward", "triplanar_normal_blend_texel_grad"} <= names
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+@pytest.mark.parametrize("method", ["hash4", "hex"])
+@pytest.mark.parametrize("filter", ["nearest", "trilinear", "anisotropic"])
+def test_stochastic_triplanar_normal_gradient_lanes_add_the_one_pixel_sums(rng, launched, method, filter, threads):
+    """Normal mapping's two-step gradient with a stochastic method: the first step's lanes store the
+    one-pixel kernel's samples and weights and add each projection's own gradient back through its
+    stochastic taps (``scatter_projection_taps_lanes``; the anisotropic filter's every footprint
+    tap's, ``scatter_stochastic_reads_lanes``), into one texture and a texture per axis, on 3
+    threads too."""
+    g = _hand_gbuffer(rng, 20_000)
+    tex = wt.Texture(rng.random((64, 32, 3), dtype=np.float32), requires_grad=True)
+    axes = [wt.Texture(rng.random((32 << a, 48, 3), dtype=np.float32), requires_grad=True) for a in range(3)]
+    smp = wt.Sampler(filter=filter, address="mirror", max_aniso=4)
+    option = wt.Stochastic(method, seed=5, contrast=2.0)
+    previous = wt.get_num_threads()
+    wt.set_num_threads(threads)
+    try:
+        _same_grads(lambda: wt.triplanar_normal(g, tex, sampler=smp, stochastic=option, sharpness=3.0, blend="rnm"), [tex], rng, 3, 20_000)
+        _same_grads(lambda: wt.triplanar_normal(g, textures_per_axis=axes, sampler=smp, stochastic=option, blend="udn"), axes, rng, 3, 20_000)
+    finally:
+        wt.set_num_threads(previous)
+    names = {name for name, _ in launched}
+    assert {"triplanar_stochastic_samples_lanes", "triplanar_stochastic_samples_texel_grad_lanes"} <= names
 
 
 @pytest.mark.parametrize("threads", [1, 3])

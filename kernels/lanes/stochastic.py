@@ -67,13 +67,13 @@ def scatter_stochastic_footprint_lane(tex: TextureView, grad: TexelGrad, smp: Sa
     ...
 
 
-@wp.func_native(cpu_snippet("wt_scatter_stochastic_reads_lanes(tex0, tex1, tex2, grad0, grad1, grad2, smp, params, layers, reads, g);\n"))
+@wp.func_native(cpu_snippet("wt_scatter_stochastic_reads_lanes(tex0, tex1, tex2, grad0, grad1, grad2, smp, params, layers, reads, weigh, g0, g1, g2);\n"))
 def scatter_stochastic_reads_lanes(tex0: TextureView, tex1: TextureView, tex2: TextureView, grad0: TexelGrad, grad1: TexelGrad, grad2: TexelGrad, smp: SamplerArgs, params: StochasticArgs,
-                                   layers: lane_ints, reads: lane_reads, g: lane_colours):  # fmt: skip
+                                   layers: lane_ints, reads: lane_reads, weigh: wp.int32, g0: lane_colours, g1: lane_colours, g2: lane_colours):  # fmt: skip
     """``stochastic.scatter_stochastic`` (a linear blend) of a stochastic triplanar lane's three
     projections over their footprints (the anisotropic filter's too): every lane pixel ``l`` adds
-    each projection's share ``w · g[l]`` into ``grad_a``, where ``w`` is positive, pixel by pixel in
-    projection, footprint tap and stochastic tap order."""
+    projection ``a``'s share (``w · g_a[l]`` where ``weigh``, else ``g_a[l]``) into ``grad_a``,
+    where ``w`` is positive, pixel by pixel in projection, footprint tap and stochastic tap order."""
     ...
 
 

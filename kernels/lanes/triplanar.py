@@ -144,7 +144,7 @@ def stochastic_lane_bodies(colour, colour_grad, args_t):
             gs = lane_colours()
             for l in range(count):
                 gs[l] = read_channels(adj, base + l)
-            scatter_stochastic_reads_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, args.stoch, lane_ints(args.layer), reads, gs)
+            scatter_stochastic_reads_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, args.stoch, lane_ints(args.layer), reads, 1, gs, gs, gs)
         else:
             faces = args.faces
             reads = triplanar_reads_lane(faces, args.proj, args.smp, pixels, base, count, 0, 0)
@@ -184,31 +184,81 @@ def stochastic_lane_bodies(colour, colour_grad, args_t):
 
 
 @functools.cache
-def normal_lane_bodies(args_t, samples_t):
-    """``(normal_lane, samples_lane, samples_grad_lane)``: the lane bodies of plain normal mapping
-    (one texture per axis) and of the first step of its two-step gradient, which stores each
+def normal_lane_bodies(args_t, samples_t, pixel_bodies=None):
+    """``(normal_lane, samples_lane, samples_grad_lane)``: the lane bodies of normal mapping (one
+    texture per axis) and of the first step of its two-step gradient, which stores each
     projection's sample and the weights (``samples_t``: :class:`~.triplanar.ProjectionSamples`) and
     adds their texel gradients. Each reads the projections on the unit normal, as the bodies do
     (``triplanar_reads_lane``'s ``unit_normals``); the forward makes the normals from them natively
-    (:func:`~.normals.surface_normals_lane`)."""
+    (:func:`~.normals.surface_normals_lane`). Plain sampling where ``pixel_bodies`` is ``None``;
+    else a stochastic method, whose pixel bodies ``(normal, samples, samples_grad)`` those are: each
+    projection's sample read over its footprint as stochastic colour reads it
+    (:func:`~.stochastic.stochastic_read_lane`), its gradient added back through the same taps
+    (``.scatter.scatter_projection_taps_lanes``; with the anisotropic filter,
+    :func:`~.stochastic.scatter_stochastic_reads_lanes`); a histogram's blend goes pixel by pixel
+    through the pixel bodies."""
+    stochastic = pixel_bodies is not None
+    normal_pixel, samples_pixel, samples_grad_pixel = pixel_bodies or (None, None, None)
 
-    def unit_normal_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
-        """``(reads, sx, sy, sz)``: the lane's reads on the unit normal and each projection's samples."""
-        reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 0)
-        sx = projection_samples_lane(args.faces, args.smp, args.layer, reads, 0)
-        sy = projection_samples_lane(args.faces, args.smp, args.layer, reads, 1)
-        sz = projection_samples_lane(args.faces, args.smp, args.layer, reads, 2)
-        return reads, sx, sy, sz
+    if stochastic:
 
-    unit_normal_samples = inlined(specialised(unit_normal_samples, "triplanar_unit_normal_samples"))
+        def unit_normal_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
+            """``(reads, sx, sy, sz)``: the lane's reads on the unit normal and each projection's samples."""
+            reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 0)
+            layers = lane_ints(args.layer)
+            sx = stochastic_read_lane(args.faces.px, args.smp, args.stoch, layers, reads, 0, count)
+            sy = stochastic_read_lane(args.faces.py, args.smp, args.stoch, layers, reads, 1, count)
+            sz = stochastic_read_lane(args.faces.pz, args.smp, args.stoch, layers, reads, 2, count)
+            return reads, sx, sy, sz
+
+        def scatter_samples(args: args_t, reads: lane_reads, count: wp.int32, grads: FaceGrads, gx: lane_colours, gy: lane_colours, gz: lane_colours):
+            """Each projection's own gradient (unweighted) added back through its stochastic taps."""
+            faces = args.faces
+            layers = lane_ints(args.layer)
+            if args.smp.filter == FILTER_ANISOTROPIC:
+                scatter_stochastic_reads_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, args.stoch, layers, reads, 0, gx, gy, gz)
+            else:
+                tx = projection_taps_lane(args.stoch, reads, 0, count)
+                ty = projection_taps_lane(args.stoch, reads, 1, count)
+                tz = projection_taps_lane(args.stoch, reads, 2, count)
+                scatter_projection_taps_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, layers, tx, ty, tz, gx, gy, gz)
+
+    else:
+
+        def unit_normal_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
+            """``(reads, sx, sy, sz)``: the lane's reads on the unit normal and each projection's samples."""
+            reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 0)
+            sx = projection_samples_lane(args.faces, args.smp, args.layer, reads, 0)
+            sy = projection_samples_lane(args.faces, args.smp, args.layer, reads, 1)
+            sz = projection_samples_lane(args.faces, args.smp, args.layer, reads, 2)
+            return reads, sx, sy, sz
+
+        def scatter_samples(args: args_t, reads: lane_reads, count: wp.int32, grads: FaceGrads, gx: lane_colours, gy: lane_colours, gz: lane_colours):
+            """Each projection's own gradient (unweighted) added into its texels."""
+            faces = args.faces
+            scatter_reads_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, lane_ints(args.layer), reads, gx, gy, gz)
+
+    kind = "_stochastic" if stochastic else ""
+    unit_normal_samples = inlined(specialised(unit_normal_samples, f"triplanar{kind}_unit_normal_samples"))
+    scatter_samples = inlined(specialised(scatter_samples, f"triplanar{kind}_scatter_samples"))
 
     def normal_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
+        if wp.static(stochastic):
+            if not lane_blend_linear(args.stoch):  # a histogram's blend
+                for l in range(count):
+                    wp.static(normal_pixel)(args, pixels, base + l, out)
+                return
         reads, sx, sy, sz = unit_normal_samples(args, pixels, base, count)
         write_normals(surface_normals_lane(args.proj, args.normal_map, pixels, base, count, reads, sx, sy, sz), base, count, out)
 
     def samples_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: samples_t):
         count = wp.min(out.weights.shape[0] - base, LANES)
+        if wp.static(stochastic):
+            if not lane_blend_linear(args.stoch):
+                for l in range(count):
+                    wp.static(samples_pixel)(args, pixels, base + l, out)
+                return
         reads, sx, sy, sz = unit_normal_samples(args, pixels, base, count)
         for l in range(count):
             i = base + l
@@ -221,6 +271,11 @@ def normal_lane_bodies(args_t, samples_t):
 
     def samples_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: samples_t):
         count = wp.min(adj.samples.shape[0] - base, LANES)
+        if wp.static(stochastic):
+            if not lane_blend_linear(args.stoch):
+                for l in range(count):
+                    wp.static(samples_grad_pixel)(args, pixels, base + l, grads, adj)
+                return
         reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 0)
         gx = lane_colours()
         gy = lane_colours()
@@ -229,13 +284,12 @@ def normal_lane_bodies(args_t, samples_t):
             gx[l] = adj.samples[base + l, 0]
             gy[l] = adj.samples[base + l, 1]
             gz[l] = adj.samples[base + l, 2]
-        faces = args.faces
-        scatter_reads_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, lane_ints(args.layer), reads, gx, gy, gz)
+        scatter_samples(args, reads, count, grads, gx, gy, gz)
 
     return (
-        inlined(specialised(normal_lane, "triplanar_normal_lane")),
-        inlined(specialised(samples_lane, "triplanar_samples_lane")),
-        inlined(specialised(samples_grad_lane, "triplanar_samples_grad_lane")),
+        inlined(specialised(normal_lane, f"triplanar{kind}_normal_lane")),
+        inlined(specialised(samples_lane, f"triplanar{kind}_samples_lane")),
+        inlined(specialised(samples_grad_lane, f"triplanar{kind}_samples_grad_lane")),
     )
 
 

@@ -360,7 +360,8 @@ WT_INLINE void wt_scatter_layer_stochastic_lane(const Tex& tex, const Grad& grad
     if (reads.smp.filter == WT_ANISOTROPIC) {  // every footprint tap's stochastic taps, in order
         const Tex* texs[3] = {&tex, &tex, &tex};
         const Grad* grads[3] = {&grad, &grad, &grad};
-        wt_scatter_stochastic_of(texs, grads, reads.smp, stoch, nreads, layers.c, at, 1, g);
+        const wt_lane_colours* gr[1] = {&g};
+        wt_scatter_stochastic_of(texs, grads, reads.smp, stoch, nreads, layers.c, at, 1, gr, 0);
         return;
     }
     wt_lane_taps taps[3];  // a read not made: no weight, nothing added

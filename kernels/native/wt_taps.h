@@ -285,7 +285,8 @@ WT_INLINE wt_lane_colours wt_stochastic_read_lane(const Tex& tex, const Smp& smp
 
 // wt_scatter_footprint_rows for stochastic lookups (stochastic.scatter_stochastic; a linear blend):
 // each read with a positive weight and a finite LOD, pixel by pixel and read by read, into a
-// gradient that is needed, adds its share (w · g[l] where weigh, g[l] where not) divided by its
+// gradient that is needed, adds its share (w · g[l] where weigh, g[l] where not; g: read r's own
+// gradient gr[r] where per_read, else gr[0]) divided by its
 // footprint's taps where several (footprint.footprint_mean) through each footprint tap in order: at
 // the tap's UV (footprint.footprint_uv, for one tap too), where finite, that UV's stochastic taps at
 // the read's LOD in order, each with a positive weight w_k adding w_k times that share. The
@@ -293,13 +294,12 @@ WT_INLINE wt_lane_colours wt_stochastic_read_lane(const Tex& tex, const Smp& smp
 // taps through a wt_tap_batch per gradient array: every texel gets the scalar kernel's sums in its
 // order, and no footprint's taps need holding (up to 64 per read).
 // twin: stochastic.scatter_stochastic
-template <class Tex, class Grad, class Smp, class Params>
-WT_INLINE void wt_scatter_stochastic_rows(const Tex* const* texs, const Grad* const* grads, const Smp& smp,
-                                          const Params& params, const int nreads, const int* layers,
-                                          const float* const* u_rows, const float* const* v_rows,
-                                          const float* const* lod_rows, const float* const* du_rows,
-                                          const float* const* dv_rows, const float* const* taps_rows,
-                                          const float* const* w_rows, const int weigh, const wt_lane_colours& g) {
+template <class Tex, class Grad, class Smp, class Params> WT_INLINE void
+wt_scatter_stochastic_rows(const Tex* const* texs, const Grad* const* grads, const Smp& smp, const Params& params,
+                           const int nreads, const int* layers, const float* const* u_rows, const float* const* v_rows,
+                           const float* const* lod_rows, const float* const* du_rows, const float* const* dv_rows,
+                           const float* const* taps_rows, const float* const* w_rows, const int weigh,
+                           const wt_lane_colours* const* gr, const int per_read) {
     wt_each_grad_array(nreads, grads, [&](const int first, const bool* group) __attribute__((always_inline)) {
         wt_tap_batch<Tex, Grad, Smp> batch(*texs[first], *grads[first], smp);
         float fu[WT_L], fv[WT_L], flod[WT_L], fraction[WT_L];  // footprint taps waiting for their taps
@@ -324,6 +324,7 @@ WT_INLINE void wt_scatter_stochastic_rows(const Tex* const* texs, const Grad* co
             for (int r = first; r < nreads; ++r) {
                 const float w = w_rows[r][l], lod = lod_rows[r][l];
                 if (!group[r] || !(w > 0.0f) || !(__builtin_fabsf(lod) <= wt_float_max)) continue;
+                const wt_lane_colours& g = *gr[per_read ? r : 0];
                 const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
                 const wt_f4 read_share = weigh ? w * gl : gl;
                 const float taps = taps_rows[r][l], u = u_rows[r][l], v = v_rows[r][l];
@@ -350,13 +351,15 @@ WT_INLINE void wt_scatter_stochastic_rows(const Tex* const* texs, const Grad* co
 template <class Tex, class Grad, class Smp, class Params>
 WT_INLINE void wt_scatter_stochastic_of(const Tex* const* texs, const Grad* const* grads, const Smp& smp,
                                         const Params& params, const int nreads, const int* layers,
-                                        const wt_lane_reads& at, const int weigh, const wt_lane_colours& g) {
+                                        const wt_lane_reads& at, const int weigh, const wt_lane_colours* const* gr,
+                                        const int per_read) {
     const float *u[3], *v[3], *lod[3], *w[3], *du[3], *dv[3], *taps[3];
     for (int r = 0; r < 3; ++r) {
         u[r] = at.data[r], v[r] = at.data[3 + r], lod[r] = at.data[6 + r], w[r] = at.data[9 + r];
         du[r] = at.data[12 + r], dv[r] = at.data[15 + r], taps[r] = at.data[18 + r];
     }
-    wt_scatter_stochastic_rows(texs, grads, smp, params, nreads, layers, u, v, lod, du, dv, taps, w, weigh, g);
+    wt_scatter_stochastic_rows(texs, grads, smp, params, nreads, layers, u, v, lod, du, dv, taps, w, weigh, gr,
+                               per_read);
 }
 
 // lanes.stochastic.scatter_stochastic_footprint_lane: stochastic.scatter_stochastic of adj[i] for
@@ -372,19 +375,24 @@ WT_INLINE void wt_scatter_stochastic_footprint_lane(const Tex& tex, const Grad& 
         wt_sample_reads_of(tex, smp, uv, uv_dx, uv_dy, lods, layers, constant_layer, lod_source, constant_lod, base);
     const Tex* texs[1] = {&tex};
     const Grad* grads[1] = {&grad};
-    wt_scatter_stochastic_of(texs, grads, smp, params, 1, s.layer, s.reads, 0, wt_adj_lane(adj, base, s.count));
+    const wt_lane_colours g = wt_adj_lane(adj, base, s.count);
+    const wt_lane_colours* gr[1] = {&g};
+    wt_scatter_stochastic_of(texs, grads, smp, params, 1, s.layer, s.reads, 0, gr, 0);
 }
 
 // lanes.stochastic.scatter_stochastic_reads_lanes: stochastic.scatter_stochastic of a stochastic
-// triplanar lane's three projections over their footprints, every filter's: each projection's share
-// w · g[l] into grad_a (a texture per axis), pixel by pixel in projection and tap order.
+// triplanar lane's three projections over their footprints, every filter's: projection a's share
+// (w · g_a[l] where weigh, else g_a[l]) into grad_a (a texture per axis), pixel by pixel in
+// projection and tap order.
 // twin: stochastic.scatter_stochastic
 template <class Tex, class Grad, class Smp, class Params, class Ints>
 WT_INLINE void wt_scatter_stochastic_reads_lanes(const Tex& tex0, const Tex& tex1, const Tex& tex2, const Grad& grad0,
                                                  const Grad& grad1, const Grad& grad2, const Smp& smp,
                                                  const Params& params, const Ints& layers, const wt_lane_reads& reads,
-                                                 const wt_lane_colours& g) {
+                                                 const int weigh, const wt_lane_colours& g0, const wt_lane_colours& g1,
+                                                 const wt_lane_colours& g2) {
     const Tex* texs[3] = {&tex0, &tex1, &tex2};
     const Grad* grads[3] = {&grad0, &grad1, &grad2};
-    wt_scatter_stochastic_of(texs, grads, smp, params, 3, layers.c, reads, 1, g);
+    const wt_lane_colours* gr[3] = {&g0, &g1, &g2};
+    wt_scatter_stochastic_of(texs, grads, smp, params, 3, layers.c, reads, weigh, gr, 1);
 }
