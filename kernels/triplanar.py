@@ -26,7 +26,7 @@ from . import adjoint_module, inlined, specialised
 from .faces import FACE_FIELDS, FaceGrads, FaceTextures, on_axis_face, on_face
 from .family import LANES_SUFFIX, Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
 from .lanes.projection import surface_covered
-from .lanes.triplanar import face_lane_bodies, lane_bodies, normal_lane_bodies, stochastic_lane_bodies, stored_lane_bodies
+from .lanes.triplanar import face_lane_bodies, lane_bodies, normal_lane_bodies, stochastic_lane_bodies, stochastic_normal_lanes_take, stored_lane_bodies
 from .native import use
 from .normals import NormalMapArgs, blend_projected, blend_projected_grad, decode_normal, decode_normal_grad, direction, direction_grad, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
@@ -371,14 +371,15 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
             grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
         return Kernels(forward, texel_grad, _adjoint(False), grads=FACE_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes)
     forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
-    lanes = first_lanes = None
+    lanes = first_lanes = take = None
     if not faces:  # modules of their own: colour-only jobs do not compile them
-        pixel_bodies = (bodies["normal"], bodies["samples"], bodies["samples_grad"]) if stochastic else None
-        normal_lane, samples_lane, samples_grad_lane = normal_lane_bodies(TriplanarArgs, ProjectionSamples, pixel_bodies)
+        normal_lane, samples_lane, samples_grad_lane = normal_lane_bodies(TriplanarArgs, ProjectionSamples, stochastic)
         lanes = lane_kernel(normal_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module + ".normal", name=name + "_normal_lanes", covered=surface_covered)
+        take = stochastic_normal_lanes_take if stochastic else None
         first_lanes = {"lanes": lane_kernel(samples_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, module=module + ".normal.grad", name=name + "_samples_lanes"),
-                       "texel_grad_lanes": lane_kernel(samples_grad_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, grads_t=FaceGrads, module=module + ".normal.grad", name=name + "_samples_texel_grad_lanes")}  # fmt: skip
+                       "texel_grad_lanes": lane_kernel(samples_grad_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, grads_t=FaceGrads, module=module + ".normal.grad", name=name + "_samples_texel_grad_lanes"),
+                       "lanes_take": take, "grad_lanes_take": take}  # fmt: skip
     first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,
                           body=bodies["samples"], scatter=bodies["samples_grad"], grads=FaceGrads)  # fmt: skip
     staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=FACE_GRADS, **(first_lanes or {})), then=_normal_from_samples(), intermediates=_sample_shapes, no_grad=("weights",))
-    return Kernels(forward, None, _adjoint(True), staged=staged, lanes=lanes)
+    return Kernels(forward, None, _adjoint(True), staged=staged, lanes=lanes, lanes_take=take)

@@ -393,7 +393,7 @@ def test_stochastic_triplanar_normal_lanes_give_the_one_pixel_bits(rng, launched
     """Normal mapping with a stochastic method (``triplanar_lanes.normal_lane_bodies`` with pixel
     bodies): each projection's sample read over its footprint through its stochastic taps, as
     stochastic colour reads it, then the normal made natively; a seed, a blend and a contrast,
-    object space; a histogram's blend pixel by pixel."""
+    object space. A histogram's blend runs the one-pixel kernel."""
     g = _hand_gbuffer(rng)
     tex = wt.Texture(rng.random((64, 32, 3), dtype=np.float32))
     smp = wt.Sampler(filter=filter, address="mirror", max_aniso=4)
@@ -405,9 +405,10 @@ def test_stochastic_triplanar_normal_lanes_give_the_one_pixel_bits(rng, launched
         assert (np.abs(np.nan_to_num(lanes)).sum(-1) > 0.5).mean() > 0.5
     assert ("triplanar_stochastic_normal_lanes", -(-1000 // LANES)) in launched
     if method == "hex" and filter == "trilinear":
+        launched.clear()
         histogram = wt.prepare_histogram(tex)
-        lanes, scalar = _both(lambda: wt.triplanar_normal(g, histogram.texture, sampler=smp, stochastic=wt.Stochastic("hex", histogram=histogram)))
-        _same_bits(lanes, scalar)
+        wt.triplanar_normal(g, histogram.texture, sampler=smp, stochastic=wt.Stochastic("hex", histogram=histogram))
+        assert [name for name, _ in launched] == ["triplanar_stochastic_normal_forward"]  # stochastic_normal_lanes_take
 
 
 @pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])

@@ -21,6 +21,7 @@ from .. import inlined, specialised
 from ..faces import FaceGrads, FaceTextures, on_axis
 from ..family import lane_covered
 from ..projection import SurfacePixels
+from ..stochastic import METHOD_NONE
 from ..texels import FILTER_ANISOTROPIC, SamplerArgs, pick3, read_channels, write_channels
 from . import LANES, lane_colours, lane_ints, lane_reads
 from .normals import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
@@ -184,22 +185,18 @@ def stochastic_lane_bodies(colour, colour_grad, args_t):
 
 
 @functools.cache
-def normal_lane_bodies(args_t, samples_t, pixel_bodies=None):
+def normal_lane_bodies(args_t, samples_t, stochastic: bool = False):
     """``(normal_lane, samples_lane, samples_grad_lane)``: the lane bodies of normal mapping (one
     texture per axis) and of the first step of its two-step gradient, which stores each
     projection's sample and the weights (``samples_t``: :class:`~.triplanar.ProjectionSamples`) and
     adds their texel gradients. Each reads the projections on the unit normal, as the bodies do
     (``triplanar_reads_lane``'s ``unit_normals``); the forward makes the normals from them natively
-    (:func:`~.normals.surface_normals_lane`). Plain sampling where ``pixel_bodies`` is ``None``;
-    else a stochastic method, whose pixel bodies ``(normal, samples, samples_grad)`` those are: each
+    (:func:`~.normals.surface_normals_lane`). Plain sampling, or a ``stochastic`` method: each
     projection's sample read over its footprint as stochastic colour reads it
     (:func:`~.stochastic.stochastic_read_lane`), its gradient added back through the same taps
     (``.scatter.scatter_projection_taps_lanes``; with the anisotropic filter,
-    :func:`~.stochastic.scatter_stochastic_reads_lanes`); a histogram's blend goes pixel by pixel
-    through the pixel bodies."""
-    stochastic = pixel_bodies is not None
-    normal_pixel, samples_pixel, samples_grad_pixel = pixel_bodies or (None, None, None)
-
+    :func:`~.stochastic.scatter_stochastic_reads_lanes`); a histogram's blend is not theirs
+    (:func:`stochastic_normal_lanes_take`)."""
     if stochastic:
 
         def unit_normal_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
@@ -244,21 +241,11 @@ def normal_lane_bodies(args_t, samples_t, pixel_bodies=None):
 
     def normal_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
-        if wp.static(stochastic):
-            if not lane_blend_linear(args.stoch):  # a histogram's blend
-                for l in range(count):
-                    wp.static(normal_pixel)(args, pixels, base + l, out)
-                return
         reads, sx, sy, sz = unit_normal_samples(args, pixels, base, count)
         write_normals(surface_normals_lane(args.proj, args.normal_map, pixels, base, count, reads, sx, sy, sz), base, count, out)
 
     def samples_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: samples_t):
         count = wp.min(out.weights.shape[0] - base, LANES)
-        if wp.static(stochastic):
-            if not lane_blend_linear(args.stoch):
-                for l in range(count):
-                    wp.static(samples_pixel)(args, pixels, base + l, out)
-                return
         reads, sx, sy, sz = unit_normal_samples(args, pixels, base, count)
         for l in range(count):
             i = base + l
@@ -271,11 +258,6 @@ def normal_lane_bodies(args_t, samples_t, pixel_bodies=None):
 
     def samples_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: samples_t):
         count = wp.min(adj.samples.shape[0] - base, LANES)
-        if wp.static(stochastic):
-            if not lane_blend_linear(args.stoch):
-                for l in range(count):
-                    wp.static(samples_grad_pixel)(args, pixels, base + l, grads, adj)
-                return
         reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 0)
         gx = lane_colours()
         gy = lane_colours()
@@ -291,6 +273,14 @@ def normal_lane_bodies(args_t, samples_t, pixel_bodies=None):
         inlined(specialised(samples_lane, f"triplanar{kind}_samples_lane")),
         inlined(specialised(samples_grad_lane, f"triplanar{kind}_samples_grad_lane")),
     )
+
+
+def stochastic_normal_lanes_take(args) -> bool:
+    """Whether stochastic normal mapping's lanes take a launch with ``args``
+    (:class:`~.triplanar.TriplanarArgs`; ``Kernels.lanes_take``): a linear blend, as
+    :func:`~.stochastic.lane_blend_linear`; a histogram's runs the one-pixel kernels, whose pixel
+    bodies the lane modules then need not compile."""
+    return args.stoch.histogram == 0 and args.stoch.method != METHOD_NONE
 
 
 @functools.cache
