@@ -26,7 +26,7 @@ from . import adjoint_module, inlined, specialised
 from .faces import FACE_FIELDS, FaceGrads, FaceTextures, on_axis_face, on_face
 from .family import LANES_SUFFIX, Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
 from .lanes.projection import surface_covered
-from .lanes.triplanar import face_lane_bodies, lane_bodies, normal_lane_bodies, stochastic_lane_bodies, stochastic_normal_lanes_take, stored_lane_bodies
+from .lanes.triplanar import face_lane_bodies, lane_bodies, linear_blend_take, normal_lane_bodies, stochastic_face_lane_bodies, stochastic_lane_bodies, stored_lane_bodies
 from .native import use
 from .normals import NormalMapArgs, blend_projected, blend_projected_grad, decode_normal, decode_normal_grad, direction, direction_grad, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
@@ -369,13 +369,17 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
             colour_lane, colour_grad_lane = stochastic_lane_bodies(bodies["colour"], bodies["colour_grad"], TriplanarArgs)
             lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
             grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
+        else:
+            colour_lane, colour_grad_lane = stochastic_face_lane_bodies(TriplanarArgs)
+            lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
+            grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
         return Kernels(forward, texel_grad, _adjoint(False), grads=FACE_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes)
     forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
     lanes = first_lanes = take = None
     if not faces:  # modules of their own: colour-only jobs do not compile them
         normal_lane, samples_lane, samples_grad_lane = normal_lane_bodies(TriplanarArgs, ProjectionSamples, stochastic)
         lanes = lane_kernel(normal_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module + ".normal", name=name + "_normal_lanes", covered=surface_covered)
-        take = stochastic_normal_lanes_take if stochastic else None
+        take = linear_blend_take if stochastic else None
         first_lanes = {"lanes": lane_kernel(samples_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, module=module + ".normal.grad", name=name + "_samples_lanes"),
                        "texel_grad_lanes": lane_kernel(samples_grad_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, grads_t=FaceGrads, module=module + ".normal.grad", name=name + "_samples_texel_grad_lanes"),
                        "lanes_take": take, "grad_lanes_take": take}  # fmt: skip

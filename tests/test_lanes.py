@@ -408,7 +408,7 @@ def test_stochastic_triplanar_normal_lanes_give_the_one_pixel_bits(rng, launched
         launched.clear()
         histogram = wt.prepare_histogram(tex)
         wt.triplanar_normal(g, histogram.texture, sampler=smp, stochastic=wt.Stochastic("hex", histogram=histogram))
-        assert [name for name, _ in launched] == ["triplanar_stochastic_normal_forward"]  # stochastic_normal_lanes_take
+        assert [name for name, _ in launched] == ["triplanar_stochastic_normal_forward"]  # linear_blend_take
 
 
 @pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
@@ -442,6 +442,41 @@ def test_face_lanes_give_the_one_pixel_bits(rng, launched, filter):
         wt.set_num_threads(previous)
     names = {name for name, _ in launched}
     assert {"triplanar_faces_lanes", "triplanar_faces_texel_grad_lanes"} <= names
+
+
+@pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])
+@pytest.mark.parametrize("filter", ["nearest", "trilinear", "anisotropic"])
+def test_stochastic_face_lanes_give_the_one_pixel_bits(rng, launched, method, filter):
+    """Stochastic colour with a texture per face (``triplanar_lanes.stochastic_face_lane_bodies``):
+    each projection's stochastic taps on the face its pixel reads, as :func:`test_face_lanes_give_the_one_pixel_bits`
+    reads the faces; forward and texel gradient (every face's, and a texture shared by a + and a -
+    face, whose adds interleave), on 3 threads too."""
+    g = _hand_gbuffer(rng, 5000)
+    normals = g.normal.numpy().reshape(-1, 3)
+    normals[11:16] = [(-0.0, 1.0, 0.5), (-1e-45, 0.3, 2.0), (0.0, -0.0, -1.0), (0.4, -1e-38, 0.0), (-3e19, 1e19, -2e19)]
+    g.normal.assign(normals.reshape(1, -1, 3))
+    g.mask.assign(np.maximum(g.mask.numpy(), (np.arange(normals.shape[0]) < 20).reshape(1, -1).astype(np.float32)))
+    faces = [wt.Texture(rng.random((16 << (k % 3), 24 + 8 * k, 3), dtype=np.float32), requires_grad=True) for k in range(6)]
+    shared = [faces[0], faces[0], faces[2], faces[3], faces[3], faces[5]]  # x+ and x-, y- and z+ share a texture
+    smp = wt.Sampler(filter=filter, address="mirror", max_aniso=4)
+    placement = np.array([[0.0, 0.8, 0.0, 0.3], [-0.8, 0.0, 0.0, 0.0], [0.0, 0.0, 1.5, -0.2], [0.0, 0.0, 0.0, 1.0]], np.float32)
+    option = wt.Stochastic(method, seed=3, mirror=True, rotation=0.5)
+    calls = ((lambda: wt.triplanar(g, textures_per_face=faces, sampler=smp, stochastic=option, sharpness=3.0), faces),
+             (lambda: wt.triplanar(g, textures_per_face=shared, sampler=smp, stochastic=method, sharpness=0.0, space="object", object_to_world=placement, tiling=(1.5, 2.0, 0.75)), [faces[0], faces[2], faces[3], faces[5]]),
+             (lambda: wt.biplanar(g, textures_per_face=faces, sampler=smp, stochastic=option), faces))  # fmt: skip
+    previous = wt.get_num_threads()
+    try:
+        for threads in (1, 3):
+            wt.set_num_threads(threads)
+            for call, textures in calls:
+                lanes, scalar = _both(call)
+                _same_bits(lanes, scalar)
+                assert (np.nan_to_num(lanes) > 0).any(-1).mean() > 0.5
+                _same_grads(call, textures, rng, 3, 5000)
+    finally:
+        wt.set_num_threads(previous)
+    names = {name for name, _ in launched}
+    assert {"triplanar_stochastic_faces_lanes", "triplanar_stochastic_faces_texel_grad_lanes"} <= names
 
 
 @pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])

@@ -28,7 +28,7 @@ from .normals import stored_normals_grad_lane, stored_normals_lane, surface_norm
 from .projection import accumulate_reads_lane, triplanar_reads_lane
 from .sample import accumulate_footprint_lane
 from .scatter import scatter_face_reads_lanes, scatter_lod_lanes, scatter_projection_taps_lanes, scatter_reads_lanes
-from .stochastic import lane_blend_linear, projection_taps_lane, scatter_stochastic_reads_lanes, stochastic_read_lane
+from .stochastic import lane_blend_linear, projection_taps_lane, scatter_stochastic_face_reads_lanes, scatter_stochastic_reads_lanes, stochastic_read_lane
 
 
 @wp.func
@@ -123,6 +123,50 @@ def face_lane_bodies(args_t):
 
 
 @functools.cache
+def stochastic_face_lane_bodies(args_t):
+    """``(colour_lane, colour_grad_lane)``: the lane bodies of stochastic colour mapping with a
+    texture per face (linear blends only: a histogram needs one texture for every projection, which
+    is not this configuration): the lane's reads on the ``+`` and
+    ``-`` faces, as :func:`face_lane_bodies` makes them; each projection's sample read over its
+    footprint through its stochastic taps on the face its pixel reads
+    (:func:`~.stochastic.stochastic_read_lane`, both faces), added with the projection's weight in
+    the order of the pixel body; the gradient adds each projection's share ``w · g`` back through
+    the same taps (:func:`~.stochastic.scatter_stochastic_face_reads_lanes`)."""
+
+    def stochastic_faces_colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
+        count = wp.min(out.shape[0] - base, LANES)
+        f = args.faces
+        plus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 1)
+        minus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 2)
+        layers = lane_ints(args.layer)
+        value = lane_colours()
+        for axis in range(3):
+            sp = stochastic_read_lane(on_axis(f.px, f.py, f.pz, axis), args.smp, args.stoch, layers, plus, axis, count)
+            sm = stochastic_read_lane(on_axis(f.nx, f.ny, f.nz, axis), args.smp, args.stoch, layers, minus, axis, count)
+            for l in range(count):
+                w_plus = plus[9 + axis, l]
+                w_minus = minus[9 + axis, l]
+                if w_plus > 0.0:
+                    value[l] = value[l] + w_plus * sp[l]
+                elif w_minus > 0.0:
+                    value[l] = value[l] + w_minus * sm[l]
+        for l in range(count):
+            write_channels(out, base + l, value[l])
+
+    def stochastic_faces_colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
+        count = wp.min(adj.shape[0] - base, LANES)
+        f = args.faces
+        plus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 1)
+        minus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 2)
+        g = lane_colours()
+        for l in range(count):
+            g[l] = read_channels(adj, base + l)
+        scatter_stochastic_face_reads_lanes(f.px, f.nx, f.py, f.ny, f.pz, f.nz, grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, args.smp, args.stoch, lane_ints(args.layer), plus, minus, g)
+
+    return inlined(specialised(stochastic_faces_colour_lane, "triplanar_stochastic_faces_colour_lane")), inlined(specialised(stochastic_faces_colour_grad_lane, "triplanar_stochastic_faces_colour_grad_lane"))
+
+
+@functools.cache
 def stochastic_lane_bodies(colour, colour_grad, args_t):
     """``(colour_lane, colour_grad_lane)``: the lane bodies of stochastic colour mapping (one texture
     per axis) whose pixel bodies are ``colour`` and its texel gradient ``colour_grad``: the lane's
@@ -196,7 +240,7 @@ def normal_lane_bodies(args_t, samples_t, stochastic: bool = False):
     (:func:`~.stochastic.stochastic_read_lane`), its gradient added back through the same taps
     (``.scatter.scatter_projection_taps_lanes``; with the anisotropic filter,
     :func:`~.stochastic.scatter_stochastic_reads_lanes`); a histogram's blend is not theirs
-    (:func:`stochastic_normal_lanes_take`)."""
+    (:func:`linear_blend_take`)."""
     if stochastic:
 
         def unit_normal_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
@@ -275,7 +319,7 @@ def normal_lane_bodies(args_t, samples_t, stochastic: bool = False):
     )
 
 
-def stochastic_normal_lanes_take(args) -> bool:
+def linear_blend_take(args) -> bool:
     """Whether stochastic normal mapping's lanes take a launch with ``args``
     (:class:`~.triplanar.TriplanarArgs`; ``Kernels.lanes_take``): a linear blend, as
     :func:`~.stochastic.lane_blend_linear`; a histogram's runs the one-pixel kernels, whose pixel

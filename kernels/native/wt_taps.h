@@ -396,3 +396,29 @@ WT_INLINE void wt_scatter_stochastic_reads_lanes(const Tex& tex0, const Tex& tex
     const wt_lane_colours* gr[3] = {&g0, &g1, &g2};
     wt_scatter_stochastic_of(texs, grads, smp, params, 3, layers.c, reads, weigh, gr, 1);
 }
+
+// lanes.stochastic.scatter_stochastic_face_reads_lanes: stochastic.scatter_stochastic with a texture
+// per face, every filter's: each projection's read on its + face (rows of `plus`) and on its - face
+// (rows of `minus`; a pixel reads one of the two), in the order x+, x-, y+, y-, z+, z-, each adding
+// w · g[l] through its stochastic taps.
+// twin: stochastic.scatter_stochastic
+template <class Tex, class Grad, class Smp, class Params, class Ints>
+WT_INLINE void wt_scatter_stochastic_face_reads_lanes(const Tex& tex_px, const Tex& tex_nx, const Tex& tex_py,
+                                                      const Tex& tex_ny, const Tex& tex_pz, const Tex& tex_nz,
+                                                      const Grad& grad_px, const Grad& grad_nx, const Grad& grad_py,
+                                                      const Grad& grad_ny, const Grad& grad_pz, const Grad& grad_nz,
+                                                      const Smp& smp, const Params& params, const Ints& layers,
+                                                      const wt_lane_reads& plus, const wt_lane_reads& minus,
+                                                      const wt_lane_colours& g) {
+    const Tex* texs[6] = {&tex_px, &tex_nx, &tex_py, &tex_ny, &tex_pz, &tex_nz};
+    const Grad* grads[6] = {&grad_px, &grad_nx, &grad_py, &grad_ny, &grad_pz, &grad_nz};
+    const float *u[6], *v[6], *lod[6], *du[6], *dv[6], *taps[6], *w[6];
+    for (int r = 0; r < 6; ++r) {
+        const wt_lane_reads& at = r % 2 == 0 ? plus : minus;
+        const int axis = r / 2;
+        u[r] = at.data[axis], v[r] = at.data[3 + axis], lod[r] = at.data[6 + axis], w[r] = at.data[9 + axis];
+        du[r] = at.data[12 + axis], dv[r] = at.data[15 + axis], taps[r] = at.data[18 + axis];
+    }
+    const wt_lane_colours* gr[1] = {&g};
+    wt_scatter_stochastic_rows(texs, grads, smp, params, 6, layers.c, u, v, lod, du, dv, taps, w, 1, gr, 0);
+}
