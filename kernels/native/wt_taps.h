@@ -210,44 +210,49 @@ WT_INLINE wt_lane_taps wt_projection_taps_lane(const Params& params, const wt_la
 // footprint tap j, its UV (footprint.footprint_uv, for a one-tap footprint too), that UV's
 // stochastic taps at the read's LOD (wt_stochastic_taps) read tap by tap from 0, NaN where the UV
 // or the LOD is not finite, added into the result from 0; the result divided by the taps where
-// there are several (footprint.footprint_mean). Rows of the lanes not read are 0.
+// there are several (footprint.footprint_mean). Rows of the lanes not read (or past count) are 0.
 // twin: stochastic._sample_stochastic:sample_stochastic
 template <class Tex, class Smp, class Params>
 WT_INLINE void wt_stochastic_footprint(const Tex& tex, const Smp& smp, const Params& params, const int* layers,
                                        const float* u, const float* v, const float* lod, const float* du,
                                        const float* dv, const float* taps, const float* weight, int count,
                                        wt_lane_colours& result) {
-    int most = 0;  // the most taps of a read lane
     float zero[WT_L], one[WT_L];
     for (int l = 0; l < WT_L; ++l) {
-        const int n = weight[l] > 0.0f ? (int)taps[l] : 0;  // footprint.footprint_taps
-        most = n > most ? n : most;
         zero[l] = 0.0f, one[l] = 1.0f;
         for (int c = 0; c < 4; ++c) result.data[l][c] = 0.0f;
     }
+    // Footprint taps queued pixel by pixel, in order, and read WT_L at a time whatever pixel they
+    // are of: a pixel's taps still add into its result in order, and the lane's pixels with fewer
+    // taps than the widest leave no lane of a read empty.
+    float qu[WT_L], qv[WT_L], qlod[WT_L];
+    int qlayer[WT_L], qpixel[WT_L];
+    int m = 0;
     const float nan = __builtin_nanf("");
-    for (int j = 0; j < most; ++j) {
-        float tu[WT_L], tv[WT_L];
-        bool on[WT_L];
-        for (int l = 0; l < WT_L; ++l) {
-            on[l] = weight[l] > 0.0f && j < (int)taps[l];
-            const float s = (float)j + 0.5f - 0.5f * taps[l];
-            tu[l] = on[l] ? u[l] + du[l] * s : 0.0f;  // footprint.footprint_uv
-            tv[l] = on[l] ? v[l] + dv[l] * s : 0.0f;
-        }
-        wt_lane_taps t = wt_stochastic_taps(params, tu, tv, lod, count);
-        for (int k = 0; k < 4; ++k)
-            for (int l = 0; l < WT_L; ++l) t.data[3 * k + 2][l] = on[l] ? t.data[3 * k + 2][l] : 0.0f;
+    auto drain = [&]() __attribute__((always_inline)) {
+        for (int q = m; q < WT_L; ++q) qu[q] = qv[q] = qlod[q] = 0.0f, qlayer[q] = 0;
+        const wt_lane_taps t = wt_stochastic_taps(params, qu, qv, qlod, m);  // weights 0 past m
         wt_lane_colours value;
         for (int k = 0; k < 4; ++k)
-            wt_accumulate_footprint(tex, smp, layers, t.data[3 * k], t.data[3 * k + 1], t.data[12], zero, zero, one,
+            wt_accumulate_footprint(tex, smp, qlayer, t.data[3 * k], t.data[3 * k + 1], t.data[12], zero, zero, one,
                                     t.data[3 * k + 2], 1, value);
-        for (int l = 0; l < WT_L; ++l) {
-            if (!on[l]) continue;
-            const bool finite = t.data[13][l] != 0.0f;
-            for (int c = 0; c < 4; ++c) result.data[l][c] = result.data[l][c] + (finite ? value.data[l][c] : nan);
+        for (int q = 0; q < m; ++q) {
+            const bool finite = t.data[13][q] != 0.0f;
+            for (int c = 0; c < 4; ++c)
+                result.data[qpixel[q]][c] = result.data[qpixel[q]][c] + (finite ? value.data[q][c] : nan);
+        }
+        m = 0;
+    };
+    for (int l = 0; l < WT_L; ++l) {
+        if (l >= count || !(weight[l] > 0.0f)) continue;
+        for (int j = 0; j < (int)taps[l]; ++j) {  // footprint.footprint_taps
+            const float s = (float)j + 0.5f - 0.5f * taps[l];
+            qu[m] = u[l] + du[l] * s, qv[m] = v[l] + dv[l] * s;  // footprint.footprint_uv
+            qlod[m] = lod[l], qlayer[m] = layers[l], qpixel[m] = l;
+            if (++m == WT_L) drain();
         }
     }
+    if (m > 0) drain();
     for (int l = 0; l < WT_L; ++l)
         if (weight[l] > 0.0f && taps[l] != 1.0f)
             for (int c = 0; c < 4; ++c) result.data[l][c] = result.data[l][c] / taps[l];
