@@ -1,7 +1,6 @@
 """Triplanar and biplanar colour for a lane of pixels on the CPU (:mod:`.`), forward and texel
-gradient, triplanar normal mapping (its forward, and both steps of its two-step gradient), one
-texture per axis, plain sampling; plain colour mapping with a texture per face; and stochastic
-colour mapping, one texture per axis, forward and texel gradient.
+gradient, plain or stochastic, one texture per axis or per face; and triplanar normal mapping (its
+forward, and both steps of its two-step gradient), plain or stochastic, one texture per axis.
 
 What each pixel reads from each projection (its UV, footprint and weight, with triplanar or
 biplanar weights) comes from :func:`~.projection.triplanar_reads_lane` for the whole lane;
