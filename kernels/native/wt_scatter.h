@@ -304,23 +304,52 @@ WT_INLINE void wt_scatter_footprint_rows(const Tex* const* texs, const Grad* con
     });
 }
 
+// The rows of up to six reads (a lane_reads matrix's rows of a read: UV, LOD, weight, footprint),
+// read r's at u[r], v[r]...: reads 0 .. 2 of a matrix (wt_rows_of), or each projection's on its +
+// and - face (wt_face_rows).
+struct wt_read_rows {
+    const float *u[6], *v[6], *lod[6], *w[6], *du[6], *dv[6], *taps[6];
+};
+// Read r of `rows`: read `axis` of `at`.
+WT_INLINE void wt_put_rows(wt_read_rows& rows, int r, const wt_lane_reads& at, int axis) {
+    rows.u[r] = at.data[axis], rows.v[r] = at.data[3 + axis], rows.lod[r] = at.data[6 + axis];
+    rows.w[r] = at.data[9 + axis], rows.du[r] = at.data[12 + axis], rows.dv[r] = at.data[15 + axis];
+    rows.taps[r] = at.data[18 + axis];
+}
+// Reads 0 .. 2 of `at`.
+WT_INLINE wt_read_rows wt_rows_of(const wt_lane_reads& at) {
+    wt_read_rows rows;
+    for (int r = 0; r < 3; ++r) wt_put_rows(rows, r, at, r);
+    return rows;
+}
+// A texture per face: each projection's read on its + face (of `plus`) and on its - face (of
+// `minus`), in the order x+, x-, y+, y-, z+, z-.
+WT_INLINE wt_read_rows wt_face_rows(const wt_lane_reads& plus, const wt_lane_reads& minus) {
+    wt_read_rows rows;
+    for (int r = 0; r < 6; ++r) wt_put_rows(rows, r, r % 2 == 0 ? plus : minus, r / 2);
+    return rows;
+}
+
+// wt_scatter_rows of reads r = 0 .. nreads - 1 of `rows`; where a read has several taps (the
+// anisotropic filter's), wt_scatter_footprint_rows.
+template <class Tex, class Grad, class Smp>
+WT_INLINE void wt_scatter_read_rows(const Tex* const* texs, const Grad* const* grads, const Smp& smp, const int nreads,
+                                    const int* layers, const wt_read_rows& rows, const int weigh,
+                                    const wt_lane_colours* const* gr, const int per_read) {
+    if (wt_several_taps(nreads, rows.w, rows.taps)) {
+        wt_scatter_footprint_rows(texs, grads, smp, nreads, layers, rows.u, rows.v, rows.lod, rows.du, rows.dv,
+                                  rows.taps, rows.w, weigh, gr, per_read);
+        return;
+    }
+    wt_scatter_rows(texs, grads, smp, nreads, layers, rows.u, rows.v, rows.lod, rows.w, weigh, gr, per_read);
+}
+
 // wt_scatter_rows of the reads of a lane_reads matrix `at`.
 template <class Tex, class Grad, class Smp>
 WT_INLINE void wt_scatter_lod_of(const Tex* const* texs, const Grad* const* grads, const Smp& smp, const int nreads,
                                  const int* layers, const wt_lane_reads& at, const int weigh,
                                  const wt_lane_colours* const* gr, const int per_read) {
-    const float* u[3] = {at.data[0], at.data[1], at.data[2]};
-    const float* v[3] = {at.data[3], at.data[4], at.data[5]};
-    const float* lod[3] = {at.data[6], at.data[7], at.data[8]};
-    const float* w[3] = {at.data[9], at.data[10], at.data[11]};
-    const float* taps[3] = {at.data[18], at.data[19], at.data[20]};
-    if (wt_several_taps(nreads, w, taps)) {
-        const float* du[3] = {at.data[12], at.data[13], at.data[14]};
-        const float* dv[3] = {at.data[15], at.data[16], at.data[17]};
-        wt_scatter_footprint_rows(texs, grads, smp, nreads, layers, u, v, lod, du, dv, taps, w, weigh, gr, per_read);
-        return;
-    }
-    wt_scatter_rows(texs, grads, smp, nreads, layers, u, v, lod, w, weigh, gr, per_read);
+    wt_scatter_read_rows(texs, grads, smp, nreads, layers, wt_rows_of(at), weigh, gr, per_read);
 }
 
 // Every read's share of one gradient g[l] per lane pixel.
@@ -442,19 +471,8 @@ WT_INLINE void wt_scatter_face_reads_lanes(const Tex& tex_px, const Tex& tex_nx,
                                            const wt_lane_colours& g) {
     const Tex* texs[6] = {&tex_px, &tex_nx, &tex_py, &tex_ny, &tex_pz, &tex_nz};
     const Grad* grads[6] = {&grad_px, &grad_nx, &grad_py, &grad_ny, &grad_pz, &grad_nz};
-    const float *u[6], *v[6], *lod[6], *du[6], *dv[6], *taps[6], *w[6];
-    for (int r = 0; r < 6; ++r) {
-        const wt_lane_reads& at = r % 2 == 0 ? plus : minus;
-        const int axis = r / 2;
-        u[r] = at.data[axis], v[r] = at.data[3 + axis], lod[r] = at.data[6 + axis], w[r] = at.data[9 + axis];
-        du[r] = at.data[12 + axis], dv[r] = at.data[15 + axis], taps[r] = at.data[18 + axis];
-    }
     const wt_lane_colours* gr[1] = {&g};
-    if (wt_several_taps(6, w, taps)) {
-        wt_scatter_footprint_rows(texs, grads, smp, 6, layers.c, u, v, lod, du, dv, taps, w, 1, gr, 0);
-        return;
-    }
-    wt_scatter_rows(texs, grads, smp, 6, layers.c, u, v, lod, w, 1, gr, 0);
+    wt_scatter_read_rows(texs, grads, smp, 6, layers.c, wt_face_rows(plus, minus), 1, gr, 0);
 }
 
 // lanes.scatter.scatter_projection_taps_lanes: scatter_stochastic of each projection's one-tap

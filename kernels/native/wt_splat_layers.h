@@ -343,7 +343,7 @@ WT_INLINE void wt_scatter_layer_lane(const Tex& tex, const Grad& grad, const Rea
 // g[l] of layer j's reads of tex (wt_layer_values_stochastic_lane's): each read k with a positive
 // weight w adds w · g (for the one read of the UV and world-XZ projections too: w is 1) through its
 // stochastic taps into grad, pixel by pixel in read and tap order (wt_scatter_projection_taps_lanes;
-// with the anisotropic filter, wt_scatter_stochastic_of: every footprint tap's taps in order).
+// with the anisotropic filter, wt_scatter_stochastic_rows: every footprint tap's taps in order).
 // twin: splat_layers._layer_reads:scatter_layer
 template <class Tex, class Grad, class Reads, class Stoch, class Floats, class UV, class Surface, class TriW>
 WT_INLINE void wt_scatter_layer_stochastic_lane(const Tex& tex, const Grad& grad, const Reads& reads,
@@ -361,7 +361,7 @@ WT_INLINE void wt_scatter_layer_stochastic_lane(const Tex& tex, const Grad& grad
         const Tex* texs[3] = {&tex, &tex, &tex};
         const Grad* grads[3] = {&grad, &grad, &grad};
         const wt_lane_colours* gr[1] = {&g};
-        wt_scatter_stochastic_of(texs, grads, reads.smp, stoch, nreads, layers.c, at, 1, gr, 0);
+        wt_scatter_stochastic_rows(texs, grads, reads.smp, stoch, nreads, layers.c, wt_rows_of(at), 1, gr, 0);
         return;
     }
     wt_lane_taps taps[3];  // a read not made: no weight, nothing added

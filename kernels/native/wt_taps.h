@@ -289,7 +289,7 @@ WT_INLINE wt_lane_colours wt_stochastic_read_lane(const Tex& tex, const Smp& smp
 }
 
 // wt_scatter_footprint_rows for stochastic lookups (stochastic.scatter_stochastic; a linear blend):
-// each read with a positive weight and a finite LOD, pixel by pixel and read by read, into a
+// each read of `rows` with a positive weight and a finite LOD, pixel by pixel and read by read, into a
 // gradient that is needed, adds its share (w · g[l] where weigh, g[l] where not; g: read r's own
 // gradient gr[r] where per_read, else gr[0]) divided by its
 // footprint's taps where several (footprint.footprint_mean) through each footprint tap in order: at
@@ -299,12 +299,11 @@ WT_INLINE wt_lane_colours wt_stochastic_read_lane(const Tex& tex, const Smp& smp
 // taps through a wt_tap_batch per gradient array: every texel gets the scalar kernel's sums in its
 // order, and no footprint's taps need holding (up to 64 per read).
 // twin: stochastic.scatter_stochastic
-template <class Tex, class Grad, class Smp, class Params> WT_INLINE void
-wt_scatter_stochastic_rows(const Tex* const* texs, const Grad* const* grads, const Smp& smp, const Params& params,
-                           const int nreads, const int* layers, const float* const* u_rows, const float* const* v_rows,
-                           const float* const* lod_rows, const float* const* du_rows, const float* const* dv_rows,
-                           const float* const* taps_rows, const float* const* w_rows, const int weigh,
-                           const wt_lane_colours* const* gr, const int per_read) {
+template <class Tex, class Grad, class Smp, class Params>
+WT_INLINE void wt_scatter_stochastic_rows(const Tex* const* texs, const Grad* const* grads, const Smp& smp,
+                                          const Params& params, const int nreads, const int* layers,
+                                          const wt_read_rows& rows, const int weigh, const wt_lane_colours* const* gr,
+                                          const int per_read) {
     wt_each_grad_array(nreads, grads, [&](const int first, const bool* group) __attribute__((always_inline)) {
         wt_tap_batch<Tex, Grad, Smp> batch(*texs[first], *grads[first], smp);
         float fu[WT_L], fv[WT_L], flod[WT_L], fraction[WT_L];  // footprint taps waiting for their taps
@@ -327,13 +326,13 @@ wt_scatter_stochastic_rows(const Tex* const* texs, const Grad* const* grads, con
         };
         for (int l = 0; l < WT_L; ++l) {
             for (int r = first; r < nreads; ++r) {
-                const float w = w_rows[r][l], lod = lod_rows[r][l];
+                const float w = rows.w[r][l], lod = rows.lod[r][l];
                 if (!group[r] || !(w > 0.0f) || !(__builtin_fabsf(lod) <= wt_float_max)) continue;
                 const wt_lane_colours& g = *gr[per_read ? r : 0];
                 const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
                 const wt_f4 read_share = weigh ? w * gl : gl;
-                const float taps = taps_rows[r][l], u = u_rows[r][l], v = v_rows[r][l];
-                const float du = du_rows[r][l], dv = dv_rows[r][l];
+                const float taps = rows.taps[r][l], u = rows.u[r][l], v = rows.v[r][l];
+                const float du = rows.du[r][l], dv = rows.dv[r][l];
                 const wt_f4 tap_share = taps != 1.0f ? read_share / taps : read_share;  // footprint.footprint_mean
                 int read_level;
                 float read_fraction;
@@ -352,21 +351,6 @@ wt_scatter_stochastic_rows(const Tex* const* texs, const Grad* const* grads, con
     });
 }
 
-// wt_scatter_stochastic_rows of the reads r = 0 .. nreads - 1 of a lane_reads matrix `at`.
-template <class Tex, class Grad, class Smp, class Params>
-WT_INLINE void wt_scatter_stochastic_of(const Tex* const* texs, const Grad* const* grads, const Smp& smp,
-                                        const Params& params, const int nreads, const int* layers,
-                                        const wt_lane_reads& at, const int weigh, const wt_lane_colours* const* gr,
-                                        const int per_read) {
-    const float *u[3], *v[3], *lod[3], *w[3], *du[3], *dv[3], *taps[3];
-    for (int r = 0; r < 3; ++r) {
-        u[r] = at.data[r], v[r] = at.data[3 + r], lod[r] = at.data[6 + r], w[r] = at.data[9 + r];
-        du[r] = at.data[12 + r], dv[r] = at.data[15 + r], taps[r] = at.data[18 + r];
-    }
-    wt_scatter_stochastic_rows(texs, grads, smp, params, nreads, layers, u, v, lod, du, dv, taps, w, weigh, gr,
-                               per_read);
-}
-
 // lanes.stochastic.scatter_stochastic_footprint_lane: stochastic.scatter_stochastic of adj[i] for
 // the lane's pixels i = base .. over their footprints (wt_sample_reads_of's reads), every filter's.
 // twin: stochastic.scatter_stochastic
@@ -382,7 +366,7 @@ WT_INLINE void wt_scatter_stochastic_footprint_lane(const Tex& tex, const Grad& 
     const Grad* grads[1] = {&grad};
     const wt_lane_colours g = wt_adj_lane(adj, base, s.count);
     const wt_lane_colours* gr[1] = {&g};
-    wt_scatter_stochastic_of(texs, grads, smp, params, 1, s.layer, s.reads, 0, gr, 0);
+    wt_scatter_stochastic_rows(texs, grads, smp, params, 1, s.layer, wt_rows_of(s.reads), 0, gr, 0);
 }
 
 // lanes.stochastic.scatter_stochastic_reads_lanes: stochastic.scatter_stochastic of a stochastic
@@ -399,7 +383,7 @@ WT_INLINE void wt_scatter_stochastic_reads_lanes(const Tex& tex0, const Tex& tex
     const Tex* texs[3] = {&tex0, &tex1, &tex2};
     const Grad* grads[3] = {&grad0, &grad1, &grad2};
     const wt_lane_colours* gr[3] = {&g0, &g1, &g2};
-    wt_scatter_stochastic_of(texs, grads, smp, params, 3, layers.c, reads, weigh, gr, 1);
+    wt_scatter_stochastic_rows(texs, grads, smp, params, 3, layers.c, wt_rows_of(reads), weigh, gr, 1);
 }
 
 // lanes.stochastic.scatter_stochastic_face_reads_lanes: stochastic.scatter_stochastic with a texture
@@ -417,13 +401,6 @@ WT_INLINE void wt_scatter_stochastic_face_reads_lanes(const Tex& tex_px, const T
                                                       const wt_lane_colours& g) {
     const Tex* texs[6] = {&tex_px, &tex_nx, &tex_py, &tex_ny, &tex_pz, &tex_nz};
     const Grad* grads[6] = {&grad_px, &grad_nx, &grad_py, &grad_ny, &grad_pz, &grad_nz};
-    const float *u[6], *v[6], *lod[6], *du[6], *dv[6], *taps[6], *w[6];
-    for (int r = 0; r < 6; ++r) {
-        const wt_lane_reads& at = r % 2 == 0 ? plus : minus;
-        const int axis = r / 2;
-        u[r] = at.data[axis], v[r] = at.data[3 + axis], lod[r] = at.data[6 + axis], w[r] = at.data[9 + axis];
-        du[r] = at.data[12 + axis], dv[r] = at.data[15 + axis], taps[r] = at.data[18 + axis];
-    }
     const wt_lane_colours* gr[1] = {&g};
-    wt_scatter_stochastic_rows(texs, grads, smp, params, 6, layers.c, u, v, lod, du, dv, taps, w, 1, gr, 0);
+    wt_scatter_stochastic_rows(texs, grads, smp, params, 6, layers.c, wt_face_rows(plus, minus), 1, gr, 0);
 }
