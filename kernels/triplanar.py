@@ -26,7 +26,7 @@ from . import adjoint_module, inlined, specialised
 from .faces import FACE_FIELDS, FaceGrads, FaceTextures, on_axis_face, on_face
 from .family import LANES_SUFFIX, Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
 from .lanes.projection import surface_covered
-from .lanes.triplanar import face_lane_bodies, lane_bodies, linear_blend_take, normal_lane_bodies, stochastic_face_lane_bodies, stochastic_lane_bodies, stored_lane_bodies
+from .lanes.triplanar import face_lane_bodies, lane_bodies, linear_blend_take, normal_lane_bodies, stochastic_lane_bodies, stored_lane_bodies
 from .native import use
 from .normals import NormalMapArgs, blend_projected, blend_projected_grad, decode_normal, decode_normal_grad, direction, direction_grad, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
@@ -356,23 +356,14 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
     if not normal:
         forward, texel_grad, _ = pixel_kernels(name, module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["colour"],
                                                scatter=bodies["colour_grad"], grads=FaceGrads)  # fmt: skip
-        lanes = grad_lanes = None
-        if not stochastic and not faces:
-            colour_lane, colour_grad_lane = lane_bodies(TriplanarArgs)
-            lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
-            grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
-        elif not stochastic:
-            colour_lane, colour_grad_lane = face_lane_bodies(TriplanarArgs)
-            lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
-            grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
-        elif not faces:
+        if stochastic and not faces:
             colour_lane, colour_grad_lane = stochastic_lane_bodies(bodies["colour"], bodies["colour_grad"], TriplanarArgs)
-            lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
-            grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
+        elif faces:
+            colour_lane, colour_grad_lane = face_lane_bodies(TriplanarArgs, stochastic)
         else:
-            colour_lane, colour_grad_lane = stochastic_face_lane_bodies(TriplanarArgs)
-            lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
-            grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
+            colour_lane, colour_grad_lane = lane_bodies(TriplanarArgs)
+        lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
+        grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
         return Kernels(forward, texel_grad, _adjoint(False), grads=FACE_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes)
     forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
     lanes = first_lanes = take = None

@@ -411,59 +411,22 @@ def test_stochastic_triplanar_normal_lanes_give_the_one_pixel_bits(rng, launched
         assert [name for name, _ in launched] == ["triplanar_stochastic_normal_forward"]  # linear_blend_take
 
 
-@pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
-def test_face_lanes_give_the_one_pixel_bits(rng, launched, filter):
-    """A texture per face (``triplanar_lanes.face_lane_bodies``): each projection read on the + and
-    on the - face (``triplanar_reads_lane``'s ``side``), every face a texture of its own size (the
-    LODs differ), normals whose components are -0, tiny negative or exactly 0 (the - face is
-    chosen by ``n < 0``), in world and object space, triplanar and biplanar; forward and texel
-    gradient (every face's), on 3 threads too."""
+def _face_inputs(rng):
+    """``(g, faces)``: a hand-made G-buffer whose normals have components that are -0, tiny negative
+    or exactly 0 (the - face is chosen by ``n < 0``), and six face textures of their own sizes (the
+    LODs differ) that take gradients."""
     g = _hand_gbuffer(rng, 5000)
     normals = g.normal.numpy().reshape(-1, 3)
     normals[11:16] = [(-0.0, 1.0, 0.5), (-1e-45, 0.3, 2.0), (0.0, -0.0, -1.0), (0.4, -1e-38, 0.0), (-3e19, 1e19, -2e19)]
     g.normal.assign(normals.reshape(1, -1, 3))
     g.mask.assign(np.maximum(g.mask.numpy(), (np.arange(normals.shape[0]) < 20).reshape(1, -1).astype(np.float32)))
     faces = [wt.Texture(rng.random((16 << (k % 3), 24 + 8 * k, 3), dtype=np.float32), requires_grad=True) for k in range(6)]
-    smp = wt.Sampler(filter=filter, address="mirror", max_aniso=4)
-    placement = np.array([[0.0, 0.8, 0.0, 0.3], [-0.8, 0.0, 0.0, 0.0], [0.0, 0.0, 1.5, -0.2], [0.0, 0.0, 0.0, 1.0]], np.float32)
-    calls = (lambda: wt.triplanar(g, textures_per_face=faces, sampler=smp, sharpness=3.0),
-             lambda: wt.triplanar(g, textures_per_face=faces, sampler=smp, sharpness=0.0, space="object", object_to_world=placement, tiling=(1.5, 2.0, 0.75)),
-             lambda: wt.biplanar(g, textures_per_face=faces, sampler=smp))  # fmt: skip
-    previous = wt.get_num_threads()
-    try:
-        for threads in (1, 3):
-            wt.set_num_threads(threads)
-            for call in calls:
-                lanes, scalar = _both(call)
-                _same_bits(lanes, scalar)
-                assert (np.nan_to_num(lanes) > 0).any(-1).mean() > 0.5
-                _same_grads(call, faces, rng, 3, 5000)
-    finally:
-        wt.set_num_threads(previous)
-    names = {name for name, _ in launched}
-    assert {"triplanar_faces_lanes", "triplanar_faces_texel_grad_lanes"} <= names
+    return g, faces
 
 
-@pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])
-@pytest.mark.parametrize("filter", ["nearest", "trilinear", "anisotropic"])
-def test_stochastic_face_lanes_give_the_one_pixel_bits(rng, launched, method, filter):
-    """Stochastic colour with a texture per face (``triplanar_lanes.stochastic_face_lane_bodies``):
-    each projection's stochastic taps on the face its pixel reads, as :func:`test_face_lanes_give_the_one_pixel_bits`
-    reads the faces; forward and texel gradient (every face's, and a texture shared by a + and a -
-    face, whose adds interleave), on 3 threads too."""
-    g = _hand_gbuffer(rng, 5000)
-    normals = g.normal.numpy().reshape(-1, 3)
-    normals[11:16] = [(-0.0, 1.0, 0.5), (-1e-45, 0.3, 2.0), (0.0, -0.0, -1.0), (0.4, -1e-38, 0.0), (-3e19, 1e19, -2e19)]
-    g.normal.assign(normals.reshape(1, -1, 3))
-    g.mask.assign(np.maximum(g.mask.numpy(), (np.arange(normals.shape[0]) < 20).reshape(1, -1).astype(np.float32)))
-    faces = [wt.Texture(rng.random((16 << (k % 3), 24 + 8 * k, 3), dtype=np.float32), requires_grad=True) for k in range(6)]
-    shared = [faces[0], faces[0], faces[2], faces[3], faces[3], faces[5]]  # x+ and x-, y- and z+ share a texture
-    smp = wt.Sampler(filter=filter, address="mirror", max_aniso=4)
-    placement = np.array([[0.0, 0.8, 0.0, 0.3], [-0.8, 0.0, 0.0, 0.0], [0.0, 0.0, 1.5, -0.2], [0.0, 0.0, 0.0, 1.0]], np.float32)
-    option = wt.Stochastic(method, seed=3, mirror=True, rotation=0.5)
-    calls = ((lambda: wt.triplanar(g, textures_per_face=faces, sampler=smp, stochastic=option, sharpness=3.0), faces),
-             (lambda: wt.triplanar(g, textures_per_face=shared, sampler=smp, stochastic=method, sharpness=0.0, space="object", object_to_world=placement, tiling=(1.5, 2.0, 0.75)), [faces[0], faces[2], faces[3], faces[5]]),
-             (lambda: wt.biplanar(g, textures_per_face=faces, sampler=smp, stochastic=option), faces))  # fmt: skip
+def _same_face_bits(rng, calls):
+    """Each ``(call, textures)`` of :func:`_face_inputs`' G-buffer: the lanes' output and texel
+    gradients of ``textures`` are the one-pixel kernels' bits, on 1 and 3 threads."""
     previous = wt.get_num_threads()
     try:
         for threads in (1, 3):
@@ -475,6 +438,42 @@ def test_stochastic_face_lanes_give_the_one_pixel_bits(rng, launched, method, fi
                 _same_grads(call, textures, rng, 3, 5000)
     finally:
         wt.set_num_threads(previous)
+
+
+@pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
+def test_face_lanes_give_the_one_pixel_bits(rng, launched, filter):
+    """A texture per face (``triplanar_lanes.face_lane_bodies``): each projection read on the + and
+    on the - face (``triplanar_reads_lane``'s ``side``), every face a texture of its own size (the
+    LODs differ), normals whose components are -0, tiny negative or exactly 0 (the - face is
+    chosen by ``n < 0``), in world and object space, triplanar and biplanar; forward and texel
+    gradient (every face's), on 3 threads too."""
+    g, faces = _face_inputs(rng)
+    smp = wt.Sampler(filter=filter, address="mirror", max_aniso=4)
+    placement = np.array([[0.0, 0.8, 0.0, 0.3], [-0.8, 0.0, 0.0, 0.0], [0.0, 0.0, 1.5, -0.2], [0.0, 0.0, 0.0, 1.0]], np.float32)
+    calls = (lambda: wt.triplanar(g, textures_per_face=faces, sampler=smp, sharpness=3.0),
+             lambda: wt.triplanar(g, textures_per_face=faces, sampler=smp, sharpness=0.0, space="object", object_to_world=placement, tiling=(1.5, 2.0, 0.75)),
+             lambda: wt.biplanar(g, textures_per_face=faces, sampler=smp))  # fmt: skip
+    _same_face_bits(rng, [(call, faces) for call in calls])
+    names = {name for name, _ in launched}
+    assert {"triplanar_faces_lanes", "triplanar_faces_texel_grad_lanes"} <= names
+
+
+@pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])
+@pytest.mark.parametrize("filter", ["nearest", "trilinear", "anisotropic"])
+def test_stochastic_face_lanes_give_the_one_pixel_bits(rng, launched, method, filter):
+    """Stochastic colour with a texture per face (``triplanar_lanes.face_lane_bodies``, stochastic):
+    each projection's stochastic taps on the face its pixel reads, as :func:`test_face_lanes_give_the_one_pixel_bits`
+    reads the faces; forward and texel gradient (every face's, and a texture shared by a + and a -
+    face, whose adds interleave), on 3 threads too."""
+    g, faces = _face_inputs(rng)
+    shared = [faces[0], faces[0], faces[2], faces[3], faces[3], faces[5]]  # x+ and x-, y- and z+ share a texture
+    smp = wt.Sampler(filter=filter, address="mirror", max_aniso=4)
+    placement = np.array([[0.0, 0.8, 0.0, 0.3], [-0.8, 0.0, 0.0, 0.0], [0.0, 0.0, 1.5, -0.2], [0.0, 0.0, 0.0, 1.0]], np.float32)
+    option = wt.Stochastic(method, seed=3, mirror=True, rotation=0.5)
+    calls = ((lambda: wt.triplanar(g, textures_per_face=faces, sampler=smp, stochastic=option, sharpness=3.0), faces),
+             (lambda: wt.triplanar(g, textures_per_face=shared, sampler=smp, stochastic=method, sharpness=0.0, space="object", object_to_world=placement, tiling=(1.5, 2.0, 0.75)), [faces[0], faces[2], faces[3], faces[5]]),
+             (lambda: wt.biplanar(g, textures_per_face=faces, sampler=smp, stochastic=option), faces))  # fmt: skip
+    _same_face_bits(rng, calls)
     names = {name for name, _ in launched}
     assert {"triplanar_stochastic_faces_lanes", "triplanar_stochastic_faces_texel_grad_lanes"} <= names
 

@@ -89,80 +89,78 @@ def lane_bodies(args_t):
 
 
 @functools.cache
-def face_lane_bodies(args_t):
-    """``(colour_lane, colour_grad_lane)``: the lane bodies of plain colour mapping with a texture per
-    face (``faces.on_face``): the lane's reads on the ``+`` faces and on the ``-`` faces (each pixel's
-    weight on the side its normal looks at), read and added projection by projection, ``+`` then
-    ``-`` (a pixel reads one of the two), in the order of the pixel bodies."""
+def face_lane_bodies(args_t, stochastic: bool = False):
+    """``(colour_lane, colour_grad_lane)``: the lane bodies of colour mapping with a texture per face
+    (``faces.on_face``), plain or ``stochastic``: the lane's reads on the ``+`` faces and on the
+    ``-`` faces (each pixel's weight on the side its normal looks at), read and added projection by
+    projection, ``+`` then ``-`` (a pixel reads one of the two), in the order of the pixel bodies.
+    Stochastic sampling (linear blends only: a histogram needs one texture for every projection,
+    which is not this configuration) reads each projection over its footprint through its
+    stochastic taps on both faces (:func:`~.stochastic.stochastic_read_lane`) and adds the one its
+    pixel reads; the gradient goes back through the same taps
+    (:func:`~.stochastic.scatter_stochastic_face_reads_lanes`)."""
+    if stochastic:
+
+        def face_colours(args: args_t, plus: lane_reads, minus: lane_reads, count: wp.int32) -> lane_colours:
+            """The lane's colours: each projection's stochastic sample on the face its pixel reads,
+            weighted."""
+            f = args.faces
+            layers = lane_ints(args.layer)
+            value = lane_colours()
+            for axis in range(3):
+                sp = stochastic_read_lane(on_axis(f.px, f.py, f.pz, axis), args.smp, args.stoch, layers, plus, axis, count)
+                sm = stochastic_read_lane(on_axis(f.nx, f.ny, f.nz, axis), args.smp, args.stoch, layers, minus, axis, count)
+                for l in range(count):
+                    w_plus = plus[9 + axis, l]
+                    w_minus = minus[9 + axis, l]
+                    if w_plus > 0.0:
+                        value[l] = value[l] + w_plus * sp[l]
+                    elif w_minus > 0.0:
+                        value[l] = value[l] + w_minus * sm[l]
+            return value
+
+        def scatter_faces(args: args_t, plus: lane_reads, minus: lane_reads, grads: FaceGrads, g: lane_colours):
+            f = args.faces
+            scatter_stochastic_face_reads_lanes(f.px, f.nx, f.py, f.ny, f.pz, f.nz, grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, args.smp, args.stoch, lane_ints(args.layer), plus, minus, g)
+
+    else:
+
+        def face_colours(args: args_t, plus: lane_reads, minus: lane_reads, count: wp.int32) -> lane_colours:
+            """The lane's colours: each projection's sample on the face its pixel reads, weighted."""
+            f = args.faces
+            layers = lane_ints(args.layer)
+            value = lane_colours()
+            for axis in range(3):
+                value = accumulate_footprint_lane(on_axis(f.px, f.py, f.pz, axis), args.smp, layers, plus[axis], plus[3 + axis], plus[6 + axis], plus[12 + axis], plus[15 + axis], plus[18 + axis], plus[9 + axis], 1, value)
+                value = accumulate_footprint_lane(on_axis(f.nx, f.ny, f.nz, axis), args.smp, layers, minus[axis], minus[3 + axis], minus[6 + axis], minus[12 + axis], minus[15 + axis], minus[18 + axis], minus[9 + axis], 1, value)
+            return value
+
+        def scatter_faces(args: args_t, plus: lane_reads, minus: lane_reads, grads: FaceGrads, g: lane_colours):
+            f = args.faces
+            scatter_face_reads_lanes(f.px, f.nx, f.py, f.ny, f.pz, f.nz, grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, args.smp, lane_ints(args.layer), plus, minus, g)
+
+    kind = "_stochastic" if stochastic else ""
+    face_colours = inlined(specialised(face_colours, f"triplanar{kind}_face_colours"))
+    scatter_faces = inlined(specialised(scatter_faces, f"triplanar{kind}_scatter_faces"))
 
     def faces_colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
-        f = args.faces
-        plus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 1)
-        minus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 2)
-        layers = lane_ints(args.layer)
-        value = lane_colours()
-        for axis in range(3):
-            value = accumulate_footprint_lane(on_axis(f.px, f.py, f.pz, axis), args.smp, layers, plus[axis], plus[3 + axis], plus[6 + axis], plus[12 + axis], plus[15 + axis], plus[18 + axis], plus[9 + axis], 1, value)
-            value = accumulate_footprint_lane(on_axis(f.nx, f.ny, f.nz, axis), args.smp, layers, minus[axis], minus[3 + axis], minus[6 + axis], minus[12 + axis], minus[15 + axis], minus[18 + axis], minus[9 + axis], 1, value)
+        plus = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0, 1)
+        minus = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0, 2)
+        value = face_colours(args, plus, minus, count)
         for l in range(count):
             write_channels(out, base + l, value[l])
 
     def faces_colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
-        f = args.faces
-        plus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 1)
-        minus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 2)
+        plus = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0, 1)
+        minus = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0, 2)
         g = lane_colours()
         for l in range(count):
             g[l] = read_channels(adj, base + l)
-        scatter_face_reads_lanes(f.px, f.nx, f.py, f.ny, f.pz, f.nz, grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, args.smp, lane_ints(args.layer), plus, minus, g)
+        scatter_faces(args, plus, minus, grads, g)
 
-    return inlined(specialised(faces_colour_lane, "triplanar_faces_colour_lane")), inlined(specialised(faces_colour_grad_lane, "triplanar_faces_colour_grad_lane"))
-
-
-@functools.cache
-def stochastic_face_lane_bodies(args_t):
-    """``(colour_lane, colour_grad_lane)``: the lane bodies of stochastic colour mapping with a
-    texture per face (linear blends only: a histogram needs one texture for every projection, which
-    is not this configuration): the lane's reads on the ``+`` and
-    ``-`` faces, as :func:`face_lane_bodies` makes them; each projection's sample read over its
-    footprint through its stochastic taps on the face its pixel reads
-    (:func:`~.stochastic.stochastic_read_lane`, both faces), added with the projection's weight in
-    the order of the pixel body; the gradient adds each projection's share ``w · g`` back through
-    the same taps (:func:`~.stochastic.scatter_stochastic_face_reads_lanes`)."""
-
-    def stochastic_faces_colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
-        count = wp.min(out.shape[0] - base, LANES)
-        f = args.faces
-        plus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 1)
-        minus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 2)
-        layers = lane_ints(args.layer)
-        value = lane_colours()
-        for axis in range(3):
-            sp = stochastic_read_lane(on_axis(f.px, f.py, f.pz, axis), args.smp, args.stoch, layers, plus, axis, count)
-            sm = stochastic_read_lane(on_axis(f.nx, f.ny, f.nz, axis), args.smp, args.stoch, layers, minus, axis, count)
-            for l in range(count):
-                w_plus = plus[9 + axis, l]
-                w_minus = minus[9 + axis, l]
-                if w_plus > 0.0:
-                    value[l] = value[l] + w_plus * sp[l]
-                elif w_minus > 0.0:
-                    value[l] = value[l] + w_minus * sm[l]
-        for l in range(count):
-            write_channels(out, base + l, value[l])
-
-    def stochastic_faces_colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
-        count = wp.min(adj.shape[0] - base, LANES)
-        f = args.faces
-        plus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 1)
-        minus = triplanar_reads_lane(f, args.proj, args.smp, pixels, base, count, 0, 2)
-        g = lane_colours()
-        for l in range(count):
-            g[l] = read_channels(adj, base + l)
-        scatter_stochastic_face_reads_lanes(f.px, f.nx, f.py, f.ny, f.pz, f.nz, grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, args.smp, args.stoch, lane_ints(args.layer), plus, minus, g)
-
-    return inlined(specialised(stochastic_faces_colour_lane, "triplanar_stochastic_faces_colour_lane")), inlined(specialised(stochastic_faces_colour_grad_lane, "triplanar_stochastic_faces_colour_grad_lane"))
+    return inlined(specialised(faces_colour_lane, f"triplanar{kind}_faces_colour_lane")), inlined(specialised(faces_colour_grad_lane, f"triplanar{kind}_faces_colour_grad_lane"))
 
 
 @functools.cache
