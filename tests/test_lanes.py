@@ -871,10 +871,10 @@ def test_triplanar_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, 
 @pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
 @pytest.mark.parametrize("case", list(SPLAT_CASES))
 def test_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter, threads):
-    """The layers' and the splat maps' texel gradients: the same bits through the lane kernels, whose
-    layers add layer by layer (each into texels of its own), as pixel by pixel; the cases they do not
-    take (height layers, face layers) launch the one-pixel kernel. The anisotropic filter's reads of
-    several taps add pixel by pixel, their taps in order."""
+    """The layers', height layers' and splat maps' texel gradients: the same bits through the lane
+    kernels, whose layers add layer by layer (each into texels of its own), then the height layers,
+    as pixel by pixel; face layers, which the lanes do not take, launch the one-pixel kernel. The
+    anisotropic filter's reads of several taps add pixel by pixel, their taps in order."""
     g, layers, maps, kw, textures = _splat_inputs(rng, case, 3000, requires_grad=True)
     smp = wt.Sampler(filter=filter, address="mirror", lod_bias=-0.4, max_aniso=3)
     previous = wt.get_num_threads()
@@ -883,7 +883,7 @@ def test_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter
         _same_grads(lambda: wt.splat(g, layers, maps, sampler=smp, **kw), textures, rng, 4, 3000)
     finally:
         wt.set_num_threads(previous)
-    takes = case not in ("world xz, height array", "triplanar, face layers")  # splat_lanes.grad_lanes_take
+    takes = case != "triplanar, face layers"  # splat_lanes.grad_lanes_take
     assert threads > 1 or (("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched) == takes
 
 
@@ -895,7 +895,7 @@ def test_stochastic_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, c
     """The stochastic splat's texel gradients through its lanes: each layer's reads add their
     shares through their stochastic taps (``scatter_layer_stochastic_lane``), layer by layer, as
     pixel by pixel; the anisotropic filter's through every footprint tap's stochastic taps in
-    order (``wt_scatter_stochastic_rows``); height layers run the one-pixel kernel."""
+    order (``wt_scatter_stochastic_rows``); height layers' after the colour layers'."""
     g, layers, maps, kw, textures = _splat_inputs(rng, case, 3000, requires_grad=True)
     smp = wt.Sampler(filter=filter, address="mirror", lod_bias=-0.4, max_aniso=5)
     previous = wt.get_num_threads()
@@ -904,8 +904,7 @@ def test_stochastic_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, c
         _same_grads(lambda: wt.splat(g, layers, maps, sampler=smp, stochastic=method, **kw), textures, rng, 4, 3000)
     finally:
         wt.set_num_threads(previous)
-    takes = case != "world xz, height array"  # stochastic_grad_lanes_take
-    assert threads > 1 or (("splat8_stochastic_texel_grad_lanes", -(-3000 // LANES)) in launched) == takes
+    assert threads > 1 or ("splat8_stochastic_texel_grad_lanes", -(-3000 // LANES)) in launched
 
 
 # The tiling-gradient cases: the splat's options, an address mode and the layers' texel format (one each, to keep the test short).
@@ -914,6 +913,8 @@ _TILING_CASES = {
     "uv, height channel": (SPLAT_CASES["uv, height channel"], "clamp", "unorm8"),
     "uv, not normalized, tiling per layer": (SPLAT_CASES["uv, not normalized, tiling per layer"], "border", "float32"),
     "world xz, height channel": ({"projection": "world_xz", "height_blend": 0.3, "tiling": [0.8, 1.2, 1.9, 0.6, 2.2]}, "mirror", "float32"),
+    "uv, height array": ({"height_blend": 0.25, "heights": True}, "mirror", "float32"),
+    "triplanar, height array": ({"projection": "triplanar", "sharpness": 3.0, "height_blend": 0.1, "heights": True, "tiling": [0.8, 1.2, 1.9, 0.6, 2.2]}, "wrap", "unorm8"),
     "triplanar": (SPLAT_CASES["triplanar"], "mirror", "float16"),
     "triplanar, no heights": (SPLAT_CASES["triplanar, no heights"], "wrap", "srgb8"),
 }
@@ -926,12 +927,17 @@ def test_splat_tiling_gradient_lanes_add_the_one_pixel_sums(rng, launched, case,
     """The tiling's gradient (the fit's), one tiling for every layer or one each, in every projection,
     address mode and texel format: the forward lane keeps each layer's slope from its own taps
     (``lane_saved``), and the gradient lane adds each pixel's layers into the tiling in the one-pixel
-    kernel's order, so the output, the tiling's gradient and the texels' are the same bits."""
+    kernel's order, so the output, the tiling's gradient and the texels' are the same bits. Height
+    layers keep their heights and slopes beside the colours'."""
     options, address, texel_format = _TILING_CASES[case]
     g = _splat_gbuffer(rng, 3000)
     layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True, format=texel_format)
     maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False, requires_grad=True)
     kw = dict(options)
+    textures = [layers, maps]
+    if kw.pop("heights", False):
+        kw["heights"] = wt.TextureArray(rng.random((5, 48, 24, 1), dtype=np.float32), requires_grad=True)
+        textures.append(kw["heights"])
     tiling = wp.array(np.atleast_1d(np.asarray(kw.pop("tiling", 1.7), dtype=np.float32)), dtype=float, requires_grad=True)
     smp = wt.Sampler(filter=filter, address=address, lod_bias=-0.4, border=(0.1, 0.2, 0.3, 0.4), max_aniso=24)
     weights = rng.normal(size=(3000, 4)).astype(np.float32)
@@ -942,7 +948,7 @@ def test_splat_tiling_gradient_lanes_add_the_one_pixel_sums(rng, launched, case,
         for one_pixel in (False, True):
             tiling.grad.zero_()
             outs = []
-            grads = _texel_grads(lambda: outs.append(wt.splat(g, layers, maps, tiling=tiling, sampler=smp, **kw)) or outs[-1], [layers, maps], weights, one_pixel)
+            grads = _texel_grads(lambda: outs.append(wt.splat(g, layers, maps, tiling=tiling, sampler=smp, **kw)) or outs[-1], textures, weights, one_pixel)
             both.append([outs[0].numpy()] + grads + [tiling.grad.numpy().copy()])
     finally:
         wt.set_num_threads(previous)
@@ -950,6 +956,24 @@ def test_splat_tiling_gradient_lanes_add_the_one_pixel_sums(rng, launched, case,
         _same_bits(a, b)
     assert filter == "nearest" or np.all(both[0][-1] != 0.0)  # every tiling was reached (a nearest read has no slope)
     assert threads > 1 or ("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched
+
+
+@pytest.mark.parametrize("stochastic", [None, "hash4"])
+def test_splat_gradient_lanes_of_height_layers(rng, launched, stochastic):
+    """Height layers whose gradient is the colour layers' own (``heights=`` the one-channel layers
+    themselves: a pixel's colour and height adds interleave in the same texels) run the one-pixel
+    kernel; separate height layers that need no gradient, beside colour layers that do, take the
+    lanes. Both give the one-pixel kernel's bits."""
+    g = _splat_gbuffer(rng, 3000)
+    grey = wt.TextureArray(rng.random((5, 32, 64, 1), dtype=np.float32), requires_grad=True)
+    maps = wt.TextureArray(rng.uniform(-0.2, 1.0, (2, 16, 16, 4)).astype(np.float32), mipmaps=False, requires_grad=True)
+    name = "splat8_stochastic_texel_grad_lanes" if stochastic else "splat8_texel_grad_lanes"
+    _same_grads(lambda: wt.splat(g, grey, maps, heights=grey, height_blend=0.2, stochastic=stochastic), [grey, maps], rng, 1, 3000)
+    assert not any(n == name for n, _ in launched)  # splat_lanes.grad_lanes_take
+    layers = wt.TextureArray(rng.random((5, 32, 64, 4), dtype=np.float32), requires_grad=True)
+    heights = wt.TextureArray(rng.random((5, 48, 24, 1), dtype=np.float32))
+    _same_grads(lambda: wt.splat(g, layers, maps, heights=heights, height_blend=0.2, stochastic=stochastic), [layers, maps], rng, 4, 3000)
+    assert (name, -(-3000 // LANES)) in launched
 
 
 def test_splat_gradient_lanes_read_the_colours_their_own_forward_kept(rng, launched, monkeypatch):

@@ -86,10 +86,16 @@ def lanes_take(args: SplatArgs) -> bool:
 
 def grad_lanes_take(args: SplatArgs) -> bool:
     """Whether the texel-gradient lane body takes a launch with ``args`` (``Kernels.grad_lanes_take``):
-    :func:`lanes_take` and no height layers (which may be the colour layers themselves). Its layers
-    then add into texels of their own, so it adds layer by layer and every texel still gets the
-    one-pixel body's sums in its order."""
-    return lanes_take(args) and args.reads.params.height_mode != HEIGHT_ARRAY
+    :func:`lanes_take`, and height layers, where there are, whose gradient is not (in part) the
+    colour layers' (``heights=`` the layers themselves). Its layers, and its height layers, then add
+    into texels of their own, so it adds layer by layer and every texel still gets the one-pixel
+    body's sums in its order."""
+    return lanes_take(args) and not (args.reads.params.height_mode == HEIGHT_ARRAY and _overlap(args.layers.texels.grad, args.heights.texels.grad))
+
+
+def _overlap(a: wp.array | None, b: wp.array | None) -> bool:
+    """Whether gradient arrays ``a`` and ``b`` (``None``: none) share memory."""
+    return a is not None and b is not None and a.ptr < b.ptr + b.capacity and b.ptr < a.ptr + a.capacity
 
 
 def stochastic_lanes_take(args: SplatArgs) -> bool:
@@ -105,19 +111,26 @@ def stochastic_grad_lanes_take(args: SplatArgs) -> bool:
 
 
 def stochastic_lane_saved(args: SplatArgs) -> int:
-    """:func:`lane_saved` for the stochastic kernels: the layers' colours (they never take the
-    tiling's gradient by hand)."""
-    return 4 * args.reads.params.num_layers
+    """:func:`lane_saved` for the stochastic kernels: the layers' colours and heights (they never
+    take the tiling's gradient by hand)."""
+    return _kept_width(args.reads.params)
+
+
+def _kept_width(params: SplatParams) -> int:
+    """Floats a pixel keeps of its layers' values for the gradient lane: 4 a layer's colour, and 1
+    its height where height layers give it (``wt_kept_width``, ``wt_kept_column``)."""
+    return (5 if params.height_mode == HEIGHT_ARRAY else 4) * params.num_layers
 
 
 def lane_saved(args: SplatArgs) -> int:
     """Floats a pixel keeps for the texel-gradient lane (``Kernels.lane_saved``): its layers'
-    colours, 4 a layer, and where the tiling needs its gradient, their slopes along it, 4 more
-    (:func:`layer_values_kept_lane`). Sampling the layers again was a fifth of a splat's forward and
-    backward; with the slopes, which the forward takes from its own taps, it was 60% of it (the
-    fit's view: anisotropic, triplanar layers)."""
+    colours, 4 a layer, and their heights where height layers give them, 1 a layer
+    (:func:`_kept_width`); where the tiling needs its gradient, the slopes of each along it, as many
+    again (:func:`layer_values_kept_lane`). Sampling the layers again was a fifth of a splat's
+    forward and backward; with the slopes, which the forward takes from its own taps, it was 60% of
+    it (the fit's view: anisotropic, triplanar layers)."""
     params = args.reads.params
-    return (8 if params.tiling.requires_grad else 4) * params.num_layers
+    return (2 if params.tiling.requires_grad else 1) * _kept_width(params)
 
 
 @wp.func_native(cpu_snippet(_BLEND.format("false"), "return {};\n"))
@@ -262,7 +275,7 @@ def lane_bodies(cap: int, pixels_t, grads_t, stochastic: bool = False):
                     weighted[l] = w1s[l, j]
                 for t in range(layer_textures(params)):
                     tex = pick(args.layers, args.heights, t)
-                    keep = wp.where(t == 0, 1, 0)
+                    keep = t + 1  # where pixels.saved keeps it (wt_kept_column)
                     if wp.static(stochastic):
                         stoch = pick(args.stoch, args.height_stoch, t)
                         value = layer_values_stochastic_lane(tex, args.reads, stoch, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, keep, pixels.saved)
@@ -316,22 +329,24 @@ def lane_bodies(cap: int, pixels_t, grads_t, stochastic: bool = False):
 
     def grad_lane(args: SplatArgs, pixels: pixels_t, base: wp.int32, grads: grads_t, adj: wp.array2d(dtype=float)):
         """Launched only where :func:`grad_lanes_take` holds (the one-pixel kernel runs the rest), after
-        a forward lane that kept each pixel's layer colours in ``pixels.saved`` (``_op`` sees to both).
-        With the tiling's gradient, each pixel's layers add ``dot(gc, dc) + ghv · dhv`` into the tiling,
-        in pixel and layer order, of the slopes ``dc`` the forward kept (:func:`lane_saved`; ``dhv`` is
-        0: the lanes take no height layers)."""
+        a forward lane that kept each pixel's layer colours (and heights of height layers) in
+        ``pixels.saved`` (``_op`` sees to both). With the tiling's gradient, each pixel's layers add
+        ``dot(gc, dc) + ghv · dhv`` into the tiling, in pixel and layer order, of the slopes ``dc``
+        and ``dhv`` the forward kept (:func:`lane_saved`; ``dhv`` is 0 without height layers)."""
         count = wp.min(adj.shape[0] - base, LANES)
         params = args.reads.params
         rs, w1s, tri_w = lane_weights(args, pixels, base, count)
         tiling_grads = grads.tiling.shape[0] > 0
-        ghvs = lane_weights_t()  # each pixel's layers' heights' gradients, for the tiling's
+        height_layers = params.height_mode == HEIGHT_ARRAY
+        num_layers = params.num_layers
+        ghvs = lane_weights_t()  # each pixel's layers' heights' gradients, for the tiling's and the height layers' texels
         if wp.static(cap == 8):  # the blend and weights backwards for the whole lane, and each pixel's splat maps' adds
             back = blend_backward_lane8(params, pixels.surface, base, count, w1s, rs, adj, pixels.saved, args.maps, grads.maps, args.map_smp, pixels.uv0)
             if grads.transition.shape[0] > 0 and params.height_mode != HEIGHT_NONE:
                 for l in range(count):
                     if pixels.surface.mask[base + l] != 0.0:
                         wp.atomic_add(grads.transition, 0, back[GRAD_TRANSITION + l // 4, l % 4])
-            if tiling_grads:
+            if tiling_grads or height_layers:
                 for l in range(count):
                     for j in range(params.num_layers):
                         ghvs[l, j] = back[GRAD_HEIGHT + (l * 8 + j) // 4, (l * 8 + j) % 4]
@@ -349,6 +364,8 @@ def lane_bodies(cap: int, pixels_t, grads_t, stochastic: bool = False):
                             c[j] = wp.vec4(pixels.saved[i, 4 * j], pixels.saved[i, 4 * j + 1], pixels.saved[i, 4 * j + 2], pixels.saved[i, 4 * j + 3])
                             if params.height_mode == HEIGHT_CHANNEL:
                                 hv[j] = c[j][params.height_channel]
+                            elif height_layers:
+                                hv[j] = pixels.saved[i, 4 * num_layers + j]
                     gw1, gc, ghv, g_t = f.blend_backward(w1, c, hv, params, read_channels(adj, i))
                     if grads.transition.shape[0] > 0 and params.height_mode != HEIGHT_NONE:
                         wp.atomic_add(grads.transition, 0, g_t)
@@ -358,25 +375,31 @@ def lane_bodies(cap: int, pixels_t, grads_t, stochastic: bool = False):
                         back[l * cap + j] = gc[j]
                         ghvs[l, j] = ghv[j]
         if tiling_grads:  # each pixel's layers' adds into the tiling, in pixel order (scatter's), of the slopes the forward kept
-            dhv = float(0.0)
+            width = wp.where(height_layers, 5, 4) * num_layers  # the slopes follow the values (wt_kept_column)
             for l in range(count):
                 i = base + l
                 if pixels.surface.mask[i] != 0.0:
-                    for j in range(params.num_layers):
+                    for j in range(num_layers):
                         if w1s[l, j] > 0.0:
-                            k = 4 * (params.num_layers + j)
+                            k = width + 4 * j
                             dc = wp.vec4(pixels.saved[i, k], pixels.saved[i, k + 1], pixels.saved[i, k + 2], pixels.saved[i, k + 3])
+                            dhv = float(0.0)
+                            if height_layers:
+                                dhv = pixels.saved[i, width + 4 * num_layers + j]
                             wp.atomic_add(grads.tiling, wp.min(j, grads.tiling.shape[0] - 1), wp.dot(back[l * cap + j], dc) + ghvs[l, j] * dhv)
-        if grads.layers.texels.shape[0] > 0:
-            for j in range(params.num_layers):  # each layer's adds: without face layers, layers add into texels of their own
-                weighted = lane_floats()
-                g = lane_colours()
-                for l in range(LANES):  # unrolled (w1s and back are 0 past count)
-                    weighted[l] = w1s[l, j]
-                    g[l] = back[l * cap + j]
-                if wp.static(stochastic):
-                    scatter_layer_stochastic_lane(args.layers, grads.layers, args.reads, args.stoch, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, g)
-                else:
-                    scatter_layer_lane(args.layers, grads.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, g)
+        for t in range(layer_textures(params)):  # the colour layers' adds, then the height layers'
+            if pick(grads.layers, grads.heights, t).texels.shape[0] > 0:
+                for j in range(num_layers):  # each layer's adds: without face layers, layers add into texels of their own
+                    weighted = lane_floats()
+                    g = lane_colours()
+                    for l in range(LANES):  # unrolled (w1s, back and ghvs are 0 past count)
+                        weighted[l] = w1s[l, j]
+                        g[l] = wp.where(t == 0, back[l * cap + j], wp.vec4(ghvs[l, j], 0.0, 0.0, 0.0))
+                    if wp.static(stochastic):
+                        scatter_layer_stochastic_lane(pick(args.layers, args.heights, t), pick(grads.layers, grads.heights, t), args.reads, pick(args.stoch, args.height_stoch, t), j, weighted,
+                                                      pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, g)  # fmt: skip
+                    else:
+                        scatter_layer_lane(pick(args.layers, args.heights, t), pick(grads.layers, grads.heights, t), args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy,
+                                           pixels.surface, base, count, tri_w, g)  # fmt: skip
 
     return forward_lane(False), None if stochastic else forward_lane(True), inlined(specialised(grad_lane, f"splat{cap}{kind}_grad_lane"), module=module)

@@ -55,9 +55,10 @@ def blend_backward_lane8(params: SplatParams, surface: SurfacePixels, base: wp.i
                          grad_maps: TexelGrad, map_smp: SamplerArgs, uv0: wp.array(dtype=wp.vec2)) -> lane_grads:  # fmt: skip
     """For each covered lane pixel ``l`` (pixel ``base + l``), with its weights and raw splat values
     as :func:`blend_lane8` and ``weights_lane8`` take them, the colours its forward lane kept (row
-    ``base + l`` of ``saved``, ``SplatPixels.saved``; heights from their height channel) and its
-    output gradient ``adj[base + l]``: ``splat_blend.blend_backward``'s colours', transition's and
-    heights' gradients (the heights' also added into the colours' height channel) and
+    ``base + l`` of ``saved``, ``SplatPixels.saved``; heights from their height channel, or the
+    height layers' it kept: ``wt_kept_column``) and its output gradient ``adj[base + l]``:
+    ``splat_blend.blend_backward``'s colours', transition's and heights' gradients (the heights'
+    also added into the colours' height channel, where that is where they are) and
     ``weights_backward``'s raw values' gradient; the colours', transition's and heights' laid out
     as :data:`lane_grads` says (0 for the other pixels), the raw values' added into the splat maps'
     texels (``grad_maps``; nothing when it is empty) at the pixel's UV0 where it is finite, in pixel

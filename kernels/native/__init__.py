@@ -87,7 +87,7 @@ def constants() -> str:
         "WT_STREAM_NOISE": hashing.STREAM_CHEAP2_NOISE, "WT_STREAM_HEX": hashing.STREAM_HEX_VERTEX,
         "WT_HEX_SCALE": float(hexgrid.HEX_SCALE), "WT_INV_SQRT3": float(hexgrid.INV_SQRT3), "WT_HALF_SQRT3": float(hexgrid.HALF_SQRT3), "WT_PI": float(hexgrid.PI),
         "WT_PROJECT_UV": splat_layers.PROJECT_UV, "WT_PROJECT_WORLD_XZ": splat_layers.PROJECT_WORLD_XZ, "WT_PROJECT_TRIPLANAR": splat_layers.PROJECT_TRIPLANAR,
-        "WT_HEIGHT_NONE": splat_layers.HEIGHT_NONE, "WT_HEIGHT_CHANNEL": splat_layers.HEIGHT_CHANNEL,
+        "WT_HEIGHT_NONE": splat_layers.HEIGHT_NONE, "WT_HEIGHT_CHANNEL": splat_layers.HEIGHT_CHANNEL, "WT_HEIGHT_ARRAY": splat_layers.HEIGHT_ARRAY,
         "WT_SPLAT_EPS": float(splat_layers.SPLAT_EPS),
     }
     lines = [_define(name, value) for name, value in values.items()]

@@ -96,13 +96,12 @@ WT_INLINE wt_lane_colours wt_blend_lane8(const Params& params, const Surface& su
 
 // lanes.splat_blend.blend_backward_lane8: for each covered lane pixel l (pixel base + l), with its
 // weights and raw splat values, the colours its forward lane kept (row base + l of saved; heights
-// from their height channel) and its output gradient adj[base + l]: splat_blend.blend_backward's
-// colours' and transition's gradients (the heights' added into the colours' height channel) and
-// weights_backward's raw values' gradient; the colours', transition's and heights' as
-// wt_lane_grads8 lays them out, the raw values' added into the splat maps' texels (grad_maps; nothing when it is empty)
-// at the pixel's UV0 where it is finite, in pixel order (splat_blend.scatter_maps), three maps at a
-// time: each map is its own array layer, so every texel still gets its adds in pixel order.
-// twin: splat_blend.blend_functions:blend_backward
+// from their height channel, or the height layers' kept) and its output gradient adj[base + l]:
+// splat_blend.blend_backward's colours' and transition's gradients (the heights' added into the colours' height
+// channel) and weights_backward's raw values' gradient; the colours', transition's and heights' as wt_lane_grads8 lays
+// them out, the raw values' added into the splat maps' texels (grad_maps; nothing when it is empty) at the pixel's UV0
+// where it is finite, in pixel order (splat_blend.scatter_maps), three maps at a time: each map is its own array layer,
+// so every texel still gets its adds in pixel order. twin: splat_blend.blend_functions:blend_backward
 template <class Params, class Surface, class Adj, class Saved, class Tex, class Grad, class Smp, class UV>
 WT_INLINE wt_lane_grads8 wt_blend_backward_lane8(const Params& params, const Surface& surface, int base, int count,
                                                  const wt_lane_weights8& w1s, const wt_lane_weights8& rs,
@@ -125,11 +124,13 @@ WT_INLINE wt_lane_grads8 wt_blend_backward_lane8(const Params& params, const Sur
         for (int j = 0; j < 8; ++j) {
             w1.c[j] = w1s.data[l][j];
             c[j] = wt_v4(0.0f);
-            if (j < n && w1.c[j] > 0.0f) {  // the colours the forward lane kept; heights from a channel of them (the
-                                            // lanes take no height layers)
+            if (j < n && w1.c[j] > 0.0f) {  // the colours the forward lane kept; heights from a channel of them, or
+                                            // the height layers' it kept (wt_kept_column)
                 for (int k = 0; k < 4; ++k)
                     c[j].c[k] = *(const float*)(kept + (long long)(4 * j + k) * saved.strides[1]);
-                hv.c[j] = params.height_mode == WT_HEIGHT_CHANNEL ? c[j].c[params.height_channel] : 0.0f;
+                if (params.height_mode == WT_HEIGHT_CHANNEL) hv.c[j] = c[j].c[params.height_channel];
+                if (params.height_mode == WT_HEIGHT_ARRAY)
+                    hv.c[j] = *(const float*)(kept + (long long)wt_kept_column(params, 1, false, j) * saved.strides[1]);
             }
         }
         wt_v8 gw1(0.0f);  // blend_backward

@@ -156,22 +156,38 @@ WT_INLINE float wt_lod_scale_slope(float width, float height, float dx0, float d
     return rho2 > (float)1.0e-30 && rho2 < wt_float_max ? 1.0f / (scale * (float)0.6931471805599453) : 0.0f;
 }
 
+// What a forward lane keeps for the gradient lane, SplatPixels.saved (lanes.splat.lane_saved), per
+// pixel (L layers): the values, layer j's colour in columns 4 j .. 4 j + 3 and, with height layers,
+// its height in column 4 L + j (wt_kept_width columns in all); then, where the tiling needs its
+// gradient, their slopes along it, laid out the same. Texture 0 is the colour layers, 1 the
+// height layers (splat_layers.pick).
+template <class Params> WT_INLINE int wt_kept_width(const Params& params) {
+    return (params.height_mode == WT_HEIGHT_ARRAY ? 5 : 4) * params.num_layers;
+}
+template <class Params> WT_INLINE int wt_kept_column(const Params& params, int texture, bool slope, int j) {
+    return (slope ? wt_kept_width(params) : 0) + (texture == 0 ? 4 * j : 4 * params.num_layers + j);
+}
+template <class Params, class Saved> WT_INLINE bool wt_kept_slopes(const Params& params, const Saved& saved) {
+    return saved.shape[1] >= 2 * wt_kept_width(params);
+}
+
 // wt_layer_values_lane's value where the tiling needs its gradient, and what that gradient reads,
 // kept from the same taps: splat_layers.read_layer_slope of layer j of tex at each lane pixel l
 // with weighted[l] > 0 (no face layers, plain sampling). Per read k of wt_layer_reads with a
 // positive weight w: value += w · v and slope += w · (d/du · du/dt + d/dv · dv/dt + d/dlod · dlod/dt
 // + d/dspread / t), of the read's wt_footprint_slopes and layer_read_slopes' UV and LOD slopes along
-// the tiling t. The value and the slope go into saved's row base + l, columns 4 j .. 4 j + 3 and
-// 4 (L + j) .. 4 (L + j) + 3 (L layers): the gradient's blend reads the values read with the
-// slopes, which may differ from the forward's in the last bit (a footprint of several taps is
-// divided by its taps, where the forward multiplies by their reciprocal) or the sign of a zero.
+// the tiling t. The value and the slope of texture keep - 1 go into saved's row base + l
+// (wt_kept_column; a height layer's first channel): the gradient's blend reads the values read
+// with the slopes, which may differ from the forward's in the last bit (a footprint of several
+// taps is divided by its taps, where the forward multiplies by their reciprocal) or the sign of a
+// zero.
 // Row l of the result: read_layer's value (wt_layer_values_lane's).
 // twin: splat_layers.read_layer_slope
 template <class Tex, class Reads, class Floats, class UV, class Surface, class TriW, class Saved>
 WT_INLINE wt_lane_colours wt_layer_values_slopes(const Tex& tex, const Reads& reads, int j, const Floats& weighted,
                                                  const UV& uv0, const UV& uv0_dx, const UV& uv0_dy,
                                                  const Surface& surface, int base, int count, const TriW& tri_w,
-                                                 const Saved& saved) {
+                                                 int keep, const Saved& saved) {
     const auto& params = reads.params;
     const auto& proj = reads.proj;
     const float t = wt_float(params.tiling, wp::min(j, params.tiling.shape[0] - 1));  // layer_tiling
@@ -224,32 +240,37 @@ WT_INLINE wt_lane_colours wt_layer_values_slopes(const Tex& tex, const Reads& re
     for (int l = 0; l < count; ++l) {
         if (!(weighted.c[l] > 0.0f)) continue;
         char* row = (char*)saved.data + (long long)(base + l) * saved.strides[0];
-        for (int c = 0; c < 4; ++c) {
-            *(float*)(row + (long long)(4 * j + c) * saved.strides[1]) = value[l][c];
-            *(float*)(row + (long long)(4 * (params.num_layers + j) + c) * saved.strides[1]) = slope[l][c];
+        const int at = wt_kept_column(params, keep - 1, false, j), slope_at = wt_kept_column(params, keep - 1, true, j);
+        for (int c = 0; c < (keep == 1 ? 4 : 1); ++c) {
+            *(float*)(row + (long long)(at + c) * saved.strides[1]) = value[l][c];
+            *(float*)(row + (long long)(slope_at + c) * saved.strides[1]) = slope[l][c];
         }
     }
     return out;
 }
 
-// SplatPixels.saved, where it is not empty: row base + l (l < count), columns 4 j .. 4 j + 3, the
-// lane's value of layer j (what the gradient lane's blend reads).
-template <class Saved>
-WT_INLINE void wt_keep_layer(const Saved& saved, int j, int base, int count, const wt_lane_colours& value) {
+// SplatPixels.saved, where it is not empty: row base + l (l < count), the lane's value of layer j of
+// texture keep - 1 (wt_kept_column; a height layer's first channel): what the gradient lane's blend reads.
+template <class Params, class Saved> WT_INLINE void wt_keep_layer(const Params& params, const Saved& saved, int keep,
+                                                                  int j, int base, int count,
+                                                                  const wt_lane_colours& value) {
     if (saved.shape[0] == 0) return;
+    const int at = wt_kept_column(params, keep - 1, false, j);
     for (int l = 0; l < count; ++l) {
         char* row = (char*)saved.data + (long long)(base + l) * saved.strides[0];
-        for (int c = 0; c < 4; ++c) *(float*)(row + (long long)(4 * j + c) * saved.strides[1]) = value.data[l][c];
+        for (int c = 0; c < (keep == 1 ? 4 : 1); ++c)
+            *(float*)(row + (long long)(at + c) * saved.strides[1]) = value.data[l][c];
     }
 }
 
 // lanes.splat.layer_values_lane: row l, layer j of tex read at lane pixel l over the footprints of
 // wt_layer_reads' reads as read_layer reads them (per projection value += w · sample where
 // triplanar, value = sample for the one read of the other projections; 0 where weighted[l] is not
-// positive). Where keep and saved is not empty, also stored in saved's row base + l, columns 4 j ..
-// 4 j + 3 (SplatPixels.saved); with Kept (the forward lane that keeps what the gradient lane reads),
-// where saved has columns for the tiling's slopes too (8 a layer), wt_layer_values_slopes keeps
-// them. Without Kept, the slopes' code is not compiled (a forward that keeps nothing: a render).
+// positive). Where keep (1 + the texture's place: colour layers 1, height layers 2) and saved is not
+// empty, also stored in saved's row base + l (SplatPixels.saved, wt_kept_column); with Kept (the
+// forward lane that keeps what the gradient lane reads), where saved has columns for the tiling's
+// slopes too (wt_kept_slopes), wt_layer_values_slopes keeps them. Without Kept, the slopes' code is
+// not compiled (a forward that keeps nothing: a render).
 // twin: splat_layers._layer_reads:read_layer
 template <bool Kept, class Tex, class Reads, class Floats, class UV, class Surface, class TriW, class Saved>
 WT_INLINE wt_lane_colours wt_layer_values_lane(const Tex& tex, const Reads& reads, int j, const Floats& weighted,
@@ -257,9 +278,9 @@ WT_INLINE wt_lane_colours wt_layer_values_lane(const Tex& tex, const Reads& read
                                                const Surface& surface, int base, int count, const TriW& tri_w, int keep,
                                                const Saved& saved) {
     if constexpr (Kept)
-        if (keep && saved.shape[0] > 0 && saved.shape[1] >= 8 * reads.params.num_layers)  // the tiling's slopes too
+        if (keep && saved.shape[0] > 0 && wt_kept_slopes(reads.params, saved))  // the tiling's slopes too
             return wt_layer_values_slopes(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w,
-                                          saved);
+                                          keep, saved);
     int layer[WT_L];
     for (int l = 0; l < WT_L; ++l) layer[l] = j;
     const Tex* texs[3] = {&tex, &tex, &tex};
@@ -268,7 +289,7 @@ WT_INLINE wt_lane_colours wt_layer_values_lane(const Tex& tex, const Reads& read
     wt_accumulate_reads(texs, reads.smp, layer, triplanar ? 3 : 1, triplanar,
                         wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w),
                         value);
-    if (keep) wt_keep_layer(saved, j, base, count, value);
+    if (keep) wt_keep_layer(reads.params, saved, keep, j, base, count, value);
     return value;
 }
 
@@ -298,7 +319,7 @@ WT_INLINE wt_lane_colours wt_layer_values_stochastic_lane(const Tex& tex, const 
             for (int c = 0; c < 4; ++c) value.data[l][c] = value.data[l][c] + w * sampled.data[l][c];
         }
     }
-    if (keep) wt_keep_layer(saved, j, base, count, value);
+    if (keep) wt_keep_layer(reads.params, saved, keep, j, base, count, value);
     return value;
 }
 
