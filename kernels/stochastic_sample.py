@@ -9,7 +9,7 @@ import warp as wp
 from . import inlined, specialised
 from .family import Kernels, family, lane_kernel, pixel_kernels
 from .hexgrid import hex_grid, hex_steps, hex_tap, hex_weights
-from .lanes.stochastic import lane_bodies
+from .lanes.stochastic import lane_bodies, linear_blend_take
 from .native import use
 from .sampling import SampleArgs, SampleGrads, SamplePixels, sample_footprint_of, sample_layer
 from .stochastic import StochasticArgs, periodic_base, sample_stochastic, sample_stochastic_outlined, scatter_stochastic
@@ -53,10 +53,10 @@ def stochastic_kernels() -> Kernels:
     hand-written gradient reaches the texels (linear blends: no histogram)."""
     kernels = pixel_kernels("stochastic", module=MODULE, args=StochasticSampleArgs, pixels=SamplePixels, out=wp.array2d(dtype=float),
                             body=stochastic_pixel, scatter=scatter_stochastic_pixel, grads=SampleGrads, adjoint_body=stochastic_pixel_outlined)  # fmt: skip
-    stochastic_lane, scatter_stochastic_lane = lane_bodies(stochastic_pixel, scatter_stochastic_pixel, StochasticSampleArgs)
+    stochastic_lane, scatter_stochastic_lane = lane_bodies(StochasticSampleArgs)
     lanes = lane_kernel(stochastic_lane, StochasticSampleArgs, SamplePixels, wp.array2d(dtype=float), module=MODULE, name="stochastic_lanes")
     grad_lanes = lane_kernel(scatter_stochastic_lane, StochasticSampleArgs, SamplePixels, wp.array2d(dtype=float), grads_t=SampleGrads, module=MODULE + ".grad", name="stochastic_texel_grad_lanes")
-    return Kernels(*kernels, grads=("args.sample.tex",), lanes=lanes, texel_grad_lanes=grad_lanes)
+    return Kernels(*kernels, grads=("args.sample.tex",), lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=linear_blend_take, grad_lanes_take=linear_blend_take)
 
 
 @wp.kernel(enable_backward=False, module=MODULE)

@@ -353,24 +353,24 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
     grad_module = module + ".grad"
     bodies = _BODIES[stochastic, faces]
     name = "triplanar" + ("_stochastic" if stochastic else "") + ("_faces" if faces else "")
+    take = linear_blend_take if stochastic else None  # a histogram's blend runs the one-pixel kernels
     if not normal:
         forward, texel_grad, _ = pixel_kernels(name, module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["colour"],
                                                scatter=bodies["colour_grad"], grads=FaceGrads)  # fmt: skip
         if stochastic and not faces:
-            colour_lane, colour_grad_lane = stochastic_lane_bodies(bodies["colour"], bodies["colour_grad"], TriplanarArgs)
+            colour_lane, colour_grad_lane = stochastic_lane_bodies(TriplanarArgs)
         elif faces:
             colour_lane, colour_grad_lane = face_lane_bodies(TriplanarArgs, stochastic)
         else:
             colour_lane, colour_grad_lane = lane_bodies(TriplanarArgs)
         lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
         grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
-        return Kernels(forward, texel_grad, _adjoint(False), grads=FACE_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes)
+        return Kernels(forward, texel_grad, _adjoint(False), grads=FACE_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=take, grad_lanes_take=take)
     forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
-    lanes = first_lanes = take = None
+    lanes = first_lanes = None
     if not faces:  # modules of their own: colour-only jobs do not compile them
         normal_lane, samples_lane, samples_grad_lane = normal_lane_bodies(TriplanarArgs, ProjectionSamples, stochastic)
         lanes = lane_kernel(normal_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module + ".normal", name=name + "_normal_lanes", covered=surface_covered)
-        take = linear_blend_take if stochastic else None
         first_lanes = {"lanes": lane_kernel(samples_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, module=module + ".normal.grad", name=name + "_samples_lanes"),
                        "texel_grad_lanes": lane_kernel(samples_grad_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, grads_t=FaceGrads, module=module + ".normal.grad", name=name + "_samples_texel_grad_lanes"),
                        "lanes_take": take, "grad_lanes_take": take}  # fmt: skip

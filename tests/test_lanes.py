@@ -230,18 +230,20 @@ def test_stochastic_lanes_give_the_one_pixel_bits(rng, launched, method, filter,
     assert ("stochastic_lanes", -(-n // LANES)) in launched
 
 
-def test_stochastic_lanes_with_a_histogram_and_on_a_real_texture(shared_data):
-    """brick.png, hex with the histogram-preserving blend (pixel by pixel inside the lane) and
-    without, at the Duck's UVs with a LOD per UV."""
+def test_stochastic_lanes_with_a_histogram_and_on_a_real_texture(shared_data, launched):
+    """brick.png, hex with the histogram-preserving blend (which the one-pixel kernel runs:
+    ``linear_blend_take``) and without, at the Duck's UVs with a LOD per UV."""
     tex = wt.Texture.from_file(shared_data / "textures" / "brick.png")
     mesh = trimesh.load(shared_data / "meshes" / "Duck.glb", force="mesh")
     uv = (np.asarray(mesh.visual.uv, np.float32) * 5.0).astype(np.float32)
     lod = np.linspace(-1.0, 6.0, len(uv)).astype(np.float32)
     histogram = wt.prepare_histogram(tex)
     for option in (wt.Stochastic("hex"), wt.Stochastic("hex", histogram=histogram), wt.Stochastic("hash4", mirror=True)):
+        launched.clear()
         lanes, scalar = _both(lambda: wt.stochastic(tex, uv, option, lod=lod))
         _same_bits(lanes, scalar)
         assert np.isfinite(lanes).all()
+        assert any(name == "stochastic_lanes" for name, _ in launched) == (option.histogram is None)
 
 
 @pytest.mark.parametrize("channels", [1, 2, 3, 4])
@@ -485,7 +487,7 @@ def test_stochastic_triplanar_lanes_give_the_one_pixel_bits(rng, launched, metho
     projection's taps from its read (``stochastic_sample.projection_taps_lane``), read tap by tap and
     weighted in the pixel body's order; non-finite positions and normals, mirrored taps, rotated hex
     taps, a contrast, object space; the anisotropic filter's footprint taps each with their
-    stochastic taps; a histogram's blend pixel by pixel."""
+    stochastic taps; a histogram's blend by the one-pixel kernel (``linear_blend_take``)."""
     g = _hand_gbuffer(rng)
     tex = wt.Texture(rng.random((64, 32, 3), dtype=np.float32))
     smp = wt.Sampler(filter=filter, address="mirror", max_aniso=4)
@@ -496,11 +498,13 @@ def test_stochastic_triplanar_lanes_give_the_one_pixel_bits(rng, launched, metho
             lanes, scalar = _both(lambda: technique(g, tex, sampler=smp, stochastic=option, **kw))
             _same_bits(lanes, scalar)
             assert (np.nan_to_num(lanes) > 0).any(-1).mean() > 0.5
+    assert ("triplanar_stochastic_lanes", -(-1000 // LANES)) in launched
     if method == "hex" and filter == "trilinear":
         histogram = wt.prepare_histogram(tex)
+        launched.clear()
         lanes, scalar = _both(lambda: wt.triplanar(g, histogram.texture, sampler=smp, stochastic=wt.Stochastic("hex", histogram=histogram)))
         _same_bits(lanes, scalar)
-    assert ("triplanar_stochastic_lanes", -(-1000 // LANES)) in launched
+        assert not any(name == "triplanar_stochastic_lanes" for name, _ in launched)
 
 
 @pytest.mark.parametrize("threads", [1, 3])

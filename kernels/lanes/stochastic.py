@@ -88,18 +88,26 @@ def scatter_stochastic_face_reads_lanes(tex_px: TextureView, tex_nx: TextureView
     ...
 
 
-@wp.func
-def lane_blend_linear(params: StochasticArgs) -> bool:
-    """Whether the forward lanes take a lookup: a linear blend (no histogram) of a stochastic method,
-    over footprints of any filter (:func:`stochastic_footprint_lane`, :func:`stochastic_read_lane`)."""
+def linear_blend(params: StochasticArgs) -> bool:
+    """Whether the lanes take a lookup with ``params`` (``Kernels.lanes_take`` of each stochastic
+    lane kernel): a linear blend (no histogram) of a stochastic method, over footprints of any
+    filter (:func:`stochastic_footprint_lane`, :func:`stochastic_read_lane`). A histogram's blend
+    is not linear: the one-pixel kernels run it, so that no lane kernel compiles the pixel bodies
+    as its fallback (they made the stochastic lane modules' CUDA compile about 13 s each)."""
     return params.histogram == 0 and params.method != METHOD_NONE
 
 
+def linear_blend_take(args) -> bool:
+    """:func:`linear_blend` of a launch's ``args`` (a struct whose ``params`` are its stochastic
+    options: ``stochastic_sample.StochasticSampleArgs``)."""
+    return linear_blend(args.params)
+
+
 @functools.cache
-def lane_bodies(pixel, scatter_pixel, args_t):
-    """``(stochastic_lane, scatter_stochastic_lane)``: the lane bodies of ``stochastic`` whose
-    scalar bodies are ``pixel`` and ``scatter_pixel``, over arguments ``args_t``
-    (``stochastic_sample.StochasticSampleArgs``: ``sample`` and ``params``)."""
+def lane_bodies(args_t):
+    """``(stochastic_lane, scatter_stochastic_lane)``: the lane bodies of ``stochastic`` over
+    arguments ``args_t`` (``stochastic_sample.StochasticSampleArgs``: ``sample`` and ``params``),
+    launched where :func:`linear_blend_take` holds."""
 
     @wp.func
     def stochastic_lane_taps(args: args_t, pixels: SamplePixels, base: wp.int32, count: wp.int32):
@@ -115,32 +123,24 @@ def lane_bodies(pixel, scatter_pixel, args_t):
 
     @inlined
     def stochastic_lane(args: args_t, pixels: SamplePixels, base: wp.int32, out: wp.array2d(dtype=float)):
-        """``pixel`` for the lane of pixels from ``base``: each pixel's footprint, each footprint
-        tap's stochastic taps, read natively tap by tap (:func:`stochastic_footprint_lane`). A
-        histogram's blend (not linear) and plain sampling go pixel by pixel through the body."""
+        """``stochastic_sample.stochastic_pixel`` for the lane of pixels from ``base``: each
+        pixel's footprint, each footprint tap's stochastic taps, read natively tap by tap
+        (:func:`stochastic_footprint_lane`)."""
         count = wp.min(out.shape[0] - base, LANES)
-        if not lane_blend_linear(args.params):
-            for l in range(count):
-                pixel(args, pixels, base + l, out)
-        else:
-            a = args.sample
-            value = stochastic_footprint_lane(a.tex, a.smp, args.params, pixels.uv, pixels.uv_dx, pixels.uv_dy, pixels.lods, pixels.layers, a.constant_layer, a.lod_source, a.constant_lod, base)
-            for l in range(count):
-                write_channels(out, base + l, value[l])
+        a = args.sample
+        value = stochastic_footprint_lane(a.tex, a.smp, args.params, pixels.uv, pixels.uv_dx, pixels.uv_dy, pixels.lods, pixels.layers, a.constant_layer, a.lod_source, a.constant_lod, base)
+        for l in range(count):
+            write_channels(out, base + l, value[l])
 
     @inlined
     def scatter_stochastic_lane(args: args_t, pixels: SamplePixels, base: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):
-        """``scatter_pixel`` for the lane of pixels from ``base``: the lane's taps, then their adds
-        natively (``scatter_taps_lane``), pixel by pixel and tap by tap as the body adds them; with
-        the anisotropic filter, every footprint tap's taps in order
-        (:func:`scatter_stochastic_footprint_lane`). A histogram's blend and plain sampling go pixel
-        by pixel through the body."""
+        """``stochastic_sample.scatter_stochastic_pixel`` for the lane of pixels from ``base``: the
+        lane's taps, then their adds natively (``scatter_taps_lane``), pixel by pixel and tap by tap
+        as the body adds them; with the anisotropic filter, every footprint tap's taps in order
+        (:func:`scatter_stochastic_footprint_lane`)."""
         count = wp.min(adj.shape[0] - base, LANES)
         a = args.sample
-        if not lane_blend_linear(args.params):
-            for l in range(count):
-                scatter_pixel(args, pixels, base + l, grads, adj)
-        elif a.smp.filter == FILTER_ANISOTROPIC:
+        if a.smp.filter == FILTER_ANISOTROPIC:
             scatter_stochastic_footprint_lane(a.tex, grads.tex, a.smp, args.params, pixels.uv, pixels.uv_dx, pixels.uv_dy, pixels.lods, pixels.layers, a.constant_layer, a.lod_source, a.constant_lod, adj, base)
         else:
             taps, layers = stochastic_lane_taps(args, pixels, base, count)

@@ -20,14 +20,13 @@ from .. import inlined, specialised
 from ..faces import FaceGrads, FaceTextures, on_axis
 from ..family import lane_covered
 from ..projection import SurfacePixels
-from ..stochastic import METHOD_NONE
 from ..texels import FILTER_ANISOTROPIC, SamplerArgs, pick3, read_channels, write_channels
 from . import LANES, lane_colours, lane_ints, lane_reads
 from .normals import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
 from .projection import accumulate_reads_lane, triplanar_reads_lane
 from .sample import accumulate_footprint_lane
 from .scatter import scatter_face_reads_lanes, scatter_lod_lanes, scatter_projection_taps_lanes, scatter_reads_lanes
-from .stochastic import lane_blend_linear, projection_taps_lane, scatter_stochastic_face_reads_lanes, scatter_stochastic_reads_lanes, stochastic_read_lane
+from .stochastic import linear_blend, projection_taps_lane, scatter_stochastic_face_reads_lanes, scatter_stochastic_reads_lanes, stochastic_read_lane
 
 
 @wp.func
@@ -164,23 +163,19 @@ def face_lane_bodies(args_t, stochastic: bool = False):
 
 
 @functools.cache
-def stochastic_lane_bodies(colour, colour_grad, args_t):
+def stochastic_lane_bodies(args_t):
     """``(colour_lane, colour_grad_lane)``: the lane bodies of stochastic colour mapping (one texture
-    per axis) whose pixel bodies are ``colour`` and its texel gradient ``colour_grad``: the lane's
-    reads, then per projection ``stochastic.sample_stochastic`` over each pixel's footprint
+    per axis) and its texel gradient: the lane's reads, then per projection ``stochastic.sample_stochastic`` over each pixel's footprint
     (:func:`~.stochastic.stochastic_read_lane`: each footprint tap's stochastic taps worked out
     natively and read tap by tap; NaN where the UV or LOD is not finite), added with the
     projection's weight, in the order of the pixel body; the gradient adds each tap's share of the
     projection's share (``.scatter.scatter_projection_taps_lanes``; with the anisotropic filter,
     every footprint tap's taps in order: :func:`~.stochastic.scatter_stochastic_reads_lanes`). A
-    histogram's blend goes pixel by pixel through the pixel bodies."""
+    histogram's blend is not theirs (:func:`linear_blend_take`)."""
 
     def stochastic_colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
-        if not lane_blend_linear(args.stoch):
-            for l in range(count):
-                colour_grad(args, pixels, base + l, grads, adj)
-        elif args.smp.filter == FILTER_ANISOTROPIC:
+        if args.smp.filter == FILTER_ANISOTROPIC:
             faces = args.faces
             reads = triplanar_reads_lane(faces, args.proj, args.smp, pixels, base, count, 0, 0)
             gs = lane_colours()
@@ -205,22 +200,18 @@ def stochastic_lane_bodies(colour, colour_grad, args_t):
 
     def stochastic_colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
-        if not lane_blend_linear(args.stoch):
+        faces = args.faces
+        reads = triplanar_reads_lane(faces, args.proj, args.smp, pixels, base, count, 0, 0)
+        layers = lane_ints(args.layer)
+        value = lane_colours()
+        for axis in range(3):
+            sampled = stochastic_read_lane(on_axis(faces.px, faces.py, faces.pz, axis), args.smp, args.stoch, layers, reads, axis, count)
             for l in range(count):
-                colour(args, pixels, base + l, out)
-        else:
-            faces = args.faces
-            reads = triplanar_reads_lane(faces, args.proj, args.smp, pixels, base, count, 0, 0)
-            layers = lane_ints(args.layer)
-            value = lane_colours()
-            for axis in range(3):
-                sampled = stochastic_read_lane(on_axis(faces.px, faces.py, faces.pz, axis), args.smp, args.stoch, layers, reads, axis, count)
-                for l in range(count):
-                    w = reads[9 + axis, l]
-                    if w > 0.0:
-                        value[l] = value[l] + w * sampled[l]
-            for l in range(count):
-                write_channels(out, base + l, value[l])
+                w = reads[9 + axis, l]
+                if w > 0.0:
+                    value[l] = value[l] + w * sampled[l]
+        for l in range(count):
+            write_channels(out, base + l, value[l])
 
     return inlined(specialised(stochastic_colour_lane, "triplanar_stochastic_colour_lane")), inlined(specialised(stochastic_colour_grad_lane, "triplanar_stochastic_colour_grad_lane"))
 
@@ -317,11 +308,11 @@ def normal_lane_bodies(args_t, samples_t, stochastic: bool = False):
 
 
 def linear_blend_take(args) -> bool:
-    """Whether stochastic normal mapping's lanes take a launch with ``args``
-    (:class:`~.triplanar.TriplanarArgs`; ``Kernels.lanes_take``): a linear blend, as
-    :func:`~.stochastic.lane_blend_linear`; a histogram's runs the one-pixel kernels, whose pixel
+    """Whether stochastic colour and normal mapping's lanes take a launch with ``args``
+    (:class:`~.triplanar.TriplanarArgs`; ``Kernels.lanes_take``): a linear blend
+    (:func:`~.stochastic.linear_blend`); a histogram's runs the one-pixel kernels, whose pixel
     bodies the lane modules then need not compile."""
-    return args.stoch.histogram == 0 and args.stoch.method != METHOD_NONE
+    return linear_blend(args.stoch)
 
 
 @functools.cache
