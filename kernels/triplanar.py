@@ -367,14 +367,13 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
         grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
         return Kernels(forward, texel_grad, _adjoint(False), grads=FACE_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=take, grad_lanes_take=take)
     forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
-    lanes = first_lanes = None
-    if not faces:  # modules of their own: colour-only jobs do not compile them
-        normal_lane, samples_lane, samples_grad_lane = normal_lane_bodies(TriplanarArgs, ProjectionSamples, stochastic)
-        lanes = lane_kernel(normal_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module + ".normal", name=name + "_normal_lanes", covered=surface_covered)
-        first_lanes = {"lanes": lane_kernel(samples_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, module=module + ".normal.grad", name=name + "_samples_lanes"),
-                       "texel_grad_lanes": lane_kernel(samples_grad_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, grads_t=FaceGrads, module=module + ".normal.grad", name=name + "_samples_texel_grad_lanes"),
-                       "lanes_take": take, "grad_lanes_take": take}  # fmt: skip
+    # modules of their own: colour-only jobs do not compile them
+    normal_lane, samples_lane, samples_grad_lane = normal_lane_bodies(TriplanarArgs, ProjectionSamples, stochastic, faces)
+    lanes = lane_kernel(normal_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module + ".normal", name=name + "_normal_lanes", covered=surface_covered)
+    first_lanes = {"lanes": lane_kernel(samples_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, module=module + ".normal.grad", name=name + "_samples_lanes"),
+                   "texel_grad_lanes": lane_kernel(samples_grad_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, grads_t=FaceGrads, module=module + ".normal.grad", name=name + "_samples_texel_grad_lanes"),
+                   "lanes_take": take, "grad_lanes_take": take}  # fmt: skip
     first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,
                           body=bodies["samples"], scatter=bodies["samples_grad"], grads=FaceGrads)  # fmt: skip
-    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=FACE_GRADS, **(first_lanes or {})), then=_normal_from_samples(), intermediates=_sample_shapes, no_grad=("weights",))
+    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=FACE_GRADS, **first_lanes), then=_normal_from_samples(), intermediates=_sample_shapes, no_grad=("weights",))
     return Kernels(forward, None, _adjoint(True), staged=staged, lanes=lanes, lanes_take=take)

@@ -480,6 +480,27 @@ def test_stochastic_face_lanes_give_the_one_pixel_bits(rng, launched, method, fi
     assert {"triplanar_stochastic_faces_lanes", "triplanar_stochastic_faces_texel_grad_lanes"} <= names
 
 
+@pytest.mark.parametrize("method", [None, "hash4", "hex"])
+@pytest.mark.parametrize("filter", ["nearest", "trilinear", "anisotropic"])
+def test_face_normal_lanes_give_the_one_pixel_bits(rng, launched, method, filter):
+    """Normal mapping with a normal map per face (``triplanar_lanes.normal_lane_bodies`` with
+    ``faces``), plain and stochastic: each projection read on the face the unit normal looks at
+    (a huge normal, whose length overflows, has a unit normal of zeros and reads the + faces, as
+    the pixel body does), forward and both steps of the two-step gradient (every face's texels, and
+    a texture shared by a + and a - face), on 3 threads too."""
+    g, faces = _face_inputs(rng)
+    shared = [faces[0], faces[0], faces[2], faces[3], faces[3], faces[5]]
+    smp = wt.Sampler(filter=filter, address="mirror", max_aniso=4)
+    placement = np.array([[0.0, 0.8, 0.0, 0.3], [-0.8, 0.0, 0.0, 0.0], [0.0, 0.0, 1.5, -0.2], [0.0, 0.0, 0.0, 1.0]], np.float32)
+    option = None if method is None else wt.Stochastic(method, seed=3, blend=(0.1, 0.3), contrast=2.0)
+    calls = ((lambda: wt.triplanar_normal(g, textures_per_face=faces, blend="rnm", sampler=smp, stochastic=option, sharpness=3.0), faces),
+             (lambda: wt.triplanar_normal(g, textures_per_face=shared, sampler=smp, stochastic=option, sharpness=0.0, space="object", object_to_world=placement, tiling=(1.5, 2.0, 0.75)), [faces[0], faces[2], faces[3], faces[5]]))  # fmt: skip
+    _same_face_bits(rng, calls)
+    kind = "_stochastic" if method else ""
+    names = {name for name, _ in launched}
+    assert {f"triplanar{kind}_faces_normal_lanes", f"triplanar{kind}_faces_samples_lanes", f"triplanar{kind}_faces_samples_texel_grad_lanes"} <= names
+
+
 @pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])
 @pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
 def test_stochastic_triplanar_lanes_give_the_one_pixel_bits(rng, launched, method, filter):

@@ -77,13 +77,14 @@ def scatter_stochastic_reads_lanes(tex0: TextureView, tex1: TextureView, tex2: T
     ...
 
 
-@wp.func_native(cpu_snippet("wt_scatter_stochastic_face_reads_lanes(tex_px, tex_nx, tex_py, tex_ny, tex_pz, tex_nz, grad_px, grad_nx, grad_py, grad_ny, grad_pz, grad_nz, smp, params, layers, plus, minus, g);\n"))
+@wp.func_native(cpu_snippet("wt_scatter_stochastic_face_reads_lanes(tex_px, tex_nx, tex_py, tex_ny, tex_pz, tex_nz, grad_px, grad_nx, grad_py, grad_ny, grad_pz, grad_nz, smp, params, layers, plus, minus, weigh, g0, g1, g2);\n"))
 def scatter_stochastic_face_reads_lanes(tex_px: TextureView, tex_nx: TextureView, tex_py: TextureView, tex_ny: TextureView, tex_pz: TextureView, tex_nz: TextureView,
                                         grad_px: TexelGrad, grad_nx: TexelGrad, grad_py: TexelGrad, grad_ny: TexelGrad, grad_pz: TexelGrad, grad_nz: TexelGrad,
-                                        smp: SamplerArgs, params: StochasticArgs, layers: lane_ints, plus: lane_reads, minus: lane_reads, g: lane_colours):  # fmt: skip
+                                        smp: SamplerArgs, params: StochasticArgs, layers: lane_ints, plus: lane_reads, minus: lane_reads, weigh: wp.int32,
+                                        g0: lane_colours, g1: lane_colours, g2: lane_colours):  # fmt: skip
     """``stochastic.scatter_stochastic`` (a linear blend) with a texture per face, every filter's:
-    every lane pixel ``l`` adds each projection's share ``w · g[l]`` through its stochastic taps
-    into the gradient of the face it reads (``plus``, ``minus``: ``projection.triplanar_reads_lane``'s
+    every lane pixel ``l`` adds each projection ``a``'s gradient ``g_a[l]`` (its share ``w · g_a[l]``
+    where ``weigh``) through its stochastic taps into the gradient of the face it reads (``plus``, ``minus``: ``projection.triplanar_reads_lane``'s
     reads of the two sides), pixel by pixel in projection, footprint tap and stochastic tap order."""
     ...
 

@@ -1,6 +1,7 @@
 """Triplanar and biplanar colour for a lane of pixels on the CPU (:mod:`.`), forward and texel
 gradient, plain or stochastic, one texture per axis or per face; and triplanar normal mapping (its
-forward, and both steps of its two-step gradient), plain or stochastic, one texture per axis.
+forward, and both steps of its two-step gradient), plain or stochastic, one texture per axis or
+per face.
 
 What each pixel reads from each projection (its UV, footprint and weight, with triplanar or
 biplanar weights) comes from :func:`~.projection.triplanar_reads_lane` for the whole lane;
@@ -120,7 +121,7 @@ def face_lane_bodies(args_t, stochastic: bool = False):
 
         def scatter_faces(args: args_t, plus: lane_reads, minus: lane_reads, grads: FaceGrads, g: lane_colours):
             f = args.faces
-            scatter_stochastic_face_reads_lanes(f.px, f.nx, f.py, f.ny, f.pz, f.nz, grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, args.smp, args.stoch, lane_ints(args.layer), plus, minus, g)
+            scatter_stochastic_face_reads_lanes(f.px, f.nx, f.py, f.ny, f.pz, f.nz, grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, args.smp, args.stoch, lane_ints(args.layer), plus, minus, 1, g, g, g)
 
     else:
 
@@ -136,7 +137,7 @@ def face_lane_bodies(args_t, stochastic: bool = False):
 
         def scatter_faces(args: args_t, plus: lane_reads, minus: lane_reads, grads: FaceGrads, g: lane_colours):
             f = args.faces
-            scatter_face_reads_lanes(f.px, f.nx, f.py, f.ny, f.pz, f.nz, grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, args.smp, lane_ints(args.layer), plus, minus, g)
+            scatter_face_reads_lanes(f.px, f.nx, f.py, f.ny, f.pz, f.nz, grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, args.smp, lane_ints(args.layer), plus, minus, 1, g, g, g)
 
     kind = "_stochastic" if stochastic else ""
     face_colours = inlined(specialised(face_colours, f"triplanar{kind}_face_colours"))
@@ -217,19 +218,68 @@ def stochastic_lane_bodies(args_t):
 
 
 @functools.cache
-def normal_lane_bodies(args_t, samples_t, stochastic: bool = False):
-    """``(normal_lane, samples_lane, samples_grad_lane)``: the lane bodies of normal mapping (one
-    texture per axis) and of the first step of its two-step gradient, which stores each
-    projection's sample and the weights (``samples_t``: :class:`~.triplanar.ProjectionSamples`) and
-    adds their texel gradients. Each reads the projections on the unit normal, as the bodies do
-    (``triplanar_reads_lane``'s ``unit_normals``); the forward makes the normals from them natively
-    (:func:`~.normals.surface_normals_lane`). Plain sampling, or a ``stochastic`` method: each
-    projection's sample read over its footprint as stochastic colour reads it
-    (:func:`~.stochastic.stochastic_read_lane`), its gradient added back through the same taps
-    (``.scatter.scatter_projection_taps_lanes``; with the anisotropic filter,
-    :func:`~.stochastic.scatter_stochastic_reads_lanes`); a histogram's blend is not theirs
+def normal_lane_bodies(args_t, samples_t, stochastic: bool = False, faces: bool = False):
+    """``(normal_lane, samples_lane, samples_grad_lane)``: the lane bodies of normal mapping, one
+    texture per axis or per face (``faces``), and of the first step of its two-step gradient, which
+    stores each projection's sample and the weights (``samples_t``:
+    :class:`~.triplanar.ProjectionSamples`) and adds their texel gradients. Each reads the
+    projections on the unit normal, as the bodies do (``triplanar_reads_lane``'s ``unit_normals``;
+    with a texture per face, the face the unit normal looks at); the forward makes the normals
+    from them natively (:func:`~.normals.surface_normals_lane`). Plain sampling, or a
+    ``stochastic`` method: each projection's sample read over its footprint as stochastic colour
+    reads it (:func:`~.stochastic.stochastic_read_lane`), its gradient added back through the same
+    taps (``.scatter.scatter_projection_taps_lanes``; with the anisotropic filter,
+    :func:`~.stochastic.scatter_stochastic_reads_lanes`; per face,
+    :func:`~.stochastic.scatter_stochastic_face_reads_lanes`); a histogram's blend is not theirs
     (:func:`linear_blend_take`)."""
-    if stochastic:
+    if faces:
+
+        def face_samples(args: args_t, plus: lane_reads, minus: lane_reads, axis: wp.int32, count: wp.int32) -> lane_colours:
+            """Row ``l``: lane pixel ``l``'s unweighted sample of projection ``axis`` on the face it
+            reads (``plus``, ``minus``: the reads of the two sides), where its weight is positive."""
+            f = args.faces
+            layers = lane_ints(args.layer)
+            value = lane_colours()
+            if wp.static(stochastic):
+                sp = stochastic_read_lane(on_axis(f.px, f.py, f.pz, axis), args.smp, args.stoch, layers, plus, axis, count)
+                sm = stochastic_read_lane(on_axis(f.nx, f.ny, f.nz, axis), args.smp, args.stoch, layers, minus, axis, count)
+                for l in range(count):
+                    if plus[9 + axis, l] > 0.0:
+                        value[l] = sp[l]
+                    elif minus[9 + axis, l] > 0.0:
+                        value[l] = sm[l]
+            else:  # put in place (not added): the + face's sample, then the - face's where the pixel reads that one
+                value = accumulate_footprint_lane(on_axis(f.px, f.py, f.pz, axis), args.smp, layers, plus[axis], plus[3 + axis], plus[6 + axis], plus[12 + axis], plus[15 + axis], plus[18 + axis], plus[9 + axis], 0, value)
+                value = accumulate_footprint_lane(on_axis(f.nx, f.ny, f.nz, axis), args.smp, layers, minus[axis], minus[3 + axis], minus[6 + axis], minus[12 + axis], minus[15 + axis], minus[18 + axis], minus[9 + axis], 0, value)
+            return value
+
+        face_samples = inlined(specialised(face_samples, f"triplanar{'_stochastic' if stochastic else ''}_normal_face_samples"))
+
+        def unit_normal_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
+            """``(reads, sx, sy, sz)``: the lane's reads on the unit normal (each projection's weight
+            whichever face it reads) and each projection's samples."""
+            plus = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 1)
+            minus = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 2)
+            sx = face_samples(args, plus, minus, 0, count)
+            sy = face_samples(args, plus, minus, 1, count)
+            sz = face_samples(args, plus, minus, 2, count)
+            reads = lane_reads()
+            for axis in range(3):  # a pixel reads one face of each projection: the other's weight is 0
+                for l in range(LANES):
+                    reads[9 + axis, l] = plus[9 + axis, l] + minus[9 + axis, l]
+            return reads, sx, sy, sz
+
+        def scatter_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32, grads: FaceGrads, gx: lane_colours, gy: lane_colours, gz: lane_colours):
+            """Each projection's own gradient (unweighted) added into the face it read."""
+            plus = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 1)
+            minus = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 2)
+            f = args.faces
+            if wp.static(stochastic):
+                scatter_stochastic_face_reads_lanes(f.px, f.nx, f.py, f.ny, f.pz, f.nz, grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, args.smp, args.stoch, lane_ints(args.layer), plus, minus, 0, gx, gy, gz)
+            else:
+                scatter_face_reads_lanes(f.px, f.nx, f.py, f.ny, f.pz, f.nz, grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, args.smp, lane_ints(args.layer), plus, minus, 0, gx, gy, gz)
+
+    elif stochastic:
 
         def unit_normal_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
             """``(reads, sx, sy, sz)``: the lane's reads on the unit normal and each projection's samples."""
@@ -240,8 +290,9 @@ def normal_lane_bodies(args_t, samples_t, stochastic: bool = False):
             sz = stochastic_read_lane(args.faces.pz, args.smp, args.stoch, layers, reads, 2, count)
             return reads, sx, sy, sz
 
-        def scatter_samples(args: args_t, reads: lane_reads, count: wp.int32, grads: FaceGrads, gx: lane_colours, gy: lane_colours, gz: lane_colours):
+        def scatter_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32, grads: FaceGrads, gx: lane_colours, gy: lane_colours, gz: lane_colours):
             """Each projection's own gradient (unweighted) added back through its stochastic taps."""
+            reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 0)
             faces = args.faces
             layers = lane_ints(args.layer)
             if args.smp.filter == FILTER_ANISOTROPIC:
@@ -262,12 +313,13 @@ def normal_lane_bodies(args_t, samples_t, stochastic: bool = False):
             sz = projection_samples_lane(args.faces, args.smp, args.layer, reads, 2)
             return reads, sx, sy, sz
 
-        def scatter_samples(args: args_t, reads: lane_reads, count: wp.int32, grads: FaceGrads, gx: lane_colours, gy: lane_colours, gz: lane_colours):
+        def scatter_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32, grads: FaceGrads, gx: lane_colours, gy: lane_colours, gz: lane_colours):
             """Each projection's own gradient (unweighted) added into its texels."""
+            reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 0)
             faces = args.faces
             scatter_reads_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, lane_ints(args.layer), reads, gx, gy, gz)
 
-    kind = "_stochastic" if stochastic else ""
+    kind = ("_stochastic" if stochastic else "") + ("_faces" if faces else "")
     unit_normal_samples = inlined(specialised(unit_normal_samples, f"triplanar{kind}_unit_normal_samples"))
     scatter_samples = inlined(specialised(scatter_samples, f"triplanar{kind}_scatter_samples"))
 
@@ -290,7 +342,6 @@ def normal_lane_bodies(args_t, samples_t, stochastic: bool = False):
 
     def samples_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: samples_t):
         count = wp.min(adj.samples.shape[0] - base, LANES)
-        reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 0)
         gx = lane_colours()
         gy = lane_colours()
         gz = lane_colours()
@@ -298,7 +349,7 @@ def normal_lane_bodies(args_t, samples_t, stochastic: bool = False):
             gx[l] = adj.samples[base + l, 0]
             gy[l] = adj.samples[base + l, 1]
             gz[l] = adj.samples[base + l, 2]
-        scatter_samples(args, reads, count, grads, gx, gy, gz)
+        scatter_samples(args, pixels, base, count, grads, gx, gy, gz)
 
     return (
         inlined(specialised(normal_lane, f"triplanar{kind}_normal_lane")),

@@ -178,9 +178,10 @@ WT_INLINE void wt_triplanar_weights(const wt_vf* N, wt_vi covered, float sharpne
 // lanes.projection.triplanar_reads_lane: what the lane's pixels base .. base + count - 1 read from
 // each projection, with triplanar or biplanar weights (proj.weights): projection.projection_uv,
 // projection_footprint and projection_weights, as a lane_reads matrix (all 0 where a projection is
-// not read). unit_normals: the UVs and footprints of the unit normal (triplanar.unit_base_normal,
-// as normal mapping reads them). side: 0, each projection on faces' texture of its axis (px, py,
-// pz); 1 or 2, on the + or - face of that axis, weight 0 where the normal looks at the other face.
+// not read). unit_normals: the UVs, footprints and faces of the unit normal (triplanar.unit_base_normal,
+// as normal mapping reads them; the weights are the normal's as given). side: 0, each projection on
+// faces' texture of its axis (px, py, pz); 1 or 2, on the + or - face of that axis, weight 0 where
+// the normal looks at the other face.
 // twin: projection.projection_weights
 template <class Faces, class Proj, class Smp, class Pixels>
 WT_INLINE wt_lane_reads wt_triplanar_reads_lane(const Faces& faces, const Proj& proj, const Smp& smp,
@@ -217,13 +218,13 @@ WT_INLINE wt_lane_reads wt_triplanar_reads_lane(const Faces& faces, const Proj& 
         wt_biplanar_weights(N, covered, sharpness, W);
     else
         wt_triplanar_weights(N, covered, sharpness, W);
-    if (side != 0) {  // faces.on_face: the - face where n[axis] < 0 (the normal as given), else the + face
+    if (unit_normals != 0) wt_unit_normals(N);  // triplanar.unit_base_normal: normal mapping reads on the unit normal
+    if (side != 0) {  // faces.on_face: the - face where n[axis] < 0 (the normal it reads on), else the + face
         for (int axis = 0; axis < 3; ++axis) {
             const wt_vi negative = N[axis] < 0.0f;
             W[axis] = wt_sel(side == 2 ? negative : ~negative, W[axis], (wt_vf)0.0f);
         }
     }
-    if (unit_normals != 0) wt_unit_normals(N);  // triplanar.unit_base_normal: normal mapping reads on the unit normal
     // Per projection: projection.plane_uv and plane_footprint, where its weight is > 0.
     wt_lane_reads reads;
     for (int axis = 0; axis < 3; ++axis) {

@@ -461,18 +461,16 @@ WT_INLINE void wt_scatter_taps_lane(const Tex& tex, const Grad& grad, const Smp&
 
 // lanes.scatter.scatter_face_reads_lanes: a texture per face: each projection's read on its + face
 // (rows of `plus`) and on its - face (rows of `minus`; a pixel reads one of the two), in the order
-// x+, x-, y+, y-, z+, z-, each adding w · g[l].
-template <class Tex, class Grad, class Smp, class Ints>
-WT_INLINE void wt_scatter_face_reads_lanes(const Tex& tex_px, const Tex& tex_nx, const Tex& tex_py, const Tex& tex_ny,
-                                           const Tex& tex_pz, const Tex& tex_nz, const Grad& grad_px,
-                                           const Grad& grad_nx, const Grad& grad_py, const Grad& grad_ny,
-                                           const Grad& grad_pz, const Grad& grad_nz, const Smp& smp, const Ints& layers,
-                                           const wt_lane_reads& plus, const wt_lane_reads& minus,
-                                           const wt_lane_colours& g) {
+// x+, x-, y+, y-, z+, z-, each adding its projection's gradient g_a[l], times w where weigh.
+template <class Tex, class Grad, class Smp, class Ints> WT_INLINE void wt_scatter_face_reads_lanes(
+    const Tex& tex_px, const Tex& tex_nx, const Tex& tex_py, const Tex& tex_ny, const Tex& tex_pz, const Tex& tex_nz,
+    const Grad& grad_px, const Grad& grad_nx, const Grad& grad_py, const Grad& grad_ny, const Grad& grad_pz,
+    const Grad& grad_nz, const Smp& smp, const Ints& layers, const wt_lane_reads& plus, const wt_lane_reads& minus,
+    int weigh, const wt_lane_colours& g0, const wt_lane_colours& g1, const wt_lane_colours& g2) {
     const Tex* texs[6] = {&tex_px, &tex_nx, &tex_py, &tex_ny, &tex_pz, &tex_nz};
     const Grad* grads[6] = {&grad_px, &grad_nx, &grad_py, &grad_ny, &grad_pz, &grad_nz};
-    const wt_lane_colours* gr[1] = {&g};
-    wt_scatter_read_rows(texs, grads, smp, 6, layers.c, wt_face_rows(plus, minus), 1, gr, 0);
+    const wt_lane_colours* gr[6] = {&g0, &g0, &g1, &g1, &g2, &g2};
+    wt_scatter_read_rows(texs, grads, smp, 6, layers.c, wt_face_rows(plus, minus), weigh, gr, 1);
 }
 
 // lanes.scatter.scatter_projection_taps_lanes: scatter_stochastic of each projection's one-tap

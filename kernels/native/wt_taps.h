@@ -389,7 +389,7 @@ WT_INLINE void wt_scatter_stochastic_reads_lanes(const Tex& tex0, const Tex& tex
 // lanes.stochastic.scatter_stochastic_face_reads_lanes: stochastic.scatter_stochastic with a texture
 // per face, every filter's: each projection's read on its + face (rows of `plus`) and on its - face
 // (rows of `minus`; a pixel reads one of the two), in the order x+, x-, y+, y-, z+, z-, each adding
-// w · g[l] through its stochastic taps.
+// its projection's gradient g_a[l] (times w where weigh) through its stochastic taps.
 // twin: stochastic.scatter_stochastic
 template <class Tex, class Grad, class Smp, class Params, class Ints>
 WT_INLINE void wt_scatter_stochastic_face_reads_lanes(const Tex& tex_px, const Tex& tex_nx, const Tex& tex_py,
@@ -397,10 +397,11 @@ WT_INLINE void wt_scatter_stochastic_face_reads_lanes(const Tex& tex_px, const T
                                                       const Grad& grad_px, const Grad& grad_nx, const Grad& grad_py,
                                                       const Grad& grad_ny, const Grad& grad_pz, const Grad& grad_nz,
                                                       const Smp& smp, const Params& params, const Ints& layers,
-                                                      const wt_lane_reads& plus, const wt_lane_reads& minus,
-                                                      const wt_lane_colours& g) {
+                                                      const wt_lane_reads& plus, const wt_lane_reads& minus, int weigh,
+                                                      const wt_lane_colours& g0, const wt_lane_colours& g1,
+                                                      const wt_lane_colours& g2) {
     const Tex* texs[6] = {&tex_px, &tex_nx, &tex_py, &tex_ny, &tex_pz, &tex_nz};
     const Grad* grads[6] = {&grad_px, &grad_nx, &grad_py, &grad_ny, &grad_pz, &grad_nz};
-    const wt_lane_colours* gr[1] = {&g};
-    wt_scatter_stochastic_rows(texs, grads, smp, params, 6, layers.c, wt_face_rows(plus, minus), 1, gr, 0);
+    const wt_lane_colours* gr[6] = {&g0, &g0, &g1, &g1, &g2, &g2};
+    wt_scatter_stochastic_rows(texs, grads, smp, params, 6, layers.c, wt_face_rows(plus, minus), weigh, gr, 1);
 }
