@@ -37,7 +37,7 @@ from .native import use
 from .family import Kernels, Staged, family, forward_kernel, lane_covered, lane_kernel, pixel_kernels
 from .projection import SurfacePixels, surface_frame
 from .splat_blend import blend_functions, capacity
-from .lanes.splat import grad_lanes_take, lane_bodies, lane_saved, lanes_take, stochastic_grad_lanes_take, stochastic_lane_saved, stochastic_lanes_take
+from .lanes.splat import grad_lanes_take, lane_bodies, lane_saved, stochastic_grad_lanes_take, stochastic_lane_saved, stochastic_lanes_take
 from .splat_layers import (
     HEIGHT_ARRAY,
     HEIGHT_CHANNEL,
@@ -375,5 +375,5 @@ def splat_kernels(*, capacity: int, stochastic: bool) -> Kernels:
     if stochastic:
         return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity), lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=stochastic_lanes_take,
                        grad_lanes_take=stochastic_grad_lanes_take, lane_saved=stochastic_lane_saved)  # fmt: skip
-    return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity), lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=lanes_take, grad_lanes_take=grad_lanes_take,
+    return Kernels(forward, texel_grad, grads=grads, staged=_staged(capacity), lanes=lanes, texel_grad_lanes=grad_lanes, grad_lanes_take=grad_lanes_take,
                    lane_saved=lane_saved, kept_lanes=kept_lanes)  # fmt: skip

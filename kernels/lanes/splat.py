@@ -13,9 +13,9 @@ same taps; the gradient's lane body, which runs only after such a forward, reads
 each pixel's blend and weights backwards and adds into its splat maps and the tiling in pixel
 order, then adds each layer's gradient into its texels by :func:`scatter_layer_lane`, layer by
 layer: a layer's reads touch texels of its own array layer only, so every texel gets the one-pixel
-body's sums in its order, and the outputs and gradients are the one-pixel kernels' bits. Face layers,
-and for the gradient the cases :func:`grad_lanes_take` names, run the one-pixel kernels
-(``Kernels.lanes_take``). In the kernels of up to 8 layers the weights, the blend and the blend
+body's sums in its order, and the outputs and gradients are the one-pixel kernels' bits. Face layers
+change only the array layer each read samples (``wt_read_layers``); for the gradient they, and the
+other cases :func:`grad_lanes_take` names, run the one-pixel kernels (``Kernels.grad_lanes_take``). In the kernels of up to 8 layers the weights, the blend and the blend
 and weights backwards are native code for the whole lane (:mod:`.splat_blend`); beyond, the
 scalar blocks run pixel by pixel.
 
@@ -77,20 +77,17 @@ def layer_values_kept_lane(tex: TextureView, reads: LayerReads, j: wp.int32, wei
     ...
 
 
-def lanes_take(args: SplatArgs) -> bool:
-    """Whether the lane bodies take a launch with ``args`` at all (``Kernels.lanes_take``): no face
-    layers (which make a read's array layer depend on the pixel's normal)."""
-    params = args.reads.params
-    return not (params.face_layers.shape[0] > 0 and params.projection == PROJECT_TRIPLANAR)
-
-
 def grad_lanes_take(args: SplatArgs) -> bool:
     """Whether the texel-gradient lane body takes a launch with ``args`` (``Kernels.grad_lanes_take``):
-    :func:`lanes_take`, and height layers, where there are, whose gradient is not (in part) the
+    no face layers (which make a read's array layer depend on the pixel's normal, so that layers
+    share array layers), and height layers, where there are, whose gradient is not (in part) the
     colour layers' (``heights=`` the layers themselves). Its layers, and its height layers, then add
     into texels of their own, so it adds layer by layer and every texel still gets the one-pixel
-    body's sums in its order."""
-    return lanes_take(args) and not (args.reads.params.height_mode == HEIGHT_ARRAY and _overlap(args.layers.texels.grad, args.heights.texels.grad))
+    body's sums in its order. (The forward lanes take every launch: face layers only change the
+    array layer each read samples, ``wt_read_layers``.)"""
+    params = args.reads.params
+    face_layers = params.face_layers.shape[0] > 0 and params.projection == PROJECT_TRIPLANAR
+    return not face_layers and not (params.height_mode == HEIGHT_ARRAY and _overlap(args.layers.texels.grad, args.heights.texels.grad))
 
 
 def _overlap(a: wp.array | None, b: wp.array | None) -> bool:
@@ -99,10 +96,10 @@ def _overlap(a: wp.array | None, b: wp.array | None) -> bool:
 
 
 def stochastic_lanes_take(args: SplatArgs) -> bool:
-    """:func:`lanes_take` for the stochastic kernels: also a linear blend (no histogram), which the
-    lanes read tap by tap; the rest runs the one-pixel kernels."""
+    """Whether the stochastic kernels' forward lanes take a launch with ``args``: a linear blend (no
+    histogram), which the lanes read tap by tap; the rest runs the one-pixel kernels."""
     stoch = args.stoch
-    return lanes_take(args) and stoch.histogram == 0 and stoch.method != METHOD_NONE
+    return stoch.histogram == 0 and stoch.method != METHOD_NONE
 
 
 def stochastic_grad_lanes_take(args: SplatArgs) -> bool:

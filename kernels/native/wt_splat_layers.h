@@ -10,7 +10,8 @@
 #include "wt_taps.h"
 
 // What each lane pixel l (pixel base + l of the launch) with weighted[l] > 0 reads of layer j of tex
-// (no face layers): splat_layers.layer_read's UV, footprint and weight of each read k at the pixel's
+// (face layers change only the array layer a read samples: wt_read_layers):
+// splat_layers.layer_read's UV, footprint and weight of each read k at the pixel's
 // point (its UV0 and their derivatives, or its surface; tri_w: its triplanar weights), as a
 // lane_reads matrix (all 0 for the other pixels), 16 pixels at a time.
 // twin: splat_layers.layer_read
@@ -156,6 +157,24 @@ WT_INLINE float wt_lod_scale_slope(float width, float height, float dx0, float d
     return rho2 > (float)1.0e-30 && rho2 < wt_float_max ? 1.0f / (scale * (float)0.6931471805599453) : 0.0f;
 }
 
+// splat_layers.face_layer for the lane: layer[k][l], the array layer that read k of layer j samples
+// at lane pixel l: j itself, or with face layers (projection triplanar) that of the face projection
+// k sees, + where the pixel's normal has n[k] >= 0, else - (the lane's tail repeats pixel base).
+// twin: splat_layers.face_layer
+template <class Params, class Surface> WT_INLINE void wt_read_layers(const Params& params, const Surface& surface,
+                                                                     int j, int base, int count, int layer[3][WT_L]) {
+    if (params.face_layers.shape[0] == 0 || params.projection != WT_PROJECT_TRIPLANAR) {
+        for (int k = 0; k < 3; ++k)
+            for (int l = 0; l < WT_L; ++l) layer[k][l] = j;
+        return;
+    }
+    float n[3][WT_L];
+    wt_rows(surface.normal, base, count, 3, n);
+    for (int k = 0; k < 3; ++k)
+        for (int l = 0; l < WT_L; ++l)
+            layer[k][l] = wt_int(params.face_layers, j * 6 + 2 * k + (n[k][l] < 0.0f ? 1 : 0));
+}
+
 // What a forward lane keeps for the gradient lane, SplatPixels.saved (lanes.splat.lane_saved), per
 // pixel (L layers): the values, layer j's colour in columns 4 j .. 4 j + 3 and, with height layers,
 // its height in column 4 L + j (wt_kept_width columns in all); then, where the tiling needs its
@@ -281,14 +300,15 @@ WT_INLINE wt_lane_colours wt_layer_values_lane(const Tex& tex, const Reads& read
         if (keep && saved.shape[0] > 0 && wt_kept_slopes(reads.params, saved))  // the tiling's slopes too
             return wt_layer_values_slopes(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w,
                                           keep, saved);
-    int layer[WT_L];
-    for (int l = 0; l < WT_L; ++l) layer[l] = j;
-    const Tex* texs[3] = {&tex, &tex, &tex};
+    int layer[3][WT_L];
+    wt_read_layers(reads.params, surface, j, base, count, layer);
     const int triplanar = reads.params.projection == WT_PROJECT_TRIPLANAR;  // value += w · sample, else value = sample
+    const wt_lane_reads at =
+        wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
     wt_lane_colours value;
-    wt_accumulate_reads(texs, reads.smp, layer, triplanar ? 3 : 1, triplanar,
-                        wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w),
-                        value);
+    for (int k = 0; k < (triplanar ? 3 : 1); ++k)  // wt_accumulate_reads, each read on its own array layers
+        wt_accumulate_footprint(tex, reads.smp, layer[k], at.data[k], at.data[3 + k], at.data[6 + k], at.data[12 + k],
+                                at.data[15 + k], at.data[18 + k], at.data[9 + k], triplanar, value);
     if (keep) wt_keep_layer(reads.params, saved, keep, j, base, count, value);
     return value;
 }
@@ -306,12 +326,12 @@ WT_INLINE wt_lane_colours wt_layer_values_stochastic_lane(const Tex& tex, const 
                                                           const TriW& tri_w, int keep, const Saved& saved) {
     const wt_lane_reads at =
         wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
-    int layer[WT_L];
-    for (int l = 0; l < WT_L; ++l) layer[l] = j;
+    int layer[3][WT_L];
+    wt_read_layers(reads.params, surface, j, base, count, layer);
     wt_lane_colours value;
     for (int k = 0; k < (reads.params.projection == WT_PROJECT_TRIPLANAR ? 3 : 1); ++k) {
         wt_lane_colours sampled;
-        wt_stochastic_footprint(tex, reads.smp, stoch, layer, at.data[k], at.data[3 + k], at.data[6 + k],
+        wt_stochastic_footprint(tex, reads.smp, stoch, layer[k], at.data[k], at.data[3 + k], at.data[6 + k],
                                 at.data[12 + k], at.data[15 + k], at.data[18 + k], at.data[9 + k], count, sampled);
         for (int l = 0; l < WT_L; ++l) {
             const float w = at.data[9 + k][l];
