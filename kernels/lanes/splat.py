@@ -37,11 +37,12 @@ from ..native import cpu_snippet
 from ..projection import SurfacePixels
 from ..splat_blend import blend_functions
 from ..splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerReads, SplatArgs, SplatParams, layer_textures, map_count, pick, surface_weights
-from ..stochastic import METHOD_NONE, StochasticArgs
+from ..stochastic import StochasticArgs
 from ..texels import TexelGrad, TextureView, read_channels, write_channels
 from . import LANES, lane_colours, lane_floats, lane_ints
 from .sample import accumulate_footprint_lane
 from .splat_blend import GRAD_HEIGHT, GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, weights_lane8
+from .stochastic import linear_blend
 
 # Per lane pixel (row): its projections' triplanar weights.
 _lane_vec3 = wp.types.matrix(shape=(LANES, 3), dtype=float)
@@ -79,12 +80,11 @@ def layer_values_kept_lane(tex: TextureView, reads: LayerReads, j: wp.int32, wei
 
 def grad_lanes_take(args: SplatArgs) -> bool:
     """Whether the texel-gradient lane body takes a launch with ``args`` (``Kernels.grad_lanes_take``):
-    no face layers (which make a read's array layer depend on the pixel's normal, so that layers
-    share array layers), and height layers, where there are, whose gradient is not (in part) the
-    colour layers' (``heights=`` the layers themselves). Its layers, and its height layers, then add
-    into texels of their own, so it adds layer by layer and every texel still gets the one-pixel
-    body's sums in its order. (The forward lanes take every launch: face layers only change the
-    array layer each read samples, ``wt_read_layers``.)"""
+    no face layers (by which layers share array layers), and height layers, where there are, whose
+    gradient is not (in part) the colour layers' (``heights=`` the layers themselves). Its layers,
+    and its height layers, then add into texels of their own, so it adds layer by layer and every
+    texel still gets the one-pixel body's sums in its order. (The forward lanes take every launch:
+    face layers only change the array layer each read samples, ``wt_read_layers``.)"""
     params = args.reads.params
     face_layers = params.face_layers.shape[0] > 0 and params.projection == PROJECT_TRIPLANAR
     return not face_layers and not (params.height_mode == HEIGHT_ARRAY and _overlap(args.layers.texels.grad, args.heights.texels.grad))
@@ -96,10 +96,9 @@ def _overlap(a: wp.array | None, b: wp.array | None) -> bool:
 
 
 def stochastic_lanes_take(args: SplatArgs) -> bool:
-    """Whether the stochastic kernels' forward lanes take a launch with ``args``: a linear blend (no
-    histogram), which the lanes read tap by tap; the rest runs the one-pixel kernels."""
-    stoch = args.stoch
-    return stoch.histogram == 0 and stoch.method != METHOD_NONE
+    """Whether the stochastic kernels' forward lanes take a launch with ``args``: a linear blend
+    (:func:`~.stochastic.linear_blend`), which they read tap by tap; a histogram's runs the one-pixel kernels."""
+    return linear_blend(args.stoch)
 
 
 def stochastic_grad_lanes_take(args: SplatArgs) -> bool:
@@ -108,8 +107,7 @@ def stochastic_grad_lanes_take(args: SplatArgs) -> bool:
 
 
 def stochastic_lane_saved(args: SplatArgs) -> int:
-    """:func:`lane_saved` for the stochastic kernels: the layers' colours and heights (they never
-    take the tiling's gradient by hand)."""
+    """:func:`lane_saved` for the stochastic kernels: values only (no tiling's gradient by hand)."""
     return _kept_width(args.reads.params)
 
 
