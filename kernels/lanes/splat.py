@@ -13,11 +13,11 @@ same taps; the gradient's lane body, which runs only after such a forward, reads
 each pixel's blend and weights backwards and adds into its splat maps and the tiling in pixel
 order, then adds each layer's gradient into its texels by :func:`scatter_layer_lane`, layer by
 layer: a layer's reads touch texels of its own array layer only, so every texel gets the one-pixel
-body's sums in its order, and the outputs and gradients are the one-pixel kernels' bits. Face layers
-change only the array layer each read samples (``wt_read_layers``); for the gradient they, and the
-other cases :func:`grad_lanes_take` names, run the one-pixel kernels (``Kernels.grad_lanes_take``). In the kernels of up to 8 layers the weights, the blend and the blend
-and weights backwards are native code for the whole lane (:mod:`.splat_blend`); beyond, the
-scalar blocks run pixel by pixel.
+body's sums in its order, and the outputs and gradients are the one-pixel kernels' bits. Face
+layers change only the array layer each read samples (``wt_read_layers``); the gradient of those,
+and of the other cases :func:`grad_lanes_take` names, runs the one-pixel kernel. In the kernels of
+up to 8 layers the weights, the blend and the blend and weights backwards are native code for the
+whole lane (:mod:`.splat_blend`); beyond, the scalar blocks run pixel by pixel.
 
 The stochastic splat's lanes are the same bodies with each layer read by
 :func:`layer_values_stochastic_lane`: per read, each footprint tap's stochastic taps worked out

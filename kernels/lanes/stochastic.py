@@ -84,8 +84,9 @@ def scatter_stochastic_face_reads_lanes(tex_px: TextureView, tex_nx: TextureView
                                         g0: lane_colours, g1: lane_colours, g2: lane_colours):  # fmt: skip
     """``stochastic.scatter_stochastic`` (a linear blend) with a texture per face, every filter's:
     every lane pixel ``l`` adds each projection ``a``'s gradient ``g_a[l]`` (its share ``w · g_a[l]``
-    where ``weigh``) through its stochastic taps into the gradient of the face it reads (``plus``, ``minus``: ``projection.triplanar_reads_lane``'s
-    reads of the two sides), pixel by pixel in projection, footprint tap and stochastic tap order."""
+    where ``weigh``) through its stochastic taps into the gradient of the face it reads (``plus``,
+    ``minus``: ``projection.triplanar_reads_lane``'s reads of the two sides), pixel by pixel in
+    projection, footprint tap and stochastic tap order."""
     ...
 
 

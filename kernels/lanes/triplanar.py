@@ -166,8 +166,8 @@ def face_lane_bodies(args_t, stochastic: bool = False):
 @functools.cache
 def stochastic_lane_bodies(args_t):
     """``(colour_lane, colour_grad_lane)``: the lane bodies of stochastic colour mapping (one texture
-    per axis) and its texel gradient: the lane's reads, then per projection ``stochastic.sample_stochastic`` over each pixel's footprint
-    (:func:`~.stochastic.stochastic_read_lane`: each footprint tap's stochastic taps worked out
+    per axis) and its texel gradient: the lane's reads, then per projection
+    ``stochastic.sample_stochastic`` over each pixel's footprint (:func:`~.stochastic.stochastic_read_lane`: each footprint tap's stochastic taps worked out
     natively and read tap by tap; NaN where the UV or LOD is not finite), added with the
     projection's weight, in the order of the pixel body; the gradient adds each tap's share of the
     projection's share (``.scatter.scatter_projection_taps_lanes``; with the anisotropic filter,
