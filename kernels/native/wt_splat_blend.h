@@ -97,11 +97,13 @@ WT_INLINE wt_lane_colours wt_blend_lane8(const Params& params, const Surface& su
 // lanes.splat_blend.blend_backward_lane8: for each covered lane pixel l (pixel base + l), with its
 // weights and raw splat values, the colours its forward lane kept (row base + l of saved; heights
 // from their height channel, or the height layers' kept) and its output gradient adj[base + l]:
-// splat_blend.blend_backward's colours' and transition's gradients (the heights' added into the colours' height
-// channel) and weights_backward's raw values' gradient; the colours', transition's and heights' as wt_lane_grads8 lays
-// them out, the raw values' added into the splat maps' texels (grad_maps; nothing when it is empty) at the pixel's UV0
-// where it is finite, in pixel order (splat_blend.scatter_maps), three maps at a time: each map is its own array layer,
-// so every texel still gets its adds in pixel order. twin: splat_blend.blend_functions:blend_backward
+// splat_blend.blend_backward's colours' and transition's gradients (the heights' added into the
+// colours' height channel) and weights_backward's raw values' gradient; the colours', transition's
+// and heights' as wt_lane_grads8 lays them out, the raw values' added into the splat maps' texels
+// (grad_maps; nothing when it is empty) at the pixel's UV0 where it is finite, in pixel order
+// (splat_blend.scatter_maps), three maps at a time: each map is its own array layer, so every texel
+// still gets its adds in pixel order.
+// twin: splat_blend.blend_functions:blend_backward
 template <class Params, class Surface, class Adj, class Saved, class Tex, class Grad, class Smp, class UV>
 WT_INLINE wt_lane_grads8 wt_blend_backward_lane8(const Params& params, const Surface& surface, int base, int count,
                                                  const wt_lane_weights8& w1s, const wt_lane_weights8& rs,
