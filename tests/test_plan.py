@@ -311,7 +311,8 @@ def _new_output_plans() -> list:
 @pytest.mark.parametrize("shape", [(300,), (20, 15)])
 def test_a_plan_without_out_makes_a_new_output_each_call(inputs, sampler, lod, shape):
     """Without ``out=``, a kept plan gives each call a new array, of the call's shape and bits,
-    leaves the arrays of earlier calls as they were, and keeps none of them alive."""
+    leaves the arrays of earlier calls as they were, and keeps at most ``SPARES`` of them alive,
+    until the plan goes."""
     texture, uv, _ = inputs
     uv = uv.reshape(shape)
     want = wt.sample(texture, uv, sampler=sampler, lod=lod).numpy()
@@ -321,10 +322,107 @@ def test_a_plan_without_out_makes_a_new_output_each_call(inputs, sampler, lod, s
     for r in results:
         assert r.shape == (*shape, 4) and r.dtype == wp.float32 and not r.requires_grad
         np.testing.assert_array_equal(r.numpy(), want)
-    held = weakref.ref(results[-1])
+    held = [weakref.ref(r) for r in results]
     del results, r
     gc.collect()
-    assert held() is None  # the plan keeps no output alive
+    assert sum(h() is not None for h in held) == _plan.SPARES  # the plan's spares
+    del uv
+    gc.collect()
+    assert all(h() is None for h in held)  # gone with the plan
+
+
+def _loop(call, steps: int) -> tuple[list, np.ndarray]:
+    """``y = call()`` ``steps`` times, as a loop does: its outputs (weakly), and the last's values."""
+    got = []
+    for _ in range(steps):
+        y = call()
+        got.append(weakref.ref(y))
+    return got, y.numpy()
+
+
+def _holders():
+    """Ways a caller keeps a result without naming it: each, what it shows of the result now."""
+    yield "a view", lambda y: y[1:3], lambda h: h.numpy()
+    yield "a reshape", lambda y: y.reshape((-1,)), lambda h: h.numpy()
+    yield "numpy()", lambda y: y.numpy(), lambda h: h
+    yield "np.asarray", np.asarray, lambda h: h
+    yield "a list", lambda y: [y], lambda h: h[0].numpy()
+
+
+@pytest.mark.parametrize("holder", [h[0] for h in _holders()] + ["wp.to_torch"])
+def test_a_new_output_is_written_again_only_once_nothing_refers_to_it(inputs, holder):
+    """A loop's dropped outputs are written again (the loop settles on a few arrays, each call's
+    bits right), and an output that anything still refers to, however indirectly, never is."""
+    texture, uv, rng = inputs
+    want = wt.sample(texture, uv).numpy()
+    got, last = _loop(lambda: wt.sample(texture, uv), 12)
+    outputs = [r() for r in got[4:]]  # the plan's, once made (by the second call)
+    assert all(o is not None for o in outputs) and len({id(o) for o in outputs}) == _plan.SPARES  # live: its spares, in turn
+    np.testing.assert_array_equal(last, want)
+    if holder == "wp.to_torch":
+        pytest.importorskip("torch")
+        hold, show = wp.to_torch, lambda h: h.numpy()
+    else:
+        hold, show = next((h, s) for name, h, s in _holders() if name == holder)
+    kept = hold(wt.sample(texture, uv))
+    before = np.array(show(kept), copy=True)
+    other = wp.array(rng.random((300, 2), dtype=np.float32), dtype=wp.vec2)
+    uv.assign(other)  # the calls below write other values
+    for _ in range(6):
+        np.testing.assert_array_equal(wt.sample(texture, uv).numpy(), wt.sample(texture, other).numpy())
+    np.testing.assert_array_equal(show(kept), before)
+
+
+def test_spares_are_small_cpu_outputs(inputs):
+    texture, _, rng = inputs
+    big = _plan.SPARE_BYTES // 16 + 1  # rows of 4 floats: just over
+    for rows, kept in ((300, True), (big, False)):
+        uv = wp.array(rng.random((rows, 2), dtype=np.float32), dtype=wp.vec2)
+        for _ in range(4):
+            wt.sample(texture, uv)
+        plans = [p for p in _new_output_plans() if p.refs[1]() is uv]
+        assert len(plans) == 1 and bool(plans[0].spares) == kept
+
+
+@pytest.mark.parametrize("held", ["nothing", "its gradient", "a view of its gradient", "a new gradient"])
+def test_a_spare_with_a_gradient_is_written_again_only_once_nothing_refers_to_either(inputs, held):
+    """An output that requires gradients comes back with a zero gradient, and is not written
+    again while its gradient is held, or where the caller gave it another gradient."""
+    texture, uv, _ = inputs
+    fitted = wt.Texture(texture.texels.numpy(), requires_grad=True)
+    for _ in range(4):
+        wt.sample(fitted, uv)
+    y = wt.sample(fitted, uv)
+    y.grad.fill_(7.0)
+    keep = {"nothing": None, "its gradient": y.grad, "a view of its gradient": y.grad[2:5]}.get(held)
+    if held == "a new gradient":
+        y.grad = keep = wp.full(y.shape, 7.0, dtype=wp.float32)
+    used = weakref.ref(y)
+    del y
+    got = [wt.sample(fitted, uv) for _ in range(_plan.SPARES)]
+    assert any(g is used() for g in got) == (held == "nothing")
+    for g in got:
+        assert g.requires_grad and not g.grad.numpy().any()
+        np.testing.assert_array_equal(g.numpy(), wt.sample(texture, uv).numpy())
+    if keep is not None:
+        assert (keep.numpy() == 7.0).all()
+
+
+@pytest.mark.skipif(tuple(map(int, wp.config.version.split(".")[:2])) < (1, 19), reason="CPU graph capture came with Warp 1.19")
+def test_a_kept_call_is_recorded_by_a_cpu_graph_capture(inputs):
+    """Within a CPU graph capture a call that has a plan takes its usual path, which the capture
+    records (a plan's launch keeps addresses only, which a capture cannot record)."""
+    texture, uv, _ = inputs
+    out = wp.zeros((300, 4), dtype=wp.float32)
+    for _ in range(3):
+        wt.sample(texture, uv, out=out)
+    want = out.numpy().copy()
+    out.zero_()
+    with wp.ScopedCapture(device="cpu") as capture:
+        wt.sample(texture, uv, out=out)
+    out.zero_()
+    wp.capture_launch(capture.graph)
+    np.testing.assert_array_equal(out.numpy(), want)
 
 
 def test_a_new_output_plan_keeps_the_outputs_requires_grad(inputs):

@@ -70,3 +70,26 @@ def test_threaded_generated_adjoint_accumulates_struct_array_gradients(rng):
             wt.set_num_threads(None)
     assert np.abs(grads[0]).max() > 1
     np.testing.assert_allclose(grads[1], grads[0], rtol=1e-5, atol=1e-5 * np.abs(grads[0]).max())
+
+
+@wp.kernel
+def _scaled(values: wp.array(dtype=float), scale: float, offset: wp.vec2, out: wp.array(dtype=float)):
+    i = wp.tid()
+    out[i] = values[i] * scale + offset[0] - offset[1]
+
+
+def test_a_kept_cpu_launch_called_straight_runs_as_wp_launch(rng):
+    """``kept_call`` of a CPU ``wp.Launch`` calls the kernel's entry point with the launch's
+    parameters (Warp's CPU calling convention), and :meth:`set` points one elsewhere."""
+    values = wp.array(rng.random(37, dtype=np.float32))
+    first, second = wp.zeros(37, dtype=float), wp.zeros(37, dtype=float)
+    cmd = wp.launch(_scaled, dim=37, inputs=[values, 2.5, wp.vec2(0.25, 1.0), first], device="cpu", record_cmd=True)
+    call = _warp.kept_call(cmd)
+    assert isinstance(call, _warp.CpuLaunch)
+    want = values.numpy() * np.float32(2.5) + np.float32(0.25) - np.float32(1.0)
+    call()
+    np.testing.assert_array_equal(first.numpy(), want)
+    call.set(3, _warp.array_struct(second, (37,)))
+    call()
+    np.testing.assert_array_equal(second.numpy(), want)
+    assert not _warp.cpu_capturing()

@@ -11,6 +11,13 @@ storage, cannot change): the same launch as before, on their current contents. W
 launch writes the caller's buffer; without (``out=None``, one of the objects), the plan makes a new
 output as the call did (its shape, type and ``requires_grad``) and points the launch at it: a new
 array costs ~6 us, where the call's own path cost ~50 us of Python around a 1,024-UV lookup.
+On the CPU, a small new output (:data:`SPARE_BYTES` at most) is kept as a spare once returned, and
+a later call writes it again (and zeroes its gradient) once nothing else refers to it or its
+gradient: no one can then read what it held, as with an array freed and allocated again, but the
+call costs no Warp arrays (~13-20 us of Python each, as much as the rest of a 1-pixel call) nor
+their argument struct. A caller's view of it, a NumPy or torch array of it, or a gradient tape's
+record all refer to it. A plan keeps :data:`SPARES` of them, so that ``y = sample(...)`` in a loop
+finds the one before last free.
 Otherwise the call runs as usual within :func:`recording`; its second call with the same objects
 keeps the launch it made (``warptex._launch.launch`` reports it through :func:`launched`), so a
 loop that passes new arrays every call never pays for plans it would not reuse. Only a call that
@@ -20,25 +27,30 @@ and a hit repeats that call's inputs (keys compare plain values of their exact t
 ``layer=True`` that a call refuses never matches a ``layer=1``).
 
 A plan holds its objects weakly and goes when one of them does; it holds the packed argument
-structs it names (``hold``) strongly, which hold a texture's arrays but not the texture. At most
-:data:`MAX_PLANS` are kept per thread, the oldest going first.
+structs it names (``hold``) strongly, which hold a texture's arrays but not the texture, and its
+spare outputs (at most ``SPARES * SPARE_BYTES``). At most :data:`MAX_PLANS` are kept per thread, the
+oldest going first.
 """
 
 from __future__ import annotations
 
 import contextlib
 import math
+import sys
 import threading
 import weakref
 
 import warp as wp
 
 from warptex._threads import never_split
-from warptex._warp import active_tape, array_struct
+from warptex._warp import active_tape, array_struct, cpu_capturing, kept_call
 from warptex.kernels.family import one_pixel_active
 
 #: Plans kept per thread.
 MAX_PLANS = 32
+#: New outputs a plan keeps to write again once the caller lets them go, and their largest size.
+SPARES = 2
+SPARE_BYTES = 64 << 10
 #: The output's place in a launch's parameters, ``kernel(args, pixels, first, out)`` (``warptex._launch.launch``).
 OUT_PARAM = 3
 
@@ -48,7 +60,7 @@ _local = threading.local()
 class _Plan:
     """A call's objects (weakly), what it holds, and its launch (``None`` once seen, not yet kept)."""
 
-    __slots__ = ("refs", "hold", "cmd", "out", "zero", "like")
+    __slots__ = ("refs", "hold", "cmd", "call", "out", "zero", "like", "spares")
 
     def holds(self, objects: tuple) -> bool:
         """Whether this plan's objects are these very ``objects`` (ids can be reused)."""
@@ -58,26 +70,66 @@ class _Plan:
         """Run the launch into the caller's output, or into a new one of shape ``(*lead, C)``; that
         output, or ``None`` (nothing run) where ``lead`` does not hold the launch's rows."""
         out = objects[self.out]
-        if out is None:  # a new output, as launch() was given one: its rows are the kernel's
-            (rows, channels), dtype, grad = self.like
-            if math.prod(lead) != rows:
+        if out is None:
+            out = self._new_output(lead)
+            if out is None:
                 return None
-            out = (wp.zeros if self.zero else wp.empty)((*lead, channels), dtype=dtype, device=self.cmd.device, requires_grad=grad)
-            self.cmd.set_param_at_index_from_ctype(OUT_PARAM, array_struct(out, (rows, channels)))
         else:
             if self.zero:  # a one-pixel kernel's output is zeroed first, as launch() zeroes it
                 out.zero_()
             if out.grad is not None:  # and a new output's gradient
                 out.grad.zero_()
-        self.cmd.launch()
+        self.call()
         return out
+
+    def _new_output(self, lead: tuple) -> wp.array | None:
+        """A new output, as launch() was given one (its rows are the kernel's), the launch pointed
+        at it: a spare that nothing else refers to, where there is one."""
+        (rows, channels), dtype, grad = self.like
+        if math.prod(lead) != rows:
+            return None
+        shape = (*lead, channels)
+        for spare in self.spares:
+            if _unheld(spare) and spare[0].shape == shape:
+                out, struct, gradient = spare
+                if self.zero:
+                    out.zero_()
+                if gradient is not None:
+                    gradient.zero_()
+                break
+        else:
+            out = (wp.zeros if self.zero else wp.empty)(shape, dtype=dtype, device=self.cmd.device, requires_grad=grad)
+            struct = array_struct(out, (rows, channels))
+            if self.cmd.device.is_cpu and out.capacity <= SPARE_BYTES:
+                self.spares = (*self.spares, (out, struct, out.grad))[-SPARES:]
+        self.call.set(OUT_PARAM, struct)
+        return out
+
+
+def _references(spare: tuple, item: int) -> int:
+    """References to one item of a spare (a tuple that only its plan holds)."""
+    return sys.getrefcount(spare[item])
+
+
+#: :func:`_references` of an object only its tuple refers to (measured: it depends on the
+#: interpreter).
+_UNHELD = _references((object(),), 0)
+
+
+def _unheld(spare: tuple) -> bool:
+    """Whether nothing but its plan refers to a spare ``(output, struct, gradient)``: not to the
+    output, nor to its gradient (``None`` where it has none), which the output still has."""
+    if _references(spare, 0) != _UNHELD or spare[0].grad is not spare[2]:
+        return False
+    return spare[2] is None or _references(spare, 2) == _UNHELD + 1  # (+ the output's own)
 
 
 def usable() -> bool:
     """Whether plans may be recalled and kept on this thread now: not while a ``wp.Tape`` records
-    (a recorded call keeps its own structs for its backward pass) nor within
-    ``one_pixel_kernels`` (a plan runs the kernel it was made with)."""
-    return active_tape() is None and not one_pixel_active()
+    (a recorded call keeps its own structs for its backward pass) or a CPU graph capture does (a
+    plan's launch holds no arrays to record), nor within ``one_pixel_kernels`` (a plan runs the
+    kernel it was made with)."""
+    return active_tape() is None and not one_pixel_active() and not cpu_capturing()
 
 
 def recall(key: tuple, objects: tuple) -> _Plan | None:
@@ -123,14 +175,14 @@ def recording(key: tuple | None, objects: tuple, *, out: int, hold=()):
         _local.capture = None
     if len(capture) == 1 and capture[0] is not None and seen.cmd is None and (objects[out] is not None or capture[0][2] is not None):
         seen.cmd, seen.zero, seen.like = capture[0]
-        seen.out = out
+        seen.call, seen.out = kept_call(seen.cmd), out
 
 
 def _remember(plans: dict, full: tuple, objects: tuple, hold) -> None:
     plan = _Plan()
     drop = lambda _ref, plans=plans, full=full: plans.pop(full, None)  # noqa: E731 (an object went: so does its plan)
     refs = tuple(_no_object if o is None else weakref.ref(o, drop) for o in objects)
-    plan.refs, plan.hold, plan.cmd, plan.out, plan.zero, plan.like = refs, tuple(hold), None, 0, False, None
+    plan.refs, plan.hold, plan.cmd, plan.call, plan.out, plan.zero, plan.like, plan.spares = refs, tuple(hold), None, None, 0, False, None, ()
     plans.pop(full, None)
     while len(plans) >= MAX_PLANS:
         plans.pop(next(iter(plans)), None)

@@ -18,6 +18,11 @@ oldest Warp release warptex supports as well):
 - :func:`scalar_type`: the scalar type of a vector or matrix dtype (which arrays can carry gradients).
 - :func:`replay`: a launch through a kept ``wp.Launch`` (``record_cmd=True``), whose ``fwd_args``
   (what Warp keeps for CPU graph capture, an internal) it drops so that it holds no array.
+  :func:`cpu_capturing`: whether a CPU graph capture records (Warp 1.19's APIC capture, an
+  internal), where a launch must go through ``wp.launch`` to be recorded.
+- :func:`kept_call`: a kept CPU ``wp.Launch`` called straight into its kernel's entry point
+  (:class:`CpuLaunch`), as ``wp.Launch.launch`` does, less the ~6 us of Python it spends packing
+  the arguments each time.
 
 And :func:`init_quietly` (public as ``warptex.init_quietly``), for the command line and the
 examples: Warp's native library prints a warning to the process's stderr on every start on a
@@ -27,6 +32,7 @@ machine without a CUDA driver, which a CPU user can do nothing about.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import functools
 import operator
 import os
@@ -181,6 +187,61 @@ def _initialised() -> bool:
 _replays = threading.local()
 
 
+def cpu_capturing() -> bool:
+    """Whether a CPU graph capture (``wp.ScopedCapture`` on the CPU, Warp 1.19) is recording
+    launches: a kept ``wp.Launch`` without its ``fwd_args`` cannot be recorded."""
+    return getattr(_runtime(), "_apic_capture", None) is not None
+
+
+class CpuLaunch:
+    """A kept CPU ``wp.Launch`` (``record_cmd=True``, of a forward kernel, one thread per index)
+    called straight into its kernel's entry point with one argument struct kept for it, as
+    ``wp.Launch.launch`` calls it (Warp's ``invoke``: ``forward(&bounds, &args)``, the struct's
+    fields the kernel's parameters, in order). ``wp.Launch.launch`` builds and fills that struct on
+    every call, ~6 us of Python of a 1-pixel call's ~25. :meth:`set` changes one parameter."""
+
+    __slots__ = ("_forward", "_bounds", "_args", "_ref", "_names")
+
+    def __init__(self, cmd: wp.Launch):
+        names = [arg.label for arg in cmd.kernel.adj.args]
+        values = cmd.params[1:]  # after the launch bounds
+        self._args = type("ArgsStruct", (ctypes.Structure,), {"_fields_": [(n, type(v)) for n, v in zip(names, values)]})()
+        for name, value in zip(names, values):
+            setattr(self._args, name, value)
+        self._forward, self._bounds, self._ref, self._names = cmd.hooks.forward, ctypes.byref(cmd.params[0]), ctypes.byref(self._args), names
+
+    def set(self, index: int, value) -> None:
+        """Parameter ``index`` (of the kernel's, from 0) to ``value``, a ctypes value of its type."""
+        setattr(self._args, self._names[index], value)
+
+    def __call__(self) -> None:
+        self._forward(self._bounds, self._ref)
+
+
+class _LaunchCall:
+    """A kept ``wp.Launch`` with :class:`CpuLaunch`'s two methods, through Warp's public ones."""
+
+    __slots__ = ("_cmd",)
+
+    def __init__(self, cmd: wp.Launch):
+        self._cmd = cmd
+
+    def set(self, index: int, value) -> None:
+        self._cmd.set_param_at_index_from_ctype(index, value)
+
+    def __call__(self) -> None:
+        self._cmd.launch()
+
+
+def kept_call(cmd: wp.Launch) -> CpuLaunch | _LaunchCall:
+    """A kept launch to set parameters of and run: called straight (:class:`CpuLaunch`) where
+    ``wp.Launch.launch`` would do no more than that call, through ``wp.Launch`` otherwise (CUDA,
+    a block of threads per index, an adjoint, parameters not as Warp 1.17-1.19 keep them)."""
+    if cmd.device.is_cpu and getattr(cmd, "block_dim", 1) == 1 and not cmd.adjoint and len(cmd.params) == len(cmd.kernel.adj.args) + 1:
+        return CpuLaunch(cmd)
+    return _LaunchCall(cmd)
+
+
 def replay(kernel, dim: int, params: tuple, device) -> None:
     """``wp.launch(kernel, dim, params)``, not recorded on a tape, through a ``wp.Launch`` kept per
     thread, kernel and device: its parameters are set and it runs. A small call's cost is mostly
@@ -188,6 +249,9 @@ def replay(kernel, dim: int, params: tuple, device) -> None:
     lookup: ~9 us of its ~30 us). The kept launch holds no array (its parameters are their
     addresses only; ``fwd_args``, which Warp keeps for CPU graph capture, is dropped), so nothing
     is kept alive past the call."""
+    if cpu_capturing():  # recorded with its arrays, as a plain launch is
+        wp.launch(kernel, dim=dim, inputs=list(params), device=device)
+        return
     launches = _replays.__dict__.setdefault("launches", {})
     key = (kernel, device.alias)
     cmd = launches.get(key)
