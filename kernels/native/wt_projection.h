@@ -48,13 +48,13 @@ WT_INLINE void wt_plane_reads(const Proj& proj, const Smp& smp, int axis, float 
 }
 
 // Reads r = 0 .. count - 1 of a lane_reads matrix, read r of *texs[r] (lane pixel l's layer
-// layers[l]) over its footprint, into value in read order (wt_accumulate_footprint: value += w ·
+// layers[r][l]) over its footprint, into value in read order (wt_accumulate_footprint: value += w ·
 // sample where add, value = sample where not).
 template <class Tex, class Smp> WT_INLINE void wt_accumulate_reads(const Tex* const* texs, const Smp& smp,
-                                                                   const int* layers, int count, int add,
+                                                                   const int* const* layers, int count, int add,
                                                                    const wt_lane_reads& at, wt_lane_colours& value) {
     for (int r = 0; r < count; ++r)
-        wt_accumulate_footprint(*texs[r], smp, layers, at.data[r], at.data[3 + r], at.data[6 + r], at.data[12 + r],
+        wt_accumulate_footprint(*texs[r], smp, layers[r], at.data[r], at.data[3 + r], at.data[6 + r], at.data[12 + r],
                                 at.data[15 + r], at.data[18 + r], at.data[9 + r], add, value);
 }
 
@@ -64,8 +64,9 @@ template <class Tex, class Smp, class Ints>
 WT_INLINE wt_lane_colours wt_accumulate_reads_lane(const Tex& tex0, const Tex& tex1, const Tex& tex2, const Smp& smp,
                                                    const Ints& layers, int count, int add, const wt_lane_reads& reads) {
     const Tex* texs[3] = {&tex0, &tex1, &tex2};
+    const int* per_read[3] = {layers.c, layers.c, layers.c};
     wt_lane_colours value;
-    wt_accumulate_reads(texs, smp, layers.c, count, add, reads, value);
+    wt_accumulate_reads(texs, smp, per_read, count, add, reads, value);
     return value;
 }
 

@@ -303,12 +303,12 @@ WT_INLINE wt_lane_colours wt_layer_values_lane(const Tex& tex, const Reads& read
     int layer[3][WT_L];
     wt_read_layers(reads.params, surface, j, base, count, layer);
     const int triplanar = reads.params.projection == WT_PROJECT_TRIPLANAR;  // value += w · sample, else value = sample
-    const wt_lane_reads at =
-        wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
+    const Tex* texs[3] = {&tex, &tex, &tex};
+    const int* per_read[3] = {layer[0], layer[1], layer[2]};
     wt_lane_colours value;
-    for (int k = 0; k < (triplanar ? 3 : 1); ++k)  // wt_accumulate_reads, each read on its own array layers
-        wt_accumulate_footprint(tex, reads.smp, layer[k], at.data[k], at.data[3 + k], at.data[6 + k], at.data[12 + k],
-                                at.data[15 + k], at.data[18 + k], at.data[9 + k], triplanar, value);
+    wt_accumulate_reads(texs, reads.smp, per_read, triplanar ? 3 : 1, triplanar,
+                        wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w),
+                        value);
     if (keep) wt_keep_layer(reads.params, saved, keep, j, base, count, value);
     return value;
 }
