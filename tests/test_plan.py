@@ -1,6 +1,7 @@
 """Kept plans (``warptex._plan``): a repeated small call on the same objects runs the launch its
-earlier call made, with the same bits, reads its inputs' current contents, never outlives an
-object it names, and stays out of the way of tapes, ``one_pixel_kernels`` and bad input."""
+earlier call made, with the same bits, reads its inputs' current contents, serves new ``uv`` and
+``out=`` arrays of the same layout on the CPU, never outlives an object it names nor holds an
+array of a call, and stays out of the way of tapes, ``one_pixel_kernels`` and bad input."""
 
 import gc
 import weakref
@@ -19,12 +20,23 @@ def _plans() -> dict:
     return _plan._local.__dict__.get("plans", {})
 
 
+def _made(func: str, *objects, out: str = "any") -> list:
+    """The kept plans of ``func`` whose objects begin with ``objects``; ``out``: ``"given"`` or
+    ``"new"`` (``out=None``) for those plans alone. (A key: the call's, the layouts of its ``out``
+    and ``uv``, its objects' ids.)"""
+    return [
+        p
+        for (key, out_layout, _uv, *ids), p in _plans().items()
+        if p.cmd is not None and key[0] == func and ids[: len(objects)] == list(map(id, objects)) and out in ("any", "new" if out_layout is None else "given")
+    ]
+
+
 def _kept(texture, uv, out, **options) -> bool:
     """Whether the next ``sample`` of these objects and options would run a kept plan."""
     from warptex.sampling import plan_key
 
     key = plan_key("sample", texture, uv, options.get("lod"), None, None, options.get("layer"), options.get("sampler"), None, out)
-    return key is not None and _plan.recall(key, (texture, uv, out)) is not None
+    return key is not None and _plan.recall(key, (texture,), out=out, uv=uv) is not None
 
 
 @pytest.fixture
@@ -69,8 +81,7 @@ def test_stochastic_calls_are_kept_but_not_with_a_histogram(inputs, option):
     for _ in range(3):
         out.fill_(np.nan)
         np.testing.assert_array_equal(wt.stochastic(texture, uv, option, out=out).numpy(), want)
-    kept = [p for key, p in _plans().items() if key[0][0] == "stochastic" and key[1:] == (id(texture), id(uv), id(out)) and p.cmd is not None]
-    assert len(kept) == (0 if isinstance(option, wt.Stochastic) and option.histogram is not None else 1)
+    assert len(_made("stochastic", texture, out="given")) == (0 if isinstance(option, wt.Stochastic) and option.histogram is not None else 1)
 
 
 def test_a_plan_reads_its_inputs_current_contents(inputs):
@@ -88,16 +99,44 @@ def test_a_plan_reads_its_inputs_current_contents(inputs):
     np.testing.assert_array_equal(out.numpy(), wt.sample(fresh, uv.numpy()).numpy())
 
 
-def test_other_objects_or_options_are_not_served_by_a_plan(inputs):
-    texture, uv, _ = inputs
+def test_other_objects_options_or_layouts_are_not_served_by_a_plan(inputs):
+    texture, uv, rng = inputs
     out = wp.empty((300, 4), dtype=wp.float32)
     for _ in range(3):
         wt.sample(texture, uv, out=out)
-    other = wp.empty((300, 4), dtype=wp.float32)
-    assert not _kept(texture, uv, other)
+    assert _kept(texture, wp.clone(uv), wp.empty((300, 4), dtype=wp.float32))  # new arrays, the same layouts
     assert not _kept(texture, uv, out, lod=2.0)
-    assert not _kept(texture, wp.clone(uv), out)
+    assert not _kept(wt.Texture(rng.random((64, 48, 4), dtype=np.float32)), uv, out)
+    assert not _kept(texture, uv[:150], out[:150])
+    assert not _kept(texture, uv.reshape((20, 15)), out.reshape((20, 15, 4)))
+    assert not _kept(texture, wp.clone(uv, requires_grad=True), out)
+    assert not _kept(texture, uv, wp.empty((300, 2, 4), dtype=wp.float32)[:, 0])  # strided: refused by the call, as before
     np.testing.assert_array_equal(wt.sample(texture, uv, lod=2.0, out=out).numpy(), wt.sample(texture, uv, lod=2.0).numpy())
+    with pytest.raises(ValueError, match="out must be a contiguous float32"):
+        wt.sample(texture, uv, out=wp.empty((300, 2, 4), dtype=wp.float32)[:, 0])
+
+
+@pytest.mark.parametrize("func", ["sample", "stochastic"])
+def test_a_plan_serves_new_arrays_of_its_layout_on_the_cpu(inputs, func):
+    """A loop that makes new UVs and a new ``out=`` each call (a torch tensor's view, a
+    ``wp.empty``) runs one plan, pointed at each call's arrays: each call's bits, every array
+    left to its caller (the plan holds none)."""
+    texture, _, rng = inputs
+    call = getattr(wt, func)
+    held = []
+    for step in range(6):
+        uv = wp.array(rng.random((300, 2), dtype=np.float32) * 3 - 1, dtype=wp.vec2)
+        out = wp.full((300, 4), np.nan, dtype=wp.float32)
+        assert _kept(texture, uv, out) == (func == "sample" and step >= 2)
+        assert call(texture, uv, out=out) is out
+        np.testing.assert_array_equal(out.numpy(), call(texture, uv.numpy()).numpy())
+        new = call(texture, uv)  # and without out=: the new output's plan
+        np.testing.assert_array_equal(new.numpy(), out.numpy())
+        held += [weakref.ref(uv), weakref.ref(out)]
+    assert len(_made(func, texture, out="given")) == 1 and len(_made(func, texture, out="new")) == 1
+    del uv, out
+    gc.collect()
+    assert all(h() is None for h in held)
 
 
 def test_a_plan_goes_with_any_of_its_objects(inputs):
@@ -114,22 +153,22 @@ def test_a_plan_goes_with_any_of_its_objects(inputs):
     assert texels() is None  # the plan held the texture's arrays through its structs: not past the texture
     for _ in range(3):
         wt.sample(wt.Texture(rng.random((8, 8, 4), dtype=np.float32)), uv, out=out)  # a texture of one call
-    del uv, out
     gc.collect()
     assert len(_plans()) == before - 1
 
 
-def test_plans_are_bounded_and_not_made_for_one_off_arrays(inputs):
-    texture, _, rng = inputs
-    out = wp.empty((8, 4), dtype=wp.float32)
-    kept = [wp.array(rng.random((8, 2), dtype=np.float32), dtype=wp.vec2) for _ in range(_plan.MAX_PLANS + 5)]
-    for uv in kept:
+def test_plans_are_bounded_and_not_made_for_one_off_objects(inputs):
+    _, uv, rng = inputs
+    out = wp.empty((300, 4), dtype=wp.float32)
+    kept = [wt.Texture(rng.random((4, 4, 4), dtype=np.float32)) for _ in range(_plan.MAX_PLANS + 5)]
+    for texture in kept:
         for _ in range(3):
             wt.sample(texture, uv, out=out)
     assert len(_plans()) <= _plan.MAX_PLANS
     assert sum(p.cmd is not None for p in _plans().values()) >= _plan.MAX_PLANS - 1
-    for _ in range(5):  # new UVs every call: seen once each, never planned
-        wt.sample(texture, wp.array(rng.random((8, 2), dtype=np.float32), dtype=wp.vec2), out=out)
+    for _ in range(5):  # a new texture every call: seen once each, never planned
+        wt.sample(wt.Texture(rng.random((4, 4, 4), dtype=np.float32)), uv, out=out)
+    gc.collect()
     assert all(r() is not None for p in _plans().values() for r in p.refs)
 
 
@@ -235,7 +274,7 @@ def test_a_splat_plan_gives_the_calls_bits_and_reads_current_contents(options):
         out.fill_(np.nan)
         assert wt.splat(g, layers, maps, **options, out=out) is out
         np.testing.assert_array_equal(out.numpy(), want)
-    assert sum(p.cmd is not None for key, p in _plans().items() if key[0][0] == "splat" and key[1:4] == (id(g), id(layers), id(out))) == 1
+    assert len(_made("splat", g, layers, out="given")) == 1
     maps.assign(rng.random((1, 8, 8, 4), dtype=np.float32))  # in place: the plan reads the new weights
     np.testing.assert_array_equal(wt.splat(g, layers, maps, **options, out=out).numpy(), wt.splat(g, layers, maps, **options).numpy())
     other = wt.TextureArray(rng.random((1, 8, 8, 4), dtype=np.float32), mipmaps=False)  # another object: not served by the plan
@@ -304,7 +343,7 @@ def test_normal_mappings_packed_arguments_follow_its_options():
 
 
 def _new_output_plans() -> list:
-    return [p for p in _plans().values() if p.cmd is not None and p.refs[p.out]() is None]
+    return [p for (_key, out, *_), p in _plans().items() if p.cmd is not None and out is None]
 
 
 @pytest.mark.parametrize(("sampler", "lod"), [(None, None), (wt.Sampler(filter="nearest", address="border", border=(1, 2, 3, 4)), None), (wt.Sampler(filter="trilinear"), 0.7)])
@@ -313,7 +352,8 @@ def test_a_plan_without_out_makes_a_new_output_each_call(inputs, sampler, lod, s
     """Without ``out=``, a kept plan gives each call a new array, of the call's shape and bits,
     leaves the arrays of earlier calls as they were, and keeps at most ``SPARES`` of them alive,
     until the plan goes."""
-    texture, uv, _ = inputs
+    _, uv, rng = inputs
+    texture = wt.Texture(rng.random((64, 48, 4), dtype=np.float32))
     uv = uv.reshape(shape)
     want = wt.sample(texture, uv, sampler=sampler, lod=lod).numpy()
     results = [wt.sample(texture, uv, sampler=sampler, lod=lod) for _ in range(4)]
@@ -326,7 +366,7 @@ def test_a_plan_without_out_makes_a_new_output_each_call(inputs, sampler, lod, s
     del results, r
     gc.collect()
     assert sum(h() is not None for h in held) == _plan.SPARES  # the plan's spares
-    del uv
+    del texture
     gc.collect()
     assert all(h() is None for h in held)  # gone with the plan
 
@@ -380,7 +420,7 @@ def test_spares_are_small_cpu_outputs(inputs):
         uv = wp.array(rng.random((rows, 2), dtype=np.float32), dtype=wp.vec2)
         for _ in range(4):
             wt.sample(texture, uv)
-        plans = [p for p in _new_output_plans() if p.refs[1]() is uv]
+        plans = [p for p in _new_output_plans() if p.like[0] == (rows, 4)]
         assert len(plans) == 1 and bool(plans[0].spares) == kept
 
 

@@ -7,10 +7,14 @@ paid for its checks, its argument structs and Warp's launch setup on every call:
 A technique whose call qualifies (inputs that are objects or plain values, no recording
 ``wp.Tape``, see :func:`usable`) asks :func:`rerun` to run a plan kept under the call's key and its
 objects, the very ones (compared by identity: the arrays' shapes and types, and a texture's
-storage, cannot change): the same launch as before, on their current contents. With ``out=`` the
-launch writes the caller's buffer; without (``out=None``, one of the objects), the plan makes a new
-output as the call did (its shape, type and ``requires_grad``) and points the launch at it: a new
-array costs ~6 us, where the call's own path cost ~50 us of Python around a 1,024-UV lookup.
+storage, cannot change): the same launch as before, on their current contents. Two arrays of a
+call are its own rather than the objects': ``out=`` and a lookup's ``uv``. On the CPU a plan
+serves any array of the same layout there (shape, strides, type, gradient) and points the launch
+at it, so that a loop that makes them anew each call (a torch tensor's Warp view, an output from
+``wp.empty``) runs its plan too: the call's own path cost ~150 us of Python around a 1,024-UV
+lookup. Elsewhere they are compared by identity, as the objects are. Without ``out=`` (``None``),
+the plan makes a new output as the call did (its shape, type and ``requires_grad``) and points the
+launch at it: a new array costs ~6 us, where the call's own path cost ~50 us of Python.
 On the CPU, a small new output (:data:`SPARE_BYTES` at most) is kept as a spare once returned, and
 a later call writes it again (and zeroes its gradient) once nothing else refers to it or its
 gradient: no one can then read what it held, as with an array freed and allocated again, but the
@@ -51,8 +55,9 @@ MAX_PLANS = 32
 #: New outputs a plan keeps to write again once the caller lets them go, and their largest size.
 SPARES = 2
 SPARE_BYTES = 64 << 10
-#: The output's place in a launch's parameters, ``kernel(args, pixels, first, out)`` (``warptex._launch.launch``).
-OUT_PARAM = 3
+#: The places of the per-sample struct and of the output in a launch's parameters,
+#: ``kernel(args, pixels, first, out)`` (``warptex._launch.launch``).
+PIXELS_PARAM, OUT_PARAM = 1, 3
 
 _local = threading.local()
 
@@ -60,21 +65,25 @@ _local = threading.local()
 class _Plan:
     """A call's objects (weakly), what it holds, and its launch (``None`` once seen, not yet kept)."""
 
-    __slots__ = ("refs", "hold", "cmd", "call", "out", "zero", "like", "spares")
+    __slots__ = ("refs", "hold", "cmd", "call", "zero", "like", "spares")
 
     def holds(self, objects: tuple) -> bool:
         """Whether this plan's objects are these very ``objects`` (ids can be reused)."""
         return all(r() is o for r, o in zip(self.refs, objects))
 
-    def run(self, objects: tuple, lead: tuple) -> wp.array | None:
-        """Run the launch into the caller's output, or into a new one of shape ``(*lead, C)``; that
-        output, or ``None`` (nothing run) where ``lead`` does not hold the launch's rows."""
-        out = objects[self.out]
+    def run(self, lead: tuple, out: wp.array | None, uv: wp.array | None) -> wp.array | None:
+        """Run the launch on ``uv`` (where given) into the caller's ``out``, or into a new output
+        of shape ``(*lead, C)``; that output, or ``None`` (nothing run) where ``lead`` does not
+        hold the launch's rows."""
+        if uv is not None and _addressed(uv):
+            _point(self.call.field(PIXELS_PARAM, "uv"), uv)
         if out is None:
             out = self._new_output(lead)
             if out is None:
                 return None
         else:
+            if _addressed(out):
+                self.call.set(OUT_PARAM, array_struct(out, self.like[0]))
             if self.zero:  # a one-pixel kernel's output is zeroed first, as launch() zeroes it
                 out.zero_()
             if out.grad is not None:  # and a new output's gradient
@@ -106,6 +115,38 @@ class _Plan:
         return out
 
 
+def _addressed(array: wp.array) -> bool:
+    """Whether a plan serves a call's own array (``out``, ``uv``) by its layout, pointing its launch
+    at it (on the CPU), or only the very array it was made with (elsewhere: a kept CUDA launch is
+    changed only through ``wp.Launch``'s own setters)."""
+    return array.device.is_cpu
+
+
+def _layout(array: wp.array | None, grad: bool):
+    """What a plan's key holds of a call's own array: its layout where the plan points the launch
+    at it (:func:`_addressed`), what the call checked of it, and with ``grad`` (an input's) its
+    ``requires_grad`` (a new output requires gradients where an input does); else ``"same"`` (the
+    array is among the objects, by identity)."""
+    if array is None:
+        return None
+    if not _addressed(array):
+        return "same"
+    return (array.shape, array.strides, array.dtype, grad and array.requires_grad)
+
+
+def _point(field, array: wp.array) -> None:
+    """An array parameter (a launch's ctypes ``array_t``) of the same layout as ``array`` to ``array``."""
+    field.data = array.ptr
+    field.grad = 0 if array.grad is None else array.grad.ptr
+
+
+def _full(key: tuple, objects: tuple, out, uv) -> tuple[tuple, tuple]:
+    """``(objects by identity, the plan's full key)`` of a call: its key, the layouts of its own
+    arrays, and the identities of its objects (and of its own arrays where not addressed)."""
+    fixed = (*objects, *(a for a in (out, uv) if a is not None and not _addressed(a)))
+    return fixed, (key, _layout(out, False), _layout(uv, True), *map(id, fixed))
+
+
 def _references(spare: tuple, item: int) -> int:
     """References to one item of a spare (a tuple that only its plan holds)."""
     return sys.getrefcount(spare[item])
@@ -132,40 +173,44 @@ def usable() -> bool:
     return active_tape() is None and not one_pixel_active() and not cpu_capturing()
 
 
-def recall(key: tuple, objects: tuple) -> _Plan | None:
+def recall(key: tuple, objects: tuple, *, out: wp.array | None = None, uv: wp.array | None = None) -> _Plan | None:
     """The plan kept for ``key`` (a hashable tuple of the call's plain values) on these very
-    ``objects``, or ``None``."""
+    ``objects`` and the call's own ``out`` and ``uv`` (module docstring), or ``None``."""
     plans = getattr(_local, "plans", None)
-    plan = plans.get((key, *map(id, objects))) if plans else None
-    if plan is None or plan.cmd is None or not plan.holds(objects):
+    if not plans:
+        return None
+    fixed, full = _full(key, objects, out, uv)
+    plan = plans.get(full)
+    if plan is None or plan.cmd is None or not plan.holds(fixed):
         return None
     return plan
 
 
-def rerun(key: tuple | None, objects: tuple, lead: tuple = ()) -> wp.array | None:
-    """Run the plan kept for ``key`` on ``objects`` (:func:`recall`) where there is one: the
-    output it wrote (the caller's ``out=``, or a new ``(*lead, C)`` array where ``out`` is
-    ``None``: ``lead`` is the result's shape less its channels), else ``None``. ``key=None``: the
-    call does not qualify."""
-    plan = recall(key, objects) if key is not None else None
-    return plan.run(objects, lead) if plan is not None else None
+def rerun(key: tuple | None, objects: tuple, lead: tuple = (), *, out: wp.array | None = None, uv: wp.array | None = None) -> wp.array | None:
+    """Run the plan kept for ``key`` on ``objects``, ``out`` and ``uv`` (:func:`recall`) where
+    there is one: the output it wrote (the caller's ``out=``, or a new ``(*lead, C)`` array where
+    ``out`` is ``None``: ``lead`` is the result's shape less its channels), else ``None``.
+    ``key=None``: the call does not qualify."""
+    plan = recall(key, objects, out=out, uv=uv) if key is not None else None
+    return plan.run(lead, out, uv) if plan is not None else None
 
 
 @contextlib.contextmanager
-def recording(key: tuple | None, objects: tuple, *, out: int, hold=()):
-    """Run the block (a call's usual path) and, where this is the second call on ``key`` and
-    ``objects`` and the block made one launch (:func:`launched`), keep that launch for
-    :func:`recall`. ``key=None``: the call does not qualify; nothing is kept. ``out``: which of
-    ``objects`` is the output array (``None``: the call makes a new one); ``hold``: what the plan
-    keeps alive (the packed structs)."""
+def recording(key: tuple | None, objects: tuple, *, out: wp.array | None = None, uv: wp.array | None = None, hold=()):
+    """Run the block (a call's usual path) and, where this is the second call on ``key``,
+    ``objects`` and arrays of the same layouts as ``out`` and ``uv`` (:func:`recall`), and the
+    block made one launch (:func:`launched`), keep that launch for :func:`recall`. ``key=None``:
+    the call does not qualify; nothing is kept. ``out``: the caller's output array (``None``: the
+    call makes a new one); ``uv``: the UVs that the launch reads as its per-sample struct's
+    ``uv`` (a lookup's); ``hold``: what the plan keeps alive (the packed structs)."""
     if key is None or not usable() or getattr(_local, "capture", None) is not None:  # (a call within a recorded one: not kept)
         yield
         return
     plans = _local.__dict__.setdefault("plans", {})
-    full = (key, *map(id, objects))
+    fixed, full = _full(key, objects, out, uv)
     seen = plans.get(full)
-    if seen is None or not seen.holds(objects):
-        _remember(plans, full, objects, hold)  # first sighting: nothing recorded
+    if seen is None or not seen.holds(fixed):
+        _remember(plans, full, fixed, hold)  # first sighting: nothing recorded
         yield
         return
     _local.capture = capture = []
@@ -173,23 +218,27 @@ def recording(key: tuple | None, objects: tuple, *, out: int, hold=()):
         yield
     finally:
         _local.capture = None
-    if len(capture) == 1 and capture[0] is not None and seen.cmd is None and (objects[out] is not None or capture[0][2] is not None):
-        seen.cmd, seen.zero, seen.like = capture[0]
-        seen.call, seen.out = kept_call(seen.cmd), out
+    if len(capture) != 1 or capture[0] is None or seen.cmd is not None:
+        return
+    cmd, zero, like = capture[0]
+    call = kept_call(cmd)
+    if like is None or (uv is not None and _addressed(uv) and call.field(PIXELS_PARAM, "uv").data != uv.ptr):
+        return  # an output the plan cannot point at (not one array of rows), or UVs the launch does not read in place
+    seen.cmd, seen.zero, seen.like, seen.call = cmd, zero, like, call
 
 
 def _remember(plans: dict, full: tuple, objects: tuple, hold) -> None:
     plan = _Plan()
     drop = lambda _ref, plans=plans, full=full: plans.pop(full, None)  # noqa: E731 (an object went: so does its plan)
     refs = tuple(_no_object if o is None else weakref.ref(o, drop) for o in objects)
-    plan.refs, plan.hold, plan.cmd, plan.call, plan.out, plan.zero, plan.like, plan.spares = refs, tuple(hold), None, None, 0, False, None, ()
+    plan.refs, plan.hold, plan.cmd, plan.call, plan.zero, plan.like, plan.spares = refs, tuple(hold), None, None, False, None, ()
     plans.pop(full, None)
     while len(plans) >= MAX_PLANS:
         plans.pop(next(iter(plans)), None)
     plans[full] = plan
 
 
-def _no_object():  # the "reference" of an object that is None (out=None)
+def _no_object():  # the "reference" of an object that is None
     return None
 
 

@@ -198,7 +198,8 @@ class CpuLaunch:
     called straight into its kernel's entry point with one argument struct kept for it, as
     ``wp.Launch.launch`` calls it (Warp's ``invoke``: ``forward(&bounds, &args)``, the struct's
     fields the kernel's parameters, in order). ``wp.Launch.launch`` builds and fills that struct on
-    every call, ~6 us of Python of a 1-pixel call's ~25. :meth:`set` changes one parameter."""
+    every call, ~6 us of Python of a 1-pixel call's ~25. :meth:`set` changes one parameter, and
+    :meth:`field` gives a struct parameter's field to change."""
 
     __slots__ = ("_forward", "_bounds", "_args", "_ref", "_names")
 
@@ -214,12 +215,17 @@ class CpuLaunch:
         """Parameter ``index`` (of the kernel's, from 0) to ``value``, a ctypes value of its type."""
         setattr(self._args, self._names[index], value)
 
+    def field(self, index: int, name: str):
+        """Field ``name`` of struct parameter ``index``: its ctypes value, in the kept struct (set
+        its members to change the launch's)."""
+        return getattr(getattr(self._args, self._names[index]), name)
+
     def __call__(self) -> None:
         self._forward(self._bounds, self._ref)
 
 
 class _LaunchCall:
-    """A kept ``wp.Launch`` with :class:`CpuLaunch`'s two methods, through Warp's public ones."""
+    """A kept ``wp.Launch`` with :class:`CpuLaunch`'s methods, through Warp's ``wp.Launch``."""
 
     __slots__ = ("_cmd",)
 
@@ -228,6 +234,9 @@ class _LaunchCall:
 
     def set(self, index: int, value) -> None:
         self._cmd.set_param_at_index_from_ctype(index, value)
+
+    def field(self, index: int, name: str):
+        return getattr(self._cmd.params[index + 1], name)  # (the launch's own ctypes value of the struct, read at each launch)
 
     def __call__(self) -> None:
         self._cmd.launch()

@@ -48,7 +48,7 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
     """
     func = "sample"
     plan = plan_key(func, texture, uv, lod, uv_dx, uv_dy, layer, sampler, device, out)
-    done = _plan.rerun(plan, (texture, uv, out), uv.shape) if plan is not None else None
+    done = _plan.rerun(plan, (texture,), uv.shape, out=out, uv=uv) if plan is not None else None
     if done is not None:  # this call's inputs again: its launch again
         return done
     if not isinstance(texture, TextureArray):
@@ -64,7 +64,7 @@ def sample(texture: TextureArray, uv, *, layer=None, lod=None, uv_dx=None, uv_dy
     key = ("sample", sampler, lod_source, constant_lod, constant_layer)
     setup = packed(texture, key, lambda: _setup(func, texture, sampler, lod_source, constant_lod, constant_layer))
     pixels = struct_of(ks.SamplePixels, device, uv=reshaped(uv, (count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
-    with _plan.recording(plan, (texture, uv, out), out=2, hold=(setup,)):
+    with _plan.recording(plan, (texture,), out=out, uv=given, hold=(setup,)):
         result = run(setup.kernels, count, args=setup.args, pixels=pixels, out=((count, texture.channels), float) if into is None else into,
                      device=device, footprints=setup.footprints, touched=setup.touched)
     return out if into is not None else reshaped(result, (*(() if single else shape), texture.channels))

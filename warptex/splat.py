@@ -151,8 +151,8 @@ def splat(
     key = _args_key(gbuffer, layers, splat_maps, heights, uv_set=uv_set, device=device, **options)
     # A small call repeated on the same objects (and the same out=, or none) reruns its launch (warptex._plan).
     plan = key if (out is None or type(out) is wp.array) and _plan.usable() else None
-    objects = (gbuffer, layers, out, splat_maps, *(() if heights is None else (heights,)), *(getattr(gbuffer, n) for n in SURFACE), *gbuffer.uv_sets.get(uv_set, {}).values()) if plan else ()
-    done = _plan.rerun(plan, objects, gbuffer.resolution) if plan is not None else None
+    objects = (gbuffer, layers, splat_maps, *(() if heights is None else (heights,)), *(getattr(gbuffer, n) for n in SURFACE), *gbuffer.uv_sets.get(uv_set, {}).values()) if plan else ()
+    done = _plan.rerun(plan, objects, gbuffer.resolution, out=out) if plan is not None else None
     if done is not None:
         return done
     as_on_device(func, "layers", layers, TextureArray, "a TextureArray", device)
@@ -169,7 +169,7 @@ def splat(
     pixels = struct_of(kl.SplatPixels, device, uv0=uvs["uv"].reshape((count,)), uv0_dx=uvs["uv_dx"].reshape((count,)), uv0_dy=uvs["uv_dy"].reshape((count,)), saved=None)
     surface = struct_of(pixels.surface, device, **{name: getattr(gbuffer, name).reshape((count,)) for name in ("position", "position_dx", "position_dy", "normal", "mask")})
     kernels = kl.splat_kernels(capacity=kl.capacity(layers.num_layers), stochastic=stochastic_on)
-    with _plan.recording(plan, objects, out=2, hold=(args,)):
+    with _plan.recording(plan, objects, out=out, hold=(args,)):
         result = run(kernels, count, args=args, pixels=pixels, out=((count, layers.channels), float) if into is None else into, device=device, linear=linear, covered=surface.mask,
                      footprints=footprint)
     return out if into is not None else result.reshape((*gbuffer.resolution, layers.channels))

@@ -78,7 +78,7 @@ def stochastic(
     func = "stochastic"
     plain = method is None and (type(stochastic) in (str, Method) or (type(stochastic) is Stochastic and stochastic.histogram is None))
     plan = plan_key(func, texture, uv, lod, uv_dx, uv_dy, layer, sampler, device, out, stochastic) if plain else None
-    done = _plan.rerun(plan, (texture, uv, out), uv.shape) if plan is not None else None
+    done = _plan.rerun(plan, (texture,), uv.shape, out=out, uv=uv) if plan is not None else None
     if done is not None:  # this call's inputs again: its launch again
         return done
     if not isinstance(texture, TextureArray):
@@ -105,7 +105,7 @@ def stochastic(
     # histogram's Gaussianised texture is as large as the texture.
     setup = build() if option.histogram is not None else packed(texture, ("stochastic", option, sampler, lod_source, constant_lod, constant_layer), build)
     pixels = struct_of(ks.SamplePixels, device, uv=reshaped(uv, (count,)), uv_dx=dx, uv_dy=dy, lods=lods, layers=layers)
-    with _plan.recording(plan, (texture, uv, out), out=2, hold=(setup,)):
+    with _plan.recording(plan, (texture,), out=out, uv=given, hold=(setup,)):
         result = run(kss.stochastic_kernels(), count, args=setup.args, pixels=pixels, out=((count, texture.channels), float) if into is None else into, device=device,
                      linear=setup.linear, footprints=setup.footprints)
     return out if into is not None else reshaped(result, (*(() if single else shape), texture.channels))

@@ -140,12 +140,12 @@ def _colour(func, weights, gbuffer, texture, *, device, out, **options) -> wp.ar
     device = _gbuffer_device(func, gbuffer, device)
     key = _args_key(weights, gbuffer, texture, device, **options)
     plan = key if (out is None or type(out) is wp.array) and _plan.usable() else None
-    objects = (gbuffer, texture, out, *(getattr(gbuffer, name) for name in SURFACE)) if plan is not None else ()
-    done = _plan.rerun(plan, objects, gbuffer.resolution) if plan is not None else None
+    objects = (gbuffer, texture, *(getattr(gbuffer, name) for name in SURFACE)) if plan is not None else ()
+    done = _plan.rerun(plan, objects, gbuffer.resolution, out=out) if plan is not None else None
     if done is not None:
         return done
     setup = _Setup(func, weights, gbuffer, texture, **options, device=device, out=out, key=key)
-    with _plan.recording(plan, objects, out=2, hold=(setup.args,)):
+    with _plan.recording(plan, objects, out=out, hold=(setup.args,)):
         return setup.launch(setup.channels)
 
 
