@@ -105,10 +105,16 @@ def bridge(native, *positional: str, rows: str = "gbuffer", channels: int | None
     signature = inspect.Signature([p for p in inspect.signature(native).parameters.values() if p.name not in ("device", "out")], return_annotation=torch.Tensor)
 
     options = [p.name for p in signature.parameters.values() if p.kind is p.VAR_KEYWORD]
+    leading = [p.name for p in signature.parameters.values() if p.kind is p.POSITIONAL_OR_KEYWORD]
+    keywords = {p.name for p in signature.parameters.values() if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+    required = {p.name for p in signature.parameters.values() if p.name in keywords and p.default is p.empty}
 
     @functools.wraps(native)
     def function(*args, **kwargs):
-        arguments = dict(signature.bind(*args, **kwargs).arguments)
+        named = leading[: len(args)]
+        arguments = {**dict(zip(named, args)), **kwargs}  # what bind() gives (a tenth of a small call), **options flattened
+        if len(args) > len(leading) or not (options or kwargs.keys() <= keywords) or kwargs.keys() & {*named, *options} or not required <= arguments.keys():
+            arguments = dict(signature.bind(*args, **kwargs).arguments)  # bind() says what is wrong
         for group in options:  # **options are passed on as keywords of their own
             arguments.update(arguments.pop(group, {}))
         if "out" in arguments:  # through **options: the native out= fills a Warp array
