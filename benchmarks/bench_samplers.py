@@ -56,8 +56,10 @@ and highest of the runs' ratios), so a ratio that swings across a bar between ru
 texture) on 1, 1,024 and 65,536 random UVs, into a new output and into ``out=``, and through the
 PyTorch bridge (``warptex.torch.sample`` on tensors), forward and forward+backward (gradients to
 every texel), against torch ``grid_sample`` on the same data (a UV array or tensor kept between
-calls, as a loop keeps it); and ``triplanar``, ``biplanar`` and ``splat`` (four layers of that
-texture) over a 1-pixel G-buffer. Each figure is the median of many calls, taken in interleaved rounds.
+calls, as a loop keeps it; and, forward, ``new uv``: a new UV array each call, a Warp view of the
+same data as ``wp.from_torch`` makes of a new tensor, into a new output); and ``triplanar``,
+``biplanar`` and ``splat`` (four layers of that texture) over a 1-pixel G-buffer. Each figure is
+the median of many calls, taken in interleaved rounds.
 
 On a CUDA device, warptex runs one launch per call (no CPU threads), the peers are torch on the same
 device and Dr.Jit's CUDA backend (NumPy is skipped), and every timed call ends by waiting for the GPU.
@@ -533,9 +535,15 @@ def call_cost(args, report) -> list[dict]:
             ours, theirs = wt.sample(tex, uv, sampler=sampler).numpy(), torch_forward()[0, :, 0].T.cpu().numpy()
         diff = float(np.abs(ours - theirs).max())
         bridged = float(np.abs(bridge_forward().cpu().numpy() - ours).max())
+
+        def new_uv():
+            return wt.sample(tex, wp.array(ptr=uv.ptr, dtype=wp.vec2, shape=uv.shape, device=device), sampler=sampler)
+
+        renewed = max(float(np.abs(new_uv().numpy() - ours).max()) for _ in range(3))  # (from the third call, a kept plan's)
         figures = {
             ("forward", "warptex"): lambda: wt.sample(tex, uv, sampler=sampler),
             ("forward", "warptex out="): lambda: wt.sample(tex, uv, sampler=sampler, out=out),
+            ("forward", "warptex new uv"): new_uv,
             ("forward", "warptex.torch"): bridge_forward,
             ("forward", "torch"): torch_forward,
             ("forward+backward", "warptex"): ours_backward,
@@ -546,7 +554,7 @@ def call_cost(args, report) -> list[dict]:
         median = interleaved_median(figures, sync, rounds=args.repeats, calls=args.calls)
         for (pass_, impl), seconds in median.items():
             rows.append({"technique": "sample", "samples": n, "pass": pass_, "impl": impl, "seconds": seconds,
-                         "max_abs_diff": {"torch": diff, "warptex.torch": bridged}.get(impl, 0.0)})  # fmt: skip
+                         "max_abs_diff": {"torch": diff, "warptex.torch": bridged, "warptex new uv": renewed}.get(impl, 0.0)})  # fmt: skip
     report(format_call_cost(rows))
     report(f"max |warptex - torch| over the outputs: {max(r['max_abs_diff'] for r in rows):.2e}")
     rows += _one_pixel_projections(args, tex, sync, report)
@@ -592,7 +600,7 @@ def interleaved_median(figures: dict, sync, rounds: int, calls: int) -> dict:
 
 def format_call_cost(rows: list[dict]) -> str:
     """The call-cost table: microseconds per call, and each warptex figure over torch's."""
-    ours = ("warptex", "warptex out=", "warptex.torch")
+    ours = ("warptex", "warptex out=", "warptex new uv", "warptex.torch")
     lines = ["call cost (median us per call; warptex / torch in brackets):", f"{'samples':>8} {'pass':<17} " + " ".join(f"{i:>16}" for i in ours) + f" {'torch':>9}"]
     for n in CALL_SAMPLES:
         for pass_ in ("forward", "forward+backward"):
@@ -600,7 +608,7 @@ def format_call_cost(rows: list[dict]) -> str:
             if not got:
                 continue
             torch_s = got["torch"]
-            cells = [f"{got[i] * 1e6:8.1f} ({got[i] / torch_s:5.2f}x)" for i in ours]
+            cells = [f"{got[i] * 1e6:8.1f} ({got[i] / torch_s:5.2f}x)" if i in got else "" for i in ours]  # (new uv: forward only)
             lines.append(f"{n:>8} {pass_:<17} " + " ".join(f"{c:>16}" for c in cells) + f" {torch_s * 1e6:9.1f}")
     return "\n".join(lines)
 

@@ -120,11 +120,12 @@ def test_call_cost_rows_time_small_calls_against_torch(tmp_path):
     assert all(r["seconds"] > 0 for r in projections) and "1-pixel calls (median us): triplanar" in result.stdout
     rows = [r for r in rows if r["technique"] == "sample"]
     impls = ("warptex", "warptex out=", "warptex.torch", "torch")
-    assert {(r["samples"], r["pass"], r["impl"]) for r in rows} == {(n, p, i) for n in (1, 1024, 65536) for p in ("forward", "forward+backward") for i in impls}
+    want = {(n, p, i) for n in (1, 1024, 65536) for p in ("forward", "forward+backward") for i in impls} | {(n, "forward", "warptex new uv") for n in (1, 1024, 65536)}
+    assert {(r["samples"], r["pass"], r["impl"]) for r in rows} == want
     assert all(r["seconds"] > 0 and r["max_abs_diff"] < 1e-5 for r in rows)  # torch computes what warptex computes
     table = result.stdout[result.stdout.index("call cost") :].splitlines()
     for r in rows:
-        if r["impl"] in ("warptex", "warptex.torch"):
+        if r["impl"] in ("warptex", "warptex new uv", "warptex.torch"):
             torch_s = next(t["seconds"] for t in rows if t["impl"] == "torch" and t["samples"] == r["samples"] and t["pass"] == r["pass"])
             line = next(line for line in table if line.split()[:2] == [str(r["samples"]), r["pass"]])
             assert f"({r['seconds'] / torch_s:5.2f}x)" in line, (line, r)

@@ -65,7 +65,7 @@ _local = threading.local()
 class _Plan:
     """A call's objects (weakly), what it holds, and its launch (``None`` once seen, not yet kept)."""
 
-    __slots__ = ("refs", "hold", "cmd", "call", "zero", "like", "spares")
+    __slots__ = ("refs", "hold", "cmd", "call", "zero", "like", "spares", "pointed")
 
     def holds(self, objects: tuple) -> bool:
         """Whether this plan's objects are these very ``objects`` (ids can be reused)."""
@@ -75,15 +75,18 @@ class _Plan:
         """Run the launch on ``uv`` (where given) into the caller's ``out``, or into a new output
         of shape ``(*lead, C)``; that output, or ``None`` (nothing run) where ``lead`` does not
         hold the launch's rows."""
-        if uv is not None and _addressed(uv):
+        pointed = self.pointed  # the addresses the launch reads now: {"uv": ..., "out": ...} where addressed
+        if "uv" in pointed and pointed["uv"] != (at := _address(uv)):
             _point(self.call.field(PIXELS_PARAM, "uv"), uv)
+            pointed["uv"] = at
         if out is None:
             out = self._new_output(lead)
             if out is None:
                 return None
         else:
-            if _addressed(out):
-                self.call.set(OUT_PARAM, array_struct(out, self.like[0]))
+            if "out" in pointed and pointed["out"] != (at := _address(out)):
+                self.call.set(OUT_PARAM, array_struct(out, self.like[0]))  # (~5 us: only where it is another array)
+                pointed["out"] = at
             if self.zero:  # a one-pixel kernel's output is zeroed first, as launch() zeroes it
                 out.zero_()
             if out.grad is not None:  # and a new output's gradient
@@ -132,6 +135,12 @@ def _layout(array: wp.array | None, grad: bool):
     if not _addressed(array):
         return "same"
     return (array.shape, array.strides, array.dtype, grad and array.requires_grad)
+
+
+def _address(array: wp.array) -> tuple:
+    """Where an array parameter points: its data and its gradient's."""
+    grad = array.grad
+    return array.ptr, 0 if grad is None else grad.ptr
 
 
 def _point(field, array: wp.array) -> None:
@@ -225,13 +234,14 @@ def recording(key: tuple | None, objects: tuple, *, out: wp.array | None = None,
     if like is None or (uv is not None and _addressed(uv) and call.field(PIXELS_PARAM, "uv").data != uv.ptr):
         return  # an output the plan cannot point at (not one array of rows), or UVs the launch does not read in place
     seen.cmd, seen.zero, seen.like, seen.call = cmd, zero, like, call
+    seen.pointed = {name: None for name, a in (("out", out), ("uv", uv)) if a is not None and _addressed(a)}  # (pointed by the first run)
 
 
 def _remember(plans: dict, full: tuple, objects: tuple, hold) -> None:
     plan = _Plan()
     drop = lambda _ref, plans=plans, full=full: plans.pop(full, None)  # noqa: E731 (an object went: so does its plan)
     refs = tuple(_no_object if o is None else weakref.ref(o, drop) for o in objects)
-    plan.refs, plan.hold, plan.cmd, plan.call, plan.zero, plan.like, plan.spares = refs, tuple(hold), None, None, False, None, ()
+    plan.refs, plan.hold, plan.cmd, plan.call, plan.zero, plan.like, plan.spares, plan.pointed = refs, tuple(hold), None, None, False, None, (), {}
     plans.pop(full, None)
     while len(plans) >= MAX_PLANS:
         plans.pop(next(iter(plans)), None)
