@@ -152,8 +152,10 @@ def _point(field, array: wp.array) -> None:
 def _full(key: tuple, objects: tuple, out, uv) -> tuple[tuple, tuple]:
     """``(objects by identity, the plan's full key)`` of a call: its key, the layouts of its own
     arrays, and the identities of its objects (and of its own arrays where not addressed)."""
-    fixed = (*objects, *(a for a in (out, uv) if a is not None and not _addressed(a)))
-    return fixed, (key, _layout(out, False), _layout(uv, True), *map(id, fixed))
+    layouts = (_layout(out, False), _layout(uv, True))
+    if "same" in layouts:  # (not on the CPU)
+        objects = (*objects, *(a for a, layout in zip((out, uv), layouts) if layout == "same"))
+    return objects, (key, *layouts, *map(id, objects))
 
 
 def _references(spare: tuple, item: int) -> int:
