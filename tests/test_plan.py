@@ -20,6 +20,14 @@ def _plans() -> dict:
     return _plan._local.__dict__.get("plans", {})
 
 
+@pytest.fixture(autouse=True)
+def _no_plans_of_other_tests():
+    """Each test starts with no plans: those of an earlier test's objects go only once a collection
+    frees the objects (with Warp 1.17, a texture waits for one)."""
+    gc.collect()
+    _plans().clear()
+
+
 def _made(func: str, *objects, out: str = "any") -> list:
     """The kept plans of ``func`` whose objects begin with ``objects``; ``out``: ``"given"`` or
     ``"new"`` (``out=None``) for those plans alone. (A key: the call's, the layouts of its ``out``

@@ -5,6 +5,7 @@ say so before the threaded backward passes or the tape records go wrong.
 """
 
 import numpy as np
+import pytest
 import warp as wp
 
 import warptex as wt
@@ -93,3 +94,35 @@ def test_a_kept_cpu_launch_called_straight_runs_as_wp_launch(rng):
     call()
     np.testing.assert_array_equal(second.numpy(), want)
     assert not _warp.cpu_capturing()
+
+
+@wp.struct
+class _Samples:
+    values: wp.array(dtype=float)
+    scale: float
+
+
+@wp.kernel
+def _scaled_struct(args: _Samples, out: wp.array(dtype=float)):
+    i = wp.tid()
+    out[i] = args.values[i] * args.scale
+
+
+@pytest.mark.parametrize("straight", [True, False])
+def test_a_kept_launchs_struct_field_points_elsewhere(rng, straight):
+    """:meth:`field` of a kept launch, straight (:class:`~warptex._warp.CpuLaunch`) or through
+    ``wp.Launch`` (``_LaunchCall``), gives a struct parameter's array that a plan points at another
+    array of the same layout (``warptex._plan``): the next call reads that one, and the struct
+    the launch was made with is left as it was."""
+    values, others = (wp.array(rng.random(29, dtype=np.float32)) for _ in range(2))
+    out = wp.zeros(29, dtype=float)
+    args = _Samples()
+    args.values, args.scale = values, 3.0
+    cmd = wp.launch(_scaled_struct, dim=29, inputs=[args, out], device="cpu", record_cmd=True)
+    call = _warp.kept_call(cmd) if straight else _warp._LaunchCall(cmd)
+    assert call.field(0, "values").data == values.ptr
+    field = call.field(0, "values")
+    field.data = others.ptr
+    call()
+    np.testing.assert_array_equal(out.numpy(), others.numpy() * np.float32(3.0))
+    assert call.field(0, "values").data == others.ptr and args._ctype.values.data == values.ptr

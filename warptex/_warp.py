@@ -227,16 +227,21 @@ class CpuLaunch:
 class _LaunchCall:
     """A kept ``wp.Launch`` with :class:`CpuLaunch`'s methods, through Warp's ``wp.Launch``."""
 
-    __slots__ = ("_cmd",)
+    __slots__ = ("_cmd", "_own")
 
     def __init__(self, cmd: wp.Launch):
-        self._cmd = cmd
+        self._cmd, self._own = cmd, set()
 
     def set(self, index: int, value) -> None:
         self._cmd.set_param_at_index_from_ctype(index, value)
 
     def field(self, index: int, name: str):
-        return getattr(self._cmd.params[index + 1], name)  # (the launch's own ctypes value of the struct, read at each launch)
+        value = self._cmd.params[index + 1]  # the struct's own ctypes value, which wp.Launch reads at each launch
+        if index not in self._own:  # a copy of its own, as CpuLaunch keeps, so that the struct is left as it was
+            value = type(value).from_buffer_copy(value)
+            self._cmd.set_param_at_index_from_ctype(index, value)
+            self._own.add(index)
+        return getattr(value, name)
 
     def __call__(self) -> None:
         self._cmd.launch()
