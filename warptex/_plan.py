@@ -9,8 +9,8 @@ A technique whose call qualifies (inputs that are objects or plain values, no re
 objects, the very ones (compared by identity: the arrays' shapes and types, and a texture's
 storage, cannot change): the same launch as before, on their current contents. Two arrays of a
 call are its own rather than the objects': ``out=`` and a lookup's ``uv``. On the CPU a plan
-serves any array of the same layout there (shape, strides, type, gradient) and points the launch
-at it, so that a loop that makes them anew each call (a torch tensor's Warp view, an output from
+serves any array of the same layout there (shape, strides, type; for ``uv``, ``requires_grad``)
+and points the launch at it, so that a loop that makes them anew each call (a torch tensor's Warp view, an output from
 ``wp.empty``) runs its plan too: the call's own path cost ~150 us of Python around a 1,024-UV
 lookup. Elsewhere they are compared by identity, as the objects are. Without ``out=`` (``None``),
 the plan makes a new output as the call did (its shape, type and ``requires_grad``) and points the

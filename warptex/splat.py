@@ -149,7 +149,7 @@ def splat(
     options = {"tiling": tiling, "projection": projection, "normalize": normalize, "height_blend": height_blend, "height_channel": height_channel, "sharpness": sharpness,
                "offsets": offsets, "mirror_fix": mirror_fix, "layers_per_face": layers_per_face, "stochastic": stochastic, "sampler": sampler}  # fmt: skip
     key = _args_key(gbuffer, layers, splat_maps, heights, uv_set=uv_set, device=device, **options)
-    # A small call repeated on the same objects (and the same out=, or none) reruns its launch (warptex._plan).
+    # A small call repeated on the same objects (and the same out=, or none; on the CPU, an out= of the same layout) reruns its launch (warptex._plan).
     plan = key if (out is None or type(out) is wp.array) and _plan.usable() else None
     objects = (gbuffer, layers, splat_maps, *(() if heights is None else (heights,)), *(getattr(gbuffer, n) for n in SURFACE), *gbuffer.uv_sets.get(uv_set, {}).values()) if plan else ()
     done = _plan.rerun(plan, objects, gbuffer.resolution, out=out) if plan is not None else None
