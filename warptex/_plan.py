@@ -77,8 +77,8 @@ class _Plan:
         hold the launch's rows."""
         pointed = self.pointed  # the addresses the launch reads now: {"uv": ..., "out": ...} where addressed
         if "uv" in pointed and pointed["uv"] != (at := _address(uv)):
-            _point(self.call.field(PIXELS_PARAM, "uv"), uv)
-            pointed["uv"] = at
+            field = self.call.field(PIXELS_PARAM, "uv")  # a ctypes array_t of the same layout as uv
+            field.data, field.grad = pointed["uv"] = at
         if out is None:
             out = self._new_output(lead)
             if out is None:
@@ -138,15 +138,9 @@ def _layout(array: wp.array | None, grad: bool):
 
 
 def _address(array: wp.array) -> tuple:
-    """Where an array parameter points: its data and its gradient's."""
+    """Where an array parameter points: its data and its gradient's (``array_t``'s ``data``, ``grad``)."""
     grad = array.grad
     return array.ptr, 0 if grad is None else grad.ptr
-
-
-def _point(field, array: wp.array) -> None:
-    """An array parameter (a launch's ctypes ``array_t``) of the same layout as ``array`` to ``array``."""
-    field.data = array.ptr
-    field.grad = 0 if array.grad is None else array.grad.ptr
 
 
 def _full(key: tuple, objects: tuple, out, uv) -> tuple[tuple, tuple]:
