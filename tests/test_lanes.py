@@ -615,6 +615,7 @@ SPLAT_CASES = {
     "triplanar": {"projection": "triplanar", "sharpness": 3.0, "height_blend": 0.1},
     "triplanar, no heights": {"projection": "triplanar", "sharpness": 3.0},
     "triplanar, face layers": {"projection": "triplanar", "layers_per_face": [None, (1, 2, 3, 4, 0, 1), None, (0, 0, 4, 4, 2, 2), None], "offsets": [(0.1, 0.2), (0.0, 0.3), (0.5, 0.5)]},
+    "triplanar, face layers, height array": {"projection": "triplanar", "layers_per_face": [(3, 3, 1, 1, 0, 2), None, (4, 0, 1, 2, 3, 2), None, None], "height_blend": 0.2, "heights": True},
 }
 
 
@@ -648,7 +649,7 @@ def test_splat_lanes_give_the_one_pixel_bits(rng, launched, case, filter):
 @pytest.mark.parametrize("filter", ["nearest", "trilinear", "anisotropic"])
 @pytest.mark.parametrize("case", list(SPLAT_CASES))
 def test_stochastic_splat_lanes_give_the_one_pixel_bits(rng, launched, case, filter, method):
-    """A stochastic splat (``lanes.splat.layer_values_stochastic_lane``): each layer's reads, then
+    """A stochastic splat (``lanes.splat_layers.layer_values_stochastic_lane``): each layer's reads, then
     each read's stochastic taps read tap by tap, as the stochastic triplanar lane reads a
     projection; the anisotropic filter's footprint taps each with their stochastic taps. Face
     layers: each read on its face's array layer."""
@@ -897,8 +898,9 @@ def test_triplanar_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, 
 def test_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter, threads):
     """The layers', height layers' and splat maps' texel gradients: the same bits through the lane
     kernels, whose layers add layer by layer (each into texels of its own), then the height layers,
-    as pixel by pixel; face layers, which the lanes do not take, launch the one-pixel kernel. The
-    anisotropic filter's reads of several taps add pixel by pixel, their taps in order."""
+    as pixel by pixel; with face layers (layers sharing array layers), every layer's reads pixel by
+    pixel, layer by layer. The anisotropic filter's reads of several taps add pixel by pixel, their
+    taps in order."""
     g, layers, maps, kw, textures = _splat_inputs(rng, case, 3000, requires_grad=True)
     smp = wt.Sampler(filter=filter, address="mirror", lod_bias=-0.4, max_aniso=3)
     previous = wt.get_num_threads()
@@ -907,8 +909,7 @@ def test_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter
         _same_grads(lambda: wt.splat(g, layers, maps, sampler=smp, **kw), textures, rng, 4, 3000)
     finally:
         wt.set_num_threads(previous)
-    takes = case != "triplanar, face layers"  # splat_lanes.grad_lanes_take
-    assert threads > 1 or (("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched) == takes
+    assert threads > 1 or ("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched
 
 
 @pytest.mark.parametrize("threads", [1, 3])
@@ -929,6 +930,19 @@ def test_stochastic_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, c
     finally:
         wt.set_num_threads(previous)
     assert threads > 1 or ("splat8_stochastic_texel_grad_lanes", -(-3000 // LANES)) in launched
+
+
+def test_splat_face_layer_gradients_the_lanes_leave_to_the_one_pixel_kernel(rng, launched):
+    """Face layers where the tiling takes its gradient (the slopes the forward lane keeps read each
+    layer's own array layer) and stochastic face layers (whose adds go layer by layer) run the
+    one-pixel gradient kernel; without either, the face layers' gradient takes the lanes."""
+    g, layers, maps, kw, textures = _splat_inputs(rng, "triplanar, face layers", 3000, requires_grad=True)
+    tiling = wp.array([1.3], dtype=float, requires_grad=True)
+    _same_grads(lambda: wt.splat(g, layers, maps, tiling=tiling, **kw), textures, rng, 4, 3000)
+    _same_grads(lambda: wt.splat(g, layers, maps, stochastic="hash4", **kw), textures, rng, 4, 3000)
+    assert not any(name.endswith("texel_grad_lanes") for name, _ in launched)
+    _same_grads(lambda: wt.splat(g, layers, maps, **kw), textures, rng, 4, 3000)
+    assert ("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched
 
 
 # The tiling-gradient cases: the splat's options, an address mode and the layers' texel format (one each, to keep the test short).

@@ -2,28 +2,31 @@
 
 The forward lane body computes what :mod:`warptex.kernels.splat`'s forward body computes for
 :data:`~.LANES` pixels: the splat maps read for the whole lane and the pixels' splat weights;
-then layer by layer, in one native call (:func:`layer_values_lane`), the lane's reads of the layer
+then layer by layer, in one native call (:func:`.splat_layers.layer_values_lane`), the lane's reads of the layer
 (UV, footprint, weight: ``layer_read`` restated, ``wt_layer_reads``) and its texels' reads over
 their footprints (``wt_accumulate_footprint``), projection by projection in the order
 ``read_layer`` adds them; then the blend. Without height blending the blend is a weighted sum in
-the layers' order, added a layer at a time inside that call (:func:`layer_blend_lane`). Where the
+the layers' order, added a layer at a time inside that call (:func:`.splat_layers.layer_blend_lane`). Where the
 forward ran on a tape, its lane keeps each pixel's layer colours (``SplatPixels.saved``,
 ``Kernels.lane_saved``), and where the tiling needs its gradient, their slopes along it, from the
 same taps; the gradient's lane body, which runs only after such a forward, reads them. It takes
 each pixel's blend and weights backwards and adds into its splat maps and the tiling in pixel
-order, then adds each layer's gradient into its texels by :func:`scatter_layer_lane`, layer by
-layer: a layer's reads touch texels of its own array layer only, so every texel gets the one-pixel
-body's sums in its order, and the outputs and gradients are the one-pixel kernels' bits. Face
-layers change only the array layer each read samples (``wt_read_layers``); the gradient of those,
-and of the other cases :func:`grad_lanes_take` names, runs the one-pixel kernel. In the kernels of
+order, then adds each layer's gradient into its texels by :func:`.splat_layers.scatter_layer_lane`,
+layer by layer: a layer's reads touch texels of its own array layer only, so every texel gets the
+one-pixel body's sums in its order, and the outputs and gradients are the one-pixel kernels' bits.
+Face layers change only the array layer each read samples (``wt_read_layers``), so that layers
+share array layers; their gradients add every layer's reads at once, pixel by pixel, layer by
+layer (``scatter_face_layers_lane``), the one-pixel order again. The cases :func:`grad_lanes_take`
+names run the one-pixel kernel. In the kernels of
 up to 8 layers the weights, the blend and the blend and weights backwards are native code for the
 whole lane (:mod:`.splat_blend`); beyond, the scalar blocks run pixel by pixel.
 
 The stochastic splat's lanes are the same bodies with each layer read by
-:func:`layer_values_stochastic_lane`: per read, each footprint tap's stochastic taps worked out
+:func:`.splat_layers.layer_values_stochastic_lane`: per read, each footprint tap's stochastic taps worked out
 natively and read tap by tap (``wt_stochastic_footprint``, as ``stochastic`` and stochastic
-triplanar read theirs), and added back by :func:`scatter_layer_stochastic_lane` (with the
-anisotropic filter, every footprint tap's stochastic taps in order). Its forward lane keeps the
+triplanar read theirs), and added back by :func:`.splat_layers.scatter_layer_stochastic_lane` (with the
+anisotropic filter, every footprint tap's stochastic taps in order; with face layers, the
+one-pixel kernel: :func:`stochastic_grad_lanes_take`). Its forward lane keeps the
 layers' colours for the gradient lane itself (it never takes the tiling's gradient by hand). A
 histogram's blend runs the one-pixel kernels (:func:`stochastic_lanes_take`).
 """
@@ -33,61 +36,36 @@ import functools
 import warp as wp
 
 from .. import inlined, specialised
-from ..native import cpu_snippet
-from ..projection import SurfacePixels
 from ..splat_blend import blend_functions
-from ..splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, LayerReads, SplatArgs, SplatParams, layer_textures, map_count, pick, surface_weights
-from ..stochastic import StochasticArgs
-from ..texels import TexelGrad, TextureView, read_channels, write_channels
+from ..splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, SplatArgs, SplatParams, layer_textures, map_count, pick, surface_weights
+from ..texels import read_channels, write_channels
 from . import LANES, lane_colours, lane_floats, lane_ints
 from .sample import accumulate_footprint_lane
 from .splat_blend import GRAD_HEIGHT, GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, weights_lane8
+from .splat_layers import (lane_vec3, layer_blend_kept_lane, layer_blend_lane, layer_values_kept_lane, layer_values_lane, layer_values_stochastic_lane, scatter_face_layers_of,
+                           scatter_layer_lane, scatter_layer_stochastic_lane)  # fmt: skip
 from .stochastic import linear_blend
-
-# Per lane pixel (row): its projections' triplanar weights.
-_lane_vec3 = wp.types.matrix(shape=(LANES, 3), dtype=float)
-
-
-_VALUES = "return wt_layer_values_lane<{}>(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, keep, saved);\n"
-_BLEND = "return wt_layer_blend_lane<{}>(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, keep, saved, colour);\n"
-
-
-@wp.func_native(cpu_snippet(_VALUES.format("false"), "return {};\n"))
-def layer_values_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
-                      uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3, keep: wp.int32,
-                      saved: wp.array2d(dtype=float)) -> lane_colours:  # fmt: skip
-    """Row ``l``: layer ``j`` of ``tex`` read at lane pixel ``l`` over the footprints of
-    ``wt_layer_reads``' reads as ``read_layer`` reads it (0 where ``weighted[l]`` is not positive);
-    one native call rather than a read per projection. Where ``keep`` and ``saved`` is not empty,
-    also stored in ``saved``'s row ``base + l``, columns ``4 j .. 4 j + 3`` (``SplatPixels.saved``)."""
-    ...
-
-
-@wp.func_native(cpu_snippet(_VALUES.format("true"), "return {};\n"))
-def layer_values_kept_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
-                           uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3, keep: wp.int32,
-                           saved: wp.array2d(dtype=float)) -> lane_colours:  # fmt: skip
-    """:func:`layer_values_lane` for the forward lane that keeps what the gradient lane reads
-    (``Kernels.kept_lanes``): where ``saved`` has 8 columns a layer (the tiling needs its gradient:
-    :func:`lane_saved`), the same taps also give ``read_layer_slope``'s value and slope along the
-    layer's tiling, kept in columns ``4 j ..`` and ``4 (L + j) ..`` (``L`` layers). That value may
-    differ from the forward's in the last bit (a footprint of several taps is divided by its taps,
-    where the forward multiplies by their reciprocal) or the sign of a zero, and the one-pixel
-    gradient blends the values it reads with the slopes. Only this one compiles the slopes' code
-    (``wt_layer_values_slopes``: 4 s more of a render's cold compile, which never needs it)."""
-    ...
 
 
 def grad_lanes_take(args: SplatArgs) -> bool:
     """Whether the texel-gradient lane body takes a launch with ``args`` (``Kernels.grad_lanes_take``):
-    no face layers (by which layers share array layers), and height layers, where there are, whose
-    gradient is not (in part) the colour layers' (``heights=`` the layers themselves). Its layers,
-    and its height layers, then add into texels of their own, so it adds layer by layer and every
-    texel still gets the one-pixel body's sums in its order. (The forward lanes take every launch:
-    face layers only change the array layer each read samples, ``wt_read_layers``.)"""
+    height layers, where there are, whose gradient is not (in part) the colour layers' (``heights=``
+    the layers themselves), and no face layers where the tiling takes its gradient (the slopes the
+    forward keeps, ``wt_layer_values_slopes``, read each layer's own array layer). Its layers, and
+    its height layers, then add into texels of their own, so it adds layer by layer and every texel
+    still gets the one-pixel body's sums in its order; with face layers, by which layers share array
+    layers, it adds every layer's reads pixel by pixel (``splat_layers.scatter_face_layers_of``).
+    (The forward lanes take every launch: face layers only change the array layer each read
+    samples, ``wt_read_layers``.)"""
     params = args.reads.params
-    face_layers = params.face_layers.shape[0] > 0 and params.projection == PROJECT_TRIPLANAR
-    return not face_layers and not (params.height_mode == HEIGHT_ARRAY and _overlap(args.layers.texels.grad, args.heights.texels.grad))
+    if _face_layers(params) and params.tiling.requires_grad:
+        return False
+    return not (params.height_mode == HEIGHT_ARRAY and _overlap(args.layers.texels.grad, args.heights.texels.grad))
+
+
+def _face_layers(params: SplatParams) -> bool:
+    """Whether face layers change the array layers a splat's reads sample (``splat_layers.face_layer``)."""
+    return params.face_layers.shape[0] > 0 and params.projection == PROJECT_TRIPLANAR
 
 
 def _overlap(a: wp.array | None, b: wp.array | None) -> bool:
@@ -102,8 +80,9 @@ def stochastic_lanes_take(args: SplatArgs) -> bool:
 
 
 def stochastic_grad_lanes_take(args: SplatArgs) -> bool:
-    """:func:`grad_lanes_take` for the stochastic kernels (:func:`stochastic_lanes_take`)."""
-    return stochastic_lanes_take(args) and grad_lanes_take(args)
+    """:func:`grad_lanes_take` for the stochastic kernels (:func:`stochastic_lanes_take`), without
+    face layers: their adds layer by layer would not keep the one-pixel order."""
+    return stochastic_lanes_take(args) and grad_lanes_take(args) and not _face_layers(args.reads.params)
 
 
 def stochastic_lane_saved(args: SplatArgs) -> int:
@@ -121,65 +100,12 @@ def lane_saved(args: SplatArgs) -> int:
     """Floats a pixel keeps for the texel-gradient lane (``Kernels.lane_saved``): its layers'
     colours, 4 a layer, and their heights where height layers give them, 1 a layer
     (:func:`_kept_width`); where the tiling needs its gradient, the slopes of each along it, as many
-    again (:func:`layer_values_kept_lane`). Sampling the layers again was a fifth of a splat's
+    again (:func:`.splat_layers.layer_values_kept_lane`). Sampling the layers again was a fifth of a splat's
     forward and backward; with the slopes, which the forward takes from its own taps, it was 60% of
     it (the fit's view: anisotropic, triplanar layers)."""
     params = args.reads.params
     return (2 if params.tiling.requires_grad else 1) * _kept_width(params)
 
-
-@wp.func_native(cpu_snippet(_BLEND.format("false"), "return {};\n"))
-def layer_blend_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
-                     uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3, keep: wp.int32,
-                     saved: wp.array2d(dtype=float), colour: lane_colours) -> lane_colours:  # fmt: skip
-    """``colour`` plus layer ``j`` (:func:`layer_values_lane`, the same arguments) weighted by
-    ``weighted``, row by row: ``splat_blend.blend``'s sum without height blending, a layer at a
-    time, so that the lane's colours are never held for all layers at once."""
-    ...
-
-
-@wp.func_native(cpu_snippet(_BLEND.format("true"), "return {};\n"))
-def layer_blend_kept_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
-                          uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: _lane_vec3, keep: wp.int32,
-                          saved: wp.array2d(dtype=float), colour: lane_colours) -> lane_colours:  # fmt: skip
-    """:func:`layer_blend_lane` of :func:`layer_values_kept_lane`."""
-    ...
-
-
-_STOCHASTIC = "return wt_layer_values_stochastic_lane(tex, reads, stoch, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, keep, saved);\n"
-
-
-@wp.func_native(cpu_snippet(_STOCHASTIC, "return {};\n"))
-def layer_values_stochastic_lane(tex: TextureView, reads: LayerReads, stoch: StochasticArgs, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2),
-                                 uv0_dx: wp.array(dtype=wp.vec2), uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32,
-                                 tri_w: _lane_vec3, keep: wp.int32, saved: wp.array2d(dtype=float)) -> lane_colours:  # fmt: skip
-    """:func:`layer_values_lane` with stochastic sampling (``stoch``; :func:`stochastic_lanes_take`):
-    ``read_layer_stochastic``, each read's stochastic taps (of each tap of its footprint) worked out
-    natively and read tap by tap (``wt_layer_values_stochastic_lane``)."""
-    ...
-
-
-@wp.func_native(cpu_snippet("wt_scatter_layer_stochastic_lane(tex, grad, reads, stoch, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, g);\n"))
-def scatter_layer_stochastic_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, stoch: StochasticArgs, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2),
-                                  uv0_dx: wp.array(dtype=wp.vec2), uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32,
-                                  tri_w: _lane_vec3, g: lane_colours):  # fmt: skip
-    """:func:`scatter_layer_lane` of :func:`layer_values_stochastic_lane`'s reads: each read's share
-    ``w · g`` added through its stochastic taps, pixel by pixel in read and tap order
-    (``scatter_layer_stochastic``)."""
-    ...
-
-
-@wp.func_native(cpu_snippet("wt_scatter_layer_lane(tex, grad, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, g);\n"))
-def scatter_layer_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2),
-                       uv0_dx: wp.array(dtype=wp.vec2), uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32,
-                       tri_w: _lane_vec3, g: lane_colours):  # fmt: skip
-    """``scatter_layer`` of the gradients ``g[l]`` of layer ``j``'s reads of ``tex`` (``wt_layer_reads``,
-    as :func:`layer_values_lane` reads them) into ``grad``, pixel by pixel and read by read:
-    ``w · g`` per projection where triplanar (``scatter_projections``), ``g`` itself for the one
-    read of the other projections (``.scatter.scatter_lod_lanes``); where a read has several taps
-    (the anisotropic filter's), the lane's taps pixel by pixel, read by read, each read's in order
-    (``wt_scatter_footprint_rows``)."""
-    ...
 
 
 @functools.cache
@@ -195,6 +121,7 @@ def lane_bodies(cap: int, pixels_t, grads_t, stochastic: bool = False):
     lane_layers_t = wp.types.matrix(shape=(LANES * cap, 4), dtype=float)  # row l * cap + j
     module = f"warptex.splat{cap}"
     kind = "_stochastic" if stochastic else ""
+    scatter_face_layers_lane = scatter_face_layers_of(cap, lane_weights_t, lane_layers_t)
 
     def lane_weights(args: SplatArgs, pixels: pixels_t, base: wp.int32, count: wp.int32):
         """``(rs, w1s, tri_w)``: each covered lane pixel's raw splat values and weights (splat_weights,
@@ -227,7 +154,7 @@ def lane_bodies(cap: int, pixels_t, grads_t, stochastic: bool = False):
                     r, w0, total, w1 = f.weights_of(rs[l], params)
                     for j in range(params.num_layers):
                         w1s[l, j] = w1[j]
-        tri_w = _lane_vec3()
+        tri_w = lane_vec3()
         if params.projection == PROJECT_TRIPLANAR:
             for l in range(count):
                 if covered[l] > 0.0:
@@ -253,11 +180,11 @@ def lane_bodies(cap: int, pixels_t, grads_t, stochastic: bool = False):
 
     def forward_lane(kept: bool):
         """The forward lane body, plain or (``kept``) the one that keeps, where asked, the tiling's
-        slopes for the gradient lane (:func:`layer_values_kept_lane`)."""
+        slopes for the gradient lane (:func:`.splat_layers.layer_values_kept_lane`)."""
         values_lane, blend_lane = (layer_values_kept_lane, layer_blend_kept_lane) if kept else (layer_values_lane, layer_blend_lane)
         suffix = kind + ("_kept" if kept else "")
 
-        def lane_layers(args: SplatArgs, pixels: pixels_t, base: wp.int32, count: wp.int32, w1s: lane_weights_t, tri_w: _lane_vec3):
+        def lane_layers(args: SplatArgs, pixels: pixels_t, base: wp.int32, count: wp.int32, w1s: lane_weights_t, tri_w: lane_vec3):
             """``(colours, heights)``: read_layers for each lane pixel, layer by layer, each layer's reads
             and its texels' for the whole lane (``layer_values_lane``); for each texture a layer reads
             (its colour, and its separate height: ``pick``) one call, compiled once."""
@@ -382,8 +309,15 @@ def lane_bodies(cap: int, pixels_t, grads_t, stochastic: bool = False):
                             if height_layers:
                                 dhv = pixels.saved[i, width + 4 * num_layers + j]
                             wp.atomic_add(grads.tiling, wp.min(j, grads.tiling.shape[0] - 1), wp.dot(back[l * cap + j], dc) + ghvs[l, j] * dhv)
+        face_layers = params.face_layers.shape[0] > 0 and params.projection == PROJECT_TRIPLANAR
         for t in range(layer_textures(params)):  # the colour layers' adds, then the height layers'
-            if pick(grads.layers, grads.heights, t).texels.shape[0] > 0:
+            if wp.static(not stochastic) and face_layers and pick(grads.layers, grads.heights, t).texels.shape[0] > 0:  # layers share array layers
+                gs = lane_layers_t()  # row l * cap + j: the gradient of layer j's value at lane pixel l
+                for i in range(LANES * cap):  # a loop, not unrolled
+                    gs[i] = wp.where(t == 0, back[i], wp.vec4(ghvs[i // cap, i % cap], 0.0, 0.0, 0.0))
+                scatter_face_layers_lane(pick(args.layers, args.heights, t), pick(grads.layers, grads.heights, t), args.reads, w1s, pixels.uv0, pixels.uv0_dx,
+                                         pixels.uv0_dy, pixels.surface, base, count, tri_w, gs)  # fmt: skip
+            elif pick(grads.layers, grads.heights, t).texels.shape[0] > 0:
                 for j in range(num_layers):  # each layer's adds: without face layers, layers add into texels of their own
                     weighted = lane_floats()
                     g = lane_colours()

@@ -246,12 +246,12 @@ template <class Tex, class Grad, class Smp> struct wt_tap_batch {
 
 // add(first, group) once per gradient array that reads r = 0 .. nreads - 1 add into, where it is
 // needed: read `first` the first into it, group[r] whether read r adds into it.
-template <class Grad, class Add>
+template <int MaxReads = WT_MAX_READS, class Grad, class Add>
 WT_INLINE void wt_each_grad_array(const int nreads, const Grad* const* grads, Add&& add) {
-    bool done[WT_MAX_READS] = {};
+    bool done[MaxReads] = {};
     for (int first = 0; first < nreads; ++first) {
         if (done[first] || grads[first]->texels.shape[0] == 0) continue;
-        bool group[WT_MAX_READS] = {};
+        bool group[MaxReads] = {};
         for (int r = first; r < nreads; ++r)
             group[r] = done[r] = grads[r]->texels.shape[0] > 0 && grads[r]->texels.data == grads[first]->texels.data;
         add(first, group);
@@ -265,16 +265,18 @@ WT_INLINE void wt_each_grad_array(const int nreads, const Grad* const* grads, Ad
 // 1 / n (a one-tap footprint its share at (u, v) itself); a tap whose UV or LOD is not finite adds
 // nothing. The taps of each gradient array go through a wt_tap_batch in that order: the reads into
 // one array (a texture shared by projections, or a splat layer's) keep the scalar kernels' order,
-// and reads into other arrays (a texture per axis) add apart, each array's in that order.
+// and reads into other arrays (a texture per axis) add apart, each array's in that order. Read r
+// samples the array layers layers[r · layer_stride + l] (a layer per lane pixel, the same for
+// every read where layer_stride is 0); up to MaxReads reads where a caller sets it (a splat's face
+// layers: every layer's reads at once).
 // twin: scatter.scatter_footprint
-template <class Tex, class Grad, class Smp>
-WT_INLINE void wt_scatter_footprint_rows(const Tex* const* texs, const Grad* const* grads, const Smp& smp,
-                                         const int nreads, const int* layers, const float* const* u_rows,
-                                         const float* const* v_rows, const float* const* lod_rows,
-                                         const float* const* du_rows, const float* const* dv_rows,
-                                         const float* const* taps_rows, const float* const* w_rows, const int weigh,
-                                         const wt_lane_colours* const* gr, const int per_read) {
-    wt_each_grad_array(nreads, grads, [&](const int first, const bool* group) __attribute__((always_inline)) {
+template <int MaxReads = WT_MAX_READS, class Tex, class Grad, class Smp> WT_INLINE void
+wt_scatter_footprint_rows(const Tex* const* texs, const Grad* const* grads, const Smp& smp, const int nreads,
+                          const int* layers, const float* const* u_rows, const float* const* v_rows,
+                          const float* const* lod_rows, const float* const* du_rows, const float* const* dv_rows,
+                          const float* const* taps_rows, const float* const* w_rows, const int weigh,
+                          const wt_lane_colours* const* gr, const int per_read, const int layer_stride = 0) {
+    wt_each_grad_array<MaxReads>(nreads, grads, [&](const int first, const bool* group) __attribute__((always_inline)) {
         wt_tap_batch<Tex, Grad, Smp> batch(*texs[first], *grads[first], smp);
         for (int l = 0; l < WT_L; ++l) {
             for (int r = first; r < nreads; ++r) {
@@ -291,7 +293,7 @@ WT_INLINE void wt_scatter_footprint_rows(const Tex* const* texs, const Grad* con
                 int level;
                 float fraction;
                 wt_mip_levels(*texs[r], smp, lod, level, fraction);
-                const int lr = wp::clamp(layers[l], 0, texs[r]->num_layers - 1);
+                const int lr = wp::clamp(layers[r * layer_stride + l], 0, texs[r]->num_layers - 1);
                 for (int k = 0; k < count; ++k) {
                     const float s = (float)k + 0.5f - 0.5f * taps;
                     const float tu = one ? u : u + du * s, tv = one ? v : v + dv * s;  // footprint.footprint_uv
@@ -306,12 +308,13 @@ WT_INLINE void wt_scatter_footprint_rows(const Tex* const* texs, const Grad* con
 
 // The rows of up to six reads (a lane_reads matrix's rows of a read: UV, LOD, weight, footprint),
 // read r's at u[r], v[r]...: reads 0 .. 2 of a matrix (wt_rows_of), or each projection's on its +
-// and - face (wt_face_rows).
-struct wt_read_rows {
-    const float *u[6], *v[6], *lod[6], *w[6], *du[6], *dv[6], *taps[6];
+// and - face (wt_face_rows); N reads where a caller sets it (a splat's face layers).
+template <int N> struct wt_read_rows_n {
+    const float *u[N], *v[N], *lod[N], *w[N], *du[N], *dv[N], *taps[N];
 };
+typedef wt_read_rows_n<6> wt_read_rows;
 // Read r of `rows`: read `axis` of `at`.
-WT_INLINE void wt_put_rows(wt_read_rows& rows, int r, const wt_lane_reads& at, int axis) {
+template <int N> WT_INLINE void wt_put_rows(wt_read_rows_n<N>& rows, int r, const wt_lane_reads& at, int axis) {
     rows.u[r] = at.data[axis], rows.v[r] = at.data[3 + axis], rows.lod[r] = at.data[6 + axis];
     rows.w[r] = at.data[9 + axis], rows.du[r] = at.data[12 + axis], rows.dv[r] = at.data[15 + axis];
     rows.taps[r] = at.data[18 + axis];

@@ -282,7 +282,7 @@ template <class Params, class Saved> WT_INLINE void wt_keep_layer(const Params& 
     }
 }
 
-// lanes.splat.layer_values_lane: row l, layer j of tex read at lane pixel l over the footprints of
+// lanes.splat_layers.layer_values_lane: row l, layer j of tex read at lane pixel l over the footprints of
 // wt_layer_reads' reads as read_layer reads them (per projection value += w · sample where
 // triplanar, value = sample for the one read of the other projections; 0 where weighted[l] is not
 // positive). Where keep (1 + the texture's place: colour layers 1, height layers 2) and saved is not
@@ -313,7 +313,7 @@ WT_INLINE wt_lane_colours wt_layer_values_lane(const Tex& tex, const Reads& read
     return value;
 }
 
-// lanes.splat.layer_values_stochastic_lane: wt_layer_values_lane with stochastic sampling (stoch, a
+// lanes.splat_layers.layer_values_stochastic_lane: wt_layer_values_lane with stochastic sampling (stoch, a
 // linear blend: no histogram), as read_layer_stochastic reads a layer: per read k of wt_layer_reads
 // with a positive weight w, value += w · sample_stochastic (from 0, for the one read of the UV and
 // world-XZ projections too: its weight is 1), each read's sample_stochastic over its footprint
@@ -343,7 +343,7 @@ WT_INLINE wt_lane_colours wt_layer_values_stochastic_lane(const Tex& tex, const 
     return value;
 }
 
-// lanes.splat.layer_blend_lane: colour plus layer j (wt_layer_values_lane) weighted by weighted,
+// lanes.splat_layers.layer_blend_lane: colour plus layer j (wt_layer_values_lane) weighted by weighted,
 // row by row: splat_blend.blend's sum without height blending, a layer at a time.
 template <bool Kept, class Tex, class Reads, class Floats, class UV, class Surface, class TriW, class Saved>
 WT_INLINE wt_lane_colours wt_layer_blend_lane(const Tex& tex, const Reads& reads, int j, const Floats& weighted,
@@ -358,7 +358,17 @@ WT_INLINE wt_lane_colours wt_layer_blend_lane(const Tex& tex, const Reads& reads
     return out;
 }
 
-// lanes.splat.scatter_layer_lane: splat_layers.scatter_layer of the gradients g[l] of layer j's
+// wt_layer_reads compiled once, out of line, for the gradient lane's two kinds of adds
+// (wt_scatter_layer_lane, wt_scatter_face_layers_lane).
+// twin: splat_layers.layer_read
+template <class Tex, class Reads, class UV, class Surface, class TriW>
+WT_OUTLINE wt_lane_reads wt_layer_reads_outlined(const Tex& tex, const Reads& reads, int j, const float* weighted,
+                                                 const UV& uv0, const UV& uv0_dx, const UV& uv0_dy,
+                                                 const Surface& surface, int base, int count, const TriW& tri_w) {
+    return wt_layer_reads(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
+}
+
+// lanes.splat_layers.scatter_layer_lane: splat_layers.scatter_layer of the gradients g[l] of layer j's
 // reads of tex (wt_layer_reads) into grad, pixel by pixel and read by read: w · g per projection
 // where triplanar, g itself for the one read of the other projections (wt_scatter_lod: where a read
 // has several taps, the anisotropic filter's, pixel by pixel, each read's taps 16 at a time).
@@ -376,11 +386,50 @@ WT_INLINE void wt_scatter_layer_lane(const Tex& tex, const Grad& grad, const Rea
         reads.params.projection == WT_PROJECT_TRIPLANAR;  // w · g per projection, else g for the one read
     const int nreads = triplanar ? 3 : 1;
     wt_scatter_lod(texs, grads, reads.smp, nreads, layer,
-                   wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w),
+                   wt_layer_reads_outlined(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w),
                    triplanar, g);
 }
 
-// lanes.splat.scatter_layer_stochastic_lane: splat_layers.scatter_layer_stochastic of the gradients
+// lanes.splat_layers.scatter_face_layers_lane: wt_scatter_layer_lane of every layer j < num_layers at
+// once, where face layers let layers share array layers (wt_read_layers; projection triplanar,
+// plain sampling): layer j's reads weighted by w1s[l][j] (wt_layer_reads) add w · g[l · Cap + j]
+// pixel by pixel, layer by layer, read by read, the one-pixel body's order, so that two layers'
+// reads of one array layer at two pixels add in pixel order as they do there (layer by layer, they
+// would not). The reads of every layer go through one wt_scatter_footprint_rows of up to 3 · Cap
+// reads, whose taps add through wt_tap_batch in the order they come (a read of one tap is its
+// footprint of one): no other copy of the adds for the compiler to build.
+// twin: splat_layers._layer_reads:scatter_layer
+template <int Cap, class Tex, class Grad, class Reads, class Weights, class UV, class Surface, class TriW, class G>
+WT_INLINE void wt_scatter_face_layers_lane(const Tex& tex, const Grad& grad, const Reads& reads, const Weights& w1s,
+                                           const UV& uv0, const UV& uv0_dx, const UV& uv0_dy, const Surface& surface,
+                                           int base, int count, const TriW& tri_w, const G& g) {
+    constexpr int N = 3 * Cap;
+    const int num_layers = reads.params.num_layers < Cap ? reads.params.num_layers : Cap;
+    wt_lane_reads at[Cap];
+    wt_lane_colours gj[Cap];
+    int layer[N][WT_L];
+    const Tex* texs[N];
+    const Grad* grads[N];
+    const wt_lane_colours* gr[N];
+    wt_read_rows_n<N> rows;
+    for (int j = 0; j < num_layers; ++j) {
+        float weighted[WT_L];
+        for (int l = 0; l < WT_L; ++l) weighted[l] = w1s.data[l][j];
+        at[j] = wt_layer_reads_outlined(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
+        wt_read_layers(reads.params, surface, j, base, count, &layer[3 * j]);
+        for (int l = 0; l < WT_L; ++l)
+            for (int c = 0; c < 4; ++c) gj[j].data[l][c] = g.data[l * Cap + j][c];
+        for (int k = 0; k < 3; ++k) {
+            const int r = 3 * j + k;
+            texs[r] = &tex, grads[r] = &grad, gr[r] = &gj[j];
+            wt_put_rows(rows, r, at[j], k);
+        }
+    }
+    wt_scatter_footprint_rows<N>(texs, grads, reads.smp, 3 * num_layers, layer[0], rows.u, rows.v, rows.lod, rows.du,
+                                 rows.dv, rows.taps, rows.w, 1, gr, 1, WT_L);
+}
+
+// lanes.splat_layers.scatter_layer_stochastic_lane: splat_layers.scatter_layer_stochastic of the gradients
 // g[l] of layer j's reads of tex (wt_layer_values_stochastic_lane's): each read k with a positive
 // weight w adds w · g (for the one read of the UV and world-XZ projections too: w is 1) through its
 // stochastic taps into grad, pixel by pixel in read and tap order (wt_scatter_projection_taps_lanes;
