@@ -50,16 +50,12 @@ from .stochastic import linear_blend
 def grad_lanes_take(args: SplatArgs) -> bool:
     """Whether the texel-gradient lane body takes a launch with ``args`` (``Kernels.grad_lanes_take``):
     height layers, where there are, whose gradient is not (in part) the colour layers' (``heights=``
-    the layers themselves), and no face layers where the tiling takes its gradient (the slopes the
-    forward keeps, ``wt_layer_values_slopes``, read each layer's own array layer). Its layers, and
-    its height layers, then add into texels of their own, so it adds layer by layer and every texel
-    still gets the one-pixel body's sums in its order; with face layers, by which layers share array
-    layers, it adds every layer's reads pixel by pixel (``splat_layers.scatter_face_layers_of``).
-    (The forward lanes take every launch: face layers only change the array layer each read
-    samples, ``wt_read_layers``.)"""
+    the layers themselves). Its layers, and its height layers, then add into texels of their own,
+    so it adds layer by layer and every texel still gets the one-pixel body's sums in its order;
+    with face layers, by which layers share array layers, it adds every layer's reads pixel by
+    pixel (``splat_layers.scatter_face_layers_of``). (The forward lanes take every launch: face
+    layers only change the array layer each read samples, ``wt_read_layers``.)"""
     params = args.reads.params
-    if _face_layers(params) and params.tiling.requires_grad:
-        return False
     return not (params.height_mode == HEIGHT_ARRAY and _overlap(args.layers.texels.grad, args.heights.texels.grad))
 
 

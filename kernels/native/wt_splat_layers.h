@@ -67,12 +67,12 @@ WT_INLINE wt_lane_reads wt_layer_reads(const Tex& tex, const Reads& reads, int j
 // sum times 1 / taps: wt_accumulate_footprint's). Lanes past their taps, not read, or not finite
 // read (0, 0) at level 0; a tap not finite gives a NaN value and zero derivatives. A one-tap
 // footprint's step is 0 (wt_footprint), so footprint_uv reads at its UV as sample_footprint does.
-// Rows of the lanes not read are 0. A channel of every lane at a time (per lane pixel, with
-// branches and scalar divides, it was a third of the fit's kept forward outside the texel reads);
-// the operations of each element are the scalar block's, so the bits are.
+// Rows of the lanes not read are 0. Lane l reads array layer layer[l]. A channel of every lane at a
+// time (per lane pixel, with branches and scalar divides, it was a third of the fit's kept forward
+// outside the texel reads); the operations of each element are the scalar block's, so the bits are.
 // twin: filters.sample_footprint_derivatives
 template <class Tex, class Smp>
-WT_INLINE void wt_footprint_slopes(const Tex& tex, const Smp& smp, int layer, const float* u, const float* v,
+WT_INLINE void wt_footprint_slopes(const Tex& tex, const Smp& smp, const int* layer, const float* u, const float* v,
                                    const float* lod, const float* du, const float* dv, const float* taps,
                                    const float* weight, wt_f4* forward, wt_f4* value, wt_f4* d_u, wt_f4* d_v,
                                    wt_f4* d_lod, wt_f4* d_spread) {
@@ -81,7 +81,7 @@ WT_INLINE void wt_footprint_slopes(const Tex& tex, const Smp& smp, int layer, co
     int most = 0;  // the most taps of a read lane
     for (int l = 0; l < WT_L; ++l) {
         read[l] = weight[l] > 0.0f ? -1 : 0;
-        layers[l] = layer;
+        layers[l] = layer[l];
         lods[l] = read[l] ? lod[l] : 0.0f;
         wt_mip_levels(tex, smp, lods[l], levels[l], fractions[l]);
         const int n = read[l] ? (int)taps[l] : 0;  // footprint.footprint_taps
@@ -192,8 +192,9 @@ template <class Params, class Saved> WT_INLINE bool wt_kept_slopes(const Params&
 
 // wt_layer_values_lane's value where the tiling needs its gradient, and what that gradient reads,
 // kept from the same taps: splat_layers.read_layer_slope of layer j of tex at each lane pixel l
-// with weighted[l] > 0 (no face layers, plain sampling). Per read k of wt_layer_reads with a
-// positive weight w: value += w · v and slope += w · (d/du · du/dt + d/dv · dv/dt + d/dlod · dlod/dt
+// with weighted[l] > 0 (plain sampling), each read k of the array layer wt_read_layers gives it
+// (face layers). Per read k of wt_layer_reads with a positive weight w: value += w · v and slope += w · (d/du · du/dt +
+// d/dv · dv/dt + d/dlod · dlod/dt
 // + d/dspread / t), of the read's wt_footprint_slopes and layer_read_slopes' UV and LOD slopes along
 // the tiling t. The value and the slope of texture keep - 1 go into saved's row base + l
 // (wt_kept_column; a height layer's first channel): the gradient's blend reads the values read
@@ -212,6 +213,8 @@ WT_INLINE wt_lane_colours wt_layer_values_slopes(const Tex& tex, const Reads& re
     const float t = wt_float(params.tiling, wp::min(j, params.tiling.shape[0] - 1));  // layer_tiling
     const wt_lane_reads at =
         wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
+    int layer[3][WT_L];
+    wt_read_layers(params, surface, j, base, count, layer);
     const int triplanar = params.projection == WT_PROJECT_TRIPLANAR;
     const float width = (float)wt_int(tex.level_width, 0), height = (float)wt_int(tex.level_height, 0);
     wt_row p[3], n[3], dx[3], dy[3];  // the lane's point: UV0 and its derivatives, or its surface
@@ -232,7 +235,7 @@ WT_INLINE wt_lane_colours wt_layer_values_slopes(const Tex& tex, const Reads& re
     for (int k = 0; k < (triplanar ? 3 : 1); ++k) {
         wt_f4 f[WT_L], v[WT_L], d_u[WT_L], d_v[WT_L], d_lod[WT_L], d_spread[WT_L];
         const float* weight = at.data[9 + k];
-        wt_footprint_slopes(tex, reads.smp, j, at.data[k], at.data[3 + k], at.data[6 + k], at.data[12 + k],
+        wt_footprint_slopes(tex, reads.smp, layer[k], at.data[k], at.data[3 + k], at.data[6 + k], at.data[12 + k],
                             at.data[15 + k], at.data[18 + k], weight, f, v, d_u, d_v, d_lod, d_spread);
         const int axis = params.projection == WT_PROJECT_WORLD_XZ ? 1 : k;
         const int c0 = axis == 0 ? 2 : 0, c1 = axis == 1 ? 2 : 1;  // projection.plane_coords
