@@ -915,12 +915,14 @@ def test_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter
 @pytest.mark.parametrize("threads", [1, 3])
 @pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])
 @pytest.mark.parametrize("filter", ["trilinear", "anisotropic"])
-@pytest.mark.parametrize("case", ["uv", "uv, height channel", "world xz, height array", "triplanar", "triplanar, no heights"])
+@pytest.mark.parametrize("case", ["uv", "uv, height channel", "world xz, height array", "triplanar", "triplanar, no heights", "triplanar, face layers",
+                                  "triplanar, face layers, height array"])  # fmt: skip
 def test_stochastic_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, case, filter, method, threads):
     """The stochastic splat's texel gradients through its lanes: each layer's reads add their
     shares through their stochastic taps (``scatter_layer_stochastic_lane``), layer by layer, as
     pixel by pixel; the anisotropic filter's through every footprint tap's stochastic taps in
-    order (``wt_scatter_stochastic_rows``); height layers' after the colour layers'."""
+    order (``wt_scatter_stochastic_rows``); height layers' after the colour layers'. With face
+    layers, every layer's reads at once, pixel by pixel (``scatter_face_layers_stochastic_lane``)."""
     g, layers, maps, kw, textures = _splat_inputs(rng, case, 3000, requires_grad=True)
     smp = wt.Sampler(filter=filter, address="mirror", lod_bias=-0.4, max_aniso=5)
     previous = wt.get_num_threads()
@@ -930,16 +932,6 @@ def test_stochastic_splat_gradient_lanes_add_the_one_pixel_sums(rng, launched, c
     finally:
         wt.set_num_threads(previous)
     assert threads > 1 or ("splat8_stochastic_texel_grad_lanes", -(-3000 // LANES)) in launched
-
-
-def test_splat_face_layer_gradients_the_lanes_leave_to_the_one_pixel_kernel(rng, launched):
-    """Stochastic face layers (whose adds go layer by layer) run the one-pixel gradient kernel; plain
-    ones take the lanes."""
-    g, layers, maps, kw, textures = _splat_inputs(rng, "triplanar, face layers", 3000, requires_grad=True)
-    _same_grads(lambda: wt.splat(g, layers, maps, stochastic="hash4", **kw), textures, rng, 4, 3000)
-    assert not any(name.endswith("texel_grad_lanes") for name, _ in launched)
-    _same_grads(lambda: wt.splat(g, layers, maps, **kw), textures, rng, 4, 3000)
-    assert ("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched
 
 
 # The tiling-gradient cases: the splat's options, an address mode and the layers' texel format (one each, to keep the test short).

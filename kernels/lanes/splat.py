@@ -25,8 +25,8 @@ The stochastic splat's lanes are the same bodies with each layer read by
 :func:`.splat_layers.layer_values_stochastic_lane`: per read, each footprint tap's stochastic taps worked out
 natively and read tap by tap (``wt_stochastic_footprint``, as ``stochastic`` and stochastic
 triplanar read theirs), and added back by :func:`.splat_layers.scatter_layer_stochastic_lane` (with the
-anisotropic filter, every footprint tap's stochastic taps in order; with face layers, the
-one-pixel kernel: :func:`stochastic_grad_lanes_take`). Its forward lane keeps the
+anisotropic filter, every footprint tap's stochastic taps in order; with face layers, every
+layer's at once, ``scatter_face_layers_stochastic_lane``). Its forward lane keeps the
 layers' colours for the gradient lane itself (it never takes the tiling's gradient by hand). A
 histogram's blend runs the one-pixel kernels (:func:`stochastic_lanes_take`).
 """
@@ -59,11 +59,6 @@ def grad_lanes_take(args: SplatArgs) -> bool:
     return not (params.height_mode == HEIGHT_ARRAY and _overlap(args.layers.texels.grad, args.heights.texels.grad))
 
 
-def _face_layers(params: SplatParams) -> bool:
-    """Whether face layers change the array layers a splat's reads sample (``splat_layers.face_layer``)."""
-    return params.face_layers.shape[0] > 0 and params.projection == PROJECT_TRIPLANAR
-
-
 def _overlap(a: wp.array | None, b: wp.array | None) -> bool:
     """Whether gradient arrays ``a`` and ``b`` (``None``: none) share memory."""
     return a is not None and b is not None and a.ptr < b.ptr + b.capacity and b.ptr < a.ptr + a.capacity
@@ -76,9 +71,8 @@ def stochastic_lanes_take(args: SplatArgs) -> bool:
 
 
 def stochastic_grad_lanes_take(args: SplatArgs) -> bool:
-    """:func:`grad_lanes_take` for the stochastic kernels (:func:`stochastic_lanes_take`), without
-    face layers: their adds layer by layer would not keep the one-pixel order."""
-    return stochastic_lanes_take(args) and grad_lanes_take(args) and not _face_layers(args.reads.params)
+    """:func:`grad_lanes_take` for the stochastic kernels (:func:`stochastic_lanes_take`)."""
+    return stochastic_lanes_take(args) and grad_lanes_take(args)
 
 
 def stochastic_lane_saved(args: SplatArgs) -> int:
@@ -117,7 +111,7 @@ def lane_bodies(cap: int, pixels_t, grads_t, stochastic: bool = False):
     lane_layers_t = wp.types.matrix(shape=(LANES * cap, 4), dtype=float)  # row l * cap + j
     module = f"warptex.splat{cap}"
     kind = "_stochastic" if stochastic else ""
-    scatter_face_layers_lane = scatter_face_layers_of(cap, lane_weights_t, lane_layers_t)
+    scatter_face_layers_lane = scatter_face_layers_of(cap, lane_weights_t, lane_layers_t, stochastic)
 
     def lane_weights(args: SplatArgs, pixels: pixels_t, base: wp.int32, count: wp.int32):
         """``(rs, w1s, tri_w)``: each covered lane pixel's raw splat values and weights (splat_weights,
@@ -307,12 +301,16 @@ def lane_bodies(cap: int, pixels_t, grads_t, stochastic: bool = False):
                             wp.atomic_add(grads.tiling, wp.min(j, grads.tiling.shape[0] - 1), wp.dot(back[l * cap + j], dc) + ghvs[l, j] * dhv)
         face_layers = params.face_layers.shape[0] > 0 and params.projection == PROJECT_TRIPLANAR
         for t in range(layer_textures(params)):  # the colour layers' adds, then the height layers'
-            if wp.static(not stochastic) and face_layers and pick(grads.layers, grads.heights, t).texels.shape[0] > 0:  # layers share array layers
+            if face_layers and pick(grads.layers, grads.heights, t).texels.shape[0] > 0:  # layers share array layers
                 gs = lane_layers_t()  # row l * cap + j: the gradient of layer j's value at lane pixel l
                 for i in range(LANES * cap):  # a loop, not unrolled
                     gs[i] = wp.where(t == 0, back[i], wp.vec4(ghvs[i // cap, i % cap], 0.0, 0.0, 0.0))
-                scatter_face_layers_lane(pick(args.layers, args.heights, t), pick(grads.layers, grads.heights, t), args.reads, w1s, pixels.uv0, pixels.uv0_dx,
-                                         pixels.uv0_dy, pixels.surface, base, count, tri_w, gs)  # fmt: skip
+                if wp.static(stochastic):
+                    scatter_face_layers_lane(pick(args.layers, args.heights, t), pick(grads.layers, grads.heights, t), args.reads, pick(args.stoch, args.height_stoch, t), w1s,
+                                             pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, gs)  # fmt: skip
+                else:
+                    scatter_face_layers_lane(pick(args.layers, args.heights, t), pick(grads.layers, grads.heights, t), args.reads, w1s, pixels.uv0, pixels.uv0_dx,
+                                             pixels.uv0_dy, pixels.surface, base, count, tri_w, gs)  # fmt: skip
             elif pick(grads.layers, grads.heights, t).texels.shape[0] > 0:
                 for j in range(num_layers):  # each layer's adds: without face layers, layers add into texels of their own
                     weighted = lane_floats()

@@ -110,9 +110,23 @@ def scatter_layer_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, j: 
 
 
 @functools.cache
-def scatter_face_layers_of(cap: int, lane_weights_t, lane_layers_t):
+def scatter_face_layers_of(cap: int, lane_weights_t, lane_layers_t, stochastic: bool = False):
     """The native call that adds the texel gradients of every layer of a splat of ``cap`` layers
-    where face layers let layers share array layers (``wt_scatter_face_layers_lane``)."""
+    where face layers let layers share array layers (``wt_scatter_face_layers_lane``; with
+    ``stochastic``, ``wt_scatter_face_layers_stochastic_lane``, whose stub also takes the
+    :class:`~warptex.kernels.stochastic.StochasticArgs` ``stoch`` after ``reads``)."""
+    if stochastic:
+
+        def scatter_face_layers_stochastic_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, stoch: StochasticArgs, w1s: lane_weights_t, uv0: wp.array(dtype=wp.vec2),
+                                                uv0_dx: wp.array(dtype=wp.vec2), uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32,
+                                                tri_w: lane_vec3, g: lane_layers_t):  # fmt: skip
+            """``scatter_face_layers_lane`` with stochastic sampling (``stoch``): each read's share
+            ``w · g`` through its stochastic taps over its footprint, pixel by pixel, layer by
+            layer, read by read (``wt_scatter_stochastic_rows``)."""
+            ...
+
+        call = f"wt_scatter_face_layers_stochastic_lane<{cap}>(tex, grad, reads, stoch, w1s, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, g);\n"
+        return wp.func_native(cpu_snippet(call))(specialised(scatter_face_layers_stochastic_lane, f"scatter_face_layers_stochastic_lane{cap}"))
 
     def scatter_face_layers_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, w1s: lane_weights_t, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
                                  uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: lane_vec3, g: lane_layers_t):  # fmt: skip

@@ -361,8 +361,8 @@ WT_INLINE wt_lane_colours wt_layer_blend_lane(const Tex& tex, const Reads& reads
     return out;
 }
 
-// wt_layer_reads compiled once, out of line, for the gradient lane's two kinds of adds
-// (wt_scatter_layer_lane, wt_scatter_face_layers_lane).
+// wt_layer_reads compiled once, out of line, for the gradient lanes' adds (a layer's, or every
+// layer's with face layers; plain or stochastic).
 // twin: splat_layers.layer_read
 template <class Tex, class Reads, class UV, class Surface, class TriW>
 WT_OUTLINE wt_lane_reads wt_layer_reads_outlined(const Tex& tex, const Reads& reads, int j, const float* weighted,
@@ -432,6 +432,42 @@ WT_INLINE void wt_scatter_face_layers_lane(const Tex& tex, const Grad& grad, con
                                  rows.dv, rows.taps, rows.w, 1, gr, 1, WT_L);
 }
 
+// lanes.splat_layers.scatter_face_layers_stochastic_lane: wt_scatter_face_layers_lane with
+// stochastic sampling (stoch, a linear blend): every layer's reads at once, pixel by pixel, layer
+// by layer, read by read, each adding w · g[l · Cap + j] through its stochastic taps over its
+// footprint (wt_scatter_stochastic_rows, every filter's), as the one-pixel body adds them.
+// twin: splat_layers._layer_reads:scatter_layer
+template <int Cap, class Tex, class Grad, class Reads, class Stoch, class Weights, class UV, class Surface, class TriW,
+          class G>
+WT_INLINE void wt_scatter_face_layers_stochastic_lane(const Tex& tex, const Grad& grad, const Reads& reads,
+                                                      const Stoch& stoch, const Weights& w1s, const UV& uv0,
+                                                      const UV& uv0_dx, const UV& uv0_dy, const Surface& surface,
+                                                      int base, int count, const TriW& tri_w, const G& g) {
+    constexpr int N = 3 * Cap;
+    const int num_layers = reads.params.num_layers < Cap ? reads.params.num_layers : Cap;
+    wt_lane_reads at[Cap];
+    wt_lane_colours gj[Cap];
+    int layer[N][WT_L];
+    const Tex* texs[N];
+    const Grad* grads[N];
+    const wt_lane_colours* gr[N];
+    wt_read_rows_n<N> rows;
+    for (int j = 0; j < num_layers; ++j) {
+        float weighted[WT_L];
+        for (int l = 0; l < WT_L; ++l) weighted[l] = w1s.data[l][j];
+        at[j] = wt_layer_reads_outlined(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
+        wt_read_layers(reads.params, surface, j, base, count, &layer[3 * j]);
+        for (int l = 0; l < WT_L; ++l)
+            for (int c = 0; c < 4; ++c) gj[j].data[l][c] = g.data[l * Cap + j][c];
+        for (int k = 0; k < 3; ++k) {
+            const int r = 3 * j + k;
+            texs[r] = &tex, grads[r] = &grad, gr[r] = &gj[j];
+            wt_put_rows(rows, r, at[j], k);
+        }
+    }
+    wt_scatter_stochastic_rows(texs, grads, reads.smp, stoch, 3 * num_layers, layer[0], rows, 1, gr, 1, WT_L);
+}
+
 // lanes.splat_layers.scatter_layer_stochastic_lane: splat_layers.scatter_layer_stochastic of the gradients
 // g[l] of layer j's reads of tex (wt_layer_values_stochastic_lane's): each read k with a positive
 // weight w adds w · g (for the one read of the UV and world-XZ projections too: w is 1) through its
@@ -444,7 +480,7 @@ WT_INLINE void wt_scatter_layer_stochastic_lane(const Tex& tex, const Grad& grad
                                                 const UV& uv0_dx, const UV& uv0_dy, const Surface& surface, int base,
                                                 int count, const TriW& tri_w, const wt_lane_colours& g) {
     const wt_lane_reads at =
-        wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
+        wt_layer_reads_outlined(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
     const int nreads = reads.params.projection == WT_PROJECT_TRIPLANAR ? 3 : 1;
     struct {
         int c[WT_L];
