@@ -2,33 +2,34 @@
 
 The forward lane body computes what :mod:`warptex.kernels.splat`'s forward body computes for
 :data:`~.LANES` pixels: the splat maps read for the whole lane and the pixels' splat weights;
-then layer by layer, in one native call (:func:`.splat_layers.layer_values_lane`), the lane's reads of the layer
-(UV, footprint, weight: ``layer_read`` restated, ``wt_layer_reads``) and its texels' reads over
-their footprints (``wt_accumulate_footprint``), projection by projection in the order
-``read_layer`` adds them; then the blend. Without height blending the blend is a weighted sum in
-the layers' order, added a layer at a time inside that call (:func:`.splat_layers.layer_blend_lane`). Where the
-forward ran on a tape, its lane keeps each pixel's layer colours (``SplatPixels.saved``,
-``Kernels.lane_saved``), and where the tiling needs its gradient, their slopes along it, from the
-same taps; the gradient's lane body, which runs only after such a forward, reads them. It takes
-each pixel's blend and weights backwards and adds into its splat maps and the tiling in pixel
-order, then adds each layer's gradient into its texels by :func:`.splat_layers.scatter_layer_lane`,
-layer by layer: a layer's reads touch texels of its own array layer only, so every texel gets the
-one-pixel body's sums in its order, and the outputs and gradients are the one-pixel kernels' bits.
-Face layers change only the array layer each read samples (``wt_read_layers``), so that layers
-share array layers; their gradients add every layer's reads at once, pixel by pixel, layer by
-layer (``scatter_face_layers_lane``), the one-pixel order again. The cases :func:`grad_lanes_take`
-names run the one-pixel kernel. In the kernels of
-up to 8 layers the weights, the blend and the blend and weights backwards are native code for the
-whole lane (:mod:`.splat_blend`); beyond, the scalar blocks run pixel by pixel.
+then layer by layer, in one native call (:func:`.splat_layers.layer_values_lane`), the lane's
+reads of the layer (UV, footprint, weight: ``layer_read`` restated, ``wt_layer_reads``) and its
+texels' reads over their footprints (``wt_accumulate_footprint``), projection by projection in
+the order ``read_layer`` adds them; then the blend. Without height blending the blend is a
+weighted sum in the layers' order, added a layer at a time inside that call
+(:func:`.splat_layers.layer_blend_lane`). Where the forward ran on a tape, its lane keeps each
+pixel's layer colours (``SplatPixels.saved``, ``Kernels.lane_saved``), and where the tiling needs
+its gradient, their slopes along it, from the same taps; the gradient's lane body, which runs only
+after such a forward, reads them. It takes each pixel's blend and weights backwards and adds into
+its splat maps and the tiling in pixel order, then adds each layer's gradient into its texels by
+:func:`.splat_layers.scatter_layer_lane`, layer by layer: a layer's reads touch texels of its own
+array layer only, so every texel gets the one-pixel body's sums in its order, and the outputs and
+gradients are the one-pixel kernels' bits. Face layers change only the array layer each read
+samples (``wt_read_layers``), so that layers share array layers; their gradients add every layer's
+reads at once, pixel by pixel, layer by layer (``scatter_face_layers_lane``), the one-pixel order
+again. The cases :func:`grad_lanes_take` names run the one-pixel kernel. In the kernels of up to 8
+layers the weights, the blend and the blend and weights backwards are native code for the whole
+lane (:mod:`.splat_blend`); beyond, the scalar blocks run pixel by pixel.
 
 The stochastic splat's lanes are the same bodies with each layer read by
-:func:`.splat_layers.layer_values_stochastic_lane`: per read, each footprint tap's stochastic taps worked out
-natively and read tap by tap (``wt_stochastic_footprint``, as ``stochastic`` and stochastic
-triplanar read theirs), and added back by :func:`.splat_layers.scatter_layer_stochastic_lane` (with the
-anisotropic filter, every footprint tap's stochastic taps in order; with face layers, every
-layer's at once, ``scatter_face_layers_stochastic_lane``). Its forward lane keeps the
-layers' colours for the gradient lane itself (it never takes the tiling's gradient by hand). A
-histogram's blend runs the one-pixel kernels (:func:`stochastic_lanes_take`).
+:func:`.splat_layers.layer_values_stochastic_lane`: per read, each footprint tap's stochastic taps
+worked out natively and read tap by tap (``wt_stochastic_footprint``, as ``stochastic`` and
+stochastic triplanar read theirs), and added back by
+:func:`.splat_layers.scatter_layer_stochastic_lane` (with the anisotropic filter, every footprint
+tap's stochastic taps in order; with face layers, every layer's at once,
+``scatter_face_layers_stochastic_lane``). Its forward lane keeps the layers' colours for the
+gradient lane itself (it never takes the tiling's gradient by hand). A histogram's blend runs the
+one-pixel kernels (:func:`stochastic_lanes_take`).
 """
 
 import functools
@@ -90,9 +91,9 @@ def lane_saved(args: SplatArgs) -> int:
     """Floats a pixel keeps for the texel-gradient lane (``Kernels.lane_saved``): its layers'
     colours, 4 a layer, and their heights where height layers give them, 1 a layer
     (:func:`_kept_width`); where the tiling needs its gradient, the slopes of each along it, as many
-    again (:func:`.splat_layers.layer_values_kept_lane`). Sampling the layers again was a fifth of a splat's
-    forward and backward; with the slopes, which the forward takes from its own taps, it was 60% of
-    it (the fit's view: anisotropic, triplanar layers)."""
+    again (:func:`.splat_layers.layer_values_kept_lane`). Sampling the layers again was a fifth of
+    a splat's forward and backward; with the slopes, which the forward takes from its own taps, it
+    was 60% of it (the fit's view: anisotropic, triplanar layers)."""
     params = args.reads.params
     return (2 if params.tiling.requires_grad else 1) * _kept_width(params)
 

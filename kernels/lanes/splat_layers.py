@@ -54,7 +54,6 @@ def layer_values_kept_lane(tex: TextureView, reads: LayerReads, j: wp.int32, wei
     ...
 
 
-
 @wp.func_native(cpu_snippet(_BLEND.format("false"), "return {};\n"))
 def layer_blend_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2), uv0_dx: wp.array(dtype=wp.vec2),
                      uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: lane_vec3, keep: wp.int32,
