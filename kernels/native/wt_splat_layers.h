@@ -193,8 +193,8 @@ template <class Params, class Saved> WT_INLINE bool wt_kept_slopes(const Params&
 // wt_layer_values_lane's value where the tiling needs its gradient, and what that gradient reads,
 // kept from the same taps: splat_layers.read_layer_slope of layer j of tex at each lane pixel l
 // with weighted[l] > 0 (plain sampling), each read k of the array layer wt_read_layers gives it
-// (face layers). Per read k of wt_layer_reads with a positive weight w: value += w · v and slope += w · (d/du · du/dt +
-// d/dv · dv/dt + d/dlod · dlod/dt
+// (face layers). Per read k of wt_layer_reads with a positive weight w: value += w · v and
+// slope += w · (d/du · du/dt + d/dv · dv/dt + d/dlod · dlod/dt
 // + d/dspread / t), of the read's wt_footprint_slopes and layer_read_slopes' UV and LOD slopes along
 // the tiling t. The value and the slope of texture keep - 1 go into saved's row base + l
 // (wt_kept_column; a height layer's first channel): the gradient's blend reads the values read
@@ -393,6 +393,43 @@ WT_INLINE void wt_scatter_layer_lane(const Tex& tex, const Grad& grad, const Rea
                    triplanar, g);
 }
 
+// Every layer j < num_layers's reads of a lane for the face-layer adds, as read r = 3 j + k of
+// wt_layer_reads' matrix of layer j (weights w1s[l][j]), of the array layers wt_read_layers gives
+// it, each adding layer j's gradient g[l · Cap + j] (wt_scatter_face_layers_lane's and
+// wt_scatter_face_layers_stochastic_lane's shared set-up).
+template <int Cap, class Tex, class Grad> struct wt_face_layer_reads {
+    static constexpr int N = 3 * Cap;
+    wt_lane_reads at[Cap];
+    wt_lane_colours gj[Cap];
+    int layer[N][WT_L];
+    const Tex* texs[N];
+    const Grad* grads[N];
+    const wt_lane_colours* gr[N];
+    wt_read_rows_n<N> rows;
+    int nreads = 0;
+    template <class Reads, class Weights, class UV, class Surface, class TriW, class G>
+    __attribute__((always_inline)) wt_face_layer_reads(const Tex& tex, const Grad& grad, const Reads& reads,
+                                                       const Weights& w1s, const UV& uv0, const UV& uv0_dx,
+                                                       const UV& uv0_dy, const Surface& surface, int base, int count,
+                                                       const TriW& tri_w, const G& g) {
+        const int num_layers = reads.params.num_layers < Cap ? reads.params.num_layers : Cap;
+        for (int j = 0; j < num_layers; ++j) {
+            float weighted[WT_L];
+            for (int l = 0; l < WT_L; ++l) weighted[l] = w1s.data[l][j];
+            at[j] = wt_layer_reads_outlined(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
+            wt_read_layers(reads.params, surface, j, base, count, &layer[3 * j]);
+            for (int l = 0; l < WT_L; ++l)
+                for (int c = 0; c < 4; ++c) gj[j].data[l][c] = g.data[l * Cap + j][c];
+            for (int k = 0; k < 3; ++k) {
+                const int r = 3 * j + k;
+                texs[r] = &tex, grads[r] = &grad, gr[r] = &gj[j];
+                wt_put_rows(rows, r, at[j], k);
+            }
+        }
+        nreads = 3 * num_layers;
+    }
+};
+
 // lanes.splat_layers.scatter_face_layers_lane: wt_scatter_layer_lane of every layer j < num_layers at
 // once, where face layers let layers share array layers (wt_read_layers; projection triplanar,
 // plain sampling): layer j's reads weighted by w1s[l][j] (wt_layer_reads) add w · g[l · Cap + j]
@@ -406,30 +443,10 @@ template <int Cap, class Tex, class Grad, class Reads, class Weights, class UV, 
 WT_INLINE void wt_scatter_face_layers_lane(const Tex& tex, const Grad& grad, const Reads& reads, const Weights& w1s,
                                            const UV& uv0, const UV& uv0_dx, const UV& uv0_dy, const Surface& surface,
                                            int base, int count, const TriW& tri_w, const G& g) {
-    constexpr int N = 3 * Cap;
-    const int num_layers = reads.params.num_layers < Cap ? reads.params.num_layers : Cap;
-    wt_lane_reads at[Cap];
-    wt_lane_colours gj[Cap];
-    int layer[N][WT_L];
-    const Tex* texs[N];
-    const Grad* grads[N];
-    const wt_lane_colours* gr[N];
-    wt_read_rows_n<N> rows;
-    for (int j = 0; j < num_layers; ++j) {
-        float weighted[WT_L];
-        for (int l = 0; l < WT_L; ++l) weighted[l] = w1s.data[l][j];
-        at[j] = wt_layer_reads_outlined(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
-        wt_read_layers(reads.params, surface, j, base, count, &layer[3 * j]);
-        for (int l = 0; l < WT_L; ++l)
-            for (int c = 0; c < 4; ++c) gj[j].data[l][c] = g.data[l * Cap + j][c];
-        for (int k = 0; k < 3; ++k) {
-            const int r = 3 * j + k;
-            texs[r] = &tex, grads[r] = &grad, gr[r] = &gj[j];
-            wt_put_rows(rows, r, at[j], k);
-        }
-    }
-    wt_scatter_footprint_rows<N>(texs, grads, reads.smp, 3 * num_layers, layer[0], rows.u, rows.v, rows.lod, rows.du,
-                                 rows.dv, rows.taps, rows.w, 1, gr, 1, WT_L);
+    const wt_face_layer_reads<Cap, Tex, Grad> f(tex, grad, reads, w1s, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w,
+                                                g);
+    wt_scatter_footprint_rows<3 * Cap>(f.texs, f.grads, reads.smp, f.nreads, f.layer[0], f.rows.u, f.rows.v, f.rows.lod,
+                                       f.rows.du, f.rows.dv, f.rows.taps, f.rows.w, 1, f.gr, 1, WT_L);
 }
 
 // lanes.splat_layers.scatter_face_layers_stochastic_lane: wt_scatter_face_layers_lane with
@@ -443,29 +460,9 @@ WT_INLINE void wt_scatter_face_layers_stochastic_lane(const Tex& tex, const Grad
                                                       const Stoch& stoch, const Weights& w1s, const UV& uv0,
                                                       const UV& uv0_dx, const UV& uv0_dy, const Surface& surface,
                                                       int base, int count, const TriW& tri_w, const G& g) {
-    constexpr int N = 3 * Cap;
-    const int num_layers = reads.params.num_layers < Cap ? reads.params.num_layers : Cap;
-    wt_lane_reads at[Cap];
-    wt_lane_colours gj[Cap];
-    int layer[N][WT_L];
-    const Tex* texs[N];
-    const Grad* grads[N];
-    const wt_lane_colours* gr[N];
-    wt_read_rows_n<N> rows;
-    for (int j = 0; j < num_layers; ++j) {
-        float weighted[WT_L];
-        for (int l = 0; l < WT_L; ++l) weighted[l] = w1s.data[l][j];
-        at[j] = wt_layer_reads_outlined(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
-        wt_read_layers(reads.params, surface, j, base, count, &layer[3 * j]);
-        for (int l = 0; l < WT_L; ++l)
-            for (int c = 0; c < 4; ++c) gj[j].data[l][c] = g.data[l * Cap + j][c];
-        for (int k = 0; k < 3; ++k) {
-            const int r = 3 * j + k;
-            texs[r] = &tex, grads[r] = &grad, gr[r] = &gj[j];
-            wt_put_rows(rows, r, at[j], k);
-        }
-    }
-    wt_scatter_stochastic_rows(texs, grads, reads.smp, stoch, 3 * num_layers, layer[0], rows, 1, gr, 1, WT_L);
+    const wt_face_layer_reads<Cap, Tex, Grad> f(tex, grad, reads, w1s, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w,
+                                                g);
+    wt_scatter_stochastic_rows(f.texs, f.grads, reads.smp, stoch, f.nreads, f.layer[0], f.rows, 1, f.gr, 1, WT_L);
 }
 
 // lanes.splat_layers.scatter_layer_stochastic_lane: splat_layers.scatter_layer_stochastic of the gradients
