@@ -76,7 +76,9 @@ def _stubs():
     seen = {}
     for name, module in list(sys.modules.items()):
         if name.startswith("warptex.kernels"):
-            for value in vars(module).values():
+            values = list(vars(module).values())
+            values += [v for d in values if isinstance(d, dict) for v in d.values()]  # stubs a factory made (lanes.splat_layers.FACE_LAYER_STUBS)
+            for value in values:
                 if isinstance(value, FUNCTION) and getattr(value, "native_snippet", None):
                     seen[f"{name}.{value.key}"] = value.native_snippet.split("#else")[0]
     return seen

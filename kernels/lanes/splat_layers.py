@@ -108,12 +108,24 @@ def scatter_layer_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, j: 
     ...
 
 
+#: The stubs :func:`scatter_face_layers_of` has made, by their Warp name (for ``tests/test_native.py``,
+#: which reads the stubs of module attributes).
+FACE_LAYER_STUBS: dict = {}
+
+
 @functools.cache
 def scatter_face_layers_of(cap: int, lane_weights_t, lane_layers_t, stochastic: bool = False):
     """The native call that adds the texel gradients of every layer of a splat of ``cap`` layers
     where face layers let layers share array layers (``wt_scatter_face_layers_lane``; with
     ``stochastic``, ``wt_scatter_face_layers_stochastic_lane``, whose stub also takes the
     :class:`~warptex.kernels.stochastic.StochasticArgs` ``stoch`` after ``reads``)."""
+    stub = _face_layers_stub(cap, lane_weights_t, lane_layers_t, stochastic)
+    FACE_LAYER_STUBS[stub.key] = stub
+    return stub
+
+
+def _face_layers_stub(cap: int, lane_weights_t, lane_layers_t, stochastic: bool):
+    """:func:`scatter_face_layers_of`'s stub, made."""
     if stochastic:
 
         def scatter_face_layers_stochastic_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, stoch: StochasticArgs, w1s: lane_weights_t, uv0: wp.array(dtype=wp.vec2),
