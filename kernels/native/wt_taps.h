@@ -297,60 +297,58 @@ WT_INLINE wt_lane_colours wt_stochastic_read_lane(const Tex& tex, const Smp& smp
 // the read's LOD in order, each with a positive weight w_k adding w_k times that share. The
 // footprint taps go through wt_stochastic_taps WT_L at a time in that order, and their stochastic
 // taps through a wt_tap_batch per gradient array: every texel gets the scalar kernel's sums in its
-// order, and no footprint's taps need holding (up to 64 per read). Layers, and up to N reads, as
-// wt_scatter_footprint_rows takes them.
+// order, and no footprint's taps need holding (up to 64 per read). Layers as
+// wt_scatter_footprint_rows takes them; the N reads `rows` holds at most.
 // twin: stochastic.scatter_stochastic
 template <int N, class Tex, class Grad, class Smp, class Params> WT_INLINE void
 wt_scatter_stochastic_rows(const Tex* const* texs, const Grad* const* grads, const Smp& smp, const Params& params,
                            const int nreads, const int* layers, const wt_read_rows_n<N>& rows, const int weigh,
                            const wt_lane_colours* const* gr, const int per_read, const int layer_stride = 0) {
-    wt_each_grad_array<(N > WT_MAX_READS ? N : WT_MAX_READS)>(
-        nreads, grads, [&](const int first, const bool* group) __attribute__((always_inline)) {
-            wt_tap_batch<Tex, Grad, Smp> batch(*texs[first], *grads[first], smp);
-            float fu[WT_L], fv[WT_L], flod[WT_L], fraction[WT_L];  // footprint taps waiting for their taps
-            int level[WT_L], lr[WT_L];
-            wt_f4 share[WT_L];
-            int m = 0;
-            auto drain = [&]() __attribute__((always_inline)) {
-                for (int q = m; q < WT_L; ++q) fu[q] = fv[q] = flod[q] = 0.0f;
-                const wt_lane_taps t = wt_stochastic_taps(params, fu, fv, flod, m);
-                for (int q = 0; q < m; ++q) {
-                    if (t.data[13][q] == 0.0f) continue;  // texels.finite_uv_lod of the footprint tap
-                    for (int k = 0; k < 4; ++k) {
-                        const float w = t.data[3 * k + 2][q], tu = t.data[3 * k][q], tv = t.data[3 * k + 1][q];
-                        if (!(w > 0.0f) ||
-                            !(__builtin_fabsf(tu) <= wt_float_max && __builtin_fabsf(tv) <= wt_float_max))
-                            continue;  // scatter.scatter_lod adds nothing
-                        batch.push(tu, tv, level[q], fraction[q], lr[q], w * share[q]);
-                    }
-                }
-                m = 0;
-            };
-            for (int l = 0; l < WT_L; ++l) {
-                for (int r = first; r < nreads; ++r) {
-                    const float w = rows.w[r][l], lod = rows.lod[r][l];
-                    if (!group[r] || !(w > 0.0f) || !(__builtin_fabsf(lod) <= wt_float_max)) continue;
-                    const wt_lane_colours& g = *gr[per_read ? r : 0];
-                    const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
-                    const wt_f4 read_share = weigh ? w * gl : gl;
-                    const float taps = rows.taps[r][l], u = rows.u[r][l], v = rows.v[r][l];
-                    const float du = rows.du[r][l], dv = rows.dv[r][l];
-                    const wt_f4 tap_share = taps != 1.0f ? read_share / taps : read_share;  // footprint.footprint_mean
-                    int read_level;
-                    float read_fraction;
-                    wt_mip_levels(*texs[r], smp, lod, read_level, read_fraction);
-                    const int read_layer = wp::clamp(layers[r * layer_stride + l], 0, texs[r]->num_layers - 1);
-                    for (int j = 0; j < (int)taps; ++j) {  // footprint.footprint_taps
-                        const float s = (float)j + 0.5f - 0.5f * taps;
-                        fu[m] = u + du * s, fv[m] = v + dv * s, flod[m] = lod;  // footprint.footprint_uv
-                        level[m] = read_level, fraction[m] = read_fraction, lr[m] = read_layer, share[m] = tap_share;
-                        if (++m == WT_L) drain();
-                    }
+    wt_each_grad_array<N>(nreads, grads, [&](const int first, const bool* group) __attribute__((always_inline)) {
+        wt_tap_batch<Tex, Grad, Smp> batch(*texs[first], *grads[first], smp);
+        float fu[WT_L], fv[WT_L], flod[WT_L], fraction[WT_L];  // footprint taps waiting for their taps
+        int level[WT_L], lr[WT_L];
+        wt_f4 share[WT_L];
+        int m = 0;
+        auto drain = [&]() __attribute__((always_inline)) {
+            for (int q = m; q < WT_L; ++q) fu[q] = fv[q] = flod[q] = 0.0f;
+            const wt_lane_taps t = wt_stochastic_taps(params, fu, fv, flod, m);
+            for (int q = 0; q < m; ++q) {
+                if (t.data[13][q] == 0.0f) continue;  // texels.finite_uv_lod of the footprint tap
+                for (int k = 0; k < 4; ++k) {
+                    const float w = t.data[3 * k + 2][q], tu = t.data[3 * k][q], tv = t.data[3 * k + 1][q];
+                    if (!(w > 0.0f) || !(__builtin_fabsf(tu) <= wt_float_max && __builtin_fabsf(tv) <= wt_float_max))
+                        continue;  // scatter.scatter_lod adds nothing
+                    batch.push(tu, tv, level[q], fraction[q], lr[q], w * share[q]);
                 }
             }
-            if (m > 0) drain();
-            batch.flush();
-        });
+            m = 0;
+        };
+        for (int l = 0; l < WT_L; ++l) {
+            for (int r = first; r < nreads; ++r) {
+                const float w = rows.w[r][l], lod = rows.lod[r][l];
+                if (!group[r] || !(w > 0.0f) || !(__builtin_fabsf(lod) <= wt_float_max)) continue;
+                const wt_lane_colours& g = *gr[per_read ? r : 0];
+                const wt_f4 gl = {g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]};
+                const wt_f4 read_share = weigh ? w * gl : gl;
+                const float taps = rows.taps[r][l], u = rows.u[r][l], v = rows.v[r][l];
+                const float du = rows.du[r][l], dv = rows.dv[r][l];
+                const wt_f4 tap_share = taps != 1.0f ? read_share / taps : read_share;  // footprint.footprint_mean
+                int read_level;
+                float read_fraction;
+                wt_mip_levels(*texs[r], smp, lod, read_level, read_fraction);
+                const int read_layer = wp::clamp(layers[r * layer_stride + l], 0, texs[r]->num_layers - 1);
+                for (int j = 0; j < (int)taps; ++j) {  // footprint.footprint_taps
+                    const float s = (float)j + 0.5f - 0.5f * taps;
+                    fu[m] = u + du * s, fv[m] = v + dv * s, flod[m] = lod;  // footprint.footprint_uv
+                    level[m] = read_level, fraction[m] = read_fraction, lr[m] = read_layer, share[m] = tap_share;
+                    if (++m == WT_L) drain();
+                }
+            }
+        }
+        if (m > 0) drain();
+        batch.flush();
+    });
 }
 
 // lanes.stochastic.scatter_stochastic_footprint_lane: stochastic.scatter_stochastic of adj[i] for
