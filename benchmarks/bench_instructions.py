@@ -41,6 +41,8 @@ CASES = {
     "triplanar sphere": ("triplanar", "sphere"),
     "triplanar terrain": ("triplanar", "terrain"),
     "splat4 terrain": ("splat4", "terrain"),
+    "splat8 sphere": ("splat8", "sphere"),
+    "triplanar_normal sphere": ("triplanar_normal", "sphere"),
 }
 
 _RUNNER = """
