@@ -50,9 +50,9 @@ WT_INLINE void wt_plane_reads(const Proj& proj, const Smp& smp, int axis, float 
 // Reads r = 0 .. count - 1 of a lane_reads matrix, read r of *texs[r] (lane pixel l's layer
 // layers[r][l]) over its footprint, into value in read order (wt_accumulate_footprint: value += w ·
 // sample where add, value = sample where not).
-template <class Tex, class Smp> WT_INLINE void wt_accumulate_reads(const Tex* const* texs, const Smp& smp,
-                                                                   const int* const* layers, int count, int add,
-                                                                   const wt_lane_reads& at, wt_lane_colours& value) {
+template <class Tex, class Smp, class Reads>
+WT_INLINE void wt_accumulate_reads(const Tex* const* texs, const Smp& smp, const int* const* layers, int count, int add,
+                                   const Reads& at, wt_lane_colours& value) {
     for (int r = 0; r < count; ++r)
         wt_accumulate_footprint(*texs[r], smp, layers[r], at.data[r], at.data[3 + r], at.data[6 + r], at.data[12 + r],
                                 at.data[15 + r], at.data[18 + r], at.data[9 + r], add, value);

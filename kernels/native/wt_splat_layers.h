@@ -12,20 +12,21 @@
 // What each lane pixel l (pixel base + l of the launch) with weighted[l] > 0 reads of layer j of tex
 // (face layers change only the array layer a read samples: wt_read_layers):
 // splat_layers.layer_read's UV, footprint and weight of each read k at the pixel's
-// point (its UV0 and their derivatives, or its surface; tri_w: its triplanar weights), as a
-// lane_reads matrix (all 0 for the other pixels), 16 pixels at a time.
+// point (its UV0 and their derivatives, or its surface; tri_w: its triplanar weights), into the
+// rows of a lane_reads matrix (0 for the other pixels), 16 pixels at a time. The rows of the reads
+// a layer does not have (1 and 2 but with the triplanar projection) are left as they are;
+// wt_layer_reads returns a matrix with them 0.
 // twin: splat_layers.layer_read
-template <class Tex, class Reads, class UV, class Surface, class TriW>
-WT_INLINE wt_lane_reads wt_layer_reads(const Tex& tex, const Reads& reads, int j, const float* weighted, const UV& uv0,
-                                       const UV& uv0_dx, const UV& uv0_dy, const Surface& surface, int base, int count,
-                                       const TriW& tri_w) {
+template <class Tex, class Reads, class UV, class Surface, class TriW, class Out>
+WT_INLINE void wt_layer_reads_into(const Tex& tex, const Reads& reads, int j, const float* weighted, const UV& uv0,
+                                   const UV& uv0_dx, const UV& uv0_dy, const Surface& surface, int base, int count,
+                                   const TriW& tri_w, Out& out) {
     const auto& params = reads.params;
     const float t = wt_float(params.tiling, wp::min(j, params.tiling.shape[0] - 1));  // layer_tiling
     wt_vf w;
     __builtin_memcpy(&w, weighted, sizeof(w));
     const wt_vi read = w > 0.0f;
     const wt_vf zero = 0.0f, one = 1.0f;
-    wt_lane_reads out;
     wt_footprint_lanes fp;
     if (params.projection == WT_PROJECT_UV) {  // UV0 × tiling, its footprint from UV0's derivatives × tiling
         wt_vf uv[2], dx[2], dy[2];
@@ -57,6 +58,13 @@ WT_INLINE wt_lane_reads wt_layer_reads(const Tex& tex, const Reads& reads, int j
             }
         }
     }
+}
+template <class Tex, class Reads, class UV, class Surface, class TriW>
+WT_INLINE wt_lane_reads wt_layer_reads(const Tex& tex, const Reads& reads, int j, const float* weighted, const UV& uv0,
+                                       const UV& uv0_dx, const UV& uv0_dy, const Surface& surface, int base, int count,
+                                       const TriW& tri_w) {
+    wt_lane_reads out;
+    wt_layer_reads_into(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, out);
     return out;
 }
 
@@ -211,8 +219,8 @@ WT_INLINE wt_lane_colours wt_layer_values_slopes(const Tex& tex, const Reads& re
     const auto& params = reads.params;
     const auto& proj = reads.proj;
     const float t = wt_float(params.tiling, wp::min(j, params.tiling.shape[0] - 1));  // layer_tiling
-    const wt_lane_reads at =
-        wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
+    wt_lane_read_rows at;  // the reads' rows, all that is read
+    wt_layer_reads_into(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, at);
     int layer[3][WT_L];
     wt_read_layers(params, surface, j, base, count, layer);
     const int triplanar = params.projection == WT_PROJECT_TRIPLANAR;
@@ -308,10 +316,10 @@ WT_INLINE wt_lane_colours wt_layer_values_lane(const Tex& tex, const Reads& read
     const int triplanar = reads.params.projection == WT_PROJECT_TRIPLANAR;  // value += w · sample, else value = sample
     const Tex* texs[3] = {&tex, &tex, &tex};
     const int* per_read[3] = {layer[0], layer[1], layer[2]};
+    wt_lane_read_rows at;  // the reads' rows, all that is read
+    wt_layer_reads_into(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, at);
     wt_lane_colours value;
-    wt_accumulate_reads(texs, reads.smp, per_read, triplanar ? 3 : 1, triplanar,
-                        wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w),
-                        value);
+    wt_accumulate_reads(texs, reads.smp, per_read, triplanar ? 3 : 1, triplanar, at, value);
     if (keep) wt_keep_layer(reads.params, saved, keep, j, base, count, value);
     return value;
 }
@@ -327,8 +335,8 @@ WT_INLINE wt_lane_colours wt_layer_values_stochastic_lane(const Tex& tex, const 
                                                           const Floats& weighted, const UV& uv0, const UV& uv0_dx,
                                                           const UV& uv0_dy, const Surface& surface, int base, int count,
                                                           const TriW& tri_w, int keep, const Saved& saved) {
-    const wt_lane_reads at =
-        wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
+    wt_lane_read_rows at;  // the reads' rows, all that is read
+    wt_layer_reads_into(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, at);
     int layer[3][WT_L];
     wt_read_layers(reads.params, surface, j, base, count, layer);
     wt_lane_colours value;
@@ -361,7 +369,8 @@ WT_INLINE wt_lane_colours wt_layer_blend_lane(const Tex& tex, const Reads& reads
         // of a splat's forward on the benchmark's sphere (8 layers, UV projection).
         int layer[3][WT_L];
         wt_read_layers(reads.params, surface, j, base, count, layer);
-        wt_lane_reads at = wt_layer_reads(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
+        wt_lane_read_rows at;  // read 0's rows, all that is read
+        wt_layer_reads_into(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, at);
         __builtin_memcpy(at.data[9], weighted.c, sizeof(at.data[9]));  // read 0's weight (1 where read): the layer's
         const Tex* texs[1] = {&tex};
         const int* per_read[1] = {layer[0]};
