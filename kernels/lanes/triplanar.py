@@ -6,7 +6,8 @@ per face.
 What each pixel reads from each projection (its UV, footprint and weight, with triplanar or
 biplanar weights) comes from :func:`~.projection.triplanar_reads_lane` for the whole lane;
 the lane's texture reads from
-:func:`~.projection.accumulate_reads_lane` and its texel-gradient adds from
+:func:`~.projection.accumulate_reads_lane` (plain colour: both in one call,
+:func:`~.projection.triplanar_values_lane`) and its texel-gradient adds from
 :func:`~.scatter.scatter_lod_lanes`, both in the order the scalar bodies take them, so the
 outputs and the gradients are the scalar kernels' bits. The anisotropic filter's footprints of
 several taps add pixel by pixel, read by read, each read's taps in order, inside the native call
@@ -24,7 +25,7 @@ from ..projection import SurfacePixels
 from ..texels import FILTER_ANISOTROPIC, SamplerArgs, pick3, read_channels, write_channels
 from . import LANES, lane_colours, lane_ints, lane_reads
 from .normals import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
-from .projection import accumulate_reads_lane, triplanar_reads_lane
+from .projection import accumulate_reads_lane, triplanar_reads_lane, triplanar_values_lane
 from .sample import accumulate_footprint_lane
 from .scatter import scatter_face_reads_lanes, scatter_lod_lanes, scatter_projection_taps_lanes, scatter_reads_lanes
 from .stochastic import linear_blend, projection_taps_lane, scatter_stochastic_face_reads_lanes, scatter_stochastic_reads_lanes, stochastic_read_lane
@@ -58,13 +59,6 @@ def lane_bodies(args_t):
     gradient (one texture per axis), whose arguments are ``args_t``
     (:class:`~.triplanar.TriplanarArgs`)."""
 
-    def write_colours(args: args_t, reads: lane_reads, base: wp.int32, count: wp.int32, out: wp.array2d(dtype=float)):
-        """The lane's colours, the projections' samples blended by their weights, into ``out``."""
-        faces = args.faces
-        value = accumulate_reads_lane(faces.px, faces.py, faces.pz, args.smp, lane_ints(args.layer), 3, 1, reads)
-        for l in range(count):
-            write_channels(out, base + l, value[l])
-
     def scatter_colours(args: args_t, reads: lane_reads, base: wp.int32, count: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         """The texel gradients of the lane's one-tap reads: each projection's share ``w · g`` of the
         pixel's output gradient ``g``."""
@@ -74,12 +68,13 @@ def lane_bodies(args_t):
             g[l] = read_channels(adj, base + l)
         scatter_lod_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, 3, lane_ints(args.layer), reads, 1, g)
 
-    write_colours = inlined(specialised(write_colours, "triplanar_write_colours"))
     scatter_colours = inlined(specialised(scatter_colours, "triplanar_scatter_colours"))
 
     def colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
-        write_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0, 0), base, count, out)
+        value = triplanar_values_lane(args.faces, args.proj, args.smp, pixels, base, count, lane_ints(args.layer))  # the projections' samples, blended
+        for l in range(count):
+            write_channels(out, base + l, value[l])
 
     def colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)

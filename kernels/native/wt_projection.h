@@ -178,15 +178,14 @@ WT_INLINE void wt_triplanar_weights(const wt_vf* N, wt_vi covered, float sharpne
 
 // lanes.projection.triplanar_reads_lane: what the lane's pixels base .. base + count - 1 read from
 // each projection, with triplanar or biplanar weights (proj.weights): projection.projection_uv,
-// projection_footprint and projection_weights, as a lane_reads matrix (all 0 where a projection is
-// not read). unit_normals: the UVs, footprints and faces of the unit normal (triplanar.unit_base_normal,
-// as normal mapping reads them; the weights are the normal's as given). side: 0, each projection on
-// faces' texture of its axis (px, py, pz); 1 or 2, on the + or - face of that axis, weight 0 where
-// the normal looks at the other face.
-// twin: projection.projection_weights
-template <class Faces, class Proj, class Smp, class Pixels>
-WT_INLINE wt_lane_reads wt_triplanar_reads_lane(const Faces& faces, const Proj& proj, const Smp& smp,
-                                                const Pixels& pixels, int base, int count, int unit_normals, int side) {
+// projection_footprint and projection_weights, into the rows of reads (all 0 where a projection is
+// not read; every row is written), which wt_triplanar_reads_lane returns as a lane_reads matrix. unit_normals: the UVs,
+// footprints and faces of the unit normal (triplanar.unit_base_normal, as normal mapping reads them; the weights are
+// the normal's as given). side: 0, each projection on faces' texture of its axis (px, py, pz); 1 or 2, on the + or -
+// face of that axis, weight 0 where the normal looks at the other face. twin: projection.projection_weights
+template <class Faces, class Proj, class Smp, class Pixels, class Reads>
+WT_INLINE void wt_triplanar_reads_into(const Faces& faces, const Proj& proj, const Smp& smp, const Pixels& pixels,
+                                       int base, int count, int unit_normals, int side, Reads& reads) {
     // projection.surface: the lane's pixels (the tail repeats pixel base, not read), in the projected space.
     float p_[3][WT_L], n_[3][WT_L], dx_[3][WT_L], dy_[3][WT_L], mask_[1][WT_L];  // read into arrays, then as vectors
     wt_rows(pixels.position, base, count, 3, p_);
@@ -227,7 +226,6 @@ WT_INLINE wt_lane_reads wt_triplanar_reads_lane(const Faces& faces, const Proj& 
         }
     }
     // Per projection: projection.plane_uv and plane_footprint, where its weight is > 0.
-    wt_lane_reads reads;
     for (int axis = 0; axis < 3; ++axis) {
         const float t = wt_float(proj.tiling, wp::min(axis, proj.tiling.shape[0] - 1));  // projection_tiling
         // faces.on_axis
@@ -238,5 +236,27 @@ WT_INLINE wt_lane_reads wt_triplanar_reads_lane(const Faces& faces, const Proj& 
         wt_plane_reads(proj, smp, axis, t, tex, P, N, DX, DY, u, v, fp);
         wt_put_read(reads, axis, W[axis] > 0.0f, u, v, fp, W[axis]);
     }
+}
+template <class Faces, class Proj, class Smp, class Pixels>
+WT_INLINE wt_lane_reads wt_triplanar_reads_lane(const Faces& faces, const Proj& proj, const Smp& smp,
+                                                const Pixels& pixels, int base, int count, int unit_normals, int side) {
+    wt_lane_reads reads;
+    wt_triplanar_reads_into(faces, proj, smp, pixels, base, count, unit_normals, side, reads);
     return reads;
+}
+
+// lanes.projection.triplanar_values_lane: row l, lane pixel l's colour, its projections' samples (on
+// faces' texture of each axis, layer layers[l]) blended by their weights in read order:
+// wt_accumulate_reads_lane(faces.px, faces.py, faces.pz, ..., 3, 1, wt_triplanar_reads_lane(...)) in
+// one call, its reads in rows that are not zeroed first (every row is written) and not copied.
+template <class Faces, class Proj, class Smp, class Pixels, class Ints>
+WT_INLINE wt_lane_colours wt_triplanar_values_lane(const Faces& faces, const Proj& proj, const Smp& smp,
+                                                   const Pixels& pixels, int base, int count, const Ints& layers) {
+    wt_lane_read_rows reads;
+    wt_triplanar_reads_into(faces, proj, smp, pixels, base, count, 0, 0, reads);
+    const decltype(&faces.px) texs[3] = {&faces.px, &faces.py, &faces.pz};
+    const int* per_read[3] = {layers.c, layers.c, layers.c};
+    wt_lane_colours value;
+    wt_accumulate_reads(texs, smp, per_read, 3, 1, reads, value);
+    return value;
 }
