@@ -24,12 +24,12 @@ from ..texels import SamplerArgs, TextureView
 from . import lane_colours, lane_ints, lane_reads
 
 
-@wp.func_native(cpu_snippet("return wt_accumulate_reads_lane(tex0, tex1, tex2, smp, layers, count, add, reads);\n", "return {};\n"))
-def accumulate_reads_lane(tex0: TextureView, tex1: TextureView, tex2: TextureView, smp: SamplerArgs, layers: lane_ints, count: wp.int32, add: wp.int32, reads: lane_reads) -> lane_colours:  # fmt: skip
-    """Row ``l``: lane pixel ``l``'s reads ``r = 0 .. count - 1`` in ``reads``
-    (:data:`~.lane_reads`), read ``r`` of ``tex_r`` (layer ``layers[l]``) over its footprint,
-    blended in read order by their weights where ``add`` (``value += w · sample``: a pixel's
-    projections), the one read's sample where not; 0 where the pixel reads nothing."""
+@wp.func_native(cpu_snippet("return wt_read_lane(tex, smp, layers, reads, r);\n", "return {};\n"))
+def read_lane(tex: TextureView, smp: SamplerArgs, layers: lane_ints, reads: lane_reads, r: wp.int32) -> lane_colours:
+    """Row ``l``: lane pixel ``l``'s sample of read ``r`` of ``reads`` (layer ``layers[l]``) over its
+    footprint, where its weight is positive (``wt_accumulate_footprint``), read in place (a matrix of
+    that read alone, zeroed and filled per projection, then read, was a tenth of a normal-mapping
+    lane)."""
     ...
 
 
@@ -51,11 +51,11 @@ def triplanar_reads_lane(faces: FaceTextures, proj: ProjectionArgs, smp: Sampler
 
 @wp.func_native(cpu_snippet("return wt_triplanar_values_lane(faces, proj, smp, pixels, base, count, layers);\n", "return {};\n"))
 def triplanar_values_lane(faces: FaceTextures, proj: ProjectionArgs, smp: SamplerArgs, pixels: SurfacePixels, base: wp.int32, count: wp.int32, layers: lane_ints) -> lane_colours:
-    """Row ``l``: lane pixel ``l``'s colour, its projections' samples blended by their weights:
-    ``accumulate_reads_lane(faces.px, faces.py, faces.pz, smp, layers, 3, 1, triplanar_reads_lane(
-    faces, proj, smp, pixels, base, count, 0, 0))`` in one call, whose reads never become a
-    :data:`~.lane_reads` matrix (one zeroed, returned and copied in per lane: 10% of a biplanar
-    forward)."""
+    """Row ``l``: lane pixel ``l``'s colour, its projections' samples (on ``faces``' texture of each
+    axis, layer ``layers[l]``) over their footprints, blended by their weights in read order
+    (``value += w · sample``), from the reads ``triplanar_reads_lane(faces, proj, smp, pixels, base,
+    count, 0, 0)`` gives, in one call: the reads never become a :data:`~.lane_reads` matrix (one
+    zeroed, returned and copied in per lane was 10% of a biplanar forward)."""
     ...
 
 

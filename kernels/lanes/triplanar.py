@@ -4,12 +4,11 @@ forward, and both steps of its two-step gradient), plain or stochastic, one text
 per face.
 
 What each pixel reads from each projection (its UV, footprint and weight, with triplanar or
-biplanar weights) comes from :func:`~.projection.triplanar_reads_lane` for the whole lane;
-the lane's texture reads from
-:func:`~.projection.accumulate_reads_lane` (plain colour: both in one call,
-:func:`~.projection.triplanar_values_lane`) and its texel-gradient adds from
-:func:`~.scatter.scatter_lod_lanes`, both in the order the scalar bodies take them, so the
-outputs and the gradients are the scalar kernels' bits. The anisotropic filter's footprints of
+biplanar weights) comes from :func:`~.projection.triplanar_reads_lane` for the whole lane (in
+plain colour's forward, with its texture reads, :func:`~.projection.triplanar_values_lane`);
+normal mapping's texture reads from :func:`~.projection.read_lane`, a projection at a time; the
+texel-gradient adds from :func:`~.scatter.scatter_lod_lanes`. All take them in the order the
+scalar bodies do, so the outputs and the gradients are the scalar kernels' bits. The anisotropic filter's footprints of
 several taps add pixel by pixel, read by read, each read's taps in order, inside the native call
 (``wt_scatter_footprint_rows``), as the scalar bodies add them.
 """
@@ -25,7 +24,7 @@ from ..projection import SurfacePixels
 from ..texels import FILTER_ANISOTROPIC, SamplerArgs, pick3, read_channels, write_channels
 from . import LANES, lane_colours, lane_ints, lane_reads
 from .normals import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
-from .projection import accumulate_reads_lane, triplanar_reads_lane, triplanar_values_lane
+from .projection import read_lane, triplanar_reads_lane, triplanar_values_lane
 from .sample import accumulate_footprint_lane
 from .scatter import scatter_face_reads_lanes, scatter_lod_lanes, scatter_projection_taps_lanes, scatter_reads_lanes
 from .stochastic import linear_blend, projection_taps_lane, scatter_stochastic_face_reads_lanes, scatter_stochastic_reads_lanes, stochastic_read_lane
@@ -36,12 +35,7 @@ def projection_samples_lane(faces: FaceTextures, smp: SamplerArgs, layer: wp.int
     """Row ``l``: lane pixel ``l``'s unweighted sample of projection ``axis`` (read ``axis`` of
     ``reads``, on ``faces``' texture of that axis), where its weight is positive; the other rows are
     not set."""
-    one = lane_reads()  # read `axis` alone, as read 0
-    for q in range(7):
-        for l in range(LANES):
-            one[3 * q, l] = reads[3 * q + axis, l]
-    tex = on_axis(faces.px, faces.py, faces.pz, axis)
-    return accumulate_reads_lane(tex, tex, tex, smp, lane_ints(layer), 1, 0, one)
+    return read_lane(on_axis(faces.px, faces.py, faces.pz, axis), smp, lane_ints(layer), reads, axis)
 
 
 @wp.func

@@ -58,15 +58,14 @@ WT_INLINE void wt_accumulate_reads(const Tex* const* texs, const Smp& smp, const
                                 at.data[15 + r], at.data[18 + r], at.data[9 + r], add, value);
 }
 
-// lanes.projection.accumulate_reads_lane: row l, lane pixel l's reads r = 0 .. count - 1 blended in
-// read order by their weights where add, the one read's sample where not; 0 where it reads nothing.
-template <class Tex, class Smp, class Ints>
-WT_INLINE wt_lane_colours wt_accumulate_reads_lane(const Tex& tex0, const Tex& tex1, const Tex& tex2, const Smp& smp,
-                                                   const Ints& layers, int count, int add, const wt_lane_reads& reads) {
-    const Tex* texs[3] = {&tex0, &tex1, &tex2};
-    const int* per_read[3] = {layers.c, layers.c, layers.c};
+// lanes.projection.read_lane: row l, lane pixel l's sample of read r of reads (layer layers[l]) over
+// its footprint, where its weight is positive (wt_accumulate_footprint, add 0), read in place
+// rather than copied into a matrix of that read alone first.
+template <class Tex, class Smp, class Ints, class Reads>
+WT_INLINE wt_lane_colours wt_read_lane(const Tex& tex, const Smp& smp, const Ints& layers, const Reads& reads, int r) {
     wt_lane_colours value;
-    wt_accumulate_reads(texs, smp, per_read, count, add, reads, value);
+    wt_accumulate_footprint(tex, smp, layers.c, reads.data[r], reads.data[3 + r], reads.data[6 + r], reads.data[12 + r],
+                            reads.data[15 + r], reads.data[18 + r], reads.data[9 + r], 0, value);
     return value;
 }
 
@@ -246,9 +245,9 @@ WT_INLINE wt_lane_reads wt_triplanar_reads_lane(const Faces& faces, const Proj& 
 }
 
 // lanes.projection.triplanar_values_lane: row l, lane pixel l's colour, its projections' samples (on
-// faces' texture of each axis, layer layers[l]) blended by their weights in read order:
-// wt_accumulate_reads_lane(faces.px, faces.py, faces.pz, ..., 3, 1, wt_triplanar_reads_lane(...)) in
-// one call, its reads in rows that are not zeroed first (every row is written) and not copied.
+// faces' texture of each axis, layer layers[l]) blended by their weights in read order
+// (wt_accumulate_reads, add 1), from wt_triplanar_reads_into's reads, in rows that are not zeroed
+// first (every row is written) and never copied.
 template <class Faces, class Proj, class Smp, class Pixels, class Ints>
 WT_INLINE wt_lane_colours wt_triplanar_values_lane(const Faces& faces, const Proj& proj, const Smp& smp,
                                                    const Pixels& pixels, int base, int count, const Ints& layers) {
