@@ -3,7 +3,7 @@
 The forward lane body computes what :mod:`warptex.kernels.splat`'s forward body computes for
 :data:`~.LANES` pixels: the splat maps read for the whole lane and the pixels' splat weights;
 then layer by layer, in one native call (:func:`.splat_layers.layer_values_lane`), the lane's
-reads of the layer (UV, footprint, weight: ``layer_read`` restated, ``wt_layer_reads``) and its
+reads of the layer (UV, footprint, weight: ``layer_read`` restated, ``wt_layer_reads_into``) and its
 texels' reads over their footprints (``wt_accumulate_footprint``), projection by projection in
 the order ``read_layer`` adds them; then the blend. Without height blending the blend is a
 weighted sum in the layers' order, added a layer at a time inside that call

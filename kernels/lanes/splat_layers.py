@@ -1,6 +1,6 @@
 """The splat's layer reads and their texel gradients for a lane of pixels, as native calls (the twins
 of :mod:`warptex.kernels.splat_layers`, ``native/wt_splat_layers.h``): a layer's reads of a lane
-(UV, footprint, weight per projection: ``layer_read`` restated, ``wt_layer_reads``) and their
+(UV, footprint, weight per projection: ``layer_read`` restated, ``wt_layer_reads_into``) and their
 texels' reads over their footprints, plain or stochastic, kept for the gradient lane where it
 reads them; and the adds of a layer's gradient into its texels, layer by layer, or, with face
 layers (by which layers share array layers), every layer's at once, pixel by pixel. The splat's
@@ -33,7 +33,7 @@ def layer_values_lane(tex: TextureView, reads: LayerReads, j: wp.int32, weighted
                       uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: lane_vec3, keep: wp.int32,
                       saved: wp.array2d(dtype=float)) -> lane_colours:  # fmt: skip
     """Row ``l``: layer ``j`` of ``tex`` read at lane pixel ``l`` over the footprints of
-    ``wt_layer_reads``' reads as ``read_layer`` reads it (0 where ``weighted[l]`` is not positive);
+    ``wt_layer_reads_into``' reads as ``read_layer`` reads it (0 where ``weighted[l]`` is not positive);
     one native call rather than a read per projection. Where ``keep`` and ``saved`` is not empty,
     also stored in ``saved``'s row ``base + l``, columns ``4 j .. 4 j + 3`` (``SplatPixels.saved``)."""
     ...
@@ -99,7 +99,7 @@ def scatter_layer_stochastic_lane(tex: TextureView, grad: TexelGrad, reads: Laye
 def scatter_layer_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, j: wp.int32, weighted: lane_floats, uv0: wp.array(dtype=wp.vec2),
                        uv0_dx: wp.array(dtype=wp.vec2), uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32,
                        tri_w: lane_vec3, g: lane_colours):  # fmt: skip
-    """``scatter_layer`` of the gradients ``g[l]`` of layer ``j``'s reads of ``tex`` (``wt_layer_reads``,
+    """``scatter_layer`` of the gradients ``g[l]`` of layer ``j``'s reads of ``tex`` (``wt_layer_reads_into``,
     as :func:`layer_values_lane` reads them) into ``grad``, pixel by pixel and read by read:
     ``w · g`` per projection where triplanar (``scatter_projections``), ``g`` itself for the one
     read of the other projections (``.scatter.scatter_lod_lanes``); where a read has several taps

@@ -314,13 +314,13 @@ template <int N> struct wt_read_rows_n {
 };
 typedef wt_read_rows_n<6> wt_read_rows;
 // Read r of `rows`: read `axis` of `at`.
-template <int N> WT_INLINE void wt_put_rows(wt_read_rows_n<N>& rows, int r, const wt_lane_reads& at, int axis) {
+template <int N, class At> WT_INLINE void wt_put_rows(wt_read_rows_n<N>& rows, int r, const At& at, int axis) {
     rows.u[r] = at.data[axis], rows.v[r] = at.data[3 + axis], rows.lod[r] = at.data[6 + axis];
     rows.w[r] = at.data[9 + axis], rows.du[r] = at.data[12 + axis], rows.dv[r] = at.data[15 + axis];
     rows.taps[r] = at.data[18 + axis];
 }
-// Reads 0 .. 2 of `at`.
-WT_INLINE wt_read_rows wt_rows_of(const wt_lane_reads& at) {
+// Reads 0 .. 2 of `at` (a wt_lane_reads, or a wt_lane_read_rows).
+template <class At> WT_INLINE wt_read_rows wt_rows_of(const At& at) {
     wt_read_rows rows;
     for (int r = 0; r < 3; ++r) wt_put_rows(rows, r, at, r);
     return rows;
@@ -348,17 +348,17 @@ WT_INLINE void wt_scatter_read_rows(const Tex* const* texs, const Grad* const* g
 }
 
 // wt_scatter_rows of the reads of a lane_reads matrix `at`.
-template <class Tex, class Grad, class Smp>
+template <class Tex, class Grad, class Smp, class At>
 WT_INLINE void wt_scatter_lod_of(const Tex* const* texs, const Grad* const* grads, const Smp& smp, const int nreads,
-                                 const int* layers, const wt_lane_reads& at, const int weigh,
-                                 const wt_lane_colours* const* gr, const int per_read) {
+                                 const int* layers, const At& at, const int weigh, const wt_lane_colours* const* gr,
+                                 const int per_read) {
     wt_scatter_read_rows(texs, grads, smp, nreads, layers, wt_rows_of(at), weigh, gr, per_read);
 }
 
 // Every read's share of one gradient g[l] per lane pixel.
-template <class Tex, class Grad, class Smp>
+template <class Tex, class Grad, class Smp, class At>
 WT_INLINE void wt_scatter_lod(const Tex* const* texs, const Grad* const* grads, const Smp& smp, const int nreads,
-                              const int* layers, const wt_lane_reads& at, const int weigh, const wt_lane_colours& g) {
+                              const int* layers, const At& at, const int weigh, const wt_lane_colours& g) {
     const wt_lane_colours* gr[1] = {&g};
     wt_scatter_lod_of(texs, grads, smp, nreads, layers, at, weigh, gr, 0);
 }

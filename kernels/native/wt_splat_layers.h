@@ -14,8 +14,8 @@
 // splat_layers.layer_read's UV, footprint and weight of each read k at the pixel's
 // point (its UV0 and their derivatives, or its surface; tri_w: its triplanar weights), into the
 // rows of a lane_reads matrix (0 for the other pixels), 16 pixels at a time. The rows of the reads
-// a layer does not have (1 and 2 but with the triplanar projection) are left as they are;
-// wt_layer_reads returns a matrix with them 0.
+// a layer does not have (1 and 2 but with the triplanar projection) are left as they are: its
+// callers read only the reads it has.
 // twin: splat_layers.layer_read
 template <class Tex, class Reads, class UV, class Surface, class TriW, class Out>
 WT_INLINE void wt_layer_reads_into(const Tex& tex, const Reads& reads, int j, const float* weighted, const UV& uv0,
@@ -59,15 +59,6 @@ WT_INLINE void wt_layer_reads_into(const Tex& tex, const Reads& reads, int j, co
         }
     }
 }
-template <class Tex, class Reads, class UV, class Surface, class TriW>
-WT_INLINE wt_lane_reads wt_layer_reads(const Tex& tex, const Reads& reads, int j, const float* weighted, const UV& uv0,
-                                       const UV& uv0_dx, const UV& uv0_dy, const Surface& surface, int base, int count,
-                                       const TriW& tri_w) {
-    wt_lane_reads out;
-    wt_layer_reads_into(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, out);
-    return out;
-}
-
 // filters.sample_footprint_derivatives of each read lane (weight[l] > 0): (value, d/du, d/dv,
 // d/dlod, d/dspread) of its footprint's taps, each tap's sample_lod_derivatives at
 // footprint.footprint_uv summed in tap order from 0, then divided by the taps; and from the same
@@ -201,7 +192,7 @@ template <class Params, class Saved> WT_INLINE bool wt_kept_slopes(const Params&
 // wt_layer_values_lane's value where the tiling needs its gradient, and what that gradient reads,
 // kept from the same taps: splat_layers.read_layer_slope of layer j of tex at each lane pixel l
 // with weighted[l] > 0 (plain sampling), each read k of the array layer wt_read_layers gives it
-// (face layers). Per read k of wt_layer_reads with a positive weight w: value += w · v and
+// (face layers). Per read k of wt_layer_reads_into with a positive weight w: value += w · v and
 // slope += w · (d/du · du/dt + d/dv · dv/dt + d/dlod · dlod/dt
 // + d/dspread / t), of the read's wt_footprint_slopes and layer_read_slopes' UV and LOD slopes along
 // the tiling t. The value and the slope of texture keep - 1 go into saved's row base + l
@@ -294,7 +285,7 @@ template <class Params, class Saved> WT_INLINE void wt_keep_layer(const Params& 
 }
 
 // lanes.splat_layers.layer_values_lane: row l, layer j of tex read at lane pixel l over the footprints of
-// wt_layer_reads' reads as read_layer reads them (per projection value += w · sample where
+// wt_layer_reads_into's reads as read_layer reads them (per projection value += w · sample where
 // triplanar, value = sample for the one read of the other projections; 0 where weighted[l] is not
 // positive). Where keep (1 + the texture's place: colour layers 1, height layers 2) and saved is not
 // empty, also stored in saved's row base + l (SplatPixels.saved, wt_kept_column); with Kept (the
@@ -325,7 +316,7 @@ WT_INLINE wt_lane_colours wt_layer_values_lane(const Tex& tex, const Reads& read
 }
 
 // lanes.splat_layers.layer_values_stochastic_lane: wt_layer_values_lane with stochastic sampling (stoch, a
-// linear blend: no histogram), as read_layer_stochastic reads a layer: per read k of wt_layer_reads
+// linear blend: no histogram), as read_layer_stochastic reads a layer: per read k of wt_layer_reads_into
 // with a positive weight w, value += w · sample_stochastic (from 0, for the one read of the UV and
 // world-XZ projections too: its weight is 1), each read's sample_stochastic over its footprint
 // (wt_stochastic_footprint). Kept in saved where keep, as wt_layer_values_lane keeps its value.
@@ -386,18 +377,20 @@ WT_INLINE wt_lane_colours wt_layer_blend_lane(const Tex& tex, const Reads& reads
     return out;
 }
 
-// wt_layer_reads compiled once, out of line, for the gradient lanes' adds (a layer's, or every
-// layer's with face layers; plain or stochastic).
+// wt_layer_reads_into compiled once, out of line, for the gradient lanes' adds (a layer's, or every
+// layer's with face layers; plain or stochastic), which read only the reads a layer has.
 // twin: splat_layers.layer_read
 template <class Tex, class Reads, class UV, class Surface, class TriW>
-WT_OUTLINE wt_lane_reads wt_layer_reads_outlined(const Tex& tex, const Reads& reads, int j, const float* weighted,
-                                                 const UV& uv0, const UV& uv0_dx, const UV& uv0_dy,
-                                                 const Surface& surface, int base, int count, const TriW& tri_w) {
-    return wt_layer_reads(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
+WT_OUTLINE wt_lane_read_rows wt_layer_reads_outlined(const Tex& tex, const Reads& reads, int j, const float* weighted,
+                                                     const UV& uv0, const UV& uv0_dx, const UV& uv0_dy,
+                                                     const Surface& surface, int base, int count, const TriW& tri_w) {
+    wt_lane_read_rows at;
+    wt_layer_reads_into(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, at);
+    return at;
 }
 
 // lanes.splat_layers.scatter_layer_lane: splat_layers.scatter_layer of the gradients g[l] of layer j's
-// reads of tex (wt_layer_reads) into grad, pixel by pixel and read by read: w · g per projection
+// reads of tex (wt_layer_reads_into) into grad, pixel by pixel and read by read: w · g per projection
 // where triplanar, g itself for the one read of the other projections (wt_scatter_lod: where a read
 // has several taps, the anisotropic filter's, pixel by pixel, each read's taps 16 at a time).
 // twin: splat_layers._layer_reads:scatter_layer
@@ -419,12 +412,12 @@ WT_INLINE void wt_scatter_layer_lane(const Tex& tex, const Grad& grad, const Rea
 }
 
 // Every layer j < num_layers's reads of a lane for the face-layer adds, as read r = 3 j + k of
-// wt_layer_reads' matrix of layer j (weights w1s[l][j]), of the array layers wt_read_layers gives
+// wt_layer_reads_into's reads of layer j (weights w1s[l][j]), of the array layers wt_read_layers gives
 // it, each adding layer j's gradient g[l · Cap + j] (wt_scatter_face_layers_lane's and
 // wt_scatter_face_layers_stochastic_lane's shared set-up).
 template <int Cap, class Tex, class Grad> struct wt_face_layer_reads {
     static constexpr int N = 3 * Cap;
-    wt_lane_reads at[Cap];
+    wt_lane_read_rows at[Cap];  // triplanar: every row written
     wt_lane_colours gj[Cap];
     int layer[N][WT_L];
     const Tex* texs[N];
@@ -457,7 +450,7 @@ template <int Cap, class Tex, class Grad> struct wt_face_layer_reads {
 
 // lanes.splat_layers.scatter_face_layers_lane: wt_scatter_layer_lane of every layer j < num_layers at
 // once, where face layers let layers share array layers (wt_read_layers; projection triplanar,
-// plain sampling): layer j's reads weighted by w1s[l][j] (wt_layer_reads) add w · g[l · Cap + j]
+// plain sampling): layer j's reads weighted by w1s[l][j] (wt_layer_reads_into) add w · g[l · Cap + j]
 // pixel by pixel, layer by layer, read by read, the one-pixel body's order, so that two layers'
 // reads of one array layer at two pixels add in pixel order as they do there (layer by layer, they
 // would not). The reads of every layer go through one wt_scatter_footprint_rows of up to 3 · Cap
@@ -501,7 +494,7 @@ WT_INLINE void wt_scatter_layer_stochastic_lane(const Tex& tex, const Grad& grad
                                                 const Stoch& stoch, int j, const Floats& weighted, const UV& uv0,
                                                 const UV& uv0_dx, const UV& uv0_dy, const Surface& surface, int base,
                                                 int count, const TriW& tri_w, const wt_lane_colours& g) {
-    const wt_lane_reads at =
+    const wt_lane_read_rows at =
         wt_layer_reads_outlined(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);
     const int nreads = reads.params.projection == WT_PROJECT_TRIPLANAR ? 3 : 1;
     struct {

@@ -196,8 +196,8 @@ WT_INLINE wt_lane_taps wt_stochastic_taps_lane(const Tex& tex, const Smp& smp, c
 
 // lanes.stochastic.projection_taps_lane: the taps of projection `axis` of a triplanar lane's reads,
 // the weights of the pixels that do not read it (weight 0) set to 0, so that nothing reads them.
-template <class Params>
-WT_INLINE wt_lane_taps wt_projection_taps_lane(const Params& params, const wt_lane_reads& reads, int axis, int count) {
+template <class Params, class At>
+WT_INLINE wt_lane_taps wt_projection_taps_lane(const Params& params, const At& reads, int axis, int count) {
     wt_lane_taps taps = wt_stochastic_taps(params, reads.data[axis], reads.data[3 + axis], reads.data[6 + axis], count);
     for (int k = 0; k < 4; ++k)
         for (int l = 0; l < WT_L; ++l)
