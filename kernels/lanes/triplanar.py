@@ -8,9 +8,10 @@ biplanar weights) comes from :func:`~.projection.triplanar_reads_lane` for the w
 plain colour's forward, with its texture reads, :func:`~.projection.triplanar_values_lane`);
 normal mapping's texture reads from :func:`~.projection.read_lane`, a projection at a time; the
 texel-gradient adds from :func:`~.scatter.scatter_lod_lanes`. All take them in the order the
-scalar bodies do, so the outputs and the gradients are the scalar kernels' bits. The anisotropic filter's footprints of
-several taps add pixel by pixel, read by read, each read's taps in order, inside the native call
-(``wt_scatter_footprint_rows``), as the scalar bodies add them.
+scalar bodies do, so the outputs and the gradients are the scalar kernels' bits. The
+anisotropic filter's footprints of several taps add pixel by pixel, read by read, each read's
+taps in order, inside the native call (``wt_scatter_footprint_rows``), as the scalar bodies add
+them.
 """
 
 import functools

@@ -178,10 +178,11 @@ WT_INLINE void wt_triplanar_weights(const wt_vf* N, wt_vi covered, float sharpne
 // lanes.projection.triplanar_reads_lane: what the lane's pixels base .. base + count - 1 read from
 // each projection, with triplanar or biplanar weights (proj.weights): projection.projection_uv,
 // projection_footprint and projection_weights, into the rows of reads (all 0 where a projection is
-// not read; every row is written), which wt_triplanar_reads_lane returns as a lane_reads matrix. unit_normals: the UVs,
-// footprints and faces of the unit normal (triplanar.unit_base_normal, as normal mapping reads them; the weights are
-// the normal's as given). side: 0, each projection on faces' texture of its axis (px, py, pz); 1 or 2, on the + or -
-// face of that axis, weight 0 where the normal looks at the other face. twin: projection.projection_weights
+// not read; every row is written). unit_normals: the UVs, footprints and faces of the unit normal
+// (triplanar.unit_base_normal, as normal mapping reads them; the weights are the normal's as
+// given). side: 0, each projection on faces' texture of its axis (px, py, pz); 1 or 2, on the + or
+// - face of that axis, weight 0 where the normal looks at the other face.
+// twin: projection.projection_weights
 template <class Faces, class Proj, class Smp, class Pixels, class Reads>
 WT_INLINE void wt_triplanar_reads_into(const Faces& faces, const Proj& proj, const Smp& smp, const Pixels& pixels,
                                        int base, int count, int unit_normals, int side, Reads& reads) {
@@ -236,6 +237,7 @@ WT_INLINE void wt_triplanar_reads_into(const Faces& faces, const Proj& proj, con
         wt_put_read(reads, axis, W[axis] > 0.0f, u, v, fp, W[axis]);
     }
 }
+// wt_triplanar_reads_into as a lane_reads matrix, which the lane bodies pass on.
 template <class Faces, class Proj, class Smp, class Pixels>
 WT_INLINE wt_lane_reads wt_triplanar_reads_lane(const Faces& faces, const Proj& proj, const Smp& smp,
                                                 const Pixels& pixels, int base, int count, int unit_normals, int side) {

@@ -59,6 +59,7 @@ WT_INLINE void wt_layer_reads_into(const Tex& tex, const Reads& reads, int j, co
         }
     }
 }
+
 // filters.sample_footprint_derivatives of each read lane (weight[l] > 0): (value, d/du, d/dv,
 // d/dlod, d/dspread) of its footprint's taps, each tap's sample_lod_derivatives at
 // footprint.footprint_uv summed in tap order from 0, then divided by the taps; and from the same
