@@ -24,22 +24,12 @@ def scatter_levels_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, uv:
 @wp.func_native(cpu_snippet("wt_scatter_reads_lanes(tex0, tex1, tex2, grad0, grad1, grad2, smp, layers, reads, g0, g1, g2);\n"))
 def scatter_reads_lanes(tex0: TextureView, tex1: TextureView, tex2: TextureView, grad0: TexelGrad, grad1: TexelGrad, grad2: TexelGrad, smp: SamplerArgs,
                         layers: lane_ints, reads: lane_reads, g0: lane_colours, g1: lane_colours, g2: lane_colours):  # fmt: skip
-    """:func:`scatter_lod_lanes` of three reads with a gradient each: read ``r`` of every lane
-    pixel ``l`` adds ``g_r[l]`` itself (not weighted) into ``grad_r``, where its weight in
-    ``reads`` is positive, pixel by pixel and read by read as the scalar kernels add them."""
-    ...
-
-
-@wp.func_native(cpu_snippet("wt_scatter_lod_lanes(tex0, tex1, tex2, grad0, grad1, grad2, smp, count, layers, reads, weigh, g);\n"))
-def scatter_lod_lanes(tex0: TextureView, tex1: TextureView, tex2: TextureView, grad0: TexelGrad, grad1: TexelGrad, grad2: TexelGrad, smp: SamplerArgs, count: wp.int32,
-                      layers: lane_ints, reads: lane_reads, weigh: wp.int32, g: lane_colours):  # fmt: skip
-    """:func:`~warptex.kernels.scatter.scatter_lod` of each read ``r = 0 .. count - 1`` of every lane
-    pixel ``l``'s share of its gradient ``g[l]`` (``w · g[l]``, ``w`` the read's weight, where
-    ``weigh``; ``g[l]`` where not): read ``r`` of ``tex_r`` (layer ``layers[l]``) at its UV and LOD
-    in ``reads`` (:data:`~.lane_reads`), into ``grad_r`` (nothing where it is empty), where its
-    weight is positive, pixel by pixel and read by read as the scalar kernels add them. Where a
-    read's footprint takes several taps (the anisotropic filter's), the lane's adds go pixel by
-    pixel, read by read, each footprint's taps in order (``scatter.scatter_footprint``)."""
+    """:func:`~warptex.kernels.scatter.scatter_lod` of three reads with a gradient each: read ``r``
+    (:data:`~.lane_reads`) of every lane pixel ``l`` adds ``g_r[l]`` itself (not weighted) into
+    ``grad_r`` (nothing where it is empty), where its weight in ``reads`` is positive, pixel by
+    pixel and read by read as the scalar kernels add them. Where a read's footprint takes several
+    taps (the anisotropic filter's), pixel by pixel, read by read, each footprint's taps in order
+    (``scatter.scatter_footprint``)."""
     ...
 
 
@@ -57,7 +47,7 @@ def scatter_footprint_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, 
 def scatter_face_reads_lanes(tex_px: TextureView, tex_nx: TextureView, tex_py: TextureView, tex_ny: TextureView, tex_pz: TextureView, tex_nz: TextureView,
                              grad_px: TexelGrad, grad_nx: TexelGrad, grad_py: TexelGrad, grad_ny: TexelGrad, grad_pz: TexelGrad, grad_nz: TexelGrad,
                              smp: SamplerArgs, layers: lane_ints, plus: lane_reads, minus: lane_reads, weigh: wp.int32, g0: lane_colours, g1: lane_colours, g2: lane_colours):  # fmt: skip
-    """:func:`scatter_lod_lanes` with a texture per face: every lane pixel ``l`` adds each
+    """:func:`scatter_reads_lanes` with a texture per face: every lane pixel ``l`` adds each
     projection ``a``'s gradient ``g_a[l]`` (its share ``w · g_a[l]`` where ``weigh``: colour's;
     the sample's own where not: the two-step normal's) into the gradient of the face it reads
     (``plus``, ``minus``: ``projection.triplanar_reads_lane``'s reads of the two sides), where

@@ -102,7 +102,7 @@ def scatter_layer_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, j: 
     """``scatter_layer`` of the gradients ``g[l]`` of layer ``j``'s reads of ``tex`` (``wt_layer_reads_into``,
     as :func:`layer_values_lane` reads them) into ``grad``, pixel by pixel and read by read:
     ``w · g`` per projection where triplanar (``scatter_projections``), ``g`` itself for the one
-    read of the other projections (``.scatter.scatter_lod_lanes``); where a read has several taps
+    read of the other projections (``wt_scatter_lod``); where a read has several taps
     (the anisotropic filter's), the lane's taps pixel by pixel, read by read, each read's in order
     (``wt_scatter_footprint_rows``)."""
     ...

@@ -5,9 +5,10 @@ per face.
 
 What each pixel reads from each projection (its UV, footprint and weight, with triplanar or
 biplanar weights) comes from :func:`~.projection.triplanar_reads_lane` for the whole lane (in
-plain colour's forward, with its texture reads, :func:`~.projection.triplanar_values_lane`);
-normal mapping's texture reads from :func:`~.projection.read_lane`, a projection at a time; the
-texel-gradient adds from :func:`~.scatter.scatter_lod_lanes`. All take them in the order the
+plain colour, with its texture reads, :func:`~.projection.triplanar_values_lane`, and with its
+texel-gradient adds, :func:`~.projection.triplanar_scatter_lane`); normal mapping's texture reads
+from :func:`~.projection.read_lane`, a projection at a time, and its texel-gradient adds from
+:mod:`.scatter`. All take them in the order the
 scalar bodies do, so the outputs and the gradients are the scalar kernels' bits. The
 anisotropic filter's footprints of several taps add pixel by pixel, read by read, each read's
 taps in order, inside the native call (``wt_scatter_footprint_rows``), as the scalar bodies add
@@ -25,9 +26,9 @@ from ..projection import SurfacePixels
 from ..texels import FILTER_ANISOTROPIC, SamplerArgs, pick3, read_channels, write_channels
 from . import LANES, lane_colours, lane_ints, lane_reads
 from .normals import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
-from .projection import read_lane, triplanar_reads_lane, triplanar_values_lane
+from .projection import read_lane, triplanar_reads_lane, triplanar_scatter_lane, triplanar_values_lane
 from .sample import accumulate_footprint_lane
-from .scatter import scatter_face_reads_lanes, scatter_lod_lanes, scatter_projection_taps_lanes, scatter_reads_lanes
+from .scatter import scatter_face_reads_lanes, scatter_projection_taps_lanes, scatter_reads_lanes
 from .stochastic import linear_blend, projection_taps_lane, scatter_stochastic_face_reads_lanes, scatter_stochastic_reads_lanes, stochastic_read_lane
 
 
@@ -54,17 +55,6 @@ def lane_bodies(args_t):
     gradient (one texture per axis), whose arguments are ``args_t``
     (:class:`~.triplanar.TriplanarArgs`)."""
 
-    def scatter_colours(args: args_t, reads: lane_reads, base: wp.int32, count: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
-        """The texel gradients of the lane's one-tap reads: each projection's share ``w · g`` of the
-        pixel's output gradient ``g``."""
-        faces = args.faces
-        g = lane_colours()
-        for l in range(count):
-            g[l] = read_channels(adj, base + l)
-        scatter_lod_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, 3, lane_ints(args.layer), reads, 1, g)
-
-    scatter_colours = inlined(specialised(scatter_colours, "triplanar_scatter_colours"))
-
     def colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
         value = triplanar_values_lane(args.faces, args.proj, args.smp, pixels, base, count, lane_ints(args.layer))  # the projections' samples, blended
@@ -73,7 +63,7 @@ def lane_bodies(args_t):
 
     def colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
-        scatter_colours(args, triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0, 0), base, count, grads, adj)
+        triplanar_scatter_lane(args.faces, grads, args.proj, args.smp, pixels, base, count, lane_ints(args.layer), adj)
 
     return inlined(specialised(colour_lane, "triplanar_colour_lane")), inlined(specialised(colour_grad_lane, "triplanar_colour_grad_lane"))
 

@@ -12,6 +12,7 @@
 #include "wt_footprint.h"
 #include "wt_normals.h"
 #include "wt_sample.h"
+#include "wt_scatter.h"
 
 // (u, v) and the footprint of projection `axis` at tiling t of `tex` (its level 0) on the lane's
 // surface P, N, DX, DY (projection.plane_uv and plane_footprint): also what a splat layer mapped
@@ -260,4 +261,20 @@ WT_INLINE wt_lane_colours wt_triplanar_values_lane(const Faces& faces, const Pro
     wt_lane_colours value;
     wt_accumulate_reads(texs, smp, per_read, 3, 1, reads, value);
     return value;
+}
+
+// lanes.projection.triplanar_scatter_lane: the texel gradients of plain colour's reads (each
+// projection's share w · g[l] of lane pixel l's output gradient adj[base + l], into the gradient
+// of its axis's texture, layer layers[l]), from wt_triplanar_reads_into's reads in rows that are
+// not zeroed first and never copied, added pixel by pixel and read by read (wt_scatter_lod).
+// twin: triplanar._bodies:colour_grad
+template <class Faces, class Grads, class Proj, class Smp, class Pixels, class Ints, class Adj>
+WT_INLINE void wt_triplanar_scatter_lane(const Faces& faces, const Grads& grads, const Proj& proj, const Smp& smp,
+                                         const Pixels& pixels, int base, int count, const Ints& layers,
+                                         const Adj& adj) {
+    wt_lane_read_rows reads;
+    wt_triplanar_reads_into(faces, proj, smp, pixels, base, count, 0, 0, reads);
+    const decltype(&faces.px) texs[3] = {&faces.px, &faces.py, &faces.pz};
+    const decltype(&grads.px) grad[3] = {&grads.px, &grads.py, &grads.pz};
+    wt_scatter_lod(texs, grad, smp, 3, layers.c, reads, 1, wt_adj_lane(adj, base, count));
 }

@@ -407,16 +407,6 @@ WT_INLINE void wt_scatter_reads_lanes(const Tex& tex0, const Tex& tex1, const Te
     wt_scatter_lod_of(texs, grads, smp, 3, layers.c, reads, 0, gr, 1);
 }
 
-// lanes.scatter.scatter_lod_lanes: reads r = 0 .. count - 1, each adding its share of g.
-template <class Tex, class Grad, class Smp, class Ints>
-WT_INLINE void wt_scatter_lod_lanes(const Tex& tex0, const Tex& tex1, const Tex& tex2, const Grad& grad0,
-                                    const Grad& grad1, const Grad& grad2, const Smp& smp, int count, const Ints& layers,
-                                    const wt_lane_reads& reads, int weigh, const wt_lane_colours& g) {
-    const Tex* texs[3] = {&tex0, &tex1, &tex2};
-    const Grad* grads[3] = {&grad0, &grad1, &grad2};
-    wt_scatter_lod(texs, grads, smp, count, layers.c, reads, weigh, g);
-}
-
 // texels.read_channels of the output gradients adj[i] of the lane's pixels i = base .. base + count
 // - 1 (the lane's tail repeats pixel base).
 template <class Adj> WT_INLINE wt_lane_colours wt_adj_lane(const Adj& adj, int base, int count) {
