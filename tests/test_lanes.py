@@ -802,7 +802,7 @@ def test_stochastic_gradient_lanes_add_the_one_pixel_sums(rng, launched, method,
 def test_triplanar_normal_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, threads):
     """Normal mapping's two-step gradient: the first step's lanes (``triplanar._samples_lanes``)
     store the one-pixel kernel's samples and weights, and add each projection's own gradient into
-    the texels in its order (``lane_scatter.scatter_reads_lanes``), and the second step's lanes
+    the texels in its order (``wt_triplanar_scatter_samples_lane``), and the second step's lanes
     make the normal and its gradient in the samples (``normal_lanes``), on 3 threads too."""
     g = _hand_gbuffer(rng, 20_000)
     tex = wt.Texture(rng.random((64, 32, 3), dtype=np.float32), requires_grad=True)

@@ -19,18 +19,10 @@ import warp as wp
 from ..faces import FaceGrads, FaceTextures
 from ..family import lane_covered
 from ..native import cpu_snippet
+from ..normals import NormalMapArgs
 from ..projection import ProjectionArgs, SurfacePixels
-from ..texels import SamplerArgs, TextureView
+from ..texels import SamplerArgs
 from . import lane_colours, lane_ints, lane_reads
-
-
-@wp.func_native(cpu_snippet("return wt_read_lane(tex, smp, layers, reads, r);\n", "return {};\n"))
-def read_lane(tex: TextureView, smp: SamplerArgs, layers: lane_ints, reads: lane_reads, r: wp.int32) -> lane_colours:
-    """Row ``l``: lane pixel ``l``'s sample of read ``r`` of ``reads`` (layer ``layers[l]``) over its
-    footprint, where its weight is positive (``wt_accumulate_footprint``), read in place (a matrix of
-    that read alone, zeroed and filled per projection, then read, was a tenth of a normal-mapping
-    lane)."""
-    ...
 
 
 @wp.func_native(cpu_snippet("return wt_triplanar_reads_lane(faces, proj, smp, pixels, base, count, unit_normals, side);\n", "return {};\n"))
@@ -68,6 +60,37 @@ def triplanar_scatter_lane(faces: FaceTextures, grads: FaceGrads, proj: Projecti
     read as the scalar kernels add them, from the reads ``triplanar_reads_lane(faces, proj, smp,
     pixels, base, count, 0, 0)`` gives, in one call (the reads as a zeroed :data:`~.lane_reads`,
     returned, then copied into the scatter, were 11% of a biplanar forward and backward)."""
+    ...
+
+
+@wp.func_native(cpu_snippet("return wt_triplanar_normals_lane(faces, proj, nm, smp, pixels, base, count, layers);\n", "return {};\n"))
+def triplanar_normals_lane(faces: FaceTextures, proj: ProjectionArgs, nm: NormalMapArgs, smp: SamplerArgs, pixels: SurfacePixels, base: wp.int32, count: wp.int32, layers: lane_ints) -> lane_colours:  # fmt: skip
+    """Row ``l``: lane pixel ``l``'s normal as normal mapping's pixel body makes it (``x, y, z, 0``; 0
+    where it is not covered), from its reads on the unit normal (``triplanar_reads_lane(faces,
+    proj, smp, pixels, base, count, 1, 0)``'s), each projection's sample on ``faces``' texture of
+    its axis (layer ``layers[l]``, read in place: ``wt_read_lane``) and ``surface_normals_lane``'s arithmetic, in
+    one call."""
+    ...
+
+
+@wp.func_native(cpu_snippet("wt_triplanar_samples_lane(faces, proj, smp, pixels, base, count, layers, samples, weights);\n"))
+def triplanar_samples_lane(faces: FaceTextures, proj: ProjectionArgs, smp: SamplerArgs, pixels: SurfacePixels, base: wp.int32, count: wp.int32, layers: lane_ints,
+                           samples: wp.array2d(dtype=wp.vec4), weights: wp.array(dtype=wp.vec3)):  # fmt: skip
+    """What normal mapping's first step stores for the lane's pixels ``i = base .. base + count - 1``
+    (:class:`~warptex.kernels.triplanar.ProjectionSamples`), from the reads and samples
+    :func:`triplanar_normals_lane` makes: ``weights[i]``, the projections' weights (0 where the
+    pixel is not covered), and ``samples[i, axis]``, each projection's sample (0 where its weight
+    is 0)."""
+    ...
+
+
+@wp.func_native(cpu_snippet("wt_triplanar_scatter_samples_lane(faces, grads, proj, smp, pixels, base, count, layers, adj);\n"))
+def triplanar_scatter_samples_lane(faces: FaceTextures, grads: FaceGrads, proj: ProjectionArgs, smp: SamplerArgs, pixels: SurfacePixels, base: wp.int32, count: wp.int32,
+                                   layers: lane_ints, adj: wp.array2d(dtype=wp.vec4)):  # fmt: skip
+    """The gradients ``adj[i, axis]`` of the samples :func:`triplanar_samples_lane` stored for the
+    lane's pixels ``i = base .. base + count - 1``, each added (not weighted) into the texels of its
+    projection's read on the unit normal (``grads.px``, ``py``, ``pz``; layer ``layers[l]``),
+    pixel by pixel and read by read as the scalar kernels add them."""
     ...
 
 

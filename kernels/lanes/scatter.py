@@ -21,18 +21,6 @@ def scatter_levels_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, uv:
     ...
 
 
-@wp.func_native(cpu_snippet("wt_scatter_reads_lanes(tex0, tex1, tex2, grad0, grad1, grad2, smp, layers, reads, g0, g1, g2);\n"))
-def scatter_reads_lanes(tex0: TextureView, tex1: TextureView, tex2: TextureView, grad0: TexelGrad, grad1: TexelGrad, grad2: TexelGrad, smp: SamplerArgs,
-                        layers: lane_ints, reads: lane_reads, g0: lane_colours, g1: lane_colours, g2: lane_colours):  # fmt: skip
-    """:func:`~warptex.kernels.scatter.scatter_lod` of three reads with a gradient each: read ``r``
-    (:data:`~.lane_reads`) of every lane pixel ``l`` adds ``g_r[l]`` itself (not weighted) into
-    ``grad_r`` (nothing where it is empty), where its weight in ``reads`` is positive, pixel by
-    pixel and read by read as the scalar kernels add them. Where a read's footprint takes several
-    taps (the anisotropic filter's), pixel by pixel, read by read, each footprint's taps in order
-    (``scatter.scatter_footprint``)."""
-    ...
-
-
 @wp.func_native(cpu_snippet("wt_scatter_footprint_lane(tex, grad, smp, uv, uv_dx, uv_dy, lods, layers, constant_layer, lod_source, constant_lod, adj, base);\n"))
 def scatter_footprint_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, uv: wp.array(dtype=wp.vec2), uv_dx: wp.array(dtype=wp.vec2), uv_dy: wp.array(dtype=wp.vec2),
                            lods: wp.array(dtype=float), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32, lod_source: wp.int32, constant_lod: float,
@@ -47,7 +35,7 @@ def scatter_footprint_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, 
 def scatter_face_reads_lanes(tex_px: TextureView, tex_nx: TextureView, tex_py: TextureView, tex_ny: TextureView, tex_pz: TextureView, tex_nz: TextureView,
                              grad_px: TexelGrad, grad_nx: TexelGrad, grad_py: TexelGrad, grad_ny: TexelGrad, grad_pz: TexelGrad, grad_nz: TexelGrad,
                              smp: SamplerArgs, layers: lane_ints, plus: lane_reads, minus: lane_reads, weigh: wp.int32, g0: lane_colours, g1: lane_colours, g2: lane_colours):  # fmt: skip
-    """:func:`scatter_reads_lanes` with a texture per face: every lane pixel ``l`` adds each
+    """:func:`~warptex.kernels.scatter.scatter_lod` of the lane's reads with a texture per face: every lane pixel ``l`` adds each
     projection ``a``'s gradient ``g_a[l]`` (its share ``w · g_a[l]`` where ``weigh``: colour's;
     the sample's own where not: the two-step normal's) into the gradient of the face it reads
     (``plus``, ``minus``: ``projection.triplanar_reads_lane``'s reads of the two sides), where

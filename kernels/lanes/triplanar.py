@@ -6,13 +6,12 @@ per face.
 What each pixel reads from each projection (its UV, footprint and weight, with triplanar or
 biplanar weights) comes from :func:`~.projection.triplanar_reads_lane` for the whole lane (in
 plain colour, with its texture reads, :func:`~.projection.triplanar_values_lane`, and with its
-texel-gradient adds, :func:`~.projection.triplanar_scatter_lane`); normal mapping's texture reads
-from :func:`~.projection.read_lane`, a projection at a time, and its texel-gradient adds from
-:mod:`.scatter`. All take them in the order the
-scalar bodies do, so the outputs and the gradients are the scalar kernels' bits. The
-anisotropic filter's footprints of several taps add pixel by pixel, read by read, each read's
-taps in order, inside the native call (``wt_scatter_footprint_rows``), as the scalar bodies add
-them.
+texel-gradient adds, :func:`~.projection.triplanar_scatter_lane`, and so, with plain sampling, normal
+mapping: :func:`plain_normal_lane_bodies`); the other texel-gradient adds from :mod:`.scatter`. All
+take them in the order the scalar bodies do, so the outputs and the gradients are the scalar
+kernels' bits. The anisotropic filter's footprints of several taps add pixel by pixel, read by
+read, each read's taps in order, inside the native call (``wt_scatter_footprint_rows``), as the
+scalar bodies add them.
 """
 
 import functools
@@ -20,24 +19,16 @@ import functools
 import warp as wp
 
 from .. import inlined, specialised
-from ..faces import FaceGrads, FaceTextures, on_axis
+from ..faces import FaceGrads, on_axis
 from ..family import lane_covered
 from ..projection import SurfacePixels
-from ..texels import FILTER_ANISOTROPIC, SamplerArgs, pick3, read_channels, write_channels
+from ..texels import FILTER_ANISOTROPIC, pick3, read_channels, write_channels
 from . import LANES, lane_colours, lane_ints, lane_reads
 from .normals import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
-from .projection import read_lane, triplanar_reads_lane, triplanar_scatter_lane, triplanar_values_lane
+from .projection import triplanar_normals_lane, triplanar_reads_lane, triplanar_samples_lane, triplanar_scatter_lane, triplanar_scatter_samples_lane, triplanar_values_lane
 from .sample import accumulate_footprint_lane
-from .scatter import scatter_face_reads_lanes, scatter_projection_taps_lanes, scatter_reads_lanes
+from .scatter import scatter_face_reads_lanes, scatter_projection_taps_lanes
 from .stochastic import linear_blend, projection_taps_lane, scatter_stochastic_face_reads_lanes, scatter_stochastic_reads_lanes, stochastic_read_lane
-
-
-@wp.func
-def projection_samples_lane(faces: FaceTextures, smp: SamplerArgs, layer: wp.int32, reads: lane_reads, axis: wp.int32) -> lane_colours:
-    """Row ``l``: lane pixel ``l``'s unweighted sample of projection ``axis`` (read ``axis`` of
-    ``reads``, on ``faces``' texture of that axis), where its weight is positive; the other rows are
-    not set."""
-    return read_lane(on_axis(faces.px, faces.py, faces.pz, axis), smp, lane_ints(layer), reads, axis)
 
 
 @wp.func
@@ -198,6 +189,35 @@ def stochastic_lane_bodies(args_t):
 
 
 @functools.cache
+def plain_normal_lane_bodies(args_t, samples_t):
+    """:func:`normal_lane_bodies` of plain sampling with a texture per axis: each body one native
+    call, which reads the projections on the unit normal and their samples and makes the normals
+    (:func:`~.projection.triplanar_normals_lane`), stores the samples and weights
+    (:func:`~.projection.triplanar_samples_lane`) or adds the samples' gradients into their texels
+    (:func:`~.projection.triplanar_scatter_samples_lane`). Through Warp, the reads were a zeroed
+    :data:`~.lane_reads` matrix returned and then copied into each native call that took them, with
+    each projection's samples (10% of a normal-mapping forward and backward in ``perf``)."""
+
+    def normal_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
+        count = wp.min(out.shape[0] - base, LANES)
+        write_normals(triplanar_normals_lane(args.faces, args.proj, args.normal_map, args.smp, pixels, base, count, lane_ints(args.layer)), base, count, out)
+
+    def samples_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: samples_t):
+        count = wp.min(out.weights.shape[0] - base, LANES)
+        triplanar_samples_lane(args.faces, args.proj, args.smp, pixels, base, count, lane_ints(args.layer), out.samples, out.weights)
+
+    def samples_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: samples_t):
+        count = wp.min(adj.samples.shape[0] - base, LANES)
+        triplanar_scatter_samples_lane(args.faces, grads, args.proj, args.smp, pixels, base, count, lane_ints(args.layer), adj.samples)
+
+    return (
+        inlined(specialised(normal_lane, "triplanar_normal_lane")),
+        inlined(specialised(samples_lane, "triplanar_samples_lane")),
+        inlined(specialised(samples_grad_lane, "triplanar_samples_grad_lane")),
+    )
+
+
+@functools.cache
 def normal_lane_bodies(args_t, samples_t, stochastic: bool = False, faces: bool = False):
     """``(normal_lane, samples_lane, samples_grad_lane)``: the lane bodies of normal mapping, one
     texture per axis or per face (``faces``), and of the first step of its two-step gradient, which
@@ -211,7 +231,9 @@ def normal_lane_bodies(args_t, samples_t, stochastic: bool = False, faces: bool 
     taps (``.scatter.scatter_projection_taps_lanes``; with the anisotropic filter,
     :func:`~.stochastic.scatter_stochastic_reads_lanes`; per face,
     :func:`~.stochastic.scatter_stochastic_face_reads_lanes`); a histogram's blend is not theirs
-    (:func:`linear_blend_take`)."""
+    (:func:`linear_blend_take`). Plain sampling with a texture per axis: :func:`plain_normal_lane_bodies`."""
+    if not stochastic and not faces:
+        return plain_normal_lane_bodies(args_t, samples_t)
     if faces:
 
         def face_samples(args: args_t, plus: lane_reads, minus: lane_reads, axis: wp.int32, count: wp.int32) -> lane_colours:
@@ -259,7 +281,7 @@ def normal_lane_bodies(args_t, samples_t, stochastic: bool = False, faces: bool 
             else:
                 scatter_face_reads_lanes(f.px, f.nx, f.py, f.ny, f.pz, f.nz, grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, args.smp, lane_ints(args.layer), plus, minus, 0, gx, gy, gz)
 
-    elif stochastic:
+    else:  # stochastic (plain sampling: plain_normal_lane_bodies)
 
         def unit_normal_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
             """``(reads, sx, sy, sz)``: the lane's reads on the unit normal and each projection's samples."""
@@ -282,22 +304,6 @@ def normal_lane_bodies(args_t, samples_t, stochastic: bool = False, faces: bool 
                 ty = projection_taps_lane(args.stoch, reads, 1, count)
                 tz = projection_taps_lane(args.stoch, reads, 2, count)
                 scatter_projection_taps_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, layers, tx, ty, tz, gx, gy, gz)
-
-    else:
-
-        def unit_normal_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32):
-            """``(reads, sx, sy, sz)``: the lane's reads on the unit normal and each projection's samples."""
-            reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 0)
-            sx = projection_samples_lane(args.faces, args.smp, args.layer, reads, 0)
-            sy = projection_samples_lane(args.faces, args.smp, args.layer, reads, 1)
-            sz = projection_samples_lane(args.faces, args.smp, args.layer, reads, 2)
-            return reads, sx, sy, sz
-
-        def scatter_samples(args: args_t, pixels: SurfacePixels, base: wp.int32, count: wp.int32, grads: FaceGrads, gx: lane_colours, gy: lane_colours, gz: lane_colours):
-            """Each projection's own gradient (unweighted) added into its texels."""
-            reads = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 1, 0)
-            faces = args.faces
-            scatter_reads_lanes(faces.px, faces.py, faces.pz, grads.px, grads.py, grads.pz, args.smp, lane_ints(args.layer), reads, gx, gy, gz)
 
     kind = ("_stochastic" if stochastic else "") + ("_faces" if faces else "")
     unit_normal_samples = inlined(specialised(unit_normal_samples, f"triplanar{kind}_unit_normal_samples"))

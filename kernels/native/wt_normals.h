@@ -186,9 +186,9 @@ WT_INLINE wt_lane_colours wt_lane_normals(const wt_vf* r, wt_vi covered) {
 // lanes.normals.surface_normals_lane: row l, lane pixel l's normal as normal mapping's pixel body
 // makes it (x, y, z, 0), from its projections' weights (rows 9-11 of reads) and samples sx, sy, sz;
 // 0 where the pixel is not covered.
-template <class Proj, class NM, class Pixels>
+template <class Proj, class NM, class Pixels, class Reads>
 WT_INLINE wt_lane_colours wt_surface_normals_lane(const Proj& proj, const NM& nm, const Pixels& pixels, int base,
-                                                  int count, const wt_lane_reads& reads, const wt_lane_colours& sx,
+                                                  int count, const Reads& reads, const wt_lane_colours& sx,
                                                   const wt_lane_colours& sy, const wt_lane_colours& sz) {
     float m_[1][WT_L];
     wt_vf N[3], W[3], S[3][4], total[3], r[3];

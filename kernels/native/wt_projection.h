@@ -59,7 +59,7 @@ WT_INLINE void wt_accumulate_reads(const Tex* const* texs, const Smp& smp, const
                                 at.data[15 + r], at.data[18 + r], at.data[9 + r], add, value);
 }
 
-// lanes.projection.read_lane: row l, lane pixel l's sample of read r of reads (layer layers[l]) over
+// Row l, lane pixel l's sample of read r of reads (layer layers[l]) over
 // its footprint, where its weight is positive (wt_accumulate_footprint, add 0), read in place
 // rather than copied into a matrix of that read alone first.
 template <class Tex, class Smp, class Ints, class Reads>
@@ -277,4 +277,76 @@ WT_INLINE void wt_triplanar_scatter_lane(const Faces& faces, const Grads& grads,
     const decltype(&faces.px) texs[3] = {&faces.px, &faces.py, &faces.pz};
     const decltype(&grads.px) grad[3] = {&grads.px, &grads.py, &grads.pz};
     wt_scatter_lod(texs, grad, smp, 3, layers.c, reads, 1, wt_adj_lane(adj, base, count));
+}
+
+// Normal mapping's reads of the lane, on the unit normal (wt_triplanar_reads_into's unit_normals,
+// each projection on faces' texture of its axis), in rows that are not zeroed first and never
+// copied; each projection's sample s[axis] (row l: lane pixel l's, where its weight is > 0, else
+// 0) read in place (wt_read_lane).
+template <class Faces, class Proj, class Smp, class Pixels, class Ints>
+WT_INLINE void wt_normal_samples_into(const Faces& faces, const Proj& proj, const Smp& smp, const Pixels& pixels,
+                                      int base, int count, const Ints& layers, wt_lane_read_rows& reads,
+                                      wt_lane_colours* s) {
+    wt_triplanar_reads_into(faces, proj, smp, pixels, base, count, 1, 0, reads);
+    s[0] = wt_read_lane(faces.px, smp, layers, reads, 0);
+    s[1] = wt_read_lane(faces.py, smp, layers, reads, 1);
+    s[2] = wt_read_lane(faces.pz, smp, layers, reads, 2);
+}
+
+// lanes.projection.triplanar_normals_lane: row l, lane pixel l's normal as normal mapping's pixel
+// body makes it (x, y, z, 0; 0 where it is not covered), from wt_normal_samples_into's reads and
+// samples (wt_surface_normals_lane), in one call.
+// twin: triplanar._bodies:normal
+template <class Faces, class Proj, class NM, class Smp, class Pixels, class Ints>
+WT_INLINE wt_lane_colours wt_triplanar_normals_lane(const Faces& faces, const Proj& proj, const NM& nm, const Smp& smp,
+                                                    const Pixels& pixels, int base, int count, const Ints& layers) {
+    wt_lane_read_rows reads;
+    wt_lane_colours s[3];
+    wt_normal_samples_into(faces, proj, smp, pixels, base, count, layers, reads, s);
+    return wt_surface_normals_lane(proj, nm, pixels, base, count, reads, s[0], s[1], s[2]);
+}
+
+// lanes.projection.triplanar_samples_lane: what normal mapping's first step stores for lane pixels
+// i = base .. base + count - 1 (wt_normal_samples_into's): weights[i], the projections' weights
+// (0 where the pixel is not covered), and samples[i, axis], each projection's sample (0 where its
+// weight is 0).
+// twin: triplanar._bodies:samples
+template <class Faces, class Proj, class Smp, class Pixels, class Ints, class Samples, class Weights>
+WT_INLINE void wt_triplanar_samples_lane(const Faces& faces, const Proj& proj, const Smp& smp, const Pixels& pixels,
+                                         int base, int count, const Ints& layers, const Samples& samples,
+                                         const Weights& weights) {
+    wt_lane_read_rows reads;
+    wt_lane_colours s[3];
+    wt_normal_samples_into(faces, proj, smp, pixels, base, count, layers, reads, s);
+    for (int l = 0; l < count; ++l) {
+        *wp::address(weights, base + l) = wt_v3(reads.data[9][l], reads.data[10][l], reads.data[11][l]);
+        for (int axis = 0; axis < 3; ++axis) {
+            const float* row = s[axis].data[l];
+            *wp::address(samples, base + l, axis) =
+                reads.data[9 + axis][l] > 0.0f ? wt_v4(row[0], row[1], row[2], row[3]) : wt_v4(0.0f);
+        }
+    }
+}
+
+// lanes.projection.triplanar_scatter_samples_lane: the gradients adj[i, axis] of the samples normal
+// mapping's first step stored (i = base .. base + count - 1), each added (not weighted) into the
+// texels of its projection's read on the unit normal, pixel by pixel and read by read
+// (wt_scatter_lod_of), with the reads in rows that are not zeroed first and never copied.
+// twin: triplanar._bodies:samples_grad
+template <class Faces, class Grads, class Proj, class Smp, class Pixels, class Ints, class Adj>
+WT_INLINE void wt_triplanar_scatter_samples_lane(const Faces& faces, const Grads& grads, const Proj& proj,
+                                                 const Smp& smp, const Pixels& pixels, int base, int count,
+                                                 const Ints& layers, const Adj& adj) {
+    wt_lane_read_rows reads;
+    wt_triplanar_reads_into(faces, proj, smp, pixels, base, count, 1, 0, reads);
+    wt_lane_colours g[3];  // row l: lane pixel l's gradient of each projection's sample (0 past count)
+    for (int l = 0; l < count; ++l)
+        for (int axis = 0; axis < 3; ++axis) {
+            const wt_v4 a = *wp::address(adj, base + l, axis);
+            for (int c = 0; c < 4; ++c) g[axis].data[l][c] = a.c[c];
+        }
+    const decltype(&faces.px) texs[3] = {&faces.px, &faces.py, &faces.pz};
+    const decltype(&grads.px) grad[3] = {&grads.px, &grads.py, &grads.pz};
+    const wt_lane_colours* gr[3] = {&g[0], &g[1], &g[2]};
+    wt_scatter_lod_of(texs, grad, smp, 3, layers.c, reads, 0, gr, 1);
 }

@@ -395,18 +395,6 @@ WT_INLINE void wt_scatter_levels_lane(const Tex& tex, const Grad& grad, const Sm
     wt_scatter_levels_any(1, texs, grads, smp, u, v, levels, fractions, layer, active, g);
 }
 
-// lanes.scatter.scatter_reads_lanes: three reads with a gradient each, g_r[l] added (not weighted).
-template <class Tex, class Grad, class Smp, class Ints>
-WT_INLINE void wt_scatter_reads_lanes(const Tex& tex0, const Tex& tex1, const Tex& tex2, const Grad& grad0,
-                                      const Grad& grad1, const Grad& grad2, const Smp& smp, const Ints& layers,
-                                      const wt_lane_reads& reads, const wt_lane_colours& g0, const wt_lane_colours& g1,
-                                      const wt_lane_colours& g2) {
-    const Tex* texs[3] = {&tex0, &tex1, &tex2};
-    const Grad* grads[3] = {&grad0, &grad1, &grad2};
-    const wt_lane_colours* gr[3] = {&g0, &g1, &g2};
-    wt_scatter_lod_of(texs, grads, smp, 3, layers.c, reads, 0, gr, 1);
-}
-
 // texels.read_channels of the output gradients adj[i] of the lane's pixels i = base .. base + count
 // - 1 (the lane's tail repeats pixel base).
 template <class Adj> WT_INLINE wt_lane_colours wt_adj_lane(const Adj& adj, int base, int count) {
