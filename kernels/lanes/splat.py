@@ -44,7 +44,7 @@ from . import LANES, lane_colours, lane_floats, lane_ints
 from .sample import accumulate_footprint_lane
 from .splat_blend import GRAD_HEIGHT, GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, weights_lane8
 from .splat_layers import (lane_vec3, layer_blend_kept_lane, layer_blend_lane, layer_values_kept_lane, layer_values_lane, layer_values_stochastic_lane, scatter_face_layers_of,
-                           scatter_layer_lane, scatter_layer_stochastic_lane)  # fmt: skip
+                           scatter_layer_lane, scatter_layer_stochastic_lane, scatter_layers_lane8)  # fmt: skip
 from .stochastic import linear_blend
 
 
@@ -313,17 +313,23 @@ def lane_bodies(cap: int, pixels_t, grads_t, stochastic: bool = False):
                     scatter_face_layers_lane(pick(args.layers, args.heights, t), pick(grads.layers, grads.heights, t), args.reads, w1s, pixels.uv0, pixels.uv0_dx,
                                              pixels.uv0_dy, pixels.surface, base, count, tri_w, gs)  # fmt: skip
             elif pick(grads.layers, grads.heights, t).texels.shape[0] > 0:
-                for j in range(num_layers):  # each layer's adds: without face layers, layers add into texels of their own
-                    weighted = lane_floats()
-                    g = lane_colours()
-                    for l in range(LANES):  # unrolled (w1s, back and ghvs are 0 past count)
-                        weighted[l] = w1s[l, j]
-                        g[l] = wp.where(t == 0, back[l * cap + j], wp.vec4(ghvs[l, j], 0.0, 0.0, 0.0))
-                    if wp.static(stochastic):
-                        scatter_layer_stochastic_lane(pick(args.layers, args.heights, t), pick(grads.layers, grads.heights, t), args.reads, pick(args.stoch, args.height_stoch, t), j, weighted,
-                                                      pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, g)  # fmt: skip
-                    else:
-                        scatter_layer_lane(pick(args.layers, args.heights, t), pick(grads.layers, grads.heights, t), args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy,
-                                           pixels.surface, base, count, tri_w, g)  # fmt: skip
+                one_call = False
+                if wp.static(cap == 8 and not stochastic):
+                    if t == 0:  # the colour layers' adds in one call
+                        scatter_layers_lane8(args.layers, grads.layers, args.reads, w1s, back, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w)
+                        one_call = True
+                if not one_call:
+                    for j in range(num_layers):  # each layer's adds: without face layers, layers add into texels of their own
+                        weighted = lane_floats()
+                        g = lane_colours()
+                        for l in range(LANES):  # unrolled (w1s, back and ghvs are 0 past count)
+                            weighted[l] = w1s[l, j]
+                            g[l] = wp.where(t == 0, back[l * cap + j], wp.vec4(ghvs[l, j], 0.0, 0.0, 0.0))
+                        if wp.static(stochastic):
+                            scatter_layer_stochastic_lane(pick(args.layers, args.heights, t), pick(grads.layers, grads.heights, t), args.reads, pick(args.stoch, args.height_stoch, t), j, weighted,
+                                                          pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, g)  # fmt: skip
+                        else:
+                            scatter_layer_lane(pick(args.layers, args.heights, t), pick(grads.layers, grads.heights, t), args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy,
+                                               pixels.surface, base, count, tri_w, g)  # fmt: skip
 
     return forward_lane(False), None if stochastic else forward_lane(True), inlined(specialised(grad_lane, f"splat{cap}{kind}_grad_lane"), module=module)

@@ -18,6 +18,7 @@ from ..splat_layers import LayerReads
 from ..stochastic import StochasticArgs
 from ..texels import TexelGrad, TextureView
 from . import LANES, lane_colours, lane_floats
+from .splat_blend import lane_grads
 
 
 # Per lane pixel (row): its projections' triplanar weights.
@@ -105,6 +106,17 @@ def scatter_layer_lane(tex: TextureView, grad: TexelGrad, reads: LayerReads, j: 
     read of the other projections (``wt_scatter_lod``); where a read has several taps
     (the anisotropic filter's), the lane's taps pixel by pixel, read by read, each read's in order
     (``wt_scatter_footprint_rows``)."""
+    ...
+
+
+@wp.func_native(cpu_snippet("wt_scatter_layers_lane8(tex, grad, reads, w1s, back, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w);\n"))
+def scatter_layers_lane8(tex: TextureView, grad: TexelGrad, reads: LayerReads, w1s: wp.types.matrix(shape=(LANES, 8), dtype=float), back: lane_grads, uv0: wp.array(dtype=wp.vec2),
+                         uv0_dx: wp.array(dtype=wp.vec2), uv0_dy: wp.array(dtype=wp.vec2), surface: SurfacePixels, base: wp.int32, count: wp.int32, tri_w: lane_vec3):  # fmt: skip
+    """:func:`scatter_layer_lane` of every colour layer ``j`` of a splat kernel of up to 8 layers in
+    turn (weights ``w1s[l, j]``, the gradient of its colour at lane pixel ``l`` row ``8 l + j`` of
+    ``back``, :func:`.splat_blend.blend_backward_lane8`'s), in one call: through Warp, each layer's
+    gradient rows were built, then copied into its call with the weights (a tenth of the texel
+    adds' lane body)."""
     ...
 
 

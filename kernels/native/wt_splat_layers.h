@@ -412,6 +412,28 @@ WT_INLINE void wt_scatter_layer_lane(const Tex& tex, const Grad& grad, const Rea
                    triplanar, g);
 }
 
+// lanes.splat_layers.scatter_layers_lane8: wt_scatter_layer_lane of every colour layer j <
+// num_layers of a splat kernel of up to 8 layers in turn, each weighted by w1s[l][j], adding the
+// gradient of layer j's colour at lane pixel l, row 8 l + j of `back` (wt_blend_backward_lane8's):
+// the lane body's loop over layers, whose gradient rows it built and passed, with the weights and
+// the triplanar weights, by value into each layer's call.
+// twin: splat_layers._layer_reads:scatter_layer
+template <class Tex, class Grad, class Reads, class Weights, class Back, class UV, class Surface, class TriW>
+WT_INLINE void wt_scatter_layers_lane8(const Tex& tex, const Grad& grad, const Reads& reads, const Weights& w1s,
+                                       const Back& back, const UV& uv0, const UV& uv0_dx, const UV& uv0_dy,
+                                       const Surface& surface, int base, int count, const TriW& tri_w) {
+    const int num_layers = reads.params.num_layers < 8 ? reads.params.num_layers : 8;
+    for (int j = 0; j < num_layers; ++j) {
+        wp::vec_t<WT_L, float> weighted;
+        wt_lane_colours g;
+        for (int l = 0; l < WT_L; ++l) {
+            weighted.c[l] = w1s.data[l][j];
+            for (int c = 0; c < 4; ++c) g.data[l][c] = back.data[8 * l + j][c];
+        }
+        wt_scatter_layer_lane(tex, grad, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, g);
+    }
+}
+
 // Every layer j < num_layers's reads of a lane for the face-layer adds, as read r = 3 j + k of
 // wt_layer_reads_into's reads of layer j (weights w1s[l][j]), of the array layers wt_read_layers gives
 // it, each adding layer j's gradient g[l · Cap + j] (wt_scatter_face_layers_lane's and
