@@ -41,13 +41,15 @@ def triplanar_reads_lane(faces: FaceTextures, proj: ProjectionArgs, smp: Sampler
     ...
 
 
-@wp.func_native(cpu_snippet("return wt_triplanar_values_lane(faces, proj, smp, pixels, base, count, layers);\n", "return {};\n"))
-def triplanar_values_lane(faces: FaceTextures, proj: ProjectionArgs, smp: SamplerArgs, pixels: SurfacePixels, base: wp.int32, count: wp.int32, layers: lane_ints) -> lane_colours:
-    """Row ``l``: lane pixel ``l``'s colour, its projections' samples (on ``faces``' texture of each
-    axis, layer ``layers[l]``) over their footprints, blended by their weights in read order
-    (``value += w · sample``), from the reads ``triplanar_reads_lane(faces, proj, smp, pixels, base,
-    count, 0, 0)`` gives, in one call: the reads never become a :data:`~.lane_reads` matrix (one
-    zeroed, returned and copied in per lane was 10% of a biplanar forward)."""
+@wp.func_native(cpu_snippet("wt_triplanar_colour_lane(faces, proj, smp, pixels, base, count, layers, out);\n"))
+def triplanar_colour_lane(faces: FaceTextures, proj: ProjectionArgs, smp: SamplerArgs, pixels: SurfacePixels, base: wp.int32, count: wp.int32, layers: lane_ints,
+                          out: wp.array2d(dtype=float)):  # fmt: skip
+    """Row ``base + l`` of ``out``: lane pixel ``l``'s colour, its projections' samples (on ``faces``'
+    texture of each axis, layer ``layers[l]``) over their footprints, blended by their weights in
+    read order (``value += w · sample``), from the reads ``triplanar_reads_lane(faces, proj, smp,
+    pixels, base, count, 0, 0)`` gives, in one call: the reads never become a :data:`~.lane_reads`
+    matrix (one zeroed, returned and copied in per lane was 10% of a biplanar forward), and the
+    colours are written as ``sample``'s are (Warp's element stores, a branch a channel, were 6%)."""
     ...
 
 

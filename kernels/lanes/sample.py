@@ -42,3 +42,17 @@ def sample_footprint_lane(tex: TextureView, smp: SamplerArgs, uv: wp.array(dtype
     lane's pixels ``i = base ..``: layer ``layers[i]`` clamped to the array, or ``constant_layer``
     where ``layers`` is empty."""
     ...
+
+
+@wp.func_native(cpu_snippet("wt_write_lane(out, base, count, value);\n"))
+def write_lane(out: wp.array2d(dtype=float), base: wp.int32, count: wp.int32, value: lane_colours):
+    """Rows ``base .. base + count - 1`` of ``out``: the lane's rows of ``value`` (``out``'s 1 to 4
+    channels of each, as :func:`~warptex.kernels.texels.write_channels` writes them)."""
+    ...
+
+
+@wp.func_native(cpu_snippet("wt_write_covered_lane(out, base, count, value, mask);\n"))
+def write_covered_lane(out: wp.array2d(dtype=float), base: wp.int32, count: wp.int32, value: lane_colours, mask: wp.array(dtype=float)):
+    """:func:`write_lane` of the rows of the lane's pixels ``i`` whose ``mask[i]`` is not 0, and 0 in
+    the others' rows."""
+    ...

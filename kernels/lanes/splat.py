@@ -41,7 +41,7 @@ from ..splat_blend import blend_functions
 from ..splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TRIPLANAR, SplatArgs, SplatParams, layer_textures, map_count, pick, surface_weights
 from ..texels import read_channels, write_channels
 from . import LANES, lane_colours, lane_floats, lane_ints
-from .sample import accumulate_footprint_lane
+from .sample import accumulate_footprint_lane, write_covered_lane, write_lane
 from .splat_blend import GRAD_HEIGHT, GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, weights_lane8
 from .splat_layers import (lane_vec3, layer_blend_kept_lane, layer_blend_lane, layer_values_kept_lane, layer_values_lane, layer_values_stochastic_lane, scatter_face_layers_of,
                            scatter_layer_lane, scatter_layer_stochastic_lane, scatter_layers_lane8)  # fmt: skip
@@ -222,14 +222,11 @@ def lane_bodies(cap: int, pixels_t, grads_t, stochastic: bool = False):
                             blended[l] = blended[l] + weighted[l] * value[l]
                     else:
                         blended = blend_lane(args.layers, args.reads, j, weighted, pixels.uv0, pixels.uv0_dx, pixels.uv0_dy, pixels.surface, base, count, tri_w, 1, pixels.saved, blended)
-                for l in range(count):
-                    write_channels(out, base + l, wp.where(pixels.surface.mask[base + l] != 0.0, blended[l], wp.vec4(0.0)))
+                write_covered_lane(out, base, count, blended, pixels.surface.mask)
                 return
             colours, heights = lane_layers(args, pixels, base, count, w1s, tri_w)
             if wp.static(cap == 8):  # the blend for the whole lane
-                colour = blend_lane8(params, pixels.surface, base, count, w1s, colours, heights)
-                for l in range(count):
-                    write_channels(out, base + l, colour[l])
+                write_lane(out, base, count, blend_lane8(params, pixels.surface, base, count, w1s, colours, heights))
             else:
                 for l in range(count):  # each pixel's blend
                     colour = wp.vec4(0.0)

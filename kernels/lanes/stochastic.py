@@ -17,8 +17,9 @@ from .. import inlined
 from ..native import cpu_snippet
 from ..sampling import SampleGrads, SamplePixels, sample_layer
 from ..stochastic import METHOD_NONE, StochasticArgs
-from ..texels import FILTER_ANISOTROPIC, SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
+from ..texels import FILTER_ANISOTROPIC, SamplerArgs, TexelGrad, TextureView, read_channels
 from . import LANES, lane_colours, lane_ints, lane_reads, lane_taps
+from .sample import write_lane
 from .scatter import scatter_taps_lane
 
 
@@ -130,9 +131,8 @@ def lane_bodies(args_t):
         (:func:`stochastic_footprint_lane`)."""
         count = wp.min(out.shape[0] - base, LANES)
         a = args.sample
-        value = stochastic_footprint_lane(a.tex, a.smp, args.params, pixels.uv, pixels.uv_dx, pixels.uv_dy, pixels.lods, pixels.layers, a.constant_layer, a.lod_source, a.constant_lod, base)
-        for l in range(count):
-            write_channels(out, base + l, value[l])
+        write_lane(out, base, count, stochastic_footprint_lane(a.tex, a.smp, args.params, pixels.uv, pixels.uv_dx, pixels.uv_dy, pixels.lods, pixels.layers, a.constant_layer, a.lod_source,
+                                                            a.constant_lod, base))  # fmt: skip
 
     @inlined
     def scatter_stochastic_lane(args: args_t, pixels: SamplePixels, base: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):

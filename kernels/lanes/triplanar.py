@@ -5,7 +5,7 @@ per face.
 
 What each pixel reads from each projection (its UV, footprint and weight, with triplanar or
 biplanar weights) comes from :func:`~.projection.triplanar_reads_lane` for the whole lane (in
-plain colour, with its texture reads, :func:`~.projection.triplanar_values_lane`, and with its
+plain colour, with its texture reads and writes, :func:`~.projection.triplanar_colour_lane`, and with its
 texel-gradient adds, :func:`~.projection.triplanar_scatter_lane`, and so, with plain sampling, normal
 mapping: :func:`plain_normal_lane_bodies`); the other texel-gradient adds from :mod:`.scatter`. All
 take them in the order the scalar bodies do, so the outputs and the gradients are the scalar
@@ -22,11 +22,11 @@ from .. import inlined, specialised
 from ..faces import FaceGrads, on_axis
 from ..family import lane_covered
 from ..projection import SurfacePixels
-from ..texels import FILTER_ANISOTROPIC, pick3, read_channels, write_channels
+from ..texels import FILTER_ANISOTROPIC, pick3, read_channels
 from . import LANES, lane_colours, lane_ints, lane_reads
 from .normals import stored_normals_grad_lane, stored_normals_lane, surface_normals_lane
-from .projection import triplanar_normals_lane, triplanar_reads_lane, triplanar_samples_lane, triplanar_scatter_lane, triplanar_scatter_samples_lane, triplanar_values_lane
-from .sample import accumulate_footprint_lane
+from .projection import triplanar_colour_lane, triplanar_normals_lane, triplanar_reads_lane, triplanar_samples_lane, triplanar_scatter_lane, triplanar_scatter_samples_lane
+from .sample import accumulate_footprint_lane, write_lane
 from .scatter import scatter_face_reads_lanes, scatter_projection_taps_lanes
 from .stochastic import linear_blend, projection_taps_lane, scatter_stochastic_face_reads_lanes, scatter_stochastic_reads_lanes, stochastic_read_lane
 
@@ -48,9 +48,7 @@ def lane_bodies(args_t):
 
     def colour_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
-        value = triplanar_values_lane(args.faces, args.proj, args.smp, pixels, base, count, lane_ints(args.layer))  # the projections' samples, blended
-        for l in range(count):
-            write_channels(out, base + l, value[l])
+        triplanar_colour_lane(args.faces, args.proj, args.smp, pixels, base, count, lane_ints(args.layer), out)  # the projections' samples, blended
 
     def colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
@@ -118,9 +116,7 @@ def face_lane_bodies(args_t, stochastic: bool = False):
         count = wp.min(out.shape[0] - base, LANES)
         plus = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0, 1)
         minus = triplanar_reads_lane(args.faces, args.proj, args.smp, pixels, base, count, 0, 2)
-        value = face_colours(args, plus, minus, count)
-        for l in range(count):
-            write_channels(out, base + l, value[l])
+        write_lane(out, base, count, face_colours(args, plus, minus, count))
 
     def faces_colour_grad_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, grads: FaceGrads, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
@@ -182,8 +178,7 @@ def stochastic_lane_bodies(args_t):
                 w = reads[9 + axis, l]
                 if w > 0.0:
                     value[l] = value[l] + w * sampled[l]
-        for l in range(count):
-            write_channels(out, base + l, value[l])
+        write_lane(out, base, count, value)
 
     return inlined(specialised(stochastic_colour_lane, "triplanar_stochastic_colour_lane")), inlined(specialised(stochastic_colour_grad_lane, "triplanar_stochastic_colour_grad_lane"))
 

@@ -247,20 +247,21 @@ WT_INLINE wt_lane_reads wt_triplanar_reads_lane(const Faces& faces, const Proj& 
     return reads;
 }
 
-// lanes.projection.triplanar_values_lane: row l, lane pixel l's colour, its projections' samples (on
-// faces' texture of each axis, layer layers[l]) blended by their weights in read order
-// (wt_accumulate_reads, add 1), from wt_triplanar_reads_into's reads, in rows that are not zeroed
-// first (every row is written) and never copied.
-template <class Faces, class Proj, class Smp, class Pixels, class Ints>
-WT_INLINE wt_lane_colours wt_triplanar_values_lane(const Faces& faces, const Proj& proj, const Smp& smp,
-                                                   const Pixels& pixels, int base, int count, const Ints& layers) {
+// lanes.projection.triplanar_colour_lane: row base + l of out, lane pixel l's colour, its
+// projections' samples (on faces' texture of each axis, layer layers[l]) blended by their weights in
+// read order (wt_accumulate_reads, add 1), from wt_triplanar_reads_into's reads, in rows that are
+// not zeroed first (every row is written) and never copied.
+// twin: triplanar._bodies:colour
+template <class Faces, class Proj, class Smp, class Pixels, class Ints, class Out>
+WT_INLINE void wt_triplanar_colour_lane(const Faces& faces, const Proj& proj, const Smp& smp, const Pixels& pixels,
+                                        int base, int count, const Ints& layers, const Out& out) {
     wt_lane_read_rows reads;
     wt_triplanar_reads_into(faces, proj, smp, pixels, base, count, 0, 0, reads);
     const decltype(&faces.px) texs[3] = {&faces.px, &faces.py, &faces.pz};
     const int* per_read[3] = {layers.c, layers.c, layers.c};
     wt_lane_colours value;
     wt_accumulate_reads(texs, smp, per_read, 3, 1, reads, value);
-    return value;
+    wt_write_lane(out, base, count, value);
 }
 
 // lanes.projection.triplanar_scatter_lane: the texel gradients of plain colour's reads (each
