@@ -70,8 +70,8 @@ def triplanar_normals_lane(faces: FaceTextures, proj: ProjectionArgs, nm: Normal
     """Row ``l``: lane pixel ``l``'s normal as normal mapping's pixel body makes it (``x, y, z, 0``; 0
     where it is not covered), from its reads on the unit normal (``triplanar_reads_lane(faces,
     proj, smp, pixels, base, count, 1, 0)``'s), each projection's sample on ``faces``' texture of
-    its axis (layer ``layers[l]``, read in place: ``wt_read_lane``) and ``surface_normals_lane``'s arithmetic, in
-    one call."""
+    its axis (layer ``layers[l]``, read in place: ``wt_read_lane``) and ``surface_normals_lane``'s
+    arithmetic, in one call."""
     ...
 
 

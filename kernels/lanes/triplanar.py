@@ -4,10 +4,11 @@ forward, and both steps of its two-step gradient), plain or stochastic, one text
 per face.
 
 What each pixel reads from each projection (its UV, footprint and weight, with triplanar or
-biplanar weights) comes from :func:`~.projection.triplanar_reads_lane` for the whole lane (in
-plain colour, with its texture reads and writes, :func:`~.projection.triplanar_colour_lane`, and with its
-texel-gradient adds, :func:`~.projection.triplanar_scatter_lane`, and so, with plain sampling, normal
-mapping: :func:`plain_normal_lane_bodies`); the other texel-gradient adds from :mod:`.scatter`. All
+biplanar weights) comes from :func:`~.projection.triplanar_reads_lane` for the whole lane, or
+inside the one native call that also reads and writes (plain colour:
+:func:`~.projection.triplanar_colour_lane`, and its texel-gradient adds,
+:func:`~.projection.triplanar_scatter_lane`; plain normal mapping:
+:func:`plain_normal_lane_bodies`); the other texel-gradient adds come from :mod:`.scatter`. All
 take them in the order the scalar bodies do, so the outputs and the gradients are the scalar
 kernels' bits. The anisotropic filter's footprints of several taps add pixel by pixel, read by
 read, each read's taps in order, inside the native call (``wt_scatter_footprint_rows``), as the
@@ -226,7 +227,8 @@ def normal_lane_bodies(args_t, samples_t, stochastic: bool = False, faces: bool 
     taps (``.scatter.scatter_projection_taps_lanes``; with the anisotropic filter,
     :func:`~.stochastic.scatter_stochastic_reads_lanes`; per face,
     :func:`~.stochastic.scatter_stochastic_face_reads_lanes`); a histogram's blend is not theirs
-    (:func:`linear_blend_take`). Plain sampling with a texture per axis: :func:`plain_normal_lane_bodies`."""
+    (:func:`linear_blend_take`). Plain sampling with a texture per axis:
+    :func:`plain_normal_lane_bodies`."""
     if not stochastic and not faces:
         return plain_normal_lane_bodies(args_t, samples_t)
     if faces:

@@ -59,9 +59,9 @@ WT_INLINE void wt_accumulate_reads(const Tex* const* texs, const Smp& smp, const
                                 at.data[15 + r], at.data[18 + r], at.data[9 + r], add, value);
 }
 
-// Row l, lane pixel l's sample of read r of reads (layer layers[l]) over
-// its footprint, where its weight is positive (wt_accumulate_footprint, add 0), read in place
-// rather than copied into a matrix of that read alone first.
+// Row l, lane pixel l's sample of read r of reads (layer layers[l]) over its footprint, where its
+// weight is positive (wt_accumulate_footprint, add 0), read in place rather than copied into a
+// matrix of that read alone first.
 template <class Tex, class Smp, class Ints, class Reads>
 WT_INLINE wt_lane_colours wt_read_lane(const Tex& tex, const Smp& smp, const Ints& layers, const Reads& reads, int r) {
     wt_lane_colours value;
