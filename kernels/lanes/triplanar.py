@@ -32,15 +32,6 @@ from .scatter import scatter_face_reads_lanes, scatter_projection_taps_lanes
 from .stochastic import linear_blend, projection_taps_lane, scatter_stochastic_face_reads_lanes, scatter_stochastic_reads_lanes, stochastic_read_lane
 
 
-@wp.func
-def write_normals(normals: lane_colours, base: wp.int32, count: wp.int32, out: wp.array2d(dtype=float)):
-    """Rows ``base .. base + count - 1`` of ``out``: the lane's normals (``x, y, z`` of each row)."""
-    for l in range(count):
-        out[base + l, 0] = normals[l, 0]
-        out[base + l, 1] = normals[l, 1]
-        out[base + l, 2] = normals[l, 2]
-
-
 @functools.cache
 def lane_bodies(args_t):
     """``(colour_lane, colour_grad_lane)``: the lane bodies of plain colour mapping and its texel
@@ -196,7 +187,7 @@ def plain_normal_lane_bodies(args_t, samples_t):
 
     def normal_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
-        write_normals(triplanar_normals_lane(args.faces, args.proj, args.normal_map, args.smp, pixels, base, count, lane_ints(args.layer)), base, count, out)
+        write_lane(out, base, count, triplanar_normals_lane(args.faces, args.proj, args.normal_map, args.smp, pixels, base, count, lane_ints(args.layer)))
 
     def samples_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: samples_t):
         count = wp.min(out.weights.shape[0] - base, LANES)
@@ -309,7 +300,7 @@ def normal_lane_bodies(args_t, samples_t, stochastic: bool = False, faces: bool 
     def normal_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
         reads, sx, sy, sz = unit_normal_samples(args, pixels, base, count)
-        write_normals(surface_normals_lane(args.proj, args.normal_map, pixels, base, count, reads, sx, sy, sz), base, count, out)
+        write_lane(out, base, count, surface_normals_lane(args.proj, args.normal_map, pixels, base, count, reads, sx, sy, sz))
 
     def samples_lane(args: args_t, pixels: SurfacePixels, base: wp.int32, out: samples_t):
         count = wp.min(out.weights.shape[0] - base, LANES)
@@ -359,7 +350,7 @@ def stored_lane_bodies(args_t, pixels_t, grads_t):
 
     def stored_lane(args: args_t, pixels: pixels_t, base: wp.int32, out: wp.array2d(dtype=float)):
         count = wp.min(out.shape[0] - base, LANES)
-        write_normals(stored_normals_lane(args.proj, args.normal_map, pixels.normal, pixels.mask, pixels.weights, pixels.samples, base, count), base, count, out)
+        write_lane(out, base, count, stored_normals_lane(args.proj, args.normal_map, pixels.normal, pixels.mask, pixels.weights, pixels.samples, base, count))
 
     def stored_grad_lane(args: args_t, pixels: pixels_t, base: wp.int32, grads: grads_t, adj: wp.array2d(dtype=float)):
         count = wp.min(adj.shape[0] - base, LANES)
