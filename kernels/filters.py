@@ -131,7 +131,7 @@ sample_footprint_outlined = _sample_footprint(sample_lod_outlined, "sample_footp
 #
 # ``sample_lod`` and its derivatives with respect to ``uv`` and ``lod``, in one pass and as Warp's
 # adjoint takes them (zero for nearest filtering, across a clamp or a floor), for hand-written
-# gradients of parameters that move the UVs (tiling).
+# gradients of parameters that move the UVs (tiling) and of ``sample``'s own UVs and LODs.
 
 
 @wp.func
@@ -146,6 +146,22 @@ def bilinear_derivatives(tex: TextureView, layer: wp.int32, level: wp.int32, uv:
     bottom = t01 * (1.0 - fx) + t11 * fx
     d_fx = (t10 - t00) * (1.0 - fy) + (t11 - t01) * fy
     return top * (1.0 - fy) + bottom * fy, d_fx * float(w), (bottom - top) * -float(tex.level_height[level])
+
+
+@wp.func
+def sample_levels_derivatives(tex: TextureView, layer: wp.int32, uv: wp.vec2, level: wp.int32, fraction: float, smp: SamplerArgs):
+    """``(d/du, d/dv)`` of :func:`sample_levels` (same arguments, ``uv`` finite), as
+    :func:`sample_lod_derivatives` takes them for its levels: zero for nearest filtering."""
+    d_u = wp.vec4(0.0)
+    d_v = wp.vec4(0.0)
+    if smp.filter != FILTER_NEAREST:
+        r = wp.vec2(reduce_coord(uv[0], smp.address), reduce_coord(uv[1], smp.address))
+        value, d_u, d_v = bilinear_derivatives(tex, layer, level, r, smp)
+        if fraction > 0.0:
+            coarse, c_u, c_v = bilinear_derivatives(tex, layer, level + 1, r, smp)
+            d_u = d_u * (1.0 - fraction) + c_u * fraction
+            d_v = d_v * (1.0 - fraction) + c_v * fraction
+    return d_u, d_v
 
 
 @wp.func

@@ -9,7 +9,7 @@ import warp as wp
 
 from . import inlined, specialised
 from .family import Kernels, family, lane_kernel, pixel_kernels
-from .filters import sample_footprint, sample_footprint_outlined, sample_levels
+from .filters import sample_footprint, sample_footprint_derivatives, sample_footprint_outlined, sample_levels, sample_levels_derivatives
 from .footprint import point_footprint, texture_footprint
 from .lanes.sample import sample_footprint_lane, sample_levels_lane
 from .lanes.scatter import scatter_footprint_lane, scatter_levels_lane
@@ -54,9 +54,12 @@ class SamplePixels:
 
 @wp.struct
 class SampleGrads:
-    """The hand-written gradient's target: the texels of ``args.tex``."""
+    """The hand-written gradient's targets (empty: not needed): the texels of ``args.tex``, and each
+    sample's UV and LOD (``pixels.uv``, ``pixels.lods``)."""
 
     tex: TexelGrad
+    uv: wp.array(dtype=wp.vec2)
+    lods: wp.array(dtype=float)
 
 
 @wp.func
@@ -93,8 +96,21 @@ def _footprint_bodies(sample, name: str):
 
 @inlined
 def scatter_sample(args: SampleArgs, pixels: SamplePixels, i: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):
-    """Add the gradient ``adj[i]`` of the per-sample body into the texels it read."""
-    scatter_footprint(args.tex, grads.tex, sample_layer(args, pixels, i), pixels.uv[i], sample_footprint_of(args, pixels, i), args.smp, read_channels(adj, i))
+    """Add the gradient ``g = adj[i]`` of the per-sample body into the texels it read, and where they
+    are needed, ``(g · d/du, g · d/dv)`` into its UV's gradient and ``g · d/dlod`` into its LOD's
+    (:func:`~.filters.sample_footprint_derivatives`; ``pixels.lods`` is read only for a LOD per
+    sample, the one LOD source whose gradient this body takes)."""
+    layer = sample_layer(args, pixels, i)
+    fp = sample_footprint_of(args, pixels, i)
+    g = read_channels(adj, i)
+    if grads.tex.texels.shape[0] > 0:
+        scatter_footprint(args.tex, grads.tex, layer, pixels.uv[i], fp, args.smp, g)
+    if grads.uv.shape[0] > 0 or grads.lods.shape[0] > 0:
+        value, d_u, d_v, d_lod, d_spread = sample_footprint_derivatives(args.tex, layer, pixels.uv[i], fp, args.smp)
+        if grads.uv.shape[0] > 0:
+            wp.atomic_add(grads.uv, i, wp.vec2(wp.dot(g, d_u), wp.dot(g, d_v)))
+        if grads.lods.shape[0] > 0:
+            wp.atomic_add(grads.lods, i, wp.dot(g, d_lod))
 
 
 @inlined
@@ -109,9 +125,17 @@ def sample_level_pixel(args: SampleArgs, pixels: SamplePixels, i: wp.int32, out:
 
 @inlined
 def scatter_sample_level(args: SampleArgs, pixels: SamplePixels, i: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):
-    """Add the gradient ``adj[i]`` of :func:`sample_level_pixel` into the texels it read."""
+    """Add the gradient ``g = adj[i]`` of :func:`sample_level_pixel` into the texels it read, and
+    where it is needed, ``(g · d/du, g · d/dv)`` into its UV's gradient
+    (:func:`~.filters.sample_levels_derivatives`); a non-finite UV adds nothing."""
     if finite_uv_lod(pixels.uv[i], 0.0):
-        scatter_levels(args.tex, grads.tex, sample_layer(args, pixels, i), pixels.uv[i], args.level, args.fraction, args.smp, read_channels(adj, i))
+        layer = sample_layer(args, pixels, i)
+        g = read_channels(adj, i)
+        if grads.tex.texels.shape[0] > 0:
+            scatter_levels(args.tex, grads.tex, layer, pixels.uv[i], args.level, args.fraction, args.smp, g)
+        if grads.uv.shape[0] > 0:
+            d_u, d_v = sample_levels_derivatives(args.tex, layer, pixels.uv[i], args.level, args.fraction, args.smp)
+            wp.atomic_add(grads.uv, i, wp.vec2(wp.dot(g, d_u), wp.dot(g, d_v)))
 
 
 @inlined
@@ -123,7 +147,7 @@ def sample_level_lane(args: SampleArgs, pixels: SamplePixels, base: wp.int32, ou
 @inlined
 def scatter_sample_level_lane(args: SampleArgs, pixels: SamplePixels, base: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):
     """:func:`scatter_sample_level` for the lane of pixels from ``base`` (:mod:`.lanes`), on the CPU."""
-    scatter_levels_lane(args.tex, grads.tex, args.smp, pixels.uv, pixels.layers, args.constant_layer, args.level, args.fraction, adj, base)
+    scatter_levels_lane(args.tex, grads.tex, grads.uv, args.smp, pixels.uv, pixels.layers, args.constant_layer, args.level, args.fraction, adj, base)
 
 
 @inlined
@@ -136,30 +160,35 @@ def sample_lane(args: SampleArgs, pixels: SamplePixels, base: wp.int32, out: wp.
 def scatter_sample_lane(args: SampleArgs, pixels: SamplePixels, base: wp.int32, grads: SampleGrads, adj: wp.array2d(dtype=float)):
     """:func:`scatter_sample` for the lane of pixels from ``base`` (:mod:`.lanes`), on the CPU (the
     anisotropic filter's footprints of several taps pixel by pixel, inside the native call)."""
-    scatter_footprint_lane(args.tex, grads.tex, args.smp, pixels.uv, pixels.uv_dx, pixels.uv_dy, pixels.lods, pixels.layers, args.constant_layer, args.lod_source, args.constant_lod, adj, base)
+    scatter_footprint_lane(args.tex, grads.tex, grads.uv, grads.lods, args.smp, pixels.uv, pixels.uv_dx, pixels.uv_dy, pixels.lods, pixels.layers, args.constant_layer, args.lod_source, args.constant_lod, adj, base)
 
 
 sample_pixel = _footprint_bodies(sample_footprint, "sample_pixel")
 sample_pixel_outlined = _footprint_bodies(sample_footprint_outlined, "sample_pixel_outlined")
 
 
+#: What the hand-written gradient serves, in :class:`SampleGrads`' order (``Kernels.grads``).
+GRADS = ("args.tex", "pixels.uv", "pixels.lods")
+
+
 @family(configurations=[{"level": False}, {"level": True}])
 def sample_kernels(*, level: bool) -> Kernels:
     """The ``sample`` kernels: with ``level``, for one LOD shared by every sample, its levels
     resolved on the host; else each sample's LOD from ``args.lod_source``. Each has lane kernels
-    for the CPU, forward and texel gradient. The hand-written gradient reaches the texels; UVs, LODs
-    and derivatives take the generated adjoint."""
+    for the CPU, forward and hand-written gradient. The hand-written gradient reaches the texels, the
+    UVs and a LOD per sample; UV derivatives (and the rest, where they need one) take the generated
+    adjoint."""
     if level:
         kernels = pixel_kernels("sample_level", module=MODULE, args=SampleArgs, pixels=SamplePixels, out=wp.array2d(dtype=float),
                                 body=sample_level_pixel, scatter=scatter_sample_level, grads=SampleGrads, adjoint_body=sample_level_pixel)  # fmt: skip
         lanes = lane_kernel(sample_level_lane, SampleArgs, SamplePixels, wp.array2d(dtype=float), module=MODULE, name="sample_level_lanes")
         grad_lanes = lane_kernel(scatter_sample_level_lane, SampleArgs, SamplePixels, wp.array2d(dtype=float), grads_t=SampleGrads, module=MODULE + ".grad", name="sample_level_texel_grad_lanes")
-        return Kernels(*kernels, grads=("args.tex",), lanes=lanes, texel_grad_lanes=grad_lanes)
+        return Kernels(*kernels, grads=GRADS, lanes=lanes, texel_grad_lanes=grad_lanes)
     kernels = pixel_kernels("sample", module=MODULE, args=SampleArgs, pixels=SamplePixels, out=wp.array2d(dtype=float),
                             body=sample_pixel, scatter=scatter_sample, grads=SampleGrads, adjoint_body=sample_pixel_outlined)  # fmt: skip
     lanes = lane_kernel(sample_lane, SampleArgs, SamplePixels, wp.array2d(dtype=float), module=LOD_MODULE, name="sample_lanes")
     grad_lanes = lane_kernel(scatter_sample_lane, SampleArgs, SamplePixels, wp.array2d(dtype=float), grads_t=SampleGrads, module=LOD_MODULE + ".grad", name="sample_texel_grad_lanes")
-    return Kernels(*kernels, grads=("args.tex",), lanes=lanes, texel_grad_lanes=grad_lanes)
+    return Kernels(*kernels, grads=GRADS, lanes=lanes, texel_grad_lanes=grad_lanes)
 
 
 @wp.kernel(module=MIPS_MODULE)

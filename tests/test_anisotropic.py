@@ -163,9 +163,9 @@ def test_hand_written_texel_gradients_equal_the_generated_adjoint(rng, monkeypat
     uv = rng.uniform(-1.5, 2.5, (n, 2)).astype(np.float32)
     dx, dy = _footprints(rng, n, (37, 29))
 
-    def forward(uv_grad):
+    def forward(derivative_grads):  # UV derivatives needing gradients take the generated adjoint (the UVs' own, the hand-written one)
         tex = wt.TextureArray(layers, requires_grad=True)
-        return wt.sample(tex, wp.array(uv, dtype=wp.vec2, requires_grad=uv_grad), layer=1, uv_dx=dx, uv_dy=dy, sampler=ANISO), [tex]
+        return wt.sample(tex, uv, layer=1, uv_dx=wp.array(dx, dtype=wp.vec2, requires_grad=derivative_grads), uv_dy=dy, sampler=ANISO), [tex]
 
     hand, forced, generated, scatters = texel_gradients_both_ways(monkeypatch, threads, forward, rng.normal(size=(n, 3)).astype(np.float32))
     assert scatters == 1

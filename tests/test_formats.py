@@ -250,6 +250,31 @@ def test_update_on_the_tape_carries_coarse_gradients_to_level_0_as_float32_does(
     assert tex.grad(2).any()
 
 
+@pytest.mark.parametrize("fmt", COMPACT)
+def test_uv_and_lod_gradients_of_a_compact_texture_are_its_float_twins(rng, fmt):
+    """``sample``'s own gradient serves UVs and a LOD per sample, so a compact texture takes them
+    (with its texels' gradient too): those of its float32 twin (every level's decoded texels), to
+    rounding."""
+    tex = wt.Texture(_values(rng, (24, 20, 4), fmt), format=fmt, requires_grad=True)
+    twin = wt.Texture(tex.numpy(0), requires_grad=True)
+    for k in range(1, tex.num_levels):  # the compact chain's own levels, decoded (not float32's own mips)
+        twin.level(k).assign(tex.numpy(k))
+    uv = rng.uniform(-1.0, 2.0, (500, 2)).astype(np.float32)
+    lod = rng.uniform(0.0, 4.0, 500).astype(np.float32)
+    weights = rng.normal(size=(500, 4)).astype(np.float32)
+    grads = []
+    for t in (tex, twin):
+        inputs = [wp.array(uv, dtype=wp.vec2, requires_grad=True), wp.array(lod, dtype=float, requires_grad=True)]
+        tape = wp.Tape()
+        with tape:
+            out = wt.sample(t, inputs[0], lod=inputs[1], sampler=wt.Sampler(filter="trilinear"))
+        tape.backward(grads={out: wp.array(weights, dtype=float)})
+        grads.append([a.grad.numpy() for a in inputs] + [t.grad(0)])
+    for got, want in zip(*grads):
+        assert np.abs(want).max() > 0
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5 * np.abs(want).max())
+
+
 def test_a_gradient_only_warps_generated_adjoint_gives_is_refused_for_a_compact_texture(rng):
     tex = wt.Texture(rng.integers(0, 256, (8, 8, 4), dtype=np.uint8), format="srgb8", requires_grad=True)
     uv = rng.uniform(0, 1, (10, 2)).astype(np.float32)

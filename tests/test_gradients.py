@@ -13,6 +13,7 @@ import pytest
 import warp as wp
 
 import warptex as wt
+from warptex import _op
 from conftest import with_sampler
 from backward_paths import assert_same_gradients, texel_gradients_both_ways
 
@@ -27,14 +28,14 @@ def _forward(img, uv, weights, *, mipmaps=True, **kw) -> np.ndarray:
     return (out.astype(np.float64) * weights).sum(axis=-1)
 
 
-def _backward(img, uv, weights, *, build_on_tape=True, uv_grad=True, **kw):
-    """Analytic gradients: ``(texture, uv_array)`` after the backward pass. With ``uv_grad=False``
-    only the texels need gradients, which the hand-written texel gradient computes; with UV
-    gradients, Warp's generated adjoint computes them all."""
+def _backward(img, uv, weights, *, build_on_tape=True, uv_grad=True, backward="hand-written", **kw):
+    """Analytic gradients: ``(texture, uv_array)`` after the backward pass, the texels' and (with
+    ``uv_grad``) the UVs', by ``backward``: the hand-written gradient, or Warp's generated adjoint
+    (forced: the hand-written one serves texels and UVs alike)."""
     tex = wt.Texture(img, requires_grad=True)
     uv_wp = wp.array(uv, dtype=wp.vec2, requires_grad=uv_grad)
     tape = wp.Tape()
-    with tape:
+    with tape, _op.force_generated_adjoint(backward == "generated"):
         if build_on_tape:
             tex.update()
         out = wt.sample(tex, uv_wp, **with_sampler(kw))
@@ -78,7 +79,7 @@ def _check_per_sample(loss_of, x, grad, rel_step, *, min_kept=0.9, kink=1e-2):
     assert kept_total / x.shape[1] >= min_kept, "too few smooth samples to check the gradient"
 
 
-BACKWARDS = {"generated": True, "hand-written": False}  # backward pass -> whether the UVs need gradients
+BACKWARDS = ("generated", "hand-written")
 
 
 @pytest.mark.parametrize("backward", BACKWARDS)
@@ -89,25 +90,27 @@ def test_texel_gradients_match_finite_differences(rng, filt, mode, backward):
     uv = rng.uniform(-1.5, 2.5, (300, 2)).astype(np.float32)
     weights = rng.normal(size=(300, 3))
     kw = {**FILTERS[filt], "address": mode, "border": BORDER}
-    tex, _ = _backward(img, uv, weights, uv_grad=BACKWARDS[backward], **kw)
+    tex, _ = _backward(img, uv, weights, uv_grad=backward == "generated", backward=backward, **kw)
     _check_texel_gradient(rng, tex.grad(0), img, uv, weights, **kw)
 
 
+@pytest.mark.parametrize("backward", BACKWARDS)
 @pytest.mark.parametrize("mode", MODES)
 @pytest.mark.parametrize("filt", list(FILTERS))
-def test_uv_gradients_match_finite_differences(rng, filt, mode):
+def test_uv_gradients_match_finite_differences(rng, filt, mode, backward):
     img = rng.random((16, 12, 4), dtype=np.float32)
     uv = rng.uniform(-1.5, 2.5, (400, 2)).astype(np.float32)
     weights = rng.normal(size=(400, 4))
     kw = {**FILTERS[filt], "address": mode, "border": BORDER}
-    _, uv_wp = _backward(img, uv, weights, **kw)
+    _, uv_wp = _backward(img, uv, weights, backward=backward, **kw)
     grad = uv_wp.grad.numpy().astype(np.float64)
     if filt == "nearest":
         np.testing.assert_array_equal(grad, 0.0)
     _check_per_sample(lambda x: _forward(img, x, weights, **kw), uv, grad, 2e-3 / 16)
 
 
-def test_lod_gradients_match_finite_differences(rng):
+@pytest.mark.parametrize("backward", BACKWARDS)
+def test_lod_gradients_match_finite_differences(rng, backward):
     img = rng.random((32, 32, 2), dtype=np.float32)
     uv = rng.uniform(0, 1, (300, 2)).astype(np.float32)
     lod = rng.uniform(0.1, 4.9, (300, 1)).astype(np.float32)
@@ -115,7 +118,7 @@ def test_lod_gradients_match_finite_differences(rng):
     tex = wt.Texture(img)
     lod_wp = wp.array(lod[:, 0], dtype=float, requires_grad=True)
     tape = wp.Tape()
-    with tape:
+    with tape, _op.force_generated_adjoint(backward == "generated"):
         out = wt.sample(tex, uv, lod=lod_wp)
     out.grad.assign(weights.astype(np.float32))
     tape.backward()
@@ -146,7 +149,7 @@ def test_coarse_level_gradients_flow_to_level_zero_through_the_chain(rng, backwa
     uv = rng.uniform(-1, 2, (300, 2)).astype(np.float32)
     weights = rng.normal(size=(300, 3))
     kw = {"lod": 2.6}  # levels 2 and 3 only: level 0 is reached only through the box filter
-    tex, _ = _backward(img, uv, weights, build_on_tape=True, uv_grad=BACKWARDS[backward], **kw)
+    tex, _ = _backward(img, uv, weights, build_on_tape=True, uv_grad=backward == "generated", backward=backward, **kw)
     _check_texel_gradient(rng, tex.grad(0), img, uv, weights, **kw)
 
 
@@ -191,12 +194,12 @@ def test_texture_array_gradients_go_to_the_sampled_layer(rng):
 def test_non_finite_uvs_give_zero_gradients(rng, backward):
     img = rng.random((8, 8, 1), dtype=np.float32)
     uv = np.array([[np.nan, 0.5], [0.25, 0.75], [np.inf, 0.1]], np.float32)
-    tex, uv_wp = _backward(img, uv, np.ones((3, 1)), uv_grad=BACKWARDS[backward])
+    tex, uv_wp = _backward(img, uv, np.ones((3, 1)), backward=backward)
     assert np.isfinite(tex.grad(0)).all()
     np.testing.assert_allclose(tex.grad(0).sum(), 1.0, rtol=1e-6)
-    if uv_wp.requires_grad:
-        assert np.isfinite(uv_wp.grad.numpy()).all()
-        assert (uv_wp.grad.numpy()[[0, 2]] == 0).all()
+    assert np.isfinite(uv_wp.grad.numpy()).all()
+    assert (uv_wp.grad.numpy()[[0, 2]] == 0).all()
+    assert (uv_wp.grad.numpy()[1] != 0).any()
 
 
 LOOKUPS = {  # sample() keywords, each a way of choosing the levels
@@ -212,9 +215,10 @@ LOOKUPS = {  # sample() keywords, each a way of choosing the levels
 @pytest.mark.parametrize("threads", [1, 2, 3])  # 3: private copies track tiles
 @pytest.mark.parametrize("lookup", LOOKUPS)
 def test_hand_written_texel_gradients_equal_the_generated_adjoint(rng, monkeypatch, lookup, threads):
-    """Only texels need gradients: the hand-written texel gradient runs (and only then), and gives
-    what the generated adjoint gives when the UVs need gradients too, over every level read, on one
-    thread and split over two (70 000 samples: more than one chunk)."""
+    """The hand-written gradient runs where only texels need gradients and where the UVs need them
+    too (the one input besides texels it serves with ``sample``'s LODs), and gives the texel
+    gradients the generated adjoint gives, over every level read, on one thread and split over two
+    (70 000 samples: more than one chunk)."""
     n = 70000
     layers = rng.random((3, 37, 29, 3), dtype=np.float32)
     uv = rng.uniform(-1.5, 2.5, (n, 2)).astype(np.float32)
@@ -227,6 +231,51 @@ def test_hand_written_texel_gradients_equal_the_generated_adjoint(rng, monkeypat
         return wt.sample(tex, wp.array(uv, dtype=wp.vec2, requires_grad=uv_grad), **with_sampler(kw)), [tex]
 
     hand, forced, generated, scatters = texel_gradients_both_ways(monkeypatch, threads, forward, rng.normal(size=(n, 3)).astype(np.float32))
-    assert scatters == 1
+    assert scatters == 2
     assert_same_gradients(hand, forced)
     assert_same_gradients(hand, generated)
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+@pytest.mark.parametrize("lookup", LOOKUPS)
+def test_hand_written_uv_and_lod_gradients_equal_the_generated_adjoint(rng, monkeypatch, lookup, threads):
+    """UVs (and a LOD per sample) needing gradients, with the texels or without: the hand-written
+    gradient (one launch of it, and no generated adjoint) gives each sample's UV and LOD gradient
+    as the generated adjoint does, to float rounding (they differentiate the same bilinear blends in
+    another order), NaN nowhere, and zero where the UV is not finite (everywhere for nearest)."""
+    n = 20000
+    layers = rng.random((3, 37, 29, 3), dtype=np.float32)
+    uv = rng.uniform(-1.5, 2.5, (n, 2)).astype(np.float32)
+    uv[:3] = [(np.nan, 0.5), (0.5, np.inf), (1e30, 0.25)]
+    arrays = {"lod": rng.uniform(-0.5, 6.0, n).astype(np.float32), "uv_dx": rng.uniform(-0.2, 0.2, (n, 2)).astype(np.float32),
+              "uv_dy": rng.uniform(-0.05, 0.05, (n, 2)).astype(np.float32), "layer": rng.integers(-1, 4, n)}  # fmt: skip
+    weights = rng.normal(size=(n, 3)).astype(np.float32)
+    launched = []
+    monkeypatch.setattr(_op, "scatter", lambda *a, **k: (launched.append(a[0].key), wt._launch.scatter(*a, **k)))
+    monkeypatch.setattr(_op, "launch", lambda kernel, *a, **k: (launched.append(kernel.key), wt._launch.launch(kernel, *a, **k)))
+    wt.set_num_threads(threads)
+    try:
+        for texels in (True, False):
+            results = []
+            for generated in (False, True):
+                launched.clear()
+                kw = {"layer": 1, **{k: arrays[k] if v == "array" else v for k, v in LOOKUPS[lookup].items()}}
+                inputs = [wp.array(uv, dtype=wp.vec2, requires_grad=True)]
+                if isinstance(kw.get("lod"), np.ndarray):
+                    kw["lod"] = wp.array(kw["lod"], dtype=float, requires_grad=True)
+                    inputs.append(kw["lod"])
+                tex = wt.TextureArray(layers, requires_grad=texels)
+                tape = wp.Tape()
+                with tape, _op.force_generated_adjoint(generated):
+                    out = wt.sample(tex, inputs[0], **with_sampler(kw))
+                out.grad.assign(weights)
+                tape.backward()
+                results.append([a.grad.numpy().reshape(n, -1) for a in inputs] + ([np.concatenate([tex.grad(k).reshape(-1, 1) for k in range(tex.num_levels)])] if texels else []))
+                adjoint = [k for k in launched if k.endswith("_adjoint")]
+                assert len(adjoint) == generated and len([k for k in launched if "texel_grad" in k]) == (not generated), launched
+            for k, (hand, gen) in enumerate(zip(*results)):
+                assert np.isfinite(hand).all() and (np.abs(hand).max() > 0) == (lookup != "nearest" or k == len(inputs))  # nearest: zero UV gradients
+                np.testing.assert_allclose(hand, gen, rtol=1e-4, atol=1e-5 * np.abs(gen).max())
+            np.testing.assert_array_equal(results[0][0][:2], 0.0)
+    finally:
+        wt.set_num_threads(None)

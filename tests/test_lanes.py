@@ -773,6 +773,57 @@ def test_sample_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, lod
     assert any(name == "sample_level_texel_grad_lanes" for name, _ in launched)
 
 
+def _uv_grads(call, inputs, tex, weights, one_pixel: bool) -> list:
+    """The gradients of ``inputs`` (UVs, LODs) and, where it needs them, ``tex``'s (every level),
+    after ``call()``'s output weighted by ``weights`` is taken backwards, through the lane kernels
+    or the one-pixel ones."""
+    for a in inputs:
+        a.grad.zero_()
+    if tex.requires_grad:
+        tex.zero_grad()
+    with one_pixel_kernels(one_pixel):
+        tape = wp.Tape()
+        with tape:
+            out = call()
+        out.grad.assign(weights.reshape(out.shape))
+        tape.backward()
+    return [a.grad.numpy().copy() for a in inputs] + ([tex.grad(level).copy() for level in range(tex.num_levels)] if tex.requires_grad else [])
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+@pytest.mark.parametrize("address", ["wrap", "clamp", "mirror", "border"])
+@pytest.mark.parametrize("filter,source", [("bilinear", None), ("nearest", 1.6), ("trilinear", 1.3), ("nearest", "lod"), ("trilinear", "lod"), ("trilinear", "derivatives"), ("anisotropic", "derivatives")])
+def test_sample_uv_and_lod_gradient_lanes_give_the_one_pixel_bits(rng, launched, filter, source, address, threads):
+    """``sample``'s UV gradients (one LOD for all: ``wt_scatter_levels_lane``; a LOD per sample or
+    from UV derivatives: ``wt_scatter_footprint_lane``) and a LOD per sample's, with the texels'
+    and without: the same bits as the one-pixel kernel's, on 3 threads too."""
+    data = rng.random((3, 64, 48, 4), dtype=np.float32)
+    n = 10_007
+    uv = _uvs(rng, n)
+    layers = rng.integers(-2, 5, n).astype(np.int32)
+    smp = wt.Sampler(filter=filter, address=address, border=(0.1, 0.2, 0.3, 0.4))
+    weights = rng.normal(size=(n, 4)).astype(np.float32)
+    previous = wt.get_num_threads()
+    wt.set_num_threads(threads)
+    try:
+        for texels, layer in ((False, 1), (True, layers)):
+            tex = wt.TextureArray(data, requires_grad=texels)
+            inputs = [wp.array(uv, dtype=wp.vec2, requires_grad=True)]
+            kw = {"lod": source} if not isinstance(source, str) else _lod_inputs(rng, n, source)
+            if source == "lod":
+                kw["lod"] = wp.array(kw["lod"], dtype=float, requires_grad=True)
+                inputs.append(kw["lod"])
+            lanes = _uv_grads(lambda: wt.sample(tex, inputs[0], layer=layer, sampler=smp, **kw), inputs, tex, weights, False)
+            scalar = _uv_grads(lambda: wt.sample(tex, inputs[0], layer=layer, sampler=smp, **kw), inputs, tex, weights, True)
+            for a, b in zip(lanes, scalar):
+                _same_bits(a, b)
+            assert (np.abs(np.nan_to_num(lanes[0])).sum() > 0) == (filter != "nearest")
+    finally:
+        wt.set_num_threads(previous)
+    kernel = "sample_level_texel_grad_lanes" if source is None or not isinstance(source, str) else "sample_texel_grad_lanes"
+    assert any(name == kernel for name, _ in launched)
+
+
 @pytest.mark.parametrize("threads", [1, 3])
 @pytest.mark.parametrize("filter,source", [("nearest", "lod"), ("trilinear", "lod"), ("trilinear", "derivatives"), ("anisotropic", "derivatives")])
 @pytest.mark.parametrize("method", ["hash4", "cheap2", "hex"])

@@ -13,21 +13,25 @@ from ..texels import SamplerArgs, TexelGrad, TextureView
 from . import lane_colours, lane_ints, lane_reads, lane_taps
 
 
-@wp.func_native(cpu_snippet("wt_scatter_levels_lane(tex, grad, smp, uv, layers, constant_layer, level, fraction, adj, base);\n"))
-def scatter_levels_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, uv: wp.array(dtype=wp.vec2), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32,
-                        level: wp.int32, fraction: float, adj: wp.array2d(dtype=float), base: wp.int32):  # fmt: skip
+@wp.func_native(cpu_snippet("wt_scatter_levels_lane(tex, grad, uv_grad, smp, uv, layers, constant_layer, level, fraction, adj, base);\n"))
+def scatter_levels_lane(tex: TextureView, grad: TexelGrad, uv_grad: wp.array(dtype=wp.vec2), smp: SamplerArgs, uv: wp.array(dtype=wp.vec2), layers: wp.array(dtype=wp.int32),
+                        constant_layer: wp.int32, level: wp.int32, fraction: float, adj: wp.array2d(dtype=float), base: wp.int32):  # fmt: skip
     """:func:`~warptex.kernels.scatter.scatter_levels` of the gradient ``adj[i]`` for the lane's
-    pixels ``i = base ..`` whose ``uv[i]`` is finite (:func:`~.sample.sample_levels_lane`'s reads)."""
+    pixels ``i = base ..`` whose ``uv[i]`` is finite (:func:`~.sample.sample_levels_lane`'s reads),
+    where ``grad`` is needed, and where ``uv_grad`` is, ``sampling.scatter_sample_level``'s adds
+    into it (not empty)."""
     ...
 
 
-@wp.func_native(cpu_snippet("wt_scatter_footprint_lane(tex, grad, smp, uv, uv_dx, uv_dy, lods, layers, constant_layer, lod_source, constant_lod, adj, base);\n"))
-def scatter_footprint_lane(tex: TextureView, grad: TexelGrad, smp: SamplerArgs, uv: wp.array(dtype=wp.vec2), uv_dx: wp.array(dtype=wp.vec2), uv_dy: wp.array(dtype=wp.vec2),
-                           lods: wp.array(dtype=float), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32, lod_source: wp.int32, constant_lod: float,
-                           adj: wp.array2d(dtype=float), base: wp.int32):  # fmt: skip
+@wp.func_native(cpu_snippet("wt_scatter_footprint_lane(tex, grad, uv_grad, lod_grad, smp, uv, uv_dx, uv_dy, lods, layers, constant_layer, lod_source, constant_lod, adj, base);\n"))
+def scatter_footprint_lane(tex: TextureView, grad: TexelGrad, uv_grad: wp.array(dtype=wp.vec2), lod_grad: wp.array(dtype=float), smp: SamplerArgs, uv: wp.array(dtype=wp.vec2),
+                           uv_dx: wp.array(dtype=wp.vec2), uv_dy: wp.array(dtype=wp.vec2), lods: wp.array(dtype=float), layers: wp.array(dtype=wp.int32), constant_layer: wp.int32,
+                           lod_source: wp.int32, constant_lod: float, adj: wp.array2d(dtype=float), base: wp.int32):  # fmt: skip
     """:func:`~warptex.kernels.scatter.scatter_footprint` of the gradient ``adj[i]`` for the lane's
-    pixels ``i = base ..`` (:func:`~.sample.sample_footprint_lane`'s reads); where the anisotropic
-    filter's footprints take several taps, pixel by pixel, each footprint's taps in order."""
+    pixels ``i = base ..`` (:func:`~.sample.sample_footprint_lane`'s reads), where ``grad`` is
+    needed; where the anisotropic filter's footprints take several taps, pixel by pixel, each
+    footprint's taps in order. Where ``uv_grad`` and ``lod_grad`` are needed (not empty),
+    ``sampling.scatter_sample``'s adds into them."""
     ...
 
 

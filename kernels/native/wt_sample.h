@@ -194,6 +194,93 @@ WT_OUTLINE void wt_sample_levels_any(const Tex& tex, const Smp& smp, const float
     }
 }
 
+// filters.sample_footprint_derivatives of each read lane (weight[l] > 0): (value, d/du, d/dv,
+// d/dlod, d/dspread) of its footprint's taps, each tap's sample_lod_derivatives at
+// footprint.footprint_uv summed in tap order from 0, then divided by the taps; and from the same
+// taps, forward[l], filters.sample_footprint's value (a one-tap footprint's sample itself, else the
+// sum times 1 / taps: wt_accumulate_footprint's). Lanes past their taps, not read, or not finite
+// read (0, 0) at level 0; a tap not finite gives a NaN value and zero derivatives. A one-tap
+// footprint's step is 0 (wt_footprint), so footprint_uv reads at its UV as sample_footprint does.
+// Rows of the lanes not read are 0. Lane l reads array layer layer[l]. A channel of every lane at a
+// time (per lane pixel, with branches and scalar divides, it was a third of the fit's kept forward
+// outside the texel reads); the operations of each element are the scalar block's, so the bits are.
+// twin: filters.sample_footprint_derivatives
+template <class Tex, class Smp>
+WT_INLINE void wt_footprint_slopes(const Tex& tex, const Smp& smp, const int* layer, const float* u, const float* v,
+                                   const float* lod, const float* du, const float* dv, const float* taps,
+                                   const float* weight, wt_f4* forward, wt_f4* value, wt_f4* d_u, wt_f4* d_v,
+                                   wt_f4* d_lod, wt_f4* d_spread) {
+    float us[WT_L], vs[WT_L], fractions[WT_L], lods[WT_L];
+    int levels[WT_L], layers[WT_L], read[WT_L];
+    int most = 0;  // the most taps of a read lane
+    for (int l = 0; l < WT_L; ++l) {
+        read[l] = weight[l] > 0.0f ? -1 : 0;
+        layers[l] = layer[l];
+        lods[l] = read[l] ? lod[l] : 0.0f;
+        wt_mip_levels(tex, smp, lods[l], levels[l], fractions[l]);
+        const int n = read[l] ? (int)taps[l] : 0;  // footprint.footprint_taps
+        most = n > most ? n : most;
+    }
+    wt_vf TAPS, DU, DV;
+    __builtin_memcpy(&TAPS, taps, sizeof(TAPS));
+    __builtin_memcpy(&DU, du, sizeof(DU));
+    __builtin_memcpy(&DV, dv, sizeof(DV));
+    wt_vi READ;
+    __builtin_memcpy(&READ, read, sizeof(READ));
+    const wt_vf zero = 0.0f, nan = __builtin_nanf("");
+    wt_vf F[4], V[4], U[4], W[4], L[4], S[4];  // forward, value, d/du, d/dv, d/dlod, d/dspread
+    for (int c = 0; c < 4; ++c) F[c] = V[c] = U[c] = W[c] = L[c] = S[c] = zero;
+    for (int k = 0; k < most; ++k) {
+        float offset[WT_L];
+        int tap[WT_L], finite[WT_L];
+        for (int l = 0; l < WT_L; ++l) {
+            offset[l] = (float)k + 0.5f - 0.5f * taps[l];
+            const float tu = u[l] + du[l] * offset[l];  // footprint.footprint_uv, for one tap too
+            const float tv = v[l] + dv[l] * offset[l];
+            tap[l] = read[l] && k < (int)taps[l] ? -1 : 0;
+            finite[l] = __builtin_fabsf(tu) <= wt_float_max && __builtin_fabsf(tv) <= wt_float_max &&
+                                __builtin_fabsf(lods[l]) <= wt_float_max
+                            ? -1
+                            : 0;  // texels.finite_uv_lod
+            const bool ok = tap[l] && finite[l];
+            us[l] = ok ? tu : 0.0f;
+            vs[l] = ok ? tv : 0.0f;
+        }
+        wt_vf channels[4][4];  // the value, d/du, d/dv, d/dlod
+        const wt_level_slopes slopes = {lods, channels[1], channels[2], channels[3]};
+        wt_sample_levels_any(tex, smp, us, vs, levels, fractions, layers, channels[0], &slopes);
+        wt_vi TAP, FINITE;
+        wt_vf OFFSET;
+        __builtin_memcpy(&TAP, tap, sizeof(TAP));
+        __builtin_memcpy(&FINITE, finite, sizeof(FINITE));
+        __builtin_memcpy(&OFFSET, offset, sizeof(OFFSET));
+        for (int c = 0; c < 4; ++c) {
+            const wt_vf tap_u = wt_sel(FINITE, channels[1][c], zero), tap_v = wt_sel(FINITE, channels[2][c], zero);
+            const wt_vf r = wt_sel(FINITE, channels[0][c], nan);
+            if (k == 0) F[c] = wt_sel(TAP, r, F[c]);
+            V[c] = wt_sel(TAP, V[c] + r, V[c]);
+            U[c] = wt_sel(TAP, U[c] + tap_u, U[c]);
+            W[c] = wt_sel(TAP, W[c] + tap_v, W[c]);
+            L[c] = wt_sel(TAP, L[c] + wt_sel(FINITE, channels[3][c], zero), L[c]);
+            S[c] = wt_sel(TAP, S[c] + (tap_u * DU + tap_v * DV) * OFFSET, S[c]);
+        }
+    }
+    const wt_vi SEVERAL = READ & (TAPS != 1.0f);
+    const wt_vf inv = 1.0f / TAPS;  // lanes not read may divide by 0: not kept
+    for (int c = 0; c < 4; ++c) {
+        F[c] = wt_sel(SEVERAL, V[c] * inv, F[c]);
+        V[c] = wt_sel(READ, V[c] / TAPS, zero), U[c] = wt_sel(READ, U[c] / TAPS, zero);
+        W[c] = wt_sel(READ, W[c] / TAPS, zero), L[c] = wt_sel(READ, L[c] / TAPS, zero);
+        S[c] = wt_sel(READ, S[c] / TAPS, zero);
+    }
+    wt_rows_of_channels(F, forward);
+    wt_rows_of_channels(V, value);
+    wt_rows_of_channels(U, d_u);
+    wt_rows_of_channels(W, d_v);
+    wt_rows_of_channels(L, d_lod);
+    wt_rows_of_channels(S, d_spread);
+}
+
 // filters.sample_footprint of each read lane (weight > 0): one tap reads (u, v) itself; a footprint
 // of several taps (the anisotropic filter's) the mean of its taps at footprint.footprint_uv, summed
 // in tap order, times 1 / taps. Lanes past their taps, not read, or not finite read (0, 0) at level

@@ -363,12 +363,22 @@ WT_INLINE void wt_scatter_lod(const Tex* const* texs, const Grad* const* grads, 
     wt_scatter_lod_of(texs, grads, smp, nreads, layers, at, weigh, gr, 0);
 }
 
+// Add g · d (wp.dot, Warp's own, so the bits are the one-pixel body's) into entry k of a
+// per-sample gradient of 1 (a LOD's) or 2 (a UV's: g · d[0], g · d[1]) floats (wp.atomic_add).
+template <class A> WT_INLINE void wt_add_dots(const A& grad, int k, int dims, const wt_f4& g, const wt_f4* d) {
+    float* row = (float*)((char*)grad.data + (long long)k * grad.strides[0]);
+    const wt_v4 gv(g[0], g[1], g[2], g[3]);
+    for (int e = 0; e < dims; ++e) row[e] = row[e] + wp::dot(gv, wt_v4(d[e][0], d[e][1], d[e][2], d[e][3]));
+}
+
 // lanes.scatter.scatter_levels_lane: scatter.scatter_levels of the gradient adj[i] for the lane's
-// pixels i = base .. whose uv[i] is finite, their layer, one level for all.
-// twin: scatter.scatter_levels
-template <class Tex, class Grad, class Smp, class UV, class Layers, class Adj>
-WT_INLINE void wt_scatter_levels_lane(const Tex& tex, const Grad& grad, const Smp& smp, const UV& uv,
-                                      const Layers& layers, int constant_layer, int level, float fraction,
+// pixels i = base .. whose uv[i] is finite, their layer, one level for all, where grad is needed;
+// where uv_grad is (not empty), sampling.scatter_sample_level's adds of (g · d/du, g · d/dv) into
+// uv_grad[i], the slopes wt_sample_levels gives (filters.sample_levels_derivatives').
+// twin: sampling.scatter_sample_level
+template <class Tex, class Grad, class UVGrad, class Smp, class UV, class Layers, class Adj>
+WT_INLINE void wt_scatter_levels_lane(const Tex& tex, const Grad& grad, const UVGrad& uv_grad, const Smp& smp,
+                                      const UV& uv, const Layers& layers, int constant_layer, int level, float fraction,
                                       const Adj& adj, int base) {
     const int n = uv.shape[0];
     const int count = n - base < WT_L ? n - base : WT_L;
@@ -390,9 +400,24 @@ WT_INLINE void wt_scatter_levels_lane(const Tex& tex, const Grad& grad, const Sm
                                           : constant_layer;  // texels.resolve_layer
         g[0][l] = wt_read_channels(adj, k);
     }
-    const Tex* texs[1] = {&tex};
-    const Grad* grads[1] = {&grad};
-    wt_scatter_levels_any(1, texs, grads, smp, u, v, levels, fractions, layer, active, g);
+    if (grad.texels.shape[0] > 0) {
+        const Tex* texs[1] = {&tex};
+        const Grad* grads[1] = {&grad};
+        wt_scatter_levels_any(1, texs, grads, smp, u, v, levels, fractions, layer, active, g);
+    }
+    if (uv_grad.shape[0] == 0) return;
+    const float lods[WT_L] = {};  // read for d/dlod only, which is not wanted here
+    wt_vf value[4], DU[4], DV[4], DLOD[4];
+    const wt_level_slopes slopes = {lods, DU, DV, DLOD};
+    wt_sample_levels_any(tex, smp, u[0], v[0], levels[0], fractions[0], layer[0], value, &slopes);
+    wt_f4 d[2][WT_L];
+    wt_rows_of_channels(DU, d[0]);
+    wt_rows_of_channels(DV, d[1]);
+    for (int l = 0; l < count; ++l) {
+        if (!active[0][l]) continue;
+        const wt_f4 dl[2] = {d[0][l], d[1][l]};
+        wt_add_dots(uv_grad, base + l, 2, g[0][l], dl);
+    }
 }
 
 // texels.read_channels of the output gradients adj[i] of the lane's pixels i = base .. base + count
@@ -409,18 +434,37 @@ template <class Adj> WT_INLINE wt_lane_colours wt_adj_lane(const Adj& adj, int b
 
 // lanes.scatter.scatter_footprint_lane: scatter.scatter_footprint of adj[i] for the lane's pixels
 // i = base .. (wt_sample_reads_of's reads; footprints of several taps through wt_scatter_lod's
-// wt_scatter_footprint_rows).
-// twin: scatter.scatter_footprint
-template <class Tex, class Grad, class Smp, class UV, class Lods, class Layers, class Adj>
-WT_INLINE void wt_scatter_footprint_lane(const Tex& tex, const Grad& grad, const Smp& smp, const UV& uv,
-                                         const UV& uv_dx, const UV& uv_dy, const Lods& lods, const Layers& layers,
-                                         int constant_layer, int lod_source, float constant_lod, const Adj& adj,
-                                         int base) {
+// wt_scatter_footprint_rows), where grad is needed; where uv_grad and lod_grad are (not empty),
+// sampling.scatter_sample's adds of (g · d/du, g · d/dv) and g · d/dlod into them, the slopes
+// wt_footprint_slopes gives (filters.sample_footprint_derivatives').
+// twin: sampling.scatter_sample
+template <class Tex, class Grad, class UVGrad, class LodGrad, class Smp, class UV, class Lods, class Layers, class Adj>
+WT_INLINE void wt_scatter_footprint_lane(const Tex& tex, const Grad& grad, const UVGrad& uv_grad,
+                                         const LodGrad& lod_grad, const Smp& smp, const UV& uv, const UV& uv_dx,
+                                         const UV& uv_dy, const Lods& lods, const Layers& layers, int constant_layer,
+                                         int lod_source, float constant_lod, const Adj& adj, int base) {
     const wt_sample_reads s =
         wt_sample_reads_of(tex, smp, uv, uv_dx, uv_dy, lods, layers, constant_layer, lod_source, constant_lod, base);
-    const Tex* texs[1] = {&tex};
-    const Grad* grads[1] = {&grad};
-    wt_scatter_lod(texs, grads, smp, 1, s.layer, s.reads, 0, wt_adj_lane(adj, base, s.count));
+    const wt_lane_colours g = wt_adj_lane(adj, base, s.count);
+    if (grad.texels.shape[0] > 0) {
+        const Tex* texs[1] = {&tex};
+        const Grad* grads[1] = {&grad};
+        wt_scatter_lod(texs, grads, smp, 1, s.layer, s.reads, 0, g);
+    }
+    if (uv_grad.shape[0] == 0 && lod_grad.shape[0] == 0) return;
+    const wt_lane_reads& at = s.reads;
+    int layer[WT_L];  // texels.resolve_layer: wt_sample_reads_of's, clamped to the array
+    for (int l = 0; l < WT_L; ++l) layer[l] = wp::clamp(s.layer[l], 0, tex.num_layers - 1);
+    wt_f4 forward[WT_L], value[WT_L], d_u[WT_L], d_v[WT_L], d_lod[WT_L], d_spread[WT_L];
+    wt_footprint_slopes(tex, smp, layer, at.data[0], at.data[3], at.data[6], at.data[12], at.data[15], at.data[18],
+                        at.data[9], forward, value, d_u, d_v, d_lod, d_spread);
+    for (int l = 0; l < s.count; ++l) {
+        wt_f4 gl;
+        __builtin_memcpy(&gl, g.data[l], 16);
+        const wt_f4 duv[2] = {d_u[l], d_v[l]};
+        if (uv_grad.shape[0] > 0) wt_add_dots(uv_grad, base + l, 2, gl, duv);
+        if (lod_grad.shape[0] > 0) wt_add_dots(lod_grad, base + l, 1, gl, &d_lod[l]);
+    }
 }
 
 // lanes.scatter.scatter_taps_lane: stochastic.scatter_stochastic of one-tap footprints: tap k of
