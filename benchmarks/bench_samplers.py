@@ -48,6 +48,11 @@ not the L3 the CPU reports, decides whether texels come from cache.
 float atomics (``set_deterministic_gradients(False)``), in the same interleaved rounds as the
 default fixed-point sums, the same bits every run: what that determinism costs on the device.
 
+``--uv-grads`` (bilinear and trilinear) makes every forward+backward take the UVs' gradients as
+well as the texels' (``warptex.sample`` with a UV array that requires them; ``grid_sample``'s grid
+gradient in torch; Dr.Jit's AD through the texture lookup's position): the differentiable
+renderer's view, where the UVs move.
+
 ``--runs 3`` times every row in 3 runs of ``--repeats`` interleaved rounds. Each figure is still
 the fastest call of all; each ratio in the summaries becomes its spread over the runs (the lowest
 and highest of the runs' ratios), so a ratio that swings across a bar between runs shows it.
@@ -202,7 +207,8 @@ def in_format(t, fmt: str):
 
 def warptex_runs(technique: str, data: dict, objs: dict, device=None, fmt: str = "float32"):
     """``(forward, forward_backward)`` callables of warptex for ``technique``, its textures (not
-    splat maps) stored in ``fmt``."""
+    splat maps) stored in ``fmt``; with ``data["uv_grads"]``, forward_backward takes the UVs'
+    gradients too."""
     objs = {k: in_format(v, fmt) if k in ("texture", "layers") else v for k, v in objs.items()}
 
     # Inputs as Warp arrays up front, as the peers convert theirs in prepare(), untimed.
@@ -216,14 +222,19 @@ def warptex_runs(technique: str, data: dict, objs: dict, device=None, fmt: str =
 
     # The same texels with gradient buffers; every level is a leaf (the chain is not rebuilt on the tape).
     grad_objs = {k: with_grad(v) if k in ("texture", "layers", "maps") else v for k, v in objs.items()}
+    grad_data = dict(data)
+    if common.uv_grads(data):
+        grad_data["uv"] = wp.array(data["uv"].numpy(), dtype=wp.vec2, device=device, requires_grad=True)
 
     def forward_backward():
         for key in ("texture", "layers", "maps"):
             if key in grad_objs:
                 grad_objs[key].zero_grad()
+        if common.uv_grads(data):
+            grad_data["uv"].grad.zero_()
         tape = wp.Tape()
         with tape:
-            out = common.warptex_forward(technique, data, device=device, **grad_objs)
+            out = common.warptex_forward(technique, grad_data, device=device, **grad_objs)
         out.grad.fill_(1.0)
         tape.backward()
         return out
@@ -240,6 +251,8 @@ def with_grad(t):
 def measure_technique(technique: str, scene: str, args, tex, cache, backends: dict, report) -> list[dict]:
     """Time warptex and the peers on one technique and scene; print and return the records."""
     data, objs = scene_data(technique, scene, args.sizes, tex, cache, args.device)
+    if args.uv_grads:
+        data["uv_grads"] = True
     n = samples(data)
     records = []
     cuda = wp.get_device(args.device).is_cuda
@@ -247,6 +260,8 @@ def measure_technique(technique: str, scene: str, args, tex, cache, backends: di
     def record(impl, pass_, threads, seconds, **extra):
         rec = {"technique": technique, "scene": scene, "impl": impl, "pass": pass_, "device": args.device, "threads": threads, "seconds": seconds, "samples": n,
                "msamples_per_s": n / seconds / 1e6, "nominal_taps_per_s": n * NOMINAL_TAPS[technique] / seconds, **extra}  # fmt: skip
+        if args.uv_grads and pass_ == "forward+backward":
+            rec["uv_grads"] = True
         records.append(rec)
         return rec
 
@@ -381,7 +396,8 @@ def format_peer_summary(records: list[dict]) -> str:
             cells.append(" / ".join(ratio_cell(a, b) for a, b in pair))
         rows.append((f"  {technique:16s} {scene:8s} {base[0]['seconds'] * 1e3:7.1f} / {base[1]['seconds'] * 1e3:7.1f}  ", cells))
     width = max([13, *(len(i) for i in impls), *(len(c) for _, cells in rows for c in cells)])
-    lines = ["peers against warptex (peer time ÷ warptex time, same run; below 1: the peer is faster), forward / forward+backward:",
+    grads = " (gradients of the texels and the UVs: --uv-grads)" if any(r.get("uv_grads") for r in records) else ""
+    lines = [f"peers against warptex (peer time ÷ warptex time, same run; below 1: the peer is faster), forward / forward+backward{grads}:",
              f"  {'technique':16s} {'scene':8s} {'warptex ms':>17s}  " + "  ".join(f"{impl:>{width}s}" for impl in impls)]  # fmt: skip
     lines += [head + "  ".join(f"{c:>{width}s}" for c in cells) for head, cells in rows]
     return "\n".join(lines)
@@ -706,6 +722,7 @@ def parse(argv=None):
                    help="texel formats of warptex's textures, rows for each (float32 float16 unorm8 srgb8; default float32)")
     p.add_argument("--atomics", action="store_true", help="on CUDA, also time forward+backward with texel gradients added by float atomics "
                                                           "(set_deterministic_gradients(False)) against the default fixed-point sums")  # fmt: skip
+    p.add_argument("--uv-grads", action="store_true", help="forward+backward takes the UVs' gradients too, in warptex and the peers (bilinear and trilinear only)")
     p.add_argument("--call-cost", action="store_true", help="only the cost of small calls: sample() (natively and through warptex.torch) on 1, 1,024 and 65,536 UVs against torch")
     p.add_argument("--calls", type=int, default=None, help="--call-cost: timed calls per figure and round (default 200, quick 20)")
     args = p.parse_args(argv)
@@ -720,6 +737,8 @@ def parse(argv=None):
         p.error("--threads and --thread-counts must be >= 1")
     if args.runs < 1:
         p.error("--runs must be >= 1")
+    if args.uv_grads and set(args.techniques) - {"bilinear", "trilinear"}:
+        p.error("--uv-grads times UV gradients of bilinear and trilinear sample(): add --techniques bilinear trilinear")
     if args.atomics and not wp.get_device(args.device).is_cuda:
         p.error("--atomics compares CUDA's fixed-point texel gradients with float atomics; on the CPU they are one path: it needs --device cuda:N")
     doubling = [] if args.quick else [2**k for k in range(1, args.threads.bit_length()) if 2**k < args.threads]

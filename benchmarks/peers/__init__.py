@@ -28,6 +28,10 @@ Usage::
   ``uv_dx``, ``uv_dy``, ``layer_levels`` (list of ``(L, h_k, w_k, C)``) and ``maps``
   ``(M, hm, wm, 4)``; options ``tiling``, ``sharpness``, ``strength``.
 
+With ``data["uv_grads"]`` (bilinear and trilinear; ``bench_samplers.py --uv-grads``),
+``forward_backward`` also takes the gradients of the UVs (``common.uv_grads``); a peer without
+autodiff has no ``forward_backward`` either way.
+
 Gradients (``forward_backward``, loss = sum of every output value) are returned per texture name
 (``"texture"``, or ``"layers"`` and ``"maps"`` for splat) as one array per mip level: every level is
 its own leaf, as in warptex when the chain is built outside the ``wp.Tape``

@@ -31,6 +31,12 @@ def texel_format(data: dict) -> str:
     return data.get("format", "float32")
 
 
+def uv_grads(data: dict) -> bool:
+    """Whether ``forward_backward`` takes the UVs' gradients too (``data["uv_grads"]``, bilinear and
+    trilinear), as well as the texels'."""
+    return bool(data.get("uv_grads", False))
+
+
 def options(data: dict, technique: str) -> dict:
     """The options of ``technique``: ``data``'s values over :data:`DEFAULTS`."""
     return {k: data.get(k, v) for k, v in DEFAULTS.get(technique, {}).items()}

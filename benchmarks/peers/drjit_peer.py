@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import Peer, PeerUnavailable, common
-from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options, texel_format
+from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options, texel_format, uv_grads
 
 MIN_LLVM = 17  # 15.0.6 and 16.0.6 fail as described below; 19.1.7 works
 
@@ -182,6 +182,10 @@ def _prepare(technique):
         state = {k: _columns(data[k]) for k in ("uv", "lod", "uv_dx", "uv_dy", "position", "normal", "position_dx", "position_dy", "mask") if k in data}
         state["options"] = options(data, technique)
         state["lod_kind"] = "none" if technique == "bilinear" else lod_kind(data)
+        if uv_grads(data):  # forward_backward's own UV columns, which take gradients
+            state["train_uv"] = _columns(data["uv"])
+            for c in state["train_uv"]:
+                dr.enable_grad(c)
         half = texel_format(data) == "float16"  # textures and layers; splat maps stay float32
         for mode, grad in (("infer", False), ("train", True)):
             if technique in SPLAT_LAYERS:
@@ -357,13 +361,16 @@ def _make(technique, body):
             for tensors in chains:
                 for t in tensors:
                     dr.clear_grad(t)
-        out = body(state, state["train"])
+        train_uv = state.get("train_uv", [])
+        for c in train_uv:
+            dr.clear_grad(c)
+        out = body({**state, "uv": train_uv} if train_uv else state, state["train"])
         total = out[0]
         for c in out[1:]:
             total = total + c
         dr.backward(dr.sum(total))
         grads = {n: [[dr.grad(t) for t in tensors] for tensors in chains] for n, chains in leaves.items()}
-        dr.eval(out, grads)
+        dr.eval(out, grads, [dr.grad(c) for c in train_uv])
         dr.sync_thread()
         return out, grads
 

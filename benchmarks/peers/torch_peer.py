@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import Peer, PeerUnavailable, common
-from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options, texel_format
+from .common import SPLAT_LAYERS, layer_tiling, lod_kind, options, texel_format, uv_grads
 
 try:
     import torch
@@ -168,6 +168,8 @@ def _tensors(data, keys):
 def _prepare(technique):
     def prepare(data):
         state = _tensors(data, ("uv", "lod", "uv_dx", "uv_dy", "position", "normal", "position_dx", "position_dy", "mask"))
+        if uv_grads(data):
+            state["uv"].requires_grad_(True)  # inference_mode's forward takes none
         state["options"] = options(data, technique)
         state["lod_kind"] = "none" if technique == "bilinear" else lod_kind(data)
         names = {"layers": "layer_levels", "maps": "maps"} if technique in SPLAT_LAYERS else {"texture": "levels"}
@@ -339,6 +341,8 @@ def _make(technique, body):
         for levels in leaves.values():
             for t in levels:
                 t.grad = None
+        if "uv" in state:
+            state["uv"].grad = None
         padded = {n: pad_wrap(v) if n != "maps" else v for n, v in leaves.items()}
         out = body(state, padded)
         out.sum().backward()
