@@ -42,7 +42,9 @@ class FaceTextures:
 @wp.struct
 class FaceGrads:
     """The texel gradients of :class:`FaceTextures`' textures (a texture standing for several faces
-    has one gradient array, passed for each of them; empty: not needed)."""
+    has one gradient array, passed for each of them; empty: not needed), and the gradient of the
+    projections' tiling, where a colour kernel of plain sampling takes it by hand (empty: not
+    needed, or not served: ``triplanar.triplanar_kernels``)."""
 
     px: TexelGrad
     nx: TexelGrad
@@ -50,6 +52,7 @@ class FaceGrads:
     ny: TexelGrad
     pz: TexelGrad
     nz: TexelGrad
+    tiling: wp.array(dtype=float)
 
 
 #: The input paths of :class:`FaceGrads`' fields, relative to the :class:`FaceTextures` they differentiate.

@@ -29,7 +29,7 @@ from .lanes.projection import surface_covered
 from .lanes.triplanar import face_lane_bodies, lane_bodies, linear_blend_take, normal_lane_bodies, stochastic_lane_bodies, stored_lane_bodies
 from .native import use
 from .normals import NormalMapArgs, blend_projected, blend_projected_grad, decode_normal, decode_normal_grad, direction, direction_grad, to_world
-from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
+from .projection import ProjectionArgs, SurfacePixels, plane_coords, plane_sample_slope, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
 from .texels import SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
 
@@ -173,10 +173,13 @@ def write_normal(out: wp.array2d(dtype=float), i: wp.int32, value: wp.vec3):
 # -- pixel bodies --------------------------------------------------------------------------------------
 
 
-def _bodies(read, add, select, suffix: str):
+def _bodies(read, add, select, suffix: str, slopes: bool):
     """The bodies of one configuration: colour, its texel gradient, normal mapping, and the two-step
     normal's stored samples with their texel gradient. Uncovered pixels (``mask == 0``) and zero or
-    non-finite normals give 0; zero-weight projections are not read."""
+    non-finite normals give 0; zero-weight projections are not read. With ``slopes`` (plain
+    sampling), colour's gradient also adds ``dot(w g, d read / d tiling)`` of each projection read,
+    in axis order, into the tiling's gradient where it is needed (``grads.tiling``, not empty:
+    :func:`~.projection.plane_sample_slope`)."""
 
     def colour(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out: wp.array2d(dtype=float)):
         value = wp.vec4(0.0)
@@ -195,7 +198,12 @@ def _bodies(read, add, select, suffix: str):
             g = read_channels(adj, i)
             for axis in range(3):
                 if w[axis] > 0.0:
-                    add(select(args.faces.px, args.faces.nx, args.faces.py, args.faces.ny, args.faces.pz, args.faces.nz, axis, n), select(grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, axis, n), args.layer, axis, args, p, n, dpdx, dpdy, w[axis] * g)
+                    tex = select(args.faces.px, args.faces.nx, args.faces.py, args.faces.ny, args.faces.pz, args.faces.nz, axis, n)
+                    add(tex, select(grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, axis, n), args.layer, axis, args, p, n, dpdx, dpdy, w[axis] * g)
+                    if wp.static(slopes):
+                        if grads.tiling.shape[0] > 0:
+                            value, slope = plane_sample_slope(tex, args.layer, args.proj, axis, p, n, dpdx, dpdy, projection_tiling(args.proj, axis), args.smp)
+                            wp.atomic_add(grads.tiling, wp.min(axis, grads.tiling.shape[0] - 1), wp.dot(w[axis] * g, slope))
 
     def normal(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out: wp.array2d(dtype=float)):
         result = wp.vec3(0.0)
@@ -310,12 +318,21 @@ def normal_from_samples_grad(args: NormalBlendArgs, pixels: StoredSamples, i: wp
 _PLAIN = _projection_reads(sample_plain, scatter_plain, "_plain")
 _STOCHASTIC = _projection_reads(sample_stochastic, scatter_stochastic, "_stochastic")
 _BODIES = {
-    (stochastic, faces): _bodies(*(_STOCHASTIC if stochastic else _PLAIN), on_face if faces else on_axis_face, ("_stochastic" if stochastic else "") + ("_faces" if faces else ""))
+    (stochastic, faces): _bodies(*(_STOCHASTIC if stochastic else _PLAIN), on_face if faces else on_axis_face, ("_stochastic" if stochastic else "") + ("_faces" if faces else ""), not stochastic)
     for stochastic in (False, True)
     for faces in (False, True)
 }
 #: The texel gradients' input paths (``FaceGrads`` fields), the face textures in :data:`~.faces.FACES` order.
 FACE_GRADS = tuple(f"args.faces.{f}" for f in FACE_FIELDS)
+#: ``FaceGrads``' paths where the kernel takes the tiling's gradient by hand (colour, plain sampling), and where not.
+SLOPE_GRADS = (*FACE_GRADS, "args.proj.tiling")
+TEXEL_GRADS = (*FACE_GRADS, None)
+
+
+def tiling_lanes_take(args: TriplanarArgs) -> bool:
+    """Whether plain colour's texel-gradient lanes take a launch: not where the tiling needs its
+    gradient, which the one-pixel kernel adds by hand (``_bodies``' slopes)."""
+    return not args.proj.tiling.requires_grad
 _CONFIGURATIONS = [{"normal": normal, "stochastic": stochastic, "faces": faces} for normal in (False, True) for stochastic in (False, True) for faces in (False, True)]
 
 
@@ -354,6 +371,7 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
     bodies = _BODIES[stochastic, faces]
     name = "triplanar" + ("_stochastic" if stochastic else "") + ("_faces" if faces else "")
     take = linear_blend_take if stochastic else None  # a histogram's blend runs the one-pixel kernels
+    grad_take = take if stochastic else tiling_lanes_take
     if not normal:
         forward, texel_grad, _ = pixel_kernels(name, module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["colour"],
                                                scatter=bodies["colour_grad"], grads=FaceGrads)  # fmt: skip
@@ -365,7 +383,7 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
             colour_lane, colour_grad_lane = lane_bodies(TriplanarArgs)
         lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
         grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
-        return Kernels(forward, texel_grad, _adjoint(False), grads=FACE_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=take, grad_lanes_take=take)
+        return Kernels(forward, texel_grad, _adjoint(False), grads=TEXEL_GRADS if stochastic else SLOPE_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=take, grad_lanes_take=grad_take)
     forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
     # normal mapping's lanes, in modules of their own (colour-only jobs do not compile them)
     normal_lane, samples_lane, samples_grad_lane = normal_lane_bodies(TriplanarArgs, ProjectionSamples, stochastic, faces)
@@ -375,5 +393,5 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
                    "lanes_take": take, "grad_lanes_take": take}  # fmt: skip
     first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,
                           body=bodies["samples"], scatter=bodies["samples_grad"], grads=FaceGrads)  # fmt: skip
-    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=FACE_GRADS, **first_lanes), then=_normal_from_samples(), intermediates=_sample_shapes, no_grad=("weights",))
+    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=TEXEL_GRADS, **first_lanes), then=_normal_from_samples(), intermediates=_sample_shapes, no_grad=("weights",))
     return Kernels(forward, None, _adjoint(True), staged=staged, lanes=lanes, lanes_take=take)

@@ -260,7 +260,7 @@ CASES = [
 @pytest.mark.parametrize("case", CASES)
 def test_hand_written_texel_gradients_equal_the_generated_adjoint(monkeypatch, case, threads):
     """The hand-written texel gradient (only texels need gradients) against the generated adjoint
-    (a tiling array needs gradients too), over every level of every texture, on a 256² sphere
+    (a sharpness array needs gradients too), over every level of every texture, on a 256² sphere
     (65 536 pixels: split over two threads). The histogram blend, not linear in the texels,
     always takes the generated adjoint."""
     camera = wt.orthographic((3.0, 2.0, 4.0), (0.0, 0.0, 0.0), height=2.2, resolution=(256, 256))
@@ -276,7 +276,7 @@ def test_hand_written_texel_gradients_equal_the_generated_adjoint(monkeypatch, c
         "normal hash4": wt.Stochastic("hash4"),
     }
 
-    def forward(tiling_grad):
+    def forward(sharpness_grad):
         if "per-axis" in case:
             textures = [wt.Texture(images[0], requires_grad=True), wt.Texture(images[1]), wt.Texture(images[2], requires_grad=True)]
             kw = {"textures_per_axis": textures}
@@ -292,13 +292,88 @@ def test_hand_written_texel_gradients_equal_the_generated_adjoint(monkeypatch, c
         if normal:
             kw["normal_map"] = kw.pop("texture", None)
             blend = next((b for b in ("rnm", "udn") if b in case), "whiteout")
-            technique = functools.partial(normal_mapping("biplanar" in case), blend=blend, strength=0.8, **({"sharpness": 4.0} if "biplanar" in case else {}))
+            technique = functools.partial(normal_mapping("biplanar" in case), blend=blend, strength=0.8)
         else:
             technique = biplanar if case.startswith("biplanar") else triplanar
-        return technique(g, tiling=wp.array([2.5], dtype=float, requires_grad=tiling_grad), **kw), textures
+        return technique(g, tiling=2.5, sharpness=wp.array([4.0], dtype=float, requires_grad=sharpness_grad), **kw), textures
 
     weights = rng.normal(size=(256, 256, 3)).astype(np.float32)
     hand, forced, generated, scatters = texel_gradients_both_ways(monkeypatch, threads, forward, weights)
     assert scatters == (0 if case.endswith("histogram") else 1)
     assert_same_gradients(hand, forced)
     assert_same_gradients(hand, generated)
+
+
+TILING_CASES = {  # a call's keywords beside the G-buffer, texture and tiling
+    "triplanar": {},
+    "biplanar": {"technique": "biplanar"},
+    "triplanar anisotropic": {"sampler": wt.Sampler(filter="anisotropic")},
+    "triplanar nearest mirror": {"sampler": wt.Sampler(filter="nearest", address="mirror")},
+    "biplanar per face": {"technique": "biplanar", "faces": True},
+    "triplanar per face, object space": {"faces": True, "space": "object"},
+}
+
+
+@pytest.mark.parametrize("threads", [1, 3])  # 3: private copies of the tiling's gradient, summed in chunk order
+@pytest.mark.parametrize("tiling", [[2.5], [1.3, 0.9, 1.7]])
+@pytest.mark.parametrize("case", TILING_CASES)
+def test_tiling_gradient_by_hand_equals_the_generated_adjoint(monkeypatch, case, tiling, threads):
+    """Plain colour with the tiling needing its gradient (and the texels theirs): the hand-written
+    gradient runs, one pixel per index (its lanes decline), and gives the generated adjoint's tiling
+    and texel gradients, one tiling or one per axis, with one texture per axis or per face."""
+    from warptex import _op
+
+    camera = wt.orthographic((3.0, 2.0, 4.0), (0.0, 0.0, 0.0), height=2.2, resolution=(192, 192))
+    g = wt.rasterize(trimesh.creation.icosphere(subdivisions=4), camera)
+    kw = dict(TILING_CASES[case])
+    technique = biplanar if kw.pop("technique", "triplanar") == "biplanar" else triplanar
+    faces = kw.pop("faces", False)
+    if kw.get("space") == "object":
+        kw["object_to_world"] = np.diag([1.5, 0.8, 1.2, 1.0]).astype(np.float32)
+    images = [smooth_texture(37, 29, seed) for seed in range(6 if faces else 1)]
+    weights = np.random.default_rng(4).normal(size=(192, 192, 3)).astype(np.float32)
+    launched = []
+    monkeypatch.setattr(_op, "scatter", lambda *a, **k: (launched.append(a[0].key), wt._launch.scatter(*a, **k)))
+    monkeypatch.setattr(_op, "launch", lambda kernel, *a, **k: (launched.append(kernel.key), wt._launch.launch(kernel, *a, **k)))
+    wt.set_num_threads(threads)
+    try:
+        results = []
+        for generated in (False, True):
+            launched.clear()
+            textures = [wt.Texture(im, requires_grad=True) for im in images]
+            t = wp.array(np.float32(tiling), dtype=float, requires_grad=True)
+            tape = wp.Tape()
+            with tape, _op.force_generated_adjoint(generated):
+                out = technique(g, **({"textures_per_face": textures} if faces else {"texture": textures[0]}), tiling=t, **kw)
+            out.grad.assign(weights)
+            tape.backward()
+            results.append([t.grad.numpy().copy()] + [tex.grad(k) for tex in textures for k in range(tex.num_levels)])
+            assert any(k.endswith("_adjoint") for k in launched) == generated, launched
+            assert not any("_lanes" in k and "grad" in k for k in launched), launched  # the one-pixel kernel adds the slopes
+    finally:
+        wt.set_num_threads(None)
+    hand, gen = results
+    assert np.abs(gen[0]).max() > 0 or "nearest" in case
+    if "nearest" in case:
+        np.testing.assert_array_equal(hand[0], 0.0)
+    np.testing.assert_allclose(hand[0], gen[0], rtol=1e-3, atol=1e-3 * max(np.abs(gen[0]).max(), 1e-6))
+    assert_same_gradients([(False, h.reshape(-1)) for h in hand[1:]], [(False, x.reshape(-1)) for x in gen[1:]])
+
+
+@pytest.mark.parametrize("technique", ["triplanar", "biplanar"])
+def test_tiling_gradient_by_hand_matches_finite_differences(sphere, technique):
+    """The tiling alone needing its gradient (the hand-written path), per axis, against central
+    differences (pixels whose step crosses a slope jump left out, :func:`fd.check_parameter_gradient`)."""
+    img = smooth_texture(32, 24, seed=1)
+    r = _weights(sphere, 3)
+    value = np.array([1.3, 0.9, 1.7])
+    check_parameter_gradient(
+        lambda v: TECHNIQUES[technique](sphere, wt.Texture(img), tiling=v.astype(np.float32)).numpy(),
+        lambda v, kept: _gradients(sphere, technique, img, kept, tiling=v)[1]["tiling"],
+        value,
+        r,
+        1e-3,
+        rtol=2e-2,
+        atol=2e-2,
+        label=f"{technique}: tiling",
+    )
