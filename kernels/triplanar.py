@@ -330,8 +330,9 @@ TEXEL_GRADS = (*FACE_GRADS, None)
 
 
 def tiling_lanes_take(args: TriplanarArgs) -> bool:
-    """Whether plain colour's texel-gradient lanes take a launch: not where the tiling needs its
-    gradient, which the one-pixel kernel adds by hand (``_bodies``' slopes)."""
+    """Whether the texel-gradient lanes of plain colour with a texture per face take a launch: not
+    where the tiling needs its gradient, which their one-pixel kernel adds by hand (``_bodies``'
+    slopes; one texture per axis, the lanes add it too: ``wt_triplanar_scatter_lane``)."""
     return not args.proj.tiling.requires_grad
 _CONFIGURATIONS = [{"normal": normal, "stochastic": stochastic, "faces": faces} for normal in (False, True) for stochastic in (False, True) for faces in (False, True)]
 
@@ -371,7 +372,7 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
     bodies = _BODIES[stochastic, faces]
     name = "triplanar" + ("_stochastic" if stochastic else "") + ("_faces" if faces else "")
     take = linear_blend_take if stochastic else None  # a histogram's blend runs the one-pixel kernels
-    grad_take = take if stochastic else tiling_lanes_take
+    grad_take = take if stochastic else tiling_lanes_take if faces else None
     if not normal:
         forward, texel_grad, _ = pixel_kernels(name, module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["colour"],
                                                scatter=bodies["colour_grad"], grads=FaceGrads)  # fmt: skip

@@ -6,6 +6,7 @@ bit (NaN payloads aside), over every filter, address mode, level, layer and chan
 launches whose pixel count is not a multiple of the lane width.
 """
 
+import dataclasses
 import os
 import re
 
@@ -940,6 +941,55 @@ def test_triplanar_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, 
         _same_grads(lambda: wt.biplanar(g, textures_per_axis=per_axis, sampler=smp), [per_axis[0], per_axis[2]], rng, 3, 30_000)
     finally:
         wt.set_num_threads(previous)
+    assert any(name == "triplanar_texel_grad_lanes" for name, _ in launched)
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+@pytest.mark.parametrize("address", ["wrap", "mirror", "border"])
+@pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
+def test_triplanar_tiling_gradient_lanes_give_the_one_pixel_bits(rng, launched, filter, address, threads):
+    """Plain colour's tiling gradient by hand (``wt_triplanar_scatter_lane``'s slopes, added pixel
+    by pixel and projection by projection): the tiling's and the texels' gradients the same bits as
+    the one-pixel kernel's, one tiling or one per axis, triplanar and biplanar weights, with the
+    mirror fix and without, offsets, object space, and a G-buffer far from the world origin."""
+    tex = wt.TextureArray(rng.random((2, 64, 32, 4), dtype=np.float32), requires_grad=True)
+    smp = wt.Sampler(filter=filter, address=address, border=(0.5, 0.25, 0.125, 1.0), lod_bias=0.3, max_aniso=4)
+    calls = []
+    for count in (20_000, 137):  # a few pixels too: each term's last bits then reach the tiling's sums
+        g = _hand_gbuffer(rng, count)
+        mask = g.mask.numpy()
+        mask[0, 4:9] = 0.0  # non-finite normals and positions, whose slopes make the whole tiling gradient NaN (in both)
+        g.mask.assign(mask)
+        far = dataclasses.replace(g, origin=np.array([3.0e5, -1.25e4, 7.5e3]))
+        calls += [
+            (g, wt.triplanar, [1.5, 2.0, 0.75], {"sharpness": 3.0, "layer": 1}),
+            (g, wt.biplanar, [2.5], {"sharpness": 8.0}),
+            (g, wt.triplanar, [0.7], {"sharpness": 0.0, "mirror_fix": False, "offsets": [(0.3, 0.1), (0.0, 0.5), (0.25, 0.25)]}),
+            (g, wt.triplanar, [1.1, 0.6, 1.9], {"space": "object", "object_to_world": np.diag([1.5, 0.8, 1.2, 1.0]).astype(np.float32)}),
+            (far, wt.triplanar, [0.35], {}),
+        ]
+    previous = wt.get_num_threads()
+    wt.set_num_threads(threads)
+    moved = []
+    try:
+        for gbuffer, func, tiling, kw in calls:
+            grads = []
+            for one_pixel in (False, True):
+                t = wp.array(np.float32(tiling), dtype=float, requires_grad=True)
+                tex.zero_grad()
+                with one_pixel_kernels(one_pixel):
+                    tape = wp.Tape()
+                    with tape:
+                        out = func(gbuffer, tex, tiling=t, sampler=smp, **kw)
+                    out.grad.assign(np.random.default_rng(5).normal(size=out.shape).astype(np.float32))
+                    tape.backward()
+                grads.append([t.grad.numpy().copy()] + [tex.grad(level) for level in range(tex.num_levels)])
+            for a, b in zip(*grads):
+                _same_bits(a, b)
+            moved.append(np.abs(grads[0][0]).max() > 0)  # 0 where every read is the border colour (far from the origin)
+    finally:
+        wt.set_num_threads(previous)
+    assert any(moved) == (filter != "nearest")
     assert any(name == "triplanar_texel_grad_lanes" for name, _ in launched)
 
 

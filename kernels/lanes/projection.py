@@ -61,7 +61,9 @@ def triplanar_scatter_lane(faces: FaceTextures, grads: FaceGrads, proj: Projecti
     its axis's texture (``grads.px``, ``py``, ``pz``; layer ``layers[l]``), pixel by pixel and read by
     read as the scalar kernels add them, from the reads ``triplanar_reads_lane(faces, proj, smp,
     pixels, base, count, 0, 0)`` gives, in one call (the reads as a zeroed :data:`~.lane_reads`,
-    returned, then copied into the scatter, were 11% of a biplanar forward and backward)."""
+    returned, then copied into the scatter, were 11% of a biplanar forward and backward). Where
+    ``grads.tiling`` is not empty, each read's ``dot(w · adj[base + l], d read / d tiling)`` into
+    it, pixel by pixel and projection by projection (``projection.plane_sample_slope``)."""
     ...
 
 

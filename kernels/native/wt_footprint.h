@@ -70,3 +70,13 @@ template <class Reads> WT_INLINE void wt_put_read(Reads& out, int r, wt_vi read,
                            wt_sel(read, fp.taps, zero)};
     for (int q = 0; q < 7; ++q) __builtin_memcpy(out.data[3 * q + r], &rows[q], sizeof(wt_vf));
 }
+
+// footprint.lod_scale_slope: d lod / d s of the footprint of UV derivatives (dx0, dx1), (dy0, dy1)
+// scaled by s, at s = scale, on a level-0 image of width × height texels.
+// twin: footprint.lod_scale_slope
+WT_INLINE float wt_lod_scale_slope(float width, float height, float dx0, float dx1, float dy0, float dy1, float scale) {
+    const float a0 = (dx0 * scale) * width, a1 = (dx1 * scale) * height;
+    const float b0 = (dy0 * scale) * width, b1 = (dy1 * scale) * height;
+    const float rho2 = wp::max(a0 * a0 + a1 * a1, b0 * b0 + b1 * b1);
+    return rho2 > (float)1.0e-30 && rho2 < wt_float_max ? 1.0f / (scale * (float)0.6931471805599453) : 0.0f;
+}

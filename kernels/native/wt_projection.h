@@ -186,7 +186,8 @@ WT_INLINE void wt_triplanar_weights(const wt_vf* N, wt_vi covered, float sharpne
 // twin: projection.projection_weights
 template <class Faces, class Proj, class Smp, class Pixels, class Reads>
 WT_INLINE void wt_triplanar_reads_into(const Faces& faces, const Proj& proj, const Smp& smp, const Pixels& pixels,
-                                       int base, int count, int unit_normals, int side, Reads& reads) {
+                                       int base, int count, int unit_normals, int side, Reads& reads,
+                                       wt_vf* surface = nullptr) {
     // projection.surface: the lane's pixels (the tail repeats pixel base, not read), in the projected space.
     float p_[3][WT_L], n_[3][WT_L], dx_[3][WT_L], dy_[3][WT_L], mask_[1][WT_L];  // read into arrays, then as vectors
     wt_rows(pixels.position, base, count, 3, p_);
@@ -213,6 +214,9 @@ WT_INLINE void wt_triplanar_reads_into(const Faces& faces, const Proj& proj, con
         __builtin_memcpy(&DX[e], dx_[e], sizeof(wt_vf));
         __builtin_memcpy(&DY[e], dy_[e], sizeof(wt_vf));
     }
+    if (surface)  // where asked, the surface in the projected space: P, N (as given), DX, DY
+        for (int e = 0; e < 3; ++e)
+            surface[e] = P[e], surface[3 + e] = N[e], surface[6 + e] = DX[e], surface[9 + e] = DY[e];
     const float sharpness = wt_float(proj.sharpness, 0);
     wt_vf W[3];
     if (proj.weights == WT_WEIGHTS_BIPLANAR)
@@ -267,17 +271,58 @@ WT_INLINE void wt_triplanar_colour_lane(const Faces& faces, const Proj& proj, co
 // lanes.projection.triplanar_scatter_lane: the texel gradients of plain colour's reads (each
 // projection's share w · g[l] of lane pixel l's output gradient adj[base + l], into the gradient
 // of its axis's texture, layer layers[l]), from wt_triplanar_reads_into's reads in rows that are
-// not zeroed first and never copied, added pixel by pixel and read by read (wt_scatter_lod).
+// not zeroed first and never copied, added pixel by pixel and read by read (wt_scatter_lod). Where
+// the tiling's gradient is needed (grads.tiling not empty), colour_grad's adds of dot(w g, slope)
+// into it, pixel by pixel and projection by projection: each read's projection.plane_sample_slope
+// from its wt_footprint_slopes (d/du · du/dt + d/dv · dv/dt + d/dlod · dlod/dt + d/dspread / t).
 // twin: triplanar._bodies:colour_grad
 template <class Faces, class Grads, class Proj, class Smp, class Pixels, class Ints, class Adj>
 WT_INLINE void wt_triplanar_scatter_lane(const Faces& faces, const Grads& grads, const Proj& proj, const Smp& smp,
                                          const Pixels& pixels, int base, int count, const Ints& layers,
                                          const Adj& adj) {
     wt_lane_read_rows reads;
-    wt_triplanar_reads_into(faces, proj, smp, pixels, base, count, 0, 0, reads);
+    wt_vf surface[12];  // P, N, DX, DY of the lane, for the tiling's slopes
+    wt_triplanar_reads_into(faces, proj, smp, pixels, base, count, 0, 0, reads, surface);
     const decltype(&faces.px) texs[3] = {&faces.px, &faces.py, &faces.pz};
     const decltype(&grads.px) grad[3] = {&grads.px, &grads.py, &grads.pz};
-    wt_scatter_lod(texs, grad, smp, 3, layers.c, reads, 1, wt_adj_lane(adj, base, count));
+    const wt_lane_colours g = wt_adj_lane(adj, base, count);
+    wt_scatter_lod(texs, grad, smp, 3, layers.c, reads, 1, g);
+    if (grads.tiling.shape[0] == 0) return;
+    const float o[3] = {(float)proj.origin.c[0], (float)proj.origin.c[1], (float)proj.origin.c[2]};
+    wt_f4 slope[3][WT_L];
+    for (int axis = 0; axis < 3; ++axis) {  // projection.plane_sample_slope of each read
+        const auto& tex = *texs[axis];
+        const float t = wt_float(proj.tiling, wp::min(axis, proj.tiling.shape[0] - 1));  // projection_tiling
+        const float width = (float)wt_int(tex.level_width, 0), height = (float)wt_int(tex.level_height, 0);
+        wt_f4 f[WT_L], v[WT_L], d_u[WT_L], d_v[WT_L], d_lod[WT_L], d_spread[WT_L];
+        const float* weight = reads.data[9 + axis];
+        wt_footprint_slopes(tex, smp, layers.c, reads.data[axis], reads.data[3 + axis], reads.data[6 + axis],
+                            reads.data[12 + axis], reads.data[15 + axis], reads.data[18 + axis], weight, f, v, d_u, d_v,
+                            d_lod, d_spread);
+        const int c0 = axis == 0 ? 2 : 0, c1 = axis == 1 ? 2 : 1;  // projection.plane_coords
+        for (int l = 0; l < count; ++l) {
+            if (!(weight[l] > 0.0f)) continue;
+            const float normal = surface[3 + axis][l];
+            float s = 1.0f;  // projection.u_sign
+            if (proj.mirror_fix != 0) s = axis == 2 ? (normal < 0.0f ? -1.0f : 1.0f) : -(normal < 0.0f ? -1.0f : 1.0f);
+            const float cu = (surface[c0][l] + o[c0]) * s, cv = surface[c1][l] + o[c1];  // projection.slope_coords
+            const float lod_slope = wt_lod_scale_slope(width, height, surface[6 + c0][l], surface[6 + c1][l],
+                                                       surface[9 + c0][l], surface[9 + c1][l], t);
+            slope[axis][l] = d_u[l] * cu + d_v[l] * cv + d_lod[l] * lod_slope + d_spread[l] / t;
+        }
+    }
+    float* tiling = (float*)grads.tiling.data;
+    const long long stride = grads.tiling.strides[0];
+    for (int l = 0; l < count; ++l) {  // colour_grad's adds, pixel by pixel, projection by projection
+        const wt_v4 gl(g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]);
+        for (int axis = 0; axis < 3; ++axis) {
+            const float w = reads.data[9 + axis][l];
+            if (!(w > 0.0f)) continue;
+            const wt_f4& d = slope[axis][l];
+            float* at = (float*)((char*)tiling + (long long)wp::min(axis, grads.tiling.shape[0] - 1) * stride);
+            *at = *at + wp::dot(wp::mul(w, gl), wt_v4(d[0], d[1], d[2], d[3]));
+        }
+    }
 }
 
 // Normal mapping's reads of the lane, on the unit normal (wt_triplanar_reads_into's unit_normals,
