@@ -250,3 +250,31 @@ def test_the_formats_yardstick_builds_as_its_header_says(tmp_path):
         pytest.skip("no gcc on PATH")
     done = subprocess.run(["gcc", "-O3", "-march=native", "-fopenmp", "-Wall", "-Werror", str(source), "-o", str(tmp_path / "y"), "-lm"], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
+
+
+@pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/ is not part of this checkout")
+def test_uv_grads_make_every_forward_backward_take_the_uvs_gradients(tmp_path):
+    """--uv-grads: warptex's and the autodiff peers' forward+backward rows take the UVs' gradients
+    (marked so in the JSON and the summary); other techniques are refused before anything runs."""
+    try:
+        import torch  # noqa: F401
+
+        peers = ["torch"]
+    except ImportError:
+        peers = []
+    result = subprocess.run(
+        [sys.executable, str(BENCH), "--quick", "--threads", "2", "--no-scaling", "--techniques", "bilinear", "trilinear", "--uv-grads", "--texture-size", "64",
+         "--peers", *peers, "--json", str(tmp_path / "u.json")],  # fmt: skip
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    records = json.loads((tmp_path / "u.json").read_text())["records"]
+    backward = [r for r in records if r["pass"] == "forward+backward"]
+    assert backward and all(r.get("uv_grads") for r in backward) and not any(r.get("uv_grads") for r in records if r["pass"] == "forward")
+    assert {r["impl"] for r in backward} == {"warptex", *peers}
+    if peers:
+        assert "(gradients of the texels and the UVs: --uv-grads)" in result.stdout
+    refused = subprocess.run([sys.executable, str(BENCH), "--quick", "--uv-grads", "--techniques", "triplanar"], capture_output=True, text=True, timeout=600)
+    assert refused.returncode == 2 and "--uv-grads times UV gradients of bilinear and trilinear" in refused.stderr
