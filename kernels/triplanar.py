@@ -179,7 +179,9 @@ def _bodies(read, add, select, suffix: str, slopes: bool):
     non-finite normals give 0; zero-weight projections are not read. With ``slopes`` (plain
     sampling), colour's gradient also adds ``dot(w g, d read / d tiling)`` of each projection read,
     in axis order, into the tiling's gradient where it is needed (``grads.tiling``, not empty:
-    :func:`~.projection.plane_sample_slope`)."""
+    :func:`~.projection.plane_sample_slope`), and so does the stored samples' gradient with each
+    sample's own gradient ``g_axis`` (normal mapping's first step: ``dot(g_axis, d read / d tiling)``,
+    the read on the unit normal)."""
 
     def colour(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out: wp.array2d(dtype=float)):
         value = wp.vec4(0.0)
@@ -237,7 +239,12 @@ def _bodies(read, add, select, suffix: str, slopes: bool):
             n = unit_base_normal(n)
             for axis in range(3):
                 if w[axis] > 0.0:
-                    add(select(args.faces.px, args.faces.nx, args.faces.py, args.faces.ny, args.faces.pz, args.faces.nz, axis, n), select(grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, axis, n), args.layer, axis, args, p, n, dpdx, dpdy, adj.samples[i, axis])
+                    tex = select(args.faces.px, args.faces.nx, args.faces.py, args.faces.ny, args.faces.pz, args.faces.nz, axis, n)
+                    add(tex, select(grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, axis, n), args.layer, axis, args, p, n, dpdx, dpdy, adj.samples[i, axis])
+                    if wp.static(slopes):
+                        if grads.tiling.shape[0] > 0:
+                            value, slope = plane_sample_slope(tex, args.layer, args.proj, axis, p, n, dpdx, dpdy, projection_tiling(args.proj, axis), args.smp)
+                            wp.atomic_add(grads.tiling, wp.min(axis, grads.tiling.shape[0] - 1), wp.dot(adj.samples[i, axis], slope))
 
     return {name: inlined(specialised(f, f"triplanar_{name}{suffix}")) for name, f in (("colour", colour), ("colour_grad", colour_grad), ("normal", normal), ("samples", samples), ("samples_grad", samples_grad))}
 
@@ -330,9 +337,10 @@ TEXEL_GRADS = (*FACE_GRADS, None)
 
 
 def tiling_lanes_take(args: TriplanarArgs) -> bool:
-    """Whether the texel-gradient lanes of plain colour with a texture per face take a launch: not
-    where the tiling needs its gradient, which their one-pixel kernel adds by hand (``_bodies``'
-    slopes; one texture per axis, the lanes add it too: ``wt_triplanar_scatter_lane``)."""
+    """Whether the texel-gradient lanes of plain sampling with a texture per face (colour's, and
+    normal mapping's stored samples') take a launch: not where the tiling needs its gradient, which
+    their one-pixel kernel adds by hand (``_bodies``' slopes; with one texture per axis the lanes
+    add it too: ``wt_add_tiling_slopes``)."""
     return not args.proj.tiling.requires_grad
 _CONFIGURATIONS = [{"normal": normal, "stochastic": stochastic, "faces": faces} for normal in (False, True) for stochastic in (False, True) for faces in (False, True)]
 
@@ -391,8 +399,8 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
     lanes = lane_kernel(normal_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module + ".normal", name=name + "_normal_lanes", covered=surface_covered)
     first_lanes = {"lanes": lane_kernel(samples_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, module=module + ".normal.grad", name=name + "_samples_lanes"),
                    "texel_grad_lanes": lane_kernel(samples_grad_lane, TriplanarArgs, SurfacePixels, ProjectionSamples, grads_t=FaceGrads, module=module + ".normal.grad", name=name + "_samples_texel_grad_lanes"),
-                   "lanes_take": take, "grad_lanes_take": take}  # fmt: skip
+                   "lanes_take": take, "grad_lanes_take": grad_take}  # fmt: skip
     first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,
                           body=bodies["samples"], scatter=bodies["samples_grad"], grads=FaceGrads)  # fmt: skip
-    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=TEXEL_GRADS, **first_lanes), then=_normal_from_samples(), intermediates=_sample_shapes, no_grad=("weights",))
+    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=TEXEL_GRADS if stochastic else SLOPE_GRADS, **first_lanes), then=_normal_from_samples(), intermediates=_sample_shapes, no_grad=("weights",))
     return Kernels(forward, None, _adjoint(True), staged=staged, lanes=lanes, lanes_take=take)

@@ -948,10 +948,11 @@ def test_triplanar_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, 
 @pytest.mark.parametrize("address", ["wrap", "mirror", "border"])
 @pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
 def test_triplanar_tiling_gradient_lanes_give_the_one_pixel_bits(rng, launched, filter, address, threads):
-    """Plain colour's tiling gradient by hand (``wt_triplanar_scatter_lane``'s slopes, added pixel
-    by pixel and projection by projection): the tiling's and the texels' gradients the same bits as
-    the one-pixel kernel's, one tiling or one per axis, triplanar and biplanar weights, with the
-    mirror fix and without, offsets, object space, and a G-buffer far from the world origin."""
+    """Plain sampling's tiling gradient by hand (``wt_add_tiling_slopes``, added pixel by pixel and
+    projection by projection: colour's, and normal mapping's stored samples'): the tiling's and the
+    texels' gradients the same bits as the one-pixel kernel's, one tiling or one per axis,
+    triplanar and biplanar weights, with the mirror fix and without, offsets, object space, and a
+    G-buffer far from the world origin."""
     tex = wt.TextureArray(rng.random((2, 64, 32, 4), dtype=np.float32), requires_grad=True)
     smp = wt.Sampler(filter=filter, address=address, border=(0.5, 0.25, 0.125, 1.0), lod_bias=0.3, max_aniso=4)
     calls = []
@@ -967,6 +968,8 @@ def test_triplanar_tiling_gradient_lanes_give_the_one_pixel_bits(rng, launched, 
             (g, wt.triplanar, [0.7], {"sharpness": 0.0, "mirror_fix": False, "offsets": [(0.3, 0.1), (0.0, 0.5), (0.25, 0.25)]}),
             (g, wt.triplanar, [1.1, 0.6, 1.9], {"space": "object", "object_to_world": np.diag([1.5, 0.8, 1.2, 1.0]).astype(np.float32)}),
             (far, wt.triplanar, [0.35], {}),
+            (g, wt.triplanar_normal, [1.5, 2.0, 0.75], {"blend": "rnm", "sharpness": 3.0}),  # the stored samples' gradient (wt_triplanar_scatter_samples_lane)
+            (far, wt.biplanar_normal, [0.35], {"blend": "whiteout"}),
         ]
     previous = wt.get_num_threads()
     wt.set_num_threads(threads)
@@ -990,7 +993,8 @@ def test_triplanar_tiling_gradient_lanes_give_the_one_pixel_bits(rng, launched, 
     finally:
         wt.set_num_threads(previous)
     assert any(moved) == (filter != "nearest")
-    assert any(name == "triplanar_texel_grad_lanes" for name, _ in launched)
+    names = {name for name, _ in launched}
+    assert {"triplanar_texel_grad_lanes", "triplanar_samples_texel_grad_lanes"} <= names, names
 
 
 @pytest.mark.parametrize("threads", [1, 3])

@@ -311,6 +311,9 @@ TILING_CASES = {  # a call's keywords beside the G-buffer, texture and tiling
     "triplanar nearest mirror": {"sampler": wt.Sampler(filter="nearest", address="mirror")},
     "biplanar per face": {"technique": "biplanar", "faces": True},
     "triplanar per face, object space": {"faces": True, "space": "object"},
+    "normal whiteout": {"technique": "normal", "blend": "whiteout"},
+    "normal rnm biplanar anisotropic": {"technique": "biplanar_normal", "blend": "rnm", "sampler": wt.Sampler(filter="anisotropic")},
+    "normal udn per face": {"technique": "normal", "blend": "udn", "faces": True},
 }
 
 
@@ -318,19 +321,22 @@ TILING_CASES = {  # a call's keywords beside the G-buffer, texture and tiling
 @pytest.mark.parametrize("tiling", [[2.5], [1.3, 0.9, 1.7]])
 @pytest.mark.parametrize("case", TILING_CASES)
 def test_tiling_gradient_by_hand_equals_the_generated_adjoint(monkeypatch, case, tiling, threads):
-    """Plain colour with the tiling needing its gradient (and the texels theirs): the hand-written
-    gradient runs (on lanes with one texture per axis, one pixel per index with one per face), and
-    gives the generated adjoint's tiling and texel gradients, one tiling or one per axis."""
+    """Plain sampling with the tiling needing its gradient (and the texels theirs): the hand-written
+    gradient runs (colour's on lanes with one texture per axis; one pixel per index with one per
+    face, and normal mapping's first step, its stored samples), and gives the generated adjoint's
+    tiling and texel gradients, one tiling or one per axis."""
     from warptex import _op
 
     camera = wt.orthographic((3.0, 2.0, 4.0), (0.0, 0.0, 0.0), height=2.2, resolution=(192, 192))
     g = wt.rasterize(trimesh.creation.icosphere(subdivisions=4), camera)
     kw = dict(TILING_CASES[case])
-    technique = biplanar if kw.pop("technique", "triplanar") == "biplanar" else triplanar
+    name = kw.pop("technique", "triplanar")
+    technique = {"triplanar": triplanar, "biplanar": biplanar, "normal": triplanar_normal, "biplanar_normal": wt.biplanar_normal}[name]
+    normal = "normal" in name
     faces = kw.pop("faces", False)
     if kw.get("space") == "object":
         kw["object_to_world"] = np.diag([1.5, 0.8, 1.2, 1.0]).astype(np.float32)
-    images = [smooth_texture(37, 29, seed) for seed in range(6 if faces else 1)]
+    images = [(normal_map_texture if normal else smooth_texture)(37, 29, seed) for seed in range(6 if faces else 1)]
     weights = np.random.default_rng(4).normal(size=(192, 192, 3)).astype(np.float32)
     launched = []
     monkeypatch.setattr(_op, "scatter", lambda *a, **k: (launched.append(a[0].key), wt._launch.scatter(*a, **k)))
@@ -344,7 +350,7 @@ def test_tiling_gradient_by_hand_equals_the_generated_adjoint(monkeypatch, case,
             t = wp.array(np.float32(tiling), dtype=float, requires_grad=True)
             tape = wp.Tape()
             with tape, _op.force_generated_adjoint(generated):
-                out = technique(g, **({"textures_per_face": textures} if faces else {"texture": textures[0]}), tiling=t, **kw)
+                out = technique(g, **({"textures_per_face": textures} if faces else {"normal_map" if normal else "texture": textures[0]}), tiling=t, **kw)
             out.grad.assign(weights)
             tape.backward()
             results.append([t.grad.numpy().copy()] + [tex.grad(k) for tex in textures for k in range(tex.num_levels)])
@@ -359,11 +365,11 @@ def test_tiling_gradient_by_hand_equals_the_generated_adjoint(monkeypatch, case,
     assert_same_gradients([(False, h.reshape(-1)) for h in hand[1:]], [(False, x.reshape(-1)) for x in gen[1:]])
 
 
-@pytest.mark.parametrize("technique", ["triplanar", "biplanar"])
+@pytest.mark.parametrize("technique", ["triplanar", "biplanar", "normal_rnm", "normal_udn_biplanar"])
 def test_tiling_gradient_by_hand_matches_finite_differences(sphere, technique):
     """The tiling alone needing its gradient (the hand-written path), per axis, against central
     differences (pixels whose step crosses a slope jump left out, :func:`fd.check_parameter_gradient`)."""
-    img = smooth_texture(32, 24, seed=1)
+    img = _texture_for(technique, 32, 24, seed=1)
     r = _weights(sphere, 3)
     value = np.array([1.3, 0.9, 1.7])
     check_parameter_gradient(

@@ -214,9 +214,6 @@ WT_INLINE void wt_triplanar_reads_into(const Faces& faces, const Proj& proj, con
         __builtin_memcpy(&DX[e], dx_[e], sizeof(wt_vf));
         __builtin_memcpy(&DY[e], dy_[e], sizeof(wt_vf));
     }
-    if (surface)  // where asked, the surface in the projected space: P, N (as given), DX, DY
-        for (int e = 0; e < 3; ++e)
-            surface[e] = P[e], surface[3 + e] = N[e], surface[6 + e] = DX[e], surface[9 + e] = DY[e];
     const float sharpness = wt_float(proj.sharpness, 0);
     wt_vf W[3];
     if (proj.weights == WT_WEIGHTS_BIPLANAR)
@@ -224,6 +221,9 @@ WT_INLINE void wt_triplanar_reads_into(const Faces& faces, const Proj& proj, con
     else
         wt_triplanar_weights(N, covered, sharpness, W);
     if (unit_normals != 0) wt_unit_normals(N);  // triplanar.unit_base_normal: normal mapping reads on the unit normal
+    if (surface)  // where asked, the surface in the projected space: P, N (the normal the reads use), DX, DY
+        for (int e = 0; e < 3; ++e)
+            surface[e] = P[e], surface[3 + e] = N[e], surface[6 + e] = DX[e], surface[9 + e] = DY[e];
     if (side != 0) {  // faces.on_face: the - face where n[axis] < 0 (the normal it reads on), else the + face
         for (int axis = 0; axis < 3; ++axis) {
             const wt_vi negative = N[axis] < 0.0f;
@@ -268,35 +268,27 @@ WT_INLINE void wt_triplanar_colour_lane(const Faces& faces, const Proj& proj, co
     wt_write_lane(out, base, count, value);
 }
 
-// lanes.projection.triplanar_scatter_lane: the texel gradients of plain colour's reads (each
-// projection's share w · g[l] of lane pixel l's output gradient adj[base + l], into the gradient
-// of its axis's texture, layer layers[l]), from wt_triplanar_reads_into's reads in rows that are
-// not zeroed first and never copied, added pixel by pixel and read by read (wt_scatter_lod). Where
-// the tiling's gradient is needed (grads.tiling not empty), colour_grad's adds of dot(w g, slope)
-// into it, pixel by pixel and projection by projection: each read's projection.plane_sample_slope
-// from its wt_footprint_slopes (d/du · du/dt + d/dv · dv/dt + d/dlod · dlod/dt + d/dspread / t).
-// twin: triplanar._bodies:colour_grad
-template <class Faces, class Grads, class Proj, class Smp, class Pixels, class Ints, class Adj>
-WT_INLINE void wt_triplanar_scatter_lane(const Faces& faces, const Grads& grads, const Proj& proj, const Smp& smp,
-                                         const Pixels& pixels, int base, int count, const Ints& layers,
-                                         const Adj& adj) {
-    wt_lane_read_rows reads;
-    wt_vf surface[12];  // P, N, DX, DY of the lane, for the tiling's slopes
-    wt_triplanar_reads_into(faces, proj, smp, pixels, base, count, 0, 0, reads, surface);
-    const decltype(&faces.px) texs[3] = {&faces.px, &faces.py, &faces.pz};
-    const decltype(&grads.px) grad[3] = {&grads.px, &grads.py, &grads.pz};
-    const wt_lane_colours g = wt_adj_lane(adj, base, count);
-    wt_scatter_lod(texs, grad, smp, 3, layers.c, reads, 1, g);
-    if (grads.tiling.shape[0] == 0) return;
+// The tiling's gradient of a lane's plain projection reads (triplanar._bodies' slopes): each
+// read's projection.plane_sample_slope, from its wt_footprint_slopes (d/du · du/dt + d/dv · dv/dt
+// + d/dlod · dlod/dt + d/dspread / t, on the projected surface wt_triplanar_reads_into hands back:
+// its slope coords, the mirror-fix sign of the normal the reads use, wt_lod_scale_slope), then
+// dot(w · g[axis][l], slope) where weigh (colour's), dot(g[axis][l], slope) where not (normal
+// mapping's stored samples), added into tiling_grad pixel by pixel and projection by projection
+// (Warp's wp::dot and wp::mul, so the sums are the one-pixel kernel's bits).
+// twin: projection.plane_sample_slope
+template <class Tex, class Tiling, class Proj, class Smp>
+WT_INLINE void wt_add_tiling_slopes(const Tex* const* texs, const Tiling& tiling_grad, const Proj& proj, const Smp& smp,
+                                    const int* layers, const wt_lane_read_rows& reads, const wt_vf* surface, int count,
+                                    const wt_lane_colours* const* g, int weigh) {
     const float o[3] = {(float)proj.origin.c[0], (float)proj.origin.c[1], (float)proj.origin.c[2]};
     wt_f4 slope[3][WT_L];
     for (int axis = 0; axis < 3; ++axis) {  // projection.plane_sample_slope of each read
-        const auto& tex = *texs[axis];
+        const Tex& tex = *texs[axis];
         const float t = wt_float(proj.tiling, wp::min(axis, proj.tiling.shape[0] - 1));  // projection_tiling
         const float width = (float)wt_int(tex.level_width, 0), height = (float)wt_int(tex.level_height, 0);
         wt_f4 f[WT_L], v[WT_L], d_u[WT_L], d_v[WT_L], d_lod[WT_L], d_spread[WT_L];
         const float* weight = reads.data[9 + axis];
-        wt_footprint_slopes(tex, smp, layers.c, reads.data[axis], reads.data[3 + axis], reads.data[6 + axis],
+        wt_footprint_slopes(tex, smp, layers, reads.data[axis], reads.data[3 + axis], reads.data[6 + axis],
                             reads.data[12 + axis], reads.data[15 + axis], reads.data[18 + axis], weight, f, v, d_u, d_v,
                             d_lod, d_spread);
         const int c0 = axis == 0 ? 2 : 0, c1 = axis == 1 ? 2 : 1;  // projection.plane_coords
@@ -311,18 +303,41 @@ WT_INLINE void wt_triplanar_scatter_lane(const Faces& faces, const Grads& grads,
             slope[axis][l] = d_u[l] * cu + d_v[l] * cv + d_lod[l] * lod_slope + d_spread[l] / t;
         }
     }
-    float* tiling = (float*)grads.tiling.data;
-    const long long stride = grads.tiling.strides[0];
-    for (int l = 0; l < count; ++l) {  // colour_grad's adds, pixel by pixel, projection by projection
-        const wt_v4 gl(g.data[l][0], g.data[l][1], g.data[l][2], g.data[l][3]);
+    float* tiling = (float*)tiling_grad.data;
+    const long long stride = tiling_grad.strides[0];
+    for (int l = 0; l < count; ++l) {  // pixel by pixel, projection by projection
         for (int axis = 0; axis < 3; ++axis) {
             const float w = reads.data[9 + axis][l];
             if (!(w > 0.0f)) continue;
+            const wt_v4 gl(g[axis]->data[l][0], g[axis]->data[l][1], g[axis]->data[l][2], g[axis]->data[l][3]);
             const wt_f4& d = slope[axis][l];
-            float* at = (float*)((char*)tiling + (long long)wp::min(axis, grads.tiling.shape[0] - 1) * stride);
-            *at = *at + wp::dot(wp::mul(w, gl), wt_v4(d[0], d[1], d[2], d[3]));
+            float* at = (float*)((char*)tiling + (long long)wp::min(axis, tiling_grad.shape[0] - 1) * stride);
+            *at = *at + wp::dot(weigh ? wp::mul(w, gl) : gl, wt_v4(d[0], d[1], d[2], d[3]));
         }
     }
+}
+
+// lanes.projection.triplanar_scatter_lane: the texel gradients of plain colour's reads (each
+// projection's share w · g[l] of lane pixel l's output gradient adj[base + l], into the gradient
+// of its axis's texture, layer layers[l]), from wt_triplanar_reads_into's reads in rows that are
+// not zeroed first and never copied, added pixel by pixel and read by read (wt_scatter_lod). Where
+// the tiling's gradient is needed (grads.tiling not empty), colour_grad's adds of dot(w g, slope)
+// into it (wt_add_tiling_slopes).
+// twin: triplanar._bodies:colour_grad
+template <class Faces, class Grads, class Proj, class Smp, class Pixels, class Ints, class Adj>
+WT_INLINE void wt_triplanar_scatter_lane(const Faces& faces, const Grads& grads, const Proj& proj, const Smp& smp,
+                                         const Pixels& pixels, int base, int count, const Ints& layers,
+                                         const Adj& adj) {
+    wt_lane_read_rows reads;
+    wt_vf surface[12];  // P, N, DX, DY of the lane, for the tiling's slopes
+    wt_triplanar_reads_into(faces, proj, smp, pixels, base, count, 0, 0, reads, surface);
+    const decltype(&faces.px) texs[3] = {&faces.px, &faces.py, &faces.pz};
+    const decltype(&grads.px) grad[3] = {&grads.px, &grads.py, &grads.pz};
+    const wt_lane_colours g = wt_adj_lane(adj, base, count);
+    wt_scatter_lod(texs, grad, smp, 3, layers.c, reads, 1, g);
+    if (grads.tiling.shape[0] == 0) return;
+    const wt_lane_colours* gr[3] = {&g, &g, &g};
+    wt_add_tiling_slopes(texs, grads.tiling, proj, smp, layers.c, reads, surface, count, gr, 1);
 }
 
 // Normal mapping's reads of the lane, on the unit normal (wt_triplanar_reads_into's unit_normals,
@@ -377,14 +392,16 @@ WT_INLINE void wt_triplanar_samples_lane(const Faces& faces, const Proj& proj, c
 // lanes.projection.triplanar_scatter_samples_lane: the gradients adj[i, axis] of the samples normal
 // mapping's first step stored (i = base .. base + count - 1), each added (not weighted) into the
 // texels of its projection's read on the unit normal, pixel by pixel and read by read
-// (wt_scatter_lod_of), with the reads in rows that are not zeroed first and never copied.
+// (wt_scatter_lod_of), with the reads in rows that are not zeroed first and never copied; where
+// grads.tiling is needed, dot(adj[i, axis], slope) of each read into it (wt_add_tiling_slopes).
 // twin: triplanar._bodies:samples_grad
 template <class Faces, class Grads, class Proj, class Smp, class Pixels, class Ints, class Adj>
 WT_INLINE void wt_triplanar_scatter_samples_lane(const Faces& faces, const Grads& grads, const Proj& proj,
                                                  const Smp& smp, const Pixels& pixels, int base, int count,
                                                  const Ints& layers, const Adj& adj) {
     wt_lane_read_rows reads;
-    wt_triplanar_reads_into(faces, proj, smp, pixels, base, count, 1, 0, reads);
+    wt_vf surface[12];  // P, N (unit), DX, DY of the lane, for the tiling's slopes
+    wt_triplanar_reads_into(faces, proj, smp, pixels, base, count, 1, 0, reads, surface);
     wt_lane_colours g[3];  // row l: lane pixel l's gradient of each projection's sample (0 past count)
     for (int l = 0; l < count; ++l)
         for (int axis = 0; axis < 3; ++axis) {
@@ -395,4 +412,6 @@ WT_INLINE void wt_triplanar_scatter_samples_lane(const Faces& faces, const Grads
     const decltype(&grads.px) grad[3] = {&grads.px, &grads.py, &grads.pz};
     const wt_lane_colours* gr[3] = {&g[0], &g[1], &g[2]};
     wt_scatter_lod_of(texs, grad, smp, 3, layers.c, reads, 0, gr, 1);
+    if (grads.tiling.shape[0] > 0)
+        wt_add_tiling_slopes(texs, grads.tiling, proj, smp, layers.c, reads, surface, count, gr, 0);
 }
