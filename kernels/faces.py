@@ -43,8 +43,8 @@ class FaceTextures:
 class FaceGrads:
     """The texel gradients of :class:`FaceTextures`' textures (a texture standing for several faces
     has one gradient array, passed for each of them; empty: not needed), and the gradient of the
-    projections' tiling, where a colour kernel of plain sampling takes it by hand (empty: not
-    needed, or not served: ``triplanar.triplanar_kernels``)."""
+    projections' tiling, where a kernel of plain sampling takes it by hand (colour's, normal
+    mapping's stored samples'; empty: not needed, or not served: ``triplanar.triplanar_kernels``)."""
 
     px: TexelGrad
     nx: TexelGrad

@@ -331,7 +331,7 @@ _BODIES = {
 }
 #: The texel gradients' input paths (``FaceGrads`` fields), the face textures in :data:`~.faces.FACES` order.
 FACE_GRADS = tuple(f"args.faces.{f}" for f in FACE_FIELDS)
-#: ``FaceGrads``' paths where the kernel takes the tiling's gradient by hand (colour, plain sampling), and where not.
+#: ``FaceGrads``' paths where the kernel takes the tiling's gradient by hand (plain sampling: colour's, normal mapping's stored samples'), and where not.
 SLOPE_GRADS = (*FACE_GRADS, "args.proj.tiling")
 TEXEL_GRADS = (*FACE_GRADS, None)
 
@@ -342,6 +342,8 @@ def tiling_lanes_take(args: TriplanarArgs) -> bool:
     their one-pixel kernel adds by hand (``_bodies``' slopes; with one texture per axis the lanes
     add it too: ``wt_add_tiling_slopes``)."""
     return not args.proj.tiling.requires_grad
+
+
 _CONFIGURATIONS = [{"normal": normal, "stochastic": stochastic, "faces": faces} for normal in (False, True) for stochastic in (False, True) for faces in (False, True)]
 
 

@@ -275,6 +275,29 @@ def test_uv_and_lod_gradients_of_a_compact_texture_are_its_float_twins(rng, fmt)
         np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5 * np.abs(want).max())
 
 
+@pytest.mark.parametrize("fmt", COMPACT)
+def test_triplanar_tiling_gradient_of_a_compact_texture_is_its_float_twins(rng, fmt):
+    """Plain triplanar's own gradient serves the tiling, so a compact texture takes it (with its
+    texels' gradient, on the lanes): its float32 twin's, to rounding."""
+    gbuffer = wt.rasterize(terrain(resolution=(65, 65)), terrain_camera((48, 64)))
+    tex = wt.Texture(_values(rng, (32, 32, 4), fmt), format=fmt, requires_grad=True)
+    twin = wt.Texture(tex.numpy(0), requires_grad=True)
+    for k in range(1, tex.num_levels):  # the compact chain's own levels, decoded
+        twin.level(k).assign(tex.numpy(k))
+    weights = rng.normal(size=(48, 64, 4)).astype(np.float32)
+    grads = []
+    for t in (tex, twin):
+        tiling = wp.array([0.3, 0.25, 0.35], dtype=float, requires_grad=True)
+        tape = wp.Tape()
+        with tape:
+            out = wt.triplanar(gbuffer, t, tiling=tiling, sampler=wt.Sampler(filter="anisotropic"))
+        tape.backward(grads={out: wp.array(weights, dtype=float)})
+        grads.append([tiling.grad.numpy(), t.grad(0)])
+    for got, want in zip(*grads):
+        assert np.abs(want).max() > 0
+        np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5 * np.abs(want).max())
+
+
 def test_a_gradient_only_warps_generated_adjoint_gives_is_refused_for_a_compact_texture(rng):
     tex = wt.Texture(rng.integers(0, 256, (8, 8, 4), dtype=np.uint8), format="srgb8", requires_grad=True)
     uv = rng.uniform(0, 1, (10, 2)).astype(np.float32)

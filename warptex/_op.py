@@ -119,9 +119,9 @@ def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linea
         if path == "adjoint" and any(getattr(a, "warptex_carrier", False) for a in wanted):
             raise ValueError(
                 "texel gradients of a texture stored in a compact format (float16, unorm8, srgb8) come from warptex's "
-                "hand-written gradients, and this call needs Warp's generated one (a gradient of tiling, UV derivatives or "
-                "another input besides texels that the technique's own gradient does not serve, or a histogram-preserving "
-                "blend): sample a float32 copy of the texture, "
+                "hand-written gradients, and this call needs Warp's generated one (a gradient of an input besides texels "
+                "that the technique's own gradient does not serve: sharpness, offsets, UV derivatives, a stochastic "
+                "lookup's tiling or UVs; or a histogram-preserving blend): sample a float32 copy of the texture, "
                 "Texture(texture, format='float32'), or leave its requires_grad off"
             )
         _run_path(kernels, path, count, inputs, result, device, cut, touched)
