@@ -57,6 +57,10 @@ class FaceGrads:
 
 #: The input paths of :class:`FaceGrads`' fields, relative to the :class:`FaceTextures` they differentiate.
 FACE_FIELDS = ("px", "nx", "py", "ny", "pz", "nz")
+#: :class:`FaceGrads`' input paths in a triplanar launch (``Kernels.grads``): where the kernel takes the tiling's
+#: gradient by hand (plain sampling: colour's, normal mapping's stored samples'), and where it does not.
+SLOPE_GRADS = (*(f"args.faces.{f}" for f in FACE_FIELDS), "args.proj.tiling")
+TEXEL_GRADS = (*SLOPE_GRADS[:-1], None)
 
 
 @wp.func

@@ -23,10 +23,10 @@ import functools
 import warp as wp
 
 from . import adjoint_module, inlined, specialised
-from .faces import FACE_FIELDS, FaceGrads, FaceTextures, on_axis_face, on_face
+from .faces import SLOPE_GRADS, TEXEL_GRADS, FaceGrads, FaceTextures, on_axis_face, on_face
 from .family import LANES_SUFFIX, Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
 from .lanes.projection import surface_covered
-from .lanes.triplanar import face_lane_bodies, lane_bodies, linear_blend_take, normal_lane_bodies, stochastic_lane_bodies, stored_lane_bodies
+from .lanes.triplanar import face_lane_bodies, lane_bodies, linear_blend_take, normal_lane_bodies, stochastic_lane_bodies, stored_lane_bodies, tiling_lanes_take
 from .native import use
 from .normals import NormalMapArgs, blend_projected, blend_projected_grad, decode_normal, decode_normal_grad, direction, direction_grad, to_world
 from .projection import ProjectionArgs, SurfacePixels, plane_coords, plane_sample_slope, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
@@ -329,21 +329,6 @@ _BODIES = {
     for stochastic in (False, True)
     for faces in (False, True)
 }
-#: The texel gradients' input paths (``FaceGrads`` fields), the face textures in :data:`~.faces.FACES` order.
-FACE_GRADS = tuple(f"args.faces.{f}" for f in FACE_FIELDS)
-#: ``FaceGrads``' paths where the kernel takes the tiling's gradient by hand (plain sampling: colour's, normal mapping's stored samples'), and where not.
-SLOPE_GRADS = (*FACE_GRADS, "args.proj.tiling")
-TEXEL_GRADS = (*FACE_GRADS, None)
-
-
-def tiling_lanes_take(args: TriplanarArgs) -> bool:
-    """Whether the texel-gradient lanes of plain sampling with a texture per face (colour's, and
-    normal mapping's stored samples') take a launch: not where the tiling needs its gradient, which
-    their one-pixel kernel adds by hand (``_bodies``' slopes; with one texture per axis the lanes
-    add it too: ``wt_add_tiling_slopes``)."""
-    return not args.proj.tiling.requires_grad
-
-
 _CONFIGURATIONS = [{"normal": normal, "stochastic": stochastic, "faces": faces} for normal in (False, True) for stochastic in (False, True) for faces in (False, True)]
 
 

@@ -32,6 +32,14 @@ from .scatter import scatter_face_reads_lanes, scatter_projection_taps_lanes
 from .stochastic import linear_blend, projection_taps_lane, scatter_stochastic_face_reads_lanes, scatter_stochastic_reads_lanes, stochastic_read_lane
 
 
+def tiling_lanes_take(args) -> bool:
+    """Whether the texel-gradient lanes of plain sampling with a texture per face (colour's, and
+    normal mapping's stored samples') take a launch with ``args``: not where the tiling needs its
+    gradient, which their one-pixel kernel adds by hand (``triplanar._bodies``' slopes; with one
+    texture per axis the lanes add it too: ``wt_add_tiling_slopes``)."""
+    return not args.proj.tiling.requires_grad
+
+
 @functools.cache
 def lane_bodies(args_t):
     """``(colour_lane, colour_grad_lane)``: the lane bodies of plain colour mapping and its texel
