@@ -47,6 +47,15 @@ def texel_gradients_both_ways(monkeypatch, threads: int, forward, weights: np.nd
     return grads[0], grads[1], grads[2], sum("texel_grad" in key and "blend" not in key for key in scatters)
 
 
+def launches(monkeypatch) -> list[str]:
+    """The keys of the kernels ``warptex._op`` launches from now on, forward (``launch``) and
+    hand-written gradient (``scatter``; the lane kernel it may run instead is not listed), in order."""
+    launched = []
+    monkeypatch.setattr(_op, "scatter", lambda *a, **k: (launched.append(a[0].key), wt._launch.scatter(*a, **k)))
+    monkeypatch.setattr(_op, "launch", lambda kernel, *a, **k: (launched.append(kernel.key), wt._launch.launch(kernel, *a, **k)))
+    return launched
+
+
 def _gradients(t) -> list[np.ndarray]:
     """Every level's gradient of a texture, or a parameter array's gradient."""
     if isinstance(t, wp.array):

@@ -730,18 +730,21 @@ def test_splat_lanes_on_the_default_terrain(projection):
 # -- texel gradients ----------------------------------------------------------------------------------
 
 
-def _texel_grads(call, textures, weights, one_pixel: bool) -> list:
+def _texel_grads(call, textures, weights, one_pixel: bool, arrays=()) -> list:
     """Every level's texel gradient of ``textures`` after ``call()``'s output, weighted by ``weights``,
-    is taken backwards, through the lane kernels or the one-pixel ones."""
+    is taken backwards, through the lane kernels or the one-pixel ones; first, copies of the
+    gradients of ``arrays`` (UVs, LODs, a tiling: zeroed before)."""
     for t in textures:
         t.zero_grad()
+    for a in arrays:
+        a.grad.zero_()
     with one_pixel_kernels(one_pixel):
         tape = wp.Tape()
         with tape:
             out = call()
         out.grad.assign(weights.reshape(out.shape))
         tape.backward()
-    return [t.grad(level) for t in textures for level in range(t.num_levels)]
+    return [a.grad.numpy().copy() for a in arrays] + [t.grad(level) for t in textures for level in range(t.num_levels)]
 
 
 def _same_grads(call, textures, rng, channels, count):
@@ -774,23 +777,6 @@ def test_sample_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, lod
     assert any(name == "sample_level_texel_grad_lanes" for name, _ in launched)
 
 
-def _uv_grads(call, inputs, tex, weights, one_pixel: bool) -> list:
-    """The gradients of ``inputs`` (UVs, LODs) and, where it needs them, ``tex``'s (every level),
-    after ``call()``'s output weighted by ``weights`` is taken backwards, through the lane kernels
-    or the one-pixel ones."""
-    for a in inputs:
-        a.grad.zero_()
-    if tex.requires_grad:
-        tex.zero_grad()
-    with one_pixel_kernels(one_pixel):
-        tape = wp.Tape()
-        with tape:
-            out = call()
-        out.grad.assign(weights.reshape(out.shape))
-        tape.backward()
-    return [a.grad.numpy().copy() for a in inputs] + ([tex.grad(level).copy() for level in range(tex.num_levels)] if tex.requires_grad else [])
-
-
 @pytest.mark.parametrize("threads", [1, 3])
 @pytest.mark.parametrize("address", ["wrap", "clamp", "mirror", "border"])
 @pytest.mark.parametrize("filter,source", [("bilinear", None), ("nearest", 1.6), ("trilinear", 1.3), ("nearest", "lod"), ("trilinear", "lod"), ("trilinear", "derivatives"), ("anisotropic", "derivatives")])
@@ -814,8 +800,7 @@ def test_sample_uv_and_lod_gradient_lanes_give_the_one_pixel_bits(rng, launched,
             if source == "lod":
                 kw["lod"] = wp.array(kw["lod"], dtype=float, requires_grad=True)
                 inputs.append(kw["lod"])
-            lanes = _uv_grads(lambda: wt.sample(tex, inputs[0], layer=layer, sampler=smp, **kw), inputs, tex, weights, False)
-            scalar = _uv_grads(lambda: wt.sample(tex, inputs[0], layer=layer, sampler=smp, **kw), inputs, tex, weights, True)
+            lanes, scalar = (_texel_grads(lambda: wt.sample(tex, inputs[0], layer=layer, sampler=smp, **kw), [tex] if texels else [], weights, one_pixel, inputs) for one_pixel in (False, True))
             for a, b in zip(lanes, scalar):
                 _same_bits(a, b)
             assert (np.abs(np.nan_to_num(lanes[0])).sum() > 0) == (filter != "nearest")
@@ -976,17 +961,9 @@ def test_triplanar_tiling_gradient_lanes_give_the_one_pixel_bits(rng, launched, 
     moved = []
     try:
         for gbuffer, func, tiling, kw in calls:
-            grads = []
-            for one_pixel in (False, True):
-                t = wp.array(np.float32(tiling), dtype=float, requires_grad=True)
-                tex.zero_grad()
-                with one_pixel_kernels(one_pixel):
-                    tape = wp.Tape()
-                    with tape:
-                        out = func(gbuffer, tex, tiling=t, sampler=smp, **kw)
-                    out.grad.assign(np.random.default_rng(5).normal(size=out.shape).astype(np.float32))
-                    tape.backward()
-                grads.append([t.grad.numpy().copy()] + [tex.grad(level) for level in range(tex.num_levels)])
+            t = wp.array(np.float32(tiling), dtype=float, requires_grad=True)
+            weights = np.random.default_rng(5).normal(size=(gbuffer.mask.size, 3 if "normal" in func.__name__ else 4)).astype(np.float32)
+            grads = [_texel_grads(lambda: func(gbuffer, tex, tiling=t, sampler=smp, **kw), [tex], weights, one_pixel, [t]) for one_pixel in (False, True)]
             for a, b in zip(*grads):
                 _same_bits(a, b)
             moved.append(np.abs(grads[0][0]).max() > 0)  # 0 where every read is the border colour (far from the origin)

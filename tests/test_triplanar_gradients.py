@@ -16,8 +16,9 @@ import trimesh
 import warp as wp
 
 import warptex as wt
+from warptex import _op
 from warptex.kernels import triplanar as kt
-from backward_paths import assert_same_gradients, texel_gradients_both_ways
+from backward_paths import assert_same_gradients, launches, texel_gradients_both_ways
 from conftest import normal_mapping
 from fd import check_parameter_gradient
 from warptex.triplanar import biplanar, triplanar, triplanar_normal
@@ -325,8 +326,6 @@ def test_tiling_gradient_by_hand_equals_the_generated_adjoint(monkeypatch, case,
     gradient runs (colour's on lanes with one texture per axis; one pixel per index with one per
     face, and normal mapping's first step, its stored samples), and gives the generated adjoint's
     tiling and texel gradients, one tiling or one per axis."""
-    from warptex import _op
-
     camera = wt.orthographic((3.0, 2.0, 4.0), (0.0, 0.0, 0.0), height=2.2, resolution=(192, 192))
     g = wt.rasterize(trimesh.creation.icosphere(subdivisions=4), camera)
     kw = dict(TILING_CASES[case])
@@ -338,9 +337,7 @@ def test_tiling_gradient_by_hand_equals_the_generated_adjoint(monkeypatch, case,
         kw["object_to_world"] = np.diag([1.5, 0.8, 1.2, 1.0]).astype(np.float32)
     images = [(normal_map_texture if normal else smooth_texture)(37, 29, seed) for seed in range(6 if faces else 1)]
     weights = np.random.default_rng(4).normal(size=(192, 192, 3)).astype(np.float32)
-    launched = []
-    monkeypatch.setattr(_op, "scatter", lambda *a, **k: (launched.append(a[0].key), wt._launch.scatter(*a, **k)))
-    monkeypatch.setattr(_op, "launch", lambda kernel, *a, **k: (launched.append(kernel.key), wt._launch.launch(kernel, *a, **k)))
+    launched = launches(monkeypatch)
     wt.set_num_threads(threads)
     try:
         results = []

@@ -40,8 +40,9 @@ def scatter_face_reads_lanes(tex_px: TextureView, tex_nx: TextureView, tex_py: T
                              grad_px: TexelGrad, grad_nx: TexelGrad, grad_py: TexelGrad, grad_ny: TexelGrad, grad_pz: TexelGrad, grad_nz: TexelGrad,
                              smp: SamplerArgs, layers: lane_ints, plus: lane_reads, minus: lane_reads, weigh: wp.int32, g0: lane_colours, g1: lane_colours, g2: lane_colours):  # fmt: skip
     """:func:`~warptex.kernels.scatter.scatter_lod` of the lane's reads with a texture per face:
-    every lane pixel ``l`` adds each projection ``a``'s gradient ``g_a[l]`` (its share ``w · g_a[l]`` where ``weigh``: colour's;
-    the sample's own where not: the two-step normal's) into the gradient of the face it reads
+    every lane pixel ``l`` adds each projection ``a``'s gradient ``g_a[l]`` (its share
+    ``w · g_a[l]`` where ``weigh``: colour's; the sample's own where not: the two-step normal's)
+    into the gradient of the face it reads
     (``plus``, ``minus``: ``projection.triplanar_reads_lane``'s reads of the two sides), where
     ``w`` is positive, pixel by pixel and projection by projection as the scalar kernels add them."""
     ...

@@ -495,9 +495,5 @@ WT_INLINE void wt_sample_footprint_lane(const Tex& tex, const Smp& smp, const UV
     wt_lane_colours value;
     wt_accumulate_footprint(tex, smp, s.layer, reads.data[0], reads.data[3], reads.data[6], reads.data[12],
                             reads.data[15], reads.data[18], reads.data[9], 0, value);
-    for (int l = 0; l < s.count; ++l) {
-        wt_f4 r;
-        __builtin_memcpy(&r, value.data[l], 16);
-        wt_write_row(out, base + l, r);
-    }
+    wt_write_lane(out, base, s.count, value);
 }
