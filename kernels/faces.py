@@ -42,9 +42,10 @@ class FaceTextures:
 @wp.struct
 class FaceGrads:
     """The texel gradients of :class:`FaceTextures`' textures (a texture standing for several faces
-    has one gradient array, passed for each of them; empty: not needed), and the gradient of the
-    projections' tiling, where a kernel of plain sampling takes it by hand (colour's, normal
-    mapping's stored samples'; empty: not needed, or not served: ``triplanar.triplanar_kernels``)."""
+    has one gradient array, passed for each of them; empty: not needed), and the gradients of the
+    projections' tiling, offsets and sharpness, where a kernel of plain sampling takes them by hand
+    (colour's all three, normal mapping's stored samples' the tiling and offsets; empty: not needed,
+    or not served: ``triplanar.triplanar_kernels``)."""
 
     px: TexelGrad
     nx: TexelGrad
@@ -53,14 +54,18 @@ class FaceGrads:
     pz: TexelGrad
     nz: TexelGrad
     tiling: wp.array(dtype=float)
+    offsets: wp.array2d(dtype=float)
+    sharpness: wp.array(dtype=float)
 
 
 #: The input paths of :class:`FaceGrads`' fields, relative to the :class:`FaceTextures` they differentiate.
 FACE_FIELDS = ("px", "nx", "py", "ny", "pz", "nz")
-#: :class:`FaceGrads`' input paths in a triplanar launch (``Kernels.grads``): where the kernel takes the tiling's
-#: gradient by hand (plain sampling: colour's, normal mapping's stored samples'), and where it does not.
-SLOPE_GRADS = (*(f"args.faces.{f}" for f in FACE_FIELDS), "args.proj.tiling")
-TEXEL_GRADS = (*SLOPE_GRADS[:-1], None)
+#: :class:`FaceGrads`' input paths in a triplanar launch (``Kernels.grads``): plain colour's (the
+#: tiling, offsets and sharpness by hand), normal mapping's stored samples' (the tiling and offsets:
+#: the sharpness moves the weights, which the second step blends), and stochastic sampling's (texels only).
+COLOUR_GRADS = (*(f"args.faces.{f}" for f in FACE_FIELDS), "args.proj.tiling", "args.proj.offsets", "args.proj.sharpness")
+SAMPLE_GRADS = (*COLOUR_GRADS[:-1], None)
+TEXEL_GRADS = (*COLOUR_GRADS[:-3], None, None, None)
 
 
 @wp.func

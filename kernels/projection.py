@@ -162,13 +162,14 @@ def plane_footprint(tex: TextureView, proj: ProjectionArgs, axis: wp.int32, n: w
 
 @wp.func
 def plane_sample_slope(tex: TextureView, layer: wp.int32, proj: ProjectionArgs, axis: wp.int32, p: wp.vec3, n: wp.vec3, dpdx: wp.vec3, dpdy: wp.vec3, tiling: float, smp: SamplerArgs):
-    """``(value, d value / d tiling)`` of plain sampling of projection ``axis`` at ``tiling``: the
-    UV moves by the (mirror-fixed) plane coordinates, the LOD by ``1 / (tiling ln 2)`` and an
-    anisotropic footprint's steps in proportion to ``tiling``."""
+    """``(value, d value / d tiling, d value / du, d value / dv)`` of plain sampling of projection
+    ``axis`` at ``tiling``: the UV moves by the (mirror-fixed) plane coordinates, the LOD by
+    ``1 / (tiling ln 2)`` and an anisotropic footprint's steps in proportion to ``tiling``. The UV
+    slopes are also the slopes along the projection's offset (:func:`plane_uv` adds it as it is)."""
     value, d_u, d_v, d_lod, d_spread = sample_footprint_derivatives(tex, layer, plane_uv(proj, axis, p, n, tiling), plane_footprint(tex, proj, axis, n, dpdx, dpdy, tiling, smp), smp)
     c = slope_coords(proj, p, axis)
     lod_slope = lod_scale_slope(tex, plane_coords(dpdx, axis), plane_coords(dpdy, axis), tiling)
-    return value, d_u * (c[0] * u_sign(n, axis, proj.mirror_fix)) + d_v * c[1] + d_lod * lod_slope + d_spread / tiling
+    return value, d_u * (c[0] * u_sign(n, axis, proj.mirror_fix)) + d_v * c[1] + d_lod * lod_slope + d_spread / tiling, d_u, d_v
 
 
 @wp.func

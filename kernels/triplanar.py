@@ -23,13 +23,14 @@ import functools
 import warp as wp
 
 from . import adjoint_module, inlined, specialised
-from .faces import SLOPE_GRADS, TEXEL_GRADS, FaceGrads, FaceTextures, on_axis_face, on_face
+from .faces import COLOUR_GRADS, SAMPLE_GRADS, TEXEL_GRADS, FaceGrads, FaceTextures, on_axis_face, on_face
 from .family import LANES_SUFFIX, Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
 from .lanes.projection import surface_covered
-from .lanes.triplanar import face_lane_bodies, lane_bodies, linear_blend_take, normal_lane_bodies, stochastic_lane_bodies, stored_lane_bodies, tiling_lanes_take
+from .lanes.triplanar import face_lane_bodies, lane_bodies, linear_blend_take, normal_lane_bodies, slopes_lanes_take, stochastic_lane_bodies, stored_lane_bodies
 from .native import use
 from .normals import NormalMapArgs, blend_projected, blend_projected_grad, decode_normal, decode_normal_grad, direction, direction_grad, to_world
-from .projection import ProjectionArgs, SurfacePixels, plane_coords, plane_sample_slope, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
+from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
+from .slopes import add_plane_slopes, projection_weights_slope
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
 from .texels import SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
 
@@ -177,11 +178,11 @@ def _bodies(read, add, select, suffix: str, slopes: bool):
     """The bodies of one configuration: colour, its texel gradient, normal mapping, and the two-step
     normal's stored samples with their texel gradient. Uncovered pixels (``mask == 0``) and zero or
     non-finite normals give 0; zero-weight projections are not read. With ``slopes`` (plain
-    sampling), colour's gradient also adds ``dot(w g, d read / d tiling)`` of each projection read,
-    in axis order, into the tiling's gradient where it is needed (``grads.tiling``, not empty:
-    :func:`~.projection.plane_sample_slope`), and so does the stored samples' gradient with each
-    sample's own gradient ``g_axis`` (normal mapping's first step: ``dot(g_axis, d read / d tiling)``,
-    the read on the unit normal)."""
+    sampling), colour's gradient also adds each projection read's share of the tiling's, offsets'
+    and sharpness' gradients, in axis order, where they are needed (:func:`~.slopes.add_plane_slopes`
+    with the read's gradient ``w g``), and so does the stored samples' gradient with each sample's
+    own gradient ``g_axis`` (normal mapping's first step: the tiling and offsets, the read on the
+    unit normal; the sharpness moves the weights, which the second step blends)."""
 
     def colour(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out: wp.array2d(dtype=float)):
         value = wp.vec4(0.0)
@@ -198,14 +199,16 @@ def _bodies(read, add, select, suffix: str, slopes: bool):
             p, n, dpdx, dpdy = surface(args.proj, pixels, i)
             w = projection_weights(args.proj, n)
             g = read_channels(adj, i)
+            dw = wp.vec3(0.0)
+            if wp.static(slopes):
+                if grads.sharpness.shape[0] > 0:
+                    dw = projection_weights_slope(args.proj, n)
             for axis in range(3):
                 if w[axis] > 0.0:
                     tex = select(args.faces.px, args.faces.nx, args.faces.py, args.faces.ny, args.faces.pz, args.faces.nz, axis, n)
                     add(tex, select(grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, axis, n), args.layer, axis, args, p, n, dpdx, dpdy, w[axis] * g)
                     if wp.static(slopes):
-                        if grads.tiling.shape[0] > 0:
-                            value, slope = plane_sample_slope(tex, args.layer, args.proj, axis, p, n, dpdx, dpdy, projection_tiling(args.proj, axis), args.smp)
-                            wp.atomic_add(grads.tiling, wp.min(axis, grads.tiling.shape[0] - 1), wp.dot(w[axis] * g, slope))
+                        add_plane_slopes(tex, args.layer, args.proj, args.smp, grads, axis, p, n, dpdx, dpdy, w[axis] * g, g, dw[axis])
 
     def normal(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out: wp.array2d(dtype=float)):
         result = wp.vec3(0.0)
@@ -242,9 +245,7 @@ def _bodies(read, add, select, suffix: str, slopes: bool):
                     tex = select(args.faces.px, args.faces.nx, args.faces.py, args.faces.ny, args.faces.pz, args.faces.nz, axis, n)
                     add(tex, select(grads.px, grads.nx, grads.py, grads.ny, grads.pz, grads.nz, axis, n), args.layer, axis, args, p, n, dpdx, dpdy, adj.samples[i, axis])
                     if wp.static(slopes):
-                        if grads.tiling.shape[0] > 0:
-                            value, slope = plane_sample_slope(tex, args.layer, args.proj, axis, p, n, dpdx, dpdy, projection_tiling(args.proj, axis), args.smp)
-                            wp.atomic_add(grads.tiling, wp.min(axis, grads.tiling.shape[0] - 1), wp.dot(adj.samples[i, axis], slope))
+                        add_plane_slopes(tex, args.layer, args.proj, args.smp, grads, axis, p, n, dpdx, dpdy, adj.samples[i, axis], adj.samples[i, axis], 0.0)
 
     return {name: inlined(specialised(f, f"triplanar_{name}{suffix}")) for name, f in (("colour", colour), ("colour_grad", colour_grad), ("normal", normal), ("samples", samples), ("samples_grad", samples_grad))}
 
@@ -367,7 +368,7 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
     bodies = _BODIES[stochastic, faces]
     name = "triplanar" + ("_stochastic" if stochastic else "") + ("_faces" if faces else "")
     take = linear_blend_take if stochastic else None  # a histogram's blend runs the one-pixel kernels
-    grad_take = take if stochastic else tiling_lanes_take if faces else None
+    grad_take = take if stochastic else slopes_lanes_take if faces else None
     if not normal:
         forward, texel_grad, _ = pixel_kernels(name, module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["colour"],
                                                scatter=bodies["colour_grad"], grads=FaceGrads)  # fmt: skip
@@ -379,7 +380,7 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
             colour_lane, colour_grad_lane = lane_bodies(TriplanarArgs)
         lanes = lane_kernel(colour_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), module=module, name=name + "_lanes", covered=surface_covered)
         grad_lanes = lane_kernel(colour_grad_lane, TriplanarArgs, SurfacePixels, wp.array2d(dtype=float), grads_t=FaceGrads, module=grad_module, name=name + "_texel_grad_lanes", covered=surface_covered)
-        return Kernels(forward, texel_grad, _adjoint(False), grads=TEXEL_GRADS if stochastic else SLOPE_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=take, grad_lanes_take=grad_take)
+        return Kernels(forward, texel_grad, _adjoint(False), grads=TEXEL_GRADS if stochastic else COLOUR_GRADS, lanes=lanes, texel_grad_lanes=grad_lanes, lanes_take=take, grad_lanes_take=grad_take)
     forward, _, _ = pixel_kernels(name + "_normal", module=module, args=TriplanarArgs, pixels=SurfacePixels, out=wp.array2d(dtype=float), body=bodies["normal"])
     # normal mapping's lanes, in modules of their own (colour-only jobs do not compile them)
     normal_lane, samples_lane, samples_grad_lane = normal_lane_bodies(TriplanarArgs, ProjectionSamples, stochastic, faces)
@@ -389,5 +390,5 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
                    "lanes_take": take, "grad_lanes_take": grad_take}  # fmt: skip
     first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,
                           body=bodies["samples"], scatter=bodies["samples_grad"], grads=FaceGrads)  # fmt: skip
-    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=TEXEL_GRADS if stochastic else SLOPE_GRADS, **first_lanes), then=_normal_from_samples(), intermediates=_sample_shapes, no_grad=("weights",))
+    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=TEXEL_GRADS if stochastic else SAMPLE_GRADS, **first_lanes), then=_normal_from_samples(), intermediates=_sample_shapes, no_grad=("weights",))
     return Kernels(forward, None, _adjoint(True), staged=staged, lanes=lanes, lanes_take=take)

@@ -10,6 +10,7 @@ import warp as wp
 
 import warptex as wt
 from fd import check_parameter_gradient
+from warptex import _op
 from warptex.scenes import TERRAIN_GRID, terrain_camera
 from warptex.scenes.material import terrain_layers, terrain_splat_maps
 from warptex.scenes.terrain import terrain
@@ -111,12 +112,18 @@ def _tiling_gradient(g, run, t, r):
     return tiling.grad.numpy().astype(np.float64)
 
 
+def _generated(technique, *args, **kw):
+    """``technique(*args, **kw)``, its backward Warp's generated adjoint (``warptex._op.force_generated_adjoint``)."""
+    with _op.force_generated_adjoint():
+        return technique(*args, **kw)
+
+
 TECHNIQUES = {
     # the hand-written slopes (plane_sample_slope, layer_read_slopes) ...
     "triplanar": lambda tex: lambda g, t: wt.triplanar(g, tex, tiling=t, sharpness=4.0),
     "splat triplanar": lambda tex: lambda g, t: wt.splat(g, tex, wt.TextureArray(np.full((1, 4, 4, 2), 0.5, np.float32), mipmaps=False), tiling=t, projection="triplanar"),
-    # ... and Warp's generated adjoint through the float64 origin term (a sharpness gradient asks for it)
-    "triplanar, sharpness too": lambda tex: lambda g, t: wt.triplanar(g, tex, tiling=t, sharpness=wp.array([4.0], dtype=float, requires_grad=True)),
+    # ... and Warp's generated adjoint through the float64 origin term (forced)
+    "triplanar, generated adjoint": lambda tex: lambda g, t: _generated(wt.triplanar, g, tex, tiling=t, sharpness=4.0),
     # stochastic: cells are hashed where the folded UVs fall, so the pattern differs from the
     # world origin's (as any translation changes it); the gradient still matches differences
     "triplanar hash4": lambda tex: lambda g, t: wt.triplanar(g, tex, tiling=t, stochastic="hash4"),

@@ -276,9 +276,9 @@ def test_uv_and_lod_gradients_of_a_compact_texture_are_its_float_twins(rng, fmt)
 
 
 @pytest.mark.parametrize("fmt", COMPACT)
-def test_triplanar_tiling_gradient_of_a_compact_texture_is_its_float_twins(rng, fmt):
-    """Plain triplanar's own gradient serves the tiling, so a compact texture takes it (with its
-    texels' gradient, on the lanes): its float32 twin's, to rounding."""
+def test_triplanar_parameter_gradients_of_a_compact_texture_are_its_float_twins(rng, fmt):
+    """Plain triplanar's own gradient serves the tiling, offsets and sharpness, so a compact
+    texture takes them (with its texels' gradient, on the lanes): its float32 twin's, to rounding."""
     gbuffer = wt.rasterize(terrain(resolution=(65, 65)), terrain_camera((48, 64)))
     tex = wt.Texture(_values(rng, (32, 32, 4), fmt), format=fmt, requires_grad=True)
     twin = wt.Texture(tex.numpy(0), requires_grad=True)
@@ -288,11 +288,13 @@ def test_triplanar_tiling_gradient_of_a_compact_texture_is_its_float_twins(rng, 
     grads = []
     for t in (tex, twin):
         tiling = wp.array([0.3, 0.25, 0.35], dtype=float, requires_grad=True)
+        offsets = wp.array(np.float32([[0.1, 0.3], [0.0, 0.25], [0.5, 0.2]]), dtype=float, requires_grad=True)
+        sharpness = wp.array([3.5], dtype=float, requires_grad=True)
         tape = wp.Tape()
         with tape:
-            out = wt.triplanar(gbuffer, t, tiling=tiling, sampler=wt.Sampler(filter="anisotropic"))
+            out = wt.triplanar(gbuffer, t, tiling=tiling, offsets=offsets, sharpness=sharpness, sampler=wt.Sampler(filter="anisotropic"))
         tape.backward(grads={out: wp.array(weights, dtype=float)})
-        grads.append([tiling.grad.numpy(), t.grad(0)])
+        grads.append([tiling.grad.numpy(), offsets.grad.numpy(), sharpness.grad.numpy(), t.grad(0)])
     for got, want in zip(*grads):
         assert np.abs(want).max() > 0
         np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5 * np.abs(want).max())

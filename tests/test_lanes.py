@@ -932,12 +932,13 @@ def test_triplanar_gradient_lanes_add_the_one_pixel_sums(rng, launched, filter, 
 @pytest.mark.parametrize("threads", [1, 3])
 @pytest.mark.parametrize("address", ["wrap", "mirror", "border"])
 @pytest.mark.parametrize("filter", ["nearest", "bilinear", "trilinear", "anisotropic"])
-def test_triplanar_tiling_gradient_lanes_give_the_one_pixel_bits(rng, launched, filter, address, threads):
-    """Plain sampling's tiling gradient by hand (``wt_add_tiling_slopes``, added pixel by pixel and
-    projection by projection: colour's, and normal mapping's stored samples'): the tiling's and the
-    texels' gradients the same bits as the one-pixel kernel's, one tiling or one per axis,
-    triplanar and biplanar weights, with the mirror fix and without, offsets, object space, and a
-    G-buffer far from the world origin."""
+def test_triplanar_slope_gradient_lanes_give_the_one_pixel_bits(rng, launched, filter, address, threads):
+    """Plain sampling's tiling, offsets and sharpness gradients by hand (``wt_add_plane_slopes``,
+    added pixel by pixel and projection by projection: colour's, and normal mapping's stored
+    samples', which take no sharpness): their gradients and the texels' the same bits as the
+    one-pixel kernel's, one tiling or one per axis, triplanar and biplanar weights (a sharpness of
+    0 too), with the mirror fix and without, offsets, object space, and a G-buffer far from the
+    world origin; the tiling alone, and with the offsets or the sharpness or both."""
     tex = wt.TextureArray(rng.random((2, 64, 32, 4), dtype=np.float32), requires_grad=True)
     smp = wt.Sampler(filter=filter, address=address, border=(0.5, 0.25, 0.125, 1.0), lod_bias=0.3, max_aniso=4)
     calls = []
@@ -947,31 +948,37 @@ def test_triplanar_tiling_gradient_lanes_give_the_one_pixel_bits(rng, launched, 
         mask[0, 4:9] = 0.0  # non-finite normals and positions, whose slopes make the whole tiling gradient NaN (in both)
         g.mask.assign(mask)
         far = dataclasses.replace(g, origin=np.array([3.0e5, -1.25e4, 7.5e3]))
-        calls += [
-            (g, wt.triplanar, [1.5, 2.0, 0.75], {"sharpness": 3.0, "layer": 1}),
-            (g, wt.biplanar, [2.5], {"sharpness": 8.0}),
-            (g, wt.triplanar, [0.7], {"sharpness": 0.0, "mirror_fix": False, "offsets": [(0.3, 0.1), (0.0, 0.5), (0.25, 0.25)]}),
-            (g, wt.triplanar, [1.1, 0.6, 1.9], {"space": "object", "object_to_world": np.diag([1.5, 0.8, 1.2, 1.0]).astype(np.float32)}),
-            (far, wt.triplanar, [0.35], {}),
-            (g, wt.triplanar_normal, [1.5, 2.0, 0.75], {"blend": "rnm", "sharpness": 3.0}),  # the stored samples' gradient (wt_triplanar_scatter_samples_lane)
-            (far, wt.biplanar_normal, [0.35], {"blend": "whiteout"}),
+        calls += [  # (G-buffer, technique, tiling, keywords, those of them that need gradients besides the tiling)
+            (g, wt.triplanar, [1.5, 2.0, 0.75], {"sharpness": 3.0, "layer": 1}, {"sharpness"}),
+            (g, wt.biplanar, [2.5], {"sharpness": 8.0, "offsets": np.zeros((3, 2))}, {"sharpness", "offsets"}),
+            (g, wt.triplanar, [0.7], {"sharpness": 0.0, "mirror_fix": False, "offsets": [(0.3, 0.1), (0.0, 0.5), (0.25, 0.25)]}, {"sharpness", "offsets"}),
+            (g, wt.triplanar, [1.1, 0.6, 1.9], {"space": "object", "object_to_world": np.diag([1.5, 0.8, 1.2, 1.0]).astype(np.float32)}, set()),
+            (far, wt.triplanar, [0.35], {"sharpness": 2.5}, {"sharpness"}),
+            (far, wt.biplanar, [0.35], {"offsets": [(0.3, 0.1), (0.0, 0.5), (0.25, 0.25)]}, {"offsets"}),
+            (g, wt.triplanar_normal, [1.5, 2.0, 0.75], {"blend": "rnm", "sharpness": 3.0}, set()),  # the stored samples' gradient (wt_triplanar_scatter_samples_lane)
+            (g, wt.triplanar_normal, [1.5], {"blend": "udn", "offsets": np.full((3, 2), 0.25)}, {"offsets"}),
+            (far, wt.biplanar_normal, [0.35], {"blend": "whiteout"}, set()),
         ]
     previous = wt.get_num_threads()
     wt.set_num_threads(threads)
     moved = []
     try:
-        for gbuffer, func, tiling, kw in calls:
+        for gbuffer, func, tiling, kw, differentiated in calls:
             t = wp.array(np.float32(tiling), dtype=float, requires_grad=True)
+            kw = {**kw, **{k: wp.array(np.float32(np.atleast_1d(kw[k])), dtype=float, requires_grad=True) for k in differentiated}}
             weights = np.random.default_rng(5).normal(size=(gbuffer.mask.size, 3 if "normal" in func.__name__ else 4)).astype(np.float32)
-            grads = [_texel_grads(lambda: func(gbuffer, tex, tiling=t, sampler=smp, **kw), [tex], weights, one_pixel, [t]) for one_pixel in (False, True)]
+            arrays = [t, *(kw[k] for k in sorted(differentiated))]
+            launched.clear()
+            grads = [_texel_grads(lambda: func(gbuffer, tex, tiling=t, sampler=smp, **kw), [tex], weights, False, arrays)]
+            lane = "triplanar_samples_texel_grad_lanes" if "normal" in func.__name__ else "triplanar_texel_grad_lanes"
+            assert lane in {name for name, _ in launched}, (func.__name__, differentiated)  # the lanes took it
+            grads.append(_texel_grads(lambda: func(gbuffer, tex, tiling=t, sampler=smp, **kw), [tex], weights, True, arrays))
             for a, b in zip(*grads):
                 _same_bits(a, b)
             moved.append(np.abs(grads[0][0]).max() > 0)  # 0 where every read is the border colour (far from the origin)
     finally:
         wt.set_num_threads(previous)
     assert any(moved) == (filter != "nearest")
-    names = {name for name, _ in launched}
-    assert {"triplanar_texel_grad_lanes", "triplanar_samples_texel_grad_lanes"} <= names, names
 
 
 @pytest.mark.parametrize("threads", [1, 3])

@@ -15,7 +15,7 @@ import trimesh
 import warp as wp
 
 import warptex as wt
-from warptex import _accumulate, _threads
+from warptex import _accumulate, _op, _threads
 
 THREADS = (1, 2, 3, 8)
 
@@ -64,8 +64,13 @@ def _layers(seed=10, count=4):
     return wt.TextureArray(_image(seed, (count, 32, 32, 4)), requires_grad=True)
 
 
+def _generated(technique, *args, **kw):
+    with _op.force_generated_adjoint():
+        return technique(*args, **kw)
+
+
 # Each technique: () -> (output, [what has gradients: textures, atlases, arrays]). Every texture
-# reaches every thread's chunks; arrays of parameters (tiling, sharpness) take the generated adjoint.
+# reaches every thread's chunks; "generated adjoint" forces Warp's (warptex._op.force_generated_adjoint).
 CASES = {
     "sample, bilinear": lambda: (lambda t: (wt.sample(t, UV), [t]))(_tex()),
     "sample, per-sample LOD": lambda: (lambda t: (wt.sample(t, UV, lod=LOD), [t]))(_tex()),
@@ -76,6 +81,7 @@ CASES = {
     "stochastic hex": lambda: (lambda t: (wt.stochastic(t, UV, "hex", lod=LOD), [t]))(_tex()),
     "triplanar": lambda: (lambda t: (wt.triplanar(_sphere(), t, tiling=3.0), [t]))(_tex()),
     "triplanar, tiling and sharpness": lambda: (lambda t, a, s: (wt.triplanar(_sphere(), t, tiling=a, sharpness=s), [t, a, s]))(_tex(), _grad_array([3.0]), _grad_array([4.0])),
+    "triplanar, generated adjoint": lambda: (lambda t, a, s: (_generated(wt.triplanar, _sphere(), t, tiling=a, sharpness=s), [t, a, s]))(_tex(), _grad_array([3.0]), _grad_array([4.0])),
     "biplanar": lambda: (lambda t: (wt.biplanar(_sphere(), t, tiling=3.0), [t]))(_tex()),
     "triplanar per face": lambda: (lambda ts: (wt.triplanar(_sphere(), textures_per_face=ts, tiling=3.0, stochastic="hash4"), ts))([_tex(k) for k in range(6)]),
     "triplanar_normal": lambda: (lambda t: (wt.triplanar_normal(_sphere(), t, tiling=3.0), [t]))(wt.Texture(_image(7, (64, 64, 3)), requires_grad=True)),
@@ -152,7 +158,7 @@ def test_grad_chunks_depend_on_the_pixels_alone():
     assert bounds[1] > (1 << 20) // (len(bounds) - 1)
 
 
-@pytest.mark.parametrize("case", ["triplanar, tiling and sharpness", "sample, bilinear", "splat, triplanar, height blend"])  # generated adjoint; hand-written scatters
+@pytest.mark.parametrize("case", ["triplanar, generated adjoint", "triplanar, tiling and sharpness", "sample, bilinear", "splat, triplanar, height blend"])  # generated adjoint; hand-written scatters
 def test_the_same_bits_whichever_thread_is_slow(case, small_chunks, monkeypatch):
     """Chunks finish in another order when one is held up; they are still added in chunk order."""
     real_run = _accumulate.run_ordered
@@ -181,10 +187,10 @@ def test_more_threads_than_slots_wait_for_one_and_never_hang(small_chunks):
     each holding a copy of every shared gradient); the result is the 1-thread one, and the pass ends."""
     assert _accumulate.slot_count(16, 16) <= _threads.cpu_count() + 1
     wt.set_num_threads(1)
-    want = _gradients("triplanar, tiling and sharpness")
+    want = _gradients("triplanar, generated adjoint")
     wt.set_num_threads(16)
     done: list = []
-    worker = threading.Thread(target=lambda: done.append(_gradients("triplanar, tiling and sharpness")), daemon=True)
+    worker = threading.Thread(target=lambda: done.append(_gradients("triplanar, generated adjoint")), daemon=True)
     worker.start()
     worker.join(timeout=120)
     assert done, "a backward pass on 16 threads did not end"

@@ -261,7 +261,7 @@ CASES = [
 @pytest.mark.parametrize("case", CASES)
 def test_hand_written_texel_gradients_equal_the_generated_adjoint(monkeypatch, case, threads):
     """The hand-written texel gradient (only texels need gradients) against the generated adjoint
-    (a sharpness array needs gradients too), over every level of every texture, on a 256² sphere
+    (the G-buffer's normals need gradients too), over every level of every texture, on a 256² sphere
     (65 536 pixels: split over two threads). The histogram blend, not linear in the texels,
     always takes the generated adjoint."""
     camera = wt.orthographic((3.0, 2.0, 4.0), (0.0, 0.0, 0.0), height=2.2, resolution=(256, 256))
@@ -277,7 +277,7 @@ def test_hand_written_texel_gradients_equal_the_generated_adjoint(monkeypatch, c
         "normal hash4": wt.Stochastic("hash4"),
     }
 
-    def forward(sharpness_grad):
+    def forward(normal_grad):
         if "per-axis" in case:
             textures = [wt.Texture(images[0], requires_grad=True), wt.Texture(images[1]), wt.Texture(images[2], requires_grad=True)]
             kw = {"textures_per_axis": textures}
@@ -296,7 +296,8 @@ def test_hand_written_texel_gradients_equal_the_generated_adjoint(monkeypatch, c
             technique = functools.partial(normal_mapping("biplanar" in case), blend=blend, strength=0.8)
         else:
             technique = biplanar if case.startswith("biplanar") else triplanar
-        return technique(g, tiling=2.5, sharpness=wp.array([4.0], dtype=float, requires_grad=sharpness_grad), **kw), textures
+        gbuffer = dataclasses.replace(g, normal=wp.array(g.normal.numpy(), dtype=wp.vec3, requires_grad=True)) if normal_grad else g
+        return technique(gbuffer, tiling=2.5, sharpness=4.0, **kw), textures
 
     weights = rng.normal(size=(256, 256, 3)).astype(np.float32)
     hand, forced, generated, scatters = texel_gradients_both_ways(monkeypatch, threads, forward, weights)
@@ -321,11 +322,11 @@ TILING_CASES = {  # a call's keywords beside the G-buffer, texture and tiling
 @pytest.mark.parametrize("threads", [1, 3])  # 3: private copies of the tiling's gradient, summed in chunk order
 @pytest.mark.parametrize("tiling", [[2.5], [1.3, 0.9, 1.7]])
 @pytest.mark.parametrize("case", TILING_CASES)
-def test_tiling_gradient_by_hand_equals_the_generated_adjoint(monkeypatch, case, tiling, threads):
-    """Plain sampling with the tiling needing its gradient (and the texels theirs): the hand-written
-    gradient runs (colour's on lanes with one texture per axis; one pixel per index with one per
-    face, and normal mapping's first step, its stored samples), and gives the generated adjoint's
-    tiling and texel gradients, one tiling or one per axis."""
+def test_parameter_gradients_by_hand_equal_the_generated_adjoint(monkeypatch, case, tiling, threads):
+    """Plain sampling with the tiling and offsets needing their gradients, and colour's sharpness
+    (and the texels theirs): the hand-written gradient runs (on lanes with one texture per axis;
+    one pixel per index with one per face; normal mapping's in its first step, its stored samples),
+    and gives the generated adjoint's parameter and texel gradients, one tiling or one per axis."""
     camera = wt.orthographic((3.0, 2.0, 4.0), (0.0, 0.0, 0.0), height=2.2, resolution=(192, 192))
     g = wt.rasterize(trimesh.creation.icosphere(subdivisions=4), camera)
     kw = dict(TILING_CASES[case])
@@ -345,21 +346,28 @@ def test_tiling_gradient_by_hand_equals_the_generated_adjoint(monkeypatch, case,
             launched.clear()
             textures = [wt.Texture(im, requires_grad=True) for im in images]
             t = wp.array(np.float32(tiling), dtype=float, requires_grad=True)
+            params = [t, wp.array(np.float32([[0.1, 0.33], [0.25, -0.4], [0.67, 0.05]]), dtype=float, requires_grad=True)]
+            shared = {"offsets": params[1]}
+            if not normal:
+                params.append(wp.array([3.0 if name == "triplanar" else 6.0], dtype=float, requires_grad=True))
+                shared["sharpness"] = params[2]
             tape = wp.Tape()
             with tape, _op.force_generated_adjoint(generated):
-                out = technique(g, **({"textures_per_face": textures} if faces else {"normal_map" if normal else "texture": textures[0]}), tiling=t, **kw)
+                out = technique(g, **({"textures_per_face": textures} if faces else {"normal_map" if normal else "texture": textures[0]}), tiling=t, **shared, **kw)
             out.grad.assign(weights)
             tape.backward()
-            results.append([t.grad.numpy().copy()] + [tex.grad(k) for tex in textures for k in range(tex.num_levels)])
+            results.append([p.grad.numpy().copy() for p in params] + [tex.grad(k) for tex in textures for k in range(tex.num_levels)])
             assert any(k.endswith("_adjoint") for k in launched) == generated, launched
     finally:
         wt.set_num_threads(None)
     hand, gen = results
-    assert np.abs(gen[0]).max() > 0 or "nearest" in case
-    if "nearest" in case:
-        np.testing.assert_array_equal(hand[0], 0.0)
-    np.testing.assert_allclose(hand[0], gen[0], rtol=1e-3, atol=1e-3 * max(np.abs(gen[0]).max(), 1e-6))
-    assert_same_gradients([(False, h.reshape(-1)) for h in hand[1:]], [(False, x.reshape(-1)) for x in gen[1:]])
+    params = 2 if normal else 3
+    for k in range(params):  # the tiling and offsets move no nearest read; the sharpness moves the blend
+        assert np.abs(gen[k]).max() > 0 or ("nearest" in case and k < 2)
+        if "nearest" in case and k < 2:
+            np.testing.assert_array_equal(hand[k], 0.0)
+        np.testing.assert_allclose(hand[k], gen[k], rtol=1e-3, atol=1e-3 * max(np.abs(gen[k]).max(), 1e-6), err_msg=f"parameter {k}")
+    assert_same_gradients([(False, h.reshape(-1)) for h in hand[params:]], [(False, x.reshape(-1)) for x in gen[params:]])
 
 
 @pytest.mark.parametrize("technique", ["triplanar", "biplanar", "normal_rnm", "normal_udn_biplanar"])

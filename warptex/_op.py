@@ -120,8 +120,9 @@ def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linea
             raise ValueError(
                 "texel gradients of a texture stored in a compact format (float16, unorm8, srgb8) come from warptex's "
                 "hand-written gradients, and this call needs Warp's generated one (a gradient of an input besides texels "
-                "that the technique's own gradient does not serve: sharpness, offsets, UV derivatives, a stochastic "
-                "lookup's tiling or UVs; or a histogram-preserving blend): sample a float32 copy of the texture, "
+                "that the technique's own gradient does not serve: UV derivatives, G-buffer arrays, a stochastic lookup's "
+                "tiling, UVs, sharpness or offsets, a splat's sharpness or offsets, normal mapping's sharpness; or a "
+                "histogram-preserving blend): sample a float32 copy of the texture, "
                 "Texture(texture, format='float32'), or leave its requires_grad off"
             )
         _run_path(kernels, path, count, inputs, result, device, cut, touched)

@@ -62,8 +62,8 @@ def triplanar_scatter_lane(faces: FaceTextures, grads: FaceGrads, proj: Projecti
     read as the scalar kernels add them, from the reads ``triplanar_reads_lane(faces, proj, smp,
     pixels, base, count, 0, 0)`` gives, in one call (the reads as a zeroed :data:`~.lane_reads`,
     returned, then copied into the scatter, were 11% of a biplanar forward and backward). Where
-    ``grads.tiling`` is not empty, each read's ``dot(w · adj[base + l], d read / d tiling)`` into
-    it, pixel by pixel and projection by projection (``projection.plane_sample_slope``)."""
+    ``grads.tiling``, ``grads.offsets`` or ``grads.sharpness`` is not empty, each read's share of
+    their gradients (``slopes.add_plane_slopes``), pixel by pixel and projection by projection."""
     ...
 
 
@@ -94,7 +94,8 @@ def triplanar_scatter_samples_lane(faces: FaceTextures, grads: FaceGrads, proj: 
     """The gradients ``adj[i, axis]`` of the samples :func:`triplanar_samples_lane` stored for the
     lane's pixels ``i = base .. base + count - 1``, each added (not weighted) into the texels of its
     projection's read on the unit normal (``grads.px``, ``py``, ``pz``; layer ``layers[l]``),
-    pixel by pixel and read by read as the scalar kernels add them."""
+    pixel by pixel and read by read as the scalar kernels add them, and where ``grads.tiling`` or
+    ``grads.offsets`` is not empty, into them (``slopes.add_plane_slopes``)."""
     ...
 
 

@@ -32,12 +32,12 @@ from .scatter import scatter_face_reads_lanes, scatter_projection_taps_lanes
 from .stochastic import linear_blend, projection_taps_lane, scatter_stochastic_face_reads_lanes, scatter_stochastic_reads_lanes, stochastic_read_lane
 
 
-def tiling_lanes_take(args) -> bool:
+def slopes_lanes_take(args) -> bool:
     """Whether the texel-gradient lanes of plain sampling with a texture per face (colour's, and
-    normal mapping's stored samples') take a launch with ``args``: not where the tiling needs its
-    gradient, which their one-pixel kernel adds by hand (``triplanar._bodies``' slopes; with one
-    texture per axis the lanes add it too: ``wt_add_tiling_slopes``)."""
-    return not args.proj.tiling.requires_grad
+    normal mapping's stored samples') take a launch with ``args``: not where the tiling, offsets or
+    sharpness need gradients, which their one-pixel kernel adds by hand (``slopes.add_plane_slopes``;
+    with one texture per axis the lanes add them too: ``wt_add_plane_slopes``)."""
+    return not (args.proj.tiling.requires_grad or args.proj.offsets.requires_grad or args.proj.sharpness.requires_grad)
 
 
 @functools.cache

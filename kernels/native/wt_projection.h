@@ -176,6 +176,87 @@ WT_INLINE void wt_triplanar_weights(const wt_vf* N, wt_vi covered, float sharpne
     for (int e = 0; e < 3; ++e) W[e] = wt_sel(weighed, W[e] / total, zero);
 }
 
+// twin: slopes.power_slope
+WT_INLINE float wt_power_slope(float r, float exponent) {
+    float s = 0.0f;
+    if (r > 0.0f) s = wp::mul(wt_power_weight(r, exponent), wp::log(r));
+    return s;
+}
+
+// twin: slopes.normalised_slope
+WT_INLINE wt_v3 wt_normalised_slope(const wt_v3& w, const wt_v3& dw) {
+    const float total = wp::add(wp::add(w.c[0], w.c[1]), w.c[2]);
+    wt_v3 d = wp::div(dw, (float)WT_WEIGHT_EPS);
+    if (total >= (float)WT_WEIGHT_EPS)
+        d = wp::div(wp::sub(dw, wp::mul(w, wp::div(wp::add(wp::add(dw.c[0], dw.c[1]), dw.c[2]), total))), total);
+    return d;
+}
+
+// twin: slopes.biplanar_pair_slope
+WT_INLINE void wt_biplanar_pair_slope(float major, float median, float exponent, wt_v2& w, wt_v2& d) {
+    const float edge = (float)WT_BIPLANAR_EDGE;
+    const float b0 = wp::clamp(wp::div(wp::sub(major, edge), wp::sub(1.0f, edge)), 0.0f, 1.0f);
+    const float b1 = wp::clamp(wp::div(wp::sub(median, edge), wp::sub(1.0f, edge)), 0.0f, 1.0f);
+    w = wt_v2(wt_power_weight(b0, exponent), wt_power_weight(b1, exponent));
+    d = wt_v2(wt_power_slope(b0, exponent), wt_power_slope(b1, exponent));
+    if (wp::add(w.c[0], w.c[1]) < (float)WT_WEIGHT_EPS) {
+        const float m = wp::max(b0, b1);
+        w = wt_v2(1.0f, 1.0f);
+        d = wt_v2(0.0f, 0.0f);
+        if (m > 0.0f) {
+            w = wt_v2(wt_power_weight(wp::div(b0, m), exponent), wt_power_weight(wp::div(b1, m), exponent));
+            d = wt_v2(wt_power_slope(wp::div(b0, m), exponent), wt_power_slope(wp::div(b1, m), exponent));
+        }
+    }
+}
+
+// slopes.projection_weights_slope of one pixel's normal n (the projected space's), with Warp's
+// own functions in the scalar blocks' order (only the sharpness' gradient needs it: pixel by pixel).
+// twin: slopes.projection_weights_slope
+template <class Proj> WT_INLINE wt_v3 wt_weights_slope(const Proj& proj, const wt_v3& n) {
+    const float sharpness = wt_float(proj.sharpness, 0);
+    wt_v3 d(0.0f);
+    if (proj.weights == WT_WEIGHTS_BIPLANAR) {  // biplanar_weights_slope
+        wt_v3 u = n;
+        float length = wp::length(n);
+        if (length > wt_float_max) {  // normals.unsquared
+            u = wp::div(n, wp::max(wt_v3(wp::abs(n.c[0]), wp::abs(n.c[1]), wp::abs(n.c[2]))));
+            length = wp::length(u);
+        }
+        if (wp::isfinite(n) && length > 0.0f) {
+            const wt_v3 a = wp::div(wt_v3(wp::abs(u.c[0]), wp::abs(u.c[1]), wp::abs(u.c[2])), length);
+            const float e = wp::div(sharpness, 8.0f);
+            wt_v2 pair, slope;
+            wt_v3 w(0.0f);
+            if (a.c[2] <= a.c[0] && a.c[2] <= a.c[1]) {
+                wt_biplanar_pair_slope(a.c[0], a.c[1], e, pair, slope);
+                w = wt_v3(pair.c[0], pair.c[1], 0.0f);
+                d = wt_v3(slope.c[0], slope.c[1], 0.0f);
+            } else if (a.c[1] <= a.c[0]) {
+                wt_biplanar_pair_slope(a.c[0], a.c[2], e, pair, slope);
+                w = wt_v3(pair.c[0], 0.0f, pair.c[1]);
+                d = wt_v3(slope.c[0], 0.0f, slope.c[1]);
+            } else {
+                wt_biplanar_pair_slope(a.c[1], a.c[2], e, pair, slope);
+                w = wt_v3(0.0f, pair.c[0], pair.c[1]);
+                d = wt_v3(0.0f, slope.c[0], slope.c[1]);
+            }
+            d = wp::div(wt_normalised_slope(w, d), 8.0f);
+        }
+    } else {  // triplanar_weights_slope
+        const wt_v3 a(wp::abs(n.c[0]), wp::abs(n.c[1]), wp::abs(n.c[2]));
+        const float m = wp::max(a);
+        if (wp::isfinite(n) && m > 0.0f) {
+            const float r0 = wp::div(a.c[0], m), r1 = wp::div(a.c[1], m), r2 = wp::div(a.c[2], m);
+            const wt_v3 w(wt_power_weight(r0, sharpness), wt_power_weight(r1, sharpness),
+                          wt_power_weight(r2, sharpness));
+            d = wt_normalised_slope(
+                w, wt_v3(wt_power_slope(r0, sharpness), wt_power_slope(r1, sharpness), wt_power_slope(r2, sharpness)));
+        }
+    }
+    return d;
+}
+
 // lanes.projection.triplanar_reads_lane: what the lane's pixels base .. base + count - 1 read from
 // each projection, with triplanar or biplanar weights (proj.weights): projection.projection_uv,
 // projection_footprint and projection_weights, into the rows of reads (all 0 where a projection is
@@ -268,29 +349,37 @@ WT_INLINE void wt_triplanar_colour_lane(const Faces& faces, const Proj& proj, co
     wt_write_lane(out, base, count, value);
 }
 
-// The tiling's gradient of a lane's plain projection reads (triplanar._bodies' slopes): each
-// read's projection.plane_sample_slope, from its wt_footprint_slopes (d/du · du/dt + d/dv · dv/dt
-// + d/dlod · dlod/dt + d/dspread / t, on the projected surface wt_triplanar_reads_into hands back:
-// its slope coords, the mirror-fix sign of the normal the reads use, wt_lod_scale_slope), then
-// dot(w · g[axis][l], slope) where weigh (colour's), dot(g[axis][l], slope) where not (normal
-// mapping's stored samples), added into tiling_grad pixel by pixel and projection by projection
-// (Warp's wp::dot and wp::mul, so the sums are the one-pixel kernel's bits).
-// twin: projection.plane_sample_slope
-template <class Tex, class Tiling, class Proj, class Smp>
-WT_INLINE void wt_add_tiling_slopes(const Tex* const* texs, const Tiling& tiling_grad, const Proj& proj, const Smp& smp,
-                                    const int* layers, const wt_lane_read_rows& reads, const wt_vf* surface, int count,
-                                    const wt_lane_colours* const* g, int weigh) {
+// The tiling's, offsets' and sharpness' gradients of a lane's plain projection reads
+// (slopes.add_plane_slopes), where each is needed (its array in grads not empty): each read's
+// projection.plane_sample_slope, from its wt_footprint_slopes (the tiling's: d/du · du/dt + d/dv ·
+// dv/dt + d/dlod · dlod/dt + d/dspread / t, on the projected surface wt_triplanar_reads_into hands
+// back: its slope coords, the mirror-fix sign of the normal the reads use, wt_lod_scale_slope; the
+// offsets': d/du and d/dv), then with the read's gradient wg = w · g[axis][l] where weigh
+// (colour's), g[axis][l] where not (normal mapping's stored samples): dot(wg, slope) into the
+// tiling, dot(wg, d/du) and dot(wg, d/dv) into the read's offsets, and dw[axis] · dot(g[axis][l],
+// value) into the sharpness (dw: the pixel's wt_weights_slope; only where weigh). Added pixel by
+// pixel and projection by projection (Warp's wp::dot and wp::mul, so the sums are the one-pixel
+// kernel's bits).
+// twin: slopes.add_plane_slopes
+template <class Tex, class Grads, class Proj, class Smp>
+WT_OUTLINE void wt_add_plane_slopes_outlined(const Tex* const* texs, const Grads& grads, const Proj& proj,
+                                             const Smp& smp, const int* layers, const wt_lane_read_rows& reads,
+                                             const wt_vf* surface, int count, const wt_lane_colours* const* g,
+                                             int weigh) {
+    const int tiling = grads.tiling.shape[0] > 0, offsets = grads.offsets.shape[0] > 0;
+    const int sharpness = weigh && grads.sharpness.shape[0] > 0;
     const float o[3] = {(float)proj.origin.c[0], (float)proj.origin.c[1], (float)proj.origin.c[2]};
-    wt_f4 slope[3][WT_L];
+    wt_f4 slope[3][WT_L], value[3][WT_L], d_u[3][WT_L], d_v[3][WT_L];
     for (int axis = 0; axis < 3; ++axis) {  // projection.plane_sample_slope of each read
         const Tex& tex = *texs[axis];
         const float t = wt_float(proj.tiling, wp::min(axis, proj.tiling.shape[0] - 1));  // projection_tiling
         const float width = (float)wt_int(tex.level_width, 0), height = (float)wt_int(tex.level_height, 0);
-        wt_f4 f[WT_L], v[WT_L], d_u[WT_L], d_v[WT_L], d_lod[WT_L], d_spread[WT_L];
+        wt_f4 f[WT_L], d_lod[WT_L], d_spread[WT_L];
         const float* weight = reads.data[9 + axis];
         wt_footprint_slopes(tex, smp, layers, reads.data[axis], reads.data[3 + axis], reads.data[6 + axis],
-                            reads.data[12 + axis], reads.data[15 + axis], reads.data[18 + axis], weight, f, v, d_u, d_v,
-                            d_lod, d_spread);
+                            reads.data[12 + axis], reads.data[15 + axis], reads.data[18 + axis], weight, f, value[axis],
+                            d_u[axis], d_v[axis], d_lod, d_spread);
+        if (!tiling) continue;
         const int c0 = axis == 0 ? 2 : 0, c1 = axis == 1 ? 2 : 1;  // projection.plane_coords
         for (int l = 0; l < count; ++l) {
             if (!(weight[l] > 0.0f)) continue;
@@ -300,29 +389,58 @@ WT_INLINE void wt_add_tiling_slopes(const Tex* const* texs, const Tiling& tiling
             const float cu = (surface[c0][l] + o[c0]) * s, cv = surface[c1][l] + o[c1];  // projection.slope_coords
             const float lod_slope = wt_lod_scale_slope(width, height, surface[6 + c0][l], surface[6 + c1][l],
                                                        surface[9 + c0][l], surface[9 + c1][l], t);
-            slope[axis][l] = d_u[l] * cu + d_v[l] * cv + d_lod[l] * lod_slope + d_spread[l] / t;
+            slope[axis][l] = d_u[axis][l] * cu + d_v[axis][l] * cv + d_lod[l] * lod_slope + d_spread[l] / t;
         }
     }
-    float* tiling = (float*)tiling_grad.data;
-    const long long stride = tiling_grad.strides[0];
     for (int l = 0; l < count; ++l) {  // pixel by pixel, projection by projection
+        wt_v3 dw(0.0f);
+        if (sharpness && (reads.data[9][l] > 0.0f || reads.data[10][l] > 0.0f || reads.data[11][l] > 0.0f))
+            dw = wt_weights_slope(proj, wt_v3(surface[3][l], surface[4][l], surface[5][l]));
         for (int axis = 0; axis < 3; ++axis) {
             const float w = reads.data[9 + axis][l];
             if (!(w > 0.0f)) continue;
             const wt_v4 gl(g[axis]->data[l][0], g[axis]->data[l][1], g[axis]->data[l][2], g[axis]->data[l][3]);
-            const wt_f4& d = slope[axis][l];
-            float* at = (float*)((char*)tiling + (long long)wp::min(axis, tiling_grad.shape[0] - 1) * stride);
-            *at = *at + wp::dot(weigh ? wp::mul(w, gl) : gl, wt_v4(d[0], d[1], d[2], d[3]));
+            const wt_v4 wg = weigh ? wp::mul(w, gl) : gl;
+            if (tiling) {
+                const wt_f4& d = slope[axis][l];
+                float* at = (float*)((char*)grads.tiling.data +
+                                     (long long)wp::min(axis, grads.tiling.shape[0] - 1) * grads.tiling.strides[0]);
+                *at = *at + wp::dot(wg, wt_v4(d[0], d[1], d[2], d[3]));
+            }
+            if (offsets) {
+                const wt_f4 &du = d_u[axis][l], &dv = d_v[axis][l];
+                char* row = (char*)grads.offsets.data + (long long)axis * grads.offsets.strides[0];
+                float* at_u = (float*)row;
+                float* at_v = (float*)(row + grads.offsets.strides[1]);
+                *at_u = *at_u + wp::dot(wg, wt_v4(du[0], du[1], du[2], du[3]));
+                *at_v = *at_v + wp::dot(wg, wt_v4(dv[0], dv[1], dv[2], dv[3]));
+            }
+            if (sharpness) {
+                const wt_f4& v = value[axis][l];
+                float* at = (float*)grads.sharpness.data;
+                *at = *at + wp::mul(dw.c[axis], wp::dot(gl, wt_v4(v[0], v[1], v[2], v[3])));
+            }
         }
     }
+}
+
+// wt_add_plane_slopes_outlined where any of the three gradients is needed: out of line, so that a
+// texel-only gradient's lane keeps the code it had without them (inlined, it cost biplanar's
+// texel-only backward 15 instructions a sample).
+template <class Tex, class Grads, class Proj, class Smp>
+WT_INLINE void wt_add_plane_slopes(const Tex* const* texs, const Grads& grads, const Proj& proj, const Smp& smp,
+                                   const int* layers, const wt_lane_read_rows& reads, const wt_vf* surface, int count,
+                                   const wt_lane_colours* const* g, int weigh) {
+    if (grads.tiling.shape[0] > 0 || grads.offsets.shape[0] > 0 || (weigh && grads.sharpness.shape[0] > 0))
+        wt_add_plane_slopes_outlined(texs, grads, proj, smp, layers, reads, surface, count, g, weigh);
 }
 
 // lanes.projection.triplanar_scatter_lane: the texel gradients of plain colour's reads (each
 // projection's share w · g[l] of lane pixel l's output gradient adj[base + l], into the gradient
 // of its axis's texture, layer layers[l]), from wt_triplanar_reads_into's reads in rows that are
-// not zeroed first and never copied, added pixel by pixel and read by read (wt_scatter_lod). Where
-// the tiling's gradient is needed (grads.tiling not empty), colour_grad's adds of dot(w g, slope)
-// into it (wt_add_tiling_slopes).
+// not zeroed first and never copied, added pixel by pixel and read by read (wt_scatter_lod); then
+// colour_grad's adds into the tiling's, offsets' and sharpness' gradients where they are needed
+// (wt_add_plane_slopes).
 // twin: triplanar._bodies:colour_grad
 template <class Faces, class Grads, class Proj, class Smp, class Pixels, class Ints, class Adj>
 WT_INLINE void wt_triplanar_scatter_lane(const Faces& faces, const Grads& grads, const Proj& proj, const Smp& smp,
@@ -335,9 +453,8 @@ WT_INLINE void wt_triplanar_scatter_lane(const Faces& faces, const Grads& grads,
     const decltype(&grads.px) grad[3] = {&grads.px, &grads.py, &grads.pz};
     const wt_lane_colours g = wt_adj_lane(adj, base, count);
     wt_scatter_lod(texs, grad, smp, 3, layers.c, reads, 1, g);
-    if (grads.tiling.shape[0] == 0) return;
     const wt_lane_colours* gr[3] = {&g, &g, &g};
-    wt_add_tiling_slopes(texs, grads.tiling, proj, smp, layers.c, reads, surface, count, gr, 1);
+    wt_add_plane_slopes(texs, grads, proj, smp, layers.c, reads, surface, count, gr, 1);
 }
 
 // Normal mapping's reads of the lane, on the unit normal (wt_triplanar_reads_into's unit_normals,
@@ -393,7 +510,7 @@ WT_INLINE void wt_triplanar_samples_lane(const Faces& faces, const Proj& proj, c
 // mapping's first step stored (i = base .. base + count - 1), each added (not weighted) into the
 // texels of its projection's read on the unit normal, pixel by pixel and read by read
 // (wt_scatter_lod_of), with the reads in rows that are not zeroed first and never copied; where
-// grads.tiling is needed, dot(adj[i, axis], slope) of each read into it (wt_add_tiling_slopes).
+// the tiling's or the offsets' gradient is needed, each read's adds into them (wt_add_plane_slopes).
 // twin: triplanar._bodies:samples_grad
 template <class Faces, class Grads, class Proj, class Smp, class Pixels, class Ints, class Adj>
 WT_INLINE void wt_triplanar_scatter_samples_lane(const Faces& faces, const Grads& grads, const Proj& proj,
@@ -412,6 +529,5 @@ WT_INLINE void wt_triplanar_scatter_samples_lane(const Faces& faces, const Grads
     const decltype(&grads.px) grad[3] = {&grads.px, &grads.py, &grads.pz};
     const wt_lane_colours* gr[3] = {&g[0], &g[1], &g[2]};
     wt_scatter_lod_of(texs, grad, smp, 3, layers.c, reads, 0, gr, 1);
-    if (grads.tiling.shape[0] > 0)
-        wt_add_tiling_slopes(texs, grads.tiling, proj, smp, layers.c, reads, surface, count, gr, 0);
+    wt_add_plane_slopes(texs, grads, proj, smp, layers.c, reads, surface, count, gr, 0);
 }
