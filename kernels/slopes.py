@@ -15,8 +15,8 @@ from .texels import SamplerArgs, TextureView
 
 @wp.func
 def power_slope(r: float, exponent: float) -> float:
-    """``d r^exponent / d exponent`` as :func:`~.projection.adj_power_weight` takes it: ``r^exponent ln r`` for
-    ``r > 0``, 0 at ``r = 0``."""
+    """``d r^exponent / d exponent`` as :func:`~.projection.adj_power_weight` takes it:
+    ``r^exponent ln r`` for ``r > 0``, 0 at ``r = 0``."""
     s = 0.0
     if r > 0.0:
         s = power_weight(r, exponent) * wp.log(r)
@@ -35,7 +35,8 @@ def normalised_slope(w: wp.vec3, dw: wp.vec3) -> wp.vec3:
 
 @wp.func
 def triplanar_weights_slope(n: wp.vec3, sharpness: float) -> wp.vec3:
-    """``d w / d sharpness`` of :func:`~.projection.triplanar_weights` ``w``, the same steps differentiated."""
+    """``d w / d sharpness`` of :func:`~.projection.triplanar_weights` ``w``, the same steps
+    differentiated."""
     a = wp.vec3(wp.abs(n[0]), wp.abs(n[1]), wp.abs(n[2]))
     m = wp.max(a)
     d = wp.vec3(0.0)
@@ -47,7 +48,8 @@ def triplanar_weights_slope(n: wp.vec3, sharpness: float) -> wp.vec3:
 
 @wp.func
 def biplanar_pair_slope(major: float, median: float, exponent: float):
-    """``(w, d w / d exponent)`` of :func:`~.projection.biplanar_pair` ``w``, the same steps differentiated."""
+    """``(w, d w / d exponent)`` of :func:`~.projection.biplanar_pair` ``w``, the same steps
+    differentiated."""
     b0 = wp.clamp((major - BIPLANAR_EDGE) / (1.0 - BIPLANAR_EDGE), 0.0, 1.0)
     b1 = wp.clamp((median - BIPLANAR_EDGE) / (1.0 - BIPLANAR_EDGE), 0.0, 1.0)
     w = wp.vec2(power_weight(b0, exponent), power_weight(b1, exponent))
@@ -64,8 +66,8 @@ def biplanar_pair_slope(major: float, median: float, exponent: float):
 
 @wp.func
 def biplanar_weights_slope(n: wp.vec3, sharpness: float) -> wp.vec3:
-    """``d w / d sharpness`` of :func:`~.projection.biplanar_weights` ``w``, the same steps differentiated (its
-    exponent is ``sharpness / 8``)."""
+    """``d w / d sharpness`` of :func:`~.projection.biplanar_weights` ``w``, the same steps
+    differentiated (its exponent is ``sharpness / 8``)."""
     d = wp.vec3(0.0)
     u = n
     length = wp.length(n)
@@ -94,8 +96,8 @@ def biplanar_weights_slope(n: wp.vec3, sharpness: float) -> wp.vec3:
 
 @wp.func
 def projection_weights_slope(proj: ProjectionArgs, n: wp.vec3) -> wp.vec3:
-    """``d w / d sharpness`` of :func:`~.projection.projection_weights` ``w``: the sharpness' gradient of a blend
-    ``Σ w[a] · read[a]`` is ``Σ dot(g, read[a]) · d w[a] / d sharpness``."""
+    """``d w / d sharpness`` of :func:`~.projection.projection_weights` ``w``: the sharpness'
+    gradient of a blend ``Σ w[a] · read[a]`` is ``Σ dot(g, read[a]) · d w[a] / d sharpness``."""
     d = wp.vec3(0.0)
     if proj.weights == WEIGHTS_BIPLANAR:
         d = biplanar_weights_slope(n, proj.sharpness[0])

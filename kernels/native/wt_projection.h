@@ -425,8 +425,9 @@ WT_OUTLINE void wt_add_plane_slopes_outlined(const Tex* const* texs, const Grads
 }
 
 // wt_add_plane_slopes_outlined where any of the three gradients is needed: out of line, so that a
-// texel-only gradient's lane keeps the code it had without them (inlined, it cost biplanar's
-// texel-only backward 15 instructions a sample).
+// texel-only gradient's lane keeps the code it had without them (inlined, callgrind put the
+// texel-only forward+backward of the terrain at 2093.2 instructions a sample against 1906.9,
+// biplanar, and 2552.0 against 2379.2, triplanar).
 template <class Tex, class Grads, class Proj, class Smp>
 WT_INLINE void wt_add_plane_slopes(const Tex* const* texs, const Grads& grads, const Proj& proj, const Smp& smp,
                                    const int* layers, const wt_lane_read_rows& reads, const wt_vf* surface, int count,
