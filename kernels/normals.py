@@ -115,7 +115,7 @@ def to_world(r: wp.vec3, axis: wp.int32) -> wp.vec3:
     return w
 
 
-# -- hand-written gradients (of the normal made from stored samples: triplanar.normal_from_samples_grad) --
+# -- hand-written gradients (of the normal made from stored samples: normal_blend.normal_from_samples_grad) --
 
 
 @wp.func

@@ -11,8 +11,8 @@ tenth slower, and compiling it costs several times more); one texture per axis o
 (``faces``, choosing by the normal's sign, again a module of its own). Colour has a hand-written
 texel gradient; normal mapping, which is not linear in the texels, a two-step one (:class:`Staged`):
 the projections' samples stored per pixel with a hand-written texel gradient, then the normal made
-from them, with a hand-written gradient in the samples (:func:`normal_from_samples_grad`; Warp's
-generated adjoint of it cost four times its forward pass). The kernels with Warp's
+from them, with a hand-written gradient in the samples and the sharpness
+(:mod:`warptex.kernels.normal_blend`). The kernels with Warp's
 generated adjoint (for sharpness, offsets, G-buffer gradients, stochastic tiling or a histogram) are
 one per output, the most general configuration's (stochastic, by face; the same results), built on
 the out-of-line blocks of :mod:`warptex.kernels.projection`.
@@ -26,10 +26,11 @@ from . import adjoint_module, inlined, specialised
 from .faces import COLOUR_GRADS, SAMPLE_GRADS, TEXEL_GRADS, FaceGrads, FaceTextures, on_axis_face, on_face
 from .family import LANES_SUFFIX, Kernels, Staged, family, forward_kernel, lane_kernel, pixel_kernels
 from .lanes.projection import surface_covered
-from .lanes.triplanar import face_lane_bodies, lane_bodies, linear_blend_take, normal_lane_bodies, slopes_lanes_take, stochastic_lane_bodies, stored_lane_bodies
+from .lanes.triplanar import face_lane_bodies, lane_bodies, linear_blend_take, normal_lane_bodies, slopes_lanes_take, stochastic_lane_bodies
 from .native import use
-from .normals import NormalMapArgs, blend_projected, blend_projected_grad, decode_normal, decode_normal_grad, direction, direction_grad, to_world
-from .projection import ProjectionArgs, SurfacePixels, plane_coords, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame, u_sign
+from .normal_blend import normal_from_samples_kernels, projected_normal, unit_base_normal, unit_normal, write_normal
+from .normals import NormalMapArgs
+from .projection import ProjectionArgs, SurfacePixels, projection_footprint, projection_sample, projection_tiling, projection_uv, projection_weights, surface, surface_frame
 from .slopes import add_plane_slopes, projection_weights_slope
 from .stochastic import StochasticArgs, sample_plain, sample_stochastic, scatter_plain, scatter_stochastic
 from .texels import SamplerArgs, TexelGrad, TextureView, read_channels, write_channels
@@ -64,33 +65,6 @@ class ProjectionSamples:
     weights: wp.array(dtype=wp.vec3)
 
 
-@wp.struct
-class NormalBlendArgs:
-    """What the normal made from stored samples reads (filled by name from :class:`TriplanarArgs`)."""
-
-    proj: ProjectionArgs
-    normal_map: NormalMapArgs
-
-
-@wp.struct
-class StoredSamples:
-    """The per-pixel inputs of the normal made from stored samples: the G-buffer's normal and mask
-    and the intermediates of :class:`ProjectionSamples`."""
-
-    normal: wp.array(dtype=wp.vec3)
-    mask: wp.array(dtype=float)
-    samples: wp.array2d(dtype=wp.vec4)
-    weights: wp.array(dtype=wp.vec3)
-
-
-@wp.struct
-class StoredSampleGrads:
-    """What the gradient of the normal made from stored samples adds into: the samples' gradient
-    (the weights carry none, :func:`_sample_shapes`)."""
-
-    samples: wp.array2d(dtype=wp.vec4)
-
-
 # -- reading one projection ----------------------------------------------------------------------------
 
 
@@ -108,67 +82,6 @@ def _projection_reads(sample, scatter, suffix: str):
             scatter(tex, grad, layer, projection_uv(args.proj, axis, p, n), projection_footprint(tex, args.proj, axis, n, dpdx, dpdy, args.smp), args.smp, args.stoch, g)
 
     return inlined(specialised(read, "read_projection" + suffix)), inlined(specialised(add, "add_projection" + suffix))
-
-
-@wp.func
-def projected_normal(texel: wp.vec4, axis: wp.int32, n: wp.vec3, proj: ProjectionArgs, nm: NormalMapArgs) -> wp.vec3:
-    """Projection ``axis``' normal in world-aligned axes (unweighted): ``texel`` decoded, its ``x``
-    mirror-fixed, blended with the unit surface normal ``n`` in the projection's frame, swizzled back."""
-    t = decode_normal(texel, nm.channels, nm.strength, nm.flip_green)
-    t = wp.vec3(t[0] * u_sign(n, axis, proj.mirror_fix), t[1], t[2])
-    base = plane_coords(n, axis)
-    return to_world(blend_projected(t, wp.vec3(base[0], base[1], n[axis]), nm.blend), axis)
-
-
-@wp.func
-def projected_normal_grad(texel: wp.vec4, axis: wp.int32, n: wp.vec3, proj: ProjectionArgs, nm: NormalMapArgs, g: wp.vec3) -> wp.vec4:
-    """The gradient of :func:`projected_normal` in ``texel`` for the result's gradient ``g`` (the
-    swizzle back to world axes is its own inverse, so it also takes ``g`` to the projection's frame)."""
-    s = u_sign(n, axis, proj.mirror_fix)
-    base = plane_coords(n, axis)
-    gt = blend_projected_grad(wp.vec3(base[0], base[1], n[axis]), nm.blend, to_world(g, axis))
-    return decode_normal_grad(texel, nm.channels, nm.strength, nm.flip_green, wp.vec3(gt[0] * s, gt[1], gt[2]))
-
-
-@wp.func
-def unit_normal(total: wp.vec3, n: wp.vec3, proj: ProjectionArgs) -> wp.vec3:
-    """The blended normal ``total`` in world space, normalised; the surface normal ``n`` where the
-    blend cancels out; ``(0, 0, 0)`` where both are zero or non-finite."""
-    world = proj.normal_to_world * total
-    surface_normal = proj.normal_to_world * n
-    result = wp.vec3(0.0)
-    if wp.length(world) > 1.0e-12 and wp.isfinite(world):
-        result = direction(world)
-    elif wp.length(surface_normal) > 0.0 and wp.isfinite(surface_normal):
-        result = direction(surface_normal)
-    return result
-
-
-@wp.func
-def unit_normal_grad(total: wp.vec3, proj: ProjectionArgs, g: wp.vec3) -> wp.vec3:
-    """The gradient of :func:`unit_normal` in the blended normal ``total`` for the result's gradient
-    ``g``: 0 where the blend cancels out (the surface normal does not depend on it)."""
-    world = proj.normal_to_world * total
-    result = wp.vec3(0.0)
-    if wp.length(world) > 1.0e-12 and wp.isfinite(world):
-        result = wp.transpose(proj.normal_to_world) * direction_grad(world, g)
-    return result
-
-
-@wp.func
-def unit_base_normal(n: wp.vec3) -> wp.vec3:
-    """``n`` normalised when it has a length: the blends assume a unit base normal (object space may scale it)."""
-    result = n
-    if wp.length(n) > 0.0:
-        result = direction(n)
-    return result
-
-
-@wp.func
-def write_normal(out: wp.array2d(dtype=float), i: wp.int32, value: wp.vec3):
-    out[i, 0] = value[0]
-    out[i, 1] = value[1]
-    out[i, 2] = value[2]
 
 
 # -- pixel bodies --------------------------------------------------------------------------------------
@@ -287,42 +200,6 @@ def normal_outlined(args: TriplanarArgs, pixels: SurfacePixels, i: wp.int32, out
     write_normal(out, i, result)
 
 
-@wp.func
-def stored_blend(args: NormalBlendArgs, pixels: StoredSamples, i: wp.int32):
-    """``(w, n, total)``: covered pixel ``i``'s stored weights, unit surface normal and blend of its
-    projections' normals (made from the stored samples), before the blend is normalised."""
-    w = pixels.weights[i]
-    n = unit_base_normal(args.proj.normal_to_object * pixels.normal[i])
-    total = wp.vec3(0.0)
-    for axis in range(3):
-        if w[axis] > 0.0:
-            total += w[axis] * projected_normal(pixels.samples[i, axis], axis, n, args.proj, args.normal_map)
-    return w, n, total
-
-
-@inlined
-def normal_from_samples(args: NormalBlendArgs, pixels: StoredSamples, i: wp.int32, out: wp.array2d(dtype=float)):
-    """The normal-mapping body with each projection's sample and weight read from the stored ones
-    (no gradient reaches the weights: this runs only where the sharpness and the G-buffer need none)."""
-    result = wp.vec3(0.0)
-    if pixels.mask[i] != 0.0:
-        w, n, total = stored_blend(args, pixels, i)
-        result = unit_normal(total, n, args.proj)
-    write_normal(out, i, result)
-
-
-@inlined
-def normal_from_samples_grad(args: NormalBlendArgs, pixels: StoredSamples, i: wp.int32, grads: StoredSampleGrads, adj: wp.array2d(dtype=float)):
-    """The hand-written gradient of :func:`normal_from_samples` in the stored samples, added into
-    ``grads.samples`` (Warp's generated adjoint of the same body cost four times its forward)."""
-    if pixels.mask[i] != 0.0 and grads.samples.shape[0] > 0:
-        w, n, total = stored_blend(args, pixels, i)
-        g = unit_normal_grad(total, args.proj, wp.vec3(adj[i, 0], adj[i, 1], adj[i, 2]))
-        for axis in range(3):
-            if w[axis] > 0.0:
-                grads.samples[i, axis] = grads.samples[i, axis] + projected_normal_grad(pixels.samples[i, axis], axis, n, args.proj, args.normal_map, w[axis] * g)
-
-
 _PLAIN = _projection_reads(sample_plain, scatter_plain, "_plain")
 _STOCHASTIC = _projection_reads(sample_stochastic, scatter_stochastic, "_stochastic")
 _BODIES = {
@@ -335,20 +212,6 @@ _CONFIGURATIONS = [{"normal": normal, "stochastic": stochastic, "faces": faces} 
 
 def _sample_shapes(count: int, args) -> dict:
     return {"samples": ((count, 3), wp.vec4), "weights": ((count,), wp.vec3)}
-
-
-@functools.cache
-def _normal_from_samples() -> Kernels:
-    """The second step of the two-step normal, one pair of kernels for every configuration, with its
-    hand-written gradient in the stored samples, in a module of its own (it runs only where
-    gradients are recorded), and their CPU lanes in another."""
-    module = MODULE + ".normal.blend"
-    forward, texel_grad, _ = pixel_kernels("triplanar_normal_blend", module=module, grad_module=module, args=NormalBlendArgs, pixels=StoredSamples,
-                                           out=wp.array2d(dtype=float), body=normal_from_samples, scatter=normal_from_samples_grad, grads=StoredSampleGrads)  # fmt: skip
-    lane, grad_lane, covered = stored_lane_bodies(NormalBlendArgs, StoredSamples, StoredSampleGrads)
-    lanes = lane_kernel(lane, NormalBlendArgs, StoredSamples, wp.array2d(dtype=float), module=module, name="triplanar_normal_blend_lanes", covered=covered)
-    grad_lanes = lane_kernel(grad_lane, NormalBlendArgs, StoredSamples, wp.array2d(dtype=float), grads_t=StoredSampleGrads, module=module, name="triplanar_normal_blend_texel_grad_lanes", covered=covered)
-    return Kernels(forward, texel_grad, grads=("pixels.samples",), lanes=lanes, texel_grad_lanes=grad_lanes)
 
 
 @functools.cache
@@ -390,5 +253,6 @@ def triplanar_kernels(*, normal: bool, stochastic: bool, faces: bool) -> Kernels
                    "lanes_take": take, "grad_lanes_take": grad_take}  # fmt: skip
     first = pixel_kernels(name + "_samples", module=grad_module, grad_module=grad_module, args=TriplanarArgs, pixels=SurfacePixels, out=ProjectionSamples,
                           body=bodies["samples"], scatter=bodies["samples_grad"], grads=FaceGrads)  # fmt: skip
-    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=TEXEL_GRADS if stochastic else SAMPLE_GRADS, **first_lanes), then=_normal_from_samples(), intermediates=_sample_shapes, no_grad=("weights",))
+    staged = Staged(replaces="texel_grad", first=Kernels(*first, grads=TEXEL_GRADS if stochastic else SAMPLE_GRADS, **first_lanes), then=normal_from_samples_kernels(), intermediates=_sample_shapes,
+                    then_only=("args.proj.sharpness",), no_grad=("weights",))  # fmt: skip
     return Kernels(forward, None, _adjoint(True), staged=staged, lanes=lanes, lanes_take=take)

@@ -1,5 +1,5 @@
 """The hand-written gradient of normal mapping's second step (the normal made from stored samples,
-``kernels.triplanar.normal_from_samples_grad``), on its own, against Warp's generated adjoint of
+``kernels.normal_blend.normal_from_samples_grad``), on its own, against Warp's generated adjoint of
 the same body and against central differences, over every blend, channel count, green flip,
 strength, mirror fix and object-space matrix, with the edge cases its branches hold: texels that
 decode to zero, a blend of zero (the surface normal is kept: no gradient), blends past
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from warptex.kernels import triplanar as kt
+from warptex.kernels import normal_blend as kt
 from warptex.kernels.family import forward_kernel
 from warptex.kernels.lanes import LANES
 from warptex.kernels.normals import BLEND_RNM, BLEND_UDN, BLEND_WHITEOUT
@@ -83,7 +83,8 @@ def _hand_written(args, pixels, adj: np.ndarray, kernel=None, per_index: int = 1
     n = pixels.mask.shape[0]
     grads = kt.StoredSampleGrads()
     grads.samples = wp.array(np.full((n, 3, 4), 0.25, np.float32), dtype=wp.vec4)  # added into
-    wp.launch(kernel or kt._normal_from_samples().texel_grad, dim=-(-n // per_index), inputs=[args, pixels, 0, grads, wp.array(adj, dtype=float)])
+    grads.sharpness = wp.empty(0, dtype=float)  # not needed
+    wp.launch(kernel or kt.normal_from_samples_kernels().texel_grad, dim=-(-n // per_index), inputs=[args, pixels, 0, grads, wp.array(adj, dtype=float)])
     return grads.samples.numpy() - 0.25
 
 
@@ -113,7 +114,7 @@ def test_hand_written_gradient_equals_the_generated_adjoint(blend, channels, fli
         tape.backward()
         generated = samples.grad.numpy()
         hand = _hand_written(args, pixels, adj)
-        np.testing.assert_array_equal(_forward(kt._normal_from_samples().forward, args, pixels).numpy(), out.numpy())
+        np.testing.assert_array_equal(_forward(kt.normal_from_samples_kernels().forward, args, pixels).numpy(), out.numpy())
         assert np.abs(hand).max() > 0
         scale = np.abs(generated).max()
         np.testing.assert_allclose(hand, generated, rtol=1e-5, atol=1e-6 * scale, err_msg=f"strength {strength}, mirror fix {mirror_fix}")
@@ -138,7 +139,7 @@ def test_hand_written_gradient_matches_central_differences(blend, channels, flip
     strength, mirror_fix = 0.8, 1
     args, pixels = _structs(inputs, matrices, blend, channels, flip_green, strength, mirror_fix)
     hand = _hand_written(args, pixels, adj.astype(np.float32)).astype(np.float64)
-    kernel = kt._normal_from_samples().forward
+    kernel = kt.normal_from_samples_kernels().forward
     step = 1e-3
 
     def loss(samples: np.ndarray) -> float:
@@ -156,7 +157,7 @@ def test_lanes_give_the_one_pixel_bits(blend, channels, flip_green):
     """The CPU lanes of the step (``normal_lanes.stored_normals_lane`` and ``_grad_lane``): the
     one-pixel kernels' normals and gradients, bit for bit, over a count that ends in a part lane
     (the gradient added into a non-zero array, as the first step's pass leaves none)."""
-    kernels = kt._normal_from_samples()
+    kernels = kt.normal_from_samples_kernels()
     n = 16 * 31 + 5
     for matrix, (strength, mirror_fix) in itertools.product(("identity", "object", "huge"), ((1.0, 1), (0.6, 0), (2.5, 1))):
         inputs, matrices = _inputs(6, matrix, n)

@@ -323,10 +323,11 @@ TILING_CASES = {  # a call's keywords beside the G-buffer, texture and tiling
 @pytest.mark.parametrize("tiling", [[2.5], [1.3, 0.9, 1.7]])
 @pytest.mark.parametrize("case", TILING_CASES)
 def test_parameter_gradients_by_hand_equal_the_generated_adjoint(monkeypatch, case, tiling, threads):
-    """Plain sampling with the tiling and offsets needing their gradients, and colour's sharpness
-    (and the texels theirs): the hand-written gradient runs (on lanes with one texture per axis;
-    one pixel per index with one per face; normal mapping's in its first step, its stored samples),
-    and gives the generated adjoint's parameter and texel gradients, one tiling or one per axis."""
+    """Plain sampling with the tiling, offsets and sharpness needing their gradients (and the
+    texels theirs): the hand-written gradient runs (on lanes with one texture per axis; one pixel
+    per index with one per face; normal mapping's tiling and offsets in its first step, its stored
+    samples, and its sharpness in its second, through the stored weights), and gives the generated
+    adjoint's parameter and texel gradients, one tiling or one per axis."""
     camera = wt.orthographic((3.0, 2.0, 4.0), (0.0, 0.0, 0.0), height=2.2, resolution=(192, 192))
     g = wt.rasterize(trimesh.creation.icosphere(subdivisions=4), camera)
     kw = dict(TILING_CASES[case])
@@ -347,10 +348,8 @@ def test_parameter_gradients_by_hand_equal_the_generated_adjoint(monkeypatch, ca
             textures = [wt.Texture(im, requires_grad=True) for im in images]
             t = wp.array(np.float32(tiling), dtype=float, requires_grad=True)
             params = [t, wp.array(np.float32([[0.1, 0.33], [0.25, -0.4], [0.67, 0.05]]), dtype=float, requires_grad=True)]
-            shared = {"offsets": params[1]}
-            if not normal:
-                params.append(wp.array([3.0 if name == "triplanar" else 6.0], dtype=float, requires_grad=True))
-                shared["sharpness"] = params[2]
+            params.append(wp.array([6.0 if "biplanar" in name else 3.0], dtype=float, requires_grad=True))
+            shared = {"offsets": params[1], "sharpness": params[2]}
             tape = wp.Tape()
             with tape, _op.force_generated_adjoint(generated):
                 out = technique(g, **({"textures_per_face": textures} if faces else {"normal_map" if normal else "texture": textures[0]}), tiling=t, **shared, **kw)
@@ -361,13 +360,41 @@ def test_parameter_gradients_by_hand_equal_the_generated_adjoint(monkeypatch, ca
     finally:
         wt.set_num_threads(None)
     hand, gen = results
-    params = 2 if normal else 3
+    params = 3
     for k in range(params):  # the tiling and offsets move no nearest read; the sharpness moves the blend
         assert np.abs(gen[k]).max() > 0 or ("nearest" in case and k < 2)
         if "nearest" in case and k < 2:
             np.testing.assert_array_equal(hand[k], 0.0)
         np.testing.assert_allclose(hand[k], gen[k], rtol=1e-3, atol=1e-3 * max(np.abs(gen[k]).max(), 1e-6), err_msg=f"parameter {k}")
     assert_same_gradients([(False, h.reshape(-1)) for h in hand[params:]], [(False, x.reshape(-1)) for x in gen[params:]])
+
+
+@pytest.mark.parametrize("space", ["world", "object"])
+@pytest.mark.parametrize("technique", ["normal_whiteout", "normal_rnm", "normal_udn_biplanar"])
+def test_normal_mapping_sharpness_alone_by_hand_equals_the_generated_adjoint(monkeypatch, technique, space):
+    """Normal mapping with only the sharpness needing its gradient: the stored samples need none,
+    so the first step records no backward, and the second step adds the sharpness' gradient through
+    the stored weights, one pixel per index (its lanes decline: ``sharpness_lanes_take``); the
+    generated adjoint's, to rounding."""
+    img = _texture_for(technique, 32, 24, seed=2)
+    g = wt.rasterize(trimesh.creation.icosphere(subdivisions=4), wt.orthographic((3.0, 2.0, 4.0), (0.0, 0.0, 0.0), height=2.2, resolution=(96, 96)))
+    kw = {"space": "object", "object_to_world": np.diag([1.5, 0.8, 1.2, 1.0]).astype(np.float32)} if space == "object" else {}
+    weights = np.random.default_rng(6).normal(size=(96, 96, 3)).astype(np.float32)
+    launched = launches(monkeypatch)
+    results = []
+    for generated in (False, True):
+        launched.clear()
+        sharpness = wp.array([5.0 if "biplanar" in technique else 3.5], dtype=float, requires_grad=True)
+        tape = wp.Tape()
+        with tape, _op.force_generated_adjoint(generated):
+            out = TECHNIQUES[technique](g, wt.Texture(img), tiling=1.7, sharpness=sharpness, **kw)
+        out.grad.assign(weights)
+        tape.backward()
+        results.append(sharpness.grad.numpy().copy())
+        assert any(k.endswith("_adjoint") for k in launched) == generated, launched
+        assert generated or not any("samples_texel_grad" in k for k in launched), launched  # the first step recorded nothing
+    assert np.abs(results[1]).max() > 0
+    np.testing.assert_allclose(results[0], results[1], rtol=1e-3, atol=1e-3 * np.abs(results[1]).max())
 
 
 @pytest.mark.parametrize("technique", ["triplanar", "biplanar", "normal_rnm", "normal_udn_biplanar"])

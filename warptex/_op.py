@@ -121,8 +121,8 @@ def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linea
                 "texel gradients of a texture stored in a compact format (float16, unorm8, srgb8) come from warptex's "
                 "hand-written gradients, and this call needs Warp's generated one (a gradient of an input besides texels "
                 "that the technique's own gradient does not serve: UV derivatives, G-buffer arrays, a stochastic lookup's "
-                "tiling, UVs, sharpness or offsets, a splat's sharpness or offsets, normal mapping's sharpness; or a "
-                "histogram-preserving blend): sample a float32 copy of the texture, "
+                "tiling, UVs, sharpness or offsets, a splat's sharpness or offsets; or a histogram-preserving blend): "
+                "sample a float32 copy of the texture, "
                 "Texture(texture, format='float32'), or leave its requires_grad off"
             )
         _run_path(kernels, path, count, inputs, result, device, cut, touched)
@@ -130,11 +130,12 @@ def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linea
 
 
 def _backward_path(kernels: Kernels, inputs: dict, wanted: list, linear: bool) -> str:
-    """``"texel_grad"`` when the hand-written gradient serves every array in ``wanted``, else ``"adjoint"``."""
+    """``"texel_grad"`` when the hand-written gradient serves every array in ``wanted`` (a staged
+    pair's: its first step's paths, and those only its second step differentiates), else ``"adjoint"``."""
     by_hand = kernels.texel_grad is not None or (kernels.staged is not None and kernels.staged.replaces == "texel_grad")
     if not by_hand or not linear or getattr(_forced, "value", False):
         return "adjoint"
-    paths = kernels.grads if kernels.texel_grad is not None else kernels.staged.first.grads
+    paths = kernels.grads if kernels.texel_grad is not None else kernels.staged.first.grads + kernels.staged.then_only
     served = {id(a) for a in (resolve(inputs, p) for p in paths if p is not None) if a is not None}
     return "texel_grad" if all(id(a) in served for a in wanted) else "adjoint"
 

@@ -32,14 +32,14 @@ def surface_normals_lane(proj: ProjectionArgs, nm: NormalMapArgs, pixels: Surfac
 def stored_normals_lane(proj: ProjectionArgs, nm: NormalMapArgs, normal: wp.array(dtype=wp.vec3), mask: wp.array(dtype=float), weights: wp.array(dtype=wp.vec3),
                         samples: wp.array2d(dtype=wp.vec4), base: wp.int32, count: wp.int32) -> lane_colours:  # fmt: skip
     """Row ``l``: lane pixel ``l``'s normal made from its stored weights and samples
-    (:func:`~.triplanar.normal_from_samples`), ``(x, y, z, 0)``; 0 where it is not covered."""
+    (:func:`~.normal_blend.normal_from_samples`), ``(x, y, z, 0)``; 0 where it is not covered."""
     ...
 
 
 @wp.func_native(cpu_snippet("wt_stored_normals_grad_lane(proj, nm, normal, mask, weights, samples, base, count, adj, grad);\n"))
 def stored_normals_grad_lane(proj: ProjectionArgs, nm: NormalMapArgs, normal: wp.array(dtype=wp.vec3), mask: wp.array(dtype=float), weights: wp.array(dtype=wp.vec3),
                              samples: wp.array2d(dtype=wp.vec4), base: wp.int32, count: wp.int32, adj: wp.array2d(dtype=float), grad: wp.array2d(dtype=wp.vec4)):  # fmt: skip
-    """:func:`~.triplanar.normal_from_samples_grad` for the lane: the gradient ``adj[i]`` of lane pixel
+    """:func:`~.normal_blend.normal_from_samples_grad` for the lane: the gradient ``adj[i]`` of lane pixel
     ``i``'s normal added into ``grad[i, axis]``, the gradient of its stored sample of each projection
     it reads (nothing where ``grad`` is empty)."""
     ...

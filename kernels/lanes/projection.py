@@ -32,7 +32,7 @@ def triplanar_reads_lane(faces: FaceTextures, proj: ProjectionArgs, smp: Sampler
     ``projection.projection_footprint`` and ``projection.projection_weights``, as
     :data:`~.lane_reads` (all 0 where a projection is not read: a zero weight, or an uncovered
     pixel). With ``unit_normals``, the UVs and footprints are those of the unit normal
-    (``triplanar.unit_base_normal``, as normal mapping reads them; the weights are the normal's as
+    (``normal_blend.unit_base_normal``, as normal mapping reads them; the weights are the normal's as
     given either way): a normal's tiny component can round to zero as it is scaled, which turns its
     mirror-fix sign. ``side``: 0, each projection read on ``faces``' texture of its axis (``px``,
     ``py``, ``pz``); with a texture per face (``faces.on_face``), 1 or 2, each projection read on the

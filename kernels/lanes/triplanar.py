@@ -40,6 +40,13 @@ def slopes_lanes_take(args) -> bool:
     return not (args.proj.tiling.requires_grad or args.proj.offsets.requires_grad or args.proj.sharpness.requires_grad)
 
 
+def sharpness_lanes_take(args) -> bool:
+    """Whether the gradient lanes of normal mapping's second step (the normal made from the stored
+    samples, ``stored_lane_bodies``) take a launch with ``args``: not where the sharpness needs its
+    gradient, which only the one-pixel kernel adds (``normal_blend.normal_from_samples_grad``)."""
+    return not args.proj.sharpness.requires_grad
+
+
 @functools.cache
 def lane_bodies(args_t):
     """``(colour_lane, colour_grad_lane)``: the lane bodies of plain colour mapping and its texel
@@ -353,7 +360,7 @@ def stored_lane_bodies(args_t, pixels_t, grads_t):
     """``(stored_lane, stored_grad_lane, covered)``: the lane bodies of the second step of normal
     mapping's two-step gradient (the normal made from the stored samples, and its gradient in them,
     natively: :mod:`.normals`), whose arguments are ``args_t``, ``pixels_t`` and ``grads_t``
-    (:class:`~.triplanar.NormalBlendArgs`, ``StoredSamples``, ``StoredSampleGrads``), and their
+    (:class:`~.normal_blend.NormalBlendArgs`, ``StoredSamples``, ``StoredSampleGrads``), and their
     lanes' ``covered`` (``family.lane_kernel``)."""
 
     def stored_lane(args: args_t, pixels: pixels_t, base: wp.int32, out: wp.array2d(dtype=float)):

@@ -15,10 +15,10 @@ WT_INLINE wt_v3 wt_unsquared_direction(const wt_v3& n) {
     return wp::normalize(wp::div(n, wp::max(wt_v3(wp::abs(n.c[0]), wp::abs(n.c[1]), wp::abs(n.c[2])))));
 }
 
-// triplanar.unit_base_normal for the lane, in place: normals.direction where |n| > 0, on vectors
+// normal_blend.unit_base_normal for the lane, in place: normals.direction where |n| > 0, on vectors
 // (wp::length's and wp::normalize's own expressions, the same bits), lane by lane past ~1.8e19
 // (|n|² overflowed: normals.unsquared first).
-// twin: triplanar.unit_base_normal
+// twin: normal_blend.unit_base_normal
 WT_INLINE void wt_unit_normals(wt_vf* N) {
     const wt_vf length = wt_vsqrt(N[0] * N[0] + N[1] * N[1] + N[2] * N[2]);
     const wt_vi scaled = length > 0.0f;
@@ -100,8 +100,8 @@ WT_INLINE void wt_to_world(const wt_vf* r, int axis, wt_vf* out) {
     for (int e = 0; e < 3; ++e) out[e] = r[k[axis][e]];
 }
 
-// triplanar.projected_normal: projection `axis`' normal (sample s) in world axes.
-// twin: triplanar.projected_normal
+// normal_blend.projected_normal: projection `axis`' normal (sample s) in world axes.
+// twin: normal_blend.projected_normal
 template <class Proj, class NM> WT_INLINE void wt_projected_normal(const wt_vf* s, int axis, const wt_vf* n,
                                                                    const Proj& proj, const NM& nm, wt_vf* out) {
     wt_vf xyz[3], r2, t[3], b[3], r[3];
@@ -121,7 +121,7 @@ template <class Proj, class NM> WT_INLINE void wt_projected_normal(const wt_vf* 
     wt_to_world(r, axis, out);
 }
 
-// The blend of the projections' normals (before triplanar.unit_normal), where their weights are > 0.
+// The blend of the projections' normals (before normal_blend.unit_normal), where their weights are > 0.
 template <class Proj, class NM> WT_INLINE void wt_total(const wt_vf (*S)[4], const wt_vf* W, const wt_vf* n,
                                                         const Proj& proj, const NM& nm, wt_vf* total) {
     for (int e = 0; e < 3; ++e) total[e] = 0.0f;
@@ -134,8 +134,8 @@ template <class Proj, class NM> WT_INLINE void wt_total(const wt_vf (*S)[4], con
     }
 }
 
-// triplanar.unit_normal: the blend in world space, normalised (the surface normal where it cancels out).
-// twin: triplanar.unit_normal
+// normal_blend.unit_normal: the blend in world space, normalised (the surface normal where it cancels out).
+// twin: normal_blend.unit_normal
 template <class Proj> WT_INLINE void wt_unit_normal(const wt_vf* total, const wt_vf* n, const Proj& proj, wt_vf* out) {
     wt_vf world[3], surface[3], a[3], b[3];
     wt_mul3(proj.normal_to_world, total, world, false);
@@ -150,7 +150,7 @@ template <class Proj> WT_INLINE void wt_unit_normal(const wt_vf* total, const wt
 }
 
 // The stored intermediates of lane pixels base .. base + count - 1 (the rest repeat pixel base) as
-// vectors: mask, unit normal (triplanar.stored_blend's: normal_to_object always applied), weights,
+// vectors: mask, unit normal (normal_blend.stored_blend's: normal_to_object always applied), weights,
 // samples.
 template <class Proj, class Normals, class Mask, class Weights, class Samples>
 WT_INLINE void wt_stored(const Proj& proj, const Normals& normal, const Mask& mask, const Weights& weights,
@@ -213,8 +213,8 @@ WT_INLINE wt_lane_colours wt_surface_normals_lane(const Proj& proj, const NM& nm
 }
 
 // lanes.normals.stored_normals_lane: row l, lane pixel l's normal made from its stored weights and
-// samples (triplanar.normal_from_samples), (x, y, z, 0); 0 where it is not covered.
-// twin: triplanar.normal_from_samples
+// samples (normal_blend.normal_from_samples), (x, y, z, 0); 0 where it is not covered.
+// twin: normal_blend.normal_from_samples
 template <class Proj, class NM, class Normals, class Mask, class Weights, class Samples>
 WT_INLINE wt_lane_colours wt_stored_normals_lane(const Proj& proj, const NM& nm, const Normals& normal,
                                                  const Mask& mask, const Weights& weights, const Samples& samples,
@@ -281,9 +281,9 @@ template <class NM> WT_INLINE void wt_decode_grad(const wt_vf* s, const NM& nm, 
     out[0] = gx * 2.0f, out[1] = gy * 2.0f, out[2] = gz * 2.0f, out[3] = 0.0f;
 }
 
-// triplanar.projected_normal_grad (normals.blend_projected_grad inline): projection `axis`'
+// normal_blend.projected_normal_grad (normals.blend_projected_grad inline): projection `axis`'
 // gradient in its sample.
-// twin: triplanar.projected_normal_grad
+// twin: normal_blend.projected_normal_grad
 template <class Proj, class NM> WT_INLINE void wt_projected_normal_grad(const wt_vf* s, int axis, const wt_vf* n,
                                                                         const Proj& proj, const NM& nm, const wt_vf* g,
                                                                         wt_vf* out) {
@@ -306,10 +306,10 @@ template <class Proj, class NM> WT_INLINE void wt_projected_normal_grad(const wt
     wt_decode_grad(s, nm, gt, out);
 }
 
-// lanes.normals.stored_normals_grad_lane: triplanar.normal_from_samples_grad for the lane: the
+// lanes.normals.stored_normals_grad_lane: normal_blend.normal_from_samples_grad for the lane: the
 // gradient adj[i] of lane pixel i's normal added into grad[i, axis], the gradient of its stored
 // sample of each projection it reads (nothing where grad is empty).
-// twin: triplanar.normal_from_samples_grad
+// twin: normal_blend.normal_from_samples_grad
 template <class Proj, class NM, class Normals, class Mask, class Weights, class Samples, class Adj, class Grad>
 WT_INLINE void wt_stored_normals_grad_lane(const Proj& proj, const NM& nm, const Normals& normal, const Mask& mask,
                                            const Weights& weights, const Samples& samples, int base, int count,
@@ -325,7 +325,7 @@ WT_INLINE void wt_stored_normals_grad_lane(const Proj& proj, const NM& nm, const
             a_[e][l] = *(const float*)((const char*)adj.data +
                                        (long long)(base + (l < count ? l : 0)) * adj.strides[0] + e * adj.strides[1]);
     for (int e = 0; e < 3; ++e) __builtin_memcpy(&A[e], a_[e], sizeof(wt_vf));
-    // triplanar.unit_normal_grad
+    // normal_blend.unit_normal_grad
     wt_mul3(proj.normal_to_world, total, world, false);
     const wt_vi blended =
         (wt_length3(world) > 1.0e-12f) & wt_finite(world[0]) & wt_finite(world[1]) & wt_finite(world[2]);

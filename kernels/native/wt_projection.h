@@ -261,7 +261,7 @@ template <class Proj> WT_INLINE wt_v3 wt_weights_slope(const Proj& proj, const w
 // each projection, with triplanar or biplanar weights (proj.weights): projection.projection_uv,
 // projection_footprint and projection_weights, into the rows of reads (all 0 where a projection is
 // not read; every row is written). unit_normals: the UVs, footprints and faces of the unit normal
-// (triplanar.unit_base_normal, as normal mapping reads them; the weights are the normal's as
+// (normal_blend.unit_base_normal, as normal mapping reads them; the weights are the normal's as
 // given). side: 0, each projection on faces' texture of its axis (px, py, pz); 1 or 2, on the + or
 // - face of that axis, weight 0 where the normal looks at the other face.
 // twin: projection.projection_weights
@@ -301,8 +301,9 @@ WT_INLINE void wt_triplanar_reads_into(const Faces& faces, const Proj& proj, con
         wt_biplanar_weights(N, covered, sharpness, W);
     else
         wt_triplanar_weights(N, covered, sharpness, W);
-    if (unit_normals != 0) wt_unit_normals(N);  // triplanar.unit_base_normal: normal mapping reads on the unit normal
-    if (surface)  // where asked, the surface in the projected space: P, N (the normal the reads use), DX, DY
+    if (unit_normals != 0)
+        wt_unit_normals(N);  // normal_blend.unit_base_normal: normal mapping reads on the unit normal
+    if (surface)             // where asked, the surface in the projected space: P, N (the normal the reads use), DX, DY
         for (int e = 0; e < 3; ++e)
             surface[e] = P[e], surface[3 + e] = N[e], surface[6 + e] = DX[e], surface[9 + e] = DY[e];
     if (side != 0) {  // faces.on_face: the - face where n[axis] < 0 (the normal it reads on), else the + face
