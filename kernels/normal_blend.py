@@ -23,7 +23,8 @@ MODULE = use("warptex.triplanar.normal.blend")
 
 @wp.struct
 class NormalBlendArgs:
-    """What the normal made from stored samples reads (filled by name from :class:`~.triplanar.TriplanarArgs`)."""
+    """What the normal made from stored samples reads (filled by name from
+    :class:`~.triplanar.TriplanarArgs`)."""
 
     proj: ProjectionArgs
     normal_map: NormalMapArgs
