@@ -256,6 +256,47 @@ def biplanar_pair(major: float, median: float, exponent: float) -> wp.vec2:
 
 
 @wp.func
+def biplanar_axes(n: wp.vec3):
+    """``(major, median, minor)`` of :func:`biplanar_weights`: the major and median components of
+    the unit normal's ``|n|``, and the minor axis' index (the smallest component, the highest index
+    among ties); ``minor = -1`` for a zero or non-finite normal, which has no weights."""
+    u = n
+    length = wp.length(n)
+    if length > FLOAT_MAX:  # |n|² overflowed
+        u = unsquared(n)
+        length = wp.length(u)
+    major = float(0.0)
+    median = float(0.0)
+    minor = int(-1)
+    if wp.isfinite(n) and length > 0.0:
+        a = wp.vec3(wp.abs(u[0]), wp.abs(u[1]), wp.abs(u[2])) / length
+        if a[2] <= a[0] and a[2] <= a[1]:
+            major = a[0]
+            median = a[1]
+            minor = 2
+        elif a[1] <= a[0]:
+            major = a[0]
+            median = a[2]
+            minor = 1
+        else:
+            major = a[1]
+            median = a[2]
+            minor = 0
+    return major, median, minor
+
+
+@wp.func
+def biplanar_spread(pair: wp.vec2, minor: wp.int32) -> wp.vec3:
+    """The major and median axes' values ``pair`` in their places, 0 on the ``minor`` axis."""
+    v = wp.vec3(0.0, pair[0], pair[1])
+    if minor == 2:
+        v = wp.vec3(pair[0], pair[1], 0.0)
+    elif minor == 1:
+        v = wp.vec3(pair[0], 0.0, pair[1])
+    return v
+
+
+@wp.func
 def biplanar_weights(n: wp.vec3, sharpness: float) -> wp.vec3:
     """Quilez' biplanar weights: major and median axes get ``clamp((|n| - 0.5773) / (1 - 0.5773), 0, 1)^(k/8)``
     (:func:`biplanar_pair`), the minor axis 0, normalised to sum 1. Zero for a zero or non-finite
@@ -267,23 +308,9 @@ def biplanar_weights(n: wp.vec3, sharpness: float) -> wp.vec3:
     except near the exact diagonal), so the weights are continuous up to that.
     """
     w = wp.vec3(0.0)
-    u = n
-    length = wp.length(n)
-    if length > FLOAT_MAX:  # |n|² overflowed
-        u = unsquared(n)
-        length = wp.length(u)
-    if wp.isfinite(n) and length > 0.0:
-        a = wp.vec3(wp.abs(u[0]), wp.abs(u[1]), wp.abs(u[2])) / length
-        e = sharpness / 8.0
-        if a[2] <= a[0] and a[2] <= a[1]:
-            pair = biplanar_pair(a[0], a[1], e)
-            w = wp.vec3(pair[0], pair[1], 0.0)
-        elif a[1] <= a[0]:
-            pair = biplanar_pair(a[0], a[2], e)
-            w = wp.vec3(pair[0], 0.0, pair[1])
-        else:
-            pair = biplanar_pair(a[1], a[2], e)
-            w = wp.vec3(0.0, pair[0], pair[1])
+    major, median, minor = biplanar_axes(n)
+    if minor >= 0:
+        w = biplanar_spread(biplanar_pair(major, median, sharpness / 8.0), minor)
         w = w / wp.max(w[0] + w[1] + w[2], WEIGHT_EPS)
     return w
 

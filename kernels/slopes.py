@@ -8,8 +8,7 @@ weights' slopes along the sharpness (:func:`projection_weights_slope`: the weigh
 import warp as wp
 
 from .faces import FaceGrads
-from .normals import FLOAT_MAX, unsquared
-from .projection import BIPLANAR_EDGE, WEIGHT_EPS, WEIGHTS_BIPLANAR, ProjectionArgs, plane_sample_slope, power_weight, projection_tiling
+from .projection import BIPLANAR_EDGE, WEIGHT_EPS, WEIGHTS_BIPLANAR, ProjectionArgs, biplanar_axes, biplanar_spread, plane_sample_slope, power_weight, projection_tiling
 from .texels import SamplerArgs, TextureView
 
 
@@ -69,28 +68,10 @@ def biplanar_weights_slope(n: wp.vec3, sharpness: float) -> wp.vec3:
     """``d w / d sharpness`` of :func:`~.projection.biplanar_weights` ``w``, the same steps
     differentiated (its exponent is ``sharpness / 8``)."""
     d = wp.vec3(0.0)
-    u = n
-    length = wp.length(n)
-    if length > FLOAT_MAX:  # |n|² overflowed
-        u = unsquared(n)
-        length = wp.length(u)
-    if wp.isfinite(n) and length > 0.0:
-        a = wp.vec3(wp.abs(u[0]), wp.abs(u[1]), wp.abs(u[2])) / length
-        e = sharpness / 8.0
-        w = wp.vec3(0.0)
-        if a[2] <= a[0] and a[2] <= a[1]:
-            pair, slope = biplanar_pair_slope(a[0], a[1], e)
-            w = wp.vec3(pair[0], pair[1], 0.0)
-            d = wp.vec3(slope[0], slope[1], 0.0)
-        elif a[1] <= a[0]:
-            pair, slope = biplanar_pair_slope(a[0], a[2], e)
-            w = wp.vec3(pair[0], 0.0, pair[1])
-            d = wp.vec3(slope[0], 0.0, slope[1])
-        else:
-            pair, slope = biplanar_pair_slope(a[1], a[2], e)
-            w = wp.vec3(0.0, pair[0], pair[1])
-            d = wp.vec3(0.0, slope[0], slope[1])
-        d = normalised_slope(w, d) / 8.0
+    major, median, minor = biplanar_axes(n)
+    if minor >= 0:
+        pair, slope = biplanar_pair_slope(major, median, sharpness / 8.0)
+        d = normalised_slope(biplanar_spread(pair, minor), biplanar_spread(slope, minor)) / 8.0
     return d
 
 
