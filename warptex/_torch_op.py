@@ -222,9 +222,12 @@ def _warp_device(device: torch.device):
 
 
 def _torch_stream(device):
-    """Warp on torch's current stream of ``device`` (CUDA), so the op is ordered with torch's work."""
+    """Warp on torch's current stream of ``device`` (CUDA), so the op is ordered with torch's work
+    (and after Warp's, except while torch captures a CUDA graph: a capture must not wait on work
+    outside it, and CUDA invalidates one that does)."""
     if device.is_cuda:
-        return wp.ScopedStream(wp.stream_from_torch(torch.cuda.current_stream(device.ordinal)))
+        stream = torch.cuda.current_stream(device.ordinal)
+        return wp.ScopedStream(wp.stream_from_torch(stream), sync_enter=not torch.cuda.is_current_stream_capturing())
     return wp.ScopedDevice(device)
 
 
