@@ -6,15 +6,16 @@ order. The techniques get one G-buffer, rasterised on the CPU and copied (``GBuf
 rasterisers agree only to rounding (checked on its own here), and on an H100 that rounding, in a
 normal or a derivative, moved blend weights and mip levels past these tolerances. Skipped, with
 the reason, on a machine without a CUDA device. ``WARPTEX_TEST_DEVICE=cpu`` runs them against the
-CPU itself (a check of the tests, where no GPU is at hand). They last ran on an H100, all passing,
-on 2026-11-26; the five-run cases of generated adjoints and the techniques added to them on
-2026-11-29 have run against the CPU only (``benchmarks/device_checks.sh`` runs this file on a GPU).
+CPU itself (a check of the tests, where no GPU is at hand). They last ran on an H200 (warp-lang
+1.19.0, driver 580, torch 2.11), all passing, on 2026-11-30, through ``benchmarks/device_checks.sh``,
+which runs this file on a GPU.
 """
 
 import json
 import os
 import subprocess
 import sys
+import weakref
 
 import numpy as np
 import pytest
@@ -292,7 +293,7 @@ def test_texel_gradients_are_the_same_bits_every_run(scene, case):
 
 def test_a_small_call_is_captured_in_a_cuda_graph(scene):
     """Issue 51: a call into out= is capturable (``wp.ScopedCapture``): the graph's replay fills
-    out= as the call does. Not yet run on a GPU (none was lent to the session that wrote it)."""
+    out= as the call does."""
     if not OTHER.startswith("cuda"):
         pytest.skip("CUDA graphs need a CUDA device")
     tex = wt.Texture(scene["image"], device=OTHER)
@@ -313,9 +314,43 @@ def test_a_small_call_is_captured_in_a_cuda_graph(scene):
     np.testing.assert_array_equal(colour.numpy(), wt.triplanar(g, tex, tiling=0.4).numpy())
 
 
+def test_new_arrays_each_call_run_a_kept_plan_on_the_device(scene):
+    """Issue 51: on the device too, a loop that makes new UVs and a new ``out=`` each call, or gives
+    no ``out=``, runs one kept plan pointed at its arrays (on an H200, a 1-UV call with new UVs
+    took 153 us and one into a new output 72 us, against 30 us into a kept ``out=``, while CUDA
+    plans served only the arrays they were made with and kept no spare outputs): each call's
+    bits, and the dropped outputs written again, on the stream that wrote them only."""
+    from warptex import _plan
+
+    tex = wt.Texture(scene["image"], device=OTHER)
+    rng = np.random.default_rng(3)
+    outputs = []
+    for _ in range(8):
+        uv = wp.array(rng.uniform(-2, 2, (300, 2)).astype(np.float32), dtype=wp.vec2, device=OTHER)
+        out = wp.full((300, 4), np.nan, dtype=wp.float32, device=OTHER)
+        with wp.Tape():  # no plan runs under a tape: the call's own path
+            want = wt.sample(tex, uv).numpy()
+        assert wt.sample(tex, uv, out=out) is out
+        new = wt.sample(tex, uv)
+        np.testing.assert_array_equal(out.numpy(), want)
+        np.testing.assert_array_equal(new.numpy(), want)
+        outputs.append(weakref.ref(new))
+        del new
+    plans = [p for (key, *_), p in _plan._local.plans.items() if key[0] == "sample" and p.cmd is not None]
+    assert len(plans) == 2  # one into out=, one making new outputs
+    spares = {id(o()) for o in outputs if o() is not None}
+    assert len(spares) == 1 and sum(o() is not None for o in outputs) == 6  # from the plan's first run, each output dropped is written again
+    if OTHER.startswith("cuda"):
+        with wp.ScopedStream(wp.Stream(OTHER)):  # another stream: its write could overtake one still pending
+            elsewhere = wt.sample(tex, uv)
+            np.testing.assert_array_equal(elsewhere.numpy(), want)
+        assert id(elsewhere) not in spares
+
+
 def test_the_torch_bridge_in_a_torch_cuda_graph(scene):
     """Issue 51: warptex.torch inside ``torch.cuda.graph``: replaying the graph recomputes the
-    output from the static input tensors' current contents. Not yet run on a GPU."""
+    output from the static input tensors' current contents. (Its first run on a GPU found the bridge
+    making torch's stream wait on Warp's, which invalidates a capture.)"""
     torch = pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
     import warptex.torch as wtt
 

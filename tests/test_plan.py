@@ -1,6 +1,6 @@
 """Kept plans (``warptex._plan``): a repeated small call on the same objects runs the launch its
 earlier call made, with the same bits, reads its inputs' current contents, serves new ``uv`` and
-``out=`` arrays of the same layout on the CPU, never outlives an object it names nor holds an
+``out=`` arrays of the same layout (on a CUDA device too: ``tests/test_cuda.py``), never outlives an object it names nor holds an
 array of a call, and stays out of the way of tapes, ``one_pixel_kernels`` and bad input."""
 
 import gc
@@ -125,7 +125,7 @@ def test_other_objects_options_or_layouts_are_not_served_by_a_plan(inputs):
 
 
 @pytest.mark.parametrize("func", ["sample", "stochastic"])
-def test_a_plan_serves_new_arrays_of_its_layout_on_the_cpu(inputs, func):
+def test_a_plan_serves_new_arrays_of_its_layout(inputs, func):
     """A loop that makes new UVs and a new ``out=`` each call (a torch tensor's view, a
     ``wp.empty``) runs one plan, pointed at each call's arrays: each call's bits, every array
     left to its caller (the plan holds none)."""
@@ -421,7 +421,7 @@ def test_a_new_output_is_written_again_only_once_nothing_refers_to_it(inputs, ho
     np.testing.assert_array_equal(show(kept), before)
 
 
-def test_spares_are_small_cpu_outputs(inputs):
+def test_spares_are_small_outputs(inputs):
     texture, _, rng = inputs
     big = _plan.SPARE_BYTES // 16 + 1  # rows of 4 floats: just over
     for rows, kept in ((300, True), (big, False)):

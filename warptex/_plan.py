@@ -8,18 +8,20 @@ A technique whose call qualifies (inputs that are objects or plain values, no re
 ``wp.Tape``, see :func:`usable`) asks :func:`rerun` to run a plan kept under the call's key and its
 objects, the very ones (compared by identity: the arrays' shapes and types, and a texture's
 storage, cannot change): the same launch as before, on their current contents. Two arrays of a
-call are its own rather than the objects': ``out=`` and a lookup's ``uv``. On the CPU a plan
-serves any array of the same layout there (shape, strides, type; for ``uv``, ``requires_grad``)
-and points the launch at it, so that a loop that makes them anew each call (a torch tensor's Warp view, an output from
-``wp.empty``) runs its plan too: the call's own path cost ~150 us of Python around a 1,024-UV
-lookup. Elsewhere they are compared by identity, as the objects are. Without ``out=`` (``None``),
-the plan makes a new output as the call did (its shape, type and ``requires_grad``) and points the
-launch at it: a new array costs ~6 us, where the call's own path cost ~50 us of Python.
-On the CPU, a small new output (:data:`SPARE_BYTES` at most) is kept as a spare once returned, and
-a later call writes it again (and zeroes its gradient) once nothing else refers to it or its
-gradient: no one can then read what it held, as with an array freed and allocated again, but the
-call costs no Warp arrays (~13-20 us of Python each, as much as the rest of a 1-pixel call) nor
-their argument struct. A caller's view of it, a NumPy or torch array of it, or a gradient tape's
+call are its own rather than the objects': ``out=`` and a lookup's ``uv``. A plan serves any
+array of the same layout (device, shape, strides, type; for ``uv``, ``requires_grad``) and points
+the launch at it, so that a loop that makes them anew each call (a torch tensor's Warp view, an
+output from ``wp.empty``) runs its plan too: the call's own path cost ~150 us of Python around a
+1,024-UV lookup on the CPU, and a 1-UV call on an H200 took 153 us against 30 us into a kept
+``out=`` while CUDA plans served only the very arrays they were made with. Without ``out=``
+(``None``), the plan makes a new output as the call did (its shape, type and ``requires_grad``)
+and points the launch at it: a new array costs ~6 us, where the call's own path cost ~50 us of
+Python. A small new output (:data:`SPARE_BYTES` at most) is kept as a spare once returned, and a
+later call on the same stream writes it again (and zeroes its gradient) once nothing else refers
+to it or its gradient: no one can then read what it held, as with an array freed and allocated
+again, but the call costs no Warp arrays (~13-20 us of Python each on the CPU, as much as the rest
+of a 1-pixel call; on an H200 a new output took a 1-UV call from 30 to 72 us) nor their argument
+struct. (On another CUDA stream, the earlier write could still be pending.) A caller's view of it, a NumPy or torch array of it, or a gradient tape's
 record all refer to it. A plan keeps :data:`SPARES` of them, so that ``y = sample(...)`` in a loop
 finds the one before last free.
 Otherwise the call runs as usual within :func:`recording`; its second call with the same objects
@@ -101,40 +103,33 @@ class _Plan:
         if math.prod(lead) != rows:
             return None
         shape = (*lead, channels)
+        device = self.cmd.device
+        stream = device.stream.cuda_stream if device.is_cuda else None  # (the launch's: the device's current stream)
         for spare in self.spares:
-            if _unheld(spare) and spare[0].shape == shape:
-                out, struct, gradient = spare
+            if _unheld(spare) and spare[0].shape == shape and spare[3] == stream:
+                out, struct, gradient, _ = spare
                 if self.zero:
                     out.zero_()
                 if gradient is not None:
                     gradient.zero_()
                 break
         else:
-            out = (wp.zeros if self.zero else wp.empty)(shape, dtype=dtype, device=self.cmd.device, requires_grad=grad)
+            out = (wp.zeros if self.zero else wp.empty)(shape, dtype=dtype, device=device, requires_grad=grad)
             struct = array_struct(out, (rows, channels))
-            if self.cmd.device.is_cpu and out.capacity <= SPARE_BYTES:
-                self.spares = (*self.spares, (out, struct, out.grad))[-SPARES:]
+            if out.capacity <= SPARE_BYTES:
+                self.spares = (*self.spares, (out, struct, out.grad, stream))[-SPARES:]
         self.call.set(OUT_PARAM, struct)
         return out
 
 
-def _addressed(array: wp.array) -> bool:
-    """Whether a plan serves a call's own array (``out``, ``uv``) by its layout, pointing its launch
-    at it (on the CPU), or only the very array it was made with (elsewhere: a kept CUDA launch is
-    changed only through ``wp.Launch``'s own setters)."""
-    return array.device.is_cpu
-
-
 def _layout(array: wp.array | None, grad: bool):
-    """What a plan's key holds of a call's own array: its layout where the plan points the launch
-    at it (:func:`_addressed`), what the call checked of it, and with ``grad`` (an input's) its
-    ``requires_grad`` (a new output requires gradients where an input does); else ``"same"`` (the
-    array is among the objects, by identity)."""
+    """What a plan's key holds of a call's own array, whose address the plan points its launch at:
+    its layout, what the call checked of it (its device too: a CUDA launch must not read a host
+    address), and with ``grad`` (an input's) its ``requires_grad`` (a new output requires
+    gradients where an input does)."""
     if array is None:
         return None
-    if not _addressed(array):
-        return "same"
-    return (array.shape, array.strides, array.dtype, grad and array.requires_grad)
+    return (array.device.alias, array.shape, array.strides, array.dtype, grad and array.requires_grad)
 
 
 def _address(array: wp.array) -> tuple:
@@ -145,11 +140,8 @@ def _address(array: wp.array) -> tuple:
 
 def _full(key: tuple, objects: tuple, out, uv) -> tuple[tuple, tuple]:
     """``(objects by identity, the plan's full key)`` of a call: its key, the layouts of its own
-    arrays, and the identities of its objects (and of its own arrays where not addressed)."""
-    layouts = (_layout(out, False), _layout(uv, True))
-    if "same" in layouts:  # (not on the CPU)
-        objects = (*objects, *(a for a, layout in zip((out, uv), layouts) if layout == "same"))
-    return objects, (key, *layouts, *map(id, objects))
+    arrays, and the identities of its objects."""
+    return objects, (key, _layout(out, False), _layout(uv, True), *map(id, objects))
 
 
 def _references(spare: tuple, item: int) -> int:
@@ -163,7 +155,7 @@ _UNHELD = _references((object(),), 0)
 
 
 def _unheld(spare: tuple) -> bool:
-    """Whether nothing but its plan refers to a spare ``(output, struct, gradient)``: not to the
+    """Whether nothing but its plan refers to a spare ``(output, struct, gradient, stream)``: not to the
     output, nor to its gradient (``None`` where it has none), which the output still has."""
     if _references(spare, 0) != _UNHELD or spare[0].grad is not spare[2]:
         return False
@@ -227,10 +219,10 @@ def recording(key: tuple | None, objects: tuple, *, out: wp.array | None = None,
         return
     cmd, zero, like = capture[0]
     call = kept_call(cmd)
-    if like is None or (uv is not None and _addressed(uv) and call.field(PIXELS_PARAM, "uv").data != uv.ptr):
+    if like is None or (uv is not None and call.field(PIXELS_PARAM, "uv").data != uv.ptr):
         return  # an output the plan cannot point at (not one array of rows), or UVs the launch does not read in place
     seen.cmd, seen.zero, seen.like, seen.call = cmd, zero, like, call
-    seen.pointed = {name: None for name, a in (("out", out), ("uv", uv)) if a is not None and _addressed(a)}  # (pointed by the first run)
+    seen.pointed = {name: None for name, a in (("out", out), ("uv", uv)) if a is not None}  # (pointed by the first run)
 
 
 def _remember(plans: dict, full: tuple, objects: tuple, hold) -> None:
