@@ -12,17 +12,24 @@
 #   4. atomics: what the same-bits texel gradients cost against float atomics, per technique.
 #
 # Prepare it here, without a GPU (the device tool's machine reaches no package index):
-#   bash ../shared/tools/gpu/prepare.sh                                  # warp-lang in two halves: .gpu/a, .gpu/b
+#   bash ../shared/tools/gpu/prepare.sh 1.19.0                           # warp-lang in two halves: .gpu/a, .gpu/b
 #   .venv/bin/python .ci/compile_cuda.py --arch 90 --keep .gpu/kernels   # every module for sm_90, as Warp's cache
-# then three calls of the device tool, on one warm machine: carry .gpu/a and run `bash .gpu/a/stage.sh`;
-# carry .gpu/b and run `source .gpu/b/install.sh`; carry .gpu/kernels and run
-#   source .gpu/b/install.sh && OUT=$OUT bash benchmarks/device_checks.sh
-# (`install.sh` again is cheap). The kernels load from .gpu/kernels where Warp there builds for sm_90
-# with the same Warp release; anything else compiles there, one module at a time (minutes).
+#   tar --exclude='*.cu' -cJf .gpu/kernels.tar.xz -C .gpu/kernels .       # 1 MB (21 MB unpacked)
+# then two calls of the device tool, the second within the 30 s the machine stays warm (each call
+# takes at most 64 MiB: .gpu/a and .gpu/b are ~51 MB each, the checkout ~6 MB):
+#   carry .gpu/a and .gpu/kernels.tar.xz, run
+#     bash .gpu/a/stage.sh && mkdir -p /tmp/gpu-stage/kernels && tar -xJf .gpu/kernels.tar.xz -C /tmp/gpu-stage/kernels
+#   carry .gpu/b, run
+#     source .gpu/b/install.sh && WARP_CACHE_PATH=/tmp/gpu-stage/kernels bash benchmarks/device_checks.sh
+# The CUDA kernels load from that cache where Warp there builds for sm_90 with the same Warp
+# release. Before the steps, every module is loaded on every device in parallel processes, one
+# per core: the CPU's compile there (the CUDA tests compare with it), 34 s on an H200 machine's
+# 16 cores where the tests alone compiled them one at a time.
 #
-# Arguments name the steps to run (default: all four): the device tool runs a command for at most
-# 10 minutes, so `... device_checks.sh tests_cuda call_cost`, then `... bilinear atomics` (about
-# 4 and 3 minutes on this project's 2-core CPU; a GPU's share is its launches and its compiles).
+# Arguments name the steps to run (default: all four). On an H200 machine (2026-11-30) the whole
+# script took about 3 minutes (tests 54 s, call_cost 27 s, bilinear 15 s, atomics 38 s), well
+# inside the device tool's 10 minutes a command. $OUT brings back at most 8 files: the steps
+# write 8.
 #
 # DEVICE=cpu runs the same steps on the CPU (tests_cuda against the CPU itself, no atomics step):
 # a check of this script, not a measurement of a GPU.
@@ -32,7 +39,7 @@ OUT=${OUT:-device_checks}
 DEVICE=${DEVICE:-cuda:0}
 PY=${PYTHON:-python3}
 mkdir -p "$OUT"
-if [ -d .gpu/kernels ]; then
+if [ -z "${WARP_CACHE_PATH:-}" ] && [ -d .gpu/kernels ]; then
     export WARP_CACHE_PATH="$PWD/.gpu/kernels"
 fi
 if [ "$DEVICE" = cpu ]; then
@@ -63,7 +70,13 @@ step() {
     fi
 }
 
-{ nvidia-smi 2>&1 || echo "no nvidia-smi"; "$PY" -c "import warp, torch; print('warp', warp.config.version, 'torch', torch.__version__)" 2>&1; } > "$OUT/machine.txt"
+{ nvidia-smi 2>&1 || echo "no nvidia-smi"; "$PY" -c "import warp, torch; print('warp', warp.config.version, 'torch', torch.__version__)" 2>&1; lscpu 2>&1 | grep -E "^Model name|^CPU\(s\)"; } > "$OUT/machine.txt"
+
+# Every module loaded on every device, one process per core (module names: warptex.kernels).
+start=$SECONDS
+"$PY" -c "import warp as wp; wp.config.quiet = True; from warptex.kernels import all_kernels; print('\n'.join(sorted({k.module.name for k in all_kernels()})))" 2>/dev/null |
+    xargs -P "$(nproc)" -I{} "$PY" -c "import warp as wp; wp.config.quiet = True; from warptex.kernels import all_kernels; all_kernels(); wp.load_module('{}')" > /dev/null 2>&1
+echo "device_checks: every module loaded (exit $?) in $((SECONDS - start)) s" | tee -a "$OUT/machine.txt"
 step tests_cuda "$PY" -m pytest -q -rs -p no:cacheprovider tests/test_cuda.py
 step call_cost "$PY" benchmarks/bench_samplers.py --device "$DEVICE" --call-cost --peers torch --json "$OUT/call_cost.json"
 step bilinear "$PY" benchmarks/bench_samplers.py --device "$DEVICE" --techniques bilinear --peers torch --no-scaling --runs 3 --json "$OUT/bilinear.json"
