@@ -108,6 +108,9 @@ class Kernels:
         kept_lanes: ``lanes`` for a forward that keeps what ``texel_grad_lanes`` reads, where
             keeping it needs code a forward alone does not (in the gradient's module, so that only
             jobs that take gradients compile it); ``None``: ``lanes`` keeps it.
+        fills: ``forward`` (and ``adjoint``) write every entry of their outputs, as lanes do, so a
+            launch need not zero them first (on CUDA, a memset launch per call); ``False``: a pixel
+            may leave its entries as they were (a masked one, say), and they are zeroed first.
     """
 
     forward: Any
@@ -121,6 +124,7 @@ class Kernels:
     grad_lanes_take: Callable[[Any], bool] | None = None
     lane_saved: Callable[[Any], int] | None = None
     kept_lanes: Any = None
+    fills: bool = False
 
     def launched(self, device, grad: bool = False):
         """The kernel a forward launch (``grad``: a hand-written gradient) runs on ``device``, as

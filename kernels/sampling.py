@@ -183,12 +183,12 @@ def sample_kernels(*, level: bool) -> Kernels:
                                 body=sample_level_pixel, scatter=scatter_sample_level, grads=SampleGrads, adjoint_body=sample_level_pixel)  # fmt: skip
         lanes = lane_kernel(sample_level_lane, SampleArgs, SamplePixels, wp.array2d(dtype=float), module=MODULE, name="sample_level_lanes")
         grad_lanes = lane_kernel(scatter_sample_level_lane, SampleArgs, SamplePixels, wp.array2d(dtype=float), grads_t=SampleGrads, module=MODULE + ".grad", name="sample_level_texel_grad_lanes")
-        return Kernels(*kernels, grads=GRADS, lanes=lanes, texel_grad_lanes=grad_lanes)
+        return Kernels(*kernels, grads=GRADS, lanes=lanes, texel_grad_lanes=grad_lanes, fills=True)
     kernels = pixel_kernels("sample", module=MODULE, args=SampleArgs, pixels=SamplePixels, out=wp.array2d(dtype=float),
                             body=sample_pixel, scatter=scatter_sample, grads=SampleGrads, adjoint_body=sample_pixel_outlined)  # fmt: skip
     lanes = lane_kernel(sample_lane, SampleArgs, SamplePixels, wp.array2d(dtype=float), module=LOD_MODULE, name="sample_lanes")
     grad_lanes = lane_kernel(scatter_sample_lane, SampleArgs, SamplePixels, wp.array2d(dtype=float), grads_t=SampleGrads, module=LOD_MODULE + ".grad", name="sample_texel_grad_lanes")
-    return Kernels(*kernels, grads=GRADS, lanes=lanes, texel_grad_lanes=grad_lanes)
+    return Kernels(*kernels, grads=GRADS, lanes=lanes, texel_grad_lanes=grad_lanes, fills=True)
 
 
 @wp.kernel(module=MIPS_MODULE)

@@ -107,3 +107,28 @@ def test_a_wrong_out_is_refused_before_any_work(scene, case):
         with pytest.raises(error, match=message):
             call(out=out)
         np.testing.assert_array_equal(out.numpy() if isinstance(out, wp.array) else out, before, err_msg=name)
+
+
+@pytest.mark.parametrize("channels", [1, 3, 4])
+@pytest.mark.parametrize("lookup", ["one LOD", "a LOD per UV", "derivatives", "anisotropic"])
+def test_samples_one_pixel_kernel_writes_every_entry(channels, lookup):
+    """``sample``'s one-pixel kernel (CUDA's) writes every entry of its output, so a launch does not
+    zero it first (``Kernels.fills``): an ``out=`` full of NaN, and one holding another call's
+    values, come back as the lanes' output, bit for bit; so does the generated adjoint's forward."""
+    from warptex._op import force_generated_adjoint, one_pixel_kernels
+
+    rng = np.random.default_rng(11)
+    texture = wt.Texture(rng.random((32, 32, channels), dtype=np.float32), requires_grad=True)
+    uv = wp.array(rng.random((300, 2), dtype=np.float32) * 3 - 1, dtype=wp.vec2)
+    kw = {"one LOD": {"lod": 1.5}, "a LOD per UV": {"lod": rng.uniform(-1, 5, 300).astype(np.float32)},
+          "derivatives": {"uv_dx": rng.uniform(-0.05, 0.05, (300, 2)).astype(np.float32), "uv_dy": rng.uniform(-0.05, 0.05, (300, 2)).astype(np.float32)},
+          "anisotropic": {"uv_dx": np.full((300, 2), [0.08, 0.0], np.float32), "uv_dy": np.full((300, 2), [0.0, 0.01], np.float32),
+                          "sampler": wt.Sampler(filter="anisotropic")}}[lookup]  # fmt: skip
+    want = wt.sample(texture, uv, **kw).numpy()
+    with one_pixel_kernels(True):
+        for fill in (np.nan, 7.0):
+            out = wp.full((300, channels), fill, dtype=wp.float32)
+            np.testing.assert_array_equal(wt.sample(texture, uv, out=out, **kw).numpy(), want)
+        with wp.Tape(), force_generated_adjoint():
+            out = wp.full((300, channels), np.nan, dtype=wp.float32, requires_grad=True)
+            np.testing.assert_array_equal(wt.sample(texture, uv, out=out, **kw).numpy(), want)

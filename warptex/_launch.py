@@ -18,7 +18,8 @@ A launch's outputs are made with :func:`output` (allocated, not touched) and zer
 output and its gradient measured up to 8 ms on the calling thread where the memory came fresh from
 the system (page faults), a third of a one-thread bilinear lookup of as many pixels. A lane kernel
 writes every entry of its outputs, so only their gradients are zeroed: on the benchmark sphere,
-a bilinear lookup is then memory-bound, and the zeroing was another pass over its 13 MB.
+a bilinear lookup is then memory-bound, and the zeroing was another pass over its 13 MB. So does
+``sample``'s one-pixel kernel, CUDA's (``fills``): there a zeroing is a memset launch of its own.
 
 CUDA launches are never split: one launch fills the device.
 """
@@ -79,7 +80,7 @@ def _check_rows(count: int, *values) -> None:
             raise RuntimeError(f"warptex internal error: a per-pixel array has {a.shape[0]} rows for {count} pixels")
 
 
-def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None = None, backward=None, covered: wp.array | None = None, footprints: int = 1, lanes=None) -> None:
+def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None = None, backward=None, covered: wp.array | None = None, footprints: int = 1, lanes=None, fills: bool = False) -> None:
     """Launch a per-pixel ``kernel(args, pixels, first, out)`` over ``count`` pixels, split over CPU threads.
 
     Args:
@@ -105,6 +106,8 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
             to run instead, over a lane of pixels per launch index, where
             ``warptex.kernels.family.lanes_for`` decided the launch runs lanes; never with
             :data:`GENERATED` (Warp differentiates the one-pixel kernel).
+        fills: ``kernel`` writes every entry of its outputs (``warptex.kernels.family.Kernels.fills``),
+            as a lane kernel does: only their gradients are zeroed.
     """
     if count <= 0:
         return
@@ -123,7 +126,7 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
         workers = min(workers, cpu_count())  # threads past the cores would only take turns
     chunks = grad_bounds(count, covered, _shared_bytes(args), footprints) if generated and device.is_cpu and not exact else [0, count]  # CUDA: one launch
     kernel, per_index = _with_lanes(kernel, lanes)
-    fills = per_index > 1  # a lane kernel writes every entry of its outputs (family.lane_kernel)
+    fills = fills or per_index > 1  # a lane kernel writes every entry of its outputs (family.lane_kernel)
     if workers == 1:
         _zero_rows(out, 0, count, fills)
         if generated and len(chunks) == 2 and not exact:  # Warp records the launch's own adjoint on the tape
@@ -308,11 +311,13 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
 def _scatter_exact(kernel, count: int, *, args, pixels, grads_t, grads: list[Target], adj, sums: dict, device) -> None:
     """:func:`scatter`'s deterministic CUDA backward: two launches of ``kernel`` over every pixel,
     the first bounding each texel's contributions (texel targets only: nothing else is added
-    into), the second adding them in fixed point, then the sums added into the texel gradients."""
+    into), the second adding them in fixed point, then the sums added into the texel gradients.
+    Each launch is a kept one (``replay``): ``wp.launch`` resolves the module and the arguments'
+    types anew each time, which a small call on a GPU pays on every launch."""
     bound = _grads_struct(grads_t, [t if t.grad is not None and id(t.grad) in sums else Target(None) for t in grads], {}, device, sums, first_pass=True)
-    wp.launch(kernel, dim=count, inputs=[args, pixels, 0, bound, adj], device=device, record_tape=False)
+    replay(kernel, count, (args, pixels, 0, bound, adj), device)
     set_exponents(sums)
-    wp.launch(kernel, dim=count, inputs=[args, pixels, 0, _grads_struct(grads_t, grads, {}, device, sums), adj], device=device, record_tape=False)
+    replay(kernel, count, (args, pixels, 0, _grads_struct(grads_t, grads, {}, device, sums), adj), device)
     add_sums(sums)
 
 

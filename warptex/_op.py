@@ -113,7 +113,7 @@ def run(kernels: Kernels, count: int, *, args, pixels, out: tuple, device, linea
         result = output(*out, device=device, requires_grad=bool(wanted))
     cut = {"covered": covered, "footprints": footprints}  # how launches are cut into chunks
     if active_tape() is None or not wanted:
-        launch(kernels.forward, count, args=args, pixels=pixels, out=result, device=device, lanes=lanes_for(kernels, device, args), **cut)
+        launch(kernels.forward, count, args=args, pixels=pixels, out=result, device=device, lanes=lanes_for(kernels, device, args), fills=kernels.fills, **cut)
     else:
         path = _backward_path(kernels, inputs, wanted, linear)
         if path == "adjoint" and any(getattr(a, "warptex_carrier", False) for a in wanted):
@@ -150,10 +150,10 @@ def _run_path(kernels: Kernels, path: str, count: int, inputs: dict, result, dev
             # held by the recorded pass alone; once it is gone, a kept block for the next (warptex._memory)
             inputs["pixels"].saved = empty((count, kernels.lane_saved(inputs["args"])), float, device)
             lanes = kernels.kept_lanes or lanes
-        launch(kernels.forward, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, lanes=lanes, **cut,
+        launch(kernels.forward, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, lanes=lanes, fills=kernels.fills, **cut,
                backward=_texel_gradient(kernels, count, inputs, result, device, cut, touched, grad_lanes))  # fmt: skip
     elif kernels.adjoint is not None:
-        launch(kernels.adjoint, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, **cut, backward=GENERATED)
+        launch(kernels.adjoint, count, args=inputs["args"], pixels=inputs["pixels"], out=result, device=device, fills=kernels.fills, **cut, backward=GENERATED)
     else:
         raise RuntimeError("warptex internal error: a gradient was asked for that this technique has no kernel for")
 
