@@ -38,7 +38,7 @@ import numpy as np
 import warp as wp
 
 from warptex._threads import cpu_count, side_by_side
-from warptex._warp import map_arrays, struct_fields, struct_like
+from warptex._warp import map_arrays, replay, struct_fields, struct_like
 from warptex.kernels.scatter import add_exact, exact_exponents
 from warptex.kernels.texels import FORMAT_FLOAT32, FORMAT_FLOAT32_PACKED, TILE_SHIFT, TextureView
 
@@ -261,13 +261,13 @@ def set_exponents(sums: dict[int, Exact]) -> None:
     """Between the two passes: each texel's exponent, from its contributions' count and largest
     magnitude (the first pass)."""
     for s in sums.values():
-        wp.launch(exact_exponents, dim=s.grad.shape[0], inputs=[s.exponents], device=s.grad.device, record_tape=False)
+        replay(exact_exponents, s.grad.shape[0], (s.exponents,), s.grad.device)
 
 
 def add_sums(sums: dict[int, Exact]) -> None:
     """After the second pass: each fixed-point sum added into its gradient."""
     for s in sums.values():
-        wp.launch(add_exact, dim=s.grad.shape[0], inputs=[s.grad, s.exponents, s.fixed], device=s.grad.device, record_tape=False)
+        replay(add_exact, s.grad.shape[0], (s.grad, s.exponents, s.fixed), s.grad.device)
 
 
 class ExactViews(NamedTuple):
