@@ -17,12 +17,12 @@ output from ``wp.empty``) runs its plan too: the call's own path cost ~150 us of
 (``None``), the plan makes a new output as the call did (its shape, type and ``requires_grad``)
 and points the launch at it: a new array costs ~6 us, where the call's own path cost ~50 us of
 Python. A small new output (:data:`SPARE_BYTES` at most) is kept as a spare once returned, and a
-later call on the same stream writes it again (and zeroes its gradient) once nothing else refers
-to it or its gradient: no one can then read what it held, as with an array freed and allocated
-again, but the call costs no Warp arrays (~13-20 us of Python each on the CPU, as much as the rest
-of a 1-pixel call; on an H200 a new output took a 1-UV call from 30 to 72 us) nor their argument
-struct. (On another CUDA stream, the earlier write could still be pending.) A caller's view of it, a NumPy or torch array of it, or a gradient tape's
-record all refer to it. A plan keeps :data:`SPARES` of them, so that ``y = sample(...)`` in a loop
+later call on the same stream (on another CUDA stream, the earlier write could still be pending)
+writes it again (and zeroes its gradient) once nothing else refers to it or its gradient: no one
+can then read what it held, as with an array freed and allocated again, but the call costs no
+Warp arrays (~13-20 us of Python each on the CPU, as much as the rest of a 1-pixel call; on an
+H200 a new output took a 1-UV call from 30 to 72 us) nor their argument struct. A caller's view
+of it, a NumPy or torch array of it, or a gradient tape's record all refer to it. A plan keeps :data:`SPARES` of them, so that ``y = sample(...)`` in a loop
 finds the one before last free.
 Otherwise the call runs as usual within :func:`recording`; its second call with the same objects
 keeps the launch it made (``warptex._launch.launch`` reports it through :func:`launched`), so a
@@ -138,10 +138,10 @@ def _address(array: wp.array) -> tuple:
     return array.ptr, 0 if grad is None else grad.ptr
 
 
-def _full(key: tuple, objects: tuple, out, uv) -> tuple[tuple, tuple]:
-    """``(objects by identity, the plan's full key)`` of a call: its key, the layouts of its own
-    arrays, and the identities of its objects."""
-    return objects, (key, _layout(out, False), _layout(uv, True), *map(id, objects))
+def _full(key: tuple, objects: tuple, out, uv) -> tuple:
+    """The plan's full key of a call: its key, the layouts of its own arrays, and the identities of
+    its objects."""
+    return (key, _layout(out, False), _layout(uv, True), *map(id, objects))
 
 
 def _references(spare: tuple, item: int) -> int:
@@ -155,8 +155,8 @@ _UNHELD = _references((object(),), 0)
 
 
 def _unheld(spare: tuple) -> bool:
-    """Whether nothing but its plan refers to a spare ``(output, struct, gradient, stream)``: not to the
-    output, nor to its gradient (``None`` where it has none), which the output still has."""
+    """Whether nothing but its plan refers to a spare ``(output, struct, gradient, stream)``: not to
+    the output, nor to its gradient (``None`` where it has none), which the output still has."""
     if _references(spare, 0) != _UNHELD or spare[0].grad is not spare[2]:
         return False
     return spare[2] is None or _references(spare, 2) == _UNHELD + 1  # (+ the output's own)
@@ -176,9 +176,8 @@ def recall(key: tuple, objects: tuple, *, out: wp.array | None = None, uv: wp.ar
     plans = getattr(_local, "plans", None)
     if not plans:
         return None
-    fixed, full = _full(key, objects, out, uv)
-    plan = plans.get(full)
-    if plan is None or plan.cmd is None or not plan.holds(fixed):
+    plan = plans.get(_full(key, objects, out, uv))
+    if plan is None or plan.cmd is None or not plan.holds(objects):
         return None
     return plan
 
@@ -204,10 +203,10 @@ def recording(key: tuple | None, objects: tuple, *, out: wp.array | None = None,
         yield
         return
     plans = _local.__dict__.setdefault("plans", {})
-    fixed, full = _full(key, objects, out, uv)
+    full = _full(key, objects, out, uv)
     seen = plans.get(full)
-    if seen is None or not seen.holds(fixed):
-        _remember(plans, full, fixed, hold)  # first sighting: nothing recorded
+    if seen is None or not seen.holds(objects):
+        _remember(plans, full, objects, hold)  # first sighting: nothing recorded
         yield
         return
     _local.capture = capture = []
