@@ -42,7 +42,7 @@ PAGES = [README, *sorted((REPO / "docs").glob("*.md"))]
 SHARED = REPO.parent / "shared"
 
 # Fenced blocks per info string: a new block must be added here, and so gets a test.
-EXPECTED_BLOCKS = {"python": 16, "sh": 10, "": 1, "text": 1}
+EXPECTED_BLOCKS = {"python": 17, "sh": 10, "": 1, "text": 1}
 EXPECTED_COMMANDS = {"warptex": 17, "python": 2, "skipped": 15, "torchrun": 1}
 
 # Python blocks that continue earlier ones (by "<section> #<n>"): they run after those, in one namespace.
@@ -57,6 +57,7 @@ PYTHON_QUICK = [
     ("Baking into a UV texture, exported as glTF #3", "1024", "512"),
     ("Pictures larger than memory: tiles #1", "1024, 1024", "96, 128"),
     ("Pictures larger than memory: tiles #1", "64 << 20", "1 << 20"),  # bands of 8 rows
+    ("Using it #3", '"cuda:0"', '"cpu"'),  # a CUDA graph's capture, on the CPU here (tests/test_cuda.py runs CUDA's)
 ]
 
 QUICK_RESOLUTION = "48x64"  # of `warptex render` and `warptex demo`, and of the out/ the Python blocks read
@@ -230,6 +231,15 @@ def _check_using_it(ns, d):
     assert ns["uv"].grad.numpy().shape == (1000, 2) and np.isfinite(ns["uv"].grad.numpy()).all()
 
 
+def _check_graph_capture(ns, d):
+    replayed = ns["out"].numpy().copy()  # the replay's lookup of the new UVs, not the captured call's
+    assert np.abs(replayed - wt.sample(ns["tex"], ns["uv"].numpy()).numpy()).max() == 0.0
+    ns["uv"].assign(np.zeros((4096, 2), np.float32))
+    wp.capture_launch(ns["capture"].graph)
+    np.testing.assert_array_equal(ns["out"].numpy(), wt.sample(ns["tex"], np.zeros((4096, 2), np.float32)).numpy())
+    assert not np.array_equal(ns["out"].numpy(), replayed)
+
+
 def _check_gbuffers(ns, d):
     g = wt.load_gbuffer(d / "out" / "g.exr")  # under out/ (ignored by git), not the repository root
     assert g.resolution == (512, 512) and g.mask.numpy().sum() > 1000  # the bunny fills the view
@@ -322,6 +332,7 @@ def _check_fit(ns, d):
 CHECKS = {
     "A first look #1": _check_first_look,
     "Using it #2": _check_using_it,
+    "Using it #3": _check_graph_capture,
     "Texel formats #1": _check_formats,
     "PyTorch #1": _check_torch,
     "G-buffers #1": _check_gbuffers,
@@ -347,6 +358,8 @@ def test_python_block(block, workdir):
         pytest.skip(f"{SHARED} not found: this block (or one it continues) reads the shared data")
     if any("import torch" in b.text for b in runs):
         pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
+    if any("wp.ScopedCapture" in b.text for b in runs) and tuple(map(int, wp.config.version.split(".")[:2])) < (1, 19):
+        pytest.skip("the block captures a graph, on the CPU here: CPU graph capture came with Warp 1.19")
     namespace = {"__name__": "__readme__"}
     for before in CONTINUES.get(block.name, []):
         _run_python(by_name[before], namespace)
