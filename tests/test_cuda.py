@@ -260,6 +260,7 @@ DETERMINISM_CASES = {
         wt.sample(tex, wp.array(uv.numpy(), dtype=wp.vec2, requires_grad=True, device=uv.device), lod=1.3, sampler=wt.Sampler(filter="trilinear")), tex
     ),
     "triplanar, tiling gradient": lambda g, tex, layers, maps, uv: (wt.triplanar(g, tex, tiling=wp.array([0.4], dtype=float, requires_grad=True, device=uv.device)), tex),
+    "six-planar (one texture on every face)": lambda g, tex, layers, maps, uv: (wt.triplanar(g, None, textures_per_face=[tex] * 6, tiling=0.4), tex),
     "hex, histogram-preserving": lambda g, tex, layers, maps, uv: _histogram(tex, uv),
     "splat_atlas": lambda g, tex, layers, maps, uv: _atlas(g, layers, maps),
 }
