@@ -69,8 +69,9 @@ class Staged:
     technique's ``args``, and from its ``pixels`` and the intermediates. ``then_only`` names the
     inputs (paths) only ``then`` differentiates: when they alone want gradients, the intermediates
     need none and ``first``'s backward is not recorded (where ``replaces`` is ``"texel_grad"``, they
-    count as served by the hand-written pair: ``then``'s gradient must add into them). ``no_grad`` names the intermediates no
-    gradient flows back through (``first``'s backward does not read theirs): made without one.
+    count as served by the hand-written pair: ``then``'s gradient must add into them). ``no_grad``
+    names the intermediates no gradient flows back through (``first``'s backward does not read
+    theirs): made without one.
     """
 
     replaces: str

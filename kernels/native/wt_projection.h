@@ -210,6 +210,38 @@ WT_INLINE void wt_biplanar_pair_slope(float major, float median, float exponent,
     }
 }
 
+// projection.biplanar_axes of one pixel's normal n: the minor axis' index (-1 for a zero or
+// non-finite normal), the major and median components of the unit |n| into major and median.
+// twin: projection.biplanar_axes
+WT_INLINE int wt_biplanar_axes(const wt_v3& n, float& major, float& median) {
+    wt_v3 u = n;
+    float length = wp::length(n);
+    if (length > wt_float_max) {  // |n|² overflowed: normals.unsquared
+        u = wp::div(n, wp::max(wt_v3(wp::abs(n.c[0]), wp::abs(n.c[1]), wp::abs(n.c[2]))));
+        length = wp::length(u);
+    }
+    major = 0.0f, median = 0.0f;
+    if (!(wp::isfinite(n) && length > 0.0f)) return -1;
+    const wt_v3 a = wp::div(wt_v3(wp::abs(u.c[0]), wp::abs(u.c[1]), wp::abs(u.c[2])), length);
+    if (a.c[2] <= a.c[0] && a.c[2] <= a.c[1]) {
+        major = a.c[0], median = a.c[1];
+        return 2;
+    }
+    if (a.c[1] <= a.c[0]) {
+        major = a.c[0], median = a.c[2];
+        return 1;
+    }
+    major = a.c[1], median = a.c[2];
+    return 0;
+}
+
+// twin: projection.biplanar_spread
+WT_INLINE wt_v3 wt_biplanar_spread(const wt_v2& pair, int minor) {
+    if (minor == 2) return wt_v3(pair.c[0], pair.c[1], 0.0f);
+    if (minor == 1) return wt_v3(pair.c[0], 0.0f, pair.c[1]);
+    return wt_v3(0.0f, pair.c[0], pair.c[1]);
+}
+
 // slopes.projection_weights_slope of one pixel's normal n (the projected space's), with Warp's
 // own functions in the scalar blocks' order (only the sharpness' gradient needs it: pixel by pixel).
 // twin: slopes.projection_weights_slope
@@ -217,31 +249,12 @@ template <class Proj> WT_INLINE wt_v3 wt_weights_slope(const Proj& proj, const w
     const float sharpness = wt_float(proj.sharpness, 0);
     wt_v3 d(0.0f);
     if (proj.weights == WT_WEIGHTS_BIPLANAR) {  // biplanar_weights_slope
-        wt_v3 u = n;
-        float length = wp::length(n);
-        if (length > wt_float_max) {  // normals.unsquared
-            u = wp::div(n, wp::max(wt_v3(wp::abs(n.c[0]), wp::abs(n.c[1]), wp::abs(n.c[2]))));
-            length = wp::length(u);
-        }
-        if (wp::isfinite(n) && length > 0.0f) {
-            const wt_v3 a = wp::div(wt_v3(wp::abs(u.c[0]), wp::abs(u.c[1]), wp::abs(u.c[2])), length);
-            const float e = wp::div(sharpness, 8.0f);
+        float major, median;
+        const int minor = wt_biplanar_axes(n, major, median);
+        if (minor >= 0) {
             wt_v2 pair, slope;
-            wt_v3 w(0.0f);
-            if (a.c[2] <= a.c[0] && a.c[2] <= a.c[1]) {
-                wt_biplanar_pair_slope(a.c[0], a.c[1], e, pair, slope);
-                w = wt_v3(pair.c[0], pair.c[1], 0.0f);
-                d = wt_v3(slope.c[0], slope.c[1], 0.0f);
-            } else if (a.c[1] <= a.c[0]) {
-                wt_biplanar_pair_slope(a.c[0], a.c[2], e, pair, slope);
-                w = wt_v3(pair.c[0], 0.0f, pair.c[1]);
-                d = wt_v3(slope.c[0], 0.0f, slope.c[1]);
-            } else {
-                wt_biplanar_pair_slope(a.c[1], a.c[2], e, pair, slope);
-                w = wt_v3(0.0f, pair.c[0], pair.c[1]);
-                d = wt_v3(0.0f, slope.c[0], slope.c[1]);
-            }
-            d = wp::div(wt_normalised_slope(w, d), 8.0f);
+            wt_biplanar_pair_slope(major, median, wp::div(sharpness, 8.0f), pair, slope);
+            d = wp::div(wt_normalised_slope(wt_biplanar_spread(pair, minor), wt_biplanar_spread(slope, minor)), 8.0f);
         }
     } else {  // triplanar_weights_slope
         const wt_v3 a(wp::abs(n.c[0]), wp::abs(n.c[1]), wp::abs(n.c[2]));
