@@ -440,6 +440,58 @@ WT_INLINE wt_sample_reads wt_sample_reads_of(const Tex& tex, const Smp& smp, con
     return out;
 }
 
+// Asks the memory for the texels that the lane after this one (pixels next .., when there are any)
+// will read at `level`: each pixel's bilinear footprint's top row and the row below it (a nearest
+// read is in one of them). A hint, with no effect on any value: at random UVs a lane's loads wait on
+// memory, and an out-of-order core cannot reach the next lane's loads past this lane's work, so
+// they overlap this lane's instead. (A plain C loop over 2^20 random UVs of a 16 MB RGBA8 texture
+// took 0.70x its time with this, on 2 threads here.)
+template <class Tex, class UV, class Layers>
+WT_INLINE void wt_prefetch_levels_lane(const int address, const Tex& tex, const UV& uv, const Layers& layers,
+                                       int constant_layer, int level, int next) {
+    const int n = uv.shape[0];
+    if (next >= n) return;
+    const int count = n - next < WT_L ? n - next : WT_L;
+    wt_vf U[2];
+    wt_row_vectors(uv, next, count, 2, U);
+    const int w = wt_int(tex.level_width, level), h = wt_int(tex.level_height, level);
+    const wt_vi finite =
+        __builtin_elementwise_abs(U[0]) <= wt_float_max & __builtin_elementwise_abs(U[1]) <= wt_float_max;
+    wt_vf ru = wt_sel(finite, U[0], (wt_vf)0.0f), rv = wt_sel(finite, U[1], (wt_vf)0.0f);
+    if (address == WT_WRAP) {  // wt_reduce's
+        ru -= __builtin_elementwise_floor(ru), rv -= __builtin_elementwise_floor(rv);
+    } else if (address == WT_MIRROR) {
+        ru -= 2.0f * __builtin_elementwise_floor(0.5f * ru), rv -= 2.0f * __builtin_elementwise_floor(0.5f * rv);
+    } else {
+        ru = wt_vmin(wt_vmax(ru, (wt_vf)-1.0f), (wt_vf)2.0f), rv = wt_vmin(wt_vmax(rv, (wt_vf)-1.0f), (wt_vf)2.0f);
+    }
+    // The texel's column and rows, folded into the level as the address modes fold them, to a texel
+    // beside it at worst (a wrap at the level's edge): a hint need not be exact.
+    wt_vi i = __builtin_convertvector(__builtin_elementwise_floor(ru * (float)w - 0.5f), wt_vi);
+    wt_vi j = __builtin_convertvector(__builtin_elementwise_floor((1.0f - rv) * (float)h - 0.5f), wt_vi);
+    if (address == WT_MIRROR) i = i >= w ? 2 * w - 1 - i : i, j = j >= h ? 2 * h - 1 - j : j;
+    i = __builtin_elementwise_min(__builtin_elementwise_max(i, (wt_vi)0), (wt_vi)(w - 1));
+    const wt_vi j0 = __builtin_elementwise_min(__builtin_elementwise_max(j, (wt_vi)0), (wt_vi)(h - 1));
+    const wt_vi j1 = __builtin_elementwise_min(j0 + 1, (wt_vi)(h - 1));
+    wt_vi first = wt_int(tex.level_offset, level) + constant_layer * h * w + i;
+    if (layers.shape[0] > 0)
+        for (int l = 0; l < WT_L; ++l)
+            first[l] = wt_int(tex.level_offset, level) +
+                       wp::clamp(wt_int(layers, next + (l < count ? l : 0)), 0, tex.num_layers - 1) * h * w + i[l];
+    const wt_vi top = first + j0 * w, bottom = first + j1 * w;
+    const char* data = tex.texel_format == WT_FLOAT32 ? (const char*)tex.texels.data : (const char*)tex.packed;
+    const long long stride = tex.texel_format == WT_FLOAT32   ? tex.texels.strides[0]
+                             : tex.texel_format == WT_FLOAT16 ? 8
+                                                              : 4;
+    int rows[2][WT_L];  // the tail's lanes repeat pixel next's
+    __builtin_memcpy(rows[0], &top, sizeof(top));
+    __builtin_memcpy(rows[1], &bottom, sizeof(bottom));
+    for (int l = 0; l < WT_L; ++l) {
+        __builtin_prefetch(data + (long long)rows[0][l] * stride);
+        __builtin_prefetch(data + (long long)rows[1][l] * stride);
+    }
+}
+
 // lanes.sample.sample_levels_lane: out[i] = filters.sample_levels at uv[i] (NaN where it is not
 // finite) for the lane's pixels i = base .. (the lane's tail repeats pixel base, not stored).
 // twin: filters.sample_levels
@@ -465,6 +517,27 @@ WT_INLINE void wt_sample_levels_lane(const Tex& tex, const Smp& smp, const UV& u
         for (int l = 0; l < WT_L; ++l)
             layer[l] = wp::clamp(wt_int(layers, base + (l < count ? l : 0)), 0, tex.num_layers - 1);
     }
+    // The next lane's texels, first, where this lane's pixels are spread over more of the level's
+    // rows than it has pixels (random UVs, a minified level): a coherent lane's texels are in the
+    // cache or on the hardware prefetcher's stream, and hints for them took 10-25% more time for a
+    // cached bilinear lookup.
+    wt_vf V;
+    __builtin_memcpy(&V, v, sizeof(V));
+    const float rows = (__builtin_reduce_max(V) - __builtin_reduce_min(V)) * (float)wt_int(tex.level_height, level);
+    if (rows > (float)WT_L) switch (smp.address) {
+        case WT_WRAP:
+            wt_prefetch_levels_lane(WT_WRAP, tex, uv, layers, constant_layer, level, base + WT_L);
+            break;
+        case WT_CLAMP:
+            wt_prefetch_levels_lane(WT_CLAMP, tex, uv, layers, constant_layer, level, base + WT_L);
+            break;
+        case WT_MIRROR:
+            wt_prefetch_levels_lane(WT_MIRROR, tex, uv, layers, constant_layer, level, base + WT_L);
+            break;
+        default:
+            wt_prefetch_levels_lane(WT_BORDER, tex, uv, layers, constant_layer, level, base + WT_L);
+            break;
+        }
     wt_vf channels[4];
     wt_f4 result[WT_L];
     wt_sample_levels_any(tex, smp, u, v, levels, fractions, layer, channels);
