@@ -440,12 +440,13 @@ WT_INLINE wt_sample_reads wt_sample_reads_of(const Tex& tex, const Smp& smp, con
     return out;
 }
 
-// Asks the memory for the texels that the lane after this one (pixels next .., when there are any)
-// will read at `level`: each pixel's bilinear footprint's top row and the row below it (a nearest
-// read is in one of them). A hint, with no effect on any value: at random UVs a lane's loads wait on
-// memory, and an out-of-order core cannot reach the next lane's loads past this lane's work, so
-// they overlap this lane's instead. (A plain C loop over 2^20 random UVs of a 16 MB RGBA8 texture
-// took 0.70x its time with this, on 2 threads here.)
+// Asks the memory for the texels of a compact format (float16, unorm8, srgb8) that the lane after
+// this one (pixels next .., when there are any) will read at `level`: each pixel's bilinear
+// footprint's top row and the row below it (a nearest read is in one of them). A hint, with no
+// effect on any value: at random UVs a lane's loads wait on memory, and an out-of-order core cannot
+// reach the next lane's loads past this lane's work, so they overlap this lane's instead. (A plain C
+// loop over 2^20 random UVs of a 16 MB RGBA8 texture took 0.70x its time with this, on 2 threads
+// of a 2-core AMD EPYC host.)
 template <class Tex, class UV, class Layers>
 WT_INLINE void wt_prefetch_levels_lane(const int address, const Tex& tex, const UV& uv, const Layers& layers,
                                        int constant_layer, int level, int next) {
@@ -479,10 +480,8 @@ WT_INLINE void wt_prefetch_levels_lane(const int address, const Tex& tex, const 
             first[l] = wt_int(tex.level_offset, level) +
                        wp::clamp(wt_int(layers, next + (l < count ? l : 0)), 0, tex.num_layers - 1) * h * w + i[l];
     const wt_vi top = first + j0 * w, bottom = first + j1 * w;
-    const char* data = tex.texel_format == WT_FLOAT32 ? (const char*)tex.texels.data : (const char*)tex.packed;
-    const long long stride = tex.texel_format == WT_FLOAT32   ? tex.texels.strides[0]
-                             : tex.texel_format == WT_FLOAT16 ? 8
-                                                              : 4;
+    const char* data = (const char*)tex.packed;  // a compact format's texels
+    const long long stride = tex.texel_format == WT_FLOAT16 ? 8 : 4;
     int rows[2][WT_L];  // the tail's lanes repeat pixel next's
     __builtin_memcpy(rows[0], &top, sizeof(top));
     __builtin_memcpy(rows[1], &bottom, sizeof(bottom));
@@ -538,13 +537,15 @@ WT_INLINE void wt_sample_levels_lane(const Tex& tex, const Smp& smp, const UV& u
         for (int l = 0; l < WT_L; ++l)
             layer[l] = wp::clamp(wt_int(layers, base + (l < count ? l : 0)), 0, tex.num_layers - 1);
     }
-    // The next lane's texels, first, where this lane's first and last pixels are further apart
-    // than it has pixels, in the level's rows (random UVs, a minified level): a coherent lane's
-    // texels are in the cache or on the hardware prefetcher's stream, and hints for them took
-    // 10-25% more time for a cached bilinear lookup. (The spread of all 16 lanes, or the call
-    // inlined, cost a coherent lookup 5 instructions a sample.)
+    // The next lane's texels, first, in a compact format, where this lane's first and last pixels
+    // are further apart than it has pixels, in the level's rows (random UVs, a minified level): a
+    // coherent lane's texels are in the cache or on the hardware prefetcher's stream, and hints for
+    // them took 10-25% more time for a cached bilinear lookup. (The spread of all 16 lanes, or the
+    // call inlined, cost a coherent lookup 5 instructions a sample.) float32's 16-byte texels
+    // gained nothing from them on one host and lost 26% on another (docs/performance.md).
     const float rows = __builtin_fabsf(v[WT_L - 1] - v[0]) * (float)wt_int(tex.level_height, level);
-    if (rows > (float)WT_L) wt_prefetch_levels_any(smp.address, tex, uv, layers, constant_layer, level, base + WT_L);
+    if (tex.texel_format != WT_FLOAT32 && rows > (float)WT_L)
+        wt_prefetch_levels_any(smp.address, tex, uv, layers, constant_layer, level, base + WT_L);
     wt_vf channels[4];
     wt_f4 result[WT_L];
     wt_sample_levels_any(tex, smp, u, v, levels, fractions, layer, channels);
