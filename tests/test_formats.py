@@ -126,13 +126,14 @@ def test_a_compact_texture_samples_as_its_decoded_float_twin(rng, fmt, filter, a
         lod = {"lod": rng.uniform(-0.5, 5.5, n).astype(np.float32)}
     elif filter == "anisotropic":
         lod = {"uv_dx": rng.normal(0, 0.05, (n, 2)).astype(np.float32), "uv_dy": rng.normal(0, 0.02, (n, 2)).astype(np.float32)}
-    for one_pixel in (False, True):
-        with one_pixel_kernels(one_pixel):
-            got = wt.sample(tex, uv, layer=layer, sampler=smp, **lod).numpy()
-            want = wt.sample(twin, uv, layer=layer, sampler=smp, **lod).numpy()
-        _same_bits(got, want)
-    with one_pixel_kernels():
-        _same_bits(wt.sample(tex, uv, layer=layer, sampler=smp, **lod).numpy(), got)  # lanes = one-pixel
+    for layers in (layer, 1):  # a layer per UV, and one for all (the lanes' next-lane hints read either)
+        got = {}
+        for one_pixel in (False, True):
+            with one_pixel_kernels(one_pixel):
+                got[one_pixel] = wt.sample(tex, uv, layer=layers, sampler=smp, **lod).numpy()
+                want = wt.sample(twin, uv, layer=layers, sampler=smp, **lod).numpy()
+            _same_bits(got[one_pixel], want)
+        _same_bits(got[False], got[True])  # lanes = one-pixel
 
 
 @pytest.mark.parametrize("address", ADDRESSES)
