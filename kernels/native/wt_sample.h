@@ -542,7 +542,8 @@ WT_INLINE void wt_sample_levels_lane(const Tex& tex, const Smp& smp, const UV& u
     // coherent lane's texels are in the cache or on the hardware prefetcher's stream, and hints for
     // them took 10-25% more time for a cached bilinear lookup. (The spread of all 16 lanes, or the
     // call inlined, cost a coherent lookup 5 instructions a sample.) float32's 16-byte texels
-    // gained nothing from them on one host and lost 26% on another (docs/performance.md).
+    // gained nothing from them, and an earlier prefetch of the next lane's rows cost float32 26% on
+    // another host (docs/performance.md).
     const float rows = __builtin_fabsf(v[WT_L - 1] - v[0]) * (float)wt_int(tex.level_height, level);
     if (tex.texel_format != WT_FLOAT32 && rows > (float)WT_L)
         wt_prefetch_levels_any(smp.address, tex, uv, layers, constant_layer, level, base + WT_L);
