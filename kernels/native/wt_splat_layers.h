@@ -188,6 +188,17 @@ template <class Params, class Saved> WT_INLINE void wt_keep_layer(const Params& 
     }
 }
 
+// wt_layer_values_slopes out of line: the kept forward of a fit that takes the tiling's gradient
+// calls it, and the kept forward of every other gradient does not, whose body it burdened inlined.
+template <class Tex, class Reads, class Floats, class UV, class Surface, class TriW, class Saved>
+WT_OUTLINE wt_lane_colours wt_layer_values_slopes_outlined(const Tex& tex, const Reads& reads, int j,
+                                                           const Floats& weighted, const UV& uv0, const UV& uv0_dx,
+                                                           const UV& uv0_dy, const Surface& surface, int base,
+                                                           int count, const TriW& tri_w, int keep, const Saved& saved) {
+    return wt_layer_values_slopes(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, keep,
+                                  saved);
+}
+
 // lanes.splat_layers.layer_values_lane: row l, layer j of tex read at lane pixel l over the footprints of
 // wt_layer_reads_into's reads as read_layer reads them (per projection value += w · sample where
 // triplanar, value = sample for the one read of the other projections; 0 where weighted[l] is not
@@ -204,8 +215,8 @@ WT_INLINE wt_lane_colours wt_layer_values_lane(const Tex& tex, const Reads& read
                                                const Saved& saved) {
     if constexpr (Kept)
         if (keep && saved.shape[0] > 0 && wt_kept_slopes(reads.params, saved))  // the tiling's slopes too
-            return wt_layer_values_slopes(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w,
-                                          keep, saved);
+            return wt_layer_values_slopes_outlined(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface, base, count,
+                                                   tri_w, keep, saved);
     int layer[3][WT_L];
     wt_read_layers(reads.params, surface, j, base, count, layer);
     const int triplanar = reads.params.projection == WT_PROJECT_TRIPLANAR;  // value += w · sample, else value = sample
