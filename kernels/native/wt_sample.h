@@ -285,12 +285,14 @@ WT_INLINE void wt_footprint_slopes(const Tex& tex, const Smp& smp, const int* la
 // of several taps (the anisotropic filter's) the mean of its taps at footprint.footprint_uv, summed
 // in tap order, times 1 / taps. Lanes past their taps, not read, or not finite read (0, 0) at level
 // 0. Into out: out[l] + weight[l] · sample where add (a blend of reads), the sample itself where
-// not; the other lanes' rows as they are.
+// not; the other lanes' rows as they are. With sampled (not null), also each read lane's sample
+// itself there, 0 in the other lanes' rows: what a kept forward keeps of a read it adds.
 // twin: filters.sample_footprint
 template <class Tex, class Smp>
 WT_INLINE void wt_accumulate_footprint(const Tex& tex, const Smp& smp, const int* layers, const float* u,
                                        const float* v, const float* lod, const float* du, const float* dv,
-                                       const float* taps, const float* weight, int add, wt_lane_colours& out) {
+                                       const float* taps, const float* weight, int add, wt_lane_colours& out,
+                                       wt_lane_colours* sampled = nullptr) {
     float us[WT_L], vs[WT_L], fractions[WT_L];
     int levels[WT_L], layer[WT_L];
     bool read[WT_L];
@@ -339,14 +341,19 @@ WT_INLINE void wt_accumulate_footprint(const Tex& tex, const Smp& smp, const int
     const wt_vf inv = 1.0f / TAPS;  // lanes not read may divide by 0: not kept
     wt_f4 rows[WT_L];
     __builtin_memcpy(rows, out.data, sizeof(rows));
-    wt_vf O[4];
+    wt_vf O[4], K[4];
     wt_channels(rows, O);
     for (int c = 0; c < 4; ++c) {
         const wt_vf r = wt_sel(ONE, S[c], T[c] * inv);
         O[c] = wt_sel(READ, add ? O[c] + W * r : r, O[c]);
+        K[c] = wt_sel(READ, r, (wt_vf)0.0f);
     }
     wt_rows_of_channels(O, rows);
     __builtin_memcpy(out.data, rows, sizeof(rows));
+    if (sampled) {
+        wt_rows_of_channels(K, rows);
+        __builtin_memcpy(sampled->data, rows, sizeof(rows));
+    }
 }
 
 // lanes.accumulate_footprint_lane: acc with each read lane's sample over its footprint added (or in place).

@@ -267,21 +267,31 @@ WT_INLINE wt_lane_colours wt_layer_blend_lane(const Tex& tex, const Reads& reads
                                               const UV& uv0, const UV& uv0_dx, const UV& uv0_dy, const Surface& surface,
                                               int base, int count, const TriW& tri_w, int keep, const Saved& saved,
                                               const wt_lane_colours& colour) {
-    if (reads.params.projection != WT_PROJECT_TRIPLANAR && !(keep && saved.shape[0] > 0)) {
-        // One read a pixel (its weight 1, the layer's value its sample) and nothing kept: the read
-        // adds weighted · sample into the colour itself, the same operations in the same order
-        // (the colour is never -0, so a pixel not read, which the sum leaves as it is, is the same
-        // bits as colour + 0 · 0). The layer's value never goes through a matrix of its own: 10%
-        // of a splat's forward on the benchmark's sphere (8 layers, UV projection).
+    const bool keeping = keep && saved.shape[0] > 0;
+    bool slopes = false;  // kept with the tiling's slopes (wt_layer_values_lane's own read)
+    if constexpr (Kept) slopes = keeping && wt_kept_slopes(reads.params, saved);
+    if (reads.params.projection != WT_PROJECT_TRIPLANAR && !slopes) {
+        // One read a pixel (its weight 1, the layer's value its sample): the read adds weighted ·
+        // sample into the colour itself, the same operations in the same order (the colour is
+        // never -0, so a pixel not read, which the sum leaves as it is, is the same bits as colour
+        // + 0 · 0). The layer's value never goes through a matrix of its own: 10% of a splat's
+        // forward on the benchmark's sphere (8 layers, UV projection). Where kept, the read also
+        // hands back each pixel's sample (wt_layer_values_lane's value, 0 where not read) to keep.
         int layer[3][WT_L];
         wt_read_layers(reads.params, surface, j, base, count, layer);
         wt_lane_read_rows at;  // read 0's rows, all that is read
         wt_layer_reads_into(tex, reads, j, weighted.c, uv0, uv0_dx, uv0_dy, surface, base, count, tri_w, at);
         __builtin_memcpy(at.data[9], weighted.c, sizeof(at.data[9]));  // read 0's weight (1 where read): the layer's
-        const Tex* texs[1] = {&tex};
-        const int* per_read[1] = {layer[0]};
         wt_lane_colours out = colour;
-        wt_accumulate_reads(texs, reads.smp, per_read, 1, 1, at, out);
+        if (!keeping) {
+            wt_accumulate_footprint(tex, reads.smp, layer[0], at.data[0], at.data[3], at.data[6], at.data[12],
+                                    at.data[15], at.data[18], at.data[9], 1, out);
+            return out;
+        }
+        wt_lane_colours value;
+        wt_accumulate_footprint(tex, reads.smp, layer[0], at.data[0], at.data[3], at.data[6], at.data[12], at.data[15],
+                                at.data[18], at.data[9], 1, out, &value);
+        wt_keep_layer(reads.params, saved, keep, j, base, count, value);
         return out;
     }
     const wt_lane_colours value = wt_layer_values_lane<Kept>(tex, reads, j, weighted, uv0, uv0_dx, uv0_dy, surface,
