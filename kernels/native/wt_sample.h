@@ -463,8 +463,7 @@ WT_INLINE void wt_prefetch_levels_lane(const int address, const Tex& tex, const 
     wt_vf U[2];
     wt_row_vectors(uv, next, count, 2, U);
     const int w = wt_int(tex.level_width, level), h = wt_int(tex.level_height, level);
-    const wt_vi finite =
-        __builtin_elementwise_abs(U[0]) <= wt_float_max & __builtin_elementwise_abs(U[1]) <= wt_float_max;
+    const wt_vi finite = wt_finite(U[0]) & wt_finite(U[1]);
     wt_vf ru = wt_sel(finite, U[0], (wt_vf)0.0f), rv = wt_sel(finite, U[1], (wt_vf)0.0f);
     if (address == WT_WRAP) {  // wt_reduce's
         ru -= __builtin_elementwise_floor(ru), rv -= __builtin_elementwise_floor(rv);
@@ -481,11 +480,12 @@ WT_INLINE void wt_prefetch_levels_lane(const int address, const Tex& tex, const 
     i = __builtin_elementwise_min(__builtin_elementwise_max(i, (wt_vi)0), (wt_vi)(w - 1));
     const wt_vi j0 = __builtin_elementwise_min(__builtin_elementwise_max(j, (wt_vi)0), (wt_vi)(h - 1));
     const wt_vi j1 = __builtin_elementwise_min(j0 + 1, (wt_vi)(h - 1));
-    wt_vi first = wt_int(tex.level_offset, level) + constant_layer * h * w + i;
+    const int start = wt_int(tex.level_offset, level);
+    wt_vi first = start + constant_layer * h * w + i;
     if (layers.shape[0] > 0)
         for (int l = 0; l < WT_L; ++l)
-            first[l] = wt_int(tex.level_offset, level) +
-                       wp::clamp(wt_int(layers, next + (l < count ? l : 0)), 0, tex.num_layers - 1) * h * w + i[l];
+            first[l] =
+                start + wp::clamp(wt_int(layers, next + (l < count ? l : 0)), 0, tex.num_layers - 1) * h * w + i[l];
     const wt_vi top = first + j0 * w, bottom = first + j1 * w;
     const char* data = (const char*)tex.packed;  // a compact format's texels
     const long long stride = tex.texel_format == WT_FLOAT16 ? 8 : 4;
