@@ -1131,6 +1131,25 @@ def test_splat_gradient_lanes_read_the_colours_their_own_forward_kept(rng, launc
     assert sum(1 for name, _ in launched if name == "splat8_texel_grad_lanes") == 3
 
 
+@pytest.mark.parametrize("case", list(SPLAT_CASES))
+def test_splat_gradient_lanes_give_the_one_pixel_bits(rng, launched, case):
+    """Every splat case's texel gradients (layers, maps, height layers) and its tiling's, given as a
+    ``wp.array`` that takes gradients: the blend's and weights' backward of the lane
+    (``blend_backward_lane8``: no height blend, a height channel, height layers; normalised or
+    not) gives the one-pixel kernel's bits."""
+    g, layers, maps, kw, textures = _splat_inputs(rng, case, 3000, requires_grad=True)
+    mask = g.mask.numpy()
+    mask[0, :15] = 0.0  # not the non-finite or huge normals, positions, derivatives and UVs, which make the tiling's gradient NaN
+    g.mask.assign(mask)
+    tiling = wp.array(np.asarray(kw.pop("tiling", [1.5]), dtype=np.float32), dtype=float, requires_grad=True)
+    weights = rng.normal(size=(3000, 4)).astype(np.float32)
+    grads = [_texel_grads(lambda: wt.splat(g, layers, maps, tiling=tiling, **kw), textures, weights, one_pixel, arrays=[tiling]) for one_pixel in (False, True)]
+    for a, b in zip(*grads):
+        _same_bits(a, b)
+    assert np.abs(np.nan_to_num(grads[0][0])).sum() > 0 and np.abs(np.nan_to_num(grads[0][-1])).sum() > 0  # the tiling's and the maps' (or heights')
+    assert ("splat8_texel_grad_lanes", -(-3000 // LANES)) in launched
+
+
 @pytest.mark.parametrize("threads", [1, 3])
 @pytest.mark.parametrize("case", ["uv, height channel", "uv, not normalized, tiling per layer", "triplanar"])
 def test_splat_gradient_lanes_add_the_transition_gradient(rng, launched, case, threads):
