@@ -165,10 +165,9 @@ WT_INLINE wt_lane_grads8 wt_blend_backward_lane8(const Params& params, const Sur
     }
     // pixel_layers: colours and heights where weighted, 0 elsewhere; the colours the forward lane kept,
     // heights from a channel of them, or the height layers' it kept (wt_kept_column)
-    wt_ch4 c[8];
+    wt_ch4 c[8];  // read only below num_layers
     wt_vf hv[8];
     for (int j = 0; j < 8; ++j) {
-        for (int k = 0; k < 4; ++k) c[j][k] = zero;
         hv[j] = zero;
         if (j >= n) continue;
         const wt_vi weighted = covered & (w1[j] > 0.0f);
@@ -196,11 +195,8 @@ WT_INLINE wt_lane_grads8 wt_blend_backward_lane8(const Params& params, const Sur
         return s;
     };
     const wt_vf ones[8] = {one, one, one, one, one, one, one, one};
-    wt_vf gw1[8], gc[8][4], g_t = zero, ghv[8];  // blend_backward
-    for (int j = 0; j < 8; ++j) {
-        gw1[j] = zero, ghv[j] = zero;
-        for (int k = 0; k < 4; ++k) gc[j][k] = zero;
-    }
+    wt_vf gw1[8], gc[8][4], g_t = zero, ghv[8];  // blend_backward (gc set below num_layers only)
+    for (int j = 0; j < 8; ++j) gw1[j] = zero, ghv[j] = zero;
     if (params.height_mode == WT_HEIGHT_NONE) {
         for (int j = 0; j < n; ++j) {
             for (int k = 0; k < 4; ++k) gc[j][k] = g[k] * w1[j];
@@ -255,9 +251,10 @@ WT_INLINE wt_lane_grads8 wt_blend_backward_lane8(const Params& params, const Sur
         const wt_vf shared = dot8(gw1, w0) / (s * s);
         for (int j = 0; j < 8; ++j) gw0[j] = wt_sel(total > eps, gw1[j] / s - shared, gw1[j] / s);
     }
-    // The lane's gradients laid out as wt_lane_grads8 says, every entry written (0 for the other pixels)
+    // The lane's gradients laid out as wt_lane_grads8 says, 0 for the other pixels (and, as the
+    // matrix starts, for the colours of the layers past num_layers)
     wt_lane_grads8 out;
-    for (int j = 0; j < 8; ++j) {
+    for (int j = 0; j < n; ++j) {
         wt_vf gcj[4];
         for (int k = 0; k < 4; ++k) gcj[k] = wt_sel(covered, gc[j][k], zero);
         wt_f4 rows[WT_L];
