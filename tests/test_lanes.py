@@ -266,6 +266,22 @@ def test_sample_lanes_over_threads(rng, threads):
     _same_bits(lanes, scalar)
 
 
+@pytest.mark.parametrize("threads", [1, 3])
+def test_sample_lanes_stream_large_outputs(rng, threads):
+    """An output of 4 MB or more (``WT_STREAM_BYTES``) is written by streaming stores
+    (``wt_store_lane``), by the level lanes and the footprint lanes: every row written (the outputs
+    start as NaN), the one-pixel kernels' bits, on 1 and 3 threads."""
+    tex = wt.Texture(rng.random((128, 96, 4), dtype=np.float32))
+    n = (4 << 20) // 16 + 1003
+    uv = rng.uniform(-1.0, 3.0, (n, 2)).astype(np.float32)
+    dx, dy = (rng.normal(size=(n, 2)).astype(np.float32) * 0.01 for _ in range(2))
+    trilinear = wt.Sampler(filter="trilinear")
+    for call in (lambda: wt.sample(tex, uv), lambda: wt.sample(tex, uv, uv_dx=dx, uv_dy=dy, sampler=trilinear)):
+        lanes, scalar = _both_on_threads(threads, call)
+        assert np.isfinite(lanes).all()
+        _same_bits(lanes, scalar)
+
+
 def test_sample_lanes_read_a_view_of_uvs_and_layers(rng):
     """UVs and layers given as ``wp.array`` views of larger arrays (their strides as given)."""
     tex = wt.TextureArray(rng.random((2, 32, 32, 4), dtype=np.float32))
