@@ -389,13 +389,15 @@ template <class A> WT_INLINE bool wt_packed_lane(const A& out, int count) {
 
 // A whole lane's rows (wt_packed_lane) into rows base .. base + WT_L - 1 of out: one copy, or, where
 // out is WT_STREAM_BYTES or more and the rows start a cache line, four streaming stores of a line
-// each. A large output is read back long after its lanes wrote it, if at all: streamed, its lines
-// neither are read before they are written nor take the cache's place of the texels. Bilinear
-// forward, 2 threads, 1024² texture, benchmark sphere 3.7 -> 3.0 ms; 2^20 random UVs of a 2048²
-// unorm8 texture (16 MB) 7.5-10.6 -> 5.8-9.3 ms (two interleaved pairs of 3 runs). Streaming
+// each. For `sample`'s lanes, which are bound by memory: a large output is read back long after its
+// lanes wrote it, if at all, and streamed, its lines neither are read before they are written nor
+// take the cache's place of the texels. Bilinear forward, 2 threads, 2^20 random UVs of a 2048²
+// unorm8 texture (16 MB): 8.25-10.39 -> 7.25-8.10 ms (three interleaved pairs). The lanes of the
+// other techniques copy (wt_write_lane): streamed, the stochastic sphere rows went from 13.1 to
+// 15.3-15.7 ms on 2 threads (hash4; cheap2 and hex alike), for a reason not found. Streaming
 // stores are weakly ordered: the end of a launch reaches the threads that read its output through
-// locked instructions (the thread pool's join), which drain the write-combining buffers. An sfence
-// a lane cost more than the stores saved (sphere 3.4 -> 4.4 ms).
+// locked instructions (the thread pool's locks), which drain the write-combining buffers. An
+// sfence a lane cost more than the stores saved (sphere 3.4 -> 4.4 ms).
 template <class A> WT_INLINE void wt_store_lane(const A& out, int base, const void* rows) {
     char* to = (char*)out.data + (long long)base * 16;
     if (out.shape[0] * 16ll >= WT_STREAM_BYTES && ((unsigned long long)to & 63) == 0) {
@@ -408,14 +410,10 @@ template <class A> WT_INLINE void wt_store_lane(const A& out, int base, const vo
 }
 
 // lanes.sample.write_lane: rows base .. base + count - 1 of out, the lane's rows of value (one copy
-// a row where out's rows are packed RGBA, wt_store_lane's where the lane is whole; Warp's element
-// stores, a branch a channel, were 6% of a biplanar forward).
+// a row where out's rows are packed RGBA; Warp's element stores, a branch a channel, were 6% of a
+// biplanar forward).
 // twin: texels.write_channels
 template <class A> WT_INLINE void wt_write_lane(const A& out, int base, int count, const wt_lane_colours& value) {
-    if (wt_packed_lane(out, count)) {
-        wt_store_lane(out, base, value.data);
-        return;
-    }
     for (int l = 0; l < count; ++l) {
         wt_f4 r;
         __builtin_memcpy(&r, value.data[l], 16);
@@ -615,5 +613,9 @@ WT_INLINE void wt_sample_footprint_lane(const Tex& tex, const Smp& smp, const UV
     wt_lane_colours value;
     wt_accumulate_footprint(tex, smp, s.layer, reads.data[0], reads.data[3], reads.data[6], reads.data[12],
                             reads.data[15], reads.data[18], reads.data[9], 0, value);
+    if (wt_packed_lane(out, s.count)) {
+        wt_store_lane(out, base, value.data);
+        return;
+    }
     wt_write_lane(out, base, s.count, value);
 }
