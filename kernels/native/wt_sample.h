@@ -10,20 +10,35 @@
 // divided by 255 (its table's value for every code). sRGB's table lookups, per lane and channel,
 // measured faster through wt_stored_texel and the transpose.
 // twin: texels.stored_texel
+static_assert(WT_L == 16, "wt_unorm8_channels: its byte shuffle is written for 16 lane pixels");
+typedef unsigned char wt_vb __attribute__((ext_vector_type(4 * WT_L)));  // a lane's packed RGBA8 texels
+
 template <class Tex> WT_INLINE void wt_unorm8_channels(const Tex& tex, const int* index, const bool* inside,
                                                        const int address, const wt_f4& border, wt_vf* ch) {
     const unsigned int* packed = (const unsigned int*)tex.packed;
     unsigned int p[WT_L];
     for (int l = 0; l < WT_L; ++l) p[l] = packed[address != WT_BORDER || inside[l] ? index[l] : 0];
-    wt_vi P;
+    wt_vb P;
     __builtin_memcpy(&P, p, sizeof(P));
     // code / 255 correctly rounded, as the table holds it, without a divide (a vector divide per
-    // channel and tap was the decode's cost): q = code · (1/255), then one Newton step on its
-    // residual, fused. Exact for each of the 256 codes (tests/test_formats.py checks them all).
-    const float r = 1.0f / 255.0f;
+    // channel and tap was the decode's cost): code · hi + code · lo, the product's low part fused,
+    // where hi = 1/255 rounded and lo the rest. Exact for each of the 256 codes
+    // (tests/test_formats.py checks them all). A channel's codes come out of the packed texels by one
+    // byte shuffle (byte c of each, zero-extended).
+    const float hi = 1.0f / 255.0f, lo = (float)(1.0 / 255.0 - (double)hi);
+    const wt_vb zero = {};
+#define WT_BYTE(c, l) 4 * l + c, 64, 64, 64
+#define WT_CHANNEL(c)                                                                                                  \
+    (wt_vi) __builtin_shufflevector(P, zero, WT_BYTE(c, 0), WT_BYTE(c, 1), WT_BYTE(c, 2), WT_BYTE(c, 3),               \
+                                    WT_BYTE(c, 4), WT_BYTE(c, 5), WT_BYTE(c, 6), WT_BYTE(c, 7), WT_BYTE(c, 8),         \
+                                    WT_BYTE(c, 9), WT_BYTE(c, 10), WT_BYTE(c, 11), WT_BYTE(c, 12), WT_BYTE(c, 13),     \
+                                    WT_BYTE(c, 14), WT_BYTE(c, 15))
+    const wt_vi codes[4] = {WT_CHANNEL(0), WT_CHANNEL(1), WT_CHANNEL(2), WT_CHANNEL(3)};
+#undef WT_CHANNEL
+#undef WT_BYTE
     for (int c = 0; c < 4; ++c) {
-        const wt_vf code = __builtin_convertvector((P >> (8 * c)) & 255, wt_vf), q = code * r;
-        ch[c] = __builtin_elementwise_fma(__builtin_elementwise_fma(-q, (wt_vf)255.0f, code), (wt_vf)r, q);
+        const wt_vf code = __builtin_convertvector(codes[c], wt_vf);
+        ch[c] = __builtin_elementwise_fma(code, (wt_vf)hi, code * lo);
     }
     if (address == WT_BORDER)
         for (int c = 0; c < 4; ++c)
