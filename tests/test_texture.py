@@ -411,3 +411,19 @@ def test_texture_errors_name_what_the_user_passed(monkeypatch):
         with pytest.raises(ValueError, match=r"^sample\(\): uv holds -1e\+39 at \(1, 0\), beyond float32's range \(about ±3.4e38\), which the kernels compute in$"):
             wt.sample(texture, np.array([[0.1, 0.5], [-1e39, 0.5]]))
     np.testing.assert_array_equal(wt.sample(texture, np.array([[0.1, 0.5]])).numpy(), 1.0)  # float64 in range: as before
+
+
+def test_around_reads_a_contiguous_chain_in_place_and_refuses_a_strided_one(rng):
+    """``around`` wraps another framework's buffer without a copy. The CPU lanes read a float32
+    chain's texels 16 bytes apart, so a strided chain is refused before anything reads it."""
+    image = rng.random((8, 8, 4)).astype(np.float32)
+    tex = wt.Texture(image, mipmaps=False)
+    chain = wp.array(image.reshape(-1, 4), dtype=wp.vec4)
+    uv = rng.random((500, 2)).astype(np.float32)
+    wrapped = wt.Texture.around(chain, 1, [(8, 8)], 4)
+    smp = wt.Sampler(filter="bilinear")
+    assert np.array_equal(wt.sample(wrapped, uv, sampler=smp).numpy(), wt.sample(tex, uv, sampler=smp).numpy())
+    every_other = wp.array(np.repeat(image.reshape(-1, 4), 2, axis=0), dtype=wp.vec4)[::2]
+    assert every_other.shape == (64,) and not every_other.is_contiguous
+    with pytest.raises(ValueError, match="contiguous"):
+        wt.Texture.around(every_other, 1, [(8, 8)], 4)

@@ -112,6 +112,8 @@ class TextureArray:
         to build them from level 0."""
         if chain.dtype != wp.vec4 or chain.ndim != 1 or chain.shape[0] != sum(num_layers * h * w for h, w in sizes):
             raise ValueError(f"{cls._name}.around(): chain must be a 1-D wp.array of vec4 holding the levels {list(sizes)} of {num_layers} layer(s)")
+        if not chain.is_contiguous:
+            raise ValueError(f"{cls._name}.around(): chain must be contiguous (the CPU lanes read its texels 16 bytes apart), got strides {chain.strides}")
         if not 1 <= channels <= 4:
             raise ValueError(f"{cls._name}.around(): channels must be in [1, 4], got {channels}")
         texture = cls.__new__(cls)
