@@ -54,6 +54,29 @@ struct wt_level_slopes {
     wt_vf *du, *dv, *dlod;
 };
 
+// Pixels 4K .. 4K + 3 of a lane's RGBA rows t, as one vector (the first step of wt_channels), and
+// w[4K] .. w[4K + 3], each four times: a lane's bilinear blend a row at a time (wt_bilinear_quad).
+template <int K> WT_INLINE wt_vf wt_quad(const wt_f4* t) {
+    const wt_f8 lo = __builtin_shufflevector(t[4 * K], t[4 * K + 1], 0, 1, 2, 3, 4, 5, 6, 7);
+    const wt_f8 hi = __builtin_shufflevector(t[4 * K + 2], t[4 * K + 3], 0, 1, 2, 3, 4, 5, 6, 7);
+    return __builtin_shufflevector(lo, hi, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+}
+template <int K> WT_INLINE wt_vf wt_quad_weights(wt_vf w) {
+    return __builtin_shufflevector(w, w, 4 * K, 4 * K, 4 * K, 4 * K, 4 * K + 1, 4 * K + 1, 4 * K + 1, 4 * K + 1,
+                                   4 * K + 2, 4 * K + 2, 4 * K + 2, 4 * K + 2, 4 * K + 3, 4 * K + 3, 4 * K + 3,
+                                   4 * K + 3);
+}
+// filters.sample_bilinear of pixels 4K .. 4K + 3 into their rows, from the rows of their four taps
+// (taps[k][l]) and the weights FX, FY: each channel's operations as the channel vectors' blend in
+// wt_sample_levels, so the bits are its.
+template <int K> WT_INLINE void wt_bilinear_quad(const wt_f4 (*taps)[WT_L], wt_vf FX, wt_vf FY, wt_f4* rows) {
+    const wt_vf fx = wt_quad_weights<K>(FX), fy = wt_quad_weights<K>(FY), gx = 1.0f - fx, gy = 1.0f - fy;
+    const wt_vf top = wt_quad<K>(taps[0]) * gx + wt_quad<K>(taps[1]) * fx;
+    const wt_vf bottom = wt_quad<K>(taps[2]) * gx + wt_quad<K>(taps[3]) * fx;
+    const wt_vf value = top * gy + bottom * fy;
+    __builtin_memcpy(rows + 4 * K, &value, sizeof(value));
+}
+
 // res[c][l] = filters.sample_levels(tex, layer[l], (u[l], v[l]), level[l], fraction[l], smp)[c] for
 // every lane and channel: a vector per channel, as the footprint reads sum and blend them (rows
 // were transposed here and straight back there). The address mode is a constant
@@ -61,12 +84,15 @@ struct wt_level_slopes {
 // level read is cut in two: every lane's addresses and weights, then every lane's loads, so that
 // the loads are in flight together. With slopes (not null), also the value's derivatives as
 // filters.sample_lod_derivatives takes them (the same value, bit for bit): bilinear_derivatives of
-// each level read, blended as the values are; 0 for nearest.
+// each level read, blended as the values are; 0 for nearest. With rows (not null), the value as
+// rows (rows[l][c] = res[c][l]) for a caller that stores rows, and res is scratch: a float32 read of
+// one level (bilinear, no slopes) then blends the rows as loaded, four pixels a vector, with no
+// transpose there or back (a third of a coherent bilinear lookup's shuffles).
 // twin: filters.sample_levels
-template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int address, const Tex& tex, const Smp& smp,
-                                                                const float* u, const float* v, const int* level,
-                                                                const float* fraction, const int* layer, wt_vf* res,
-                                                                const wt_level_slopes* slopes = nullptr) {
+template <class Tex, class Smp>
+WT_INLINE void wt_sample_levels(const int address, const Tex& tex, const Smp& smp, const float* u, const float* v,
+                                const int* level, const float* fraction, const int* layer, wt_vf* res,
+                                const wt_level_slopes* slopes = nullptr, wt_f4* rows = nullptr) {
     const wt_f4 border = {smp.border.c[0], smp.border.c[1], smp.border.c[2], smp.border.c[3]};
     auto load = [&](int index, bool inside) __attribute__((always_inline)) -> wt_f4 {  // texels.texel
         if (address != WT_BORDER) return wt_stored_texel(tex, index);  // only the border mode reads outside
@@ -92,11 +118,13 @@ template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int addres
             index[0][l] = start + layer[l] * h * w + y * w + x;
             inside[0][l] = address != WT_BORDER || (x >= 0 && y >= 0);  // only the border mode reads outside
         }
-        wt_f4 rows[WT_L];
-        for (int l = 0; l < WT_L; ++l) rows[l] = load(index[0][l], inside[0][l]);
-        wt_channels(rows, res);
+        wt_f4 texels[WT_L];
+        for (int l = 0; l < WT_L; ++l) texels[l] = load(index[0][l], inside[0][l]);
+        wt_channels(texels, res);
         if (slopes)
             for (int c = 0; c < 4; ++c) slopes->du[c] = slopes->dv[c] = slopes->dlod[c] = 0.0f;
+        if (rows)
+            for (int l = 0; l < WT_L; ++l) rows[l] = texels[l];
         return;
     }
     float fx[WT_L], fy[WT_L];
@@ -127,6 +155,20 @@ template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int addres
             fy[l] = y - y0;
         }
         // filters.sample_bilinear, and the blend of filters.sample_levels, a channel of 16 pixels at a time
+        if (rows && !blend && !slopes && tex.texel_format == WT_FLOAT32) {  // the rows as loaded, blended
+            wt_f4 t[4][WT_L];
+            for (int k = 0; k < 4; ++k)
+                _Pragma("clang loop unroll(full)") for (int l = 0; l < WT_L; ++l) t[k][l] =
+                    load(index[k][l], inside[k][l]);
+            wt_vf X, Y;
+            __builtin_memcpy(&X, fx, sizeof(X));
+            __builtin_memcpy(&Y, fy, sizeof(Y));
+            wt_bilinear_quad<0>(t, X, Y, rows);
+            wt_bilinear_quad<1>(t, X, Y, rows);
+            wt_bilinear_quad<2>(t, X, Y, rows);
+            wt_bilinear_quad<3>(t, X, Y, rows);
+            return;
+        }
         wt_vf taps[4][4], FX, FY;
         for (int k = 0; k < 4; ++k) {
             if (tex.texel_format == WT_UNORM8) {  // a channel of every lane's codes at a time, no transpose
@@ -183,6 +225,7 @@ template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int addres
     }
     if (slopes)
         for (int c = 0; c < 4; ++c) slopes->du[c] = DU[c], slopes->dv[c] = DV[c], slopes->dlod[c] = DLOD[c];
+    if (rows) wt_rows_of_channels(res, rows);
 }
 
 // wt_sample_levels with the address mode a constant, once per mode. Out of line: the four modes'
@@ -192,19 +235,19 @@ template <class Tex, class Smp> WT_INLINE void wt_sample_levels(const int addres
 template <class Tex, class Smp>
 WT_OUTLINE void wt_sample_levels_any(const Tex& tex, const Smp& smp, const float* u, const float* v, const int* level,
                                      const float* fraction, const int* layer, wt_vf* res,
-                                     const wt_level_slopes* slopes = nullptr) {
+                                     const wt_level_slopes* slopes = nullptr, wt_f4* rows = nullptr) {
     switch (smp.address) {
     case WT_WRAP:
-        wt_sample_levels(WT_WRAP, tex, smp, u, v, level, fraction, layer, res, slopes);
+        wt_sample_levels(WT_WRAP, tex, smp, u, v, level, fraction, layer, res, slopes, rows);
         break;
     case WT_CLAMP:
-        wt_sample_levels(WT_CLAMP, tex, smp, u, v, level, fraction, layer, res, slopes);
+        wt_sample_levels(WT_CLAMP, tex, smp, u, v, level, fraction, layer, res, slopes, rows);
         break;
     case WT_MIRROR:
-        wt_sample_levels(WT_MIRROR, tex, smp, u, v, level, fraction, layer, res, slopes);
+        wt_sample_levels(WT_MIRROR, tex, smp, u, v, level, fraction, layer, res, slopes, rows);
         break;
     default:
-        wt_sample_levels(WT_BORDER, tex, smp, u, v, level, fraction, layer, res, slopes);
+        wt_sample_levels(WT_BORDER, tex, smp, u, v, level, fraction, layer, res, slopes, rows);
         break;
     }
 }
@@ -599,15 +642,11 @@ WT_INLINE void wt_sample_levels_lane(const Tex& tex, const Smp& smp, const UV& u
     const float rows = __builtin_fabsf(v[WT_L - 1] - v[0]) * (float)wt_int(tex.level_height, level);
     if (tex.texel_format != WT_FLOAT32 && rows > (float)WT_L)
         wt_prefetch_levels_any(smp.address, tex, uv, layers, constant_layer, level, base + WT_L);
-    wt_vf channels[4];
-    wt_f4 result[WT_L];
-    wt_sample_levels_any(tex, smp, u, v, levels, fractions, layer, channels);
-    int ok[WT_L];
-    for (int l = 0; l < WT_L; ++l) ok[l] = finite[l] ? -1 : 0;
-    wt_vi OK;
-    __builtin_memcpy(&OK, ok, sizeof(OK));
-    for (int c = 0; c < 4; ++c) channels[c] = wt_sel(OK, channels[c], (wt_vf)__builtin_nanf(""));
-    wt_rows_of_channels(channels, result);
+    wt_vf scratch[4];
+    alignas(64) wt_f4 result[WT_L];  // rows stored a vector of four at a time
+    wt_sample_levels_any(tex, smp, u, v, levels, fractions, layer, scratch, nullptr, result);
+    for (int l = 0; l < WT_L; ++l)
+        if (!finite[l]) result[l] = __builtin_nanf("");
     if (wt_packed_lane(out, count)) {
         wt_store_lane(out, base, result);
         return;
