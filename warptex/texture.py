@@ -106,7 +106,7 @@ class TextureArray:
     @classmethod
     def around(cls, chain: wp.array, num_layers: int, sizes: Sequence[tuple[int, int]], channels: int) -> "TextureArray":
         """A texture array whose mip chain *is* ``chain`` (no copy), for buffers that another
-        framework owns (the PyTorch bridge): a ``wp.array`` of ``vec4`` holding the levels of
+        framework owns (the PyTorch bridge): a contiguous ``wp.array`` of ``vec4`` holding the levels of
         ``sizes`` (:func:`mip_sizes`) one after another, each ``num_layers`` layers of rows, with
         ``channels`` channels in use. Levels 1.. are as the buffer holds them: call :meth:`update`
         to build them from level 0."""
