@@ -5,14 +5,14 @@
 #include "wt_core.h"
 #include "wt_footprint.h"
 
+static_assert(WT_L == 16, "wt_unorm8_channels: its byte shuffle is written for 16 lane pixels");
+typedef unsigned char wt_vb __attribute__((ext_vector_type(4 * WT_L)));  // a lane's packed RGBA8 texels
+
 // The texels at index[l] of a unorm8 texture (the border colour where a border-mode read is not
 // inside), decoded into a vector per channel: ch[c][l] is stored_texel(tex, index[l])[c], the code
 // divided by 255 (its table's value for every code). sRGB's table lookups, per lane and channel,
 // measured faster through wt_stored_texel and the transpose.
 // twin: texels.stored_texel
-static_assert(WT_L == 16, "wt_unorm8_channels: its byte shuffle is written for 16 lane pixels");
-typedef unsigned char wt_vb __attribute__((ext_vector_type(4 * WT_L)));  // a lane's packed RGBA8 texels
-
 template <class Tex> WT_INLINE void wt_unorm8_channels(const Tex& tex, const int* index, const bool* inside,
                                                        const int address, const wt_f4& border, wt_vf* ch) {
     const unsigned int* packed = (const unsigned int*)tex.packed;
