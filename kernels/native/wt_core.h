@@ -168,13 +168,15 @@ template <class A> WT_INLINE void wt_row_vectors(const A& a, int base, int count
 // Sixteen RGBA rows (a lane's texels) as four vectors of a channel per lane pixel, and back: the
 // blends then run 16 pixels wide, not a pixel's 4 channels at a time (two-source permutes).
 static_assert(WT_L == 16, "the transposes below are written for lanes of 16");
+// Pixels 4K .. 4K + 3 of a lane's RGBA rows t, RGBA each, as one vector: the transpose's first step,
+// and what a bilinear blend of rows reads (wt_bilinear_quad).
+template <int K> WT_INLINE wt_vf wt_quad(const wt_f4* t) {
+    const wt_f8 lo = __builtin_shufflevector(t[4 * K], t[4 * K + 1], 0, 1, 2, 3, 4, 5, 6, 7);
+    const wt_f8 hi = __builtin_shufflevector(t[4 * K + 2], t[4 * K + 3], 0, 1, 2, 3, 4, 5, 6, 7);
+    return __builtin_shufflevector(lo, hi, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+}
 WT_INLINE void wt_channels(const wt_f4* t, wt_vf* ch) {
-    wt_vf q[4];  // pixels 4k .. 4k + 3, RGBA each
-    for (int k = 0; k < 4; ++k) {
-        const wt_f8 lo = __builtin_shufflevector(t[4 * k], t[4 * k + 1], 0, 1, 2, 3, 4, 5, 6, 7);
-        const wt_f8 hi = __builtin_shufflevector(t[4 * k + 2], t[4 * k + 3], 0, 1, 2, 3, 4, 5, 6, 7);
-        q[k] = __builtin_shufflevector(lo, hi, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-    }
+    const wt_vf q[4] = {wt_quad<0>(t), wt_quad<1>(t), wt_quad<2>(t), wt_quad<3>(t)};
     const wt_vf rg0 = __builtin_shufflevector(q[0], q[1], 0, 4, 8, 12, 16, 20, 24, 28, 1, 5, 9, 13, 17, 21, 25, 29);
     const wt_vf ba0 = __builtin_shufflevector(q[0], q[1], 2, 6, 10, 14, 18, 22, 26, 30, 3, 7, 11, 15, 19, 23, 27, 31);
     const wt_vf rg1 = __builtin_shufflevector(q[2], q[3], 0, 4, 8, 12, 16, 20, 24, 28, 1, 5, 9, 13, 17, 21, 25, 29);

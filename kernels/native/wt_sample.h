@@ -54,13 +54,8 @@ struct wt_level_slopes {
     wt_vf *du, *dv, *dlod;
 };
 
-// Pixels 4K .. 4K + 3 of a lane's RGBA rows t, as one vector (the first step of wt_channels), and
-// w[4K] .. w[4K + 3], each four times: a lane's bilinear blend a row at a time (wt_bilinear_quad).
-template <int K> WT_INLINE wt_vf wt_quad(const wt_f4* t) {
-    const wt_f8 lo = __builtin_shufflevector(t[4 * K], t[4 * K + 1], 0, 1, 2, 3, 4, 5, 6, 7);
-    const wt_f8 hi = __builtin_shufflevector(t[4 * K + 2], t[4 * K + 3], 0, 1, 2, 3, 4, 5, 6, 7);
-    return __builtin_shufflevector(lo, hi, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-}
+// w[4K] .. w[4K + 3], each four times, beside the rows of pixels 4K .. 4K + 3 (wt_quad): a lane's
+// bilinear blend a row at a time (wt_bilinear_quad).
 template <int K> WT_INLINE wt_vf wt_quad_weights(wt_vf w) {
     return __builtin_shufflevector(w, w, 4 * K, 4 * K, 4 * K, 4 * K, 4 * K + 1, 4 * K + 1, 4 * K + 1, 4 * K + 1,
                                    4 * K + 2, 4 * K + 2, 4 * K + 2, 4 * K + 2, 4 * K + 3, 4 * K + 3, 4 * K + 3,
