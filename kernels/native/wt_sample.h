@@ -114,12 +114,11 @@ WT_INLINE void wt_sample_levels(const int address, const Tex& tex, const Smp& sm
             inside[0][l] = address != WT_BORDER || (x >= 0 && y >= 0);  // only the border mode reads outside
         }
         wt_f4 texels[WT_L];
-        for (int l = 0; l < WT_L; ++l) texels[l] = load(index[0][l], inside[0][l]);
-        wt_channels(texels, res);
+        wt_f4* to = rows ? rows : texels;  // a nearest read's rows are its value
+        for (int l = 0; l < WT_L; ++l) to[l] = load(index[0][l], inside[0][l]);
+        if (!rows) wt_channels(texels, res);
         if (slopes)
             for (int c = 0; c < 4; ++c) slopes->du[c] = slopes->dv[c] = slopes->dlod[c] = 0.0f;
-        if (rows)
-            for (int l = 0; l < WT_L; ++l) rows[l] = texels[l];
         return;
     }
     float fx[WT_L], fy[WT_L];
