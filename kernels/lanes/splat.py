@@ -42,7 +42,7 @@ from ..splat_layers import HEIGHT_ARRAY, HEIGHT_CHANNEL, HEIGHT_NONE, PROJECT_TR
 from ..texels import read_channels, write_channels
 from . import LANES, lane_colours, lane_floats, lane_ints
 from .sample import accumulate_footprint_lane, write_covered_lane, write_lane
-from .splat_blend import GRAD_HEIGHT, GRAD_TRANSITION, blend_backward_lane8, blend_lane8, map_values_lane8, weights_lane8
+from .splat_blend import GRAD_HEIGHT, GRAD_TRANSITION, blend_backward_lane8, blend_lane8, lane_grads, map_values_lane8, weights_lane8
 from .splat_layers import (lane_vec3, layer_blend_kept_lane, layer_blend_lane, layer_values_kept_lane, layer_values_lane, layer_values_stochastic_lane, scatter_face_layers_of,
                            scatter_layer_lane, scatter_layer_stochastic_lane, scatter_layers_lane8)  # fmt: skip
 from .stochastic import linear_blend
@@ -251,7 +251,8 @@ def lane_bodies(cap: int, pixels_t, grads_t, stochastic: bool = False):
         num_layers = params.num_layers
         ghvs = lane_weights_t()  # each pixel's layers' heights' gradients, for the tiling's and the height layers' texels
         if wp.static(cap == 8):  # the blend and weights backwards for the whole lane, and each pixel's splat maps' adds
-            back = blend_backward_lane8(params, pixels.surface, base, count, w1s, rs, adj, pixels.saved, args.maps, grads.maps, args.map_smp, pixels.uv0)
+            back = lane_grads()
+            blend_backward_lane8(params, pixels.surface, base, count, w1s, rs, adj, pixels.saved, args.maps, grads.maps, args.map_smp, pixels.uv0, back)
             if grads.transition.shape[0] > 0 and params.height_mode != HEIGHT_NONE:
                 for l in range(count):
                     if pixels.surface.mask[base + l] != 0.0:

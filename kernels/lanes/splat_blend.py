@@ -49,18 +49,22 @@ def blend_lane8(params: SplatParams, surface: SurfacePixels, base: wp.int32, cou
     ...
 
 
-@wp.func_native(cpu_snippet("return wt_blend_backward_lane8(params, surface, base, count, w1s, rs, adj, saved, maps, grad_maps, map_smp, uv0);\n", "return {};\n"))
-def blend_backward_lane8(params: SplatParams, surface: SurfacePixels, base: wp.int32, count: wp.int32, w1s: wp.types.matrix(shape=(LANES, 8), dtype=float),
-                         rs: wp.types.matrix(shape=(LANES, 8), dtype=float), adj: wp.array2d(dtype=float), saved: wp.array2d(dtype=float), maps: TextureView,
-                         grad_maps: TexelGrad, map_smp: SamplerArgs, uv0: wp.array(dtype=wp.vec2)) -> lane_grads:  # fmt: skip
+@wp.func_native(cpu_snippet("wt_blend_backward_lane8(params, surface, base, count, w1s, rs, adj, saved, maps, grad_maps, map_smp, uv0, out);\n"))
+def blend_backward_lane8(params: wp.ref[SplatParams], surface: wp.ref[SurfacePixels], base: wp.int32, count: wp.int32, w1s: wp.ref[wp.types.matrix(shape=(LANES, 8), dtype=float)],
+                         rs: wp.ref[wp.types.matrix(shape=(LANES, 8), dtype=float)], adj: wp.array2d(dtype=float), saved: wp.array2d(dtype=float), maps: wp.ref[TextureView],
+                         grad_maps: wp.ref[TexelGrad], map_smp: wp.ref[SamplerArgs], uv0: wp.array(dtype=wp.vec2), out: wp.ref[lane_grads]):  # fmt: skip
     """For each covered lane pixel ``l`` (pixel ``base + l``), with its weights and raw splat values
     as :func:`blend_lane8` and ``weights_lane8`` take them, the colours its forward lane kept (row
     ``base + l`` of ``saved``, ``SplatPixels.saved``; heights from their height channel, or the
     height layers' it kept: ``wt_kept_column``) and its output gradient ``adj[base + l]``:
     ``splat_blend.blend_backward``'s colours', transition's and heights' gradients (the heights'
     also added into the colours' height channel, where that is where they are) and
-    ``weights_backward``'s raw values' gradient; the colours', transition's and heights' laid out
-    as :data:`lane_grads` says (0 for the other pixels), the raw values' added into the splat maps'
-    texels (``grad_maps``; nothing when it is empty) at the pixel's UV0 where it is finite, in pixel
-    order (``splat_blend.scatter_maps``), in the same call, so that they never leave it."""
+    ``weights_backward``'s raw values' gradient; the colours', transition's and heights' written
+    into ``out``, every row of it, laid out as :data:`lane_grads` says (0 for the other pixels),
+    the raw values' added into the splat maps' texels (``grad_maps``; nothing when it is empty) at
+    the pixel's UV0 where it is finite, in pixel order (``splat_blend.scatter_maps``), in the same
+    call, so that they never leave it.
+
+    Its matrices and structs are passed by reference (``wp.ref``), and ``out`` is the caller's:
+    by value, every lane copied them into the call, and the 2.6 KB result out of it."""
     ...

@@ -103,16 +103,16 @@ WT_INLINE wt_lane_colours wt_blend_lane8(const Params& params, const Surface& su
 // from their height channel, or the height layers' kept) and its output gradient adj[base + l]:
 // splat_blend.blend_backward's colours' and transition's gradients (the heights' added into the
 // colours' height channel) and weights_backward's raw values' gradient; the colours', transition's
-// and heights' as wt_lane_grads8 lays them out, the raw values' added into the splat maps' texels
-// (grad_maps; nothing when it is empty) at the pixel's UV0 where it is finite, in pixel order
-// (splat_blend.scatter_maps), three maps at a time: each map is its own array layer, so every texel
-// still gets its adds in pixel order.
+// and heights' into out (the caller's, every row written) as wt_lane_grads8 lays them out, the raw
+// values' added into the splat maps' texels (grad_maps; nothing when it is empty) at the pixel's
+// UV0 where it is finite, in pixel order (splat_blend.scatter_maps), three maps at a time: each
+// map is its own array layer, so every texel still gets its adds in pixel order.
 // twin: splat_blend.blend_functions:blend_backward
 template <class Params, class Surface, class Adj, class Saved, class Tex, class Grad, class Smp, class UV>
-WT_INLINE wt_lane_grads8 wt_blend_backward_lane8(const Params& params, const Surface& surface, int base, int count,
-                                                 const wt_lane_weights8& w1s, const wt_lane_weights8& rs,
-                                                 const Adj& adj, const Saved& saved, const Tex& maps,
-                                                 const Grad& grad_maps, const Smp& map_smp, const UV& uv0) {
+WT_INLINE void wt_blend_backward_lane8(const Params& params, const Surface& surface, int base, int count,
+                                       const wt_lane_weights8& w1s, const wt_lane_weights8& rs, const Adj& adj,
+                                       const Saved& saved, const Tex& maps, const Grad& grad_maps, const Smp& map_smp,
+                                       const UV& uv0, wt_lane_grads8& out) {
     // The lane's 16 pixels at once, a vector of a value per pixel for each of the scalar block's
     // values: the same operations on each pixel's values in the same order, so the same bits. Pixel
     // by pixel (each pixel's chains of dependent adds and divides), it was 39% of the splat gradient
@@ -251,9 +251,10 @@ WT_INLINE wt_lane_grads8 wt_blend_backward_lane8(const Params& params, const Sur
         const wt_vf shared = dot8(gw1, w0) / (s * s);
         for (int j = 0; j < 8; ++j) gw0[j] = wt_sel(total > eps, gw1[j] / s - shared, gw1[j] / s);
     }
-    // The lane's gradients laid out as wt_lane_grads8 says, 0 for the other pixels (and, as the
-    // matrix starts, for the colours of the layers past num_layers)
-    wt_lane_grads8 out;
+    // The lane's gradients laid out as wt_lane_grads8 says, into the caller's matrix, every row of it
+    // written: 0 for the other pixels, and for the colours of the layers past num_layers
+    for (int j = n; j < 8; ++j)
+        for (int l = 0; l < WT_L; ++l) __builtin_memset(out.data[l * 8 + j], 0, sizeof(wt_f4));
     for (int j = 0; j < n; ++j) {
         wt_vf gcj[4];
         for (int k = 0; k < 4; ++k) gcj[k] = wt_sel(covered, gc[j][k], zero);
@@ -320,5 +321,4 @@ WT_INLINE wt_lane_grads8 wt_blend_backward_lane8(const Params& params, const Sur
             wt_scatter_levels_any(reads, texs, grads, map_smp, us, vs, levels, fractions, layer, active, gs);
         }
     }
-    return out;
 }
