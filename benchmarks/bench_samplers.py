@@ -57,6 +57,11 @@ renderer's view, where the UVs move.
 the fastest call of all; each ratio in the summaries becomes its spread over the runs (the lowest
 and highest of the runs' ratios), so a ratio that swings across a bar between runs shows it.
 
+``--processes 3`` runs all of that in 3 fresh processes, one after another, and gives each ratio's
+spread over every run of every process. A peer's pace can differ from one process to the next
+while warptex's does not (Dr.Jit's, by up to 1.6x on this project's hosts: docs/performance.md),
+and the rounds of one process never show that; the fresh processes do.
+
 ``--call-cost`` times what a call costs when it computes little: ``sample`` (bilinear, a 256² RGBA
 texture) on 1, 1,024 and 65,536 random UVs, into a new output and into ``out=``, and through the
 PyTorch bridge (``warptex.torch.sample`` on tensors), forward and forward+backward (gradients to
@@ -714,6 +719,8 @@ def parse(argv=None):
     p.add_argument("--limit", action="store_true", help="time a plain C loop of the bilinear lookup beside the peers (peers/limit_peer.py): the hardware's pace; "
                                                           "and report where the cache this run gets ends (a pointer chase)")
     p.add_argument("--runs", type=int, default=1, help="time every row in this many runs of --repeats interleaved rounds; the summaries give each ratio's spread over the runs (min–max)")
+    p.add_argument("--processes", type=int, default=1, help="run everything in this many fresh processes, one after another; the summaries give each ratio's "
+                                                              "spread over the runs of all of them (the scaling sweeps run in the first only)")
     p.add_argument("--no-scaling", action="store_true", help="skip the pixel-count and texture-size sweeps")
     p.add_argument("--texture-size", type=int, default=None, metavar="N",
                    help="the rows' texture is N x N RGBA (default 1024: 16 MB in float32, 4 MB in 8 bits; 2048: 64 and 16 MB; "
@@ -735,8 +742,10 @@ def parse(argv=None):
     args.threads = args.threads or wt.get_num_threads()
     if args.threads < 1 or any(n < 1 for n in args.thread_counts or ()):
         p.error("--threads and --thread-counts must be >= 1")
-    if args.runs < 1:
-        p.error("--runs must be >= 1")
+    if args.runs < 1 or args.processes < 1:
+        p.error("--runs and --processes must be >= 1")
+    if args.processes > 1 and args.call_cost:
+        p.error("--call-cost times its calls in one process: leave out --processes")
     if args.uv_grads and set(args.techniques) - {"bilinear", "trilinear"}:
         p.error("--uv-grads times UV gradients of bilinear and trilinear sample(): add --techniques bilinear trilinear")
     if args.atomics and not wp.get_device(args.device).is_cuda:
@@ -754,9 +763,73 @@ def parse(argv=None):
     return args
 
 
+def _child_argv(argv: list[str], json_path: Path, first: bool) -> list[str]:
+    """``argv`` for one of ``--processes``' children: without ``--processes`` and ``--json``, writing
+    its results to ``json_path``; the scaling sweeps only in the first."""
+    out, skip = [], False
+    for a in argv:
+        if skip:
+            skip = False
+        elif a in ("--processes", "--json"):
+            skip = True
+        elif not a.startswith(("--processes=", "--json=")):
+            out.append(a)
+    return out + ["--json", str(json_path)] + ([] if first or "--no-scaling" in out else ["--no-scaling"])
+
+
+def merge_processes(results: list[dict]) -> tuple[dict, list[tuple]]:
+    """One result of several processes' results (``--processes``): each figure's ``run_seconds`` are
+    every process's runs in turn (so the runs of two figures still pair up round by round), its
+    ``seconds`` their fastest and its ``max_abs_diff`` the largest. Returns the result and the keys
+    (technique, scene, impl, pass, threads) of figures that not every process timed (a peer that
+    ran out of memory in one), which are left out."""
+    key = lambda r: (r["technique"], r["scene"], r["impl"], r["pass"], r["threads"])  # noqa: E731
+    tables = [{key(r): r for r in res["records"]} for res in results]
+    records, dropped = [], []
+    for k, first in tables[0].items():
+        if not all(k in t for t in tables[1:]):
+            dropped.append(k)
+            continue
+        rec = dict(first)
+        rec["run_seconds"] = [s for t in tables for s in t[k].get("run_seconds", [t[k]["seconds"]])]
+        rec["seconds"] = min(rec["run_seconds"])
+        rec["msamples_per_s"] = rec["samples"] / rec["seconds"] / 1e6
+        rec["nominal_taps_per_s"] = rec["samples"] * NOMINAL_TAPS[rec["technique"]] / rec["seconds"]
+        if "max_abs_diff" in rec:
+            rec["max_abs_diff"] = max(t[k]["max_abs_diff"] for t in tables)
+        records.append(rec)
+    dropped += [k for t in tables[1:] for k in t if k not in tables[0]]
+    return {**results[0], "records": records, "processes": len(results)}, dropped
+
+
+def run_processes(args, argv: list[str]) -> dict:
+    """``--processes``: the whole run in ``args.processes`` fresh processes, one after another,
+    merged (:func:`merge_processes`), and its summaries printed over all of them."""
+    import subprocess
+    import tempfile
+
+    results = []
+    with tempfile.TemporaryDirectory(prefix="bench_samplers_") as tmp:
+        for i in range(args.processes):
+            print(f"== process {i + 1} of {args.processes}", flush=True)
+            path = Path(tmp) / f"p{i}.json"
+            done = subprocess.run([sys.executable, str(Path(__file__).resolve()), *_child_argv(argv, path, i == 0)])
+            if done.returncode != 0:
+                raise SystemExit(f"process {i + 1} of {args.processes} failed (exit {done.returncode})")
+            results.append(json.loads(path.read_text()))
+    result, dropped = merge_processes(results)
+    print(f"== the {args.processes} processes together ({args.runs} run{'s' * (args.runs > 1)} each)")
+    for k in dropped:
+        print(f"  left out: {' '.join(str(v) for v in k)} (not timed in every process)")
+    for summary in (format_peer_summary(result["records"]), format_format_summary(result["records"]), format_thread_scaling(result["records"])):
+        if summary:
+            print(summary)
+    return result
+
+
 def main(argv=None) -> int:
     args = parse(argv)
-    result = run(args)
+    result = run(args) if args.processes == 1 else run_processes(args, list(sys.argv[1:] if argv is None else argv))
     if args.json:
         from warptex.io import _atomic_output
 

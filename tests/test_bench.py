@@ -110,6 +110,33 @@ def test_limit_and_runs_give_the_c_loop_and_each_ratio_spread(tmp_path):
 
 
 @pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/ is not part of this checkout")
+def test_processes_merge_every_process_runs_into_each_ratio_spread(tmp_path):
+    """--processes 2 runs the benchmark in two fresh processes; each figure keeps the runs of both,
+    in turn, and the summary over both gives each ratio's spread over all four paired runs."""
+    result = subprocess.run(
+        [sys.executable, str(BENCH), "--quick", "--thread-counts", "2", "--threads", "2", "--peers", "numpy", "--runs", "2", "--processes", "2", "--no-scaling", "--techniques", "bilinear", "--json", str(tmp_path / "r.json")],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    assert result.stdout.count("== process ") == 2 and "== the 2 processes together (2 runs each)" in result.stdout
+    written = json.loads((tmp_path / "r.json").read_text())
+    assert written["processes"] == 2
+    records = written["records"]
+    assert {(r["scene"], r["impl"], r["pass"]) for r in records} >= {(s, i, "forward") for s in ("sphere", "random") for i in ("warptex", "numpy")}
+    assert all(len(r["run_seconds"]) == 4 and r["seconds"] == min(r["run_seconds"]) for r in records)
+    table = result.stdout[result.stdout.index("== the 2 processes together") :]
+    table = table[table.index("peers against warptex") :].splitlines()
+    for scene in ("sphere", "random"):
+        mine = next(r for r in records if r["scene"] == scene and r["impl"] == "warptex" and r["pass"] == "forward" and r["threads"] == 2)
+        peer = next(r for r in records if r["scene"] == scene and r["impl"] == "numpy" and r["pass"] == "forward")
+        ratios = [a / b for a, b in zip(peer["run_seconds"], mine["run_seconds"])]
+        row = next(line for line in table if line.split()[:2] == ["bilinear", scene])
+        assert row.split()[5:8] == [f"{min(ratios):.2f}–{max(ratios):.2f}", "/", "-"], row
+
+
+@pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/ is not part of this checkout")
 def test_call_cost_rows_time_small_calls_against_torch(tmp_path):
     pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
     result = subprocess.run([sys.executable, str(BENCH), "--call-cost", "--quick", "--calls", "2", "--json", str(tmp_path / "c.json")], capture_output=True, text=True, timeout=600)
