@@ -12,16 +12,18 @@ import pytest
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_samplers.py"
 
 
+def run_script(script, *args) -> subprocess.CompletedProcess:
+    """A benchmark script run with ``args`` in a process of its own, which must succeed (its
+    output's tails otherwise say why)."""
+    result = subprocess.run([sys.executable, str(script), *map(str, args)], capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    return result
+
+
 @pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/ is not part of this checkout")
 def test_quick_benchmark_writes_json_and_plot(tmp_path):
     out = tmp_path / "bench"
-    result = subprocess.run(
-        [sys.executable, str(BENCH), "--quick", "--threads", "4", "--thread-counts", "2", "--peers", "numpy", "--techniques", "bilinear", "triplanar", "splat4", "--json", str(tmp_path / "r.json"), "--out", str(out)],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    result = run_script(BENCH, "--quick", "--threads", "4", "--thread-counts", "2", "--peers", "numpy", "--techniques", "bilinear", "triplanar", "splat4", "--json", str(tmp_path / "r.json"), "--out", str(out))
     data = json.loads((tmp_path / "r.json").read_text())
     records = data["records"]
     for technique in ("bilinear", "triplanar", "splat4"):
@@ -47,13 +49,7 @@ def test_quick_benchmark_writes_json_and_plot(tmp_path):
 
 @pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/ is not part of this checkout")
 def test_formats_add_rows_of_compact_texels_in_the_same_rounds(tmp_path):
-    result = subprocess.run(
-        [sys.executable, str(BENCH), "--quick", "--threads", "2", "--peers", "--no-scaling", "--techniques", "bilinear", "splat4", "--formats", "float32", "unorm8", "float16", "--texture-size", "64", "--json", str(tmp_path / "r.json")],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    result = run_script(BENCH, "--quick", "--threads", "2", "--peers", "--no-scaling", "--techniques", "bilinear", "splat4", "--formats", "float32", "unorm8", "float16", "--texture-size", "64", "--json", str(tmp_path / "r.json"))
     result_json = json.loads((tmp_path / "r.json").read_text())
     records = result_json["records"]
     assert result_json["settings"]["texture_size"] == 64 and "texture: 64² RGBA with mips" in result.stdout
@@ -74,13 +70,7 @@ def test_formats_add_rows_of_compact_texels_in_the_same_rounds(tmp_path):
 def test_limit_and_runs_give_the_c_loop_and_each_ratio_spread(tmp_path):
     """--limit times the plain C loop beside the peers; --runs 2 times every row twice, and the
     summary gives each ratio as the lowest and highest of the runs' ratios."""
-    result = subprocess.run(
-        [sys.executable, str(BENCH), "--quick", "--threads", "2", "--peers", "numpy", "--limit", "--runs", "2", "--no-scaling", "--techniques", "bilinear", "--json", str(tmp_path / "r.json")],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    result = run_script(BENCH, "--quick", "--threads", "2", "--peers", "numpy", "--limit", "--runs", "2", "--no-scaling", "--techniques", "bilinear", "--json", str(tmp_path / "r.json"))
     written = json.loads((tmp_path / "r.json").read_text())
     records = written["records"]
     assert all(len(r["run_seconds"]) == 2 and r["seconds"] == min(r["run_seconds"]) for r in records)
@@ -113,13 +103,7 @@ def test_limit_and_runs_give_the_c_loop_and_each_ratio_spread(tmp_path):
 def test_processes_merge_every_process_runs_into_each_ratio_spread(tmp_path):
     """--processes 2 runs the benchmark in two fresh processes; each figure keeps the runs of both,
     in turn, and the summary over both gives each ratio's spread over all four paired runs."""
-    result = subprocess.run(
-        [sys.executable, str(BENCH), "--quick", "--thread-counts", "2", "--threads", "2", "--peers", "numpy", "--runs", "2", "--processes", "2", "--no-scaling", "--techniques", "bilinear", "--json", str(tmp_path / "r.json")],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    result = run_script(BENCH, "--quick", "--thread-counts", "2", "--threads", "2", "--peers", "numpy", "--runs", "2", "--processes", "2", "--no-scaling", "--techniques", "bilinear", "--json", str(tmp_path / "r.json"))
     assert result.stdout.count("== process ") == 2 and "== the 2 processes together (2 runs each)" in result.stdout
     written = json.loads((tmp_path / "r.json").read_text())
     assert written["processes"] == 2
@@ -139,8 +123,7 @@ def test_processes_merge_every_process_runs_into_each_ratio_spread(tmp_path):
 @pytest.mark.skipif(not BENCH.exists(), reason="benchmarks/ is not part of this checkout")
 def test_call_cost_rows_time_small_calls_against_torch(tmp_path):
     pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
-    result = subprocess.run([sys.executable, str(BENCH), "--call-cost", "--quick", "--calls", "2", "--json", str(tmp_path / "c.json")], capture_output=True, text=True, timeout=600)
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    result = run_script(BENCH, "--call-cost", "--quick", "--calls", "2", "--json", str(tmp_path / "c.json"))
     rows = json.loads((tmp_path / "c.json").read_text())["call_cost"]
     projections = [r for r in rows if r["technique"] != "sample"]
     assert {(r["technique"], r["impl"]) for r in projections} == {(f, i) for f in ("triplanar", "biplanar", "splat") for i in ("warptex", "warptex out=")}
@@ -200,8 +183,7 @@ BENCH_VIEWS = BENCH.parent / "bench_views.py"
 @pytest.mark.skipif(not BENCH_TORCH.exists(), reason="benchmarks/ is not part of this checkout")
 def test_bridge_overhead_benchmark_checks_and_reports(tmp_path):
     pytest.importorskip("torch", reason="PyTorch is not installed (pip install torch)")
-    result = subprocess.run([sys.executable, str(BENCH_TORCH), "--resolution", "32", "--texture-size", "16", "--repeats", "1", "--json", str(tmp_path / "t.json")], capture_output=True, text=True, timeout=600)
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    result = run_script(BENCH_TORCH, "--resolution", "32", "--texture-size", "16", "--repeats", "1", "--json", str(tmp_path / "t.json"))
     rows = json.loads((tmp_path / "t.json").read_text())["rows"]
     assert {(r["technique"], r["pass"]) for r in rows} == {(t, p) for t in ("triplanar", "splat") for p in ("forward", "forward+backward")}
     assert all(r["max_abs_diff"] <= 1e-5 and r["native_s"] > 0 and r["bridge_s"] > 0 for r in rows)
@@ -210,8 +192,7 @@ def test_bridge_overhead_benchmark_checks_and_reports(tmp_path):
 
 @pytest.mark.skipif(not BENCH_VIEWS.exists(), reason="benchmarks/ is not part of this checkout")
 def test_batched_views_benchmark_reports(tmp_path):
-    result = subprocess.run([sys.executable, str(BENCH_VIEWS), "--views", "2", "--resolution", "24x32", "--iters", "1", "--repeats", "1", "--json", str(tmp_path / "v.json")], capture_output=True, text=True, timeout=600)
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    result = run_script(BENCH_VIEWS, "--views", "2", "--resolution", "24x32", "--iters", "1", "--repeats", "1", "--json", str(tmp_path / "v.json"))
     rows = json.loads((tmp_path / "v.json").read_text())["rows"]
     assert rows[0]["api"] == "warptex.fit.fit_splat" and all(r["batch_s"] > 0 and r["loop_s"] > 0 for r in rows)
     assert "loop/batch" in result.stdout
@@ -289,14 +270,8 @@ def test_uv_grads_make_every_forward_backward_take_the_uvs_gradients(tmp_path):
         peers = ["torch"]
     except ImportError:
         peers = []
-    result = subprocess.run(
-        [sys.executable, str(BENCH), "--quick", "--threads", "2", "--no-scaling", "--techniques", "bilinear", "trilinear", "--uv-grads", "--texture-size", "64",
-         "--peers", *peers, "--json", str(tmp_path / "u.json")],  # fmt: skip
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    result = run_script(BENCH, "--quick", "--threads", "2", "--no-scaling", "--techniques", "bilinear", "trilinear", "--uv-grads", "--texture-size", "64",
+                        "--peers", *peers, "--json", str(tmp_path / "u.json"))  # fmt: skip
     records = json.loads((tmp_path / "u.json").read_text())["records"]
     backward = [r for r in records if r["pass"] == "forward+backward"]
     assert backward and all(r.get("uv_grads") for r in backward) and not any(r.get("uv_grads") for r in records if r["pass"] == "forward")
