@@ -59,8 +59,9 @@ and highest of the runs' ratios), so a ratio that swings across a bar between ru
 
 ``--processes 3`` runs all of that in 3 fresh processes, one after another, and gives each ratio's
 spread over every run of every process. A peer's pace can differ from one process to the next
-while warptex's does not (Dr.Jit's, by up to 1.6x on this project's hosts: docs/performance.md),
-and the rounds of one process never show that; the fresh processes do.
+while warptex's does not, and the rounds of one process never show that; the fresh processes do.
+(Dr.Jit's did, by up to 1.6x, while its peer took NumPy's arrays wherever they happened to start:
+peers/drjit_peer.py.)
 
 ``--call-cost`` times what a call costs when it computes little: ``sample`` (bilinear, a 256² RGBA
 texture) on 1, 1,024 and 65,536 random UVs, into a new output and into ``out=``, and through the
