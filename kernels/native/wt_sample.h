@@ -150,8 +150,10 @@ WT_INLINE void wt_sample_levels(const int address, const Tex& tex, const Smp& sm
         }
         // filters.sample_bilinear, and the blend of filters.sample_levels, a channel of 16 pixels at a time
         if (rows && !blend && !slopes && tex.texel_format == WT_FLOAT32) {  // the rows as loaded, blended
+            // Both loops unrolled: with the taps' loop kept, each texel went to the stack by a 16-byte
+            // store and came back four at a time by 64-byte loads that no store could forward.
             wt_f4 t[4][WT_L];
-            for (int k = 0; k < 4; ++k)
+            _Pragma("clang loop unroll(full)") for (int k = 0; k < 4; ++k)
                 _Pragma("clang loop unroll(full)") for (int l = 0; l < WT_L; ++l) t[k][l] =
                     load(index[k][l], inside[k][l]);
             wt_vf X, Y;
