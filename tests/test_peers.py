@@ -245,7 +245,7 @@ def _misaligned(a):
 def test_drjit_peer_reads_texels_as_packets_from_any_numpy_array(capfd):
     """Dr.Jit's LLVM backend uses a NumPy array in place and reads a texel's four channels with one
     packet gather only where the array starts 64-byte aligned; otherwise it gathers channel by
-    channel, up to 1.7× slower (benchmarks/peers/drjit_peer.py). The peer hands over aligned copies,
+    channel, 1.4–2× slower on the benchmark sphere (benchmarks/peers/drjit_peer.py). The peer hands over aligned copies,
     so it runs Dr.Jit's fast path whatever the allocator gave: a benchmark process used to draw
     Dr.Jit's pace at random."""
     peer = _load("drjit")["bilinear"]

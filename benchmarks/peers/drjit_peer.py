@@ -112,7 +112,6 @@ def aligned(a, dtype=np.float32) -> np.ndarray:
     return out
 
 
-
 class Chain:
     """One ``Texture2f`` per mip level of one image; ``tensors`` are the AD leaves when trained.
     ``half``: ``Texture2f16`` on half texels instead (lookups still return float32)."""
