@@ -8,9 +8,11 @@ off (``--instr-atstart=no``) through start-up, imports, compiling (the kernels c
 cache, filled by a first plain run) and a warm-up call, switches it on (``callgrind_control -i on``)
 for ``R`` more calls, and reports their instructions per sample. Instructions are not time: a cache
 miss costs many cycles and no instruction, so random access to a large texture is cheap here and
-slow on the clock. ``--cache-sim`` also has callgrind simulate the caches (its first level and its
-last, sized as this machine's) and reports their data misses per sample: how much memory traffic
-each implementation makes, though not how well the hardware overlaps it.
+slow on the clock. Warp compiles its CPU modules for the CPU it runs on, and valgrind's has AVX2
+and no AVX-512, so these count the AVX2 build of the lanes even on a host with AVX-512.
+``--cache-sim`` also has callgrind simulate the caches (its first level and its last, sized as
+this machine's) and reports their data misses per sample: how much memory traffic each
+implementation makes, though not how well the hardware overlaps it.
 
     python benchmarks/bench_instructions.py                              # every case, warptex
     python benchmarks/bench_instructions.py --cases "bilinear sphere" --peers drjit torch

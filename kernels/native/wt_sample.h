@@ -617,7 +617,8 @@ WT_INLINE void wt_sample_levels_lane(const Tex& tex, const Smp& smp, const UV& u
     float raw[2][WT_L];
     wt_rows(uv, base, count, 2, raw);
     for (int l = 0; l < WT_L; ++l) {  // texels.finite_uv_lod: a non-finite UV reads (0, 0), its output NaN
-        finite[l] = __builtin_fabsf(raw[0][l]) <= wt_float_max && __builtin_fabsf(raw[1][l]) <= wt_float_max;
+        // & rather than &&: the branch of && kept this loop scalar where the CPU has no AVX-512
+        finite[l] = (__builtin_fabsf(raw[0][l]) <= wt_float_max) & (__builtin_fabsf(raw[1][l]) <= wt_float_max);
         u[l] = finite[l] ? raw[0][l] : 0.0f;
         v[l] = finite[l] ? raw[1][l] : 0.0f;
         levels[l] = level;
