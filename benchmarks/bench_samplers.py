@@ -171,6 +171,11 @@ def samples(data: dict) -> int:
     return int((data["mask"] > 0).sum()) if "mask" in data else len(data["uv"])
 
 
+def rates(technique: str, n: int, seconds: float) -> dict:
+    """A figure's rates: samples (millions) and nominal texel taps a second, for ``n`` samples."""
+    return {"msamples_per_s": n / seconds / 1e6, "nominal_taps_per_s": n * NOMINAL_TAPS[technique] / seconds}
+
+
 # -- timing -------------------------------------------------------------------------------------------
 
 
@@ -265,7 +270,7 @@ def measure_technique(technique: str, scene: str, args, tex, cache, backends: di
 
     def record(impl, pass_, threads, seconds, **extra):
         rec = {"technique": technique, "scene": scene, "impl": impl, "pass": pass_, "device": args.device, "threads": threads, "seconds": seconds, "samples": n,
-               "msamples_per_s": n / seconds / 1e6, "nominal_taps_per_s": n * NOMINAL_TAPS[technique] / seconds, **extra}  # fmt: skip
+               **rates(technique, n, seconds), **extra}  # fmt: skip
         if args.uv_grads and pass_ == "forward+backward":
             rec["uv_grads"] = True
         records.append(rec)
@@ -794,8 +799,7 @@ def merge_processes(results: list[dict]) -> tuple[dict, list[tuple]]:
         rec = dict(first)
         rec["run_seconds"] = [s for t in tables for s in t[k].get("run_seconds", [t[k]["seconds"]])]
         rec["seconds"] = min(rec["run_seconds"])
-        rec["msamples_per_s"] = rec["samples"] / rec["seconds"] / 1e6
-        rec["nominal_taps_per_s"] = rec["samples"] * NOMINAL_TAPS[rec["technique"]] / rec["seconds"]
+        rec.update(rates(rec["technique"], rec["samples"], rec["seconds"]))
         if "max_abs_diff" in rec:
             rec["max_abs_diff"] = max(t[k]["max_abs_diff"] for t in tables)
         records.append(rec)
