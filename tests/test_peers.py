@@ -234,10 +234,11 @@ def test_limit_loop_computes_warptex_bilinear():
 
 
 def _misaligned(a):
-    """A copy of ``a`` that starts 16 bytes past a 64-byte boundary (as NumPy often hands one over)."""
-    buffer = np.empty(a.nbytes + 80, np.uint8)
-    start = (-buffer.ctypes.data % 64) + 16
-    out = buffer[start : start + a.nbytes].view(a.dtype).reshape(a.shape)
+    """A copy of ``a`` that starts 16 bytes past a 64-byte boundary (as NumPy often hands one over):
+    16 bytes into a buffer that the peer's own ``aligned`` starts on one."""
+    from peers.drjit_peer import aligned
+
+    out = aligned(np.empty(a.nbytes + 16, np.uint8), np.uint8)[16:].view(a.dtype).reshape(a.shape)
     out[...] = a
     return out
 
@@ -245,9 +246,9 @@ def _misaligned(a):
 def test_drjit_peer_reads_texels_as_packets_from_any_numpy_array(capfd):
     """Dr.Jit's LLVM backend uses a NumPy array in place and reads a texel's four channels with one
     packet gather only where the array starts 64-byte aligned; otherwise it gathers channel by
-    channel, 1.4–2× slower on the benchmark sphere (benchmarks/peers/drjit_peer.py). The peer hands over aligned copies,
-    so it runs Dr.Jit's fast path whatever the allocator gave: a benchmark process used to draw
-    Dr.Jit's pace at random."""
+    channel, 1.4–2× slower on the benchmark sphere (benchmarks/peers/drjit_peer.py). The peer
+    hands over aligned copies, so it runs Dr.Jit's fast path whatever the allocator gave: a
+    benchmark process used to draw Dr.Jit's pace at random."""
     peer = _load("drjit")["bilinear"]
     import drjit as dr
 
