@@ -358,16 +358,44 @@ def test_zero_grad_of_a_small_gradient_stays_on_one_thread(threads, monkeypatch)
 
 
 @pytest.mark.parametrize("workers", [2, 3, 4, 16])
-def test_every_worker_gets_as_many_chunks(workers):
-    """A forward launch is cut into a whole number of chunks per worker, at least
-    ``MIN_PIXELS_PER_THREAD`` pixels each (a 192 x 256 view in 3 chunks on 2 workers gave one
+def test_chunks_shrink_towards_the_end(workers):
+    """A forward launch is cut into at least a chunk a worker, ever smaller chunks (guided), and a
+    tail of equal chunks, a whole number a worker, none larger than the last guided one nor much
+    smaller than ``MIN_PIXELS_PER_THREAD`` (a 192 x 256 view in 3 chunks on 2 workers gave one
     twice the other's work)."""
     for count in (workers * _threads.MIN_PIXELS_PER_THREAD, 192 * 256, 5 * _threads.MIN_PIXELS_PER_THREAD + 7, 1 << 20):
         if count < workers * _threads.MIN_PIXELS_PER_THREAD:
             continue
-        split = _threads.Split(count, workers)
-        assert split.chunks % workers == 0 and workers <= split.chunks <= workers * _threads.CHUNKS_PER_THREAD
-        assert min(np.diff(split.bounds)) >= _threads.MIN_PIXELS_PER_THREAD
+        sizes = np.diff(_threads.Split(count, workers).bounds)
+        assert len(sizes) >= workers and sizes.sum() == count
+        assert np.all(sizes[1:] <= sizes[:-1] + LANES), sizes  # never growing (but for a lane's rounding)
+        assert sizes.min() >= _threads.MIN_PIXELS_PER_THREAD // 2, sizes
+        tail = sizes[np.abs(sizes - sizes[-1]) <= LANES]
+        assert len(tail) % workers == 0, sizes
+        assert sizes[-1] <= max(count / (_threads.GUIDED_TAIL * workers), _threads.MIN_PIXELS_PER_THREAD) + LANES, sizes
+
+
+def _makespan(sizes, speeds):
+    """When the last of workers of ``speeds`` (work a second) ends, taking chunks ``sizes`` in turn."""
+    free = [0.0] * len(speeds)
+    for size in sizes:
+        w = min(range(len(speeds)), key=lambda k: (free[k], k))
+        free[w] += size / speeds[w]
+    return max(free)
+
+
+@pytest.mark.parametrize("speeds", [(1.0, 1.0), (1.0, 0.55), (1.0, 1.0, 1.0, 0.5)])
+def test_guided_chunks_even_out_unequal_workers(speeds):
+    """Workers that run at unequal paces (a shared host's second vCPU ran whole calls at 0.55x the
+    first's) end close together, as a split of the work by their speeds would: the last chunks are
+    small. Four equal chunks on (1, 0.55) end at 1.40x that ideal."""
+    count = 1 << 20
+    sizes = np.diff(_threads.Split(count, len(speeds)).bounds).astype(float)
+    ideal = count / sum(speeds)
+    assert _makespan(sizes, speeds) <= 1.1 * ideal
+    equal = np.full(2 * len(speeds), count / (2 * len(speeds)))
+    if speeds == (1.0, 0.55):
+        assert _makespan(equal, speeds) > 1.3 * ideal  # what the guided cut removes
 
 
 def test_chunk_cuts_fall_between_lanes(rng):

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ctypes
 import itertools
+import math
 import os
 import queue
 import threading
@@ -21,14 +22,18 @@ from warptex.kernels.lanes import LANES
 
 # Below this many pixels per thread, handing work to a thread costs more than it saves.
 MIN_PIXELS_PER_THREAD = 16384
-# Chunks per thread (when the pixels allow): costs vary across an image (sky, terrain), so
-# threads take chunks from a queue rather than one fixed share each. Each launch costs ~20 us of
-# Python, partly under the GIL; with the chunks cut to equal costs (below), 2 a thread measured 2-4%
-# faster than 4 on 2 threads (bilinear on the benchmark sphere, triplanar on its terrain) and no
-# slower on the rest; 1 a thread no faster.
-CHUNKS_PER_THREAD = 2
-# Where a G-buffer's mask is known (``covered``), chunks are cut to equal estimated cost rather than
-# equal pixel counts: a pixel it does not cover costs about this much of a covered one (the lane
+# A forward launch's chunks shrink as the launch goes (guided scheduling): each holds 1 / (2 ·
+# workers) of the estimated cost left, down to 1 / (GUIDED_TAIL · workers) of the whole (or
+# MIN_PIXELS_PER_THREAD pixels, the larger), and the rest is cut into equal chunks no larger, a
+# whole number a worker. Threads take the next chunk as they finish one, so the last chunks, small,
+# even out what the estimate misses (a splat's costs vary with its layers, not with the mask) and
+# a core slower than the other (a shared host's second vCPU ran whole calls at 0.55x the first's
+# pace). Each launch costs ~20 us of Python, partly under the GIL: a 1024² launch is cut into 12
+# chunks on 2 workers, against 4 equal ones before (2 a thread, which measured 2-4% faster than 4
+# on a host with equal cores). docs/performance.md, "Threads and speed", has the guided cut's figures.
+GUIDED_TAIL = 16
+# Where a G-buffer's mask is known (``covered``), chunks are cut by estimated cost rather than by
+# pixel counts: a pixel it does not cover costs about this much of a covered one (the lane
 # kernels, which skip lanes of sky: 0.10-0.11 for triplanar and splat4 on the benchmark's sphere and
 # terrain) ...
 UNCOVERED_COST = 0.1
@@ -213,16 +218,15 @@ def workers_for(device, count: int, threads: int | None) -> int:
 
 
 class Split:
-    """``count`` pixels cut into contiguous chunks, up to :data:`CHUNKS_PER_THREAD` per worker (a
-    worker whose chunks are cheap, e.g. sky pixels, takes more of them as workers finish), run by
-    ``workers`` threads taking the next chunk. With a G-buffer's mask (``covered``), the chunks hold
-    equal estimated costs (:func:`bounds`). For a forward launch, whose pixels are independent: a
-    backward pass cuts its chunks by the pixels alone (:func:`grad_bounds`)."""
+    """``count`` pixels cut into contiguous chunks that shrink towards the end (:data:`GUIDED_TAIL`),
+    run by ``workers`` threads taking the next chunk as they finish one. With a G-buffer's mask
+    (``covered``), the chunks' sizes are shares of the estimated cost (:func:`bounds`). For a
+    forward launch, whose pixels are independent: a backward pass cuts its chunks by the pixels
+    alone (:func:`grad_bounds`)."""
 
     def __init__(self, count: int, workers: int, covered: wp.array | None = None):
         self.count, self.workers = count, workers
-        chunks = workers * max(1, min(count // (MIN_PIXELS_PER_THREAD * workers), CHUNKS_PER_THREAD))
-        self.bounds = bounds(count, chunks, covered)
+        self.bounds = bounds(count, 0, covered, guided_cuts(workers, max(MIN_PIXELS_PER_THREAD / max(count, 1), 1.0 / (GUIDED_TAIL * workers))))
 
     @property
     def chunks(self) -> int:
@@ -256,19 +260,35 @@ def grad_bounds(count: int, covered: wp.array | None = None, shared_bytes: int |
     return bounds(count, max(1, min(count // pixels, MAX_GRAD_CHUNKS)), covered)
 
 
-def bounds(count: int, chunks: int, covered: wp.array | None) -> list[int]:
-    """The bounds of ``count`` pixels cut into ``chunks`` contiguous chunks: equal pixel counts, or,
-    given the mask ``covered``, equal costs (a covered pixel costs 1, another
-    :data:`UNCOVERED_COST`), cut at whole blocks of :data:`COVERAGE_BLOCK` pixels. Every cut is a
-    multiple of :data:`~warptex.kernels.lanes.LANES`, so that a lane kernel's lanes never straddle
-    two chunks (fewer chunks where ``count`` is too small for that). Deterministic: a function of
-    the pixels and the mask alone.
+def guided_cuts(workers: int, smallest: float) -> list[float]:
+    """The cuts (shares of the whole, increasing, in (0, 1)) of a launch's chunks for ``workers``
+    taking them in turn: each chunk ``1 / (2 · workers)`` of what is left, while that is at least
+    ``smallest``; the rest in equal chunks of at most ``smallest``, as many as a whole number a
+    worker allows."""
+    cuts, done = [], 0.0
+    while (1.0 - done) / (2 * workers) >= smallest:
+        done += (1.0 - done) / (2 * workers)
+        cuts.append(done)
+    tail = workers * math.ceil((1.0 - done) / (smallest * workers) - 1e-9)
+    cuts += [done + (1.0 - done) * k / tail for k in range(1, tail)]
+    return cuts
+
+
+def bounds(count: int, chunks: int, covered: wp.array | None, cuts: list[float] | None = None) -> list[int]:
+    """The bounds of ``count`` pixels cut into ``chunks`` contiguous chunks of equal pixel counts,
+    or, given the mask ``covered``, equal costs (a covered pixel costs 1, another
+    :data:`UNCOVERED_COST`), cut at whole blocks of :data:`COVERAGE_BLOCK` pixels; given ``cuts``
+    (shares of the whole, increasing, :func:`guided_cuts`), cut there rather than into equal
+    chunks. Every cut is a multiple of :data:`~warptex.kernels.lanes.LANES`, so that a lane
+    kernel's lanes never straddle two chunks (fewer chunks where ``count`` is too small for that).
+    Deterministic: a function of the pixels, the mask and the cuts alone.
 
     The covered pixels of a block are counted as the sum of its mask, exact for the 0/1 masks the
     rasteriser and ``GBuffer.from_arrays`` write (and 2.5× faster than counting non-zeros: 1.3 ms
     for 4M pixels); other values only skew the estimate, never the result."""
-    if covered is None or count < 2 * COVERAGE_BLOCK * chunks:
-        return sorted({0, count, *(count * k // chunks // LANES * LANES for k in range(1, chunks))})
+    shares = np.asarray(cuts, dtype=np.float64) if cuts is not None else np.arange(1, chunks) / chunks
+    if covered is None or count < 2 * COVERAGE_BLOCK * (len(shares) + 1):
+        return sorted({0, count, *(int(count * f) // LANES * LANES for f in shares)})
     mask = covered.numpy().reshape(-1)
     full = count // COVERAGE_BLOCK * COVERAGE_BLOCK
     shaded = mask[:full].reshape(-1, COVERAGE_BLOCK).sum(axis=1)
@@ -278,7 +298,7 @@ def bounds(count: int, chunks: int, covered: wp.array | None) -> list[int]:
         sizes = np.append(sizes, count - full)
     shaded = np.clip(np.nan_to_num(shaded), 0.0, sizes)
     cost = np.cumsum(shaded + UNCOVERED_COST * (sizes - shaded))
-    ends = np.minimum((np.searchsorted(cost, cost[-1] * np.arange(1, chunks) / chunks) + 1) * COVERAGE_BLOCK, count)
+    ends = np.minimum((np.searchsorted(cost, cost[-1] * shares) + 1) * COVERAGE_BLOCK, count)
     return sorted({0, count, *(int(e) for e in ends)})  # a chunk never empty (bounds distinct)
 
 
