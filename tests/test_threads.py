@@ -360,9 +360,9 @@ def test_zero_grad_of_a_small_gradient_stays_on_one_thread(threads, monkeypatch)
 @pytest.mark.parametrize("workers", [2, 3, 4, 16])
 def test_chunks_shrink_towards_the_end(workers):
     """A forward launch is cut into at least a chunk a worker, ever smaller chunks (guided), and a
-    tail of equal chunks, a whole number a worker, none larger than the last guided one nor much
-    smaller than ``MIN_PIXELS_PER_THREAD`` (a 192 x 256 view in 3 chunks on 2 workers gave one
-    twice the other's work)."""
+    tail of equal chunks, a whole number a worker, each at most ``1 / (GUIDED_TAIL · workers)`` of
+    the whole or ``MIN_PIXELS_PER_THREAD`` pixels, and none under half of those (a 192 x 256 view
+    in 3 chunks on 2 workers gave one twice the other's work)."""
     for count in (workers * _threads.MIN_PIXELS_PER_THREAD, 192 * 256, 5 * _threads.MIN_PIXELS_PER_THREAD + 7, 1 << 20):
         if count < workers * _threads.MIN_PIXELS_PER_THREAD:
             continue

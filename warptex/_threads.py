@@ -226,7 +226,8 @@ class Split:
 
     def __init__(self, count: int, workers: int, covered: wp.array | None = None):
         self.count, self.workers = count, workers
-        self.bounds = bounds(count, 0, covered, guided_cuts(workers, max(MIN_PIXELS_PER_THREAD / max(count, 1), 1.0 / (GUIDED_TAIL * workers))))
+        cuts = guided_cuts(workers, max(MIN_PIXELS_PER_THREAD / max(count, 1), 1.0 / (GUIDED_TAIL * workers)))
+        self.bounds = bounds(count, len(cuts) + 1, covered, cuts)
 
     @property
     def chunks(self) -> int:
@@ -288,7 +289,8 @@ def bounds(count: int, chunks: int, covered: wp.array | None, cuts: list[float] 
     for 4M pixels); other values only skew the estimate, never the result."""
     shares = np.asarray(cuts, dtype=np.float64) if cuts is not None else np.arange(1, chunks) / chunks
     if covered is None or count < 2 * COVERAGE_BLOCK * (len(shares) + 1):
-        return sorted({0, count, *(int(count * f) // LANES * LANES for f in shares)})
+        ends = [int(count * f) for f in shares] if cuts is not None else [count * k // chunks for k in range(1, chunks)]
+        return sorted({0, count, *(e // LANES * LANES for e in ends)})
     mask = covered.numpy().reshape(-1)
     full = count // COVERAGE_BLOCK * COVERAGE_BLOCK
     shaded = mask[:full].reshape(-1, COVERAGE_BLOCK).sum(axis=1)
