@@ -9,6 +9,8 @@ launches whose pixel count is not a multiple of the lane width.
 import dataclasses
 import os
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -1259,3 +1261,48 @@ def test_one_lane_decision():
     assert lanes_for(picky, "cpu") is lanes  # no args: as compiled ahead, any launch
     if wp.is_cuda_available():
         assert lanes_for(plain, "cuda:0") is None and plain.launched("cuda:0") is forward
+
+
+#: The tests run again at the width this host does not use: those that reach each of the lanes'
+#: width-specific code (the transposes, the bilinear blend of rows, the 8-bit byte shuffle).
+OTHER_WIDTH_TESTS = (
+    "test_sample_lanes_give_the_one_pixel_bits or test_triplanar_normal_lanes_give_the_one_pixel_bits"
+    " or test_splat_lanes_give_the_one_pixel_bits or test_sample_gradient_lanes_add_the_one_pixel_sums"
+    " or test_a_compact_texture_samples_as_its_decoded_float_twin"
+)
+
+
+def test_lanes_of_the_other_width_give_the_one_pixel_bits():
+    """The lanes are 16 pixels wide with AVX-512 and 8 without (``host_lanes``); every test above runs
+    this host's width, and those of ``OTHER_WIDTH_TESTS`` run here at the other one (``WARPTEX_LANES``),
+    in a process of their own (the width is fixed at import), so that both widths' C++ stays the
+    scalar kernels' bits on any host."""
+    other = 8 if LANES == 16 else 16
+    here = os.path.dirname(os.path.abspath(__file__))
+    run = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-x", "-k", OTHER_WIDTH_TESTS,
+         os.path.join(here, "test_lanes.py"), os.path.join(here, "test_formats.py")],
+        env=dict(os.environ, WARPTEX_LANES=str(other)), capture_output=True, text=True, timeout=1800)
+    tail = (run.stdout + run.stderr)[-6000:]
+    assert run.returncode == 0, f"at lanes of {other}:\n{tail}"
+    passed = re.search(r"(\d+) passed", run.stdout)
+    assert passed and int(passed.group(1)) >= 100, f"at lanes of {other}, too few tests ran:\n{tail}"
+
+
+def test_the_lane_width_is_the_hosts_or_asked(monkeypatch):
+    """``WARPTEX_LANES`` picks 8 or 16 and nothing else; unset, the host's SIMD decides."""
+    from warptex.kernels.lanes import host_lanes
+
+    for width in (8, 16):
+        monkeypatch.setenv("WARPTEX_LANES", str(width))
+        assert host_lanes() == width
+    for bad in ("4", "32", "sixteen"):
+        monkeypatch.setenv("WARPTEX_LANES", bad)
+        with pytest.raises(ValueError, match="8 or 16"):
+            host_lanes()
+    monkeypatch.delenv("WARPTEX_LANES")
+    assert host_lanes() in (8, 16)
+    if os.path.exists("/proc/cpuinfo"):
+        with open("/proc/cpuinfo") as f:
+            avx512 = any(line.startswith("flags") and "avx512f" in line.split() for line in f)
+        assert host_lanes() == (16 if avx512 else 8)

@@ -418,7 +418,7 @@ def _lod_log2(x: np.ndarray) -> np.ndarray:
 
 
 def test_lod_log2_is_log2_to_the_nearest_float_but_at_its_hardest_cases(rng):
-    """The CPU's own log2 (``wt_log2`` of native/wt_log2.h, which the CPU lanes compute 16 at a time): every float
+    """The CPU's own log2 (``wt_log2`` of native/wt_log2.h, which the CPU lanes compute a lane at a time): every float
     in [0.5, 2) (its 16 subintervals, both sides of 1) and random ones from 1e-38 to 3e38, against
     float64 NumPy rounded to float32: within one ulp everywhere, the nearest float for 99.95% of the
     first and 99.998% of the second (glibc's log2f here: 99.0% and 99.98%), exact at powers of two."""

@@ -84,7 +84,7 @@ def terrain_scene():
 
 @pytest.mark.parametrize("technique", ["splat", "triplanar", "biplanar", "stochastic triplanar", "triplanar_normal", "sample"])
 def test_every_technique_gives_a_tiles_rows_of_the_whole_image(terrain_scene, technique):
-    """Techniques compute each pixel from its own G-buffer entries, on lanes of 16 pixels that
+    """Techniques compute each pixel from its own G-buffer entries, on lanes of 8 or 16 pixels that
     start anywhere in a tile: a band's output is the whole image's rows, bit for bit."""
     mesh, camera, material = terrain_scene
     rng = np.random.default_rng(3)

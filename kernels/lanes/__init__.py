@@ -3,9 +3,9 @@
 Warp compiles a CPU launch as a scalar loop, one launch index at a time, and LLVM does not
 vectorise across indices (Warp issues #1309, #1358, #1954): rewriting a scalar body as an unrolled
 loop over 16 pixels inside one Warp launch index measured no faster here. A ``wp.func_native``
-function written for a lane, in phases, is: its UV arithmetic runs 16 lanes wide in SIMD
-registers, and all the texel addresses of a lane are known before the first load, so the loads
-overlap.
+function written for a lane, in phases, is: its UV arithmetic runs a lane wide in SIMD
+registers (16 pixels with AVX-512, 8 without: :func:`host_lanes`), and all the texel addresses of a
+lane are known before the first load, so the loads overlap.
 
 Each technique's lane parts sit beside its scalar ones, by name: the lane bodies (``@wp.func``
 that read a lane's pixels, call native functions and write its outputs) in this package's module
@@ -24,11 +24,34 @@ thread there, from the scalar kernels). The lane kernels themselves are made by
 :func:`warptex.kernels.family.runs_lanes`.
 """
 
+import os
+
 import warp as wp
 
+
+def host_lanes() -> int:
+    """The lane width for this host: 16 where the CPU has AVX-512 (a lane vector is one 512-bit
+    register), 8 elsewhere. With AVX2, 16 took two registers a vector and the lanes ran short of
+    registers: 8 was 1.1-1.3× faster on coherent views (the sphere and terrain rows) and 0.85-0.95×
+    on random UVs' forward (docs/performance.md, "Lanes of 8 without AVX-512").
+    ``WARPTEX_LANES`` (8 or 16) overrides it; both widths compute the same bits, the scalar
+    kernels'."""
+    asked = os.environ.get("WARPTEX_LANES", "").strip()
+    if asked:
+        if asked not in ("8", "16"):
+            raise ValueError(f"WARPTEX_LANES={asked!r}: the lanes are 8 or 16 pixels wide")
+        return int(asked)
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
+            flags = next((line.split(":", 1)[1].split() for line in f if line.startswith("flags")), [])
+    except OSError:  # not Linux: Warp still compiles for the host, and 8 suits 128- and 256-bit SIMD
+        return 8
+    return 16 if "avx512f" in flags else 8
+
+
 #: Pixels per lane: one launch index of a lane kernel computes pixels ``LANES·t .. LANES·t + LANES - 1``
-#: (fewer in a launch's last lane). 16 float32 lanes fill an AVX-512 register.
-LANES = 16
+#: (fewer in a launch's last lane): :func:`host_lanes`, fixed at import.
+LANES = host_lanes()
 
 #: A lane of floats or ints (one per pixel), and a lane of RGBA values (a row per pixel).
 lane_floats = wp.types.vector(length=LANES, dtype=wp.float32)

@@ -1,7 +1,7 @@
 """Normal mapping's arithmetic for a lane of pixels on the CPU (:mod:`.`, ``native/wt_normals.h``): each projection's
 sample decoded, mirror-fixed, blended with the unit surface normal and swizzled back, the
 projections blended by their weights and the blend normalised in world space, and the gradient of
-all that in the samples, 16 pixels wide in SIMD registers where Warp's scalar code took a pixel at
+all that in the samples, a lane wide in SIMD registers where Warp's scalar code took a pixel at
 a time (it was most of normal mapping's time once the texture reads had lanes).
 
 Every helper computes what the scalar blocks of :mod:`.normals` and :mod:`.triplanar` compute,

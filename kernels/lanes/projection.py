@@ -1,5 +1,5 @@
 """Plane projections for a lane of pixels on the CPU (:mod:`.lanes`): what each pixel of a triplanar
-lane reads from each projection, its UV, LOD and weight, computed 16 pixels at a time.
+lane reads from each projection, its UV, LOD and weight, computed a lane at a time.
 
 The scalar blocks of :mod:`.projection` and :mod:`.footprint` run one pixel at a time through Warp's
 code, with a branch per projection and per test; in a triplanar lane on the benchmark's sphere they
@@ -8,7 +8,7 @@ took 59% of the time (timed with the TSC inside the kernel), the texture reads t
 functions or their exact vector twins, no contraction), on clang vectors of a value per lane pixel
 (the weights' exponent and the other launch-wide choices are tested once, outside them; loops over
 lanes that the compiler was left to vectorise did not all vectorise), so the reads are the scalar
-blocks' bits; the LODs' ``log2`` is :func:`~.footprint.lod_log2`'s, 16 at a time. It covers every
+blocks' bits; the LODs' ``log2`` is :func:`~.footprint.lod_log2`'s, a lane at a time. It covers every
 filter (the anisotropic footprint's branches as selects) and both weights on the vectors: biplanar's
 branches, which pick each pixel's axes, as selects too (pixel by pixel in C++ they took half a
 biplanar lane's reads; the rare pairs whose powers underflow still go pixel by pixel).

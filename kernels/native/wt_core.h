@@ -165,16 +165,23 @@ template <class A> WT_INLINE void wt_row_vectors(const A& a, int base, int count
     for (int d = 0; d < dims; ++d) __builtin_memcpy(&out[d], rows[d], sizeof(wt_vf));
 }
 
-// Sixteen RGBA rows (a lane's texels) as four vectors of a channel per lane pixel, and back: the
-// blends then run 16 pixels wide, not a pixel's 4 channels at a time (two-source permutes).
-static_assert(WT_L == 16, "the transposes below are written for lanes of 16");
-// Pixels 4K .. 4K + 3 of a lane's RGBA rows t, RGBA each, as one vector: the transpose's first step,
-// and what a bilinear blend of rows reads (wt_bilinear_quad).
+// A lane's RGBA rows (wt_f4 each) as four vectors of a channel per lane pixel, and back: the blends
+// then run a lane wide, not a pixel's 4 channels at a time (two-source permutes). WT_Q pixels'
+// rows fill one vector (a quad: 4 pixels at 16 lanes, 2 at 8).
+static_assert(WT_L == 16 || WT_L == 8, "the transposes below are written for lanes of 16 and 8");
+constexpr int WT_Q = WT_L / 4;
+// Pixels WT_Q·K .. WT_Q·K + WT_Q - 1 of a lane's RGBA rows t, RGBA each, as one vector: the
+// transpose's first step, and what a bilinear blend of rows reads (wt_bilinear_quad).
 template <int K> WT_INLINE wt_vf wt_quad(const wt_f4* t) {
+#if WT_L == 16
     const wt_f8 lo = __builtin_shufflevector(t[4 * K], t[4 * K + 1], 0, 1, 2, 3, 4, 5, 6, 7);
     const wt_f8 hi = __builtin_shufflevector(t[4 * K + 2], t[4 * K + 3], 0, 1, 2, 3, 4, 5, 6, 7);
     return __builtin_shufflevector(lo, hi, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+#else
+    return __builtin_shufflevector(t[2 * K], t[2 * K + 1], 0, 1, 2, 3, 4, 5, 6, 7);
+#endif
 }
+#if WT_L == 16
 WT_INLINE void wt_channels(const wt_f4* t, wt_vf* ch) {
     const wt_vf q[4] = {wt_quad<0>(t), wt_quad<1>(t), wt_quad<2>(t), wt_quad<3>(t)};
     const wt_vf rg0 = __builtin_shufflevector(q[0], q[1], 0, 4, 8, 12, 16, 20, 24, 28, 1, 5, 9, 13, 17, 21, 25, 29);
@@ -207,6 +214,36 @@ WT_INLINE void wt_rows_of_channels(const wt_vf* ch, wt_f4* t) {
     }
 }
 
+#else
+WT_INLINE void wt_channels(const wt_f4* t, wt_vf* ch) {
+    const wt_vf q[4] = {wt_quad<0>(t), wt_quad<1>(t), wt_quad<2>(t), wt_quad<3>(t)};
+    const wt_vf rg0 = __builtin_shufflevector(q[0], q[1], 0, 4, 8, 12, 1, 5, 9, 13);
+    const wt_vf ba0 = __builtin_shufflevector(q[0], q[1], 2, 6, 10, 14, 3, 7, 11, 15);
+    const wt_vf rg1 = __builtin_shufflevector(q[2], q[3], 0, 4, 8, 12, 1, 5, 9, 13);
+    const wt_vf ba1 = __builtin_shufflevector(q[2], q[3], 2, 6, 10, 14, 3, 7, 11, 15);
+    ch[0] = __builtin_shufflevector(rg0, rg1, 0, 1, 2, 3, 8, 9, 10, 11);
+    ch[1] = __builtin_shufflevector(rg0, rg1, 4, 5, 6, 7, 12, 13, 14, 15);
+    ch[2] = __builtin_shufflevector(ba0, ba1, 0, 1, 2, 3, 8, 9, 10, 11);
+    ch[3] = __builtin_shufflevector(ba0, ba1, 4, 5, 6, 7, 12, 13, 14, 15);
+}
+WT_INLINE void wt_rows_of_channels(const wt_vf* ch, wt_f4* t) {
+    // r, g of pixels 0 .. 3, then 4 .. 7; b, a likewise
+    const wt_vf rg0 = __builtin_shufflevector(ch[0], ch[1], 0, 1, 2, 3, 8, 9, 10, 11);
+    const wt_vf rg1 = __builtin_shufflevector(ch[0], ch[1], 4, 5, 6, 7, 12, 13, 14, 15);
+    const wt_vf ba0 = __builtin_shufflevector(ch[2], ch[3], 0, 1, 2, 3, 8, 9, 10, 11);
+    const wt_vf ba1 = __builtin_shufflevector(ch[2], ch[3], 4, 5, 6, 7, 12, 13, 14, 15);
+    wt_vf q[4];
+    q[0] = __builtin_shufflevector(rg0, ba0, 0, 4, 8, 12, 1, 5, 9, 13);
+    q[1] = __builtin_shufflevector(rg0, ba0, 2, 6, 10, 14, 3, 7, 11, 15);
+    q[2] = __builtin_shufflevector(rg1, ba1, 0, 4, 8, 12, 1, 5, 9, 13);
+    q[3] = __builtin_shufflevector(rg1, ba1, 2, 6, 10, 14, 3, 7, 11, 15);
+    for (int k = 0; k < 4; ++k) {
+        t[2 * k] = __builtin_shufflevector(q[k], q[k], 0, 1, 2, 3);
+        t[2 * k + 1] = __builtin_shufflevector(q[k], q[k], 4, 5, 6, 7);
+    }
+}
+#endif
+
 // The size (w, h) and offset of each lane's level k[l] of tex; read once where every lane reads
 // one level, as neighbouring pixels mostly do (per lane, the reads are AVX-512 gathers).
 // Whether every lane reads one level is asked of the whole vector: a loop over k[1..] compiled to
@@ -221,7 +258,7 @@ template <class Tex> WT_INLINE void wt_level_sizes(const Tex& tex, const int* k,
         for (int l = 0; l < WT_L; ++l) w[l] = w0, h[l] = h0, start[l] = start0;
         return;
     }
-#if defined(__AVX512F__)
+#if defined(__AVX512F__) && WT_L == 16
     // Up to 16 levels (a 32768² texture has 16): each table in one register, a lane's entry picked
     // by a permute (the loop below compiles to gathers, slow on AMD's AVX-512).
     if (tex.num_levels <= 16 && tex.level_width.strides[0] == 4 && tex.level_height.strides[0] == 4 &&

@@ -1,6 +1,6 @@
 // Normal mapping's arithmetic for a lane of pixels: each projection's sample decoded, mirror-fixed,
 // blended with the unit surface normal and swizzled back, the projections blended by their weights
-// and the blend normalised in world space, and the gradient of all that in the samples, 16 pixels
+// and the blend normalised in world space, and the gradient of all that in the samples, a lane
 // wide. Each function computes what the scalar blocks of warptex.kernels.normals and .triplanar
 // compute, operation for operation and in the same order (Warp's wp::mul of a matrix and a vector
 // column by column; wp::length and wp::dot as Warp writes them; each branch computed in every lane

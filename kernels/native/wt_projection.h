@@ -1,5 +1,5 @@
 // Plane projections for a lane of pixels: what each pixel of a triplanar lane reads from each
-// projection, its UV, LOD and weight, 16 pixels at a time. The scalar blocks of
+// projection, its UV, LOD and weight, a lane at a time. The scalar blocks of
 // warptex.kernels.projection and .footprint restated operation for operation (Warp's own wp::
 // functions or their exact vector twins, no contraction) on clang vectors of a value per lane pixel
 // (the weights' exponent and the other launch-wide choices are tested once, outside them), so the

@@ -5,7 +5,6 @@
 #include "wt_core.h"
 #include "wt_footprint.h"
 
-static_assert(WT_L == 16, "wt_unorm8_channels: its byte shuffle is written for 16 lane pixels");
 typedef unsigned char wt_vb __attribute__((ext_vector_type(4 * WT_L)));  // a lane's packed RGBA8 texels
 
 // The texels at index[l] of a unorm8 texture (the border colour where a border-mode read is not
@@ -27,12 +26,18 @@ template <class Tex> WT_INLINE void wt_unorm8_channels(const Tex& tex, const int
     // byte shuffle (byte c of each, zero-extended).
     const float hi = 1.0f / 255.0f, lo = (float)(1.0 / 255.0 - (double)hi);
     const wt_vb zero = {};
-#define WT_BYTE(c, l) 4 * l + c, 64, 64, 64
+#define WT_BYTE(c, l) 4 * l + c, 4 * WT_L, 4 * WT_L, 4 * WT_L
+#if WT_L == 16
 #define WT_CHANNEL(c)                                                                                                  \
     (wt_vi) __builtin_shufflevector(P, zero, WT_BYTE(c, 0), WT_BYTE(c, 1), WT_BYTE(c, 2), WT_BYTE(c, 3),               \
                                     WT_BYTE(c, 4), WT_BYTE(c, 5), WT_BYTE(c, 6), WT_BYTE(c, 7), WT_BYTE(c, 8),         \
                                     WT_BYTE(c, 9), WT_BYTE(c, 10), WT_BYTE(c, 11), WT_BYTE(c, 12), WT_BYTE(c, 13),     \
                                     WT_BYTE(c, 14), WT_BYTE(c, 15))
+#else
+#define WT_CHANNEL(c)                                                                                                  \
+    (wt_vi) __builtin_shufflevector(P, zero, WT_BYTE(c, 0), WT_BYTE(c, 1), WT_BYTE(c, 2), WT_BYTE(c, 3),               \
+                                    WT_BYTE(c, 4), WT_BYTE(c, 5), WT_BYTE(c, 6), WT_BYTE(c, 7))
+#endif
     const wt_vi codes[4] = {WT_CHANNEL(0), WT_CHANNEL(1), WT_CHANNEL(2), WT_CHANNEL(3)};
 #undef WT_CHANNEL
 #undef WT_BYTE
@@ -54,22 +59,26 @@ struct wt_level_slopes {
     wt_vf *du, *dv, *dlod;
 };
 
-// w[4K] .. w[4K + 3], each four times, beside the rows of pixels 4K .. 4K + 3 (wt_quad): a lane's
-// bilinear blend a row at a time (wt_bilinear_quad).
+// w[WT_Q·K] .. w[WT_Q·K + WT_Q - 1], each four times, beside the rows of those pixels (wt_quad): a
+// lane's bilinear blend a row at a time (wt_bilinear_quad).
 template <int K> WT_INLINE wt_vf wt_quad_weights(wt_vf w) {
+#if WT_L == 16
     return __builtin_shufflevector(w, w, 4 * K, 4 * K, 4 * K, 4 * K, 4 * K + 1, 4 * K + 1, 4 * K + 1, 4 * K + 1,
                                    4 * K + 2, 4 * K + 2, 4 * K + 2, 4 * K + 2, 4 * K + 3, 4 * K + 3, 4 * K + 3,
                                    4 * K + 3);
+#else
+    return __builtin_shufflevector(w, w, 2 * K, 2 * K, 2 * K, 2 * K, 2 * K + 1, 2 * K + 1, 2 * K + 1, 2 * K + 1);
+#endif
 }
-// filters.sample_bilinear of pixels 4K .. 4K + 3 into their rows, from the rows of their four taps
-// (taps[k][l]) and the weights FX, FY: each channel's operations as the channel vectors' blend in
-// wt_sample_levels, so the bits are its.
+// filters.sample_bilinear of pixels WT_Q·K .. WT_Q·K + WT_Q - 1 into their rows, from the rows of
+// their four taps (taps[k][l]) and the weights FX, FY: each channel's operations as the channel
+// vectors' blend in wt_sample_levels, so the bits are its.
 template <int K> WT_INLINE void wt_bilinear_quad(const wt_f4 (*taps)[WT_L], wt_vf FX, wt_vf FY, wt_f4* rows) {
     const wt_vf fx = wt_quad_weights<K>(FX), fy = wt_quad_weights<K>(FY), gx = 1.0f - fx, gy = 1.0f - fy;
     const wt_vf top = wt_quad<K>(taps[0]) * gx + wt_quad<K>(taps[1]) * fx;
     const wt_vf bottom = wt_quad<K>(taps[2]) * gx + wt_quad<K>(taps[3]) * fx;
     const wt_vf value = top * gy + bottom * fy;
-    __builtin_memcpy(rows + 4 * K, &value, sizeof(value));
+    __builtin_memcpy(rows + WT_Q * K, &value, sizeof(value));
 }
 
 // res[c][l] = filters.sample_levels(tex, layer[l], (u[l], v[l]), level[l], fraction[l], smp)[c] for
@@ -148,7 +157,7 @@ WT_INLINE void wt_sample_levels(const int address, const Tex& tex, const Smp& sm
             fx[l] = x - x0;
             fy[l] = y - y0;
         }
-        // filters.sample_bilinear, and the blend of filters.sample_levels, a channel of 16 pixels at a time
+        // filters.sample_bilinear, and the blend of filters.sample_levels, a channel of a lane at a time
         if (rows && !blend && !slopes && tex.texel_format == WT_FLOAT32) {  // the rows as loaded, blended
             // Both loops unrolled: with the taps' loop kept, each texel went to the stack by a 16-byte
             // store and came back four at a time by 64-byte loads that no store could forward.
@@ -632,7 +641,7 @@ WT_INLINE void wt_sample_levels_lane(const Tex& tex, const Smp& smp, const UV& u
     // The next lane's texels, first, in a compact format, where this lane's first and last pixels
     // are further apart than it has pixels, in the level's rows (random UVs, a minified level): a
     // coherent lane's texels are in the cache or on the hardware prefetcher's stream, and hints for
-    // them took 10-25% more time for a cached bilinear lookup. (The spread of all 16 lanes, or the
+    // them took 10-25% more time for a cached bilinear lookup. (The spread of all the lane's pixels, or the
     // call inlined, cost a coherent lookup 5 instructions a sample.) float32's 16-byte texels
     // gained nothing from them, and an earlier prefetch of the next lane's rows cost float32 26% on
     // another host (docs/performance.md).

@@ -113,7 +113,7 @@ WT_INLINE void wt_blend_backward_lane8(const Params& params, const Surface& surf
                                        const wt_lane_weights8& w1s, const wt_lane_weights8& rs, const Adj& adj,
                                        const Saved& saved, const Tex& maps, const Grad& grad_maps, const Smp& map_smp,
                                        const UV& uv0, wt_lane_grads8& out) {
-    // The lane's 16 pixels at once, a vector of a value per pixel for each of the scalar block's
+    // The lane's pixels at once, a vector of a value per pixel for each of the scalar block's
     // values: the same operations on each pixel's values in the same order, so the same bits. Pixel
     // by pixel (each pixel's chains of dependent adds and divides), it was 39% of the splat gradient
     // lane's samples under perf.

@@ -1,5 +1,5 @@
 // Splat layers for a lane of pixels: what each lane pixel reads of a layer (splat_layers.layer_read
-// restated: its UV, footprint and weight of each read, 16 pixels at a time), the layer's texels read
+// restated: its UV, footprint and weight of each read, a lane at a time), the layer's texels read
 // over those footprints, and their gradients added into the layer's texels.
 #pragma once
 #include "wt_config.h"
@@ -13,7 +13,7 @@
 // (face layers change only the array layer a read samples: wt_read_layers):
 // splat_layers.layer_read's UV, footprint and weight of each read k at the pixel's
 // point (its UV0 and their derivatives, or its surface; tri_w: its triplanar weights), into the
-// rows of a lane_reads matrix (0 for the other pixels), 16 pixels at a time. The rows of the reads
+// rows of a lane_reads matrix (0 for the other pixels), a lane at a time. The rows of the reads
 // a layer does not have (1 and 2 but with the triplanar projection) are left as they are: its
 // callers read only the reads it has.
 // twin: splat_layers.layer_read
@@ -317,7 +317,7 @@ WT_OUTLINE wt_lane_read_rows wt_layer_reads_outlined(const Tex& tex, const Reads
 // lanes.splat_layers.scatter_layer_lane: splat_layers.scatter_layer of the gradients g[l] of layer j's
 // reads of tex (wt_layer_reads_into) into grad, pixel by pixel and read by read: w · g per projection
 // where triplanar, g itself for the one read of the other projections (wt_scatter_lod: where a read
-// has several taps, the anisotropic filter's, pixel by pixel, each read's taps 16 at a time).
+// has several taps, the anisotropic filter's, pixel by pixel, each read's taps a lane at a time).
 // twin: splat_layers._layer_reads:scatter_layer
 template <class Tex, class Grad, class Reads, class Floats, class UV, class Surface, class TriW>
 WT_INLINE void wt_scatter_layer_lane(const Tex& tex, const Grad& grad, const Reads& reads, int j,
