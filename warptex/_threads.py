@@ -279,17 +279,16 @@ def bounds(count: int, chunks: int, covered: wp.array | None, cuts: list[float] 
     """The bounds of ``count`` pixels cut into ``chunks`` contiguous chunks of equal pixel counts,
     or, given the mask ``covered``, equal costs (a covered pixel costs 1, another
     :data:`UNCOVERED_COST`), cut at whole blocks of :data:`COVERAGE_BLOCK` pixels; given ``cuts``
-    (shares of the whole, increasing, :func:`guided_cuts`), cut there rather than into equal
-    chunks. Every cut is a multiple of :data:`~warptex.kernels.lanes.LANES`, so that a lane
+    (``chunks - 1`` shares of the whole, increasing, :func:`guided_cuts`), cut there rather than
+    into equal chunks. Every cut is a multiple of :data:`~warptex.kernels.lanes.LANES`, so that a lane
     kernel's lanes never straddle two chunks (fewer chunks where ``count`` is too small for that).
     Deterministic: a function of the pixels, the mask and the cuts alone.
 
     The covered pixels of a block are counted as the sum of its mask, exact for the 0/1 masks the
     rasteriser and ``GBuffer.from_arrays`` write (and 2.5× faster than counting non-zeros: 1.3 ms
     for 4M pixels); other values only skew the estimate, never the result."""
-    shares = np.asarray(cuts, dtype=np.float64) if cuts is not None else np.arange(1, chunks) / chunks
-    if covered is None or count < 2 * COVERAGE_BLOCK * (len(shares) + 1):
-        ends = [int(count * f) for f in shares] if cuts is not None else [count * k // chunks for k in range(1, chunks)]
+    if covered is None or count < 2 * COVERAGE_BLOCK * chunks:
+        ends = [int(count * f) for f in cuts] if cuts is not None else [count * k // chunks for k in range(1, chunks)]
         return sorted({0, count, *(e // LANES * LANES for e in ends)})
     mask = covered.numpy().reshape(-1)
     full = count // COVERAGE_BLOCK * COVERAGE_BLOCK
@@ -300,7 +299,8 @@ def bounds(count: int, chunks: int, covered: wp.array | None, cuts: list[float] 
         sizes = np.append(sizes, count - full)
     shaded = np.clip(np.nan_to_num(shaded), 0.0, sizes)
     cost = np.cumsum(shaded + UNCOVERED_COST * (sizes - shaded))
-    ends = np.minimum((np.searchsorted(cost, cost[-1] * shares) + 1) * COVERAGE_BLOCK, count)
+    targets = cost[-1] * np.asarray(cuts, dtype=np.float64) if cuts is not None else cost[-1] * np.arange(1, chunks) / chunks
+    ends = np.minimum((np.searchsorted(cost, targets) + 1) * COVERAGE_BLOCK, count)
     return sorted({0, count, *(int(e) for e in ends)})  # a chunk never empty (bounds distinct)
 
 
