@@ -84,8 +84,9 @@ def raster_kernel(
     """Closest hit per pixel of every view (``cams[view]``: arrays are ``(views, rows, W)``, one
     launch for a batch of cameras, launch row ``row`` being image row ``cam.first_row + row``);
     normals face the camera (flipped on back faces, shading normals bent). ``indices`` holds the
-    triangles in the BVH, ``face_ids`` their index in the mesh. Misses keep the outputs' background
-    values (zeros, ``depth = inf``, ``triangle = -1``) written by the caller."""
+    triangles in the BVH, ``face_ids`` their index in the mesh. Misses get the background values
+    (zeros, ``depth = inf``, ``triangle = -1``): every output element is written, so the caller's
+    arrays need no fill."""
     view, row, col = wp.tid()
     cam = cams[view]
     o, d, do_dx, do_dy, dd_dx, dd_dy = primary_ray(cam, cam.first_row + row, col)
@@ -123,6 +124,16 @@ def raster_kernel(
         barycentric[view, row, col] = b
         position_dx[view, row, col] = plane_differential(hit.t, d, ng, do_dx, dd_dx)
         position_dy[view, row, col] = plane_differential(hit.t, d, ng, do_dy, dd_dy)
+    else:  # the background, here rather than by a fill of the arrays first: the threads write it as they go
+        position[view, row, col] = wp.vec3(0.0)
+        normal[view, row, col] = wp.vec3(0.0)
+        geometric_normal[view, row, col] = wp.vec3(0.0)
+        depth[view, row, col] = wp.inf
+        mask[view, row, col] = 0.0
+        triangle[view, row, col] = -1
+        barycentric[view, row, col] = wp.vec3(0.0)
+        position_dx[view, row, col] = wp.vec3(0.0)
+        position_dy[view, row, col] = wp.vec3(0.0)
 
 
 @wp.func
@@ -156,7 +167,12 @@ def uv_kernel(
     """
     view, row, col = wp.tid()
     f = triangle[view, row, col]
-    if f >= 0:
+    frame = wp.vec4(0.0)  # the tangent where the pixel is a miss, or its tangent degenerate
+    if f < 0:  # a miss: the background, zeros (every element is written: the arrays need no fill)
+        uv[view, row, col] = wp.vec2(0.0)
+        uv_dx[view, row, col] = wp.vec2(0.0)
+        uv_dy[view, row, col] = wp.vec2(0.0)
+    else:
         i = indices[3 * f]
         j = indices[3 * f + 1]
         k = indices[3 * f + 2]
@@ -179,7 +195,8 @@ def uv_kernel(
             if tv[3] < 0.0:
                 sign = -1.0
             t = wp.normalize(t)
-            tangent[view, row, col] = wp.vec4(t[0], t[1], t[2], sign)
+            frame = wp.vec4(t[0], t[1], t[2], sign)
+    tangent[view, row, col] = frame
 
 
 # Resolving a supersampled image: each ``s × s`` block of samples averaged into one pixel (a box

@@ -246,6 +246,36 @@ def test_camera_looking_away_gives_an_empty_gbuffer():
     assert isinstance(g, GBuffer) and g.mask.numpy().sum() == 0 and (g.triangle.numpy() == -1).all()
 
 
+def test_misses_get_the_background_whatever_the_arrays_held(monkeypatch):
+    """The rasteriser's arrays start unfilled (its kernels write every element): with every
+    allocation poisoned first (bytes 0x7F: floats of 3.4e38, ints of 2.1e9), each miss still gets the
+    background (zeros, depth inf, triangle -1), in every field and UV set: the G-buffer of unpoisoned
+    arrays, bit for bit."""
+    import warp as wp
+
+    mesh = trimesh.creation.icosphere(subdivisions=2)
+    mesh.visual = trimesh.visual.TextureVisuals(uv=mesh.vertices[:, :2] * 0.5 + 0.5)
+    camera = _framing_camera(mesh, resolution=(40, 56))
+    clean = rasterize(mesh, camera, samples=4).numpy()
+    empty = wp.empty
+
+    def poisoned(*args, **kwargs):
+        a = empty(*args, **kwargs)
+        a.numpy().view(np.uint8)[...] = 0x7F
+        return a
+
+    monkeypatch.setattr(wp, "empty", poisoned)
+    g = rasterize(mesh, camera, samples=4).numpy()
+    missed = g["mask"] == 0
+    assert missed.any() and (~missed).any()
+    assert (g["triangle"][missed] == -1).all() and np.isinf(g["depth"][missed]).all()
+    assert any(k.endswith(".tangent") for k in g)
+    for key, a in g.items():
+        if key not in ("triangle", "depth"):
+            assert not a[missed].any(), f"{key} is not 0 at a miss"
+        np.testing.assert_array_equal(a, clean[key], err_msg=key)
+
+
 def test_camera_inside_the_mesh_sees_back_faces_facing_it():
     g = rasterize(trimesh.creation.box((4, 4, 4)), look_at((0, 0, 0), (0, 0, -1), resolution=(8, 8))).numpy()
     assert (g["mask"] == 1).all()

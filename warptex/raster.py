@@ -164,12 +164,13 @@ class Scene:
         camera (supersampled ones: ``strata``-times as many rows of samples)."""
         device, s = self.device, cameras[0].strata
         shape = (len(cameras), (rows[1] - rows[0]) * s, cameras[0].resolution[1])  # the kernels' (views, rows, W)
-        g = GBuffer.empty(shape if batch else shape[1:], uv_sets=self.uv_sets, camera=tuple(cameras) if batch else cameras[0], samples=s * s, origin=self.origin, device=device)
+        # Unfilled: the kernels write every element, a miss its background.
+        g = GBuffer._unfilled(shape if batch else shape[1:], uv_sets=self.uv_sets, camera=tuple(cameras) if batch else cameras[0], samples=s * s, origin=self.origin, device=device)
 
         def batched(a: wp.array) -> wp.array:
             return a.reshape(shape)
 
-        barycentric = wp.zeros(shape, dtype=wp.vec3, device=device)
+        barycentric = wp.empty(shape, dtype=wp.vec3, device=device)
         outputs = [batched(a) for a in (g.position, g.normal, g.geometric_normal, g.depth, g.mask, g.triangle)] + [barycentric, batched(g.position_dx), batched(g.position_dy)]
         sets = {name: [batched(g.uv_sets[name][k]) for k in ("uv", "uv_dx", "uv_dy", "tangent")] for name in self.uv_sets}
 
