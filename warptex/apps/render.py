@@ -46,7 +46,7 @@ from warptex.scenes.terrain import terrain, terrain_normal_grid
 from warptex.texture import Texture, TextureArray
 from warptex.splat import splat
 from warptex.options import Filter, Sampler
-from warptex.scenes.material import LAYER_NAMES, noise_texture, terrain_layers, terrain_splat_maps
+from warptex.scenes.material import LAYER_NAMES, noise_texture, terrain_layer_texels, terrain_layers, terrain_splat_maps
 from warptex.triplanar import biplanar, triplanar
 
 
@@ -146,11 +146,13 @@ def triplanar_material(mesh: trimesh.Trimesh, texture: Texture, tiling: float, s
 SPLAT_UPSAMPLE = 4
 
 
-def terrain_textures(mesh: trimesh.Trimesh, seed: int, device) -> tuple[TextureArray, TextureArray]:
-    """The default terrain's layers and (finer, :data:`SPLAT_UPSAMPLE`) splat maps, made in NumPy:
-    a render makes them on a second thread while it rasterises."""
+def terrain_textures(mesh: trimesh.Trimesh, seed: int, device, texels: np.ndarray | None = None) -> tuple[TextureArray, TextureArray]:
+    """The default terrain's layers and (finer, :data:`SPLAT_UPSAMPLE`) splat maps; the layers'
+    ``texels`` (:func:`~warptex.scenes.material.terrain_layer_texels`) made here unless given (a
+    render makes them on a second thread from its start: they are NumPy's work alone)."""
     maps = terrain_splat_maps(mesh, TERRAIN_GRID, upsample=SPLAT_UPSAMPLE)
-    return terrain_layers(seed=seed, device=device), TextureArray(maps[None], mipmaps=False, device=device)
+    layers = terrain_layers(seed=seed, device=device) if texels is None else TextureArray(texels, device=device)
+    return layers, TextureArray(maps[None], mipmaps=False, device=device)
 
 
 def terrain_material(mesh: trimesh.Trimesh, tiling: float | None, seed: int, sampler: Sampler, device, textures=None) -> Callable[[GBuffer], wp.array]:
@@ -293,24 +295,23 @@ def run_render(
         raise ValueError(f"{func}(): tiling must be a finite number > 0, got {tiling!r}")
     bar = tqdm(total=h, desc="render", unit="row", disable=False if progress else None if progress is None else True)
     is_terrain = mesh_path is None and texture_path is None
-    bar.set_postfix_str("kernels")
-    preload(_kernels(is_terrain, device), device)  # a cold start compiles them side by side
-    bar.set_postfix_str("mesh")
-    mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
-    framing = terrain_camera(resolution, fov_y) if mesh_path is None else default_camera(mesh, resolution, fov_y, up=up_axis(mesh_path))
-    if eye is None and target is None and up is None:
-        camera = framing
-    else:
-        eye = framing.eye if eye is None else eye
-        target = mesh.bounds.mean(axis=0) if target is None else target
-        camera = look_at(eye, target, up, fov_y=fov_y, resolution=resolution)
-
-    bar.set_postfix_str("textures")
-    with ThreadPoolExecutor(1) as pool:  # the material's NumPy beside the rasteriser's BVH (both release the GIL)
-        textures = pool.submit(terrain_textures, mesh, seed, device) if is_terrain else None
+    with ThreadPoolExecutor(1) as pool:  # the terrain layers' NumPy (0.5 s) beside all the rest up to the material
+        texels = pool.submit(terrain_layer_texels, seed=seed) if is_terrain else None
+        bar.set_postfix_str("kernels")
+        preload(_kernels(is_terrain, device), device)  # a cold start compiles them side by side
+        bar.set_postfix_str("mesh")
+        mesh = terrain(resolution=TERRAIN_GRID, seed=seed) if mesh_path is None else load_mesh(mesh_path)
+        framing = terrain_camera(resolution, fov_y) if mesh_path is None else default_camera(mesh, resolution, fov_y, up=up_axis(mesh_path))
+        if eye is None and target is None and up is None:
+            camera = framing
+        else:
+            eye = framing.eye if eye is None else eye
+            target = mesh.bounds.mean(axis=0) if target is None else target
+            camera = look_at(eye, target, up, fov_y=fov_y, resolution=resolution)
+        bar.set_postfix_str("textures")
         shaded = _smooth_normals(mesh) if mesh_path is None else mesh  # the splat rules keep the terrain's own normals
         tiles = gbuffer_tiles(shaded, camera, samples=samples, memory=memory, device=device)
-        textures = textures.result() if textures is not None else None
+        textures = terrain_textures(mesh, seed, device, texels.result()) if is_terrain else None
     if is_terrain:
         material = terrain_material(mesh, tiling, seed, sampler, device, textures=textures)
         used = terrain_used(material.keywords["tiling"])
