@@ -11,7 +11,7 @@ pass inside its reverse pass and measured 4.7× slower on triplanar.
 import warp as wp
 
 from . import out_of_line
-from .filters import bilinear_taps, nearest_tap
+from .filters import bilinear_taps_outlined, nearest_tap
 from .footprint import footprint_taps, footprint_uv, mip_levels
 from .texels import FILTER_NEAREST, FINITE_LIMIT, NOT_FINITE, TILE_MASK, TILE_SHIFT, SamplerArgs, TexelGrad, TextureView, exact_texel, finite_uv_lod, reduce_coord
 
@@ -75,9 +75,9 @@ def add_exact(texels: wp.array(dtype=wp.vec4), exponents: wp.array(dtype=wp.int3
         texels[i] = texels[i] + s * inverse
 
 
-@wp.func
+@out_of_line
 def scatter_bilinear(grad: TexelGrad, start: wp.int32, w: wp.int32, i0: wp.int32, i1: wp.int32, j0: wp.int32, j1: wp.int32, fx: float, fy: float, g: wp.vec4):
-    """Add ``g`` times each bilinear weight into the four texels of :func:`bilinear_taps`, and
+    """Add ``g`` times each bilinear weight into the four texels of :func:`~.filters.bilinear_taps`, and
     mark their rows where tiles are tracked."""
     top = g * (1.0 - fy)
     bottom = g * fy
@@ -105,9 +105,9 @@ def scatter_levels(tex: TextureView, grad: TexelGrad, layer: wp.int32, uv: wp.ve
         finer = g
         if fraction > 0.0:
             finer = g * (1.0 - fraction)
-            start, w, i0, i1, j0, j1, fx, fy = bilinear_taps(tex, layer, level + 1, r, smp)
+            start, w, i0, i1, j0, j1, fx, fy = bilinear_taps_outlined(tex, layer, level + 1, r, smp)
             scatter_bilinear(grad, start, w, i0, i1, j0, j1, fx, fy, g * fraction)
-        start, w, i0, i1, j0, j1, fx, fy = bilinear_taps(tex, layer, level, r, smp)
+        start, w, i0, i1, j0, j1, fx, fy = bilinear_taps_outlined(tex, layer, level, r, smp)
         scatter_bilinear(grad, start, w, i0, i1, j0, j1, fx, fy, finer)
 
 
