@@ -51,9 +51,11 @@ from .splat_layers import (
     pick,
     read_layer_outlined,
     read_layer_plain,
+    read_layer_plain_once,
     read_layer_slope,
     read_layer_stochastic,
     scatter_layer_plain,
+    scatter_layer_plain_once,
     scatter_layer_stochastic,
     surface_weights,
 )
@@ -144,13 +146,12 @@ def layer_point(args: SplatArgs, pixels: SplatPixels, i: wp.int32) -> LayerPoint
     return pt
 
 
-def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> dict:
-    """The forward and texel-gradient bodies for ``cap`` layers, reading layers with ``read_layer``
-    (``plain``: a call each for colour and height, faster; else one call for both, so that stochastic
-    sampling is compiled once)."""
+def _read_layers(cap: int, read_layer, plain: bool, name: str):
+    """``read_layers(args, pt, w1)`` for ``cap`` layers, reading each with ``read_layer`` (``plain``:
+    a call each for colour and height, faster; else one call for both, so that the read is compiled
+    once)."""
     f = blend_functions(cap)
     weights_t, colours_t = f.weights_t, f.colours_t
-
 
     def read_layers_of(args: SplatArgs, pt: LayerPoint, w1: weights_t):
         """``(c, hv)``: every weighted layer's colour and raw height."""
@@ -177,7 +178,24 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> di
                             hv[j] = value[0]
         return c, hv
 
-    read_layers = inlined(specialised(read_layers_of, f"splat{cap}_read_layers{suffix}"), module=f"warptex.splat{cap}")
+    return inlined(specialised(read_layers_of, name), module=f"warptex.splat{cap}")
+
+
+def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str, once=None) -> dict:
+    """The forward and texel-gradient bodies for ``cap`` layers, reading layers with ``read_layer``
+    (``plain``: plain sampling, and a call each for colour and height, faster; else one call for
+    both, so that stochastic sampling is compiled once) and adding the texels' gradients with
+    ``scatter_layer``. ``once`` (optional): the ``(read_layer, scatter_layer)`` the texel gradient
+    takes instead, each reading every projection and both textures through one call: its body holds
+    the forward's reads beside their scatters, and with the forward's (each read inlined four times,
+    for colour and height, UV and triplanar) ``warptex.splat8.grad`` took 26-38 s to compile for sm_90."""
+    f = blend_functions(cap)
+    weights_t, colours_t = f.weights_t, f.colours_t
+    read_layers = _read_layers(cap, read_layer, plain, f"splat{cap}_read_layers{suffix}")
+    grad_split, grad_read_layers, grad_scatter = plain, read_layers, scatter_layer
+    if once is not None:
+        grad_split, grad_scatter = False, once[1]
+        grad_read_layers = _read_layers(cap, once[0], False, f"splat{cap}_read_layers{suffix}_once")
 
     def forward(args: SplatArgs, pixels: SplatPixels, i: wp.int32, out: wp.array2d(dtype=float)):
         """``out[i, c]``: the layers blended by the splat maps; 0 where the mask is 0."""
@@ -215,7 +233,7 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> di
                         elif params.height_mode == HEIGHT_CHANNEL:
                             hv[j] = c[j, params.height_channel]
             else:
-                c, hv = read_layers(args, pt, w1)
+                c, hv = grad_read_layers(args, pt, w1)
             gw1, gc, ghv, g_t = f.blend_backward(w1, c, hv, params, read_channels(adj, i))
             if grads.transition.shape[0] > 0 and params.height_mode != HEIGHT_NONE:
                 wp.atomic_add(grads.transition, 0, g_t)
@@ -227,17 +245,17 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str) -> di
             f.scatter_maps(args.maps, grads.maps, pt.uv0, args.map_smp, gr, params)
             for j in range(params.num_layers):
                 if w1[j] > 0.0:
-                    if wp.static(plain):
-                        scatter_layer(args.layers, grads.layers, j, args.reads, pt, args.stoch, gc[j])
+                    if wp.static(grad_split):
+                        grad_scatter(args.layers, grads.layers, j, args.reads, pt, args.stoch, gc[j])
                         if params.height_mode == HEIGHT_ARRAY:
-                            scatter_layer(args.heights, grads.heights, j, args.reads, pt, args.height_stoch, wp.vec4(ghv[j], 0.0, 0.0, 0.0))
+                            grad_scatter(args.heights, grads.heights, j, args.reads, pt, args.height_stoch, wp.vec4(ghv[j], 0.0, 0.0, 0.0))
                     else:
                         for t in range(layer_textures(params)):
                             g = gc[j]
                             if t == 1:
                                 g = wp.vec4(ghv[j], 0.0, 0.0, 0.0)
                             tex = pick(args.layers, args.heights, t)
-                            scatter_layer(tex, pick(grads.layers, grads.heights, t), j, args.reads, pt, pick(args.stoch, args.height_stoch, t), g)
+                            grad_scatter(tex, pick(grads.layers, grads.heights, t), j, args.reads, pt, pick(args.stoch, args.height_stoch, t), g)
 
     return inlined(specialised(forward, f"splat{cap}_forward{suffix}"), module=f"warptex.splat{cap}"), inlined(specialised(scatter, f"splat{cap}_scatter{suffix}"), module=f"warptex.splat{cap}")
 
@@ -363,7 +381,8 @@ def splat_kernels(*, capacity: int, stochastic: bool) -> Kernels:
         for name in (module, module + ".grad"):
             wp.set_module_options({"max_unroll": 1}, module=use(name))
     read, scatter = (read_layer_stochastic, scatter_layer_stochastic) if stochastic else (read_layer_plain, scatter_layer_plain)
-    body, scatter_body = _bodies(capacity, read, scatter, plain=not stochastic, suffix="_stochastic" if stochastic else "")
+    once = None if stochastic else (read_layer_plain_once, scatter_layer_plain_once)
+    body, scatter_body = _bodies(capacity, read, scatter, plain=not stochastic, suffix="_stochastic" if stochastic else "", once=once)
     forward, texel_grad, _ = pixel_kernels(f"splat{capacity}" + ("_stochastic" if stochastic else ""), module=module, args=SplatArgs, pixels=SplatPixels, out=wp.array2d(dtype=float),
                                            body=body, scatter=scatter_body, grads=SplatGrads)  # fmt: skip
     grads = ("args.layers", "args.heights", "args.maps", "args.reads.params.transition", None if stochastic else "args.reads.params.tiling")

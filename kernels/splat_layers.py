@@ -314,6 +314,8 @@ def _layer_reads(sample, scatter, suffix: str, one_call: bool, decorate=wp.func)
 
 # Inlined where they are read: they take the launch's SplatArgs, which a call would copy whole, per layer.
 read_layer_plain, scatter_layer_plain = _layer_reads(sample_plain, scatter_plain, "_plain", one_call=False, decorate=inlined)
+# For the plain texel gradient, which replays the forward beside the scatters: each compiled once.
+read_layer_plain_once, scatter_layer_plain_once = _layer_reads(sample_plain, scatter_plain, "_plain_once", one_call=True, decorate=inlined)
 read_layer_stochastic, scatter_layer_stochastic = _layer_reads(sample_stochastic, scatter_stochastic, "_stochastic", one_call=True, decorate=inlined)
 # For the generated adjoint: out of line, on the out-of-line stochastic sampler.
 read_layer_outlined, _ = _layer_reads(sample_stochastic_outlined, scatter_stochastic, "_outlined", one_call=True, decorate=out_of_line)
