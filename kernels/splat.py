@@ -220,18 +220,21 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str, once=
             dc = colours_t()
             dhv = weights_t()
             tiling_grads = grads.tiling.shape[0] > 0
-            if tiling_grads and wp.static(plain):  # the stochastic kernels never take the tiling's gradient by hand
-                for j in range(params.num_layers):
-                    if w1[j] > 0.0:
-                        value, slope = read_layer_slope(args.layers, j, args.reads, pt)
-                        c[j] = value
-                        dc[j] = slope
-                        if params.height_mode == HEIGHT_ARRAY:
-                            height, height_slope = read_layer_slope(args.heights, j, args.reads, pt)
-                            hv[j] = height[0]
-                            dhv[j] = height_slope[0]
-                        elif params.height_mode == HEIGHT_CHANNEL:
-                            hv[j] = c[j, params.height_channel]
+            if wp.static(plain):  # the stochastic kernels never take the tiling's gradient by hand (nor compile its reads)
+                if tiling_grads:
+                    for j in range(params.num_layers):
+                        if w1[j] > 0.0:
+                            value, slope = read_layer_slope(args.layers, j, args.reads, pt)
+                            c[j] = value
+                            dc[j] = slope
+                            if params.height_mode == HEIGHT_ARRAY:
+                                height, height_slope = read_layer_slope(args.heights, j, args.reads, pt)
+                                hv[j] = height[0]
+                                dhv[j] = height_slope[0]
+                            elif params.height_mode == HEIGHT_CHANNEL:
+                                hv[j] = c[j, params.height_channel]
+                else:
+                    c, hv = grad_read_layers(args, pt, w1)
             else:
                 c, hv = grad_read_layers(args, pt, w1)
             gw1, gc, ghv, g_t = f.blend_backward(w1, c, hv, params, read_channels(adj, i))
