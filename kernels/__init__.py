@@ -26,12 +26,12 @@ from . import native
 # The kernels with Warp's generated adjoint live in Warp modules of their own, compiled the first
 # time such a gradient is recorded: ``warptex.adjoint`` for sample, stochastic and the atlas, and one
 # module beside it for triplanar colour (``.triplanar``), for normal mapping (``.triplanar.normal``)
-# and for splat (``.splat``). Kernels of one module
-# share the out-of-line sampling blocks (``sample_lod_outlined``, ``sample_stochastic_outlined``...),
-# which it compiles once; one module for all of them compiled for sm_90 in 27-32 s once the kernels
-# took their arguments as structs (whose adjoints are code too), past the 30 s bar, and made a
-# triplanar sharpness gradient wait for splat's adjoint. For CUDA they are compiled at -O2 instead of
-# Warp's default -O3 (the CPU default is -O2 already): sm_90 in 13 s instead of 43 s.
+# and for splat (``.splat``). Kernels of one module share the out-of-line sampling blocks
+# (``sample_lod_outlined``, ``sample_stochastic_outlined``...), which it compiles once; one module
+# for all of them compiled for sm_90 in 27-32 s once the kernels took their arguments as structs
+# (whose adjoints are code too), past the 30 s bar, and made a triplanar sharpness gradient wait
+# for splat's adjoint. For CUDA they are compiled at -O2 instead of Warp's default -O3 (the CPU
+# default is -O2 already): sm_90 in 13 s instead of 43 s.
 ADJOINT_MODULE = "warptex.adjoint"
 
 
