@@ -182,13 +182,11 @@ def _read_layers(cap: int, read_layer, plain: bool, name: str):
 
 
 def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str, once=None) -> dict:
-    """The forward and texel-gradient bodies for ``cap`` layers, reading layers with ``read_layer``
-    (``plain``: plain sampling, and a call each for colour and height, faster; else one call for
-    both, so that stochastic sampling is compiled once) and adding the texels' gradients with
-    ``scatter_layer``. ``once`` (optional): the ``(read_layer, scatter_layer)`` the texel gradient
-    takes instead, each reading every projection and both textures through one call: its body holds
-    the forward's reads beside their scatters, and with the forward's (each read inlined four times,
-    for colour and height, UV and triplanar) ``warptex.splat8.grad`` took 26-38 s to compile for sm_90."""
+    """The forward and texel-gradient bodies for ``cap`` layers: layers read with ``read_layer``
+    (``plain``: plain sampling, split reads as in :func:`_read_layers`), texels' gradients added with
+    ``scatter_layer``. ``once``: the ``(read_layer, scatter_layer)`` the texel gradient takes instead,
+    one call per read; with the forward's split reads beside their scatters (each inlined four
+    times) ``warptex.splat8.grad`` took 26-38 s to compile for sm_90."""
     f = blend_functions(cap)
     weights_t, colours_t = f.weights_t, f.colours_t
     read_layers = _read_layers(cap, read_layer, plain, f"splat{cap}_read_layers{suffix}")
