@@ -54,7 +54,6 @@ from .splat_layers import (
     read_layer_plain_once,
     read_layer_slope,
     read_layer_stochastic,
-    scatter_layer_plain,
     scatter_layer_plain_once,
     scatter_layer_stochastic,
     surface_weights,
@@ -181,19 +180,17 @@ def _read_layers(cap: int, read_layer, plain: bool, name: str):
     return inlined(specialised(read_layers_of, name), module=f"warptex.splat{cap}")
 
 
-def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str, once=None) -> dict:
-    """The forward and texel-gradient bodies for ``cap`` layers: layers read with ``read_layer``
-    (``plain``: plain sampling, split reads as in :func:`_read_layers`), texels' gradients added with
-    ``scatter_layer``. ``once``: the ``(read_layer, scatter_layer)`` the texel gradient takes instead,
-    one call per read; with the forward's split reads beside their scatters (each inlined four
-    times) ``warptex.splat8.grad`` took 26-38 s to compile for sm_90."""
+def _bodies(cap: int, read_layer, plain: bool, suffix: str, grad_reads) -> dict:
+    """The forward and texel-gradient bodies for ``cap`` layers: the forward reads layers with
+    ``read_layer`` (``plain``: plain sampling, split reads as in :func:`_read_layers`); the texel
+    gradient with ``grad_reads``, a ``(read_layer, scatter_layer)`` of one call per read (with split
+    reads beside their scatters, each inlined four times, ``warptex.splat8.grad`` took 26-38 s to
+    compile for sm_90)."""
     f = blend_functions(cap)
     weights_t, colours_t = f.weights_t, f.colours_t
     read_layers = _read_layers(cap, read_layer, plain, f"splat{cap}_read_layers{suffix}")
-    grad_split, grad_read_layers, grad_scatter = plain, read_layers, scatter_layer
-    if once is not None:
-        grad_split, grad_scatter = False, once[1]
-        grad_read_layers = _read_layers(cap, once[0], False, f"splat{cap}_read_layers{suffix}_once")
+    grad_read, grad_scatter = grad_reads
+    grad_read_layers = read_layers if grad_read is read_layer else _read_layers(cap, grad_read, False, f"splat{cap}_read_layers{suffix}_once")
 
     def forward(args: SplatArgs, pixels: SplatPixels, i: wp.int32, out: wp.array2d(dtype=float)):
         """``out[i, c]``: the layers blended by the splat maps; 0 where the mask is 0."""
@@ -246,17 +243,12 @@ def _bodies(cap: int, read_layer, scatter_layer, plain: bool, suffix: str, once=
             f.scatter_maps(args.maps, grads.maps, pt.uv0, args.map_smp, gr, params)
             for j in range(params.num_layers):
                 if w1[j] > 0.0:
-                    if wp.static(grad_split):
-                        grad_scatter(args.layers, grads.layers, j, args.reads, pt, args.stoch, gc[j])
-                        if params.height_mode == HEIGHT_ARRAY:
-                            grad_scatter(args.heights, grads.heights, j, args.reads, pt, args.height_stoch, wp.vec4(ghv[j], 0.0, 0.0, 0.0))
-                    else:
-                        for t in range(layer_textures(params)):
-                            g = gc[j]
-                            if t == 1:
-                                g = wp.vec4(ghv[j], 0.0, 0.0, 0.0)
-                            tex = pick(args.layers, args.heights, t)
-                            grad_scatter(tex, pick(grads.layers, grads.heights, t), j, args.reads, pt, pick(args.stoch, args.height_stoch, t), g)
+                    for t in range(layer_textures(params)):
+                        g = gc[j]
+                        if t == 1:
+                            g = wp.vec4(ghv[j], 0.0, 0.0, 0.0)
+                        tex = pick(args.layers, args.heights, t)
+                        grad_scatter(tex, pick(grads.layers, grads.heights, t), j, args.reads, pt, pick(args.stoch, args.height_stoch, t), g)
 
     return inlined(specialised(forward, f"splat{cap}_forward{suffix}"), module=f"warptex.splat{cap}"), inlined(specialised(scatter, f"splat{cap}_scatter{suffix}"), module=f"warptex.splat{cap}")
 
@@ -381,9 +373,9 @@ def splat_kernels(*, capacity: int, stochastic: bool) -> Kernels:
     if stochastic:  # loops rather than unrolled copies of the stochastic sampling code, as triplanar's: 37 s to compile for sm_90 unrolled
         for name in (module, module + ".grad"):
             wp.set_module_options({"max_unroll": 1}, module=use(name))
-    read, scatter = (read_layer_stochastic, scatter_layer_stochastic) if stochastic else (read_layer_plain, scatter_layer_plain)
-    once = None if stochastic else (read_layer_plain_once, scatter_layer_plain_once)
-    body, scatter_body = _bodies(capacity, read, scatter, plain=not stochastic, suffix="_stochastic" if stochastic else "", once=once)
+    read = read_layer_stochastic if stochastic else read_layer_plain
+    grad_reads = (read_layer_stochastic, scatter_layer_stochastic) if stochastic else (read_layer_plain_once, scatter_layer_plain_once)
+    body, scatter_body = _bodies(capacity, read, plain=not stochastic, suffix="_stochastic" if stochastic else "", grad_reads=grad_reads)
     forward, texel_grad, _ = pixel_kernels(f"splat{capacity}" + ("_stochastic" if stochastic else ""), module=module, args=SplatArgs, pixels=SplatPixels, out=wp.array2d(dtype=float),
                                            body=body, scatter=scatter_body, grads=SplatGrads)  # fmt: skip
     grads = ("args.layers", "args.heights", "args.maps", "args.reads.params.transition", None if stochastic else "args.reads.params.tiling")
