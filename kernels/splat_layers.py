@@ -313,7 +313,7 @@ def _layer_reads(sample, scatter, suffix: str, one_call: bool, decorate=wp.func)
 
 
 # Inlined where they are read: they take the launch's SplatArgs, which a call would copy whole, per layer.
-read_layer_plain, scatter_layer_plain = _layer_reads(sample_plain, scatter_plain, "_plain", one_call=False, decorate=inlined)
+read_layer_plain, _ = _layer_reads(sample_plain, scatter_plain, "_plain", one_call=False, decorate=inlined)  # the texel gradient scatters with the _once pair
 # For the plain texel gradient, which replays the forward beside the scatters: each compiled once.
 read_layer_plain_once, scatter_layer_plain_once = _layer_reads(sample_plain, scatter_plain, "_plain_once", one_call=True, decorate=inlined)
 read_layer_stochastic, scatter_layer_stochastic = _layer_reads(sample_stochastic, scatter_stochastic, "_stochastic", one_call=True, decorate=inlined)
