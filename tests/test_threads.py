@@ -7,6 +7,8 @@ import functools
 import gc
 import multiprocessing
 import os
+import subprocess
+import sys
 import threading
 import weakref
 
@@ -627,3 +629,25 @@ def test_pool_threads_keep_off_the_callers_cpu():
         assert caller in os.sched_getaffinity(0) and len(_threads._worker_ids) >= parts - 1
         assert all(os.sched_getaffinity(worker) == os.sched_getaffinity(0) - {caller} for worker in _threads._worker_ids)
         assert sorted(seen) == list(range(1, parts)) and caller not in seen.values()
+
+
+FIRST_CALLS = """
+import numpy as np, trimesh, warptex as wt
+wt.set_num_threads(2)
+wt.rasterize(trimesh.creation.box(), wt.orthographic((0, 0, 3), (0, 0, 0), height=2.0, resolution=(128, 128)))
+uv = np.random.default_rng(0).random((4 * 16384, 2)).astype(np.float32)
+wt.sample(wt.Texture(np.ones((16, 16, 4), np.float32), mipmaps=False), uv)
+"""
+
+
+def test_a_first_threaded_call_compiles_each_module_once(tmp_path):
+    """Warp loads a module at the first launch of one of its kernels, on whichever thread launches
+    it: split over 2 threads, a first call compiled its module twice, side by side, unless warptex
+    loads it before the threads start (``warptex._compile.load_first``). A fresh kernel cache, so that
+    the process compiles; Warp reports each compile on its output."""
+    env = {**os.environ, "WARP_CACHE_PATH": str(tmp_path / "cache")}
+    done = subprocess.run([sys.executable, "-c", FIRST_CALLS], env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    compiled = [line.split()[1] for line in done.stdout.splitlines() if line.startswith("Module ") and line.endswith("(compiled)")]
+    assert "warptex.raster" in compiled and "warptex.sample.lanes" in compiled, done.stdout
+    assert len(compiled) == len(set(compiled)), done.stdout

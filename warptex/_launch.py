@@ -33,6 +33,7 @@ from typing import Iterator, NamedTuple
 import warp as wp
 
 from warptex import _plan
+from warptex._compile import load_first
 from warptex._accumulate import Copy, add_sums, exact_sums, exact_texel_grads, exact_views, private, run_ordered, set_exponents, slot_count, with_private_grads
 from warptex._memory import empty
 from warptex._pack import empty_array, packed
@@ -137,6 +138,7 @@ def launch(kernel, count: int, *, args, pixels, out, device, threads: int | None
             if not recorded:  # a call kept for its next one on the same objects (warptex._plan)
                 _plan.launched(kernel, dim, params, device, count=count, zeroes=not fills)
     else:
+        load_first([kernel], device)  # not by each thread at its first launch (each would compile it)
         split = Split(count, workers, covered)
 
         def forward(worker: int, k: int) -> None:
@@ -191,6 +193,8 @@ def _backward(tape, *, kernel, bounds: list[int], workers: int, args, pixels, ou
     workers = min(workers, chunks, cpu_count())  # fixed chunks: threads past the cores only take turns
     slots = [[] for _ in range(slot_count(chunks, workers))]  # each slot's (real gradient, private copy) pairs
     slot_args = [with_private_grads(args, copies, slot) for slot, copies in enumerate(slots)]
+    if workers > 1:
+        load_first([kernel], device)
 
     def backward(k: int, slot: int | None) -> None:
         lo, hi = bounds[k], bounds[k + 1]
@@ -300,6 +304,8 @@ def scatter(kernel, count: int, *, args, pixels, grads: list[Target], adj, devic
         slots.append([(g, mine[id(g)]) for g in shared])
         structs.append(_grads_struct(grads_t, grads, mine, device))
     real = _grads_struct(grads_t, grads, {}, device)
+    if workers > 1:
+        load_first([kernel], device)
 
     def run(k: int, slot: int | None) -> None:
         lo, hi = bounds[k], bounds[k + 1]

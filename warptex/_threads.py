@@ -326,12 +326,17 @@ def side_by_side(work, parts: int) -> None:
         raise failures[0]
 
 
-def rows_side_by_side(rows: int, work, device) -> None:
+def rows_side_by_side(rows: int, work, device, kernels=()) -> None:
     """``work(a, b)`` over rows ``0 .. rows`` cut into one range per CPU thread, side by side: for
     the kernels that compute each pixel (or texel) on its own from its row, the rasteriser's and
     the bake's, which Warp runs on one thread a launch; the ranges give one launch's bits. One
-    range on a GPU, or for fewer than 64 rows."""
+    range on a GPU, or for fewer than 64 rows. ``kernels``: those ``work`` launches, whose modules
+    are loaded first (``warptex._compile.load_first``)."""
     parts = 1 if not wp.get_device(device).is_cpu or rows < 64 else min(get_num_threads(), rows // 32)
+    if parts > 1:
+        from warptex._compile import load_first  # _compile imports this module
+
+        load_first(kernels, device)
     bounds = [rows * k // parts for k in range(parts + 1)]
     side_by_side(lambda part: work(bounds[part], bounds[part + 1]), parts)
 

@@ -212,7 +212,7 @@ class TextureSpace:
         def cast(a: int, b: int) -> None:  # rows a..b of the window
             wp.launch(kb.chart_kernel, dim=(b - a, size), inputs=[self._bvh.id, self._face_ids, self._view(lo + a)], outputs=[chart[a:b], seed[a:b]], **launch)
 
-        rows_side_by_side(hi - lo, cast, device)
+        rows_side_by_side(hi - lo, cast, device, (kb.chart_kernel,))
         if self._steps:
             other = wp.empty_like(seed)
             for step in self._steps:
@@ -220,7 +220,7 @@ class TextureSpace:
                 def flood(a: int, b: int) -> None:
                     wp.launch(kb.flood_kernel, dim=(b - a, size), inputs=[seed, step, lo, a], outputs=[other[a:b]], **launch)
 
-                rows_side_by_side(hi - lo, flood, device)
+                rows_side_by_side(hi - lo, flood, device, (kb.flood_kernel,))
                 seed, other = other, seed
         return chart, seed, lo
 
@@ -250,7 +250,7 @@ class TextureSpace:
                     **launch,
                 )
 
-        rows_side_by_side(stop - start, evaluate, device)
+        rows_side_by_side(stop - start, evaluate, device, (kb.surface_kernel, *([kr.uv_kernel] if self._uv_sets else [])))
         return g, coverage
 
 

@@ -189,5 +189,5 @@ class Scene:
                     record_tape=False,
                 )
 
-        rows_side_by_side(shape[1], trace, device)
+        rows_side_by_side(shape[1], trace, device, (kr.raster_kernel, kr.uv_kernel))
         return g
