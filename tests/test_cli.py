@@ -1,6 +1,7 @@
 """The command line as a user meets it: a checkout that imports, --version, one-line errors that
 name the input and write nothing, Ctrl-C, atomic output sets."""
 
+import gc
 import json
 import os
 import subprocess
@@ -54,6 +55,29 @@ def test_cli_errors_are_one_line_without_warp_start_up_noise(tmp_path):
     assert done.returncode == 1
     assert done.stderr.splitlines() == [f"warptex: error: load_mesh(): {str(tmp_path)!r} is a folder, not a mesh file"]
     assert done.stdout == "" and not (tmp_path / "out").exists()
+
+
+COLLECTOR_SEEN = """
+import gc, sys
+import warptex.apps.render as render
+from warptex.apps import cli
+run = render.run_render
+render.run_render = lambda *a, **k: (print("collector", gc.isenabled(), gc.get_freeze_count() > 0), run(*a, **k))[1]
+sys.argv = ["warptex", "render", "--resolution", "16x16", "--out", sys.argv[1]]
+cli.entry()
+"""
+
+
+def test_the_command_runs_its_job_with_the_collector_on_and_leaves_a_callers_alone(tmp_path):
+    """The process's entry pauses Python's cycle collector through the imports and turns it back
+    on, the imports' objects frozen, before the job runs (a fit's loop must not keep its cyclic
+    garbage); :func:`main` called in a program leaves that program's collector as it was."""
+    done = _python(COLLECTOR_SEEN.replace("sys.argv[1]", repr(str(tmp_path / "out"))), tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "collector True True" in done.stdout.splitlines(), done.stdout
+    frozen = gc.get_freeze_count()
+    assert main(["render", *SMALL, "--out", str(tmp_path / "in_process")]) == 0
+    assert gc.isenabled() and gc.get_freeze_count() == frozen
 
 
 def _obj(path: Path, text: str) -> Path:
