@@ -323,9 +323,9 @@ def _collector_back() -> None:
     The imports make hundreds of thousands of objects that live as long as the process (Warp's
     parsed kernels and functions above all), and the collector went over them again and again while
     they were made, and over all of them in every full pass of the run after. A warm ``warptex
-    render`` took 0.73-0.87x the time with the collector paused through the imports and the
-    imports' objects frozen (2 runs of 6 alternated pairs). Only the process's own entry does this:
-    :func:`main` called from a user's program leaves their collector alone."""
+    render`` takes 0.74-0.78x the time (medians of 3 runs of 6 alternated pairs; docs/performance.md).
+    Paused alone, without the freeze, the collector only went over them later. Only the process's
+    own entry does this: :func:`main` called from a user's program leaves their collector alone."""
     global _COLLECTOR_PAUSED
     if _COLLECTOR_PAUSED:
         _COLLECTOR_PAUSED = False
