@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import argparse
 import difflib
-import gc
 import os
 import sys
 import warnings
 
+from warptex.apps import collector
 from warptex.apps.arguments import add_fit_arguments, check_fit_options, count, fit_arguments, memory_size, number, resolution, square, vector
 
 
@@ -272,9 +272,7 @@ def entry() -> None:
     import atexit
     import signal
 
-    global _COLLECTOR_PAUSED
-    _COLLECTOR_PAUSED = gc.isenabled()
-    gc.disable()  # through the imports (_collector_back)
+    collector.pause()  # through the imports: collector.resume() before the job
     status = main(process=True)
     sys.stdout.flush()
     sys.stderr.flush()
@@ -313,26 +311,6 @@ def _one_line(err: BaseException) -> str:
     return text or ("out of memory" if isinstance(err, MemoryError) else type(err).__name__)
 
 
-_COLLECTOR_PAUSED = False  # entry() paused Python's cycle collector
-
-
-def _collector_back() -> None:
-    """Python's cycle collector back on, where :func:`entry` paused it, once a command's modules
-    are imported, with every object made so far left out of its passes (``gc.freeze``).
-
-    The imports make hundreds of thousands of objects that live as long as the process (Warp's
-    parsed kernels and functions above all), and the collector went over them again and again while
-    they were made, and over all of them in every full pass of the run after. A warm ``warptex
-    render`` takes 0.74-0.78x the time (medians of 3 runs of 6 alternated pairs; docs/performance.md).
-    Paused alone, without the freeze, the collector only went over them later. Only the process's
-    own entry does this: :func:`main` called from a user's program leaves their collector alone."""
-    global _COLLECTOR_PAUSED
-    if _COLLECTOR_PAUSED:
-        _COLLECTOR_PAUSED = False
-        gc.freeze()
-        gc.enable()
-
-
 def _run(args: argparse.Namespace) -> list:
     from warptex._warp import init_quietly
 
@@ -348,21 +326,21 @@ def _run(args: argparse.Namespace) -> list:
 
         paths = {"mesh_path": args.mesh, "texture_path": args.texture, "layer_paths": args.layers, "splat_path": args.splat, "normal_map_path": args.normal_map}
         options = {k: getattr(args, k) for k in ("technique", "stochastic", "size", "padding", "gutter", "tiling", "seed", "filter", "atlas", "keep_uvs", "memory", "device")}
-        _collector_back()
+        collector.resume()
         return run_bake(args.out, **paths, **options, progress=_progress(args), report=_reporter("bake"))
     if args.command == "assets":
         from warptex.apps.assets import run_assets
 
-        _collector_back()
+        collector.resume()
         return run_assets(args.out, seed=args.seed)
     if args.command == "demo":
         from warptex.apps.demo import run_demo
 
-        _collector_back()
+        collector.resume()
         return run_demo(args.out, texture_path=args.texture, resolution=args.resolution, device=args.device)
     from warptex.apps.render import run_render
 
-    _collector_back()
+    collector.resume()
     return run_render(
         args.out,
         mesh_path=args.mesh,
@@ -391,7 +369,7 @@ def _fit(args: argparse.Namespace) -> list:
     from warptex.apps.fit_demo import run_fit
 
     kwargs = {**fit_arguments(args), "progress": _progress(args)}
-    _collector_back()
+    collector.resume()
     job = from_environment()
     if job is None:
         summary = run_fit(args.out, **kwargs)
