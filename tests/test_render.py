@@ -114,6 +114,35 @@ def test_terrain_layers_are_procedural_seamless_and_distinct(monkeypatch):
     assert not np.array_equal(terrain_layers(size=128, seed=4).numpy(), layers)
 
 
+def test_terrain_noise_on_a_row_and_a_column_is_the_noise_on_the_grid():
+    """The layers' noise takes its tile coordinates as a row of u and a column of v, so that what
+    depends on one axis alone is computed once per column or row: the same bits as on the full
+    ``[size, size]`` grid, warped or not. The Worley cells keep F1 <= F2 with in-place minima;
+    they equal a plain search of the 3 × 3 neighbouring cells' points, sorted."""
+    from warptex.scenes.material import _cells, _fbm, _tile_coordinates, _warp
+
+    u, v = _tile_coordinates(48)
+    assert u.shape == (1, 48) and v.shape == (48, 1)
+    gu, gv = np.broadcast_arrays(u, v)
+    for ridged in (False, True):
+        on_axes = _fbm(np.random.default_rng(5), u, v, 3, 3, ridged=ridged, stretch=(2, 1))
+        on_grid = _fbm(np.random.default_rng(5), gu, gv, 3, 3, ridged=ridged, stretch=(2, 1))
+        assert on_axes.shape == (48, 48)
+        np.testing.assert_array_equal(on_axes, on_grid)
+    np.testing.assert_array_equal(np.stack(_warp(np.random.default_rng(6), u, v, 0.1)), np.stack(_warp(np.random.default_rng(6), gu, gv, 0.1)))
+
+    wu, wv = _warp(np.random.default_rng(7), u, v, 0.05)
+    n = 5
+    f1, f2, nearest = _cells(np.random.default_rng(8), wu, wv, n)
+    points = 0.5 + 0.9 * (np.random.default_rng(8).random((2, n, n)) - 0.5)
+    x, y = wu * n, wv * n
+    for r, c in [(0, 0), (7, 40), (23, 11), (47, 47)]:
+        cx, cy = int(np.floor(x[r, c])), int(np.floor(y[r, c]))
+        found = sorted((float(np.hypot(cx + dx + points[0, (cy + dy) % n, (cx + dx) % n] - x[r, c], cy + dy + points[1, (cy + dy) % n, (cx + dx) % n] - y[r, c])),
+                        (cy + dy) % n * n + (cx + dx) % n) for dy in (-1, 0, 1) for dx in (-1, 0, 1))  # fmt: skip
+        assert (f1[r, c], f2[r, c], nearest[r, c]) == (found[0][0], found[1][0], found[0][1])
+
+
 def test_render_reports_bad_input(tmp_path, capsys):
     assert main(["render", "--out", str(tmp_path), "--mesh", str(tmp_path / "missing.obj")]) == 1
     assert "load_mesh(): file not found" in capsys.readouterr().err
